@@ -1,0 +1,37 @@
+"""joints: drive real robot joints over their buses, and simulate the same joints in MuJoCo.
+
+>>> import joints
+>>> with joints.open("robot.toml") as rig:        # doctest: +SKIP
+...     rig.joints["shoulder"].enable()
+"""
+
+from __future__ import annotations
+
+from joints.errors import (
+    ConfigError,
+    ConfirmationRequired,
+    DeviceFault,
+    JointsError,
+    ProtocolError,
+    ReplyTimeout,
+)
+from joints.joint import Joint, JointState, Limits, Motion
+from joints.rig import Rig, open
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "ConfigError",
+    "ConfirmationRequired",
+    "DeviceFault",
+    "Joint",
+    "JointState",
+    "JointsError",
+    "Limits",
+    "Motion",
+    "ProtocolError",
+    "ReplyTimeout",
+    "Rig",
+    "__version__",
+    "open",
+]

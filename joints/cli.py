@@ -1,0 +1,137 @@
+"""The ``joints`` command: inspect and drive joints on real or emulated buses.
+
+Rule: read-only by default; anything that moves or persists needs an explicit subcommand and,
+for persistent writes, ``--confirm``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Sequence
+
+from joints.errors import JointsError
+
+
+def _parse_range(text: str) -> range:
+    lo, _, hi = text.partition("-")
+    a = int(lo)
+    b = int(hi) if hi else a
+    if not 1 <= a <= b <= 247:
+        raise argparse.ArgumentTypeError(f"address range must be within 1-247, got {text!r}")
+    return range(a, b + 1)
+
+
+def _key(text: str) -> str | int:
+    try:
+        return int(text, 0)
+    except ValueError:
+        return text
+
+
+def cmd_scan(args: argparse.Namespace) -> int:
+    """Probe Modbus slave addresses for an eRob (reads Error Code 0x0060)."""
+    from joints.link.modbus import ModbusLink, RetryPolicy
+    from joints.transports.serial import SerialTransport
+
+    found = []
+    with SerialTransport(args.port, args.baudrate) as t:
+        link = ModbusLink(t, policy=RetryPolicy(timeout=args.timeout, retries=0))
+        for addr in args.range:
+            try:
+                code = link.read_registers(addr, 0x0060, 1)[0]
+            except JointsError:
+                continue
+            found.append({"address": addr, "error_code": code})
+            print(json.dumps({"address": addr, "error_code": code}), flush=True)
+    if not found:
+        print(f"no eRob answered on {args.port} at {args.baudrate} bd in {args.range.start}-{args.range.stop - 1}",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+def _open(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    import joints
+
+    return joints.open(args.config, backend=args.backend)
+
+
+def cmd_state(args: argparse.Namespace) -> int:
+    with _open(args) as rig:
+        for name, s in rig.read_states().items():
+            d = {k: getattr(s, k) for k in ("position", "velocity", "torque", "current", "temperature",
+                                            "enabled", "moving", "fault", "time")}
+            print(json.dumps({"joint": name, **d}))
+    return 0
+
+
+def cmd_read(args: argparse.Namespace) -> int:
+    with _open(args) as rig:
+        j = rig.joints[args.joint]
+        for key in args.register:
+            reg = j.driver.table.get(_key(key))
+            print(json.dumps({"joint": args.joint, "register": reg.name, "address": f"0x{reg.address:04X}",
+                              "value": j.read(reg.name), "unit": reg.unit}))
+    return 0
+
+
+def cmd_write(args: argparse.Namespace) -> int:
+    with _open(args) as rig:
+        rig.joints[args.joint].write(_key(args.register), int(args.value, 0), confirm=args.confirm)
+    return 0
+
+
+def cmd_registers(args: argparse.Namespace) -> int:
+    from joints.devices.erob.registers import EROB_MODBUS
+
+    for r in EROB_MODBUS:
+        print(f"0x{r.address:04X}  {r.name:<40} {r.type:<6} {r.access.value:<7} {r.unit}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="joints", description=__doc__.splitlines()[0])
+    p.add_argument("--version", action="version", version=f"joints {__import__('joints').__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("scan", help="find eRob drives on a Modbus RTU port")
+    s.add_argument("--port", required=True)
+    s.add_argument("--baudrate", type=int, default=115200)
+    s.add_argument("--range", type=_parse_range, default=range(1, 33), help="addresses, e.g. 1-32")
+    s.add_argument("--timeout", type=float, default=0.05)
+    s.set_defaults(func=cmd_scan)
+
+    for name, func, helptext in (("state", cmd_state, "print the state of every joint (JSON lines)"),
+                                 ("read", cmd_read, "read registers of a joint by manual name or address"),
+                                 ("write", cmd_write, "write a register of a joint")):
+        c = sub.add_parser(name, help=helptext)
+        c.add_argument("config")
+        c.add_argument("--backend", choices=("sim", "hardware"))
+        if name in ("read", "write"):
+            c.add_argument("joint")
+            c.add_argument("register", nargs="+" if name == "read" else None)
+        if name == "write":
+            c.add_argument("value")
+            c.add_argument("--confirm", action="store_true", help="allow persistent/dangerous registers")
+        c.set_defaults(func=func)
+
+    r = sub.add_parser("registers", help="list the eRob Modbus register table")
+    r.set_defaults(func=cmd_registers)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args))
+    except JointsError as exc:
+        print(f"joints: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,61 @@
+"""Injected time: a monotonic wall clock on hardware, a simulated clock in sim.
+
+Rule: nothing below the rig reads the wall clock directly; it is handed a :class:`Clock`.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable, Protocol
+
+
+class Clock(Protocol):
+    def now(self) -> float:
+        """Seconds since an arbitrary origin (monotonic)."""
+        ...
+
+    def sleep(self, seconds: float) -> None:
+        """Let ``seconds`` pass (wall clock: block; simulation: advance the world)."""
+        ...
+
+
+class MonotonicClock:
+    """Wall-clock time for hardware."""
+
+    def now(self) -> float:
+        return time.monotonic()
+
+    def sleep(self, seconds: float) -> None:
+        if seconds > 0:
+            time.sleep(seconds)
+
+
+class ManualClock:
+    """A clock that only moves when told to; ``advance`` callbacks let a simulation step with it."""
+
+    def __init__(self, start: float = 0.0) -> None:
+        self._t = start
+        self._on_sleep: Callable[[float], None] | None = None
+
+    def bind(self, on_sleep: Callable[[float], None] | None) -> None:
+        """Route ``sleep`` to ``on_sleep`` (which must call :meth:`set`/:meth:`advance`)."""
+        self._on_sleep = on_sleep
+
+    def now(self) -> float:
+        return self._t
+
+    def advance(self, seconds: float) -> None:
+        if seconds < 0:
+            raise ValueError("time cannot go backwards")
+        self._t += seconds
+
+    def set(self, t: float) -> None:
+        self._t = t
+
+    def sleep(self, seconds: float) -> None:
+        if seconds <= 0:
+            return
+        if self._on_sleep is not None:
+            self._on_sleep(seconds)
+        else:
+            self.advance(seconds)

@@ -1,0 +1,466 @@
+"""Modbus RTU codec, sans-I/O, for both roles (host and device).
+
+Rule: ``encode(message) -> bytes`` is pure; decoding is ``feed(bytes)`` then ``next_message()``
+until it returns ``None`` (need more bytes). RTU has no length field, so frames are delimited by
+the function code and byte counts. Garbage is skipped byte by byte (resynchronisation); a frame
+whose CRC fails raises :class:`~joints.errors.ChecksumError` after its first byte is dropped, so
+the caller may keep calling ``next_message()``. ``flush()`` tells the codec the line went silent
+(t3.5): an incomplete head is garbage then.
+
+Host role decodes replies; ``expect_reply_to(request)`` lets it check a reply's byte count
+against the request (a reply whose byte-count field disagrees with the frame raises
+:class:`~joints.errors.ByteCountError`). ``expect_echo(frame)`` skips an RS485 adapter's local echo.
+Device role decodes requests; unsupported-but-well-framed function codes come out as
+:class:`UnsupportedRequest` so a server can answer "illegal function".
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+from typing import Union
+
+from joints.codecs.crc import crc16_modbus
+from joints.errors import ByteCountError, ChecksumError, EncodeError, FrameError
+
+READ_HOLDING_REGISTERS = 0x03
+READ_INPUT_REGISTERS = 0x04
+WRITE_SINGLE_REGISTER = 0x06
+WRITE_MULTIPLE_REGISTERS = 0x10
+
+#: Modbus exception codes (Modbus Application Protocol v1.1b3, 7).
+EXCEPTION_TEXT = {
+    0x01: "illegal function",
+    0x02: "illegal data address",
+    0x03: "illegal data value",
+    0x04: "server device failure",
+    0x05: "acknowledge",
+    0x06: "server device busy",
+    0x08: "memory parity error",
+    0x0A: "gateway path unavailable",
+    0x0B: "gateway target device failed to respond",
+}
+
+MAX_READ = 125  #: registers per FC03/04 (Modbus spec; the eRob manual allows 127)
+MAX_WRITE = 123  #: registers per FC16 (Modbus spec)
+MAX_FRAME = 256
+
+
+class Role(enum.Enum):
+    HOST = "host"  #: encodes requests, decodes replies
+    DEVICE = "device"  #: decodes requests, encodes replies
+
+
+# --- messages --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class ReadHoldingRegisters:
+    slave: int
+    address: int
+    count: int
+    function = READ_HOLDING_REGISTERS
+
+
+@dataclass(frozen=True, slots=True)
+class ReadInputRegisters:
+    slave: int
+    address: int
+    count: int
+    function = READ_INPUT_REGISTERS
+
+
+@dataclass(frozen=True, slots=True)
+class WriteSingleRegister:
+    slave: int
+    address: int
+    value: int
+    function = WRITE_SINGLE_REGISTER
+
+
+@dataclass(frozen=True, slots=True)
+class WriteMultipleRegisters:
+    slave: int
+    address: int
+    values: tuple[int, ...]
+    function = WRITE_MULTIPLE_REGISTERS
+
+
+@dataclass(frozen=True, slots=True)
+class UnsupportedRequest:
+    """A well-framed request with a function code this stack does not implement (device role)."""
+
+    slave: int
+    function: int
+    pdu: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class ReadRegistersReply:
+    """Reply to FC03 or FC04: the register values in order."""
+
+    slave: int
+    function: int
+    values: tuple[int, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class WriteSingleRegisterReply:
+    slave: int
+    address: int
+    value: int
+    function = WRITE_SINGLE_REGISTER
+
+
+@dataclass(frozen=True, slots=True)
+class WriteMultipleRegistersReply:
+    slave: int
+    address: int
+    count: int
+    function = WRITE_MULTIPLE_REGISTERS
+
+
+@dataclass(frozen=True, slots=True)
+class ExceptionReply:
+    """Exception reply: ``function`` is the request's function code (without the 0x80 bit)."""
+
+    slave: int
+    function: int
+    code: int
+
+    @property
+    def text(self) -> str:
+        return EXCEPTION_TEXT.get(self.code, "unknown exception")
+
+
+Request = Union[
+    ReadHoldingRegisters, ReadInputRegisters, WriteSingleRegister, WriteMultipleRegisters
+]
+Reply = Union[ReadRegistersReply, WriteSingleRegisterReply, WriteMultipleRegistersReply, ExceptionReply]
+Message = Union[Request, Reply, UnsupportedRequest]
+
+
+# --- encoding --------------------------------------------------------------------------------
+
+
+def _u8(name: str, v: int) -> int:
+    if not 0 <= v <= 0xFF:
+        raise EncodeError(f"{name} must be 0..255, got {v}")
+    return v
+
+
+def _u16(name: str, v: int) -> int:
+    if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 0xFFFF:
+        raise EncodeError(f"{name} must be an integer 0..65535, got {v!r}")
+    return v
+
+
+def _words(values: tuple[int, ...] | list[int]) -> bytes:
+    out = bytearray()
+    for i, v in enumerate(values):
+        out += _u16(f"value[{i}]", v).to_bytes(2, "big")
+    return bytes(out)
+
+
+def _finish(body: bytes | bytearray) -> bytes:
+    return bytes(body) + crc16_modbus(body).to_bytes(2, "little")
+
+
+def encode_pdu(message: Message) -> bytes:
+    """The frame without slave address and CRC."""
+    if isinstance(message, (ReadHoldingRegisters, ReadInputRegisters)):
+        if not 1 <= message.count <= MAX_READ:
+            raise EncodeError(f"read count must be 1..{MAX_READ}, got {message.count}")
+        return bytes((message.function,)) + _u16("address", message.address).to_bytes(
+            2, "big"
+        ) + message.count.to_bytes(2, "big")
+    if isinstance(message, (WriteSingleRegister, WriteSingleRegisterReply)):
+        return (
+            bytes((WRITE_SINGLE_REGISTER,))
+            + _u16("address", message.address).to_bytes(2, "big")
+            + _u16("value", message.value).to_bytes(2, "big")
+        )
+    if isinstance(message, WriteMultipleRegisters):
+        n = len(message.values)
+        if not 1 <= n <= MAX_WRITE:
+            raise EncodeError(f"write count must be 1..{MAX_WRITE}, got {n}")
+        return (
+            bytes((WRITE_MULTIPLE_REGISTERS,))
+            + _u16("address", message.address).to_bytes(2, "big")
+            + n.to_bytes(2, "big")
+            + bytes((2 * n,))
+            + _words(message.values)
+        )
+    if isinstance(message, WriteMultipleRegistersReply):
+        return (
+            bytes((WRITE_MULTIPLE_REGISTERS,))
+            + _u16("address", message.address).to_bytes(2, "big")
+            + _u16("count", message.count).to_bytes(2, "big")
+        )
+    if isinstance(message, ReadRegistersReply):
+        n = len(message.values)
+        if n > MAX_READ:
+            raise EncodeError(f"reply carries at most {MAX_READ} registers, got {n}")
+        return bytes((_u8("function", message.function), 2 * n)) + _words(message.values)
+    if isinstance(message, ExceptionReply):
+        return bytes((_u8("function", message.function) | 0x80, _u8("code", message.code)))
+    if isinstance(message, UnsupportedRequest):
+        return bytes((_u8("function", message.function),)) + message.pdu
+    raise EncodeError(f"not a Modbus message: {message!r}")
+
+
+def encode(message: Message) -> bytes:
+    """Encode any request or reply into a complete RTU frame (address, PDU, CRC low first)."""
+    return _finish(bytes((_u8("slave", message.slave),)) + encode_pdu(message))
+
+
+# --- decoding --------------------------------------------------------------------------------
+
+
+def _reply_length(buf: bytearray) -> int | None:
+    """Frame length of a reply at the head of ``buf``; None = need more; 0 = not a reply."""
+    if len(buf) < 2:
+        return None
+    fc = buf[1]
+    if fc & 0x80:
+        return 5 if fc & 0x7F in (1, 2, 3, 4, 5, 6, 15, 16, 0x17) else 0
+    if fc in (READ_HOLDING_REGISTERS, READ_INPUT_REGISTERS, 1, 2):
+        if len(buf) < 3:
+            return None
+        return 5 + buf[2]
+    if fc in (WRITE_SINGLE_REGISTER, WRITE_MULTIPLE_REGISTERS, 5, 15):
+        return 8
+    return 0
+
+
+def _request_length(buf: bytearray) -> int | None:
+    if len(buf) < 2:
+        return None
+    fc = buf[1]
+    if fc in (1, 2, 3, 4, 5, 6):
+        return 8
+    if fc in (15, 16):
+        if len(buf) < 7:
+            return None
+        return 9 + buf[6]
+    return 0
+
+
+def _decode_reply(frame: bytes, expected: Request | None) -> Reply:
+    slave, fc = frame[0], frame[1]
+    if fc & 0x80:
+        return ExceptionReply(slave, fc & 0x7F, frame[2])
+    if fc in (READ_HOLDING_REGISTERS, READ_INPUT_REGISTERS):
+        n = frame[2]
+        if n % 2:
+            raise ByteCountError(f"read reply byte count {n} is odd", data=frame)
+        data = frame[3 : 3 + n]
+        return ReadRegistersReply(
+            slave, fc, tuple(int.from_bytes(data[i : i + 2], "big") for i in range(0, n, 2))
+        )
+    a = int.from_bytes(frame[2:4], "big")
+    b = int.from_bytes(frame[4:6], "big")
+    if fc == WRITE_SINGLE_REGISTER:
+        return WriteSingleRegisterReply(slave, a, b)
+    if fc == WRITE_MULTIPLE_REGISTERS:
+        return WriteMultipleRegistersReply(slave, a, b)
+    raise FrameError(f"reply with unsupported function code 0x{fc:02X}", data=frame)
+
+
+def _decode_request(frame: bytes) -> Request | UnsupportedRequest:
+    slave, fc = frame[0], frame[1]
+    a = int.from_bytes(frame[2:4], "big")
+    b = int.from_bytes(frame[4:6], "big")
+    if fc == READ_HOLDING_REGISTERS:
+        return ReadHoldingRegisters(slave, a, b)
+    if fc == READ_INPUT_REGISTERS:
+        return ReadInputRegisters(slave, a, b)
+    if fc == WRITE_SINGLE_REGISTER:
+        return WriteSingleRegister(slave, a, b)
+    if fc == WRITE_MULTIPLE_REGISTERS:
+        n = frame[6]
+        if n != 2 * b or n % 2:
+            raise ByteCountError(
+                f"FC16 request for {b} registers carries byte count {n} (expected {2 * b})",
+                data=frame,
+            )
+        data = frame[7 : 7 + n]
+        return WriteMultipleRegisters(
+            slave, a, tuple(int.from_bytes(data[i : i + 2], "big") for i in range(0, n, 2))
+        )
+    return UnsupportedRequest(slave, fc, frame[2:-2])
+
+
+class ModbusRtuCodec:
+    """Incremental RTU framer/decoder for one end of a bus (see module docstring)."""
+
+    def __init__(self, role: Role = Role.HOST) -> None:
+        self.role = role
+        self._buf = bytearray()
+        self._expected: Request | None = None
+        self._echo: bytes | None = None
+        self._silent = False
+        self.discarded = 0  #: bytes dropped while resynchronising (garbage, bad frames)
+
+    # -- input --
+    def feed(self, data: bytes | bytearray) -> None:
+        """Append received bytes."""
+        self._buf += data
+        self._silent = False
+
+    def flush(self) -> None:
+        """The line went silent: an incomplete frame at the head will never complete."""
+        self._silent = True
+
+    def clear(self) -> None:
+        """Drop everything buffered and any expectation."""
+        self.discarded += len(self._buf)
+        self._buf.clear()
+        self._expected = None
+        self._echo = None
+
+    @property
+    def buffered(self) -> int:
+        return len(self._buf)
+
+    def expect_reply_to(self, request: Request | None) -> None:
+        """Host role: the request now outstanding (checks the reply's byte count against it)."""
+        self._expected = request
+
+    def expect_echo(self, frame: bytes) -> None:
+        """Skip this exact frame once if it arrives first (RS485 adapter local echo)."""
+        self._echo = bytes(frame)
+
+    # -- output --
+    @staticmethod
+    def encode(message: Message) -> bytes:
+        return encode(message)
+
+    def next_message(self) -> Message | None:
+        """Next complete message, or None if more bytes are needed.
+
+        Raises a :class:`~joints.errors.FrameError` subclass for a bad frame; the bad bytes are
+        consumed first, so calling again continues with what follows.
+        """
+        buf = self._buf
+        while buf:
+            if self._echo is not None:
+                echo = self._echo
+                k = min(len(echo), len(buf))
+                if buf[:k] == echo[:k]:
+                    if k < len(echo):
+                        if not self._silent:
+                            return None
+                    else:
+                        del buf[:k]
+                        self._echo = None
+                        continue
+                self._echo = None
+            if self.role is Role.HOST:
+                length = self._host_length(buf)
+            else:
+                length = _request_length(buf)
+            if length is None or (length and len(buf) < length):
+                if not self._silent:
+                    return None
+                # Silence: the head will never complete. Resync on a later valid frame if one is
+                # buffered; otherwise the head was a truncated frame.
+                skip = self._next_valid_offset(buf)
+                if skip:
+                    del buf[:skip]
+                    self.discarded += skip
+                    continue
+                frame = bytes(buf)
+                self.discarded += len(buf)
+                buf.clear()
+                if length:
+                    raise FrameError(
+                        f"truncated frame: {frame.hex(' ')} has {len(frame)} bytes, its header "
+                        f"announces {length}",
+                        data=frame,
+                    )
+                return None
+            if length == 0 or length > MAX_FRAME or length < 4:
+                del buf[0]
+                self.discarded += 1
+                continue
+            frame = bytes(buf[:length])
+            if crc16_modbus(frame) != 0:
+                if self.role is Role.HOST and self._expected is not None:
+                    err = self._byte_count_mismatch(buf)
+                    if err is not None:
+                        raise err
+                del buf[0]
+                self.discarded += 1
+                raise ChecksumError(
+                    f"CRC mismatch in {frame.hex(' ')}: expected "
+                    f"{crc16_modbus(frame[:-2]).to_bytes(2, 'little').hex(' ')}, "
+                    f"got {frame[-2:].hex(' ')}",
+                    data=frame,
+                )
+            del buf[:length]
+            if self.role is Role.HOST:
+                reply = _decode_reply(frame, self._expected)
+                self._check_against_expected(reply, frame)
+                return reply
+            return _decode_request(frame)
+        return None
+
+    def _next_valid_offset(self, buf: bytearray) -> int:
+        """Offset (>0) of the first complete CRC-valid frame after the head, or 0."""
+        for off in range(1, len(buf) - 3):
+            view = buf[off:]
+            n = self._host_length(view) if self.role is Role.HOST else _request_length(view)
+            if n and 4 <= n <= len(view) and crc16_modbus(bytes(view[:n])) == 0:
+                return off
+        return 0
+
+    # -- host helpers --
+    def _host_length(self, buf: bytearray) -> int | None:
+        exp = self._expected
+        if (
+            exp is not None
+            and isinstance(exp, (ReadHoldingRegisters, ReadInputRegisters))
+            and len(buf) >= 3
+            and buf[0] == exp.slave
+            and buf[1] == exp.function
+            and buf[2] != 2 * exp.count
+        ):
+            # Byte count disagrees with the request: the frame should still be 5 + 2*count long.
+            want = 5 + 2 * exp.count
+            if len(buf) < want and not self._silent:
+                return None
+        return _reply_length(buf)
+
+    def _byte_count_mismatch(self, buf: bytearray) -> ByteCountError | None:
+        exp = self._expected
+        if not isinstance(exp, (ReadHoldingRegisters, ReadInputRegisters)):
+            return None
+        if len(buf) < 3 or buf[0] != exp.slave or buf[1] != exp.function:
+            return None
+        want = 5 + 2 * exp.count
+        if buf[2] != 2 * exp.count and len(buf) >= want and crc16_modbus(bytes(buf[:want])) == 0:
+            frame = bytes(buf[:want])
+            del buf[:want]
+            self.discarded += want
+            return ByteCountError(
+                f"reply byte count is {frame[2]} but the frame carries {2 * exp.count} data bytes "
+                f"for the {exp.count} registers requested: {frame.hex(' ')}",
+                data=frame,
+            )
+        return None
+
+    def _check_against_expected(self, reply: Reply, frame: bytes) -> None:
+        exp = self._expected
+        if (
+            isinstance(reply, ReadRegistersReply)
+            and isinstance(exp, (ReadHoldingRegisters, ReadInputRegisters))
+            and reply.slave == exp.slave
+            and reply.function == exp.function
+            and len(reply.values) != exp.count
+        ):
+            raise ByteCountError(
+                f"asked for {exp.count} registers, reply carries {len(reply.values)}: "
+                f"{frame.hex(' ')}",
+                data=frame,
+            )

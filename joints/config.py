@@ -1,0 +1,281 @@
+"""Configuration: one TOML file (or dict) describes the buses, joints and simulation.
+
+Rule: validate everything up front; every error names the file, the key and what is allowed.
+In ``backend = "sim"`` the hardware-only keys (port, CAN interface) are read but ignored, so one
+file serves both backends. ``JOINTS_BACKEND=sim|hardware`` overrides the file.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from joints.errors import ConfigError
+from joints.joint import Limits, Motion
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+BACKENDS = ("sim", "hardware")
+PROTOCOLS = ("modbus-rtu", "mks-serial", "erob-can", "canopen")
+DEVICES = ("erob", "zlac8015d", "mks-servo42d", "mks-servo57d")
+#: (device, protocol) pairs with a driver in this version
+SUPPORTED = {("erob", "modbus-rtu")}
+PARITIES = ("N", "E", "O")
+ON_EXIT = ("disable", "stop", "none")
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    model: str = "erob_stand.xml"
+    timestep: float = 0.001
+    realtime: bool = False
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    name: str
+    protocol: str
+    port: str | None = None
+    baudrate: int = 115200
+    parity: str = "N"
+    stopbits: int = 1
+    timeout: float = 0.1  #: s, reply timeout
+    retries: int = 2
+    echo: bool = False  #: the RS485 adapter echoes what it sends
+    interface: str | None = None  #: CAN: python-can interface
+    channel: str | None = None  #: CAN: channel
+    bitrate: int = 1_000_000
+
+
+@dataclass(frozen=True)
+class JointConfig:
+    name: str
+    device: str
+    bus: str
+    address: int
+    model: str | None = None  #: device variant (eRob: "eRob80H100")
+    channel: str | None = None
+    mjcf_joint: str | None = None
+    limits: Limits = field(default_factory=Limits)
+    motion: Motion = field(default_factory=Motion)
+    profile: Mapping[str, float] = field(default_factory=dict)  #: device-profile overrides
+    watchdog_ms: int | None = None
+    offset: float = 0.0
+    direction: int = 1
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    backend: str
+    buses: Mapping[str, BusConfig]
+    joints: Mapping[str, JointConfig]
+    sim: SimConfig = field(default_factory=SimConfig)
+    on_exit: str = "disable"
+    source: str = "<dict>"
+    base_dir: Path = field(default_factory=Path.cwd)
+
+
+class _Reader:
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def err(self, key: str, msg: str, allowed: Any = None) -> ConfigError:
+        return ConfigError(msg, file=self.source, key=key, allowed=allowed)
+
+    def table(self, data: Mapping[str, Any], key: str) -> Mapping[str, Any]:
+        v = data.get(key.rsplit(".", 1)[-1], {})
+        if not isinstance(v, Mapping):
+            raise self.err(key, f"expected a table, got {type(v).__name__}")
+        return v
+
+    def choice(self, data: Mapping[str, Any], key: str, allowed: tuple[str, ...], default: str | None = None) -> str:
+        short = key.rsplit(".", 1)[-1]
+        v = data.get(short, default)
+        if v is None:
+            raise self.err(key, "is required", allowed)
+        if v not in allowed:
+            raise self.err(key, f"{v!r} is not allowed", allowed)
+        return str(v)
+
+    def number(self, data: Mapping[str, Any], key: str, default: float | None, *, positive: bool = False,
+               integer: bool = False, minimum: float | None = None, maximum: float | None = None) -> Any:
+        short = key.rsplit(".", 1)[-1]
+        v = data.get(short, default)
+        if v is None:
+            return None
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not float(v).is_integer()):
+            raise self.err(key, f"expected {'an integer' if integer else 'a number'}, got {v!r}")
+        if positive and v <= 0:
+            raise self.err(key, f"must be > 0, got {v}")
+        if minimum is not None and v < minimum or maximum is not None and v > maximum:
+            raise self.err(key, f"{v} is out of range", f"{minimum}..{maximum}")
+        return int(v) if integer else float(v)
+
+    def known(self, data: Mapping[str, Any], key: str, allowed: tuple[str, ...]) -> None:
+        for k in data:
+            if k not in allowed:
+                raise self.err(f"{key}.{k}" if key else k, "unknown key", allowed)
+
+
+_BUS_KEYS = tuple(f for f in BusConfig.__dataclass_fields__ if f != "name")
+_JOINT_KEYS = tuple(f for f in JointConfig.__dataclass_fields__ if f not in ("name",))
+_TOP_KEYS = ("backend", "sim", "buses", "joints", "on_exit")
+
+
+def _limits(r: _Reader, data: Mapping[str, Any], key: str) -> Limits:
+    r.known(data, key, ("position", "velocity", "torque", "acceleration"))
+    pos = data.get("position")
+    if pos is not None:
+        if (not isinstance(pos, (list, tuple)) or len(pos) != 2
+                or not all(isinstance(p, (int, float)) and not isinstance(p, bool) for p in pos)
+                or not pos[0] < pos[1]):
+            raise r.err(f"{key}.position", f"expected [min, max] in rad with min < max, got {pos!r}")
+        pos = (float(pos[0]), float(pos[1]))
+    return Limits(
+        position=pos,
+        velocity=r.number(data, f"{key}.velocity", None, positive=True),
+        torque=r.number(data, f"{key}.torque", None, positive=True),
+        acceleration=r.number(data, f"{key}.acceleration", None, positive=True),
+    )
+
+
+def _motion(r: _Reader, data: Mapping[str, Any], key: str) -> Motion:
+    r.known(data, key, ("velocity", "acceleration", "deceleration"))
+    d = Motion()
+    return Motion(
+        velocity=r.number(data, f"{key}.velocity", d.velocity, positive=True),
+        acceleration=r.number(data, f"{key}.acceleration", d.acceleration, positive=True),
+        deceleration=r.number(data, f"{key}.deceleration", d.deceleration, positive=True),
+    )
+
+
+def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | None = None,
+          backend: str | None = None) -> RigConfig:
+    """Validate a config mapping (the parsed TOML)."""
+    r = _Reader(source)
+    r.known(data, "", _TOP_KEYS)
+    env = os.environ.get("JOINTS_BACKEND")
+    chosen = backend or env or data.get("backend", "sim")
+    if chosen not in BACKENDS:
+        where = "backend argument" if backend else ("JOINTS_BACKEND" if env else "backend")
+        raise r.err(where, f"{chosen!r} is not a backend", BACKENDS)
+
+    s = r.table(data, "sim")
+    r.known(s, "sim", ("model", "timestep", "realtime"))
+    realtime = s.get("realtime", False)
+    if not isinstance(realtime, bool):
+        raise r.err("sim.realtime", f"expected true or false, got {realtime!r}")
+    sim = SimConfig(
+        model=str(s.get("model", SimConfig.model)),
+        timestep=r.number(s, "sim.timestep", SimConfig.timestep, positive=True, maximum=0.01),
+        realtime=realtime,
+    )
+
+    buses: dict[str, BusConfig] = {}
+    for name, b in r.table(data, "buses").items():
+        key = f"buses.{name}"
+        if not isinstance(b, Mapping):
+            raise r.err(key, "expected a table")
+        r.known(b, key, _BUS_KEYS)
+        protocol = r.choice(b, f"{key}.protocol", PROTOCOLS)
+        port = b.get("port")
+        if chosen == "hardware" and protocol in ("modbus-rtu", "mks-serial") and not port:
+            raise r.err(f"{key}.port", "is required for backend = \"hardware\" (e.g. \"/dev/ttyUSB0\")")
+        buses[name] = BusConfig(
+            name=name,
+            protocol=protocol,
+            port=None if port is None else str(port),
+            baudrate=r.number(b, f"{key}.baudrate", 115200, integer=True, positive=True),
+            parity=r.choice(b, f"{key}.parity", PARITIES, "N"),
+            stopbits=r.number(b, f"{key}.stopbits", 1, integer=True, minimum=1, maximum=2),
+            timeout=r.number(b, f"{key}.timeout", 0.1, positive=True),
+            retries=r.number(b, f"{key}.retries", 2, integer=True, minimum=0, maximum=10),
+            echo=bool(b.get("echo", False)),
+            interface=b.get("interface"),
+            channel=b.get("channel"),
+            bitrate=r.number(b, f"{key}.bitrate", 1_000_000, integer=True, positive=True),
+        )
+
+    joints: dict[str, JointConfig] = {}
+    seen: dict[tuple[str, int, str | None], str] = {}
+    for name, j in r.table(data, "joints").items():
+        key = f"joints.{name}"
+        if not isinstance(j, Mapping):
+            raise r.err(key, "expected a table")
+        r.known(j, key, _JOINT_KEYS)
+        device = r.choice(j, f"{key}.device", DEVICES)
+        bus = j.get("bus")
+        if bus not in buses:
+            raise r.err(f"{key}.bus", f"{bus!r} is not a bus defined under [buses]", sorted(buses))
+        protocol = buses[str(bus)].protocol
+        if (device, protocol) not in SUPPORTED:
+            raise r.err(
+                f"{key}.device",
+                f"device {device!r} on protocol {protocol!r} is not supported yet",
+                sorted(f"{d} on {p}" for d, p in SUPPORTED),
+            )
+        address = r.number(j, f"{key}.address", None, integer=True, minimum=1, maximum=247)
+        if address is None:
+            raise r.err(f"{key}.address", "is required (Modbus slave id / MKS address / CAN node id)")
+        channel = j.get("channel")
+        ident = (str(bus), address, channel)
+        if ident in seen:
+            raise r.err(f"{key}.address", f"address {address} on bus {bus!r} is already used by joint {seen[ident]!r}")
+        seen[ident] = name
+        profile = j.get("profile", {})
+        if not isinstance(profile, Mapping):
+            raise r.err(f"{key}.profile", "expected a table of device-profile overrides")
+        direction = j.get("direction", 1)
+        if direction not in (1, -1):
+            raise r.err(f"{key}.direction", f"{direction!r} is not allowed", (1, -1))
+        model = j.get("model")
+        if model is not None and not isinstance(model, str):
+            raise r.err(f"{key}.model", f"expected a model name string, got {model!r}")
+        joints[name] = JointConfig(
+            name=name,
+            device=device,
+            bus=str(bus),
+            address=address,
+            model=model,
+            channel=None if channel is None else str(channel),
+            mjcf_joint=str(j.get("mjcf_joint", name)),
+            limits=_limits(r, r.table(j, f"{key}.limits"), f"{key}.limits"),
+            motion=_motion(r, r.table(j, f"{key}.motion"), f"{key}.motion"),
+            profile=dict(profile),
+            watchdog_ms=r.number(j, f"{key}.watchdog_ms", None, integer=True, minimum=0, maximum=4000),
+            offset=r.number(j, f"{key}.offset", 0.0),
+            direction=int(direction),
+        )
+    if not joints:
+        raise r.err("joints", "no joints defined; add a [joints.<name>] table")
+    return RigConfig(
+        backend=chosen,
+        buses=buses,
+        joints=joints,
+        sim=sim,
+        on_exit=r.choice(data, "on_exit", ON_EXIT, "disable"),
+        source=source,
+        base_dir=base_dir or Path.cwd(),
+    )
+
+
+def load(path: str | os.PathLike[str], *, backend: str | None = None) -> RigConfig:
+    """Read and validate a TOML config file."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"config file not found: {p}", file=str(p)) from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read config: {exc}", file=str(p)) from exc
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"not valid TOML: {exc}", file=str(p)) from exc
+    return parse(data, source=str(p), base_dir=p.resolve().parent, backend=backend)

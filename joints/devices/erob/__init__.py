@@ -1,0 +1,1 @@
+"""ZeroErr eRob rotary actuators: register table and physical device profiles."""

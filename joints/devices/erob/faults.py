@@ -1,0 +1,65 @@
+"""eRob error codes (register 0x0060 ``error_code``) with the manuals' text.
+
+Rule: pure data. The Modbus manual documents one code itself (0xFA2 = 4002, RS485 communication
+timeout) and refers to the eRob user manual's appendix for the rest, which is not in our manual
+set. The eRunner manual's appendix 1 lists the command-rejection codes of the same firmware; they
+are included because a Modbus drive reports the same conditions (e.g. start while disabled).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True, slots=True)
+class FaultInfo:
+    code: int
+    text: str
+    hint: str
+    source: str
+
+
+_FAULTS = (
+    FaultInfo(
+        0x0FA2,
+        "RS485 communication timeout",
+        "no frame arrived within modbus_communication_timeout_duration (0x0002); "
+        "clear errors, then poll faster or raise the timeout",
+        "Modbus manual v1.6, register 0x0002",
+    ),
+    FaultInfo(0x0015, "parameter write or command invalid while the motor is moving",
+              "stop the motion before changing this parameter", "eRunner v1.7 appendix 1 #1"),
+    FaultInfo(0x0016, "parameter write or command invalid while the motor is enabled",
+              "disable the motor before changing this parameter", "eRunner v1.7 appendix 1 #2"),
+    FaultInfo(0x001F, "commutation not finished after power-on; cannot enable",
+              "wait at least 8 s after power-on before commanding", "eRunner v1.7 appendix 1 #3"),
+    FaultInfo(0x0027, "cannot start motion while the motor is off",
+              "enable the motor first, then start; if the error follows enable, clear the fault "
+              "and enable again", "eRunner v1.7 appendix 1 #4"),
+    FaultInfo(0x0030, "start with an invalid motion mode value",
+              "set motion_mode (0x0041) to 0, 1 or 2", "eRunner v1.7 appendix 1 #5"),
+    FaultInfo(0x0056, "cannot enable: relay not active",
+              "wait at least 8 s after power-on before commanding", "eRunner v1.7 appendix 1 #8"),
+    FaultInfo(0x014A, "brake control not configured",
+              "configure the brake type in eTuner", "eRunner v1.7 appendix 1 #9"),
+)
+
+FAULTS: dict[int, FaultInfo] = {f.code: f for f in _FAULTS}
+
+#: The communication-watchdog fault code (0xFA2).
+RS485_TIMEOUT = 0x0FA2
+#: Start while the motor is off.
+START_WHILE_DISABLED = 0x0027
+
+
+def describe(code: int) -> FaultInfo:
+    """Text for an error code; unknown codes get a pointer to the vendor's table."""
+    info = FAULTS.get(code)
+    if info is not None:
+        return info
+    return FaultInfo(
+        code,
+        "drive error (code not documented in the Modbus/eRunner manuals)",
+        "look it up in the eRob user manual, appendix 'error codes', then clear errors",
+        "-",
+    )

@@ -1,0 +1,243 @@
+"""Typed register tables: one :class:`Register` per manual register, shared by driver and emulator.
+
+Rule: pure data. A 32-bit Hi/Lo pair is ONE entry at its Hi address with ``type`` int32/uint32,
+Hi word first on the wire (unless the table says otherwise). Names are the manual's in snake_case.
+"""
+
+from __future__ import annotations
+
+import enum
+import re
+from dataclasses import dataclass, field
+from typing import Iterable, Iterator, Mapping, Sequence
+
+from joints.errors import CommandError, RegisterError
+
+
+class Access(enum.Enum):
+    """Access attribute as printed in the manual."""
+
+    R = "R"  #: read only
+    RW = "R/W"  #: read and write
+    COMMAND = "Command"  #: write-only command (writing triggers an action)
+
+    @property
+    def readable(self) -> bool:
+        return self is not Access.COMMAND
+
+    @property
+    def writable(self) -> bool:
+        return self is not Access.R
+
+
+_RANGES = {
+    "uint16": (0, 0xFFFF, 1),
+    "int16": (-0x8000, 0x7FFF, 1),
+    "uint32": (0, 0xFFFFFFFF, 2),
+    "int32": (-0x80000000, 0x7FFFFFFF, 2),
+}
+
+_NAME_RE = re.compile(r"[^0-9a-zA-Z]+")
+
+
+def snake_name(definition: str) -> str:
+    """Manual definition -> register name: drop "(Hi)"/"(Lo)", runs of non-alphanumerics -> "_".
+
+    >>> snake_name("Max. Speed (Hi)")
+    'max_speed'
+    """
+    text = re.sub(r"\((Hi|Lo|hi|lo|H|L)\)", "", definition)
+    return _NAME_RE.sub("_", text).strip("_").lower()
+
+
+@dataclass(frozen=True, slots=True)
+class Register:
+    """One register (or 32-bit register pair) of a device."""
+
+    address: int
+    name: str
+    type: str = "uint16"  #: uint16 | int16 | uint32 | int32
+    access: Access = Access.RW
+    unit: str = ""
+    description: str = ""
+    minimum: int | None = None  #: documented lower bound (inclusive), if any
+    maximum: int | None = None  #: documented upper bound (inclusive), if any
+    default: int = 0  #: power-on value where the manual gives one
+    persistent: bool = False  #: writing it is persistent/dangerous (needs confirmation)
+    low_word_first: bool = False  #: word order of 32-bit pairs (eRob/ZLAC: Hi first)
+
+    def __post_init__(self) -> None:
+        if self.type not in _RANGES:
+            raise ValueError(f"register {self.name}: unknown type {self.type!r}")
+
+    @property
+    def words(self) -> int:
+        """Number of 16-bit registers the entry spans (1 or 2)."""
+        return _RANGES[self.type][2]
+
+    @property
+    def signed(self) -> bool:
+        return self.type.startswith("int")
+
+    @property
+    def type_range(self) -> tuple[int, int]:
+        lo, hi, _ = _RANGES[self.type]
+        return lo, hi
+
+    def check(self, value: int | float) -> int:
+        """Validate a value for writing; returns it as int or raises :class:`CommandError`."""
+        if isinstance(value, bool) or not isinstance(value, int):
+            if isinstance(value, float) and value.is_integer():
+                value = int(value)
+            else:
+                raise CommandError(f"{self.name}: expected an integer, got {value!r}")
+        lo, hi = self.type_range
+        if self.minimum is not None:
+            lo = max(lo, self.minimum)
+        if self.maximum is not None:
+            hi = min(hi, self.maximum)
+        if not lo <= value <= hi:
+            raise CommandError(
+                f"{self.name} (0x{self.address:04X}): value {value} out of range [{lo}, {hi}]"
+                + (f" {self.unit}" if self.unit else "")
+            )
+        return value
+
+    def to_words(self, value: int) -> tuple[int, ...]:
+        """Encode a value into its 16-bit words in wire order (range-checked)."""
+        value = self.check(value)
+        raw = value & (0xFFFF if self.words == 1 else 0xFFFFFFFF)
+        if self.words == 1:
+            return (raw,)
+        hi, lo = raw >> 16, raw & 0xFFFF
+        return (lo, hi) if self.low_word_first else (hi, lo)
+
+    def from_words(self, words: Sequence[int]) -> int:
+        """Decode the register's words (wire order) into its typed value."""
+        if len(words) != self.words:
+            raise ValueError(f"{self.name}: expected {self.words} words, got {len(words)}")
+        if self.words == 1:
+            raw = words[0] & 0xFFFF
+            if self.signed and raw & 0x8000:
+                raw -= 0x10000
+            return raw
+        a, b = words[0] & 0xFFFF, words[1] & 0xFFFF
+        hi, lo = (b, a) if self.low_word_first else (a, b)
+        raw = (hi << 16) | lo
+        if self.signed and raw & 0x80000000:
+            raw -= 0x100000000
+        return raw
+
+
+@dataclass(frozen=True)
+class RegisterTable:
+    """An immutable, indexed collection of registers of one device family."""
+
+    device: str
+    registers: tuple[Register, ...]
+    _by_name: Mapping[str, Register] = field(init=False, repr=False, compare=False)
+    _by_address: Mapping[int, Register] = field(init=False, repr=False, compare=False)
+    _word_owner: Mapping[int, Register] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        by_name: dict[str, Register] = {}
+        by_addr: dict[int, Register] = {}
+        owner: dict[int, Register] = {}
+        for reg in self.registers:
+            if reg.name in by_name:
+                raise ValueError(f"{self.device}: duplicate register name {reg.name!r}")
+            by_name[reg.name] = reg
+            for a in range(reg.address, reg.address + reg.words):
+                if a in owner:
+                    raise ValueError(
+                        f"{self.device}: 0x{a:04X} used by both {owner[a].name} and {reg.name}"
+                    )
+                owner[a] = reg
+            by_addr[reg.address] = reg
+        object.__setattr__(self, "_by_name", by_name)
+        object.__setattr__(self, "_by_address", by_addr)
+        object.__setattr__(self, "_word_owner", owner)
+
+    def __iter__(self) -> Iterator[Register]:
+        return iter(self.registers)
+
+    def __len__(self) -> int:
+        return len(self.registers)
+
+    def __contains__(self, key: object) -> bool:
+        return key in self._by_name or key in self._by_address
+
+    def __getitem__(self, key: str | int | Register) -> Register:
+        return self.get(key)
+
+    def get(self, key: str | int | Register) -> Register:
+        """Look a register up by name, by (start) address, or pass a Register through."""
+        if isinstance(key, Register):
+            return key
+        if isinstance(key, str):
+            reg = self._by_name.get(key)
+            if reg is None:
+                close = [n for n in self._by_name if key.lower().replace(" ", "_") in n][:5]
+                hint = f"; did you mean {', '.join(close)}?" if close else ""
+                raise RegisterError(f"{self.device}: no register named {key!r}{hint}")
+            return reg
+        if isinstance(key, int) and not isinstance(key, bool):
+            reg = self._by_address.get(key)
+            if reg is None:
+                owner = self._word_owner.get(key)
+                if owner is not None:
+                    raise RegisterError(
+                        f"{self.device}: 0x{key:04X} is the second word of {owner.name} "
+                        f"(0x{owner.address:04X}, {owner.type}); address the pair at its Hi word"
+                    )
+                raise RegisterError(f"{self.device}: no register at address 0x{key:04X}")
+            return reg
+        raise RegisterError(f"{self.device}: register key must be a name or address, got {key!r}")
+
+    def owner(self, address: int) -> Register | None:
+        """The register a single 16-bit address belongs to (either word of a pair)."""
+        return self._word_owner.get(address)
+
+    def span(self, first: str | int, last: str | int) -> tuple[int, int]:
+        """(start address, word count) covering registers ``first`` .. ``last`` inclusive."""
+        a, b = self.get(first), self.get(last)
+        return a.address, b.address + b.words - a.address
+
+    def decode_block(self, start: int, words: Sequence[int]) -> dict[str, int]:
+        """Decode a contiguous block read starting at ``start`` into {name: value}.
+
+        Registers only partly covered, and gaps, are skipped.
+        """
+        out: dict[str, int] = {}
+        end = start + len(words)
+        for reg in self.registers:
+            if reg.address >= start and reg.address + reg.words <= end:
+                i = reg.address - start
+                out[reg.name] = reg.from_words(words[i : i + reg.words])
+        return out
+
+    def encode_block(self, values: Mapping[str | int, int]) -> tuple[int, list[int]]:
+        """Encode several registers that form one contiguous block -> (start, words)."""
+        regs = sorted((self.get(k) for k in values), key=lambda r: r.address)
+        if not regs:
+            raise CommandError("encode_block: no registers given")
+        start = regs[0].address
+        words: list[int] = []
+        expect = start
+        raw = {self.get(k).name: v for k, v in values.items()}
+        for reg in regs:
+            if reg.address != expect:
+                raise CommandError(
+                    f"{self.device}: registers are not contiguous at 0x{expect:04X} "
+                    f"(next is {reg.name} at 0x{reg.address:04X})"
+                )
+            words.extend(reg.to_words(raw[reg.name]))
+            expect = reg.address + reg.words
+        return start, words
+
+    def names(self) -> list[str]:
+        return [r.name for r in self.registers]
+
+    @staticmethod
+    def build(device: str, registers: Iterable[Register]) -> "RegisterTable":
+        return RegisterTable(device, tuple(sorted(registers, key=lambda r: r.address)))

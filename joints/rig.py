@@ -1,0 +1,195 @@
+"""Rig: config -> buses, joints, (sim world) and one clock; the ``with`` block that keeps it safe.
+
+Rule: leaving the rig - normally or by an exception - stops and disables every joint this rig
+enabled (``on_exit = "disable"``, the default), then closes the buses. Shutdown errors of one
+joint never prevent the others from being shut down.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Callable, Mapping
+
+from joints.clock import Clock, MonotonicClock
+from joints.config import BusConfig, RigConfig, load, parse
+from joints.errors import ConfigError, JointsError
+from joints.joint import Joint, JointState
+from joints.link.modbus import ModbusLink, RetryPolicy
+from joints.link.trace import TraceRecord
+from joints.transports.base import ByteTransport
+
+log = logging.getLogger("joints")
+
+
+@dataclass
+class Bus:
+    """One configured bus: its transport and link."""
+
+    config: BusConfig
+    transport: ByteTransport
+    link: ModbusLink
+
+
+class Rig:
+    """Buses, joints and a clock built from one config."""
+
+    def __init__(
+        self,
+        config: RigConfig,
+        *,
+        clock: Clock,
+        buses: Mapping[str, Bus],
+        joints: Mapping[str, Joint],
+        world: Any = None,
+    ) -> None:
+        self.config = config
+        self.clock = clock
+        self.buses = dict(buses)
+        self.joints: dict[str, Joint] = dict(joints)
+        self.world = world  #: the simulation (sim backend) or None
+        self._closed = False
+
+    @property
+    def backend(self) -> str:
+        return self.config.backend
+
+    @property
+    def time(self) -> float:
+        """Seconds on the rig's clock (simulated time in sim)."""
+        return self.clock.now()
+
+    def sleep(self, seconds: float) -> None:
+        """Sim: advance the world by ``seconds``; hardware: wait on the wall clock."""
+        if seconds < 0:
+            raise ValueError(f"cannot sleep a negative time ({seconds})")
+        self.clock.sleep(seconds)
+
+    def read_states(self) -> dict[str, JointState]:
+        """State of every joint, bus by bus (one status transaction per joint)."""
+        out: dict[str, JointState] = {}
+        for bus in self.buses:
+            for name, j in self.joints.items():
+                if self.config.joints[name].bus == bus:
+                    out[name] = j.state()
+        return out
+
+    def trace(self, sink: Callable[[TraceRecord], None] | None) -> None:
+        """Route every frame of every bus to ``sink`` (None stops tracing)."""
+        for b in self.buses.values():
+            b.link.trace = sink
+
+    def close(self) -> None:
+        """Stop and disable what this rig enabled (per ``on_exit``), then close the buses."""
+        if self._closed:
+            return
+        self._closed = True
+        errors: list[BaseException] = []
+        if self.config.on_exit != "none":
+            for j in self.joints.values():
+                try:
+                    if self.config.on_exit == "disable":
+                        j.shutdown()
+                    elif j.enabled:
+                        j.stop()
+                except Exception as exc:  # noqa: BLE001 - keep shutting the others down
+                    log.error("shutdown of joint %s failed: %s", j.name, exc)
+                    errors.append(exc)
+        for b in self.buses.values():
+            try:
+                b.transport.close()
+            except Exception as exc:  # noqa: BLE001
+                errors.append(exc)
+        if self.world is not None and hasattr(self.world, "close"):
+            self.world.close()
+        if errors:
+            raise JointsError(f"errors while closing the rig: {'; '.join(map(str, errors))}") from errors[0]
+
+    def __enter__(self) -> "Rig":
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        if exc is None:
+            self.close()
+        else:
+            try:
+                self.close()
+            except JointsError as close_exc:  # the original exception matters more
+                log.error("%s", close_exc)
+
+    def __repr__(self) -> str:
+        return f"Rig(backend={self.backend!r}, joints={list(self.joints)})"
+
+
+def _open_hardware_transport(cfg: BusConfig) -> ByteTransport:
+    if cfg.protocol == "modbus-rtu":
+        from joints.transports.serial import SerialTransport
+
+        assert cfg.port is not None
+        return SerialTransport(cfg.port, cfg.baudrate, parity=cfg.parity, stopbits=cfg.stopbits)
+    raise ConfigError(f"protocol {cfg.protocol!r} has no transport yet", key=f"buses.{cfg.name}.protocol")
+
+
+def build(config: RigConfig, *, transports: Mapping[str, ByteTransport] | None = None,
+          clock: Clock | None = None, world: Any = None) -> Rig:
+    """Assemble a rig from a validated config and ready transports (one per bus)."""
+    from joints.drivers import make_driver
+
+    clock = clock or MonotonicClock()
+    opened: dict[str, ByteTransport] = dict(transports or {})
+    buses: dict[str, Bus] = {}
+    try:
+        for name, bcfg in config.buses.items():
+            if name not in opened:
+                opened[name] = _open_hardware_transport(bcfg)
+            link = ModbusLink(
+                opened[name],
+                policy=RetryPolicy(timeout=bcfg.timeout, retries=bcfg.retries),
+                echo=bcfg.echo,
+                clock=clock,
+                name=name,
+            )
+            buses[name] = Bus(bcfg, opened[name], link)
+        joints: dict[str, Joint] = {}
+        for name, jcfg in config.joints.items():
+            driver = make_driver(jcfg, buses[jcfg.bus].link, clock)
+            joints[name] = Joint(name, driver, clock=clock, limits=jcfg.limits, motion=jcfg.motion,
+                                 offset=jcfg.offset, direction=jcfg.direction)
+            if jcfg.watchdog_ms is not None and hasattr(driver, "set_communication_timeout"):
+                driver.set_communication_timeout(jcfg.watchdog_ms)
+    except BaseException:
+        for t in opened.values():
+            t.close()
+        raise
+    return Rig(config, clock=clock, buses=buses, joints=joints, world=world)
+
+
+def open(config: str | os.PathLike[str] | Mapping[str, Any] | RigConfig, *, backend: str | None = None) -> Rig:  # noqa: A001
+    """Open a rig from a TOML path, a dict or a parsed config.
+
+    ``backend`` (or the environment variable ``JOINTS_BACKEND``) overrides the file's backend.
+    """
+    if isinstance(config, RigConfig):
+        if backend is not None and backend not in ("sim", "hardware"):
+            raise ConfigError(f"{backend!r} is not a backend", key="backend", allowed=("sim", "hardware"))
+        cfg = config if backend is None else dataclasses.replace(config, backend=backend)
+    elif isinstance(config, Mapping):
+        cfg = parse(config, backend=backend)
+    else:
+        cfg = load(Path(config), backend=backend)
+    if cfg.backend == "sim":
+        try:
+            from joints.sim.world import open_sim  # type: ignore[attr-defined]
+        except ImportError as exc:
+            raise ConfigError(
+                "backend 'sim' needs the simulation package (joints.sim.world) which is not "
+                "available in this build; use backend = \"hardware\"",
+                file=cfg.source, key="backend", allowed=("hardware",),
+            ) from exc
+        return open_sim(cfg)  # type: ignore[no-any-return]
+    return build(cfg)

@@ -1,0 +1,1 @@
+"""Simulation: emulated drives (device semantics + motor model + MuJoCo coupling) and servers."""
