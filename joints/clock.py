@@ -5,6 +5,7 @@ Rule: nothing below the rig reads the wall clock directly; it is handed a :class
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Callable, Protocol
 
@@ -45,6 +46,8 @@ class ManualClock:
         return self._t
 
     def advance(self, seconds: float) -> None:
+        if not math.isfinite(seconds):
+            raise ValueError(f"cannot advance the clock by {seconds!r} s")
         if seconds < 0:
             raise ValueError("time cannot go backwards")
         self._t += seconds
@@ -53,6 +56,8 @@ class ManualClock:
         self._t = t
 
     def sleep(self, seconds: float) -> None:
+        if not math.isfinite(seconds):
+            raise ValueError(f"cannot sleep {seconds!r} s")
         if seconds <= 0:
             return
         if self._on_sleep is not None:

@@ -7,6 +7,7 @@ file serves both backends. ``JOINTS_BACKEND=sim|hardware`` overrides the file.
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 from dataclasses import dataclass, field
@@ -28,6 +29,8 @@ DEVICES = ("erob", "zlac8015d", "mks-servo42d", "mks-servo57d")
 SUPPORTED = {("erob", "modbus-rtu")}
 PARITIES = ("N", "E", "O")
 ON_EXIT = ("disable", "stop", "none")
+#: devices with more than one motor per address (the joint's ``channel`` selects one)
+MULTI_CHANNEL = ("zlac8015d",)
 
 
 @dataclass(frozen=True)
@@ -109,12 +112,17 @@ class _Reader:
         v = data.get(short, default)
         if v is None:
             return None
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not float(v).is_integer()):
-            raise self.err(key, f"expected {'an integer' if integer else 'a number'}, got {v!r}")
+        if (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
+                or (integer and not float(v).is_integer())):
+            raise self.err(key, f"expected {'an integer' if integer else 'a finite number'}, got {v!r}")
         if positive and v <= 0:
             raise self.err(key, f"must be > 0, got {v}")
         if minimum is not None and v < minimum or maximum is not None and v > maximum:
-            raise self.err(key, f"{v} is out of range", f"{minimum}..{maximum}")
+            if minimum is not None and maximum is not None:
+                allowed = f"{minimum}..{maximum}"
+            else:
+                allowed = f">= {minimum}" if minimum is not None else f"<= {maximum}"
+            raise self.err(key, f"{v} is out of range", allowed)
         return int(v) if integer else float(v)
 
     def known(self, data: Mapping[str, Any], key: str, allowed: tuple[str, ...]) -> None:
@@ -133,7 +141,7 @@ def _limits(r: _Reader, data: Mapping[str, Any], key: str) -> Limits:
     pos = data.get("position")
     if pos is not None:
         if (not isinstance(pos, (list, tuple)) or len(pos) != 2
-                or not all(isinstance(p, (int, float)) and not isinstance(p, bool) for p in pos)
+                or not all(isinstance(p, (int, float)) and not isinstance(p, bool) and math.isfinite(p) for p in pos)
                 or not pos[0] < pos[1]):
             raise r.err(f"{key}.position", f"expected [min, max] in rad with min < max, got {pos!r}")
         pos = (float(pos[0]), float(pos[1]))
@@ -161,7 +169,10 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
     r = _Reader(source)
     r.known(data, "", _TOP_KEYS)
     env = os.environ.get("JOINTS_BACKEND")
-    chosen = backend or env or data.get("backend", "sim")
+    in_file = data.get("backend", "sim")
+    if in_file not in BACKENDS:
+        raise r.err("backend", f"{in_file!r} is not a backend", BACKENDS)
+    chosen = backend or env or in_file
     if chosen not in BACKENDS:
         where = "backend argument" if backend else ("JOINTS_BACKEND" if env else "backend")
         raise r.err(where, f"{chosen!r} is not a backend", BACKENDS)
@@ -185,6 +196,11 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
         r.known(b, key, _BUS_KEYS)
         protocol = r.choice(b, f"{key}.protocol", PROTOCOLS)
         port = b.get("port")
+        if port is not None and not isinstance(port, str):
+            raise r.err(f"{key}.port", f"expected a port name string, got {port!r}")
+        echo = b.get("echo", False)
+        if not isinstance(echo, bool):
+            raise r.err(f"{key}.echo", f"expected true or false, got {echo!r}")
         if chosen == "hardware" and protocol in ("modbus-rtu", "mks-serial") and not port:
             raise r.err(f"{key}.port", "is required for backend = \"hardware\" (e.g. \"/dev/ttyUSB0\")")
         buses[name] = BusConfig(
@@ -196,7 +212,7 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
             stopbits=r.number(b, f"{key}.stopbits", 1, integer=True, minimum=1, maximum=2),
             timeout=r.number(b, f"{key}.timeout", 0.1, positive=True),
             retries=r.number(b, f"{key}.retries", 2, integer=True, minimum=0, maximum=10),
-            echo=bool(b.get("echo", False)),
+            echo=echo,
             interface=b.get("interface"),
             channel=b.get("channel"),
             bitrate=r.number(b, f"{key}.bitrate", 1_000_000, integer=True, positive=True),
@@ -211,7 +227,7 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
         r.known(j, key, _JOINT_KEYS)
         device = r.choice(j, f"{key}.device", DEVICES)
         bus = j.get("bus")
-        if bus not in buses:
+        if not isinstance(bus, str) or bus not in buses:
             raise r.err(f"{key}.bus", f"{bus!r} is not a bus defined under [buses]", sorted(buses))
         protocol = buses[str(bus)].protocol
         if (device, protocol) not in SUPPORTED:
@@ -224,7 +240,7 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
         if address is None:
             raise r.err(f"{key}.address", "is required (Modbus slave id / MKS address / CAN node id)")
         channel = j.get("channel")
-        ident = (str(bus), address, channel)
+        ident = (str(bus), address, channel if device in MULTI_CHANNEL else None)
         if ident in seen:
             raise r.err(f"{key}.address", f"address {address} on bus {bus!r} is already used by joint {seen[ident]!r}")
         seen[ident] = name
@@ -232,7 +248,7 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
         if not isinstance(profile, Mapping):
             raise r.err(f"{key}.profile", "expected a table of device-profile overrides")
         direction = j.get("direction", 1)
-        if direction not in (1, -1):
+        if isinstance(direction, bool) or direction not in (1, -1):
             raise r.err(f"{key}.direction", f"{direction!r} is not allowed", (1, -1))
         model = j.get("model")
         if model is not None and not isinstance(model, str):
@@ -274,6 +290,8 @@ def load(path: str | os.PathLike[str], *, backend: str | None = None) -> RigConf
         raise ConfigError(f"config file not found: {p}", file=str(p)) from None
     except OSError as exc:
         raise ConfigError(f"cannot read config: {exc}", file=str(p)) from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"not a UTF-8 text file: {exc}", file=str(p)) from exc
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -31,9 +31,12 @@ class ConfigError(JointsError, ValueError):
         key: str | None = None,
         allowed: Iterable[object] | str | None = None,
     ) -> None:
+        self.message = message  #: the bare message, without file/key/allowed (for re-raising)
         self.file = file
         self.key = key
-        self.allowed = allowed
+        # keep a one-shot iterable usable after the message consumed it
+        self.allowed = allowed if allowed is None or isinstance(allowed, str) else tuple(allowed)
+        allowed = self.allowed
         where = ""
         if file:
             where += f"{file}: "
@@ -133,6 +136,13 @@ class RegisterError(JointsError, KeyError):
 
 class CommandError(JointsError, ValueError):
     """A command that is out of range or not allowed in the current state; nothing was sent."""
+
+
+class MotionTimeout(JointsError, TimeoutError):
+    """A joint did not reach its goal (stop moving, a condition) within the time allowed.
+
+    Not a :class:`TransportError`: the bus worked, the motion took too long.
+    """
 
 
 class StateError(JointsError):

@@ -8,12 +8,13 @@ Units: position rad, velocity rad/s, acceleration rad/s^2, torque N*m, current A
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Callable
 
 from joints.clock import Clock
-from joints.drivers.base import JointDriver, RawState
-from joints.errors import CommandError, DeviceFault, ReplyTimeout, StateError
+from joints.drivers.base import JointDriver, RawState, Units
+from joints.errors import CommandError, DeviceFault, MotionTimeout, StateError
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,7 +82,7 @@ class Joint:
 
     # -- unit conversion --------------------------------------------------------------------
     @property
-    def units(self) -> Any:
+    def units(self) -> Units:
         return self.driver.units
 
     def _to_pos(self, rad: float) -> int:
@@ -98,7 +99,8 @@ class Joint:
 
     # -- checks -----------------------------------------------------------------------------
     def _finite(self, what: str, value: float) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        # numbers.Real also admits numpy scalars (np.float32 from a gymnasium action is no float)
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
             raise CommandError(f"joint {self.name}: {what} must be a finite number, got {value!r}")
         return float(value)
 
@@ -133,8 +135,10 @@ class Joint:
     # -- power ------------------------------------------------------------------------------
     def enable(self) -> None:
         """Enable the drive (brake releases). Leaving the rig disables it again."""
-        self.driver.enable()
+        # Mark first: if the reply to "enable" is lost the drive may be enabled all the same,
+        # and leaving the rig must then still try to disable it.
         self._enabled_by_us = True
+        self.driver.enable()
 
     def disable(self) -> None:
         """Disable the drive (brake engages)."""
@@ -241,7 +245,15 @@ class Joint:
             raise DeviceFault(f"joint {self.name}", s.fault, self.driver.fault_text(s.fault))
 
     def wait(self, timeout: float = 10.0, *, poll: float = 0.01, until: Callable[[JointState], bool] | None = None) -> JointState:
-        """Poll until the joint stops moving (or ``until(state)`` holds); raise on fault/timeout."""
+        """Poll until the joint stops moving (or ``until(state)`` holds); raise on fault/timeout.
+
+        Raises :class:`DeviceFault` when the drive reports a fault and
+        :class:`~joints.errors.MotionTimeout` when ``timeout`` [s] passes first.
+        """
+        timeout = self._finite("timeout", timeout)
+        poll = self._finite("poll", poll)
+        if timeout < 0 or poll <= 0:
+            raise CommandError(f"joint {self.name}: wait() needs timeout >= 0 and poll > 0, got {timeout}, {poll}")
         deadline = self.clock.now() + timeout
         while True:
             s = self.state()
@@ -251,7 +263,7 @@ class Joint:
             if done:
                 return s
             if self.clock.now() >= deadline:
-                raise ReplyTimeout(f"joint {self.name}: still moving after {timeout} s")
+                raise MotionTimeout(f"joint {self.name}: still moving after {timeout} s")
             self.clock.sleep(poll)
 
     # -- registers --------------------------------------------------------------------------
@@ -264,8 +276,9 @@ class Joint:
         self.driver.write(key, value, confirm=confirm)
 
     def shutdown(self) -> None:
-        """Stop and disable if we enabled it (used when leaving the rig). Best effort."""
-        if not self._enabled_by_us:
+        """Stop and disable if it was enabled through this joint (``enable()`` or a raw write of
+        the enable register; used when leaving the rig). Best effort."""
+        if not (self._enabled_by_us or self.driver.is_enabled):
             return
         try:
             self.driver.stop()

@@ -183,13 +183,31 @@ def open(config: str | os.PathLike[str] | Mapping[str, Any] | RigConfig, *, back
     else:
         cfg = load(Path(config), backend=backend)
     if cfg.backend == "sim":
-        try:
-            from joints.sim.world import open_sim  # type: ignore[attr-defined]
-        except ImportError as exc:
-            raise ConfigError(
-                "backend 'sim' needs the simulation package (joints.sim.world) which is not "
-                "available in this build; use backend = \"hardware\"",
-                file=cfg.source, key="backend", allowed=("hardware",),
-            ) from exc
-        return open_sim(cfg)  # type: ignore[no-any-return]
+        return open_sim(cfg)
     return build(cfg)
+
+
+def sim_world(cfg: RigConfig) -> Any:
+    """The simulated world for a config: its model with one emulated drive per joint."""
+    from joints.devices.erob.profiles import profile
+    from joints.sim.world import DriveSpec, World
+
+    drives = []
+    for name, j in cfg.joints.items():
+        prof = profile(j.model or "eRob80H100")
+        if j.profile:
+            prof = prof.with_overrides(**dict(j.profile))
+        drives.append(DriveSpec(bus=j.bus, name=name, mjcf_joint=j.mjcf_joint or name, address=j.address, profile=prof))
+    return World(cfg.sim.model, drives, timestep=cfg.sim.timestep, base_dir=cfg.base_dir)
+
+
+def open_sim(cfg: RigConfig) -> Rig:
+    """Build the sim backend: world + emulated drives + in-process links, same drivers as hardware."""
+    world = sim_world(cfg)
+    transports = {name: world.transport(name) for name in cfg.buses}
+    clock: Clock = world.clock
+    if cfg.sim.realtime:
+        from joints.sim.pacing import RealtimeClock
+
+        clock = RealtimeClock(world)
+    return build(cfg, transports=transports, clock=clock, world=world)

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from typing import Mapping
 
 from joints.devices.registers import Register, RegisterTable
-from joints.errors import ConfirmationRequired
+from joints.errors import ConfirmationRequired, RegisterError
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,6 +102,10 @@ class JointDriver(abc.ABC):
     def write(self, key: str | int, value: int, *, confirm: bool = False) -> None:
         """Write one register by manual name or address (persistent ones need ``confirm=True``)."""
         reg = self.table.get(key)
+        if not reg.access.writable:
+            raise RegisterError(
+                f"{self.device}: {reg.name} (0x{reg.address:04X}) is read-only; nothing was sent"
+            )
         if reg.persistent and not confirm:
             raise ConfirmationRequired(
                 f"{self.device}: writing {reg.name} (0x{reg.address:04X}) is persistent or "

@@ -16,6 +16,7 @@ from joints.clock import Clock, MonotonicClock
 from joints.codecs import modbus as mb
 from joints.errors import (
     DeviceRejected,
+    EncodeError,
     FrameError,
     PeerProtocolError,
     ReplyTimeout,
@@ -85,6 +86,8 @@ class ModbusLink:
     def transact(self, request: mb.Request, *, idempotent: bool = False) -> mb.Reply | None:
         """Send ``request`` and return its matching reply (None for broadcast)."""
         frame = mb.encode(request)  # raises EncodeError before anything is sent
+        if request.slave == BROADCAST and isinstance(request, (mb.ReadHoldingRegisters, mb.ReadInputRegisters)):
+            raise EncodeError(f"{self.name}: a read cannot be broadcast (slave 0 never answers): {_describe(request)}")
         attempts = 1 + (self.policy.retries if idempotent else 0)
         with self._lock:
             last: Exception | None = None

@@ -1,0 +1,199 @@
+"""The simulated world: a MuJoCo model whose joints are driven by emulated drives.
+
+Rule: two rates. Every physics substep, each emulated drive runs its own loops from its own
+registers and writes a torque to its MuJoCo ``motor`` actuator; register traffic happens between
+substeps, at the caller's rate, on the simulated clock (lockstep). Actuator and joint parameters
+(armature = reflected rotor inertia, damping, friction loss, torque range) come from the device
+profile, not from the XML. Nothing here reads the wall clock.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, Sequence
+
+from joints.clock import ManualClock
+from joints.devices.erob.profiles import ErobProfile
+from joints.errors import ConfigError, MissingDependencyError
+from joints.sim.erob import ErobEmulator
+from joints.sim.modbus_slave import ModbusDeviceBus
+from joints.transports.loopback import LoopbackTransport
+
+
+def _mujoco() -> Any:
+    try:
+        import mujoco
+    except ImportError as exc:  # pragma: no cover - depends on the install
+        raise MissingDependencyError("mujoco", "sim") from exc
+    return mujoco
+
+
+def model_dirs() -> list[Path]:
+    """Where bundled models are looked for: the installed ``joints.models`` package, then ./models."""
+    dirs: list[Path] = []
+    try:
+        dirs.append(Path(str(resources.files("joints.models"))))
+    except (ModuleNotFoundError, TypeError):
+        pass
+    dirs.append(Path(__file__).resolve().parents[2] / "models")
+    return dirs
+
+
+def resolve_model(name: str | Path, base_dir: Path | None = None) -> Path:
+    """A model file: an existing path (relative to ``base_dir``), or a file shipped in models/."""
+    p = Path(name)
+    candidates = [p] if p.is_absolute() else [(base_dir or Path.cwd()) / p, p]
+    candidates += [d / p.name for d in model_dirs()]
+    for c in candidates:
+        if c.is_file():
+            return c
+    shipped = sorted({f.name for d in model_dirs() if d.is_dir() for f in d.glob("*.xml")})
+    raise ConfigError(f"model {str(name)!r} not found", key="sim.model", allowed=shipped)
+
+
+@dataclass(frozen=True)
+class DriveSpec:
+    """One emulated drive: which bus/address it answers on and which MJCF joint it drives."""
+
+    bus: str
+    name: str
+    mjcf_joint: str
+    address: int
+    profile: ErobProfile
+    device: str = "erob"
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class World:
+    """MuJoCo model + data + emulated drives + the simulated clock."""
+
+    def __init__(self, model: str | Path, drives: Sequence[DriveSpec], *, timestep: float = 0.001,
+                 base_dir: Path | None = None) -> None:
+        mj = _mujoco()
+        self.mujoco = mj
+        self.path = resolve_model(model, base_dir)
+        spec = mj.MjSpec.from_file(str(self.path))
+        spec.option.timestep = timestep
+        joint_names = [j.name for j in spec.joints]
+        for d in drives:
+            jnt = spec.joint(d.mjcf_joint)
+            if jnt is None:
+                raise ConfigError(
+                    f"joint {d.name!r}: MJCF joint {d.mjcf_joint!r} is not in {self.path.name}",
+                    key=f"joints.{d.name}.mjcf_joint", allowed=joint_names,
+                )
+            if jnt.type != mj.mjtJoint.mjJNT_HINGE:
+                raise ConfigError(f"MJCF joint {d.mjcf_joint!r} must be a hinge", key=f"joints.{d.name}.mjcf_joint")
+            prof = d.profile
+            jnt.armature = prof.armature
+            damping = getattr(jnt, "damping")
+            if hasattr(damping, "__len__"):  # MuJoCo >= 4: [linear, quadratic, cubic] coefficients
+                jnt.damping = [prof.viscous_friction] + [0.0] * (len(damping) - 1)
+            else:
+                jnt.damping = prof.viscous_friction
+            jnt.frictionloss = prof.coulomb_friction
+            for act in list(spec.actuators):
+                if act.target == d.mjcf_joint:
+                    spec.delete(act)
+            act = spec.add_actuator()
+            act.name = f"{d.name}_motor"
+            act.trntype = mj.mjtTrn.mjTRN_JOINT
+            act.target = d.mjcf_joint
+            act.gainprm[0] = 1.0
+            act.ctrllimited = 1
+            act.ctrlrange = [-prof.max_torque, prof.max_torque]
+        self.model = spec.compile()
+        self.data = mj.MjData(self.model)
+        self.timestep = float(self.model.opt.timestep)
+        mj.mj_forward(self.model, self.data)
+        self.steps = 0
+        self._target = 0.0
+        self.clock = ManualClock()
+        self.clock.bind(self.advance)
+        self.drives: dict[str, ErobEmulator] = {}
+        self.buses: dict[str, ModbusDeviceBus] = {}
+        self._bind: list[tuple[ErobEmulator, int, int, int]] = []
+        for d in drives:
+            jid = mj.mj_name2id(self.model, mj.mjtObj.mjOBJ_JOINT, d.mjcf_joint)
+            aid = mj.mj_name2id(self.model, mj.mjtObj.mjOBJ_ACTUATOR, f"{d.name}_motor")
+            dof = int(self.model.jnt_dofadr[jid])
+            inertia = self._dof_inertia(dof)
+            emu = ErobEmulator(d.profile, d.address, inertia=inertia)
+            self.drives[d.name] = emu
+            self.buses.setdefault(d.bus, ModbusDeviceBus()).add(emu)
+            self._bind.append((emu, int(self.model.jnt_qposadr[jid]), dof, aid))
+            emu.pos = float(self.data.qpos[self.model.jnt_qposadr[jid]]) * (524288 / (2 * math.pi))
+            emu.p_ref = emu.pos
+
+    def _dof_inertia(self, dof: int) -> float:
+        """Diagonal of the joint-space inertia (incl. armature) at the current pose [kg*m^2]."""
+        import numpy as np
+
+        unit = np.zeros(self.model.nv)
+        unit[dof] = 1.0
+        out = np.zeros(self.model.nv)
+        self.mujoco.mj_mulM(self.model, self.data, out, unit)
+        return float(out[dof])
+
+    @property
+    def time(self) -> float:
+        """Simulated seconds since the last reset."""
+        return self.steps * self.timestep
+
+    def transport(self, bus: str) -> LoopbackTransport:
+        """An in-process transport whose peer is every emulated drive on ``bus``."""
+        if bus not in self.buses:
+            raise ConfigError(f"no emulated drives on bus {bus!r}", key="buses", allowed=sorted(self.buses))
+        return LoopbackTransport(self.buses[bus])
+
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` physics substeps (drives' loops every substep)."""
+        mj_step = self.mujoco.mj_step
+        m, d = self.model, self.data
+        qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
+        dt = self.timestep
+        bind = self._bind
+        for _ in range(n):
+            t = (self.steps + 1) * dt
+            for emu, qa, da, aid in bind:
+                ctrl[aid] = emu.step(t, dt, float(qpos[qa]), float(qvel[da]))
+            mj_step(m, d)
+            self.steps += 1
+        self._target = max(self._target, self.time)
+        self.clock.set(self.time)
+
+    def advance(self, seconds: float) -> None:
+        """Advance simulated time by ``seconds`` (rounded up to whole substeps, no drift)."""
+        if seconds <= 0:
+            return
+        self._target += seconds
+        n = math.ceil((self._target - self.time) / self.timestep - 1e-9)
+        if n > 0:
+            self.step(n)
+
+    def reset(self) -> None:
+        """Physics to the model's initial state, every drive to its power-on state (saved settings kept)."""
+        mj = self.mujoco
+        mj.mj_resetData(self.model, self.data)
+        mj.mj_forward(self.model, self.data)
+        self.steps = 0
+        self._target = 0.0
+        self.clock.set(0.0)
+        for emu, qa, _da, _aid in self._bind:
+            emu.power_cycle()
+            emu.time = 0.0
+            emu.pos = emu.p_ref = float(self.data.qpos[qa]) * (524288 / (2 * math.pi))
+            emu.brake_hold = emu.pos
+
+    def joint_position(self, name: str) -> float:
+        """Ground truth joint angle [rad] from the physics (for tests and envs' task terms)."""
+        for (emu, qa, _da, _aid), dname in zip(self._bind, self.drives):
+            if dname == name:
+                return float(self.data.qpos[qa])
+        raise KeyError(name)
+
+    def close(self) -> None:
+        """Nothing to release for an in-process world (kept for symmetry with served worlds)."""
