@@ -91,6 +91,19 @@ def cmd_registers(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_sim_serve(args: argparse.Namespace) -> int:
+    """Run the configured world in real time; each Modbus bus on a pseudo-terminal."""
+    from joints.config import load
+    from joints.rig import sim_world
+    from joints.sim.serve import serve
+
+    cfg = load(args.config, backend="sim")
+    world = sim_world(cfg)
+    buses = [name for name, b in cfg.buses.items() if b.protocol == "modbus-rtu"]
+    serve(world, buses, out=sys.stdout)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="joints", description=__doc__.splitlines()[0])
     p.add_argument("--version", action="version", version=f"joints {__import__('joints').__version__}")
@@ -116,6 +129,11 @@ def build_parser() -> argparse.ArgumentParser:
             c.add_argument("value")
             c.add_argument("--confirm", action="store_true", help="allow persistent/dangerous registers")
         c.set_defaults(func=func)
+
+    sim = sub.add_parser("sim", help="simulation tools").add_subparsers(dest="sim_command", required=True)
+    sv = sim.add_parser("serve", help="serve the emulated drives of CONFIG on pseudo-terminals (JSON line per bus)")
+    sv.add_argument("config")
+    sv.set_defaults(func=cmd_sim_serve)
 
     r = sub.add_parser("registers", help="list the eRob Modbus register table")
     r.set_defaults(func=cmd_registers)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,8 +66,8 @@ class Rig:
 
     def sleep(self, seconds: float) -> None:
         """Sim: advance the world by ``seconds``; hardware: wait on the wall clock."""
-        if seconds < 0:
-            raise ValueError(f"cannot sleep a negative time ({seconds})")
+        if not math.isfinite(seconds) or seconds < 0:
+            raise ValueError(f"cannot sleep {seconds!r} s (need a finite time >= 0)")
         self.clock.sleep(seconds)
 
     def read_states(self) -> dict[str, JointState]:
@@ -105,7 +106,10 @@ class Rig:
             except Exception as exc:  # noqa: BLE001
                 errors.append(exc)
         if self.world is not None and hasattr(self.world, "close"):
-            self.world.close()
+            try:
+                self.world.close()
+            except Exception as exc:  # noqa: BLE001 - report with the others
+                errors.append(exc)
         if errors:
             raise JointsError(f"errors while closing the rig: {'; '.join(map(str, errors))}") from errors[0]
 
@@ -130,9 +134,20 @@ def _open_hardware_transport(cfg: BusConfig) -> ByteTransport:
     if cfg.protocol == "modbus-rtu":
         from joints.transports.serial import SerialTransport
 
-        assert cfg.port is not None
+        if cfg.port is None:  # e.g. a sim config opened with backend="hardware"
+            raise ConfigError("is required for backend = \"hardware\" (e.g. \"/dev/ttyUSB0\")",
+                              key=f"buses.{cfg.name}.port")
         return SerialTransport(cfg.port, cfg.baudrate, parity=cfg.parity, stopbits=cfg.stopbits)
     raise ConfigError(f"protocol {cfg.protocol!r} has no transport yet", key=f"buses.{cfg.name}.protocol")
+
+
+def _in_file(exc: ConfigError, source: str) -> ConfigError:
+    """The same error, naming the config file (errors from below the config know only the key)."""
+    if exc.file is not None:
+        return exc
+    named = ConfigError(exc.message, file=source, key=exc.key, allowed=exc.allowed)
+    named.__cause__ = exc
+    return named
 
 
 def build(config: RigConfig, *, transports: Mapping[str, ByteTransport] | None = None,
@@ -162,9 +177,11 @@ def build(config: RigConfig, *, transports: Mapping[str, ByteTransport] | None =
                                  offset=jcfg.offset, direction=jcfg.direction)
             if jcfg.watchdog_ms is not None and hasattr(driver, "set_communication_timeout"):
                 driver.set_communication_timeout(jcfg.watchdog_ms)
-    except BaseException:
+    except BaseException as exc:
         for t in opened.values():
             t.close()
+        if isinstance(exc, ConfigError):
+            raise _in_file(exc, config.source) from exc
         raise
     return Rig(config, clock=clock, buses=buses, joints=joints, world=world)
 
@@ -182,21 +199,22 @@ def open(config: str | os.PathLike[str] | Mapping[str, Any] | RigConfig, *, back
         cfg = parse(config, backend=backend)
     else:
         cfg = load(Path(config), backend=backend)
-    if cfg.backend == "sim":
-        return open_sim(cfg)
-    return build(cfg)
+    try:
+        if cfg.backend == "sim":
+            return open_sim(cfg)
+        return build(cfg)
+    except ConfigError as exc:
+        raise _in_file(exc, cfg.source) from exc
 
 
 def sim_world(cfg: RigConfig) -> Any:
     """The simulated world for a config: its model with one emulated drive per joint."""
-    from joints.devices.erob.profiles import profile
+    from joints.drivers import erob_profile
     from joints.sim.world import DriveSpec, World
 
     drives = []
     for name, j in cfg.joints.items():
-        prof = profile(j.model or "eRob80H100")
-        if j.profile:
-            prof = prof.with_overrides(**dict(j.profile))
+        prof = erob_profile(j)
         drives.append(DriveSpec(bus=j.bus, name=name, mjcf_joint=j.mjcf_joint or name, address=j.address, profile=prof))
     return World(cfg.sim.model, drives, timestep=cfg.sim.timestep, base_dir=cfg.base_dir)
 

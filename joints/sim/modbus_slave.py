@@ -102,6 +102,8 @@ class ModbusSlave:
         return tuple(out)
 
     def write(self, start: int, words: tuple[int, ...]) -> None:
+        if not 1 <= len(words) <= mb.MAX_WRITE:
+            raise ModbusException(ILLEGAL_DATA_VALUE, f"write count {len(words)}")
         touched: list[Register] = []
         for i in range(len(words)):
             reg = self.table.owner(start + i)
@@ -110,19 +112,26 @@ class ModbusSlave:
             if not touched or touched[-1] is not reg:
                 touched.append(reg)
         saved = dict(self.words)
+        logged = len(self.write_log)
         for i, w in enumerate(words):
             self.words[start + i] = w
         try:
+            # validate every touched register before any is logged or acted on: a refused
+            # block write must have no effect at all
+            accepted: list[tuple[Register, int]] = []
             for reg in touched:
                 value = self.get(reg.name)
                 try:
                     reg.check(value)
                 except CommandError as exc:
                     raise ModbusException(ILLEGAL_DATA_VALUE, str(exc)) from exc
+                accepted.append((reg, value))
+            for reg, value in accepted:
                 self.write_log.append((reg.name, value))
                 self.on_write(reg, value)
         except ModbusException:
             self.words = saved
+            del self.write_log[logged:]
             raise
 
     def handle(self, request: mb.Request | mb.UnsupportedRequest) -> mb.Reply:
