@@ -23,6 +23,22 @@ def _parse_range(text: str) -> range:
     return range(a, b + 1)
 
 
+def integer(text: str) -> int:
+    """A register value: decimal, 0x.. hex, 0b.. binary (argparse type)."""
+    return int(text, 0)
+
+
+def _joint(rig, name: str):  # type: ignore[no-untyped-def]
+    """The rig's joint ``name``; an unknown name is a configuration error listing the joints."""
+    from joints.errors import ConfigError
+
+    try:
+        return rig.joints[name]
+    except KeyError:
+        raise ConfigError(f"no joint named {name!r}", file=rig.config.source, key="joints",
+                          allowed=sorted(rig.joints)) from None
+
+
 def _key(text: str) -> str | int:
     try:
         return int(text, 0)
@@ -69,7 +85,7 @@ def cmd_state(args: argparse.Namespace) -> int:
 
 def cmd_read(args: argparse.Namespace) -> int:
     with _open(args) as rig:
-        j = rig.joints[args.joint]
+        j = _joint(rig, args.joint)
         for key in args.register:
             reg = j.driver.table.get(_key(key))
             print(json.dumps({"joint": args.joint, "register": reg.name, "address": f"0x{reg.address:04X}",
@@ -79,7 +95,7 @@ def cmd_read(args: argparse.Namespace) -> int:
 
 def cmd_write(args: argparse.Namespace) -> int:
     with _open(args) as rig:
-        rig.joints[args.joint].write(_key(args.register), int(args.value, 0), confirm=args.confirm)
+        _joint(rig, args.joint).write(_key(args.register), args.value, confirm=args.confirm)
     return 0
 
 
@@ -105,7 +121,7 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="joints", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="joints", description=(__doc__ or "joints").splitlines()[0])
     p.add_argument("--version", action="version", version=f"joints {__import__('joints').__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
@@ -126,7 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
             c.add_argument("joint")
             c.add_argument("register", nargs="+" if name == "read" else None)
         if name == "write":
-            c.add_argument("value")
+            c.add_argument("value", type=integer, help="decimal or 0x.. hex")
             c.add_argument("--confirm", action="store_true", help="allow persistent/dangerous registers")
         c.set_defaults(func=func)
 

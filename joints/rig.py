@@ -143,11 +143,7 @@ def _open_hardware_transport(cfg: BusConfig) -> ByteTransport:
 
 def _in_file(exc: ConfigError, source: str) -> ConfigError:
     """The same error, naming the config file (errors from below the config know only the key)."""
-    if exc.file is not None:
-        return exc
-    named = ConfigError(exc.message, file=source, key=exc.key, allowed=exc.allowed)
-    named.__cause__ = exc
-    return named
+    return ConfigError(exc.message, file=source, key=exc.key, allowed=exc.allowed)
 
 
 def build(config: RigConfig, *, transports: Mapping[str, ByteTransport] | None = None,
@@ -180,7 +176,7 @@ def build(config: RigConfig, *, transports: Mapping[str, ByteTransport] | None =
     except BaseException as exc:
         for t in opened.values():
             t.close()
-        if isinstance(exc, ConfigError):
+        if isinstance(exc, ConfigError) and exc.file is None:
             raise _in_file(exc, config.source) from exc
         raise
     return Rig(config, clock=clock, buses=buses, joints=joints, world=world)
@@ -204,7 +200,9 @@ def open(config: str | os.PathLike[str] | Mapping[str, Any] | RigConfig, *, back
             return open_sim(cfg)
         return build(cfg)
     except ConfigError as exc:
-        raise _in_file(exc, cfg.source) from exc
+        if exc.file is None:
+            raise _in_file(exc, cfg.source) from exc
+        raise
 
 
 def sim_world(cfg: RigConfig) -> Any:
@@ -213,10 +211,16 @@ def sim_world(cfg: RigConfig) -> Any:
     from joints.sim.world import DriveSpec, World
 
     drives = []
-    for name, j in cfg.joints.items():
-        prof = erob_profile(j)
-        drives.append(DriveSpec(bus=j.bus, name=name, mjcf_joint=j.mjcf_joint or name, address=j.address, profile=prof))
-    return World(cfg.sim.model, drives, timestep=cfg.sim.timestep, base_dir=cfg.base_dir)
+    try:
+        for name, j in cfg.joints.items():
+            prof = erob_profile(j)
+            drives.append(DriveSpec(bus=j.bus, name=name, mjcf_joint=j.mjcf_joint or name, address=j.address,
+                                    profile=prof))
+        return World(cfg.sim.model, drives, timestep=cfg.sim.timestep, base_dir=cfg.base_dir)
+    except ConfigError as exc:  # `joints sim serve` comes here directly: name the file too
+        if exc.file is None:
+            raise _in_file(exc, cfg.source) from exc
+        raise
 
 
 def open_sim(cfg: RigConfig) -> Rig:

@@ -232,7 +232,7 @@ class ErobEmulator(ModbusSlave):
             self._cache_settings()
             if name == "target_speed" and self._mode() == OperationMode.SPEED:
                 self._speed_command(value)
-            elif name == "target_current" and self._mode() == OperationMode.TORQUE:
+            elif name == "target_current" and self._mode() == OperationMode.TORQUE and value:
                 self._ready_or_refuse()
             elif name == "operation_mode":
                 self._change_mode()
@@ -285,7 +285,7 @@ class ErobEmulator(ModbusSlave):
         return False
 
     def _enable(self) -> None:
-        if self.fault:
+        if self.fault and self.fault != faults.START_WHILE_DISABLED:
             return  # a faulted drive does not enable until errors are cleared
         if not self.enabled:
             self.enabled = True

@@ -70,9 +70,7 @@ ENCODED = [
 ]
 
 
-@pytest.mark.parametrize(
-    ("message", "hex_text"), ENCODED, ids=[f"{type(m).__name__}-{x[:8]}" for m, x in ENCODED]
-)
+@pytest.mark.parametrize(("message", "hex_text"), ENCODED, ids=[f"{type(m).__name__}-{x[:8]}" for m, x in ENCODED])
 def test_encode_known_frames(message: mb.Message, hex_text: str) -> None:
     assert mb.encode(message) == h(hex_text)
     assert mb.ModbusRtuCodec.encode(message) == h(hex_text)

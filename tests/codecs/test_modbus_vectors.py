@@ -33,15 +33,11 @@ BY_ID = {r["id"]: r for r in RECORDS if "id" in r}
 EROB = [
     r
     for r in RECORDS
-    if r.get("record_type") == "vector"
-    and r.get("protocol") == "modbus-rtu"
-    and r.get("device") == "erob"
+    if r.get("record_type") == "vector" and r.get("protocol") == "modbus-rtu" and r.get("device") == "erob"
 ]
 EROB_ERRATA = [r for r in EROB if r.get("correct_hex")]
 EROB_SEQUENCES = [
-    r
-    for r in RECORDS
-    if r.get("record_type") == "sequence" and "erob-modbus-rtu" in str(r.get("manual", ""))
+    r for r in RECORDS if r.get("record_type") == "sequence" and "erob-modbus-rtu" in str(r.get("manual", ""))
 ]
 OTHER_MODBUS = [
     r
@@ -171,8 +167,15 @@ def test_corpus_is_complete() -> None:
     assert len(EROB) >= 250
     assert {_decoded(r)["function"] for r in EROB} == {3, 6, 16}
     kinds = {k for r in EROB_ERRATA for k in r["erratum_kind"].split("+")}
-    assert {"crc-byte-order", "missing-byte", "byte-count", "wrong-slave", "wrong-register",
-            "response-mismatch", "bad-crc"} <= kinds
+    assert {
+        "crc-byte-order",
+        "missing-byte",
+        "byte-count",
+        "wrong-slave",
+        "wrong-register",
+        "response-mismatch",
+        "bad-crc",
+    } <= kinds
     assert len({r["id"] for r in EROB}) == len(EROB)
     assert EROB_SEQUENCES
 
@@ -399,9 +402,7 @@ def _sequence_steps() -> list[Any]:
 def test_sequence_step_replays(sequence: dict[str, Any], step: dict[str, Any]) -> None:
     send = _bytes(step["send_hex"])
     request = _decode_request(send)
-    assert isinstance(
-        request, (mb.ReadHoldingRegisters, mb.WriteSingleRegister, mb.WriteMultipleRegisters)
-    )
+    assert isinstance(request, (mb.ReadHoldingRegisters, mb.WriteSingleRegister, mb.WriteMultipleRegisters))
     assert mb.encode(request) == send
     if step.get("request"):
         assert send == _corrected(BY_ID[step["request"]])
@@ -423,9 +424,7 @@ def test_sequence_step_replays(sequence: dict[str, Any], step: dict[str, Any]) -
         assert reply == mb.WriteSingleRegisterReply(request.slave, request.address, request.value)
         assert reply_frame == send  # FC06 reply echoes the request
     else:
-        assert reply == mb.WriteMultipleRegistersReply(
-            request.slave, request.address, len(request.values)
-        )
+        assert reply == mb.WriteMultipleRegistersReply(request.slave, request.address, len(request.values))
     if step.get("response"):
         assert reply_frame == _corrected(BY_ID[step["response"]])
 

@@ -6,8 +6,8 @@ import csv
 import dataclasses
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import pytest
 
@@ -292,9 +292,7 @@ def test_echo_only_no_device_times_out(clock: ManualClock) -> None:
 # ---------------------------------------------------------------------------------- trace
 
 
-def test_trace_records_and_exports(
-    bus: ModbusDeviceBus, clock: ManualClock, tmp_path: Path
-) -> None:
+def test_trace_records_and_exports(bus: ModbusDeviceBus, clock: ManualClock, tmp_path: Path) -> None:
     trace = Trace()
     link = make_link(bus, clock, trace=trace)
     link.write_register(SLAVE, 0x0040, 3)

@@ -59,9 +59,7 @@ def test_read_unknown_address_is_exception_02(slave: ModbusSlave) -> None:
 def test_write_read_only_register_is_exception_02(slave: ModbusSlave) -> None:
     before = dict(slave.words)
     assert slave.handle(mb.WriteSingleRegister(ADDR, 0x0060, 1)) == mb.ExceptionReply(ADDR, 6, 2)
-    assert slave.handle(mb.WriteMultipleRegisters(ADDR, 0x0060, (1, 0))) == mb.ExceptionReply(
-        ADDR, 16, 2
-    )
+    assert slave.handle(mb.WriteMultipleRegisters(ADDR, 0x0060, (1, 0))) == mb.ExceptionReply(ADDR, 16, 2)
     # a block that runs from writable registers into a read-only one is refused as a whole
     assert slave.handle(mb.WriteMultipleRegisters(ADDR, 0x0051, (0, 1, 0))).code == ILLEGAL_DATA_ADDRESS
     assert slave.words == before
@@ -140,9 +138,7 @@ def test_on_write_refusal_restores_image() -> None:
     s = Refusing(EROB_MODBUS, ADDR)
     s.set("target_speed", 5)
     before = dict(s.words)
-    assert s.handle(mb.WriteMultipleRegisters(ADDR, 0x0051, words32(-10))) == mb.ExceptionReply(
-        ADDR, 16, 0x04
-    )
+    assert s.handle(mb.WriteMultipleRegisters(ADDR, 0x0051, words32(-10))) == mb.ExceptionReply(ADDR, 16, 0x04)
     assert s.words == before and s.get("target_speed") == 5
 
 
@@ -166,7 +162,10 @@ def test_status_block_read_with_gaps(slave: ModbusSlave) -> None:
     assert isinstance(reply, mb.ReadRegistersReply)
     values = reply.values
     assert len(values) == 25
-    at = lambda a: values[a - STATUS_BLOCK_START]  # noqa: E731
+
+    def at(address: int) -> int:
+        return values[address - STATUS_BLOCK_START]
+
     assert at(0x0060) == 0x0FA2
     assert at(0x0061) == 1
     assert at(0x0062) == 0 and at(0x006A) == 0 and at(0x006B) == 0
@@ -177,12 +176,8 @@ def test_status_block_read_with_gaps(slave: ModbusSlave) -> None:
 
 
 def test_command_registers_read_zero(slave: ModbusSlave) -> None:
-    assert slave.handle(mb.WriteSingleRegister(ADDR, 0x00F0, 1)) == mb.WriteSingleRegisterReply(
-        ADDR, 0x00F0, 1
-    )
-    assert slave.handle(mb.ReadHoldingRegisters(ADDR, 0x00F0, 1)) == mb.ReadRegistersReply(
-        ADDR, 3, (0,)
-    )
+    assert slave.handle(mb.WriteSingleRegister(ADDR, 0x00F0, 1)) == mb.WriteSingleRegisterReply(ADDR, 0x00F0, 1)
+    assert slave.handle(mb.ReadHoldingRegisters(ADDR, 0x00F0, 1)) == mb.ReadRegistersReply(ADDR, 3, (0,))
     assert slave.write_log == [("enable_the_motor", 1)]
 
 
