@@ -145,6 +145,11 @@ class Joint:
         self.driver.disable()
         self._enabled_by_us = False
 
+    def driver_reset(self) -> None:
+        """The drive was power-cycled (sim reset): it is disabled and holds no settings."""
+        self.driver.forget()
+        self._enabled_by_us = False
+
     @property
     def enabled(self) -> bool:
         return self.driver.is_enabled

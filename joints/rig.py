@@ -79,6 +79,18 @@ class Rig:
                     out[name] = j.state()
         return out
 
+    def reset(self) -> None:
+        """Sim: physics to the model's initial state and every emulated drive to power-on.
+
+        Drivers forget what they wrote (the drives lost it) and joints count as disabled.
+        On hardware this raises: a real robot cannot be reset by software.
+        """
+        if self.world is None:
+            raise JointsError("reset() is only available with backend = \"sim\"")
+        self.world.reset()
+        for j in self.joints.values():
+            j.driver_reset()
+
     def trace(self, sink: Callable[[TraceRecord], None] | None) -> None:
         """Route every frame of every bus to ``sink`` (None stops tracing)."""
         for b in self.buses.values():

@@ -117,5 +117,8 @@ class JointDriver(abc.ABC):
     @abc.abstractmethod
     def is_enabled(self) -> bool: ...
 
+    def forget(self) -> None:
+        """The drive was power-cycled: drop cached settings and count it as disabled."""
+
     def close(self) -> None:
         """Release driver resources (the bus is closed by the rig)."""

@@ -121,8 +121,9 @@ class ErobModbusDriver(JointDriver):
         self._cache.pop(name, None)
 
     def forget(self) -> None:
-        """Forget cached settings (after a power cycle or an external tool wrote the drive)."""
+        """Forget cached settings and the enable state (after a power cycle or an external tool)."""
         self._cache.clear()
+        self._note_enable(False)
 
     # -- power ------------------------------------------------------------------------------
     def _note_enable(self, on: bool) -> None:

@@ -1,0 +1,1 @@
+"""MJCF models shipped with joints (installed as the package data ``joints.models``)."""
