@@ -102,11 +102,10 @@ def test_normal_exit_stops_and_disables_enabled_joints_only() -> None:
 
 def test_exception_inside_stops_disables_and_propagates() -> None:
     s = Setup()
-    with pytest.raises(RuntimeError, match="controller bug"):
-        with s.build() as rig:
-            rig.joints["shoulder"].enable()
-            rig.joints["shoulder"].set_velocity(0.5)
-            raise RuntimeError("controller bug")
+    with pytest.raises(RuntimeError, match="controller bug"), s.build() as rig:
+        rig.joints["shoulder"].enable()
+        rig.joints["shoulder"].set_velocity(0.5)
+        raise RuntimeError("controller bug")
     log = s.log("shoulder")
     assert log[-2:] == STOP_AND_DISABLE
     assert ("target_speed", 0) in log[log.index(("enable_the_motor", 1)):]  # speed mode: target zeroed
@@ -115,10 +114,9 @@ def test_exception_inside_stops_disables_and_propagates() -> None:
 
 def test_keyboard_interrupt_inside_also_disables() -> None:
     s = Setup()
-    with pytest.raises(KeyboardInterrupt):
-        with s.build() as rig:
-            rig.joints["elbow"].enable()
-            raise KeyboardInterrupt
+    with pytest.raises(KeyboardInterrupt), s.build() as rig:
+        rig.joints["elbow"].enable()
+        raise KeyboardInterrupt
     assert s.log("elbow")[-2:] == STOP_AND_DISABLE
 
 
@@ -169,13 +167,11 @@ def test_one_failing_joint_does_not_keep_the_others_enabled() -> None:
 
 def test_shutdown_error_does_not_hide_the_original_exception(caplog: pytest.LogCaptureFixture) -> None:
     s = Setup()
-    with caplog.at_level(logging.ERROR, logger="joints"):
-        with pytest.raises(ZeroDivisionError):
-            with s.build() as rig:
-                rig.joints["shoulder"].enable()
-                rig.joints["elbow"].enable()
-                del s.bus.slaves[2]
-                1 / 0  # noqa: B018
+    with caplog.at_level(logging.ERROR, logger="joints"), pytest.raises(ZeroDivisionError), s.build() as rig:
+        rig.joints["shoulder"].enable()
+        rig.joints["elbow"].enable()
+        del s.bus.slaves[2]
+        raise ZeroDivisionError("controller bug")
     assert s.log("elbow")[-2:] == STOP_AND_DISABLE
     assert "shoulder" in caplog.text
 
@@ -192,9 +188,8 @@ def test_lost_enable_reply_still_disables_on_exit() -> None:
         return reply
 
     s.transport.attach(flaky)
-    with pytest.raises(ReplyTimeout):
-        with s.build() as rig:
-            rig.joints["elbow"].enable()
+    with pytest.raises(ReplyTimeout), s.build() as rig:
+        rig.joints["elbow"].enable()
     assert s.log("elbow")[-1] == ("enable_the_motor", 0)
 
 

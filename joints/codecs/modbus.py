@@ -17,6 +17,7 @@ Device role decodes requests; unsupported-but-well-framed function codes come ou
 from __future__ import annotations
 
 import enum
+import struct
 from dataclasses import dataclass
 from typing import Union
 
@@ -155,7 +156,29 @@ def _u16(name: str, v: int) -> int:
     return v
 
 
+#: big-endian register packers/unpackers by word count (a frame carries at most 127 words)
+_WORDS_BE = [struct.Struct(f">{n}H") for n in range(128)]
+
+
+def _words_be(n: int) -> struct.Struct:
+    return _WORDS_BE[n] if n < 128 else struct.Struct(f">{n}H")
+
+
+def _plain_u16s(values: tuple[int, ...] | list[int]) -> bytes | None:
+    """Fast path of :func:`_words`: exact ints in range packed in one go, else None."""
+    for v in values:
+        if type(v) is not int:  # bools, floats, int subclasses: the checked path decides
+            return None
+    try:
+        return _words_be(len(values)).pack(*values)
+    except struct.error:  # out of range: the checked path raises the EncodeError
+        return None
+
+
 def _words(values: tuple[int, ...] | list[int]) -> bytes:
+    fast = _plain_u16s(values)
+    if fast is not None:
+        return fast
     out = bytearray()
     for i, v in enumerate(values):
         out += _u16(f"value[{i}]", v).to_bytes(2, "big")
@@ -164,6 +187,11 @@ def _words(values: tuple[int, ...] | list[int]) -> bytes:
 
 def _finish(body: bytes | bytearray) -> bytes:
     return bytes(body) + crc16_modbus(body).to_bytes(2, "little")
+
+
+_HEAD = struct.Struct(">BBHH")  # slave, function, address, count/value
+#: FC16 request bodies (slave, function, address, count, byte count, values) by value count
+_FC16 = [struct.Struct(f">BBHHB{n}H") for n in range(MAX_WRITE + 1)]
 
 
 def encode_pdu(message: Message) -> bytes:
@@ -209,8 +237,48 @@ def encode_pdu(message: Message) -> bytes:
     raise EncodeError(f"not a Modbus message: {message!r}")
 
 
+def _encode_fast(message: Message) -> bytes | None:
+    """The host's hot path (requests of exactly our types, plain in-range ints), else None.
+
+    Produces the same bytes as the checked path; anything unusual (subclasses, bools, values out
+    of range) returns None so that the checked path encodes it or raises its EncodeError.
+    """
+    t = type(message)
+    if t is ReadHoldingRegisters or t is ReadInputRegisters or t is WriteSingleRegister:
+        s, a = message.slave, message.address
+        c = message.value if t is WriteSingleRegister else message.count  # type: ignore[union-attr]
+        if type(s) is not int or type(a) is not int or type(c) is not int:
+            return None
+        if not (0 <= s <= 0xFF and 0 <= a <= 0xFFFF):
+            return None
+        if t is WriteSingleRegister:
+            if not 0 <= c <= 0xFFFF:
+                return None
+        elif not 1 <= c <= MAX_READ:
+            return None
+        body = _HEAD.pack(s, t.function, a, c)
+    elif t is WriteMultipleRegisters:
+        s, a, values = message.slave, message.address, message.values
+        n = len(values)
+        if type(s) is not int or type(a) is not int or not (0 <= s <= 0xFF and 0 <= a <= 0xFFFF and 1 <= n <= MAX_WRITE):
+            return None
+        for v in values:
+            if type(v) is not int:
+                return None
+        try:
+            body = _FC16[n].pack(s, WRITE_MULTIPLE_REGISTERS, a, n, 2 * n, *values)
+        except struct.error:  # a value out of range
+            return None
+    else:
+        return None
+    return body + crc16_modbus(body).to_bytes(2, "little")
+
+
 def encode(message: Message) -> bytes:
     """Encode any request or reply into a complete RTU frame (address, PDU, CRC low first)."""
+    frame = _encode_fast(message)
+    if frame is not None:
+        return frame
     return _finish(bytes((_u8("slave", message.slave),)) + encode_pdu(message))
 
 
@@ -254,15 +322,11 @@ def _decode_reply(frame: bytes, expected: Request | None) -> Reply:
         n = frame[2]
         if n % 2:
             raise ByteCountError(f"read reply byte count {n} is odd", data=frame)
-        data = frame[3 : 3 + n]
-        return ReadRegistersReply(
-            slave, fc, tuple(int.from_bytes(data[i : i + 2], "big") for i in range(0, n, 2))
-        )
-    a = int.from_bytes(frame[2:4], "big")
-    b = int.from_bytes(frame[4:6], "big")
-    if fc == WRITE_SINGLE_REGISTER:
-        return WriteSingleRegisterReply(slave, a, b)
-    if fc == WRITE_MULTIPLE_REGISTERS:
+        return ReadRegistersReply(slave, fc, _words_be(n >> 1).unpack_from(frame, 3))
+    if fc == WRITE_SINGLE_REGISTER or fc == WRITE_MULTIPLE_REGISTERS:  # always 8-byte frames
+        _, _, a, b = _HEAD.unpack_from(frame)
+        if fc == WRITE_SINGLE_REGISTER:
+            return WriteSingleRegisterReply(slave, a, b)
         return WriteMultipleRegistersReply(slave, a, b)
     raise FrameError(f"reply with unsupported function code 0x{fc:02X}", data=frame)
 
@@ -284,10 +348,7 @@ def _decode_request(frame: bytes) -> Request | UnsupportedRequest:
                 f"FC16 request for {b} registers carries byte count {n} (expected {2 * b})",
                 data=frame,
             )
-        data = frame[7 : 7 + n]
-        return WriteMultipleRegisters(
-            slave, a, tuple(int.from_bytes(data[i : i + 2], "big") for i in range(0, n, 2))
-        )
+        return WriteMultipleRegisters(slave, a, _words_be(n >> 1).unpack_from(frame, 7))
     return UnsupportedRequest(slave, fc, frame[2:-2])
 
 

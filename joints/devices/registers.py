@@ -9,7 +9,7 @@ from __future__ import annotations
 import enum
 import re
 from dataclasses import dataclass, field
-from typing import Iterable, Iterator, Mapping, Sequence
+from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 from joints.errors import CommandError, RegisterError
 
@@ -216,7 +216,7 @@ class RegisterTable:
                 out[reg.name] = reg.from_words(words[i : i + reg.words])
         return out
 
-    def encode_block(self, values: Mapping[str | int, int]) -> tuple[int, list[int]]:
+    def encode_block(self, values: Mapping[Any, int]) -> tuple[int, list[int]]:
         """Encode several registers that form one contiguous block -> (start, words)."""
         regs = sorted((self.get(k) for k in values), key=lambda r: r.address)
         if not regs:

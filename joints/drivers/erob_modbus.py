@@ -120,6 +120,12 @@ class ErobModbusDriver(JointDriver):
         self.write_register(self.table[name], value, idempotent=False)
         self._cache.pop(name, None)
 
+    def _validate(self, **values: int | None) -> None:
+        """Range-check every value of a command before its first write (nothing sent on error)."""
+        for name, value in values.items():
+            if value is not None:
+                self.table[name].check(value)
+
     def forget(self) -> None:
         """Forget cached settings and the enable state (after a power cycle or an external tool)."""
         self._cache.clear()
@@ -226,6 +232,8 @@ class ErobModbusDriver(JointDriver):
         deceleration: int | None = None,
     ) -> None:
         """Move Absolute (5.1.1): relative value 0, target absolute position, start."""
+        self._validate(target_absolute_position=position, profile_speed=speed,
+                       profile_acceleration=acceleration, profile_deceleration=deceleration)
         self.configure_position(
             MotionMode.ABSOLUTE, speed=speed, acceleration=acceleration, deceleration=deceleration,
             clear_relative=True,
@@ -243,6 +251,8 @@ class ErobModbusDriver(JointDriver):
         deceleration: int | None = None,
     ) -> None:
         """Move Relative (5.1.2): motion mode 1 with a target relative position, start."""
+        self._validate(target_relative_position=delta, profile_speed=speed,
+                       profile_acceleration=acceleration, profile_deceleration=deceleration)
         self.configure_position(MotionMode.ABSOLUTE, speed=speed, acceleration=acceleration, deceleration=deceleration)
         self._settle_after_enable()
         self._set("target_relative_position", delta, force=True)
@@ -250,6 +260,7 @@ class ErobModbusDriver(JointDriver):
 
     def move_continuous(self, speed: int, *, acceleration: int | None = None, deceleration: int | None = None) -> None:
         """Move Continuous (5.1.3): signed profile speed, start; stop() ends it."""
+        self._validate(profile_speed=speed, profile_acceleration=acceleration, profile_deceleration=deceleration)
         self.configure_position(MotionMode.CONTINUOUS, speed=speed, acceleration=acceleration, deceleration=deceleration)
         self._settle_after_enable()
         self._command("start_operating", CMD_START)
@@ -264,6 +275,8 @@ class ErobModbusDriver(JointDriver):
         dwell: int | None = None,
     ) -> None:
         """Move Repetitive (5.1.4): dwell time [0.05 ms], target absolute position, start."""
+        self._validate(target_absolute_position=position, profile_speed=speed, dwell_time=dwell,
+                       profile_acceleration=acceleration, profile_deceleration=deceleration)
         self.configure_position(
             MotionMode.REPETITIVE, speed=speed, acceleration=acceleration, deceleration=deceleration, dwell=dwell
         )
@@ -278,6 +291,7 @@ class ErobModbusDriver(JointDriver):
     # -- speed control (5.2) ----------------------------------------------------------------
     def set_velocity(self, velocity: int, *, acceleration: int | None = None, deceleration: int | None = None) -> None:
         """Speed control: mode 2, profile acceleration/deceleration, target speed [count/s]."""
+        self._validate(target_speed=velocity, profile_acceleration=acceleration, profile_deceleration=deceleration)
         self._operation_mode(OperationMode.SPEED)
         self._set("control_source", 0)
         self._set_many(self._profile(None, acceleration, deceleration))
@@ -296,6 +310,7 @@ class ErobModbusDriver(JointDriver):
 
     def set_current(self, current: int) -> None:
         """Torque control: mode 1, target current [mA] (negative = reverse torque)."""
+        self._validate(target_current=current)
         self._operation_mode(OperationMode.TORQUE)
         self._set("control_source", 0)
         self._settle_after_enable()

@@ -205,6 +205,7 @@ class ErobEmulator(ModbusSlave):
         # torque per (count/s) of speed error -> current per (count/s) in mA
         self.kv = self.inertia * bw / COUNTS_PER_RAD / self.kt * 1000.0
         self.ki = self.kv / ti if ti > 0 else 0.0
+        self.kff = self.inertia / COUNTS_PER_RAD / self.kt * 1000.0  # mA per count/s^2
         self.i_cont = float(g("continuous_current"))
         self.i_peak = float(max(g("peak_current"), 1))
         self.i_max = float(max(g("max_motor_current"), 1))
@@ -353,6 +354,10 @@ class ErobEmulator(ModbusSlave):
 
     def _stop(self, decel: float) -> None:
         g = self.gen
+        if self._mode() == OperationMode.TORQUE:
+            # no speed profile in torque mode: the current command goes to zero
+            self.set("target_current", 0)
+            return
         if self._mode() == OperationMode.SPEED:
             self.mode_speed_target = 0.0
             self.set("target_speed", 0)
@@ -364,6 +369,8 @@ class ErobEmulator(ModbusSlave):
     def _speed_command(self, value: int) -> None:
         if value and not self._ready_or_refuse():
             return
+        if value:
+            self.gen = _Profile()  # a new speed command ends a stop ramp in progress
         self.mode_speed_target = float(max(-self.vmax, min(self.vmax, value)))
 
     # -- physics side -----------------------------------------------------------------------
@@ -390,6 +397,7 @@ class ErobEmulator(ModbusSlave):
         if mode == OperationMode.TORQUE:
             i = self._torque_loop(dt)
         else:
+            v_prev = self.v_ref
             if mode == OperationMode.SPEED:
                 self._speed_ramp(dt)
                 v_cmd = self.v_ref
@@ -408,13 +416,18 @@ class ErobEmulator(ModbusSlave):
             if slim and abs(self.v_ref - self.vel) > slim:
                 self._raise_fault(SPEED_ERROR)
                 return self._brake_torque(q, qd)
-            i = self.kv * e + self.ki * self.integ
+            # PI speed loop plus acceleration feedforward (the current the profile's own
+            # acceleration needs, J x a / kt): without it the integral has to carry every ramp
+            # and the joint overshoots when a ramp ends (an emergency stop bounced back ~8 %)
+            i = self.kv * e + self.ki * self.integ + self.kff * (self.v_ref - v_prev) / dt
             lim_i = self._current_limit(dt, i)
             if -lim_i < i < lim_i:
                 self.integ += e * dt  # anti-windup: integrate only while unsaturated
             i = max(-lim_i, min(lim_i, i))
         self.i_cmd = i
         self.i_out = i
+        if mode == OperationMode.POSITION and self.started:
+            self._achieve(self._moving())  # the settle timer of 0x007A runs on the drive, not on reads
         self._stall(dt)
         self._thermal(dt, i)
         return i * 1e-3 * self.kt
@@ -474,11 +487,16 @@ class ErobEmulator(ModbusSlave):
         decel = float(self.get("profile_deceleration")) or self.amax
         speeding_up = abs(target) > abs(v) and (v == 0 or (v > 0) == (target > 0))
         rate = accel if speeding_up else decel
+        g = self.gen
+        if g.stopping:  # Stop Operating / Emergency Stop: to standstill with the stop's deceleration
+            target, rate = 0.0, g.rate or decel
         dv = target - v
         step = rate * dt
         v = target if abs(dv) <= step else v + math.copysign(step, dv)
         self.p_ref += 0.5 * (self.v_ref + v) * dt
         self.v_ref = v
+        if g.stopping and v == 0.0:
+            self.gen = _Profile()
 
     def _profile_step(self, dt: float) -> None:
         g = self.gen
@@ -519,8 +537,13 @@ class ErobEmulator(ModbusSlave):
             self._leg_done()
             return
         direction = 1.0 if s > 0 else -1.0
-        # fastest speed from which we can still stop at the target with the deceleration
-        v_allow = math.sqrt(2.0 * decel * abs(s))
+        # fastest speed from which we can still stop at the target with the deceleration, for
+        # this discrete step: new_v^2 = 2*decel*(|s| - (v + new_v)/2*dt) (the continuous
+        # sqrt(2*decel*|s|) runs ahead of the curve and ends the move early with a speed jump)
+        h = decel * dt
+        v_here = abs(v) if v * direction > 0 else 0.0
+        disc = h * h + 4.0 * (2.0 * decel * abs(s) - h * v_here)
+        v_allow = 0.5 * (math.sqrt(disc) - h) if disc > 0.0 else 0.0
         v_des = direction * min(vmax, v_allow)
         dv = v_des - v
         speeding_up = abs(v_des) > abs(v) and v * v_des >= 0
@@ -589,12 +612,15 @@ class ErobEmulator(ModbusSlave):
         s("part_of_power_temperature", round(self.temperature))
         s("torque_sensor_value", round(self.i_out * self.kt))
         s("error_code", self.fault)
-        moving = self.gen.active or self.dwell_until >= 0 or (self.enabled and abs(self.v_ref) > 0.5)
+        moving = self._moving()
         if self.repeat_stop and self.get("motion_mode") == MotionMode.REPETITIVE and self.gen.active:
             s("motion_status", int(MotionStatus.STOP_REPETITIVE))
         else:
             s("motion_status", int(MotionStatus.MOVING if moving else MotionStatus.STOP))
         s("status_of_achieving_position", int(self._achieve(moving)))
+
+    def _moving(self) -> bool:
+        return self.gen.active or self.dwell_until >= 0 or (self.enabled and abs(self.v_ref) > 0.5)
 
     def _achieve(self, moving: bool) -> AchieveStatus:
         if not self.enabled or self.fault and self.fault != faults.START_WHILE_DISABLED:

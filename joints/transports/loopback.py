@@ -46,7 +46,8 @@ class LoopbackTransport(ByteTransport):
         peer = self._peer
         if peer is None:
             return
-        answer = peer.receive(bytes(data)) if hasattr(peer, "receive") else peer(bytes(data))  # type: ignore[operator,union-attr]
+        receive = getattr(peer, "receive", None)
+        answer = receive(bytes(data)) if receive is not None else peer(bytes(data))  # type: ignore[operator]
         if answer:
             self._rx += answer
 

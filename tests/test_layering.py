@@ -1,0 +1,230 @@
+"""The import direction of DESIGN.md section 3, checked by parsing every module under joints/.
+
+Every import counts - at module level or inside a function (lazy imports still couple the layers) -
+except those under ``if TYPE_CHECKING:``, which exist for annotations only.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import os
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "joints"
+
+#: the package itself (``import joints`` / ``from joints import open``) is the public API: everything
+API = "api"
+
+#: layer -> the layers it may import besides its own
+ALLOWED: dict[str, frozenset[str]] = {
+    "errors": frozenset(),
+    "clock": frozenset(),
+    "codecs": frozenset({"errors"}),
+    "devices": frozenset({"errors"}),
+    "transports": frozenset({"errors"}),
+    "link": frozenset({"codecs", "transports", "clock", "errors"}),
+    "drivers": frozenset({"link", "devices", "codecs", "clock", "errors"}),
+    "joint": frozenset({"drivers", "devices", "clock", "errors"}),
+    "config": frozenset({"joint", "errors"}),
+    # emulated drives: device semantics + transports to be served on; never the host side
+    "sim": frozenset({"devices", "codecs", "transports", "clock", "errors"}),
+    "rig": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
+                      "config", "sim"}),
+    "cli": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
+                      "config", "sim", "rig", API}),
+}
+#: the package entry points import whatever they re-export
+EXEMPT = {"joints", "joints.__main__"}
+
+
+def layer_of(module: str) -> str:
+    """``joints.link.modbus`` -> ``link``; ``joints`` -> the public API."""
+    parts = module.split(".")
+    assert parts[0] == "joints", module
+    if len(parts) == 1:
+        return API
+    return parts[1]
+
+
+def module_name(path: Path) -> str:
+    rel = path.relative_to(ROOT).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def modules() -> list[Path]:
+    return sorted(p for p in PACKAGE.rglob("*.py") if "__pycache__" not in p.parts)
+
+
+def is_submodule(dotted: str) -> bool:
+    """Whether ``joints.x.y`` names a module or package on disk (else it is an attribute)."""
+    base = ROOT.joinpath(*dotted.split("."))
+    return base.with_suffix(".py").is_file() or (base / "__init__.py").is_file()
+
+
+def _is_type_checking(test: ast.expr) -> bool:
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+    )
+
+
+@dataclass(frozen=True)
+class Import:
+    target: str  #: the joints module imported
+    line: int
+
+
+class ImportCollector(ast.NodeVisitor):
+    """All imports of one module, resolved to absolute ``joints...`` module names."""
+
+    def __init__(self, module: str, is_package: bool) -> None:
+        self.module = module
+        self.package = module if is_package else module.rpartition(".")[0]
+        self.found: list[Import] = []
+
+    def visit_If(self, node: ast.If) -> None:
+        if _is_type_checking(node.test):
+            for child in node.orelse:  # the else branch runs
+                self.visit(child)
+            return
+        self.generic_visit(node)
+
+    def visit_Import(self, node: ast.Import) -> None:
+        for alias in node.names:
+            if alias.name == "joints" or alias.name.startswith("joints."):
+                self.found.append(Import(alias.name, node.lineno))
+
+    def visit_ImportFrom(self, node: ast.ImportFrom) -> None:
+        if node.level:
+            base = self.package.split(".")
+            if node.level > 1:
+                base = base[: -(node.level - 1)]
+            source = ".".join(base + ([node.module] if node.module else []))
+        else:
+            source = node.module or ""
+        if not (source == "joints" or source.startswith("joints.")):
+            return
+        for alias in node.names:
+            sub = f"{source}.{alias.name}"
+            # ``from joints import rig`` imports the module joints.rig; ``from joints import open`` the API
+            self.found.append(Import(sub if is_submodule(sub) else source, node.lineno))
+
+
+def imports_of(path: Path) -> list[Import]:
+    name = module_name(path)
+    collector = ImportCollector(name, path.name == "__init__.py")
+    collector.visit(ast.parse(path.read_text(encoding="utf-8"), filename=str(path)))
+    return collector.found
+
+
+def test_every_module_has_a_layer() -> None:
+    unknown = sorted(
+        module_name(p) for p in modules()
+        if module_name(p) not in EXEMPT and layer_of(module_name(p)) not in ALLOWED
+    )
+    assert not unknown, (
+        f"modules outside every layer of DESIGN.md section 3: {unknown}; "
+        "place them in a layer and add it to ALLOWED in this test"
+    )
+
+
+def test_imports_flow_one_way() -> None:
+    violations: list[str] = []
+    for path in modules():
+        name = module_name(path)
+        if name in EXEMPT:
+            continue
+        layer = layer_of(name)
+        allowed = ALLOWED.get(layer, frozenset()) | {layer}
+        for imp in imports_of(path):
+            target = layer_of(imp.target)
+            if target not in allowed:
+                violations.append(
+                    f"{path.relative_to(ROOT)}:{imp.line}: {layer} imports {imp.target} ({target}); "
+                    f"{layer} may import only {sorted(allowed)}"
+                )
+    assert not violations, "import direction violated:\n" + "\n".join(violations)
+
+
+# --- the checker itself -----------------------------------------------------------------------
+
+
+def _collect(source: str, module: str = "joints.sim.fake", is_package: bool = False) -> list[str]:
+    collector = ImportCollector(module, is_package)
+    collector.visit(ast.parse(source))
+    return [i.target for i in collector.found]
+
+
+def test_checker_sees_lazy_relative_and_from_imports() -> None:
+    src = (
+        "import os\n"
+        "from typing import TYPE_CHECKING\n"
+        "import joints.link.modbus\n"
+        "from joints import rig\n"
+        "from joints import open\n"
+        "from . import modbus_slave\n"
+        "from ..drivers import base\n"
+        "def f():\n"
+        "    from joints.joint import Joint\n"
+        "    return Joint\n"
+        "if TYPE_CHECKING:\n"
+        "    from joints.config import RigConfig\n"
+        "else:\n"
+        "    from joints.clock import ManualClock\n"
+    )
+    assert _collect(src) == [
+        "joints.link.modbus",
+        "joints.rig",
+        "joints",
+        "joints.sim.modbus_slave",
+        "joints.drivers.base",
+        "joints.joint",
+        "joints.clock",
+    ]
+
+
+def test_checker_flags_typing_dot_type_checking_as_exempt() -> None:
+    src = "import typing\nif typing.TYPE_CHECKING:\n    from joints.rig import Rig\n"
+    assert _collect(src) == []
+
+
+def test_checker_resolves_relative_imports_in_a_package_init() -> None:
+    assert _collect("from .modbus import ModbusLink\n", "joints.link", is_package=True) == ["joints.link.modbus"]
+
+
+@pytest.mark.parametrize("layer,forbidden", [("sim", "drivers"), ("sim", "joint"), ("sim", "rig"), ("sim", "link"),
+                                             ("codecs", "transports"), ("devices", "codecs"),
+                                             ("joint", "link"), ("config", "drivers"), ("rig", "cli"),
+                                             ("drivers", "joint"), ("link", "drivers"), ("clock", "errors")])
+def test_rules_forbid(layer: str, forbidden: str) -> None:
+    assert forbidden not in ALLOWED[layer]
+
+
+# --- optional heavy dependencies --------------------------------------------------------------
+
+HEAVY = ("mujoco", "serial", "can", "gymnasium")
+
+
+def test_import_joints_pulls_in_no_heavy_dependency() -> None:
+    code = (
+        "import json, sys\n"
+        "import joints\n"
+        f"heavy = {HEAVY!r}\n"
+        "print(json.dumps(sorted(m for m in sys.modules if m.split('.')[0] in heavy)))\n"
+    )
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    env.pop("JOINTS_BACKEND", None)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, env=env,
+                          timeout=60, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout.strip().splitlines()[-1]) == []
