@@ -18,8 +18,9 @@ from __future__ import annotations
 
 import enum
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Union
+from typing import Any, Union
 
 from joints.codecs.crc import crc16_modbus
 from joints.errors import ByteCountError, ChecksumError, EncodeError, FrameError
@@ -237,52 +238,70 @@ def encode_pdu(message: Message) -> bytes:
     raise EncodeError(f"not a Modbus message: {message!r}")
 
 
-def _encode_fast(message: Message) -> bytes | None:
-    """The host's hot path (requests of exactly our types, plain in-range ints), else None.
+# Fast paths of the host's hot messages: exactly these types with plain in-range ints give the
+# same bytes as the checked path; anything unusual (subclasses, bools, floats, out-of-range
+# fields) returns None and goes through the checked path, which encodes it or raises EncodeError.
 
-    Produces the same bytes as the checked path; anything unusual (subclasses, bools, values out
-    of range) returns None so that the checked path encodes it or raises its EncodeError.
-    """
-    t = type(message)
-    if t is ReadHoldingRegisters or t is ReadInputRegisters or t is WriteSingleRegister:
-        s, a = message.slave, message.address
-        c = message.value if t is WriteSingleRegister else message.count  # type: ignore[union-attr]
-        if type(s) is not int or type(a) is not int or type(c) is not int:
+
+def _fast_read(m: ReadHoldingRegisters | ReadInputRegisters) -> bytes | None:
+    s, a, c = m.slave, m.address, m.count
+    if type(s) is not int or type(a) is not int or type(c) is not int:
+        return None
+    if not (0 <= s <= 0xFF and 0 <= a <= 0xFFFF and 1 <= c <= MAX_READ):
+        return None
+    body = _HEAD.pack(s, m.function, a, c)
+    return body + crc16_modbus(body).to_bytes(2, "little")
+
+
+def _fast_write_single(m: WriteSingleRegister) -> bytes | None:
+    s, a, v = m.slave, m.address, m.value
+    if type(s) is not int or type(a) is not int or type(v) is not int:
+        return None
+    if not (0 <= s <= 0xFF and 0 <= a <= 0xFFFF and 0 <= v <= 0xFFFF):
+        return None
+    body = _HEAD.pack(s, WRITE_SINGLE_REGISTER, a, v)
+    return body + crc16_modbus(body).to_bytes(2, "little")
+
+
+def _fast_write_multiple(m: WriteMultipleRegisters) -> bytes | None:
+    s, a, values = m.slave, m.address, m.values
+    n = len(values)
+    if type(s) is not int or type(a) is not int or not (0 <= s <= 0xFF and 0 <= a <= 0xFFFF and 1 <= n <= MAX_WRITE):
+        return None
+    for v in values:
+        if type(v) is not int:
             return None
-        if not (0 <= s <= 0xFF and 0 <= a <= 0xFFFF):
-            return None
-        if t is WriteSingleRegister:
-            if not 0 <= c <= 0xFFFF:
-                return None
-        elif not 1 <= c <= MAX_READ:
-            return None
-        body = _HEAD.pack(s, t.function, a, c)
-    elif t is WriteMultipleRegisters:
-        s, a, values = message.slave, message.address, message.values
-        n = len(values)
-        if type(s) is not int or type(a) is not int or not (0 <= s <= 0xFF and 0 <= a <= 0xFFFF and 1 <= n <= MAX_WRITE):
-            return None
-        for v in values:
-            if type(v) is not int:
-                return None
-        try:
-            body = _FC16[n].pack(s, WRITE_MULTIPLE_REGISTERS, a, n, 2 * n, *values)
-        except struct.error:  # a value out of range
-            return None
-    else:
+    try:
+        body = _FC16[n].pack(s, WRITE_MULTIPLE_REGISTERS, a, n, 2 * n, *values)
+    except struct.error:  # a value out of range
         return None
     return body + crc16_modbus(body).to_bytes(2, "little")
 
 
+_FAST_ENCODERS: dict[type, Callable[[Any], bytes | None]] = {
+    ReadHoldingRegisters: _fast_read,
+    ReadInputRegisters: _fast_read,
+    WriteSingleRegister: _fast_write_single,
+    WriteMultipleRegisters: _fast_write_multiple,
+}
+
+
 def encode(message: Message) -> bytes:
     """Encode any request or reply into a complete RTU frame (address, PDU, CRC low first)."""
-    frame = _encode_fast(message)
-    if frame is not None:
-        return frame
+    fast = _FAST_ENCODERS.get(type(message))
+    if fast is not None:
+        frame = fast(message)
+        if frame is not None:
+            return frame
     return _finish(bytes((_u8("slave", message.slave),)) + encode_pdu(message))
 
 
 # --- decoding --------------------------------------------------------------------------------
+
+
+_EXCEPTION_FCS = frozenset((1, 2, 3, 4, 5, 6, 15, 16, 0x17))
+_BYTE_COUNT_REPLY_FCS = frozenset((READ_HOLDING_REGISTERS, READ_INPUT_REGISTERS, 1, 2))
+_FIXED_REPLY_FCS = frozenset((WRITE_SINGLE_REGISTER, WRITE_MULTIPLE_REGISTERS, 5, 15))
 
 
 def _reply_length(buf: bytearray) -> int | None:
@@ -291,12 +310,12 @@ def _reply_length(buf: bytearray) -> int | None:
         return None
     fc = buf[1]
     if fc & 0x80:
-        return 5 if fc & 0x7F in (1, 2, 3, 4, 5, 6, 15, 16, 0x17) else 0
-    if fc in (READ_HOLDING_REGISTERS, READ_INPUT_REGISTERS, 1, 2):
+        return 5 if fc & 0x7F in _EXCEPTION_FCS else 0
+    if fc in _BYTE_COUNT_REPLY_FCS:
         if len(buf) < 3:
             return None
         return 5 + buf[2]
-    if fc in (WRITE_SINGLE_REGISTER, WRITE_MULTIPLE_REGISTERS, 5, 15):
+    if fc in _FIXED_REPLY_FCS:
         return 8
     return 0
 
@@ -418,6 +437,16 @@ class ModbusRtuCodec:
                         continue
                 self._echo = None
             if self.role is Role.HOST:
+                if len(buf) >= 8 and (buf[1] == WRITE_SINGLE_REGISTER or buf[1] == WRITE_MULTIPLE_REGISTERS):
+                    # Hot path, same result as the general one below: a write reply is always
+                    # 8 bytes and needs no check against the request; a bad CRC falls through.
+                    frame = bytes(buf[:8])
+                    if crc16_modbus(frame) == 0:
+                        del buf[:8]
+                        slave, fc, a, b = _HEAD.unpack_from(frame)
+                        if fc == WRITE_SINGLE_REGISTER:
+                            return WriteSingleRegisterReply(slave, a, b)
+                        return WriteMultipleRegistersReply(slave, a, b)
                 length = self._host_length(buf)
             else:
                 length = _request_length(buf)

@@ -12,7 +12,8 @@ Conventions the manuals leave open (documented emulator choices):
 * Gains: ``position_loop_gain`` is Kp in 0.1 /s (speed command = Kp x position error);
   ``speed_loop_gain`` is the speed-loop bandwidth in rad/s (torque = J x bandwidth x speed
   error, J = the joint's inertia seen by the drive); ``speed_loop_integral`` is the integral time
-  constant in 0.1 ms.
+  constant in 0.1 ms. The speed loop adds the profile's acceleration as feedforward
+  (current = J x a_ref / kt), so the integral does not have to carry the ramps.
 * Torque-mode max speed (0x00D8) = 0 means "no limit but max_speed" (the manual's 5.3.2 sets 0 and
   the motor still turns, ERRATA DOC-EROB-EN-6).
 * Min/max position limit with min >= max means "no software limits".
@@ -626,7 +627,10 @@ class ErobEmulator(ModbusSlave):
         if not self.enabled or self.fault and self.fault != faults.START_WHILE_DISABLED:
             return AchieveStatus.MOTOR_OFF
         if not self._ready():
-            return AchieveStatus.MOTOR_OFF
+            # Enabled and inside the 500 ms before "ready": the module is on (0 would say
+            # "disabled", and a host polling meanwhile would think the drive dropped out).
+            # A start refused meanwhile (0x0027) leaves it off until cleared and re-enabled.
+            return AchieveStatus.MOTOR_OFF if self.fault else AchieveStatus.MOTOR_ON
         if self._mode() != OperationMode.POSITION or not self.started:
             return AchieveStatus.OPERATION if moving else AchieveStatus.MOTOR_ON
         if moving:

@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 from joints.clock import ManualClock
 from joints.devices.erob.profiles import ErobProfile
@@ -187,6 +187,31 @@ class World:
             emu.time = 0.0
             emu.pos = emu.p_ref = float(self.data.qpos[qa]) * (524288 / (2 * math.pi))
             emu.brake_hold = emu.pos
+
+    def set_joint_positions(self, positions: Mapping[str, float]) -> None:
+        """Place drives' joints at ``positions`` (drive name -> MJCF angle [rad]) at rest.
+
+        For a start state right after :meth:`reset`, while the drives are disabled: sets the joint
+        angles, zeroes their velocities, recomputes the kinematics and moves each drive's encoder,
+        setpoint and brake hold to the new angle (so the brake holds the new pose).
+        """
+        mj = self.mujoco
+        names = list(self.drives)
+        for name, q in positions.items():
+            if name not in self.drives:
+                raise KeyError(f"no emulated drive {name!r} (have {names})")
+            if not math.isfinite(q):
+                raise ValueError(f"joint {name}: position must be finite, got {q!r}")
+        for (emu, qa, da, _aid), dname in zip(self._bind, names):
+            if dname in positions:
+                self.data.qpos[qa] = float(positions[dname])
+                self.data.qvel[da] = 0.0
+        mj.mj_forward(self.model, self.data)
+        for (emu, qa, _da, _aid), dname in zip(self._bind, names):
+            if dname in positions:
+                emu.pos = emu.p_ref = float(self.data.qpos[qa]) * (524288 / (2 * math.pi))
+                emu.vel = 0.0
+                emu.brake_hold = emu.pos
 
     def joint_position(self, name: str) -> float:
         """Ground truth joint angle [rad] from the physics (for tests and envs' task terms)."""

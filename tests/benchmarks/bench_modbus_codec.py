@@ -1,4 +1,3 @@
-#!/usr/bin/env python
 """Modbus RTU codec benchmark: joints vs pymodbus, and loopback transactions per second.
 
 Run from the repository root::
@@ -26,20 +25,20 @@ import argparse
 import platform
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from joints.clock import ManualClock  # noqa: E402
-from joints.codecs import modbus as mb  # noqa: E402
-from joints.devices.erob.registers import EROB_MODBUS, STATUS_BLOCK_START, STATUS_BLOCK_WORDS  # noqa: E402
-from joints.drivers.erob_modbus import ErobModbusDriver  # noqa: E402
-from joints.link.modbus import ModbusLink, RetryPolicy  # noqa: E402
-from joints.sim.modbus_slave import ModbusDeviceBus, ModbusSlave  # noqa: E402
-from joints.transports.loopback import LoopbackTransport  # noqa: E402
+from joints.clock import ManualClock
+from joints.codecs import modbus as mb
+from joints.devices.erob.registers import EROB_MODBUS, STATUS_BLOCK_START, STATUS_BLOCK_WORDS
+from joints.drivers.erob_modbus import ErobModbusDriver
+from joints.link.modbus import ModbusLink, RetryPolicy
+from joints.sim.modbus_slave import ModbusDeviceBus, ModbusSlave
+from joints.transports.loopback import LoopbackTransport
 
 GOAL = 3.0  #: the issue's target: joints encode+decode at least 3x faster than pymodbus
 SLAVE = 2
@@ -92,7 +91,7 @@ def joints_fc03(n: int) -> None:
         encode(req)
         codec.expect_reply_to(req)
         codec.feed(reply)
-        codec.next_message().values  # type: ignore[union-attr]
+        _ = codec.next_message().values  # type: ignore[union-attr]
 
 
 def joints_fc16(n: int) -> None:
@@ -129,7 +128,7 @@ def joints_decode03(n: int) -> None:
     for _ in range(n):
         codec.expect_reply_to(req)
         codec.feed(REPLY03)
-        codec.next_message().values  # type: ignore[union-attr]
+        _ = codec.next_message().values  # type: ignore[union-attr]
 
 
 # --- pymodbus -------------------------------------------------------------------------------
@@ -166,7 +165,7 @@ def pymodbus_benches() -> dict[str, Bench] | None:
         build, handle, req_cls, reply = fr.buildFrame, fr.handleFrame, ReadHoldingRegistersRequest, REPLY03
         for _ in range(n):
             build(req_cls(address=READ_ADDR, count=READ_COUNT, dev_id=SLAVE))
-            handle(reply, SLAVE, 0)[1].registers  # type: ignore[union-attr]
+            _ = handle(reply, SLAVE, 0)[1].registers  # type: ignore[union-attr]
 
     def pymodbus_fc16(n: int) -> None:
         fr = framer()
@@ -183,7 +182,7 @@ def pymodbus_benches() -> dict[str, Bench] | None:
     def pymodbus_decode03(n: int) -> None:
         handle = framer().handleFrame
         for _ in range(n):
-            handle(REPLY03, SLAVE, 0)[1].registers  # type: ignore[union-attr]
+            _ = handle(REPLY03, SLAVE, 0)[1].registers  # type: ignore[union-attr]
 
     pymodbus_fc03.version = pymodbus.__version__  # type: ignore[attr-defined]
     return {

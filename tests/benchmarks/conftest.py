@@ -1,3 +1,3 @@
-"""Benchmarks are scripts (``python tests/benchmarks/bench_modbus_codec.py``), never collected."""
+"""Benchmarks here are scripts (``python tests/benchmarks/bench_*.py``), never collected by pytest."""
 
 collect_ignore_glob = ["bench_*.py"]

@@ -21,7 +21,8 @@ import select
 import struct
 import sys
 import threading
-from typing import Any, Iterator
+from collections.abc import Iterator
+from typing import Any
 
 import pytest
 

@@ -1,0 +1,533 @@
+"""JointsEnv: a gymnasium environment over the public Joint API, on sim or hardware from one config.
+
+Rules:
+
+* The env acts ONLY through the public API - ``joint.enable / move_to / set_velocity / set_torque
+  / stop / state / write``, ``rig.sleep``, ``rig.reset`` - so the same code runs on emulated and on
+  real drives. Sim-only extras (seeded start state, domain randomisation, rendering, ground-truth
+  task terms) use ``rig.world`` and only when ``rig.backend == "sim"``.
+* Fixed control period (``dt``, default 20 ms): ``step`` sends the action's commands, waits on the
+  rig's clock until the next tick of a fixed schedule (sim: advances physics; hardware: the wall
+  clock, absorbing the bus time), then reads every joint's state. The drive holds the command
+  between ticks (zero-order hold).
+* Deterministic in sim: no wall clock, no global RNG; every random draw comes from
+  ``self.np_random`` (seeded by ``reset(seed=...)``).
+
+Actions are normalised to ``[-1, 1]`` per joint (see :meth:`JointsEnv.command_of`):
+
+=============  =========================================================================
+action mode    a in [-1, 1] means
+=============  =========================================================================
+"position"     target angle ``lo + (a + 1) / 2 * (hi - lo)`` [rad] over the joint's
+               position limits, reached with the drive's own trapezoidal profile
+               (``joint.move_to`` every step; the profile is the config's ``motion``)
+"velocity"     speed command ``a * limits.velocity`` [rad/s] (``joint.set_velocity``, ramped
+               with ``motion.acceleration``)
+"torque"       torque command ``a * limits.torque`` [N*m] (``joint.set_torque``)
+=============  =========================================================================
+
+Observation (float64) starts with the joint terms, then the task's terms:
+``[position_1..n [rad], velocity_1..n [rad/s], torque_1..n [N*m], task...]``. Bounds per joint:
+position within its limits widened by 0.5 rad, velocity within +-2x its velocity limit, torque
+within +-2x its torque limit (the drive may exceed the user's torque limit in position/velocity
+mode: the limit bounds commands); values outside are clipped. Torque is the drive's estimate from
+its motor current.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections import deque
+from typing import Any, Mapping, Sequence
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+import joints
+from joints.errors import DeviceFault, MotionTimeout
+
+from envs.configs import config_path
+from envs.randomization import GAIN_REGISTERS, DomainRandomization
+from envs.render import CameraSpec, SceneRenderer
+
+ACTION_MODES = ("position", "velocity", "torque")
+#: s between "enable" and the first motion command (the eRob manual's 500 ms; the emulator enforces it)
+ENABLE_SETTLE = 0.5
+#: rad a joint may pass its position limits (overshoot) before the episode ends as a limit violation
+LIMIT_MARGIN = 0.05
+#: rad the observation's position bounds extend beyond the limits
+OBS_POSITION_MARGIN = 0.5
+
+
+class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
+    """Base of the ``joints/`` environments. Subclasses define the task (see :class:`envs.ErobReachEnv`).
+
+    Args:
+        config: a joints config - TOML path or dict; ``None``: the shipped default of the task.
+        backend: ``"sim"`` | ``"hardware"``; overrides the config (as ``joints.open``).
+        action_mode: ``"position"`` | ``"velocity"`` | ``"torque"``.
+        control_period: seconds per step (``dt``); in sim a whole number of physics substeps.
+        render_mode: ``None`` | ``"rgb_array"`` | ``"human"``.
+        domain_randomization: sim only - ``False``, ``True`` (default ranges), a mapping of ranges,
+            or a :class:`~envs.randomization.DomainRandomization`.
+        reset_velocity, reset_acceleration: hardware reset - the safe profile [rad/s, rad/s^2]
+            (capped by the joint's limits) of the move to the start pose.
+        reset_timeout: hardware reset - seconds to reach the start pose and stand still.
+        reset_tolerance: hardware reset - rad from the start pose that counts as there.
+        width, height: ``rgb_array`` image size in pixels.
+    """
+
+    metadata: dict[str, Any] = {"render_modes": ["human", "rgb_array"], "render_fps": 50}
+
+    #: the shipped config used when ``config`` is None (file stem in ``joints/configs``)
+    default_config: str = ""
+    #: how the renderer looks at the model
+    camera = CameraSpec()
+
+    def __init__(
+        self,
+        config: str | os.PathLike[str] | Mapping[str, Any] | None = None,
+        backend: str | None = None,
+        *,
+        action_mode: str = "position",
+        control_period: float = 0.02,
+        render_mode: str | None = None,
+        domain_randomization: bool | Mapping[str, Any] | DomainRandomization = False,
+        reset_velocity: float = 0.5,
+        reset_acceleration: float = 1.0,
+        reset_timeout: float = 30.0,
+        reset_tolerance: float = 0.02,
+        width: int = 480,
+        height: int = 480,
+    ) -> None:
+        if action_mode not in ACTION_MODES:
+            raise ValueError(f"action_mode {action_mode!r} is not one of {ACTION_MODES}")
+        if isinstance(control_period, bool) or not isinstance(control_period, (int, float)) \
+                or not math.isfinite(control_period) or control_period <= 0:
+            raise ValueError(f"control_period must be a finite number of seconds > 0, got {control_period!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode {render_mode!r} is not one of {self.metadata['render_modes']}")
+        for what, v in (("reset_velocity", reset_velocity), ("reset_acceleration", reset_acceleration),
+                        ("reset_timeout", reset_timeout), ("reset_tolerance", reset_tolerance)):
+            if not math.isfinite(v) or v <= 0:
+                raise ValueError(f"{what} must be > 0, got {v!r}")
+        self.action_mode = action_mode
+        self.control_period = float(control_period)
+        self.render_mode = render_mode
+        self.reset_velocity = float(reset_velocity)
+        self.reset_acceleration = float(reset_acceleration)
+        self.reset_timeout = float(reset_timeout)
+        self.reset_tolerance = float(reset_tolerance)
+        self.width, self.height = int(width), int(height)
+        # per instance: render_fps follows the control period
+        self.metadata = {**type(self).metadata, "render_fps": round(1.0 / self.control_period)}
+
+        self.rig = self._open(config, backend)
+        try:
+            self._setup(domain_randomization)
+        except BaseException:
+            self.rig.close()
+            raise
+        self._closed = False
+
+    # -- construction -----------------------------------------------------------------------
+    def _open(self, config: Any, backend: str | None) -> joints.Rig:
+        if config is None:
+            if not self.default_config:
+                raise ValueError(f"{type(self).__name__} has no default config; pass config=")
+            with config_path(self.default_config) as p:
+                return joints.open(p, backend=backend)
+        return joints.open(config, backend=backend)
+
+    def _setup(self, domain_randomization: Any) -> None:
+        rig = self.rig
+        self.sim = rig.backend == "sim"
+        self.joint_names: list[str] = self._select_joints(rig)
+        self.joints = [rig.joints[n] for n in self.joint_names]
+        n = len(self.joints)
+        lo, hi, vlim, tlim = [], [], [], []
+        for name, j in zip(self.joint_names, self.joints):
+            lim = j.limits
+            for field_, value in (("position", lim.position), ("velocity", lim.velocity), ("torque", lim.torque)):
+                if value is None:
+                    raise joints.ConfigError(
+                        f"the env needs the joint's {field_} limit (it scales actions and bounds observations)",
+                        file=rig.config.source, key=f"joints.{name}.limits.{field_}",
+                    )
+            assert lim.position is not None and lim.velocity is not None and lim.torque is not None
+            lo.append(lim.position[0]); hi.append(lim.position[1])
+            vlim.append(lim.velocity); tlim.append(lim.torque)
+        self.position_limits = np.array([lo, hi], dtype=np.float64).T  #: (n, 2) rad
+        self.velocity_limits = np.array(vlim, dtype=np.float64)  #: (n,) rad/s
+        self.torque_limits = np.array(tlim, dtype=np.float64)  #: (n,) N*m
+        if self.sim:
+            steps = self.control_period / rig.world.timestep
+            if abs(steps - round(steps)) > 1e-6 or round(steps) < 1:
+                raise ValueError(
+                    f"control_period {self.control_period} s must be a whole number of physics substeps "
+                    f"of {rig.world.timestep} s"
+                )
+            self.substeps = int(round(steps))  #: physics substeps per env step (sim)
+        else:
+            self.substeps = 0
+        self.randomization = DomainRandomization.from_arg(domain_randomization)
+        if self.randomization is not None and not self.sim:
+            gym.logger.warn("domain randomisation acts on the simulation only; ignored on hardware")
+            self.randomization = None
+
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
+        t_lo, t_hi = self._task_bounds()
+        low = np.concatenate([self.position_limits[:, 0] - OBS_POSITION_MARGIN, -2 * self.velocity_limits,
+                              -2 * self.torque_limits, t_lo]).astype(np.float64)
+        high = np.concatenate([self.position_limits[:, 1] + OBS_POSITION_MARGIN, 2 * self.velocity_limits,
+                               2 * self.torque_limits, t_hi]).astype(np.float64)
+        self.observation_space = spaces.Box(low, high, dtype=np.float64)
+
+        # sim-only handles: nominal model parameters (domain randomisation restores them each reset)
+        self._mjcf_joints = [rig.config.joints[nm].mjcf_joint or nm for nm in self.joint_names]
+        self._nominal: dict[str, np.ndarray] = {}
+        self._gains: dict[str, dict[str, int]] = {}
+        if self.sim:
+            mj, model = rig.world.mujoco, rig.world.model
+            jids = [mj.mj_name2id(model, mj.mjtObj.mjOBJ_JOINT, m) for m in self._mjcf_joints]
+            self._dofs = np.array([model.jnt_dofadr[j] for j in jids])
+            self._actuators = np.array(
+                [mj.mj_name2id(model, mj.mjtObj.mjOBJ_ACTUATOR, f"{nm}_motor") for nm in self.joint_names])
+            self._nominal = {
+                "frictionloss": model.dof_frictionloss.copy(),
+                "damping": model.dof_damping.copy(),
+                "armature": model.dof_armature.copy(),
+                "gear": model.actuator_gear.copy(),
+            }
+            if self.randomization is not None:
+                # power-on values of the gain registers (the factors apply to these)
+                self._gains = {nm: {r: j.read(r) for r in GAIN_REGISTERS}
+                               for nm, j in zip(self.joint_names, self.joints)}
+
+        self._renderer: SceneRenderer | None = None
+        self._twin: tuple[Any, Any, np.ndarray] | None = None  # hardware: (model, data, qpos addresses)
+        self._queue: deque[np.ndarray] = deque()
+        self._prev_action = np.zeros(n)
+        self._states: list[joints.JointState] = []
+        self._tick = 0
+        self._t0 = 0.0
+        self._noise = np.zeros(n)
+        self._noise_rng: np.random.Generator | None = None
+        self.randomization_sample: dict[str, Any] | None = None
+        self.overruns = 0  #: hardware: steps whose tick had passed before the commands were sent
+
+    def _select_joints(self, rig: joints.Rig) -> list[str]:
+        """The joints this env drives, in action/observation order (default: the config's order)."""
+        return list(rig.joints)
+
+    # -- task hooks (subclasses) ------------------------------------------------------------
+    def _task_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of the task terms appended to the observation."""
+        return np.zeros(0), np.zeros(0)
+
+    def _sample_start(self, options: Mapping[str, Any]) -> np.ndarray:
+        """Start joint positions [rad] (user frame), drawn from ``self.np_random``."""
+        raise NotImplementedError
+
+    def _sample_target(self, options: Mapping[str, Any]) -> None:
+        """Draw the task's goal from ``self.np_random``."""
+
+    def _task_terms(self, positions: np.ndarray) -> np.ndarray:
+        """Task terms of the observation for the measured joint positions."""
+        return np.zeros(0)
+
+    def _reward(self, positions: np.ndarray, action: np.ndarray) -> tuple[float, dict[str, Any]]:
+        """Reward and its terms (``info``)."""
+        return 0.0, {}
+
+    # -- units ------------------------------------------------------------------------------
+    @property
+    def dt(self) -> float:
+        """Seconds per step: the control period."""
+        return self.control_period
+
+    def command_of(self, action: Sequence[float] | np.ndarray) -> np.ndarray:
+        """SI commands (rad | rad/s | N*m per the action mode) of a normalised action."""
+        a = np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
+        if self.action_mode == "position":
+            lo, hi = self.position_limits[:, 0], self.position_limits[:, 1]
+            return np.clip(lo + (a + 1.0) * 0.5 * (hi - lo), lo, hi)
+        if self.action_mode == "velocity":
+            return a * self.velocity_limits
+        return a * self.torque_limits
+
+    def action_of(self, command: Sequence[float] | np.ndarray) -> np.ndarray:
+        """The normalised action (float32, clipped to [-1, 1]) for SI commands; inverse of :meth:`command_of`."""
+        c = np.asarray(command, dtype=np.float64).reshape(-1)
+        if self.action_mode == "position":
+            lo, hi = self.position_limits[:, 0], self.position_limits[:, 1]
+            a = 2.0 * (c - lo) / (hi - lo) - 1.0
+        elif self.action_mode == "velocity":
+            a = c / self.velocity_limits
+        else:
+            a = c / self.torque_limits
+        return np.clip(a, -1.0, 1.0).astype(np.float32)
+
+    def _to_model(self, i: int, position: float) -> float:
+        """Joint position (user frame) -> MJCF joint angle: ``(position - offset) * direction``."""
+        j = self.joints[i]
+        return (position - j.offset) * j.direction
+
+    # -- gymnasium API ----------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start an episode. ``options``: ``{"start": [rad per joint], "target": task goal}`` fix the draws.
+
+        Sim: physics and every emulated drive to power-on (``rig.reset``), the domain randomisation
+        draw, the seeded start pose written into the physics before the drives are enabled.
+        Hardware: clear faults, enable, move to the start pose with a safe profile inside the
+        limits and wait for standstill. Both: enable, wait the drive's 500 ms, hold.
+        """
+        super().reset(seed=seed)
+        self._check_open()
+        options = dict(options or {})
+        start = self._sample_start(options)
+        lo, hi = self.position_limits[:, 0], self.position_limits[:, 1]
+        if start.shape != (len(self.joints),) or not np.all(np.isfinite(start)) \
+                or np.any(start < lo) or np.any(start > hi):
+            raise ValueError(f"start pose {start.tolist()} is not one finite angle per joint inside the limits")
+        self._sample_target(options)
+        if self.sim:
+            self._reset_sim(start)
+        else:
+            self._reset_hardware(start)
+        neutral = self.action_of(start) if self.action_mode == "position" else np.zeros(len(self.joints), np.float32)
+        self._prev_action = neutral.astype(np.float64)
+        latency = self.randomization_sample["latency"] if self.randomization_sample else 0
+        self._queue = deque(neutral.astype(np.float64) for _ in range(latency))
+        self._tick = 0
+        self._t0 = self.rig.time
+        states = self._read()
+        obs = self._observation(states)
+        info = self._info(states)
+        if self.randomization_sample is not None:
+            info["randomization"] = self.randomization_sample
+        if self.render_mode == "human":
+            self.render()
+        return obs, info
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        self._check_open()
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != self.action_space.shape:
+            raise ValueError(f"action shape {a.shape} != {self.action_space.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action must be finite, got {a.tolist()}")
+        a = np.clip(a, -1.0, 1.0)
+        self._queue.append(a)
+        self._command(self._queue.popleft())
+        self._tick += 1
+        self._wait_until(self._t0 + self._tick * self.control_period)
+        states = self._read()
+        obs = self._observation(states)
+        positions = np.array([s.position for s in states])
+        reward, terms = self._reward(positions, a)
+        self._prev_action = a
+        info = self._info(states)
+        info.update(terms)
+        lo, hi = self.position_limits[:, 0], self.position_limits[:, 1]
+        violation = bool(np.any(positions < lo - LIMIT_MARGIN) or np.any(positions > hi + LIMIT_MARGIN))
+        info["limit_violation"] = violation
+        terminated = violation or any(s.fault for s in states)
+        if terminated:
+            self._safe_stop()
+        if self.render_mode == "human":
+            self.render()
+        return obs, float(reward), bool(terminated), False, info
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            gym.logger.warn("render() was called without a render_mode; pass render_mode='rgb_array' or 'human'")
+            return None
+        self._check_open()
+        if self._renderer is None:
+            model, data = self._scene()
+            self._renderer = SceneRenderer(self.render_mode, model, data, width=self.width, height=self.height,
+                                           camera=self.camera)
+        if not self.sim:
+            self._update_twin()
+        return self._renderer.render(self.rig.time - self._t0)
+
+    def close(self) -> None:
+        if getattr(self, "_closed", True):
+            return
+        self._closed = True
+        try:
+            if self._renderer is not None:
+                self._renderer.close()
+                self._renderer = None
+        finally:
+            self.rig.close()
+
+    # -- internals --------------------------------------------------------------------------
+    def _check_open(self) -> None:
+        if self._closed:
+            raise RuntimeError("the env is closed")
+
+    def _read(self) -> list[joints.JointState]:
+        self._states = [j.state() for j in self.joints]
+        return self._states
+
+    def _observation(self, states: Sequence[joints.JointState]) -> np.ndarray:
+        pos = np.array([s.position for s in states])
+        vel = np.array([s.velocity for s in states])
+        tau = np.array([s.torque for s in states])
+        seen = pos
+        if self._noise_rng is not None and np.any(self._noise > 0):
+            seen = pos + self._noise_rng.normal(0.0, 1.0, pos.shape) * self._noise
+        obs = np.concatenate([seen, vel, tau, self._task_terms(pos)])
+        return np.clip(obs, self.observation_space.low, self.observation_space.high)
+
+    def _info(self, states: Sequence[joints.JointState]) -> dict[str, Any]:
+        return {
+            "time": float(self.rig.time),  # s on the rig's clock (sim: simulated seconds since reset)
+            "faults": {n: int(s.fault) for n, s in zip(self.joint_names, states)},
+        }
+
+    def _command(self, action: np.ndarray) -> None:
+        cmd = self.command_of(action)
+        for j, c in zip(self.joints, cmd):
+            if not j.enabled:  # faulted/disabled drive: the episode has ended; never command it
+                continue
+            if self.action_mode == "position":
+                j.move_to(float(c))
+            elif self.action_mode == "velocity":
+                j.set_velocity(float(c))
+            else:
+                j.set_torque(float(c))
+
+    def _hold(self, start: np.ndarray) -> None:
+        """The action mode's neutral command: hold the start pose, zero speed or zero torque."""
+        for j, q in zip(self.joints, start):
+            if self.action_mode == "position":
+                j.move_to(float(q))
+            elif self.action_mode == "velocity":
+                j.set_velocity(0.0)
+            else:
+                j.set_torque(0.0)
+
+    def _wait_until(self, t: float) -> None:
+        remaining = t - self.rig.time
+        if remaining > 0:
+            self.rig.sleep(remaining)
+        elif remaining < -1e-9:
+            self.overruns += 1
+
+    def _safe_stop(self) -> None:
+        for j in self.joints:
+            if j.enabled:
+                try:
+                    j.stop()
+                except joints.JointsError as exc:  # keep stopping the others
+                    gym.logger.warn(f"stopping joint {j.name} failed: {exc}")
+
+    # -- sim reset --------------------------------------------------------------------------
+    def _reset_sim(self, start: np.ndarray) -> None:
+        rig, world = self.rig, self.rig.world
+        rig.reset()  # physics + drives to power-on; drivers forget, joints count as disabled
+        self._randomize()
+        world.set_joint_positions({nm: self._to_model(i, float(q))
+                                   for i, (nm, q) in enumerate(zip(self.joint_names, start))})
+        if self.randomization_sample is not None:
+            for nm, j in zip(self.joint_names, self.joints):
+                f = self.randomization_sample["joints"][nm]
+                for reg in GAIN_REGISTERS:
+                    j.write(reg, max(1, min(65535, round(self._gains[nm][reg] * f[reg]))))
+        for j in self.joints:
+            j.enable()
+        rig.sleep(ENABLE_SETTLE)
+        self._hold(start)
+
+    def _randomize(self) -> None:
+        model = self.rig.world.model
+        model.dof_frictionloss[:] = self._nominal["frictionloss"]
+        model.dof_damping[:] = self._nominal["damping"]
+        model.dof_armature[:] = self._nominal["armature"]
+        model.actuator_gear[:] = self._nominal["gear"]
+        self.randomization_sample = None
+        self._noise = np.zeros(len(self.joints))
+        self._noise_rng = None
+        if self.randomization is None:
+            return
+        sample = self.randomization.sample(self.np_random, self.joint_names)
+        self.randomization_sample = sample
+        for i, nm in enumerate(self.joint_names):
+            f = sample["joints"][nm]
+            dof, act = self._dofs[i], self._actuators[i]
+            model.dof_frictionloss[dof] = self._nominal["frictionloss"][dof] * f["friction"]
+            model.dof_damping[dof] = self._nominal["damping"][dof] * f["friction"]
+            model.dof_armature[dof] = self._nominal["armature"][dof] * f["armature"]
+            model.actuator_gear[act, 0] = self._nominal["gear"][act, 0] * f["torque_constant"]
+            self._noise[i] = f["encoder_noise"]
+        self._noise_rng = np.random.default_rng(int(self.np_random.integers(2**63)))
+
+    # -- hardware reset ---------------------------------------------------------------------
+    def _reset_hardware(self, start: np.ndarray) -> None:
+        rig = self.rig
+        self.randomization_sample = None
+        need_enable = []
+        for j in self.joints:
+            s = j.state()
+            if s.fault:
+                j.clear_faults()
+                s = j.state()
+                if s.fault:
+                    raise DeviceFault(f"joint {j.name}", s.fault, j.driver.fault_text(s.fault))
+            if not (s.enabled and j.enabled):
+                need_enable.append(j)
+        for j in need_enable:
+            j.enable()
+        if need_enable:
+            rig.sleep(ENABLE_SETTLE)
+        for i, (j, q) in enumerate(zip(self.joints, start)):
+            lim = j.limits
+            v = min(self.reset_velocity, lim.velocity or math.inf)
+            acc = min(self.reset_acceleration, lim.acceleration or math.inf)
+            j.move_to(float(q), velocity=v, acceleration=acc, deceleration=acc)
+        deadline = rig.time + self.reset_timeout
+        while True:
+            states = [j.state() for j in self.joints]
+            for j, s in zip(self.joints, states):
+                if s.fault:
+                    raise DeviceFault(f"joint {j.name}", s.fault, j.driver.fault_text(s.fault))
+            if all(not s.moving and abs(s.position - q) <= self.reset_tolerance and abs(s.velocity) < 0.05
+                   for s, q in zip(states, start)):
+                break
+            if rig.time > deadline:
+                far = {j.name: round(s.position - q, 4) for j, s, q in zip(self.joints, states, start)}
+                raise MotionTimeout(f"reset: joints not at the start pose after {self.reset_timeout} s "
+                                    f"(error per joint [rad]: {far})")
+            rig.sleep(self.control_period)
+        self._hold(start)
+
+    # -- rendering --------------------------------------------------------------------------
+    def _scene(self) -> tuple[Any, Any]:
+        if self.sim:
+            return self.rig.world.model, self.rig.world.data
+        import mujoco
+
+        from joints.sim.world import resolve_model
+
+        cfg = self.rig.config
+        model = mujoco.MjModel.from_xml_path(str(resolve_model(cfg.sim.model, cfg.base_dir)))
+        data = mujoco.MjData(model)
+        adr = np.array([model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, m)]
+                        for m in self._mjcf_joints])
+        self._twin = (model, data, adr)
+        return model, data
+
+    def _update_twin(self) -> None:
+        """Hardware: pose the kinematic copy of the model with the measured joint angles."""
+        import mujoco
+
+        assert self._twin is not None
+        model, data, adr = self._twin
+        for i, s in enumerate(self._states):
+            data.qpos[adr[i]] = self._to_model(i, s.position)
+        mujoco.mj_forward(model, data)

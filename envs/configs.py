@@ -1,0 +1,44 @@
+"""The shipped default configs (package data of ``joints.configs``).
+
+``default_config("erob_reach")`` returns the parsed TOML as a dict, so a script can change a key
+(e.g. the bus port for hardware) and hand the dict to an env::
+
+    cfg = envs.default_config("erob_reach")
+    cfg["buses"]["rs485"]["port"] = "/dev/ttyUSB0"
+    env = gymnasium.make("joints/ErobReach-v0", config=cfg, backend="hardware")
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+from importlib import resources
+from pathlib import Path
+from typing import Any, Iterator
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+#: names of the shipped configs (files ``joints/configs/<name>.toml``)
+SHIPPED = ("erob_reach", "erob_arm_reach")
+
+
+def _ref(name: str) -> Any:
+    stem = name[:-5] if name.endswith(".toml") else name
+    if stem not in SHIPPED:
+        raise ValueError(f"no shipped config {name!r}; shipped: {list(SHIPPED)}")
+    return resources.files("joints.configs") / f"{stem}.toml"
+
+
+@contextlib.contextmanager
+def config_path(name: str) -> Iterator[Path]:
+    """A filesystem path of the shipped config ``name`` (valid inside the ``with`` block)."""
+    with resources.as_file(_ref(name)) as p:
+        yield Path(p)
+
+
+def default_config(name: str) -> dict[str, Any]:
+    """The shipped config ``name`` ("erob_reach" | "erob_arm_reach") as a fresh, editable dict."""
+    return tomllib.loads(_ref(name).read_text(encoding="utf-8"))

@@ -1,0 +1,107 @@
+"""Domain randomisation of drive-level parameters (sim backend only).
+
+One :class:`DomainRandomization` holds a range per parameter; every ``reset()`` draws one value
+per joint (per env for the latency) from ``env.np_random``, uniformly in the closed range, so the
+draw is reproducible from the reset seed. A range ``(x, x)`` fixes a parameter; the nominal value
+is a factor of 1 (or 0 noise, 0 latency).
+
+=====================  ======================================  ====================  ==============
+parameter              what changes                            unit                  default range
+=====================  ======================================  ====================  ==============
+position_loop_gain     drive register 0x0030 (Kp), x factor    factor                [0.7, 1.3]
+speed_loop_gain        drive register 0x0031 (bandwidth)       factor                [0.7, 1.3]
+speed_loop_integral    drive register 0x0032 (integral time)   factor                [0.7, 1.5]
+friction               Coulomb friction and viscous damping    factor                [0.5, 2.0]
+                       of the joint (the profile's numbers are
+                       uncertain by ~3x)
+armature               reflected rotor inertia of the joint    factor                [0.8, 1.2]
+torque_constant        true / nominal torque per ampere (the   factor                [0.9, 1.1]
+                       drive still converts with the nominal
+                       constant, as a real drive does)
+encoder_noise          std of Gaussian noise on the reported   rad                   [0, 1e-4]
+                       joint positions (observations)
+latency                bus latency: an action takes effect     control periods       [0, 1]
+                       this many periods later                 (integer)
+=====================  ======================================  ====================  ==============
+
+The loop gains are written through the public register API (``joint.write``) after the drives'
+power-on reset, so they act exactly as on a real drive; friction, armature and the torque
+constant change the MuJoCo model (``dof_frictionloss``, ``dof_damping``, ``dof_armature``,
+``actuator_gear``) - the drive keeps tuning its loops for the nominal inertia, as a real drive
+whose load was mis-estimated does.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any, Mapping
+
+import numpy as np
+
+#: per-joint factors on drive registers (register name -> field)
+GAIN_REGISTERS = ("position_loop_gain", "speed_loop_gain", "speed_loop_integral")
+
+
+@dataclass(frozen=True)
+class DomainRandomization:
+    """Ranges ``(low, high)`` of the randomised parameters (see the module docstring)."""
+
+    position_loop_gain: tuple[float, float] = (0.7, 1.3)
+    speed_loop_gain: tuple[float, float] = (0.7, 1.3)
+    speed_loop_integral: tuple[float, float] = (0.7, 1.5)
+    friction: tuple[float, float] = (0.5, 2.0)
+    armature: tuple[float, float] = (0.8, 1.2)
+    torque_constant: tuple[float, float] = (0.9, 1.1)
+    encoder_noise: tuple[float, float] = (0.0, 1e-4)
+    latency: tuple[int, int] = (0, 1)
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            rng = getattr(self, f.name)
+            if not isinstance(rng, (tuple, list)) or len(rng) != 2:
+                raise ValueError(f"domain randomisation {f.name}: expected (low, high), got {rng!r}")
+            lo, hi = rng
+            if any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in rng):
+                raise ValueError(f"domain randomisation {f.name}: expected finite numbers, got {rng!r}")
+            if lo > hi:
+                raise ValueError(f"domain randomisation {f.name}: low {lo} > high {hi}")
+            if f.name == "latency":
+                if lo < 0 or not float(lo).is_integer() or not float(hi).is_integer():
+                    raise ValueError(f"domain randomisation latency: expected whole periods >= 0, got {rng!r}")
+                object.__setattr__(self, f.name, (int(lo), int(hi)))
+            elif f.name == "encoder_noise":
+                if lo < 0:
+                    raise ValueError(f"domain randomisation encoder_noise: std must be >= 0, got {rng!r}")
+                object.__setattr__(self, f.name, (float(lo), float(hi)))
+            else:
+                if lo <= 0:
+                    raise ValueError(f"domain randomisation {f.name}: factors must be > 0, got {rng!r}")
+                object.__setattr__(self, f.name, (float(lo), float(hi)))
+
+    @classmethod
+    def from_arg(cls, arg: "bool | Mapping[str, Any] | DomainRandomization | None") -> "DomainRandomization | None":
+        """``False``/``None``: off; ``True``: the default ranges; a mapping: defaults with overrides."""
+        if arg is None or arg is False:
+            return None
+        if arg is True:
+            return cls()
+        if isinstance(arg, cls):
+            return arg
+        if isinstance(arg, Mapping):
+            allowed = [f.name for f in fields(cls)]
+            unknown = sorted(k for k in arg if k not in allowed)
+            if unknown:
+                raise ValueError(f"unknown domain randomisation parameter(s) {unknown}; allowed: {allowed}")
+            return cls(**{k: tuple(v) for k, v in arg.items()})
+        raise TypeError(f"domain_randomization must be a bool, a mapping or DomainRandomization, got {arg!r}")
+
+    def sample(self, rng: np.random.Generator, joints: list[str]) -> dict[str, Any]:
+        """One draw: ``{"latency": int, "joints": {name: {parameter: value}}}`` (plain Python numbers)."""
+        per_joint: dict[str, dict[str, float]] = {}
+        for name in joints:
+            per_joint[name] = {
+                f.name: float(rng.uniform(*getattr(self, f.name))) for f in fields(self) if f.name != "latency"
+            }
+        lo, hi = self.latency
+        return {"latency": int(rng.integers(lo, hi + 1)), "joints": per_joint}

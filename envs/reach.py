@@ -1,0 +1,337 @@
+"""joints/ErobReach-v0 and joints/ErobArmReach-v0: reach tasks on eRob drives."""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+import joints
+
+from envs.base import JointsEnv
+from envs.kinematics import ARM3_REACH, ARM3_SHOULDER_HEIGHT, erob_arm3_ee
+from envs.render import CameraSpec
+
+
+def _range(name: str, r: Sequence[float], lo: float, hi: float) -> tuple[float, float]:
+    """``r`` intersected with the limits ``[lo, hi]``; must not be empty."""
+    if len(r) != 2 or not all(math.isfinite(v) for v in r) or r[0] > r[1]:
+        raise ValueError(f"{name} must be (low, high) with low <= high, got {r!r}")
+    a, b = max(float(r[0]), lo), min(float(r[1]), hi)
+    if a > b:
+        raise ValueError(f"{name} {tuple(r)} lies outside the joint limits [{lo}, {hi}]")
+    return a, b
+
+
+class ErobReachEnv(JointsEnv):
+    """Turn one eRob joint to a random target angle.
+
+    ## Description
+    One ZeroErr eRob80H100 on a test stand (``models/erob_stand.xml``: vertical axis, a load arm
+    with 1.8 kg, no gravity torque) is driven over Modbus RTU - emulated in MuJoCo with the sim
+    backend, or a real drive with the hardware backend, from the same config. The agent turns
+    the joint to a target angle drawn at every reset.
+
+    ## Action Space
+    ``Box(-1, 1, (1,), float32)``, the meaning set by ``action_mode``:
+
+    | action_mode | command | unit |
+    |---|---|---|
+    | ``"position"`` (default) | target angle ``lo + (a+1)/2 (hi-lo)`` over the position limits, reached with the drive's own trapezoidal profile (config ``motion``) | rad |
+    | ``"velocity"`` | speed ``a x limits.velocity`` | rad/s |
+    | ``"torque"`` | torque ``a x limits.torque`` | N*m |
+
+    ``env.unwrapped.command_of(a)`` / ``action_of(si)`` convert. The default config has limits
+    position [-3, 3] rad, velocity 3 rad/s, torque 40 N*m. The drive holds the command for the
+    control period (zero-order hold, ``dt`` = 20 ms by default).
+
+    ## Observation Space
+    ``Box(float64, (5,))``:
+
+    | index | observation | unit | bounds (default config) |
+    |---|---|---|---|
+    | 0 | joint position | rad | [-3.5, 3.5] (limits +- 0.5) |
+    | 1 | joint velocity | rad/s | [-6, 6] (+- 2 x velocity limit) |
+    | 2 | joint torque (drive's estimate from its current) | N*m | [-80, 80] (+- 2 x torque limit) |
+    | 3 | target angle | rad | position limits |
+    | 4 | target - position | rad | +- (hi - lo) |
+
+    Values are clipped to the bounds. With domain randomisation, index 0 carries encoder noise.
+
+    ## Rewards
+    ``reward = reward_distance + reward_action_rate`` (both in ``info``):
+
+    - ``reward_distance = -|target - position|`` [rad];
+    - ``reward_action_rate = -action_rate_weight * sum((a_t - a_{t-1})^2)``: smooth commands.
+
+    ``info`` also holds ``distance`` [rad], ``is_success`` (``distance < success_tolerance``),
+    ``time`` [s] (sim: simulated seconds since reset), ``faults`` (joint -> drive error code,
+    0 = none) and ``limit_violation``.
+
+    ## Starting State
+    Sim: physics and the emulated drive at power-on, the joint at rest at an angle uniform in
+    ``start_range`` (seeded), then enabled and held for the drive's 500 ms (the first observation
+    is at t = 0.5 s). Hardware: the joint is enabled and moved to the drawn angle with a safe
+    profile (``reset_velocity``, ``reset_acceleration``), and the env waits for standstill.
+    The target is uniform in ``target_range``. ``reset(options={"start": [q], "target": t})``
+    fixes either.
+
+    ## Episode End
+    - Termination: the drive reports a fault, or the joint passes its position limits by more
+      than 0.05 rad (the env then stops the joint).
+    - Truncation: 250 steps (5 s at the default control period), by the registered
+      ``max_episode_steps``.
+    The env does not end an episode on success: hold the target.
+
+    ## Arguments
+    ``gymnasium.make("joints/ErobReach-v0", config=None, backend=None, action_mode="position",
+    control_period=0.02, render_mode=None, domain_randomization=False, target_range=(-2.5, 2.5),
+    start_range=(-1.0, 1.0), success_tolerance=0.02, action_rate_weight=0.01, ...)``
+
+    - ``config``: joints config (TOML path or dict) with one joint; default the shipped
+      ``joints/configs/erob_reach.toml``. ``backend``: ``"sim"`` | ``"hardware"``, overrides it.
+    - ``action_mode``, ``control_period``, ``render_mode`` (``"rgb_array"``, ``"human"``),
+      ``domain_randomization`` (see :mod:`envs.randomization`), hardware reset profile
+      ``reset_velocity`` [rad/s], ``reset_acceleration`` [rad/s^2], ``reset_timeout`` [s],
+      ``reset_tolerance`` [rad]; ``width``/``height`` of rgb_array frames: see :class:`envs.JointsEnv`.
+    - ``target_range``, ``start_range`` [rad], intersected with the position limits.
+    - ``success_tolerance`` [rad], ``action_rate_weight``.
+
+    ## Version History
+    - v0: initial version (eRob over Modbus RTU; sim and hardware backends).
+    """
+
+    default_config = "erob_reach"
+    camera = CameraSpec(lookat=(0.1, 0.0, 0.35), distance=1.1, azimuth=135.0, elevation=-40.0)
+
+    def __init__(
+        self,
+        config: Any = None,
+        backend: str | None = None,
+        *,
+        target_range: Sequence[float] = (-2.5, 2.5),
+        start_range: Sequence[float] = (-1.0, 1.0),
+        success_tolerance: float = 0.02,
+        action_rate_weight: float = 0.01,
+        **kwargs: Any,
+    ) -> None:
+        self._target_range_arg = tuple(target_range)
+        self._start_range_arg = tuple(start_range)
+        if not math.isfinite(success_tolerance) or success_tolerance <= 0:
+            raise ValueError(f"success_tolerance must be > 0 rad, got {success_tolerance!r}")
+        if not math.isfinite(action_rate_weight) or action_rate_weight < 0:
+            raise ValueError(f"action_rate_weight must be >= 0, got {action_rate_weight!r}")
+        self.success_tolerance = float(success_tolerance)
+        self.action_rate_weight = float(action_rate_weight)
+        self.target = 0.0
+        super().__init__(config, backend, **kwargs)
+
+    def _select_joints(self, rig: joints.Rig) -> list[str]:
+        if len(rig.joints) != 1:
+            raise joints.ConfigError(f"ErobReach drives exactly one joint, the config has {list(rig.joints)}",
+                                     file=rig.config.source, key="joints")
+        return list(rig.joints)
+
+    def _task_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        lo, hi = (float(v) for v in self.rig.joints[self._select_joints(self.rig)[0]].limits.position or (0, 0))
+        self.target_range = _range("target_range", self._target_range_arg, lo, hi)
+        self.start_range = _range("start_range", self._start_range_arg, lo, hi)
+        span = hi - lo
+        return np.array([lo, -span]), np.array([hi, span])
+
+    def _sample_start(self, options: Mapping[str, Any]) -> np.ndarray:
+        if "start" in options:
+            return np.asarray(options["start"], dtype=np.float64).reshape(-1)
+        return np.array([self.np_random.uniform(*self.start_range)])
+
+    def _sample_target(self, options: Mapping[str, Any]) -> None:
+        if "target" in options:
+            t = float(np.asarray(options["target"], dtype=np.float64).reshape(-1)[0])
+            lo, hi = self.position_limits[0]
+            if not (math.isfinite(t) and lo <= t <= hi):
+                raise ValueError(f"target {t} rad is outside the position limits [{lo}, {hi}]")
+            self.target = t
+        else:
+            self.target = float(self.np_random.uniform(*self.target_range))
+
+    def _task_terms(self, positions: np.ndarray) -> np.ndarray:
+        return np.array([self.target, self.target - positions[0]])
+
+    def _reward(self, positions: np.ndarray, action: np.ndarray) -> tuple[float, dict[str, Any]]:
+        distance = abs(self.target - float(positions[0]))
+        r_dist = -distance
+        r_rate = -self.action_rate_weight * float(np.sum((action - self._prev_action) ** 2))
+        return r_dist + r_rate, {
+            "reward_distance": r_dist,
+            "reward_action_rate": r_rate,
+            "distance": distance,
+            "is_success": distance < self.success_tolerance,
+        }
+
+
+class ErobArmReachEnv(JointsEnv):
+    """Bring the end effector of a 3-joint eRob arm to a random point.
+
+    ## Description
+    The arm of ``models/erob_arm3.xml`` under gravity: ``joint1`` base yaw (eRob80H100),
+    ``joint2`` shoulder pitch (eRob80H100), ``joint3`` elbow pitch (eRob70H100); upper arm
+    0.30 m, forearm 0.25 m to the ``ee`` site, shoulder 0.36 m above the floor. Each joint is an
+    eRob drive on one Modbus RTU bus - emulated in sim, or real with the hardware backend from
+    the same config. The agent moves the end effector to a target point drawn at every reset.
+
+    ## Action Space
+    ``Box(-1, 1, (3,), float32)``, one entry per joint (joint1, joint2, joint3), meaning set by
+    ``action_mode`` as in :class:`ErobReachEnv`: ``"position"`` (default; target angle over the
+    position limits, drive's own profile), ``"velocity"`` (``a x limits.velocity`` rad/s) or
+    ``"torque"`` (``a x limits.torque`` N*m; the agent must then carry the arm against gravity).
+    Default limits: position joint1 [-3, 3], joint2 [-1.6, 1.2], joint3 [-2.4, 2.4] rad; velocity
+    3 rad/s; torque 40, 40, 20 N*m.
+
+    ## Observation Space
+    ``Box(float64, (18,))``:
+
+    | index | observation | unit | bounds |
+    |---|---|---|---|
+    | 0-2 | joint positions | rad | limits +- 0.5 |
+    | 3-5 | joint velocities | rad/s | +- 2 x velocity limit |
+    | 6-8 | joint torques (drives' estimates) | N*m | +- 2 x torque limit |
+    | 9-11 | end-effector position x, y, z | m | x, y in [-0.6, 0.6]; z in [-0.25, 0.95] |
+    | 12-14 | target position x, y, z | m | same |
+    | 15-17 | target - end effector | m | [-1.2, 1.2] |
+
+    The end effector is MuJoCo's ``ee`` site in sim and the forward kinematics of the measured
+    joint angles on hardware (:func:`envs.kinematics.erob_arm3_ee`; they agree in sim). Values are
+    clipped to the bounds.
+
+    ## Rewards
+    ``reward = reward_distance + reward_action_rate``: ``-||target - ee||`` [m] and
+    ``-action_rate_weight * sum((a_t - a_{t-1})^2)``. ``info`` also holds ``distance`` [m],
+    ``is_success`` (``distance < success_tolerance``), ``time``, ``faults``, ``limit_violation``.
+
+    ## Starting State
+    Sim: physics and the drives at power-on, the joints at rest at angles uniform in
+    ``start_ranges`` (seeded), enabled and held for the drives' 500 ms (the brakes hold the arm
+    meanwhile). Hardware: enable, move to the drawn pose with a safe profile, wait for standstill.
+    The target is the ``ee`` position of joint angles drawn uniformly in ``target_ranges``,
+    redrawn until it is at least 0.10 m above the floor and 0.15 m from the base axis (so it is
+    reachable). ``reset(options={"start": [q1, q2, q3], "target": [x, y, z]})`` fixes either.
+
+    ## Episode End
+    - Termination: a drive fault, or a joint past its position limits by more than 0.05 rad.
+    - Truncation: 250 steps (5 s at the default control period).
+
+    ## Arguments
+    ``gymnasium.make("joints/ErobArmReach-v0", config=None, backend=None, action_mode="position",
+    control_period=0.02, render_mode=None, domain_randomization=False,
+    start_ranges=((-0.5, 0.5), (-0.6, 0.0), (0.3, 1.2)),
+    target_ranges=((-2.0, 2.0), (-1.0, 0.3), (-1.2, 1.2)), success_tolerance=0.02,
+    action_rate_weight=0.01, ...)``; the common arguments as in :class:`ErobReachEnv`. The config
+    needs three joints whose ``mjcf_joint`` are joint1, joint2, joint3 of ``erob_arm3.xml``
+    (default: the shipped ``joints/configs/erob_arm_reach.toml``).
+
+    ## Version History
+    - v0: initial version.
+    """
+
+    default_config = "erob_arm_reach"
+    camera = CameraSpec(lookat=(0.1, 0.0, 0.3), distance=1.8, azimuth=135.0, elevation=-25.0)
+    MODEL_JOINTS = ("joint1", "joint2", "joint3")
+    MIN_HEIGHT = 0.10  #: m, lowest target
+    MIN_RADIUS = 0.15  #: m, closest target to the base axis
+
+    def __init__(
+        self,
+        config: Any = None,
+        backend: str | None = None,
+        *,
+        start_ranges: Sequence[Sequence[float]] = ((-0.5, 0.5), (-0.6, 0.0), (0.3, 1.2)),
+        target_ranges: Sequence[Sequence[float]] = ((-2.0, 2.0), (-1.0, 0.3), (-1.2, 1.2)),
+        success_tolerance: float = 0.02,
+        action_rate_weight: float = 0.01,
+        **kwargs: Any,
+    ) -> None:
+        if len(start_ranges) != 3 or len(target_ranges) != 3:
+            raise ValueError("start_ranges and target_ranges need one (low, high) per joint (3)")
+        if not math.isfinite(success_tolerance) or success_tolerance <= 0:
+            raise ValueError(f"success_tolerance must be > 0 m, got {success_tolerance!r}")
+        if not math.isfinite(action_rate_weight) or action_rate_weight < 0:
+            raise ValueError(f"action_rate_weight must be >= 0, got {action_rate_weight!r}")
+        self._ranges_arg = (tuple(map(tuple, start_ranges)), tuple(map(tuple, target_ranges)))
+        self.success_tolerance = float(success_tolerance)
+        self.action_rate_weight = float(action_rate_weight)
+        self.target = np.zeros(3)
+        self._ee = np.zeros(3)
+        super().__init__(config, backend, **kwargs)
+        if self.sim:
+            mj = self.rig.world.mujoco
+            self._site = mj.mj_name2id(self.rig.world.model, mj.mjtObj.mjOBJ_SITE, "ee")
+            if self._site < 0:
+                self.close()
+                raise joints.ConfigError("the model has no site 'ee'", file=self.rig.config.source, key="sim.model")
+
+    def _select_joints(self, rig: joints.Rig) -> list[str]:
+        by_model = {(c.mjcf_joint or n): n for n, c in rig.config.joints.items()}
+        if len(rig.joints) != 3 or any(m not in by_model for m in self.MODEL_JOINTS):
+            raise joints.ConfigError(
+                "ErobArmReach drives three joints mapped to the MJCF joints joint1, joint2, joint3 of erob_arm3.xml; "
+                f"the config maps {by_model}", file=rig.config.source, key="joints")
+        return [by_model[m] for m in self.MODEL_JOINTS]
+
+    def _task_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        lim = self.position_limits
+        starts, targets = self._ranges_arg
+        self.start_ranges = [_range(f"start_ranges[{i}]", r, *lim[i]) for i, r in enumerate(starts)]
+        self.target_ranges = [_range(f"target_ranges[{i}]", r, *lim[i]) for i, r in enumerate(targets)]
+        r = ARM3_REACH + 0.05
+        p_lo = np.array([-r, -r, ARM3_SHOULDER_HEIGHT - ARM3_REACH - 0.06])
+        p_hi = np.array([r, r, ARM3_SHOULDER_HEIGHT + ARM3_REACH + 0.04])
+        d = 2 * r
+        return (np.concatenate([p_lo, p_lo, [-d] * 3]), np.concatenate([p_hi, p_hi, [d] * 3]))
+
+    def _sample_start(self, options: Mapping[str, Any]) -> np.ndarray:
+        if "start" in options:
+            return np.asarray(options["start"], dtype=np.float64).reshape(-1)
+        return np.array([self.np_random.uniform(*r) for r in self.start_ranges])
+
+    def _sample_target(self, options: Mapping[str, Any]) -> None:
+        if "target" in options:
+            t = np.asarray(options["target"], dtype=np.float64).reshape(-1)
+            if t.shape != (3,) or not np.all(np.isfinite(t)):
+                raise ValueError(f"target must be a finite point [x, y, z] in m, got {options['target']!r}")
+            self.target = t
+            return
+        for _ in range(1000):
+            q = self._to_model_all(np.array([self.np_random.uniform(*r) for r in self.target_ranges]))
+            p = erob_arm3_ee(q)
+            if p[2] >= self.MIN_HEIGHT and math.hypot(p[0], p[1]) >= self.MIN_RADIUS:
+                self.target = p
+                return
+        raise ValueError("target_ranges give no reachable target above the floor; widen them")
+
+    def _to_model_all(self, positions: np.ndarray) -> np.ndarray:
+        return np.array([self._to_model(i, float(q)) for i, q in enumerate(positions)])
+
+    def end_effector(self, positions: np.ndarray | None = None) -> np.ndarray:
+        """End-effector position [m]: MuJoCo's ``ee`` site in sim, forward kinematics on hardware
+        (or of ``positions`` [rad] when given)."""
+        if positions is None and self.sim:
+            return np.array(self.rig.world.data.site_xpos[self._site])
+        if positions is None:
+            positions = np.array([s.position for s in self._states])
+        return erob_arm3_ee(self._to_model_all(np.asarray(positions, dtype=np.float64)))
+
+    def _task_terms(self, positions: np.ndarray) -> np.ndarray:
+        self._ee = self.end_effector(None if self.sim else positions)
+        return np.concatenate([self._ee, self.target, self.target - self._ee])
+
+    def _reward(self, positions: np.ndarray, action: np.ndarray) -> tuple[float, dict[str, Any]]:
+        distance = float(np.linalg.norm(self.target - self._ee))
+        r_dist = -distance
+        r_rate = -self.action_rate_weight * float(np.sum((action - self._prev_action) ** 2))
+        return r_dist + r_rate, {
+            "reward_distance": r_dist,
+            "reward_action_rate": r_rate,
+            "distance": distance,
+            "is_success": distance < self.success_tolerance,
+        }

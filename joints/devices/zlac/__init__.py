@@ -1,0 +1,1 @@
+"""ZLAC8015D dual-channel hub servo driver (Zhongling): Modbus RTU register table."""
