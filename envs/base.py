@@ -242,6 +242,10 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
         """Reward and its terms (``info``)."""
         return 0.0, {}
 
+    def _markers(self) -> list[tuple[np.ndarray, tuple[float, float, float, float]]]:
+        """Points to draw in renders: [(position [m], rgba)] (the task's goal)."""
+        return []
+
     # -- units ------------------------------------------------------------------------------
     @property
     def dt(self) -> float:
@@ -352,7 +356,7 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
                                            camera=self.camera)
         if not self.sim:
             self._update_twin()
-        return self._renderer.render(self.rig.time - self._t0)
+        return self._renderer.render(self.rig.time - self._t0, self._markers())
 
     def close(self) -> None:
         if getattr(self, "_closed", True):

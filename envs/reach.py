@@ -10,7 +10,7 @@ import numpy as np
 import joints
 
 from envs.base import JointsEnv
-from envs.kinematics import ARM3_REACH, ARM3_SHOULDER_HEIGHT, erob_arm3_ee
+from envs.kinematics import ARM3_REACH, ARM3_SHOULDER_HEIGHT, erob_arm3_ee, erob_stand_tip
 from envs.render import CameraSpec
 
 
@@ -134,7 +134,7 @@ class ErobReachEnv(JointsEnv):
         return list(rig.joints)
 
     def _task_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        lo, hi = (float(v) for v in self.rig.joints[self._select_joints(self.rig)[0]].limits.position or (0, 0))
+        lo, hi = (float(v) for v in self.position_limits[0])
         self.target_range = _range("target_range", self._target_range_arg, lo, hi)
         self.start_range = _range("start_range", self._start_range_arg, lo, hi)
         span = hi - lo
@@ -157,6 +157,9 @@ class ErobReachEnv(JointsEnv):
 
     def _task_terms(self, positions: np.ndarray) -> np.ndarray:
         return np.array([self.target, self.target - positions[0]])
+
+    def _markers(self) -> list[tuple[np.ndarray, tuple[float, float, float, float]]]:
+        return [(erob_stand_tip(self._to_model(0, self.target)), (0.1, 0.9, 0.2, 0.6))]
 
     def _reward(self, positions: np.ndarray, action: np.ndarray) -> tuple[float, dict[str, Any]]:
         distance = abs(self.target - float(positions[0]))
@@ -320,6 +323,9 @@ class ErobArmReachEnv(JointsEnv):
         if positions is None:
             positions = np.array([s.position for s in self._states])
         return erob_arm3_ee(self._to_model_all(np.asarray(positions, dtype=np.float64)))
+
+    def _markers(self) -> list[tuple[np.ndarray, tuple[float, float, float, float]]]:
+        return [(self.target, (0.1, 0.9, 0.2, 0.6))]
 
     def _task_terms(self, positions: np.ndarray) -> np.ndarray:
         self._ee = self.end_effector(None if self.sim else positions)

@@ -11,12 +11,27 @@ display warns once and shows nothing.
 
 from __future__ import annotations
 
+import os
+import sys
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 from gymnasium import logger
+
+
+def _no_viewer_reason() -> str:
+    """Why the interactive viewer cannot open here ('' if it can): it needs GLFW and a display.
+
+    Checked up front because GLFW without a display can end the process instead of raising.
+    """
+    gl = os.environ.get("MUJOCO_GL", "glfw").lower()
+    if gl not in ("glfw", ""):
+        return f"MUJOCO_GL={gl} is an offscreen backend (the viewer needs glfw)"
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        return "no display (DISPLAY / WAYLAND_DISPLAY unset)"
+    return ""
 
 
 @dataclass(frozen=True)
@@ -55,6 +70,7 @@ class SceneRenderer:
         self._viewer: Any = None
         self._failed = False
         self._pace: tuple[float, float] | None = None  #: (wall, sim) at the first human frame
+        self.markers: list[tuple[Sequence[float], Sequence[float]]] = []
 
     def _rgb(self) -> np.ndarray:
         if self._renderer is None:
@@ -65,12 +81,28 @@ class SceneRenderer:
             self._cam = self._mj.MjvCamera()
             self.camera.apply(self._cam)
         self._renderer.update_scene(self.data, camera=self._cam)
+        self._add_markers(self._renderer.scene)
         return np.asarray(self._renderer.render())
+
+    def _add_markers(self, scene: Any) -> None:
+        """Draw the task's markers (e.g. the target) as translucent spheres."""
+        for pos, rgba in self.markers:
+            if scene.ngeom >= scene.maxgeom:
+                return
+            self._mj.mjv_initGeom(scene.geoms[scene.ngeom], self._mj.mjtGeom.mjGEOM_SPHERE,
+                                  np.array([0.02, 0.0, 0.0]), np.asarray(pos, dtype=np.float64),
+                                  np.eye(3).reshape(-1), np.asarray(rgba, dtype=np.float32))
+            scene.ngeom += 1
 
     def _human(self, sim_time: float) -> None:
         if self._failed:
             return
         if self._viewer is None:
+            why = _no_viewer_reason()
+            if why:
+                self._failed = True
+                logger.warn(f"render_mode='human' shows nothing: {why}")
+                return
             try:
                 from mujoco import viewer
 
@@ -82,6 +114,9 @@ class SceneRenderer:
                 return
         if not self._viewer.is_running():
             return
+        with self._viewer.lock():
+            self._viewer.user_scn.ngeom = 0
+            self._add_markers(self._viewer.user_scn)
         self._viewer.sync()
         # a human watches in real time: hold the frame until the wall clock catches up
         now = time.monotonic()
@@ -93,7 +128,9 @@ class SceneRenderer:
         elif ahead >= 1.0 or ahead < -1.0:
             self._pace = (now, sim_time)
 
-    def render(self, sim_time: float = 0.0) -> np.ndarray | None:
+    def render(self, sim_time: float = 0.0, markers: Sequence[tuple[Sequence[float], Sequence[float]]] = ()) -> np.ndarray | None:
+        """A frame (``rgb_array``: uint8 array (height, width, 3)) with ``markers`` = [(position [m], rgba)]."""
+        self.markers = list(markers)
         if self.mode == "rgb_array":
             return self._rgb()
         self._human(sim_time)

@@ -214,6 +214,12 @@ class ErobEmulator(ModbusSlave):
         self.vmax = float(max(g("max_speed"), 1))
         self.amax = float(max(g("max_acceleration"), 1))
 
+    def place(self, q: float) -> None:
+        """The joint is at ``q`` [rad] and at rest (start state, reset): encoder, setpoint and brake follow."""
+        self.pos = self.p_ref = q * COUNTS_PER_RAD
+        self.vel = self.v_ref = 0.0
+        self.brake_hold = self.pos
+
     def counts(self) -> int:
         """Actual position register value: encoder counts + position offset."""
         return round(self.pos) + self.offset
@@ -627,10 +633,7 @@ class ErobEmulator(ModbusSlave):
         if not self.enabled or self.fault and self.fault != faults.START_WHILE_DISABLED:
             return AchieveStatus.MOTOR_OFF
         if not self._ready():
-            # Enabled and inside the 500 ms before "ready": the module is on (0 would say
-            # "disabled", and a host polling meanwhile would think the drive dropped out).
-            # A start refused meanwhile (0x0027) leaves it off until cleared and re-enabled.
-            return AchieveStatus.MOTOR_OFF if self.fault else AchieveStatus.MOTOR_ON
+            return AchieveStatus.MOTOR_OFF
         if self._mode() != OperationMode.POSITION or not self.started:
             return AchieveStatus.OPERATION if moving else AchieveStatus.MOTOR_ON
         if moving:

@@ -13,10 +13,9 @@ import math
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, Protocol, Sequence
 
 from joints.clock import ManualClock
-from joints.devices.erob.profiles import ErobProfile
 from joints.errors import ConfigError, MissingDependencyError
 from joints.sim.erob import ErobEmulator
 from joints.sim.modbus_slave import ModbusDeviceBus
@@ -54,17 +53,75 @@ def resolve_model(name: str | Path, base_dir: Path | None = None) -> Path:
     raise ConfigError(f"model {str(name)!r} not found", key="sim.model", allowed=shipped)
 
 
+class JointProfile(Protocol):
+    """What the world needs from a device profile to set up a joint and its motor."""
+
+    armature: float
+    viscous_friction: float
+    coulomb_friction: float
+    max_torque: float
+
+
 @dataclass(frozen=True)
 class DriveSpec:
-    """One emulated drive: which bus/address it answers on and which MJCF joint it drives."""
+    """One emulated joint: which bus/address (and channel) answers for it and which MJCF joint it drives."""
 
     bus: str
     name: str
     mjcf_joint: str
     address: int
-    profile: ErobProfile
+    profile: Any  #: ErobProfile | HubMotorProfile (anything with the JointProfile fields)
     device: str = "erob"
+    channel: str | None = None  #: "left" / "right" for a dual-channel drive
     extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class _Bound:
+    name: str
+    emulator: Any  #: the drive (one Modbus slave)
+    stepper: Any  #: what runs the loops of this joint: .step(t, dt, q, qd) -> torque, .place(q)
+    qadr: int
+    dadr: int
+    aid: int
+
+
+def _make_emulators(specs: Sequence[DriveSpec], inertia: Mapping[str, float]) -> dict[str, tuple[Any, Any]]:
+    """Build one emulator per drive (bus, address); returns joint name -> (emulator, stepper)."""
+    out: dict[str, tuple[Any, Any]] = {}
+    groups: dict[tuple[str, int], list[DriveSpec]] = {}
+    for d in specs:
+        groups.setdefault((d.bus, d.address), []).append(d)
+    for (bus, address), group in groups.items():
+        device = group[0].device
+        if any(g.device != device for g in group):
+            raise ConfigError(f"bus {bus!r} address {address}: joints of different devices share one address",
+                              key=f"joints.{group[0].name}.address")
+        if device == "erob":
+            if len(group) > 1:
+                raise ConfigError(f"bus {bus!r} address {address} is used by {[g.name for g in group]}",
+                                  key=f"joints.{group[1].name}.address")
+            d = group[0]
+            emu: Any = ErobEmulator(d.profile, address, inertia=inertia[d.name])
+            out[d.name] = (emu, emu)
+        elif device == "zlac8015d":
+            from joints.sim.zlac import ZlacEmulator
+
+            by_channel = {g.channel: g for g in group}
+            if len(by_channel) != len(group) or not set(by_channel) <= {"left", "right"}:
+                raise ConfigError(f"zlac8015d at address {address}: each of channel 'left'/'right' at most once",
+                                  key=f"joints.{group[0].name}.channel", allowed=("left", "right"))
+            emu = ZlacEmulator(
+                group[0].profile, address,
+                inertia_left=inertia[by_channel["left"].name] if "left" in by_channel else None,
+                inertia_right=inertia[by_channel["right"].name] if "right" in by_channel else None,
+            )
+            for ch, g in by_channel.items():
+                out[g.name] = (emu, emu.channel(str(ch)))
+        else:
+            raise ConfigError(f"no emulator for device {device!r}", key=f"joints.{group[0].name}.device",
+                              allowed=("erob", "zlac8015d"))
+    return out
 
 
 class World:
@@ -113,20 +170,26 @@ class World:
         self._target = 0.0
         self.clock = ManualClock()
         self.clock.bind(self.advance)
-        self.drives: dict[str, ErobEmulator] = {}
-        self.buses: dict[str, ModbusDeviceBus] = {}
-        self._bind: list[tuple[ErobEmulator, int, int, int]] = []
+        addr: dict[str, tuple[int, int, int]] = {}
         for d in drives:
             jid = mj.mj_name2id(self.model, mj.mjtObj.mjOBJ_JOINT, d.mjcf_joint)
             aid = mj.mj_name2id(self.model, mj.mjtObj.mjOBJ_ACTUATOR, f"{d.name}_motor")
-            dof = int(self.model.jnt_dofadr[jid])
-            inertia = self._dof_inertia(dof)
-            emu = ErobEmulator(d.profile, d.address, inertia=inertia)
+            addr[d.name] = (int(self.model.jnt_qposadr[jid]), int(self.model.jnt_dofadr[jid]), aid)
+        inertia = {name: self._dof_inertia(dof) for name, (_qa, dof, _aid) in addr.items()}
+        made = _make_emulators(drives, inertia)
+        self.drives: dict[str, Any] = {}  #: joint name -> its drive's emulator (shared by channels)
+        self.buses: dict[str, ModbusDeviceBus] = {}
+        self._bound: list[_Bound] = []
+        for d in drives:
+            emu, stepper = made[d.name]
             self.drives[d.name] = emu
-            self.buses.setdefault(d.bus, ModbusDeviceBus()).add(emu)
-            self._bind.append((emu, int(self.model.jnt_qposadr[jid]), dof, aid))
-            emu.pos = float(self.data.qpos[self.model.jnt_qposadr[jid]]) * (524288 / (2 * math.pi))
-            emu.p_ref = emu.pos
+            bus = self.buses.setdefault(d.bus, ModbusDeviceBus())
+            if bus.slaves.get(d.address) is not emu:
+                bus.add(emu)
+            qa, da, aid = addr[d.name]
+            self._bound.append(_Bound(d.name, emu, stepper, qa, da, aid))
+            stepper.place(float(self.data.qpos[qa]))
+        self._bind = [(b.stepper.step, b.qadr, b.dadr, b.aid) for b in self._bound]
 
     def _dof_inertia(self, dof: int) -> float:
         """Diagonal of the joint-space inertia (incl. armature) at the current pose [kg*m^2]."""
@@ -158,8 +221,8 @@ class World:
         bind = self._bind
         for _ in range(n):
             t = (self.steps + 1) * dt
-            for emu, qa, da, aid in bind:
-                ctrl[aid] = emu.step(t, dt, float(qpos[qa]), float(qvel[da]))
+            for step, qa, da, aid in bind:
+                ctrl[aid] = step(t, dt, float(qpos[qa]), float(qvel[da]))
             mj_step(m, d)
             self.steps += 1
         self._target = max(self._target, self.time)
@@ -174,6 +237,12 @@ class World:
         if n > 0:
             self.step(n)
 
+    def _emulators(self) -> list[Any]:
+        seen: dict[int, Any] = {}
+        for b in self._bound:
+            seen.setdefault(id(b.emulator), b.emulator)
+        return list(seen.values())
+
     def reset(self) -> None:
         """Physics to the model's initial state, every drive to its power-on state (saved settings kept)."""
         mj = self.mujoco
@@ -182,42 +251,46 @@ class World:
         self.steps = 0
         self._target = 0.0
         self.clock.set(0.0)
-        for emu, qa, _da, _aid in self._bind:
+        for emu in self._emulators():
             emu.power_cycle()
             emu.time = 0.0
-            emu.pos = emu.p_ref = float(self.data.qpos[qa]) * (524288 / (2 * math.pi))
-            emu.brake_hold = emu.pos
+        for b in self._bound:
+            b.stepper.place(float(self.data.qpos[b.qadr]))
 
     def set_joint_positions(self, positions: Mapping[str, float]) -> None:
-        """Place drives' joints at ``positions`` (drive name -> MJCF angle [rad]) at rest.
+        """Place drives' joints at ``positions`` (joint name -> MJCF angle [rad]) at rest.
 
         For a start state right after :meth:`reset`, while the drives are disabled: sets the joint
-        angles, zeroes their velocities, recomputes the kinematics and moves each drive's encoder,
-        setpoint and brake hold to the new angle (so the brake holds the new pose).
+        angles, zeroes their velocities, recomputes the kinematics and lets each drive's encoder
+        (and holding brake) see the new angle.
         """
-        mj = self.mujoco
-        names = list(self.drives)
+        names = [b.name for b in self._bound]
         for name, q in positions.items():
-            if name not in self.drives:
+            if name not in names:
                 raise KeyError(f"no emulated drive {name!r} (have {names})")
             if not math.isfinite(q):
                 raise ValueError(f"joint {name}: position must be finite, got {q!r}")
-        for (emu, qa, da, _aid), dname in zip(self._bind, names):
-            if dname in positions:
-                self.data.qpos[qa] = float(positions[dname])
-                self.data.qvel[da] = 0.0
-        mj.mj_forward(self.model, self.data)
-        for (emu, qa, _da, _aid), dname in zip(self._bind, names):
-            if dname in positions:
-                emu.pos = emu.p_ref = float(self.data.qpos[qa]) * (524288 / (2 * math.pi))
-                emu.vel = 0.0
-                emu.brake_hold = emu.pos
+        for b in self._bound:
+            if b.name in positions:
+                self.data.qpos[b.qadr] = float(positions[b.name])
+                self.data.qvel[b.dadr] = 0.0
+        self.mujoco.mj_forward(self.model, self.data)
+        for b in self._bound:
+            if b.name in positions:
+                b.stepper.place(float(self.data.qpos[b.qadr]))
 
     def joint_position(self, name: str) -> float:
         """Ground truth joint angle [rad] from the physics (for tests and envs' task terms)."""
-        for (emu, qa, _da, _aid), dname in zip(self._bind, self.drives):
-            if dname == name:
-                return float(self.data.qpos[qa])
+        for b in self._bound:
+            if b.name == name:
+                return float(self.data.qpos[b.qadr])
+        raise KeyError(name)
+
+    def joint_velocity(self, name: str) -> float:
+        """Ground truth joint velocity [rad/s] from the physics."""
+        for b in self._bound:
+            if b.name == name:
+                return float(self.data.qvel[b.dadr])
         raise KeyError(name)
 
     def close(self) -> None:

@@ -13,22 +13,22 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-from joints.codecs import modbus as mb  # noqa: E402
-from joints.devices.erob import faults  # noqa: E402
-from joints.devices.erob.profiles import profile  # noqa: E402
-from joints.devices.erob.registers import (  # noqa: E402
+from joints.codecs import modbus as mb
+from joints.devices.erob import faults
+from joints.devices.erob.profiles import profile
+from joints.devices.erob.registers import (
     COUNTS_PER_REV,
     EROB_MODBUS,
     AchieveStatus,
     MotionMode,
     MotionStatus,
 )
-from joints.drivers.erob_modbus import ZERO_BASE, ErobModbusDriver  # noqa: E402
-from joints.errors import DeviceFault, DeviceRejected, StateError  # noqa: E402
-from joints.joint import Joint  # noqa: E402
-from joints.link.modbus import ModbusLink  # noqa: E402
-from joints.sim.erob import FOLLOWING_ERROR, STALL  # noqa: E402
-from joints.sim.world import DriveSpec, World  # noqa: E402
+from joints.drivers.erob_modbus import ZERO_BASE, ErobModbusDriver
+from joints.errors import DeviceFault, DeviceRejected, StateError
+from joints.joint import Joint
+from joints.link.modbus import ModbusLink
+from joints.sim.erob import FOLLOWING_ERROR, STALL
+from joints.sim.world import DriveSpec, World
 
 PROFILE = profile("eRob80H100")
 C = COUNTS_PER_REV / (2.0 * math.pi)  #: counts per rad
@@ -212,9 +212,11 @@ def test_communication_watchdog(bench: Bench) -> None:
     emu = bench.world.drives["joint1"]
     drv.set_communication_timeout(100)  # 0x0002 = 100 ms; armed by this very frame
     drv.enable()
-    for _ in range(12):  # keep talking through the 500 ms enable delay
+    # Keep talking through the 500 ms enable delay. (Not with drv.state(): the drive reports
+    # "motor off" until it is ready, and the driver would conclude it disabled itself.)
+    for _ in range(12):
         bench.world.advance(0.05)
-        drv.state()
+        assert drv.read("error_code") == 0
     drv.move_continuous(50_000, acceleration=200_000, deceleration=200_000)
     for _ in range(10):
         bench.world.advance(0.05)
@@ -249,7 +251,7 @@ def test_software_position_limits_clamp_the_target(bench: Bench) -> None:
     drv.write("min_position_limit_value", -50_000)
     drv.write("max_position_limit_value", 80_000)
     drv.enable()
-    fast = dict(speed=150_000, acceleration=300_000, deceleration=300_000)
+    fast = {"speed": 150_000, "acceleration": 300_000, "deceleration": 300_000}
     drv.move_to(200_000, **fast)
     bench.world.advance(2.5)
     assert bench.pos() == pytest.approx(80_000, abs=100)

@@ -53,12 +53,8 @@ class Replay:
 
     def place(self, counts: int) -> None:
         """The manual's "move to the desired position" step: put the joint there physically."""
-        q = counts * 2 * math.pi / COUNTS_PER_REV
-        self.world.data.qpos[0] = q
-        self.world.data.qvel[0] = 0.0
-        self.world.mujoco.mj_forward(self.world.model, self.world.data)
-        self.world.advance(0.01)  # the drive's encoder sees it on the next substep
-        self.emu.brake_hold = self.emu.pos
+        self.world.set_joint_positions({"joint1": counts * 2 * math.pi / COUNTS_PER_REV})
+        self.world.advance(0.01)
 
 
 def _consistent(rp: Replay, req: mb.ReadHoldingRegisters, expected: dict[str, int], got: dict[str, int]) -> bool:

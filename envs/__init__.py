@@ -1,0 +1,63 @@
+"""Gymnasium environments over the joints API: the same env on emulated (sim) and real (hardware) drives.
+
+Importing ``envs`` registers, under the ``joints/`` namespace:
+
+* ``joints/ErobReach-v0`` - one eRob joint (models/erob_stand.xml) to a random target angle
+  (:class:`envs.reach.ErobReachEnv`);
+* ``joints/ErobArmReach-v0`` - the 3-joint eRob arm (models/erob_arm3.xml), end effector to a
+  random point (:class:`envs.reach.ErobArmReachEnv`).
+
+>>> import gymnasium as gym, envs
+>>> env = gym.make("joints/ErobReach-v0", action_mode="torque")          # doctest: +SKIP
+>>> env = gym.make("joints/ErobReach-v0", config="stand.toml", backend="hardware")  # doctest: +SKIP
+
+Headless rendering: when ``MUJOCO_GL`` is unset, no display is available and MuJoCo is not yet
+imported, importing ``envs`` sets ``MUJOCO_GL=egl`` so ``render_mode="rgb_array"`` works offscreen.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+if (sys.platform.startswith("linux") and "MUJOCO_GL" not in os.environ and "mujoco" not in sys.modules
+        and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY")):
+    os.environ["MUJOCO_GL"] = "egl"
+
+from gymnasium.envs.registration import register, registry  # noqa: E402
+
+from envs.base import ACTION_MODES, JointsEnv  # noqa: E402
+from envs.configs import SHIPPED, config_path, default_config  # noqa: E402
+from envs.kinematics import erob_arm3_ee  # noqa: E402
+from envs.randomization import DomainRandomization  # noqa: E402
+from envs.reach import ErobArmReachEnv, ErobReachEnv  # noqa: E402
+
+#: id -> (entry point, max_episode_steps)
+ENV_IDS = {
+    "joints/ErobReach-v0": ("envs.reach:ErobReachEnv", 250),
+    "joints/ErobArmReach-v0": ("envs.reach:ErobArmReachEnv", 250),
+}
+
+
+def register_envs() -> None:
+    """Register the ``joints/`` ids with gymnasium (idempotent; done on ``import envs``)."""
+    for env_id, (entry_point, steps) in ENV_IDS.items():
+        if env_id not in registry:
+            register(id=env_id, entry_point=entry_point, max_episode_steps=steps)
+
+
+register_envs()
+
+__all__ = [
+    "ACTION_MODES",
+    "ENV_IDS",
+    "SHIPPED",
+    "DomainRandomization",
+    "ErobArmReachEnv",
+    "ErobReachEnv",
+    "JointsEnv",
+    "config_path",
+    "default_config",
+    "erob_arm3_ee",
+    "register_envs",
+]

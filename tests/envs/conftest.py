@@ -1,0 +1,36 @@
+"""Gymnasium env tests: need gymnasium and mujoco; headless rendering uses EGL when nothing else is set."""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import pytest
+
+if (sys.platform.startswith("linux") and "MUJOCO_GL" not in os.environ and "mujoco" not in sys.modules
+        and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY")):
+    os.environ["MUJOCO_GL"] = "egl"
+
+pytest.importorskip("gymnasium")
+pytest.importorskip("mujoco")
+
+
+_GL: list[str] = []
+
+
+@pytest.fixture(scope="session")
+def gl_unavailable() -> str:
+    """'' when MuJoCo can render offscreen here, else the reason (checked once)."""
+    if not _GL:
+        try:
+            import mujoco
+
+            model = mujoco.MjModel.from_xml_string("<mujoco><worldbody><geom size='1'/></worldbody></mujoco>")
+            renderer = mujoco.Renderer(model, 16, 16)
+            renderer.update_scene(mujoco.MjData(model))
+            renderer.render()
+            renderer.close()
+            _GL.append("")
+        except Exception as exc:  # noqa: BLE001 - any GL failure means: no offscreen rendering here
+            _GL.append(f"no offscreen GL backend (MUJOCO_GL={os.environ.get('MUJOCO_GL', 'unset')}): {exc}")
+    return _GL[0]
