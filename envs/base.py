@@ -184,6 +184,9 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
         high = np.concatenate([self.position_limits[:, 1] + OBS_POSITION_MARGIN, 2 * self.velocity_limits,
                                2 * self.torque_limits, t_hi]).astype(np.float64)
         self.observation_space = spaces.Box(low, high, dtype=np.float64)
+        self._obs_low, self._obs_high = self.observation_space.low.copy(), self.observation_space.high.copy()
+        self._lo_stop = self.position_limits[:, 0] - LIMIT_MARGIN
+        self._hi_stop = self.position_limits[:, 1] + LIMIT_MARGIN
 
         # sim-only handles: nominal model parameters (domain randomisation restores them each reset)
         self._mjcf_joints = [rig.config.joints[nm].mjcf_joint or nm for nm in self.joint_names]
@@ -321,9 +324,9 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
         a = np.asarray(action, dtype=np.float64)
         if a.shape != self.action_space.shape:
             raise ValueError(f"action shape {a.shape} != {self.action_space.shape}")
-        if not np.all(np.isfinite(a)):
+        if not np.isfinite(a).all():
             raise ValueError(f"action must be finite, got {a.tolist()}")
-        a = np.clip(a, -1.0, 1.0)
+        a = a.clip(-1.0, 1.0)
         self._queue.append(a)
         self._command(self._queue.popleft())
         self._tick += 1
@@ -335,8 +338,7 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
         self._prev_action = a
         info = self._info(states)
         info.update(terms)
-        lo, hi = self.position_limits[:, 0], self.position_limits[:, 1]
-        violation = bool(np.any(positions < lo - LIMIT_MARGIN) or np.any(positions > hi + LIMIT_MARGIN))
+        violation = bool((positions < self._lo_stop).any() or (positions > self._hi_stop).any())
         info["limit_violation"] = violation
         terminated = violation or any(s.fault for s in states)
         if terminated:
@@ -383,10 +385,10 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
         vel = np.array([s.velocity for s in states])
         tau = np.array([s.torque for s in states])
         seen = pos
-        if self._noise_rng is not None and np.any(self._noise > 0):
+        if self._noise_rng is not None and self._noise.any():
             seen = pos + self._noise_rng.normal(0.0, 1.0, pos.shape) * self._noise
         obs = np.concatenate([seen, vel, tau, self._task_terms(pos)])
-        return np.clip(obs, self.observation_space.low, self.observation_space.high)
+        return obs.clip(self._obs_low, self._obs_high)
 
     def _info(self, states: Sequence[joints.JointState]) -> dict[str, Any]:
         return {

@@ -164,7 +164,7 @@ class ErobReachEnv(JointsEnv):
     def _reward(self, positions: np.ndarray, action: np.ndarray) -> tuple[float, dict[str, Any]]:
         distance = abs(self.target - float(positions[0]))
         r_dist = -distance
-        r_rate = -self.action_rate_weight * float(np.sum((action - self._prev_action) ** 2))
+        r_rate = -self.action_rate_weight * float(((action - self._prev_action) ** 2).sum())
         return r_dist + r_rate, {
             "reward_distance": r_dist,
             "reward_action_rate": r_rate,
@@ -334,7 +334,7 @@ class ErobArmReachEnv(JointsEnv):
     def _reward(self, positions: np.ndarray, action: np.ndarray) -> tuple[float, dict[str, Any]]:
         distance = float(np.linalg.norm(self.target - self._ee))
         r_dist = -distance
-        r_rate = -self.action_rate_weight * float(np.sum((action - self._prev_action) ** 2))
+        r_rate = -self.action_rate_weight * float(((action - self._prev_action) ** 2).sum())
         return r_dist + r_rate, {
             "reward_distance": r_dist,
             "reward_action_rate": r_rate,

@@ -26,7 +26,7 @@ BACKENDS = ("sim", "hardware")
 PROTOCOLS = ("modbus-rtu", "mks-serial", "erob-can", "canopen")
 DEVICES = ("erob", "zlac8015d", "mks-servo42d", "mks-servo57d")
 #: (device, protocol) pairs with a driver in this version
-SUPPORTED = {("erob", "modbus-rtu")}
+SUPPORTED = {("erob", "modbus-rtu"), ("zlac8015d", "modbus-rtu")}
 PARITIES = ("N", "E", "O")
 ON_EXIT = ("disable", "stop", "none")
 #: devices with more than one motor per address (the joint's ``channel`` selects one)
@@ -240,6 +240,8 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
         if address is None:
             raise r.err(f"{key}.address", "is required (Modbus slave id / MKS address / CAN node id)")
         channel = j.get("channel")
+        if device in MULTI_CHANNEL and channel not in ("left", "right"):
+            raise r.err(f"{key}.channel", f"{channel!r}: a {device} joint must name its motor", ("left", "right"))
         ident = (str(bus), address, channel if device in MULTI_CHANNEL else None)
         if ident in seen:
             raise r.err(f"{key}.address", f"address {address} on bus {bus!r} is already used by joint {seen[ident]!r}")

@@ -71,13 +71,26 @@ class Rig:
         self.clock.sleep(seconds)
 
     def read_states(self) -> dict[str, JointState]:
-        """State of every joint, bus by bus (one status transaction per joint)."""
+        """State of every joint, bus by bus: one status transaction per drive.
+
+        Joints whose drivers share a ``status_group`` (the two wheels of a ZLAC8015D) are served
+        by one block read of that drive.
+        """
         out: dict[str, JointState] = {}
+        groups: dict[int, Any] = {}
         for bus in self.buses:
             for name, j in self.joints.items():
-                if self.config.joints[name].bus == bus:
+                if self.config.joints[name].bus != bus:
+                    continue
+                group = getattr(j.driver, "status_group", None)
+                if group is None:
                     out[name] = j.state()
-        return out
+                    continue
+                if id(group) not in groups:
+                    groups[id(group)] = (group.read_status(), self.clock.now())
+                block, t = groups[id(group)]
+                out[name] = j.to_si(j.driver.state_from(block, t))  # type: ignore[attr-defined]
+        return {name: out[name] for name in self.joints if name in out}
 
     def reset(self) -> None:
         """Sim: physics to the model's initial state and every emulated drive to power-on.
@@ -179,8 +192,9 @@ def build(config: RigConfig, *, transports: Mapping[str, ByteTransport] | None =
             )
             buses[name] = Bus(bcfg, opened[name], link)
         joints: dict[str, Joint] = {}
+        shared: dict[Any, Any] = {}
         for name, jcfg in config.joints.items():
-            driver = make_driver(jcfg, buses[jcfg.bus].link, clock)
+            driver = make_driver(jcfg, buses[jcfg.bus].link, clock, shared)
             joints[name] = Joint(name, driver, clock=clock, limits=jcfg.limits, motion=jcfg.motion,
                                  offset=jcfg.offset, direction=jcfg.direction)
             if jcfg.watchdog_ms is not None and hasattr(driver, "set_communication_timeout"):
@@ -219,15 +233,14 @@ def open(config: str | os.PathLike[str] | Mapping[str, Any] | RigConfig, *, back
 
 def sim_world(cfg: RigConfig) -> Any:
     """The simulated world for a config: its model with one emulated drive per joint."""
-    from joints.drivers import erob_profile
+    from joints.drivers import device_profile
     from joints.sim.world import DriveSpec, World
 
     drives = []
     try:
         for name, j in cfg.joints.items():
-            prof = erob_profile(j)
             drives.append(DriveSpec(bus=j.bus, name=name, mjcf_joint=j.mjcf_joint or name, address=j.address,
-                                    profile=prof))
+                                    profile=device_profile(j), device=j.device, channel=j.channel))
         return World(cfg.sim.model, drives, timestep=cfg.sim.timestep, base_dir=cfg.base_dir)
     except ConfigError as exc:  # `joints sim serve` comes here directly: name the file too
         if exc.file is None:

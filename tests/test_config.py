@@ -358,7 +358,7 @@ def test_direction_must_be_plus_or_minus_one(direction: object) -> None:
     assert "[joints.shoulder.direction]" in msg and "(allowed: 1, -1)" in msg
 
 
-@pytest.mark.parametrize("device,protocol", [("zlac8015d", "modbus-rtu"), ("mks-servo42d", "modbus-rtu"),
+@pytest.mark.parametrize("device,protocol", [("zlac8015d", "canopen"), ("mks-servo42d", "modbus-rtu"),
                                              ("erob", "canopen"), ("erob", "erob-can")])
 def test_unsupported_device_protocol_pair(device: str, protocol: str) -> None:
     data = good()
@@ -367,6 +367,7 @@ def test_unsupported_device_protocol_pair(device: str, protocol: str) -> None:
     if device == "zlac8015d":
         data["joints"]["shoulder"]["channel"] = "left"
     msg = str(config_error(data))
+    assert "'zlac8015d on modbus-rtu'" in msg
     assert "rig.toml" in msg and "[joints.shoulder.device]" in msg
     assert "not supported yet" in msg and repr(device) in msg and repr(protocol) in msg
     assert "'erob on modbus-rtu'" in msg  # what is supported

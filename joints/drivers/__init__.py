@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from joints.drivers.base import JointDriver, RawState, Units
 
@@ -33,8 +33,29 @@ def erob_profile(cfg: "JointConfig") -> "ErobProfile":
     return prof
 
 
-def make_driver(cfg: "JointConfig", link: object, clock: "Clock") -> JointDriver:
-    """Build the driver for a configured joint on its bus link."""
+def hub_profile(cfg: "JointConfig") -> Any:
+    """The hub-motor profile of a configured ZLAC8015D wheel (``profile`` overrides applied)."""
+    from joints.devices.zlac.profile import HubMotorProfile
+    from joints.errors import ConfigError
+
+    try:
+        prof = HubMotorProfile()
+        return prof.with_overrides(**dict(cfg.profile)) if cfg.profile else prof
+    except ConfigError as exc:
+        raise ConfigError(exc.message, key=f"joints.{cfg.name}.profile" + (f".{exc.key}" if exc.key else ""),
+                          allowed=exc.allowed) from exc
+
+
+def device_profile(cfg: "JointConfig") -> Any:
+    """The physical profile of a configured joint, by device."""
+    return hub_profile(cfg) if cfg.device == "zlac8015d" else erob_profile(cfg)
+
+
+def make_driver(cfg: "JointConfig", link: object, clock: "Clock", shared: dict[Any, Any] | None = None) -> JointDriver:
+    """Build the driver for a configured joint on its bus link.
+
+    ``shared`` holds per-drive objects (a ZLAC8015D's two channels share one ZlacDrive).
+    """
     from joints.errors import ConfigError
 
     if cfg.device == "erob":
@@ -43,7 +64,18 @@ def make_driver(cfg: "JointConfig", link: object, clock: "Clock") -> JointDriver
 
         assert isinstance(link, ModbusLink)
         return ErobModbusDriver(link, cfg.address, profile=erob_profile(cfg), clock=clock, name=cfg.name)
+    if cfg.device == "zlac8015d":
+        from joints.drivers.zlac_modbus import ZlacChannelDriver, ZlacDrive
+        from joints.link.modbus import ModbusLink
+
+        assert isinstance(link, ModbusLink)
+        shared = {} if shared is None else shared
+        key = (cfg.bus, cfg.address)
+        drive = shared.get(key)
+        if drive is None:
+            drive = shared[key] = ZlacDrive(link, cfg.address, clock=clock, name=f"zlac8015d@{cfg.bus}:{cfg.address}")
+        return ZlacChannelDriver(drive, cfg.channel or "", profile=hub_profile(cfg), name=cfg.name)
     raise ConfigError(f"no driver for device {cfg.device!r} yet", key=f"joints.{cfg.name}.device")
 
 
-__all__ = ["JointDriver", "RawState", "Units", "erob_profile", "make_driver"]
+__all__ = ["JointDriver", "RawState", "Units", "device_profile", "erob_profile", "hub_profile", "make_driver"]

@@ -152,11 +152,18 @@ class ErobModbusDriver(JointDriver):
         self._note_enable(False)
 
     def _settle_after_enable(self) -> None:
+        """Wait until 500 ms after "enable"; with the watchdog on, keep the bus alive meanwhile."""
         if not self._enabled or self._enabled_at is None:
             raise StateError(f"{self.name}: the motor is not enabled; call enable() first")
-        wait = self._enabled_at + ENABLE_SETTLE - self.clock.now()
-        if wait > 0:
-            self.clock.sleep(wait)
+        watchdog = self._cache.get("modbus_communication_timeout_duration", 0) * 1e-3
+        while True:
+            wait = self._enabled_at + ENABLE_SETTLE - self.clock.now()
+            if wait <= 0:
+                return
+            chunk = min(wait, watchdog / 2) if watchdog > 0 else wait
+            self.clock.sleep(chunk)
+            if watchdog > 0 and self.clock.now() < self._enabled_at + ENABLE_SETTLE:
+                self.read("error_code")  # a frame resets the drive's communication timeout
 
     def _operation_mode(self, mode: OperationMode) -> None:
         self._set("operation_mode", int(mode))
@@ -341,8 +348,11 @@ class ErobModbusDriver(JointDriver):
         v = self.table.decode_block(STATUS_BLOCK_START, words)
         achieve = v["status_of_achieving_position"]
         enabled = achieve != AchieveStatus.MOTOR_OFF
-        if not enabled and self._enabled:
-            self._note_enable(False)  # the drive disabled itself (fault, watchdog)
+        settling = self._enabled_at is not None and t - self._enabled_at < ENABLE_SETTLE + 0.1
+        if not enabled and self._enabled and (v["error_code"] or not settling):
+            # The drive disabled itself (fault, watchdog). During the 500 ms after "enable" it
+            # reports "motor off" while the brake releases: that is not a disable.
+            self._note_enable(False)
         return RawState(
             position=v["actual_position"],
             velocity=v["current_speed"],

@@ -42,6 +42,18 @@ _FAULTS = (
               "wait at least 8 s after power-on before commanding", "eRunner v1.7 appendix 1 #8"),
     FaultInfo(0x014A, "brake control not configured",
               "configure the brake type in eTuner", "eRunner v1.7 appendix 1 #9"),
+    # The protection faults below are not numbered in our manual set; the emulator reports them with
+    # the CiA 402 error codes (the eRob's CANopen profile), so a real drive may use other numbers.
+    FaultInfo(0x8611, "position following error above max_position_error (0x00B9)",
+              "check load, gains and profile acceleration; clear errors and enable again", "CiA 402 (emulator)"),
+    FaultInfo(0x8400, "speed error above max_speed_error (0x00BB)",
+              "reduce acceleration or load; clear errors and enable again", "CiA 402 (emulator)"),
+    FaultInfo(0x7121, "motor stalled (struck current/speed/time, 0x00C5-0x00C9)",
+              "remove the blockage; clear errors and enable again", "CiA 402 (emulator)"),
+    FaultInfo(0x8612, "position outside min/max position limit (0x00BD/0x00BF)",
+              "move back inside the limits", "CiA 402 (emulator)"),
+    FaultInfo(0x4310, "power stage above power_temperature_protection_value (0x00D1)",
+              "let the drive cool down, reduce the duty", "CiA 402 (emulator)"),
 )
 
 FAULTS: dict[int, FaultInfo] = {f.code: f for f in _FAULTS}

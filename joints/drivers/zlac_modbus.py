@@ -1,0 +1,367 @@
+"""ZLAC8015D over Modbus RTU: one drive, two hub motors (left/right), one control mode.
+
+Rule: a :class:`ZlacDrive` owns what belongs to the drive - the control mode (0x200D), the
+synchronous/asynchronous flag (0x200F), the control word (0x200E) and the one FC03 status read of
+both wheels; each wheel is a :class:`ZlacChannelDriver` (a :class:`JointDriver`). Asking one
+channel for a mode while its sibling is enabled in another mode is an error that says so.
+Synchronous commands are one FC16 (both target velocities at 0x2088-0x2089, both torques at
+0x2090-0x2091, both positions at 0x208A-0x208D).
+
+Units used towards :class:`~joints.joint.Joint`: position in encoder counts (4096/rev), velocity
+in 0.1 r/min (the feedback unit; commands are rounded to the register's 1 r/min), current in mA
+(feedback 0.1 A is scaled to mA). 0x200F follows the manual's EXAMPLES (1 = synchronous,
+0 = asynchronous; the register table says the opposite, ERRATA DOC-ZLAC-1).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from joints.clock import Clock, MonotonicClock
+from joints.devices.registers import Register
+from joints.devices.zlac import registers as zr
+from joints.drivers.base import JointDriver, RawState, Units
+from joints.errors import CommandError, ConfirmationRequired, StateError
+from joints.link.modbus import ModbusLink
+
+SIDES = ("left", "right")
+#: status block read in ONE FC03: motor state (0x20A2) .. actual torque right (0x20AE)
+STATUS_START = 0x20A2
+STATUS_WORDS = 0x20AE - 0x20A2 + 1
+#: The acceleration/deceleration time registers are the ramp time from 0 to this speed [r/min]
+#: (the emulator uses the same reference; see joints.sim.zlac).
+RAMP_REFERENCE_RPM = 1000.0
+
+
+def ramp_time_ms(rpm_per_s: float) -> int:
+    """Acceleration/deceleration-time register value for a ramp of ``rpm_per_s``."""
+    if rpm_per_s <= 0:
+        raise CommandError(f"ramp rate must be > 0 r/min/s, got {rpm_per_s}")
+    return max(0, min(32767, round(RAMP_REFERENCE_RPM / rpm_per_s * 1000.0)))
+
+
+@dataclass
+class _DriveState:
+    mode: int | None = None
+    sync: int | None = None
+    enabled: set[str] = field(default_factory=set)
+    channel_mode: dict[str, int] = field(default_factory=dict)
+
+
+class ZlacDrive:
+    """One ZLAC8015D on a Modbus link: the state both wheels share."""
+
+    table = zr.ZLAC8015D
+
+    def __init__(self, link: ModbusLink, slave: int, *, clock: Clock | None = None, name: str = "") -> None:
+        if not 1 <= slave <= 127:
+            raise CommandError(f"ZLAC8015D RS485 node id must be 1..127, got {slave}")
+        self.link = link
+        self.slave = slave
+        self.clock: Clock = clock or link.clock or MonotonicClock()
+        self.name = name or f"zlac8015d@{slave}"
+        self.state = _DriveState()
+        self._cache: dict[str, int] = {}
+
+    # -- registers --
+    def read(self, key: str | int) -> int:
+        reg = self.table.get(key)
+        return reg.from_words(self.link.read_registers(self.slave, reg.address, reg.words))
+
+    def write_register(self, reg: Register, value: int, *, idempotent: bool = True) -> None:
+        words = reg.to_words(value)
+        if len(words) == 1:
+            self.link.write_register(self.slave, reg.address, words[0], idempotent=idempotent)
+        else:
+            self.link.write_registers(self.slave, reg.address, words, idempotent=idempotent)
+        self._cache[reg.name] = int(value)
+
+    def set(self, name: str, value: int, *, force: bool = False) -> None:
+        if force or self._cache.get(name) != value:
+            self.write_register(self.table[name], value)
+
+    def set_block(self, values: Mapping[str, int]) -> None:
+        """Several contiguous registers in one FC16."""
+        start, words = self.table.encode_block(values)
+        self.link.write_registers(self.slave, start, words)
+        self._cache.update(values)
+
+    def control(self, word: zr.ControlWord) -> None:
+        """Write the control word (commands are never retried)."""
+        self.write_register(self.table["control_word"], int(word), idempotent=False)
+        self._cache.pop("control_word", None)
+
+    def forget(self) -> None:
+        self._cache.clear()
+        self.state = _DriveState()
+
+    # -- mode ownership --
+    def require_mode(self, side: str, mode: zr.ControlMode) -> None:
+        """Put the drive in ``mode`` for ``side`` unless the sibling is enabled in another mode."""
+        other = "right" if side == "left" else "left"
+        st = self.state
+        if other in st.enabled and st.mode is not None and st.mode != int(mode):
+            raise StateError(
+                f"{self.name}: the control mode belongs to the drive - the {other} wheel is enabled in "
+                f"{zr.ControlMode(st.mode).name} mode, so the {side} wheel cannot use {mode.name}; "
+                f"disable the {other} wheel first or command both in {zr.ControlMode(st.mode).name}"
+            )
+        if st.mode != int(mode):
+            self.set("control_mode", int(mode), force=True)
+            st.mode = int(mode)
+        st.channel_mode[side] = int(mode)
+
+    def set_sync(self, synchronous: bool) -> None:
+        value = int(zr.SyncMode.SYNCHRONOUS if synchronous else zr.SyncMode.ASYNCHRONOUS)
+        if self.state.sync != value:
+            self.set("synchronous_asynchronous_control_status", value, force=True)
+            self.state.sync = value
+
+    def configure(
+        self,
+        mode: zr.ControlMode,
+        *,
+        acceleration_ms: tuple[int, int] | None = None,
+        deceleration_ms: tuple[int, int] | None = None,
+        position_speed_rpm: tuple[int, int] | None = None,
+        torque_rate: tuple[int, int] | None = None,
+        synchronous: bool | None = None,
+    ) -> None:
+        """The manual's initialisation (3.1/3.2/3.4), before "enable": [sync flag,] control mode,
+        acceleration time L/R, deceleration time L/R, position-mode speed L/R or torque rate L/R."""
+        if self.state.enabled and self.state.mode not in (None, int(mode)):
+            raise StateError(f"{self.name}: cannot change the control mode while a wheel is enabled; disable first")
+        if synchronous is not None:
+            self.set_sync(synchronous)
+        self.set("control_mode", int(mode), force=True)
+        self.state.mode = int(mode)
+        pairs = (("acceleration_time", acceleration_ms), ("deceleration_time", deceleration_ms),
+                 ("target_speed", position_speed_rpm), ("torque_rate", torque_rate))
+        for stem, pair in pairs:
+            if pair is not None:
+                self.set(f"{stem}_left", pair[0])
+                self.set(f"{stem}_right", pair[1])
+
+    def stop(self) -> None:
+        """Control word STOP (0x07): both motors stop (the manual's "Stop" in every example)."""
+        self.control(zr.ControlWord.STOP)
+        self.state.enabled.clear()
+
+    # -- power --
+    def enable(self, side: str) -> None:
+        if not self.state.enabled:
+            self.control(zr.ControlWord.ENABLE)
+        self.state.enabled.add(side)
+
+    def disable(self, side: str) -> None:
+        """The drive has one enable for both motors: it is disabled when no wheel is in use."""
+        self.state.enabled.discard(side)
+        if not self.state.enabled:
+            self.control(zr.ControlWord.STOP)
+
+    # -- synchronous commands (one FC16) --
+    def set_velocities(self, left: int, right: int) -> None:
+        """Both target velocities [r/min] in one FC16 (velocity mode)."""
+        self._need_both("set_velocities")
+        for side in SIDES:
+            self.require_mode(side, zr.ControlMode.VELOCITY)
+        self.set_block({"target_velocity_left": left, "target_velocity_right": right})
+
+    def set_torques(self, left: int, right: int) -> None:
+        """Both target torques [mA] in one FC16 (torque mode)."""
+        self._need_both("set_torques")
+        for side in SIDES:
+            self.require_mode(side, zr.ControlMode.TORQUE)
+        self.set_block({"target_torque_left": left, "target_torque_right": right})
+
+    def move_both(self, left: int, right: int, *, absolute: bool = True) -> None:
+        """Both target positions [counts] in one FC16, then start both (synchronous position mode)."""
+        self._need_both("move_both")
+        mode = zr.ControlMode.ABSOLUTE_POSITION if absolute else zr.ControlMode.RELATIVE_POSITION
+        for side in SIDES:
+            self.require_mode(side, mode)
+        self.set_sync(True)
+        self.set_block({"target_position_left": left, "target_position_right": right})
+        self.control(zr.ControlWord.START_SYNC)
+
+    def _need_both(self, what: str) -> None:
+        missing = [s for s in SIDES if s not in self.state.enabled]
+        if missing:
+            raise StateError(f"{self.name}: {what} needs both wheels enabled ({', '.join(missing)} is not)")
+
+    # -- status --
+    def read_status(self) -> dict[str, int]:
+        """Both wheels' status in ONE FC03 (motor state .. actual torque right)."""
+        words = self.link.read_registers(self.slave, STATUS_START, STATUS_WORDS)
+        return self.table.decode_block(STATUS_START, words)
+
+
+class ZlacChannelDriver(JointDriver):
+    """One wheel of a ZLAC8015D (``side`` = "left" | "right")."""
+
+    device = "zlac8015d"
+    table = zr.ZLAC8015D
+
+    def __init__(self, drive: ZlacDrive, side: str, *, profile: Any, name: str = "") -> None:
+        if side not in SIDES:
+            raise CommandError(f"ZLAC8015D channel must be 'left' or 'right', got {side!r}")
+        self.drive = drive
+        self.side = side
+        self.profile = profile
+        self.name = name or f"{drive.name}:{side}"
+        rad_per_count = 2.0 * math.pi / zr.COUNTS_PER_REV
+        self.units = Units(rad_per_count, 2.0 * math.pi / 60.0 * 0.1, 0.001, float(profile.torque_constant))
+
+    def _r(self, stem: str) -> str:
+        return f"{stem}_{self.side}"
+
+    @property
+    def status_group(self) -> ZlacDrive:
+        """Channels with the same group share one status read (Rig.read_states)."""
+        return self.drive
+
+    # -- registers --
+    def read(self, key: str | int) -> int:
+        return self.drive.read(key)
+
+    def write_register(self, reg: Register, value: int) -> None:
+        self.drive.write_register(reg, value)
+
+    @property
+    def is_enabled(self) -> bool:
+        return self.side in self.drive.state.enabled
+
+    def forget(self) -> None:
+        self.drive.forget()
+
+    # -- power --
+    def enable(self) -> None:
+        self.drive.enable(self.side)
+
+    def disable(self) -> None:
+        self._zero_target()
+        self.drive.disable(self.side)
+
+    def _require_enabled(self) -> None:
+        if not self.is_enabled:
+            raise StateError(f"{self.name}: the wheel is not enabled; call enable() first")
+
+    def _zero_target(self) -> None:
+        mode = self.drive.state.mode
+        if self.is_enabled and mode == zr.ControlMode.VELOCITY:
+            self.drive.set(self._r("target_velocity"), 0, force=True)
+        elif self.is_enabled and mode == zr.ControlMode.TORQUE:
+            self.drive.set(self._r("target_torque"), 0, force=True)
+
+    def _ramps(self, acceleration: int | None, deceleration: int | None) -> None:
+        """Acceleration/deceleration [0.1 r/min per s] -> the ramp-time registers [ms]."""
+        if acceleration is not None:
+            self.drive.set(self._r("acceleration_time"), ramp_time_ms(acceleration / 10.0))
+        if deceleration is not None:
+            self.drive.set(self._r("deceleration_time"), ramp_time_ms(deceleration / 10.0))
+
+    # -- velocity mode --
+    def set_velocity(self, velocity: int, *, acceleration: int | None = None, deceleration: int | None = None) -> None:
+        """Target velocity (0.1 r/min, rounded to the register's 1 r/min), asynchronous per wheel."""
+        rpm = round(velocity / 10.0)
+        self.table[self._r("target_velocity")].check(rpm)
+        self._require_enabled()
+        self.drive.require_mode(self.side, zr.ControlMode.VELOCITY)
+        self._ramps(acceleration, deceleration)
+        self.drive.set(self._r("target_velocity"), rpm, force=True)
+
+    # -- position modes --
+    def _position(self, counts: int, mode: zr.ControlMode, speed: int | None, acceleration: int | None,
+                  deceleration: int | None) -> None:
+        self.table[self._r("target_position")].check(counts)
+        rpm = None if speed is None else max(1, min(1000, round(abs(speed) / 10.0)))
+        self._require_enabled()
+        self.drive.require_mode(self.side, mode)
+        self.drive.set_sync(False)
+        self._ramps(acceleration, deceleration)
+        if rpm is not None:
+            self.drive.set(self._r("target_speed"), rpm)
+        self.drive.set(self._r("target_position"), counts, force=True)
+        self.drive.control(zr.ControlWord.START_LEFT if self.side == "left" else zr.ControlWord.START_RIGHT)
+
+    def move_to(self, position: int, *, speed: int | None = None, acceleration: int | None = None,
+                deceleration: int | None = None) -> None:
+        """Absolute position mode (counts), start this wheel (asynchronous)."""
+        self._position(position, zr.ControlMode.ABSOLUTE_POSITION, speed, acceleration, deceleration)
+
+    def move_by(self, delta: int, *, speed: int | None = None, acceleration: int | None = None,
+                deceleration: int | None = None) -> None:
+        """Relative position mode (counts), start this wheel (asynchronous)."""
+        self._position(delta, zr.ControlMode.RELATIVE_POSITION, speed, acceleration, deceleration)
+
+    # -- torque mode --
+    def set_current(self, current: int) -> None:
+        """Target torque [mA] of this wheel (torque mode; the torque rate register sets the slope)."""
+        self.table[self._r("target_torque")].check(current)
+        self._require_enabled()
+        self.drive.require_mode(self.side, zr.ControlMode.TORQUE)
+        self.drive.set(self._r("target_torque"), current, force=True)
+
+    def set_torque_rate(self, ma_per_s: int) -> None:
+        self.drive.set(self._r("torque_rate"), ma_per_s)
+
+    # -- stopping --
+    def stop(self) -> None:
+        """Velocity/torque: this wheel's target to 0 (ramped). Position: control word STOP (both wheels)."""
+        mode = self.drive.state.mode
+        if mode in (zr.ControlMode.VELOCITY, zr.ControlMode.TORQUE):
+            self._zero_target()
+        elif self.is_enabled:
+            self.drive.control(zr.ControlWord.STOP)
+            self.drive.state.enabled.clear()
+
+    def emergency_stop(self) -> None:
+        """Quick stop (control word 0x05, both wheels, reaction per 0x2011)."""
+        self.drive.control(zr.ControlWord.QUICK_STOP)
+
+    def clear_errors(self) -> None:
+        self.drive.control(zr.ControlWord.CLEAR_FAULT)
+
+    # -- status --
+    def state(self) -> RawState:
+        return self.state_from(self.drive.read_status(), self.drive.clock.now())
+
+    def state_from(self, v: Mapping[str, int], t: float) -> RawState:
+        """This wheel's part of a status block read by :meth:`ZlacDrive.read_status`."""
+        hi = self.side == "left"
+        running = (v["motor_state"] >> 8) & 0xFF if hi else v["motor_state"] & 0xFF
+        temp = (v["motor_temperature"] >> 8) & 0xFF if hi else v["motor_temperature"] & 0xFF
+        return RawState(
+            position=v[f"actual_motor_position_{self.side}"],
+            velocity=v[f"actual_velocity_{self.side}"],
+            current=v[f"actual_torque_{self.side}"] * 100,  # 0.1 A -> mA
+            temperature=float(temp),
+            enabled=self.is_enabled,
+            moving=bool(running) and v[f"actual_velocity_{self.side}"] != 0,
+            fault=v[f"error_code_{self.side}"],
+            time=t,
+            extra=dict(v),
+        )
+
+    def fault_text(self, code: int) -> str:
+        return "; ".join(zr.describe(code)) or "no fault"
+
+    # -- watchdog and persistent operations --
+    def set_communication_timeout(self, milliseconds: int) -> None:
+        """Communication offline time (0x2000) [ms]: the drive stops when the host goes quiet."""
+        self.drive.set("communication_offline_time", milliseconds)
+
+    def reset_zero_point(self, *, confirm: bool = False) -> None:
+        """Absolute position mode: the present position becomes zero (0x2006)."""
+        if not confirm:
+            raise ConfirmationRequired(f"{self.name}: resetting the zero point moves the position reference; pass confirm=True")
+        self.drive.write_register(self.table["in_absolute_position_control_reset_the_zero_point"],
+                                  1 if self.side == "left" else 2)
+
+    def clear_feedback_position(self, *, confirm: bool = False) -> None:
+        """Clear the feedback position of both wheels (0x2005)."""
+        if not confirm:
+            raise ConfirmationRequired(f"{self.name}: clearing the feedback position resets both wheels' counts; pass confirm=True")
+        self.drive.write_register(self.table["clear_feedback_position"], 1)
