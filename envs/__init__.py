@@ -24,13 +24,13 @@ if (sys.platform.startswith("linux") and "MUJOCO_GL" not in os.environ and "mujo
         and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY")):
     os.environ["MUJOCO_GL"] = "egl"
 
-from gymnasium.envs.registration import register, registry  # noqa: E402
+from gymnasium.envs.registration import register, registry
 
-from envs.base import ACTION_MODES, JointsEnv  # noqa: E402
-from envs.configs import SHIPPED, config_path, default_config  # noqa: E402
-from envs.kinematics import erob_arm3_ee  # noqa: E402
-from envs.randomization import DomainRandomization  # noqa: E402
-from envs.reach import ErobArmReachEnv, ErobReachEnv  # noqa: E402
+from envs.base import ACTION_MODES, JointsEnv
+from envs.configs import SHIPPED, config_path, default_config
+from envs.kinematics import erob_arm3_ee
+from envs.randomization import DomainRandomization
+from envs.reach import ErobArmReachEnv, ErobReachEnv
 
 #: id -> (entry point, max_episode_steps)
 ENV_IDS = {

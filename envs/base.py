@@ -39,18 +39,18 @@ from __future__ import annotations
 import math
 import os
 from collections import deque
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
 import joints
-from joints.errors import DeviceFault, MotionTimeout
-
 from envs.configs import config_path
 from envs.randomization import GAIN_REGISTERS, DomainRandomization
 from envs.render import CameraSpec, SceneRenderer
+from joints.errors import DeviceFault, MotionTimeout
 
 ACTION_MODES = ("position", "velocity", "torque")
 #: s between "enable" and the first motion command (the eRob manual's 500 ms; the emulator enforces it)
@@ -79,7 +79,7 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
         width, height: ``rgb_array`` image size in pixels.
     """
 
-    metadata: dict[str, Any] = {"render_modes": ["human", "rgb_array"], "render_fps": 50}
+    metadata: dict[str, Any] = {"render_modes": ["human", "rgb_array"], "render_fps": 50}  # noqa: RUF012 - gymnasium declares it so
 
     #: the shipped config used when ``config`` is None (file stem in ``joints/configs``)
     default_config: str = ""
@@ -169,7 +169,7 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
                     f"control_period {self.control_period} s must be a whole number of physics substeps "
                     f"of {rig.world.timestep} s"
                 )
-            self.substeps = int(round(steps))  #: physics substeps per env step (sim)
+            self.substeps = round(steps)  #: physics substeps per env step (sim)
         else:
             self.substeps = 0
         self.randomization = DomainRandomization.from_arg(domain_randomization)
@@ -260,10 +260,12 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
         a = np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
         if self.action_mode == "position":
             lo, hi = self.position_limits[:, 0], self.position_limits[:, 1]
-            return np.clip(lo + (a + 1.0) * 0.5 * (hi - lo), lo, hi)
-        if self.action_mode == "velocity":
-            return a * self.velocity_limits
-        return a * self.torque_limits
+            out: np.ndarray = np.clip(lo + (a + 1.0) * 0.5 * (hi - lo), lo, hi)
+        elif self.action_mode == "velocity":
+            out = a * self.velocity_limits
+        else:
+            out = a * self.torque_limits
+        return out
 
     def action_of(self, command: Sequence[float] | np.ndarray) -> np.ndarray:
         """The normalised action (float32, clipped to [-1, 1]) for SI commands; inverse of :meth:`command_of`."""
@@ -275,7 +277,8 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
             a = c / self.velocity_limits
         else:
             a = c / self.torque_limits
-        return np.clip(a, -1.0, 1.0).astype(np.float32)
+        clipped: np.ndarray = np.clip(a, -1.0, 1.0).astype(np.float32)
+        return clipped
 
     def _to_model(self, i: int, position: float) -> float:
         """Joint position (user frame) -> MJCF joint angle: ``(position - offset) * direction``."""

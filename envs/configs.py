@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import contextlib
 import sys
+from collections.abc import Iterator
 from importlib import resources
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -26,7 +27,7 @@ SHIPPED = ("erob_reach", "erob_arm_reach")
 
 
 def _ref(name: str) -> Any:
-    stem = name[:-5] if name.endswith(".toml") else name
+    stem = name.removesuffix(".toml")
     if stem not in SHIPPED:
         raise ValueError(f"no shipped config {name!r}; shipped: {list(SHIPPED)}")
     return resources.files("joints.configs") / f"{stem}.toml"
@@ -41,4 +42,5 @@ def config_path(name: str) -> Iterator[Path]:
 
 def default_config(name: str) -> dict[str, Any]:
     """The shipped config ``name`` ("erob_reach" | "erob_arm_reach") as a fresh, editable dict."""
-    return tomllib.loads(_ref(name).read_text(encoding="utf-8"))
+    data: dict[str, Any] = tomllib.loads(_ref(name).read_text(encoding="utf-8"))
+    return data

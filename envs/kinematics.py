@@ -15,7 +15,7 @@ z up):
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -26,7 +26,7 @@ ARM3_FORE = 0.25  #: joint3 -> ee site
 ARM3_REACH = ARM3_UPPER + ARM3_FORE
 
 
-def erob_arm3_ee(q: Sequence[float]) -> np.ndarray:
+def erob_arm3_ee(q: Sequence[float] | np.ndarray) -> np.ndarray:
     """Position [m] of the ``ee`` site of erob_arm3 for joint angles ``q`` = (joint1, joint2, joint3) [rad]."""
     q1, q2, q3 = (float(v) for v in q)
     r = ARM3_UPPER * math.cos(q2) + ARM3_FORE * math.cos(q2 + q3)  # horizontal distance from the axis

@@ -34,8 +34,9 @@ whose load was mis-estimated does.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -80,7 +81,7 @@ class DomainRandomization:
                 object.__setattr__(self, f.name, (float(lo), float(hi)))
 
     @classmethod
-    def from_arg(cls, arg: "bool | Mapping[str, Any] | DomainRandomization | None") -> "DomainRandomization | None":
+    def from_arg(cls, arg: bool | Mapping[str, Any] | DomainRandomization | None) -> DomainRandomization | None:
         """``False``/``None``: off; ``True``: the default ranges; a mapping: defaults with overrides."""
         if arg is None or arg is False:
             return None

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 import joints
-
 from envs.base import JointsEnv
 from envs.kinematics import ARM3_REACH, ARM3_SHOULDER_HEIGHT, erob_arm3_ee, erob_stand_tip
 from envs.render import CameraSpec

@@ -14,8 +14,9 @@ from __future__ import annotations
 import os
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from gymnasium import logger
@@ -70,7 +71,7 @@ class SceneRenderer:
         self._viewer: Any = None
         self._failed = False
         self._pace: tuple[float, float] | None = None  #: (wall, sim) at the first human frame
-        self.markers: list[tuple[Sequence[float], Sequence[float]]] = []
+        self.markers: list[tuple[Any, Sequence[float]]] = []
 
     def _rgb(self) -> np.ndarray:
         if self._renderer is None:
@@ -128,7 +129,7 @@ class SceneRenderer:
         elif ahead >= 1.0 or ahead < -1.0:
             self._pace = (now, sim_time)
 
-    def render(self, sim_time: float = 0.0, markers: Sequence[tuple[Sequence[float], Sequence[float]]] = ()) -> np.ndarray | None:
+    def render(self, sim_time: float = 0.0, markers: Sequence[tuple[Any, Sequence[float]]] = ()) -> np.ndarray | None:
         """A frame (``rgb_array``: uint8 array (height, width, 3)) with ``markers`` = [(position [m], rgba)]."""
         self.markers = list(markers)
         if self.mode == "rgb_array":

@@ -27,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
 
-import envs  # noqa: E402  (registers joints/ErobReach-v0)
+import envs
 
 KP = 300.0  #: N*m/rad
 KD = 30.0  #: N*m*s/rad

@@ -46,6 +46,7 @@ from joints.sim.modbus_slave import ILLEGAL_DATA_VALUE, ModbusException, ModbusS
 COUNTS_PER_RAD = COUNTS_PER_REV / (2.0 * math.pi)
 ENABLE_DELAY = 0.5  #: s from "enable" to motor ready (manual: wait 500 ms before start)
 ESTOP_TIME = 0.04  #: s, emergency stop decelerates within this (manual: < 50 ms)
+SUPERVISION_PERIOD = 0.002  #: s between the drive's slow tasks (stall, thermal, settle timer)
 
 FOLLOWING_ERROR = 0x8611
 SPEED_ERROR = 0x8400
@@ -178,6 +179,7 @@ class ErobEmulator(ModbusSlave):
         self.brake_hold: float | None = None
         self.last_frame = -1.0
         self.started = False
+        self._sup = 0.0
         self._cache_settings()
 
     def power_cycle(self) -> None:
@@ -189,7 +191,7 @@ class ErobEmulator(ModbusSlave):
             self.set(name, value)
         for name, value in self._saved.items():
             self.set(name, value)
-        self.address = self.get("modbus_address")
+        self.address = self.v["modbus_address"]
         self._reset_state()
         # absolute encoder: a single-turn module keeps only the angle within one turn
         self.pos = pos if self.multi_turn else pos % COUNTS_PER_REV
@@ -254,9 +256,9 @@ class ErobEmulator(ModbusSlave):
         elif name == "start_operating":
             self._start()
         elif name == "stop_operating":
-            self._stop(self.get("profile_deceleration"))
+            self._stop(self.v["profile_deceleration"])
         elif name == "emergency_stop":
-            self._stop(max(abs(self.v_ref) / ESTOP_TIME, float(self.get("profile_deceleration"))))
+            self._stop(max(abs(self.v_ref) / ESTOP_TIME, float(self.v["profile_deceleration"])))
             self.mode_speed_target = 0.0
             self.set("target_current", 0)
         elif name == "stop_repetitive_motion":
@@ -272,7 +274,7 @@ class ErobEmulator(ModbusSlave):
             self.p_ref = self.pos
 
     def _mode(self) -> int:
-        return self.get("operation_mode")
+        return self.v["operation_mode"]
 
     def _raise_fault(self, code: int) -> None:
         if self.fault:
@@ -323,8 +325,8 @@ class ErobEmulator(ModbusSlave):
         self.started = False
 
     def _clamp_target(self, target: float) -> float:
-        lo = self.get("min_position_limit_value") - self.offset
-        hi = self.get("max_position_limit_value") - self.offset
+        lo = self.v["min_position_limit_value"] - self.offset
+        hi = self.v["max_position_limit_value"] - self.offset
         if lo < hi:
             return min(max(target, lo), hi)
         return target
@@ -334,7 +336,7 @@ class ErobEmulator(ModbusSlave):
             return
         if not self._ready_or_refuse():
             return
-        motion = self.get("motion_mode")
+        motion = self.v["motion_mode"]
         g = self.gen
         g.stopping = False
         g.rate = 0.0
@@ -343,17 +345,17 @@ class ErobEmulator(ModbusSlave):
         if motion == MotionMode.CONTINUOUS:
             g.active, g.continuous = True, True
         elif motion == MotionMode.ABSOLUTE:
-            rel = self.get("target_relative_position")
+            rel = self.v["target_relative_position"]
             if rel:
                 g.target = self._clamp_target(self.p_ref + rel)
             else:
-                g.target = self._clamp_target(self.get("target_absolute_position") - self.offset)
+                g.target = self._clamp_target(self.v["target_absolute_position"] - self.offset)
             g.active, g.continuous = True, False
         elif motion == MotionMode.REPETITIVE:
             self.repeat_home = self.p_ref
             self.repeat_leg_to_target = True
             self.repeat_stop = False
-            g.target = self._clamp_target(self.get("target_absolute_position") - self.offset)
+            g.target = self._clamp_target(self.v["target_absolute_position"] - self.offset)
             g.active, g.continuous = True, False
         else:
             self.set("error_code", 0x0030)
@@ -383,22 +385,28 @@ class ErobEmulator(ModbusSlave):
     # -- physics side -----------------------------------------------------------------------
     def step(self, t: float, dt: float, q: float, qd: float) -> float:
         """Run the drive's loops for the substep ending at ``t`` (length ``dt``) with the joint at
-        ``q`` [rad], ``qd`` [rad/s]; return the motor torque at the output [N*m]."""
+        ``q`` [rad], ``qd`` [rad/s]; return the motor torque at the output [N*m].
+
+        Control loops run every substep; supervision (watchdog, stall, temperature, the settle
+        timer of 0x007A) every :data:`SUPERVISION_PERIOD` of drive time; the communication
+        watchdog every substep.
+        """
         self.time = t
         self.pos = q * COUNTS_PER_RAD
         self.vel = qd * COUNTS_PER_RAD
-        wd = self.get("modbus_communication_timeout_duration")
-        if wd and self.last_frame >= 0 and self.time - self.last_frame > wd * 1e-3:
+        wd = self.v["modbus_communication_timeout_duration"]
+        if wd and self.last_frame >= 0 and t - self.last_frame > wd * 1e-3:
             if self.fault != faults.RS485_TIMEOUT:
                 self.fault = 0
                 self._raise_fault(faults.RS485_TIMEOUT)
             self.last_frame = -1.0
-        if not self.enabled or (self.fault and self.fault != faults.START_WHILE_DISABLED):
-            self._thermal(dt, 0.0)
-            return self._brake_torque(q, qd)
-        if not self._ready():
-            self._thermal(dt, 0.0)
-            self.p_ref = self.pos
+        self._sup += dt
+        if self._sup >= SUPERVISION_PERIOD - 1e-12:
+            self._supervise(self._sup)
+            self._sup = 0.0
+        if not self.enabled or self.fault or t < self.enabled_at + ENABLE_DELAY - 1e-9:
+            if self.enabled and (not self.fault or self.fault == faults.START_WHILE_DISABLED):
+                self.p_ref = self.pos  # brake still releasing (or start refused): hold here
             return self._brake_torque(q, qd)
         mode = self._mode()
         if mode == OperationMode.TORQUE:
@@ -412,14 +420,14 @@ class ErobEmulator(ModbusSlave):
                 self._profile_step(dt)
                 v_cmd = self.v_ref + self.kp * (self.p_ref - self.pos)
                 err = abs(self.p_ref - self.pos)
-                lim = self.get("max_position_error")
+                lim = self.v["max_position_error"]
                 if lim and err > lim:
                     self._raise_fault(FOLLOWING_ERROR)
                     return self._brake_torque(q, qd)
             v_cmd = max(-self.vmax, min(self.vmax, v_cmd))
             self.v_cmd = v_cmd
             e = v_cmd - self.vel
-            slim = self.get("max_speed_error")
+            slim = self.v["max_speed_error"]
             if slim and abs(self.v_ref - self.vel) > slim:
                 self._raise_fault(SPEED_ERROR)
                 return self._brake_torque(q, qd)
@@ -433,11 +441,14 @@ class ErobEmulator(ModbusSlave):
             i = max(-lim_i, min(lim_i, i))
         self.i_cmd = i
         self.i_out = i
-        if mode == OperationMode.POSITION and self.started:
-            self._achieve(self._moving())  # the settle timer of 0x007A runs on the drive, not on reads
-        self._stall(dt)
-        self._thermal(dt, i)
         return i * 1e-3 * self.kt
+
+    def _supervise(self, period: float) -> None:
+        """The drive's slow tasks: settle timer, stall and thermal protection."""
+        if self.enabled and self.started and self.v["operation_mode"] == OperationMode.POSITION:
+            self._achieve(self._moving())  # the settle timer of 0x007A runs on the drive, not on reads
+        self._stall(period)
+        self._thermal(period, self.i_out if self.enabled else 0.0)
 
     def _brake_torque(self, q: float, qd: float) -> float:
         """Holding brake: a stiff spring-damper to where it engaged, limited to the rated torque x 2."""
@@ -465,8 +476,8 @@ class ErobEmulator(ModbusSlave):
 
     def _torque_loop(self, dt: float) -> float:
         """Current = target current, capped by a PI speed limiter at the torque-mode max speed."""
-        target = float(self.get("target_current"))
-        vlim = min(float(self.get("torque_control_mode_max_speed")) or self.vmax, self.vmax)
+        target = float(self.v["target_current"])
+        vlim = min(float(self.v["torque_control_mode_max_speed"]) or self.vmax, self.vmax)
         self.v_ref = self.vel
         self.p_ref = self.pos
         if target == 0.0:
@@ -490,8 +501,8 @@ class ErobEmulator(ModbusSlave):
     def _speed_ramp(self, dt: float) -> None:
         target = self.mode_speed_target
         v = self.v_ref
-        accel = float(self.get("profile_acceleration")) or self.amax
-        decel = float(self.get("profile_deceleration")) or self.amax
+        accel = float(self.v["profile_acceleration"]) or self.amax
+        decel = float(self.v["profile_deceleration"]) or self.amax
         speeding_up = abs(target) > abs(v) and (v == 0 or (v > 0) == (target > 0))
         rate = accel if speeding_up else decel
         g = self.gen
@@ -515,9 +526,9 @@ class ErobEmulator(ModbusSlave):
                     self._next_repetitive_leg()
                 return
             return
-        accel = float(self.get("profile_acceleration")) or self.amax
-        decel = g.rate or float(self.get("profile_deceleration")) or self.amax
-        vmax = min(float(abs(self.get("profile_speed"))), self.vmax)
+        accel = float(self.v["profile_acceleration"]) or self.amax
+        decel = g.rate or float(self.v["profile_deceleration"]) or self.amax
+        vmax = min(float(abs(self.v["profile_speed"])), self.vmax)
         if g.stopping:
             dv = -v
             step = decel * dt
@@ -531,7 +542,7 @@ class ErobEmulator(ModbusSlave):
                 self.dwell_until = -1.0
             return
         if g.continuous:
-            target_v = math.copysign(vmax, self.get("profile_speed")) if self.get("profile_speed") else 0.0
+            target_v = math.copysign(vmax, self.v["profile_speed"]) if self.v["profile_speed"] else 0.0
             dv = target_v - v
             rate = accel if abs(target_v) > abs(v) else decel
             step = rate * dt
@@ -568,10 +579,10 @@ class ErobEmulator(ModbusSlave):
     def _leg_done(self) -> None:
         g = self.gen
         g.active = False
-        if self.get("motion_mode") == MotionMode.REPETITIVE and self.started and not self.repeat_stop:
-            self.dwell_until = self.time + self.get("dwell_time") * 5e-5
+        if self.v["motion_mode"] == MotionMode.REPETITIVE and self.started and not self.repeat_stop:
+            self.dwell_until = self.time + self.v["dwell_time"] * 5e-5
         else:
-            self.started = self.get("motion_mode") != MotionMode.REPETITIVE and self.started
+            self.started = self.v["motion_mode"] != MotionMode.REPETITIVE and self.started
 
     def _next_repetitive_leg(self) -> None:
         if self.repeat_stop:
@@ -579,14 +590,14 @@ class ErobEmulator(ModbusSlave):
         self.repeat_leg_to_target = not self.repeat_leg_to_target
         g = self.gen
         g.target = (
-            self._clamp_target(self.get("target_absolute_position") - self.offset)
+            self._clamp_target(self.v["target_absolute_position"] - self.offset)
             if self.repeat_leg_to_target
             else self.repeat_home
         )
         g.active, g.continuous, g.stopping = True, False, False
 
     def _stall(self, dt: float) -> None:
-        sc, ss, st = self.get("struck_current"), self.get("struck_speed"), self.get("struck_time")
+        sc, ss, st = self.v["struck_current"], self.v["struck_speed"], self.v["struck_time"]
         if sc and st and abs(self.i_out) > sc and abs(self.vel) < ss:
             if self.stall_since < 0:
                 self.stall_since = self.time
@@ -600,7 +611,7 @@ class ErobEmulator(ModbusSlave):
         # first-order model: rated current gives +40 K at steady state, time constant 300 s
         rise = 40.0 * (i_ma * 1e-3 / self.profile.rated_current) ** 2
         self.temperature += (self.ambient + rise - self.temperature) * dt / 300.0
-        lim = self.get("power_temperature_protection_value")
+        lim = self.v["power_temperature_protection_value"]
         if lim and self.temperature > lim:
             self._raise_fault(OVER_TEMPERATURE)
 
@@ -620,7 +631,7 @@ class ErobEmulator(ModbusSlave):
         s("torque_sensor_value", round(self.i_out * self.kt))
         s("error_code", self.fault)
         moving = self._moving()
-        if self.repeat_stop and self.get("motion_mode") == MotionMode.REPETITIVE and self.gen.active:
+        if self.repeat_stop and self.v["motion_mode"] == MotionMode.REPETITIVE and self.gen.active:
             s("motion_status", int(MotionStatus.STOP_REPETITIVE))
         else:
             s("motion_status", int(MotionStatus.MOVING if moving else MotionStatus.STOP))
@@ -639,11 +650,11 @@ class ErobEmulator(ModbusSlave):
         if moving:
             self.in_window_since = -1.0
             return AchieveStatus.OPERATION
-        window = self.get("position_reaches_set_precision")
+        window = self.v["position_reaches_set_precision"]
         if abs(self.gen.target - self.pos) <= window:
             if self.in_window_since < 0:
                 self.in_window_since = self.time
-            if self.time - self.in_window_since >= self.get("time_setting_of_achieving_position") * 5e-5:
+            if self.time - self.in_window_since >= self.v["time_setting_of_achieving_position"] * 5e-5:
                 return AchieveStatus.TARGET_REACHED
             return AchieveStatus.WAIT_TIME
         self.in_window_since = -1.0

@@ -38,6 +38,8 @@ class ModbusSlave:
         self.table = table
         self.address = address
         self.words: dict[int, int] = {}
+        #: typed value of every register by name, kept in step with ``words`` (fast reads for emulators)
+        self.v: dict[str, int] = {}
         for reg in table:
             self._store(reg, reg.default)
         for name, value in (values or {}).items():
@@ -47,6 +49,7 @@ class ModbusSlave:
 
     # -- typed access for emulators and tests ------------------------------------------------
     def _store(self, reg: Register, value: int) -> None:
+        self.v[reg.name] = value
         raw = value & (0xFFFF if reg.words == 1 else 0xFFFFFFFF)
         if reg.words == 1:
             self.words[reg.address] = raw
@@ -58,8 +61,18 @@ class ModbusSlave:
 
     def get(self, key: str | int) -> int:
         """Typed value of a register from the image."""
+        if isinstance(key, str):
+            value = self.v.get(key)
+            if value is not None:
+                return value
         reg = self.table.get(key)
-        return reg.from_words([self.words[reg.address + i] for i in range(reg.words)])
+        return self.v[reg.name]
+
+    def _refresh(self, reg: Register) -> int:
+        """Recompute a register's typed value from its words (after a raw word write)."""
+        value = reg.from_words([self.words.get(reg.address + i, 0) for i in range(reg.words)])
+        self.v[reg.name] = value
+        return value
 
     def set(self, key: str | int, value: int) -> None:
         """Set a register in the image (no access check: this is the device itself)."""
@@ -112,6 +125,7 @@ class ModbusSlave:
             if not touched or touched[-1] is not reg:
                 touched.append(reg)
         saved = dict(self.words)
+        saved_v = {reg.name: self.v[reg.name] for reg in touched}
         logged = len(self.write_log)
         for i, w in enumerate(words):
             self.words[start + i] = w
@@ -120,7 +134,7 @@ class ModbusSlave:
             # block write must have no effect at all
             accepted: list[tuple[Register, int]] = []
             for reg in touched:
-                value = self.get(reg.name)
+                value = self._refresh(reg)
                 try:
                     reg.check(value)
                 except CommandError as exc:
@@ -131,6 +145,7 @@ class ModbusSlave:
                 self.on_write(reg, value)
         except ModbusException:
             self.words = saved
+            self.v.update(saved_v)
             del self.write_log[logged:]
             raise
 

@@ -16,15 +16,16 @@ from __future__ import annotations
 import os
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
+import mujoco
+import numpy as np
 
-from envs import ErobArmReachEnv, ErobReachEnv  # noqa: E402
+from envs import ErobArmReachEnv, ErobReachEnv
 
 STEPS = 500  #: env steps per timed block (10 s simulated at 20 ms)
 REPEATS = 5
@@ -85,7 +86,7 @@ def bench(name: str, env: Any) -> None:
 
 def main() -> None:
     if hasattr(os, "sched_setaffinity"):
-        cpu = sorted(os.sched_getaffinity(0))[0]
+        cpu = min(os.sched_getaffinity(0))
         os.sched_setaffinity(0, {cpu})  # one core
     print(f"env steps of {STEPS}, best of {REPEATS}; raw mj_step loop of {RAW_STEPS}; one core")
     for mode in ("position", "velocity", "torque"):

@@ -12,11 +12,12 @@ import pytest
 gym = pytest.importorskip("gymnasium")
 pytest.importorskip("mujoco")
 
-import joints  # noqa: E402
-import envs  # noqa: E402
-from envs import ErobArmReachEnv, ErobReachEnv  # noqa: E402
-from envs.base import ENABLE_SETTLE  # noqa: E402
-from gymnasium.utils.env_checker import check_env  # noqa: E402
+from gymnasium.utils.env_checker import check_env
+
+import envs
+import joints
+from envs import ErobArmReachEnv, ErobReachEnv
+from envs.base import ENABLE_SETTLE
 
 IDS = list(envs.ENV_IDS)
 MODES = list(envs.ACTION_MODES)
@@ -214,7 +215,7 @@ def test_drive_fault_terminates_with_its_code() -> None:
                 break
         assert term and info["faults"]["joint1"] == 0x8611
         env.step(env.action_of([2.0]))  # stepping on after the end commands no faulted drive
-        obs, info = env.reset(seed=0)  # a reset power-cycles the drive: the fault is gone
+        _obs, info = env.reset(seed=0)  # a reset power-cycles the drive: the fault is gone
         assert info["faults"]["joint1"] == 0
     finally:
         env.close()

@@ -10,16 +10,16 @@ import select
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
-from typing import Iterator
 
 import pytest
 
 gym = pytest.importorskip("gymnasium")
 pytest.importorskip("mujoco")
 
-import envs  # noqa: E402
+import envs
 
 ROOT = Path(__file__).resolve().parents[2]
 TARGET, START = 1.0, 0.3
@@ -83,7 +83,7 @@ def test_same_pd_policy_reaches_target_through_hardware_backend(pd: ModuleType, 
         u = env.unwrapped
         assert u.rig.backend == "hardware" and u.rig.world is None
         # reset moves to the start pose with the safe profile and waits for standstill, on the wall clock
-        ok, steps, obs = pd.reach(env, target=TARGET, start=START, max_steps=500)
+        ok, _steps, obs = pd.reach(env, target=TARGET, start=START, max_steps=500)
         assert ok, obs
         assert abs(obs[0] - TARGET) < 0.02
     finally:

@@ -10,13 +10,13 @@ import pytest
 gym = pytest.importorskip("gymnasium")
 pytest.importorskip("mujoco")
 
-import envs  # noqa: E402
-from envs import ErobArmReachEnv, ErobReachEnv  # noqa: E402
+import envs
+from envs import ErobArmReachEnv, ErobReachEnv
 
 STEPS = 30
 
 
-def _run(vec: "gym.vector.VectorEnv", seed: int) -> tuple[np.ndarray, np.ndarray]:
+def _run(vec: gym.vector.VectorEnv, seed: int) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng(0)
     obs, _info = vec.reset(seed=seed)
     seen, rewards = [obs], []

@@ -1,0 +1,824 @@
+"""Emulated ZLAC8015D: one dual-channel hub-servo drive (one Modbus address, two motors).
+
+Rule: the emulator IS the drive. It answers Modbus frames from its register image (through
+:class:`~joints.sim.modbus_slave.ModbusSlave`, table :data:`~joints.devices.zlac.registers.ZLAC8015D`),
+acts on writes as the manual says the drive does, and every physics substep each channel closes its
+own loops - ramp / profile generator -> position loop -> velocity loop -> current limits -> torque =
+current x torque constant - from the registers it holds. :attr:`ZlacEmulator.left` and
+:attr:`ZlacEmulator.right` are the two channels; the world calls ``left.step(t, dt, q, qd)`` and
+``right.step(t, dt, q, qd)`` every substep with the same ``t`` and applies the returned wheel
+torque. The emulator never writes positions. No wall clock: time advances only through ``step``.
+
+Manual: ``/work/shared/manuals/zlac8015d-rs485-modbus-manual-v1.04.txt`` (OCR text, 1-based lines
+below), corrected by ``/work/shared/vectors/ERRATA.md`` (DOC-ZLAC-1..7).
+
+Semantics taken from the manual
+-------------------------------
+* Control word 0x200E (lines 853-872): 0x08 enable, 0x07 stop, 0x05 quick stop, 0x06 clear
+  faults, 0x10 start both wheels / 0x11 start left / 0x12 start right (position modes). ONE state
+  machine for both motors (there is one control word). Control mode 0x200D (lines 838-851) is
+  shared too: 1 relative position, 2 absolute position, 3 velocity, 4 torque.
+* Stop 0x07: 0x2012 "Stop control" says "Stop (switch to ready to switch on)" (lines 920-925),
+  i.e. the power stage switches off and the wheels coast (friction only). 0x2012 = 0 ("Invalid")
+  is treated the same. The community drivers' "disable" writes 0x07 as well.
+* Quick stop 0x05 follows 0x2011 "Quick stop control" (lines 902-911): 5 = stop with the normal
+  deceleration time (0x2082/0x2083), 6 = quick stop with the quick-stop deceleration time
+  (0x2084/0x2085, default 10 ms), 7 = quick stop without deceleration time (speed command 0 at
+  once, the velocity loop brakes at the current limit). The codes are the CiA 402 quick-stop
+  option codes 5/6/7, which all STAY in "quick stop active": the motors remain energised and hold
+  zero speed until enable (0x08) resumes operation or stop (0x07) switches them off. Set-points
+  written meanwhile are stored but not executed.
+* Clear faults 0x06 (lines 774-776) clears both error-code registers 0x20A5/0x20A6; the drive is
+  then disabled and needs 0x08. A fault whose cause persists (over-temperature) comes back.
+* Synchronous/asynchronous 0x200F follows the EXAMPLES (ERRATA DOC-ZLAC-1): 0 = asynchronous
+  (lines 457-462: each wheel started with 0x11/0x12), 1 = synchronous (line 566: both started
+  with 0x10).
+* Acceleration / deceleration time 0x2080-0x2083 (lines 318-328, 416-425, 1079-1091): the manual
+  gives only "Acceleration time", unit ms, range 0-32767 ms, default 500, in the velocity-mode
+  table next to the target velocity and in the position-mode table next to the target speed. No
+  reference speed is named anywhere (0x2008 "Maximum motor speed", line 813, is a separate
+  protection limit and is never linked to the ramp times). The emulator therefore reads the
+  register literally as the **duration of the ramp to the commanded speed**:
+
+  - velocity mode: writing a new target velocity (0x2088/0x2089) starts a linear ramp from the
+    present speed command that arrives at the target exactly ``acceleration time`` later when
+    the speed magnitude grows, ``deceleration time`` later when it shrinks; a reversal first
+    decelerates to 0 in the deceleration time, then accelerates to the target in the
+    acceleration time. 0 r/min -> 100 r/min with 500 ms takes 500 ms, and so does 0 -> 300 r/min.
+    Re-writing the SAME target does not restart the ramp; a different target does (from the
+    speed command at that moment). Changing a ramp time takes effect with the next target.
+  - position modes: the move accelerates from standstill to the target speed 0x208E/0x208F in
+    the acceleration time and decelerates from it to standstill in the deceleration time
+    (trapezoid; triangular when the distance is too short).
+  - 0 ms means "as fast as possible" (taken as 1 ms, the register's resolution).
+
+  If hardware shows a fixed-slope semantics instead (time for 0 -> some reference speed), pass
+  ``ramp_reference_rpm=...`` (e.g. 1000 for 0x2008's default): every ramp then has the slope
+  ``ramp_reference_rpm / time``.
+  The ramp shape is linear (the facts file calls the ramp "S-curve", the manual does not; the
+  time to the target, which the register sets, is the same).
+* Target velocity 0x2088/0x2089 (r/min, +-3000, lines 330-335) is clamped to 0x2008 (max motor
+  speed, default 1000 r/min); one FC16 write of 0x2088-0x2089 sets both wheels (line 391).
+* Position modes: target position 0x208A/0x208C (int32 counts, high word first; relative
+  +-0x7FFFFFFF, absolute +-0x3FFFFFFF, lines 426-436 - an absolute-mode write outside the latter
+  is refused with exception 03); target speed 0x208E/0x208F (1-1000 r/min, lines 438-446).
+  A relative move goes ``target`` counts from the end point of the previous move (from the
+  position at enable if there was none), so repeated relative moves do not accumulate error; an
+  absolute move goes to ``target`` counts of the feedback-position frame (see 0x2005/0x2006).
+  Target speed and ramp times are latched at the start command.
+* Torque mode: target torque 0x2090/0x2091 in mA (+-30000), reached with the torque slope
+  0x2086/0x2087 in mA/s (lines 646-660; default printed "300ms", DOC-ZLAC-5, read as 300 mA/s).
+  Slope 0 = step. The speed is capped at 0x2008 (the current is reduced near it).
+* Feedback (lines 1193-1369): actual position 0x20A7/0x20A9 int32 counts (4 x encoder lines
+  0x2030/0x2060 per turn; the incremental counter starts at 0 at power-on), actual velocity
+  0x20AB/0x20AC in 0.1 r/min, actual torque (current) 0x20AD/0x20AE in 0.1 A, error codes
+  0x20A5/0x20A6 (:class:`~joints.devices.zlac.registers.Fault` bits), DC voltage 0x20A1 in 0.01 V,
+  motor state 0x20A2 / hall state 0x20A3 / motor temperature 0x20A4 (1 degC) packed high byte =
+  left, low byte = right.
+* 0x2005 clear feedback position (line 798; 1 = clear; the table allows 0-1, so both wheels) and
+  0x2006 reset the zero point (lines 803-807: 1 left, 2 right, 3 printed "right" again -> both,
+  DOC-ZLAC-4) make the present position read 0 and become the zero of absolute targets. They move
+  nothing, act at once and read back 0 ("Not saved").
+* 0x2000 communication offline time (lines 782-785, ms, default 1000): with the motors energised
+  and no frame received for longer than this, the drive treats the host as offline and performs a
+  quick stop per 0x2011 (above), so the robot stops and holds; it does not restart until an
+  enable. The fault list (lines 757-772) has no communication bit, so no error code is set; the
+  trip is visible as 0x20AF "software connected status" = 0 (see conventions) and as
+  :attr:`ZlacEmulator.offline`.
+* 0x2010 = 1 stores the RW settings (they survive :meth:`ZlacEmulator.power_cycle`); 0x2009 = 1
+  restores the factory settings; 0x2007 = 1 (saved) enables the motors at power-on; a new RS485
+  node id 0x2001 takes effect after a power cycle.
+
+Emulator conventions (the manual leaves these open)
+---------------------------------------------------
+* Gains (units are not printed): Vl Kp 0x203C/0x206C is the velocity-loop bandwidth in 0.1 rad/s
+  (default 500 -> 50 rad/s): current = J x Kp x speed error / kt, J = the inertia the drive is
+  tuned for (``inertia_left``/``inertia_right``, default :attr:`HubMotorProfile.tuning_inertia`);
+  Vl Ki 0x203D/0x206D is the integral corner in 0.1 rad/s (default 100 -> 10 rad/s); Vl Kf
+  0x203E/0x206E is the acceleration feed-forward in 0.1 % of J x a (default 500 -> 50 %). Pl Kp
+  0x203F/0x206F is the position gain in 0.1 /s (default 100 -> 10 /s); Pl Kf 0x2040/0x2070 is the
+  velocity feed-forward in % (default 50 -> 50 %). The current loop (Cl Kp/Ki), the smoothing
+  factors, the velocity observer and the initial velocities are not modelled (ideal current
+  loop: the motor current is the current command).
+* Current limits: peak = min(maximum current 0x2034/0x2064, rated current 0x2033/0x2063 x
+  overload factor 0x2032/0x2062 / 100) (factor 0 = no factor limit); in the motoring direction
+  also the back-EMF limit (bus voltage - ke x speed) / phase resistance, so the wheel cannot
+  exceed the motor's no-load speed at the bus voltage.
+* Faults (any fault switches BOTH motors off - one state machine - and sets the bit in the
+  faulty channel's error code):
+  - OVER_LOAD 0x0008: current above the rated current 0x2033 continuously for longer than the
+    overload protection time 0x2035 (x 10 ms; 0 = no overload protection).
+  - POSITION_FOLLOWING_ERROR 0x0020 (position modes): |position command - position| above the
+    threshold 0x2036/0x2066 x 10 counts.
+  - VELOCITY_FOLLOWING_ERROR 0x0040 (velocity mode and quick stop): the integral of the speed
+    error (the position lag behind the speed command) above the same threshold 0x2036 x 10
+    counts (a blocked wheel at 100 r/min trips after ~0.6 s). There is no other threshold
+    register for it.
+  - MOTOR_OVER_TEMPERATURE 0x0400: first-order winding model, +60 K at the motor's own rated
+    current (:attr:`HubMotorProfile.motor_rated_current`), time constant 600 s, above the
+    threshold 0x2046/0x2076 (0.1 degC).
+  Other bits (voltage, hall, EEPROM ...) are never raised: the supply is ideal.
+* Start commands: 0x10 starts both wheels only in synchronous mode, 0x11/0x12 start one wheel
+  only in asynchronous mode; a start in the other coupling, outside the position modes or while
+  the drive is not enabled is acknowledged (echo) and does nothing (recorded in
+  :attr:`ZlacEmulator.ignored`). "Synchronous" starts both moves in the same substep; each wheel
+  uses its own target, speed and ramp times.
+* Enabling (0x08) in velocity mode ramps from the present speed to the target velocity registers
+  as they stand (write 0 first if the wheels must stay still); in torque mode the current ramps
+  from 0 to the target torque. Enable while enabled changes nothing; enable while faulted is
+  ignored.
+* Unprinted power-on values: 0x2011 = 6 (quick stop with the quick-stop deceleration time, whose
+  registers 0x2084/0x2085 exist for it), 0x2012 = 1 (stop), 0x2014 = 1 (the table's range is
+  1-3), 0x20A1 = the profile's bus voltage, 0x20A0 software version = 0.
+* 0x20AF "software connected status" (line 1368, value meaning illegible): 0 at power-on, 1 once
+  a frame was received, 0 again after an offline trip until the next enable command.
+* 0x20A2 motor state: 1 while the channel's power stage is on (enabled or quick stop).
+* 0x2005 accepts only 1 (the table); if it is ever widened, 2 = right and 3 = both, as 0x2006 and
+  as community drivers use it.
+* The stored settings (0x2010) are every RW register except commands (0x200E, 0x2005, 0x2006,
+  0x2009, 0x2010) and the set-points 0x2088-0x2091 (target speeds 0x208E/0x208F are kept).
+  0x2009 = 1 restores the power-on values in the image and forgets the stored settings.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+
+from joints.codecs import modbus as mb
+from joints.devices.registers import Access, Register
+from joints.devices.zlac.profile import HubMotorProfile
+from joints.devices.zlac.registers import (
+    ZLAC8015D,
+    ControlMode,
+    ControlWord,
+    Fault,
+    QuickStopBehaviour,
+    SyncMode,
+)
+from joints.sim.modbus_slave import ILLEGAL_DATA_VALUE, ModbusException, ModbusSlave
+
+__all__ = [
+    "ABSOLUTE_TARGET_LIMIT",
+    "DriveState",
+    "ZlacChannel",
+    "ZlacEmulator",
+    "power_on_defaults",
+]
+
+TWO_PI = 2.0 * math.pi
+RPM = TWO_PI / 60.0  #: rad/s per r/min
+MIN_RAMP_TIME = 1e-3  #: s; a ramp time of 0 ms is taken as 1 ms
+ABSOLUTE_TARGET_LIMIT = 0x3FFFFFFF  #: absolute-mode target position range (line 436)
+
+THERMAL_RISE = 60.0  #: K above ambient at the motor's rated current (EST)
+THERMAL_TAU = 600.0  #: s, winding time constant (EST)
+
+#: 120-degree hall code of each 60-degree electrical sector.
+_HALL_SEQUENCE = (1, 3, 2, 6, 4, 5)
+
+#: Registers that are commands or set-points, never stored by 0x2010.
+_NOT_STORED = frozenset({
+    "control_word",
+    "clear_feedback_position",
+    "in_absolute_position_control_reset_the_zero_point",
+    "register_parameter_settings",
+    "whether_store_rw_register_to_eeprom",
+    "target_velocity_left",
+    "target_velocity_right",
+    "target_position_left",
+    "target_position_right",
+    "target_torque_left",
+    "target_torque_right",
+})
+_SETTINGS = tuple(r.name for r in ZLAC8015D if r.access is Access.RW and r.name not in _NOT_STORED)
+
+_DRIVE_SETTINGS = frozenset({
+    "maximum_motor_speed",
+    "communication_offline_time",
+    "quick_stop_control",
+    "control_mode",
+    "synchronous_asynchronous_control_status",
+})
+
+
+class DriveState(enum.Enum):
+    """State of the drive's one state machine (both motors)."""
+
+    DISABLED = "disabled"  #: power stage off: after power-on, stop (0x07) or clear faults
+    ENABLED = "enabled"  #: operation enabled (0x08)
+    QUICK_STOP = "quick stop"  #: ramping to / holding zero speed (0x05 or the offline watchdog)
+    FAULT = "fault"  #: a channel faulted; power stage off until clear faults (0x06)
+
+
+def power_on_defaults(profile: HubMotorProfile, address: int) -> dict[str, int]:
+    """Register values after power-on of a factory-fresh drive with this motor on both channels."""
+    rated = min(150, round(profile.rated_current * 10))
+    peak = min(300, round(profile.max_current * 10))
+    values: dict[str, int] = {
+        "rs485_node_id": address,
+        "maximum_motor_speed": max(1, min(1000, round(profile.max_speed_rpm))),
+        "quick_stop_control": int(QuickStopBehaviour.QUICK_STOP_WITH_DECELERATION),
+        "stop_control": 1,
+        "halt_control": 1,
+        "dc_voltage": round(profile.bus_voltage * 100),
+    }
+    for side in ("left", "right"):
+        values[f"encoder_line_{side}"] = profile.encoder_lines
+        values[f"poles_of_motor_{side}"] = max(4, min(64, profile.pole_pairs))
+        values[f"rated_current_{side}"] = rated
+        values[f"maximum_current_{side}"] = peak
+    return values
+
+
+def _ramp_seconds(ms: int) -> float:
+    return max(ms * 1e-3, MIN_RAMP_TIME)
+
+
+class ZlacChannel:
+    """One motor channel of the drive: its loops, motor model and protections."""
+
+    def __init__(self, drive: ZlacEmulator, side: str, inertia: float) -> None:
+        if inertia <= 0 or not math.isfinite(inertia):
+            raise ValueError(f"{side} channel: inertia must be positive and finite, got {inertia!r}")
+        self.drive = drive
+        self.side = side
+        self.inertia = float(inertia)  #: J [kg*m^2] the velocity-loop gains are scaled with
+        self.reg = {key: f"{key}_{side}" for key in (
+            "encoder_line", "hall_offset_angle", "overload_factor", "rated_current", "maximum_current",
+            "overload_protection_time", "position_following_error_threshold", "vl_kp", "vl_ki", "vl_kf",
+            "pl_kp", "pl_kf", "poles_of_motor", "over_temperature_threshold", "acceleration_time",
+            "deceleration_time", "deceleration_time_of_quick_stop", "torque_rate", "target_velocity",
+            "target_position", "target_speed", "target_torque", "error_code", "actual_motor_position",
+            "actual_velocity", "actual_torque",
+        )}
+        self.kt = drive.profile.torque_constant
+        self.temperature = drive.ambient
+        self.reset_power()
+
+    # -- state ----------------------------------------------------------------------------
+    def reset_power(self) -> None:
+        """Power-on state (the physical angle is latched at the next step)."""
+        self.fresh = True  #: the next step latches the encoder origin and the loops at q
+        self.q = 0.0  #: wheel angle [rad] seen at the last step
+        self.qd = 0.0  #: wheel speed [rad/s] seen at the last step
+        self.origin = 0.0  #: raw angle [rad] where the position counter reads 0
+        self.fault = 0  #: Fault bits (error code register)
+        self.overload_time = 0.0
+        self.i_out = 0.0  #: motor current [A]
+        self.reset_loops()
+
+    def reset_loops(self) -> None:
+        """Loops and generators to rest at the present state (enable, mode change, power off)."""
+        self.v_ref = self.qd  #: speed command of the ramp / profile [rad/s]
+        self.v_target = self.qd  #: velocity-mode ramp target [rad/s]
+        self.acc_slope = math.inf
+        self.dec_slope = math.inf
+        self.p_ref = self.q  #: position command [rad]
+        self.goal = self.q  #: end point of the present / last move [rad]
+        self.moving = False  #: a position move is in progress
+        self.cruise = 0.0
+        self.p_acc = math.inf
+        self.p_dec = math.inf
+        self.integ = 0.0  #: velocity-loop integral of the speed error [rad]
+        self.lag = 0.0  #: integral of (speed command - speed) [rad], velocity following error
+        self.i_ref = 0.0  #: torque-mode current command after the slope [A]
+        self.qs_slope = math.inf
+
+    # -- settings cache --------------------------------------------------------------------
+    def cache(self) -> None:
+        g = self.drive.get
+        r = self.reg
+        self.cpr = 4 * max(g(r["encoder_line"]), 1)
+        self.counts_per_rad = self.cpr / TWO_PI
+        self.acc_time = _ramp_seconds(g(r["acceleration_time"]))
+        self.dec_time = _ramp_seconds(g(r["deceleration_time"]))
+        self.qs_time = _ramp_seconds(g(r["deceleration_time_of_quick_stop"]))
+        self.torque_rate = g(r["torque_rate"]) * 1e-3  # A/s
+        self.rated = g(r["rated_current"]) * 0.1
+        i_max = g(r["maximum_current"]) * 0.1
+        factor = g(r["overload_factor"])
+        self.peak = min(i_max, self.rated * factor / 100.0) if factor else i_max
+        self.overload_limit = g(r["overload_protection_time"]) * 0.01
+        self.follow_limit = g(r["position_following_error_threshold"]) * 10 / self.counts_per_rad
+        self.wv = g(r["vl_kp"]) * 0.1
+        self.wi = g(r["vl_ki"]) * 0.1
+        self.kfv = g(r["vl_kf"]) * 1e-3
+        self.kpp = g(r["pl_kp"]) * 0.1
+        self.kfp = g(r["pl_kf"]) * 1e-2
+        self.poles = g(r["poles_of_motor"])
+        self.hall_offset = math.radians(g(r["hall_offset_angle"]))
+        self.temp_limit = g(r["over_temperature_threshold"]) * 0.1
+        self.target_speed = g(r["target_speed"]) * RPM
+
+    # -- conversions -----------------------------------------------------------------------
+    def counts(self) -> int:
+        """Actual position register value [counts]."""
+        return round((self.q - self.origin) * self.counts_per_rad)
+
+    def rpm(self) -> float:
+        return self.qd / RPM
+
+    # -- commands (from the drive) ---------------------------------------------------------
+    def set_velocity_target(self, rpm: int) -> None:
+        """Velocity-mode target changed: start the ramp to it (see the module docstring)."""
+        vmax = self.drive.vmax
+        target = max(-vmax, min(vmax, rpm * RPM))
+        if target == self.v_target and not self.fresh:
+            return
+        self.v_target = target
+        v = self.v_ref
+        ref = self.drive.ramp_reference
+        if ref is not None:
+            self.acc_slope = ref / self.acc_time
+            self.dec_slope = ref / self.dec_time
+        elif v * target > 0.0:
+            if abs(target) >= abs(v):
+                self.acc_slope = (abs(target) - abs(v)) / self.acc_time
+            else:
+                self.dec_slope = (abs(v) - abs(target)) / self.dec_time
+        else:
+            self.dec_slope = abs(v) / self.dec_time
+            self.acc_slope = abs(target) / self.acc_time
+
+    def start_move(self, absolute: bool) -> bool:
+        """Position-mode start: latch target, speed and ramps; False if the target is refused."""
+        value = self.drive.get(self.reg["target_position"])
+        if absolute:
+            if abs(value) > ABSOLUTE_TARGET_LIMIT:
+                return False
+            self.goal = self.origin + value / self.counts_per_rad
+        else:
+            self.goal = self.goal + value / self.counts_per_rad
+        self.cruise = min(self.target_speed, self.drive.vmax)
+        ref = self.drive.ramp_reference
+        base = ref if ref is not None else self.cruise
+        self.p_acc = base / self.acc_time
+        self.p_dec = base / self.dec_time
+        self.moving = True
+        return True
+
+    def begin_quick_stop(self, option: int, was_running: bool) -> None:
+        """Enter quick stop: ramp the speed command to 0 per 0x2011."""
+        start = self.v_ref if was_running and self.drive.mode != ControlMode.TORQUE else self.qd
+        self.moving = False
+        self.v_ref = start
+        if option == QuickStopBehaviour.QUICK_STOP_WITHOUT_DECELERATION:
+            self.qs_slope = math.inf
+        else:
+            t = self.dec_time if option == QuickStopBehaviour.STOP else self.qs_time
+            ref = self.drive.ramp_reference
+            self.qs_slope = (ref if ref is not None else abs(start)) / t
+        self.integ = min(max(self.integ, -1.0), 1.0)
+
+    def clear_position(self) -> None:
+        """0x2005 / 0x2006: the present position reads 0 and is the zero of absolute targets."""
+        self.origin = self.q
+
+    # -- physics side ----------------------------------------------------------------------
+    def step(self, t: float, dt: float, q: float, qd: float) -> float:
+        """Run this channel's loops for the substep ending at ``t`` (length ``dt``) with the wheel
+        at ``q`` [rad], ``qd`` [rad/s]; return the motor torque at the wheel [N*m]."""
+        drive = self.drive
+        drive.tick(t)
+        self.q = q
+        self.qd = qd
+        if self.fresh:
+            self.fresh = False
+            self.origin = q
+            self.reset_loops()
+            if drive.state is DriveState.ENABLED and drive.mode == ControlMode.VELOCITY:
+                self.set_velocity_target(drive.get(self.reg["target_velocity"]))
+        state = drive.state
+        if state is DriveState.DISABLED or state is DriveState.FAULT or dt <= 0.0:
+            return self._off(dt)
+        mode = drive.mode
+        if state is DriveState.QUICK_STOP:
+            v_prev = self.v_ref
+            step = self.qs_slope * dt
+            self.v_ref = 0.0 if abs(self.v_ref) <= step else self.v_ref - math.copysign(step, self.v_ref)
+            if not self._track_lag(dt):
+                return self._off(dt)
+            i = self._speed_loop(self.v_ref, (self.v_ref - v_prev) / dt, dt)
+        elif mode == ControlMode.VELOCITY:
+            v_prev = self.v_ref
+            self._ramp(dt)
+            if not self._track_lag(dt):
+                return self._off(dt)
+            i = self._speed_loop(self.v_ref, self.kfv * (self.v_ref - v_prev) / dt, dt)
+        elif mode == ControlMode.RELATIVE_POSITION or mode == ControlMode.ABSOLUTE_POSITION:
+            v_prev = self.v_ref
+            if self.moving:
+                self._profile(dt)
+            err = self.p_ref - q
+            if abs(err) > self.follow_limit:
+                drive.raise_fault(self, Fault.POSITION_FOLLOWING_ERROR)
+                return self._off(dt)
+            v_cmd = self.kfp * self.v_ref + self.kpp * err
+            i = self._speed_loop(v_cmd, self.kfv * self.kfp * (self.v_ref - v_prev) / dt, dt)
+        elif mode == ControlMode.TORQUE:
+            i = self._torque(dt)
+        else:  # control mode 0 "undefined": energised, no command
+            i = 0.0
+        self.i_out = i
+        if not self._protect(dt, i):
+            return self._off(dt)
+        return i * self.kt
+
+    def _off(self, dt: float) -> float:
+        self.i_out = 0.0
+        self.overload_time = 0.0
+        self.reset_loops()
+        self._thermal(dt, 0.0)
+        return 0.0
+
+    def _ramp(self, dt: float) -> None:
+        v, target = self.v_ref, self.v_target
+        if v == target:
+            return
+        if v != 0.0 and (target * v <= 0.0 or abs(target) < abs(v)):
+            floor = target if target * v > 0.0 else 0.0
+            step = self.dec_slope * dt
+            self.v_ref = floor if abs(v - floor) <= step else v - math.copysign(step, v)
+        else:
+            step = self.acc_slope * dt
+            self.v_ref = target if abs(target - v) <= step else v + math.copysign(step, target - v)
+
+    def _profile(self, dt: float) -> None:
+        """Trapezoidal move from ``p_ref`` to ``goal`` (discrete-time exact stopping)."""
+        v = self.v_ref
+        s = self.goal - self.p_ref
+        eps = 0.5 / self.counts_per_rad
+        if abs(s) < eps and abs(v) <= self.p_dec * dt:
+            self.p_ref, self.v_ref, self.moving = self.goal, 0.0, False
+            return
+        direction = 1.0 if s > 0 else -1.0
+        dec, acc = self.p_dec, self.p_acc
+        h = dec * dt
+        v_here = abs(v) if v * direction > 0 else 0.0
+        disc = h * h + 4.0 * (2.0 * dec * abs(s) - h * v_here)
+        v_allow = 0.5 * (math.sqrt(disc) - h) if disc > 0.0 else 0.0
+        v_des = direction * min(self.cruise, v_allow)
+        speeding_up = abs(v_des) > abs(v) and v * v_des >= 0.0
+        step = (acc if speeding_up else dec) * dt
+        new_v = v_des if abs(v_des - v) <= step else v + math.copysign(step, v_des - v)
+        ds = 0.5 * (v + new_v) * dt
+        if abs(ds) >= abs(s) and new_v * direction >= 0.0:
+            self.p_ref, self.v_ref, self.moving = self.goal, 0.0, False
+            return
+        self.p_ref += ds
+        self.v_ref = new_v
+
+    def _track_lag(self, dt: float) -> bool:
+        self.lag += (self.v_ref - self.qd) * dt
+        if abs(self.lag) > self.follow_limit:
+            self.drive.raise_fault(self, Fault.VELOCITY_FOLLOWING_ERROR)
+            return False
+        return True
+
+    def _limits(self) -> tuple[float, float]:
+        """(positive, negative) current magnitude limits [A] at the present speed."""
+        peak = self.peak
+        p = self.drive.profile
+        emf = p.back_emf_constant * abs(self.qd)
+        volt = max(0.0, (p.bus_voltage - emf) / p.phase_resistance)
+        if self.qd > 0.0:
+            return min(peak, volt), peak
+        if self.qd < 0.0:
+            return peak, min(peak, volt)
+        return peak, peak
+
+    def _speed_loop(self, v_cmd: float, a_ff: float, dt: float) -> float:
+        """PI velocity loop + acceleration feed-forward -> current [A], limited, anti-windup."""
+        e = v_cmd - self.qd
+        j = self.inertia
+        i = j * (self.wv * e + self.wv * self.wi * self.integ + a_ff) / self.kt
+        hi, lo = self._limits()
+        if i > hi:
+            i = hi
+        elif i < -lo:
+            i = -lo
+        else:
+            self.integ += e * dt  # integrate only while unsaturated
+        return i
+
+    def _torque(self, dt: float) -> float:
+        target = self.drive.get(self.reg["target_torque"]) * 1e-3
+        if self.torque_rate > 0.0:
+            step = self.torque_rate * dt
+            d = target - self.i_ref
+            self.i_ref = target if abs(d) <= step else self.i_ref + math.copysign(step, d)
+        else:
+            self.i_ref = target
+        i = self.i_ref
+        if i != 0.0:
+            sgn = 1.0 if i > 0 else -1.0
+            cap = self.inertia * self.wv * (self.drive.vmax - sgn * self.qd) / self.kt
+            i = sgn * min(abs(i), max(0.0, cap))
+        hi, lo = self._limits()
+        return max(-lo, min(hi, i))
+
+    def _protect(self, dt: float, i: float) -> bool:
+        if self.overload_limit > 0.0 and abs(i) > self.rated:
+            self.overload_time += dt
+            if self.overload_time > self.overload_limit + 1e-9:
+                self.drive.raise_fault(self, Fault.OVER_LOAD)
+                return False
+        else:
+            self.overload_time = 0.0
+        return self._thermal(dt, i)
+
+    def _thermal(self, dt: float, i: float) -> bool:
+        if dt > 0.0:
+            amb = self.drive.ambient
+            rise = THERMAL_RISE * (i / self.drive.profile.motor_rated_current) ** 2
+            self.temperature += (amb + rise - self.temperature) * min(1.0, dt / THERMAL_TAU)
+        if self.temp_limit > 0.0 and self.temperature > self.temp_limit:
+            self.drive.raise_fault(self, Fault.MOTOR_OVER_TEMPERATURE)
+            return False
+        return True
+
+    def hall(self) -> int:
+        angle = (self.q * self.poles + self.hall_offset) % TWO_PI
+        return _HALL_SEQUENCE[min(5, int(angle / (TWO_PI / 6)))]
+
+    @property
+    def energised(self) -> bool:
+        return self.drive.state in (DriveState.ENABLED, DriveState.QUICK_STOP)
+
+
+class ZlacEmulator(ModbusSlave):
+    """One emulated ZLAC8015D on a Modbus bus: two hub motors, ``left`` and ``right``."""
+
+    def __init__(
+        self,
+        profile: HubMotorProfile,
+        address: int,
+        *,
+        inertia_left: float | None = None,
+        inertia_right: float | None = None,
+        ambient: float = 25.0,
+        ramp_reference_rpm: float | None = None,
+    ) -> None:
+        self.profile = profile
+        self.ambient = float(ambient)
+        self.ramp_reference = ramp_reference_rpm * RPM if ramp_reference_rpm else None
+        self.time = 0.0
+        self._saved: dict[str, int] = {}
+        self._defaults = power_on_defaults(profile, address)
+        super().__init__(ZLAC8015D, address, values=self._defaults)
+        #: (time, text) of commands that were acknowledged but did nothing
+        self.ignored: list[tuple[float, str]] = []
+        self.left = ZlacChannel(self, "left", inertia_left if inertia_left is not None else profile.tuning_inertia)
+        self.right = ZlacChannel(self, "right", inertia_right if inertia_right is not None else profile.tuning_inertia)
+        self.channels = (self.left, self.right)
+        self._power_on()
+
+    # -- power -------------------------------------------------------------------------------
+    def _power_on(self) -> None:
+        self.state = DriveState.DISABLED
+        self.last_frame = -1.0  #: time of the last received frame (-1: none since power-on)
+        self.offline = False  #: the offline watchdog tripped (until the next enable)
+        self._ticked = -math.inf
+        self._cache()
+        for ch in self.channels:
+            ch.reset_power()
+        if self.get("driver_state") == 1:
+            self.state = DriveState.ENABLED  # channels latch q and start their loops at the first step
+
+    def power_cycle(self) -> None:
+        """Simulated power off/on: stored settings survive, everything else is power-on default.
+
+        The incremental position counters restart at 0 at the wheels' present angle.
+        """
+        for reg in self.table:
+            self._store(reg, reg.default)
+        for name, value in self._defaults.items():
+            self.set(name, value)
+        for name, value in self._saved.items():
+            self.set(name, value)
+        self.address = self.get("rs485_node_id")
+        self.write_log.clear()
+        self.ignored.clear()
+        self._power_on()
+
+    def channel(self, name: str) -> ZlacChannel:
+        """The ``"left"`` or ``"right"`` channel."""
+        if name == "left":
+            return self.left
+        if name == "right":
+            return self.right
+        raise KeyError(f"ZLAC8015D channel must be 'left' or 'right', got {name!r}")
+
+    # -- settings cache ----------------------------------------------------------------------
+    def _cache(self) -> None:
+        g = self.get
+        self.vmax = max(g("maximum_motor_speed"), 1) * RPM
+        self.watchdog = g("communication_offline_time") * 1e-3
+        self.mode = g("control_mode")
+        self.sync = g("synchronous_asynchronous_control_status")
+        option = g("quick_stop_control")
+        self.quick_stop_option = option if option in (5, 6, 7) else int(QuickStopBehaviour.QUICK_STOP_WITH_DECELERATION)
+        for ch in getattr(self, "channels", ()):
+            ch.cache()
+
+    # -- Modbus side ---------------------------------------------------------------------------
+    def handle(self, request: mb.Request | mb.UnsupportedRequest) -> mb.Reply:
+        self.last_frame = self.time
+        if not self.offline:
+            self.set("software_connected_status", 1)
+        return super().handle(request)
+
+    def on_read(self, start: int, count: int) -> None:
+        self._publish()
+
+    def on_write(self, reg: Register, value: int) -> None:
+        name = reg.name
+        if name == "control_word":
+            self._command(value)
+            return
+        if name == "control_mode":
+            self._cache()
+            self._mode_changed()
+            return
+        if name in ("target_velocity_left", "target_velocity_right"):
+            ch = self.left if name.endswith("left") else self.right
+            if self.state is DriveState.ENABLED and self.mode == ControlMode.VELOCITY:
+                ch.set_velocity_target(value)
+            return
+        if name in ("target_position_left", "target_position_right"):
+            if self.mode == ControlMode.ABSOLUTE_POSITION and abs(value) > ABSOLUTE_TARGET_LIMIT:
+                raise ModbusException(
+                    ILLEGAL_DATA_VALUE, f"{name}: absolute target {value} outside +-0x3FFFFFFF"
+                )
+            return
+        if name in ("target_torque_left", "target_torque_right"):
+            return
+        if name == "clear_feedback_position":
+            if value:
+                for ch in self._sides(value, both_for_one=True):
+                    ch.clear_position()
+                self.set(name, 0)
+            return
+        if name == "in_absolute_position_control_reset_the_zero_point":
+            if value:
+                for ch in self._sides(value, both_for_one=False):
+                    ch.clear_position()
+                self.set(name, 0)
+            return
+        if name == "whether_store_rw_register_to_eeprom":
+            if value == 1:
+                self._saved = {n: self.get(n) for n in _SETTINGS}
+            self.set(name, 0)
+            return
+        if name == "register_parameter_settings":
+            if value == 1:
+                for n in _SETTINGS:
+                    self.set(n, self._defaults.get(n, self.table.get(n).default))
+                self._saved = {}
+                self._cache()
+            self.set(name, 0)
+            return
+        if name == "maximum_motor_speed":
+            self._cache()
+            if self.state is DriveState.ENABLED and self.mode == ControlMode.VELOCITY:
+                for ch in self.channels:  # a lower cap clamps the present targets
+                    ch.set_velocity_target(self.get(ch.reg["target_velocity"]))
+            return
+        self._cache()
+
+    def _sides(self, value: int, *, both_for_one: bool) -> tuple[ZlacChannel, ...]:
+        if value == 1:
+            return self.channels if both_for_one else (self.left,)
+        if value == 2:
+            return (self.right,)
+        if value == 3:
+            return self.channels
+        return ()
+
+    def _ignore(self, text: str) -> None:
+        self.ignored.append((self.time, text))
+
+    def _command(self, value: int) -> None:
+        if value == ControlWord.ENABLE:
+            self._enable()
+        elif value == ControlWord.STOP:
+            if self.state is not DriveState.FAULT:
+                self.state = DriveState.DISABLED
+                for ch in self.channels:
+                    ch.reset_loops()
+        elif value == ControlWord.QUICK_STOP:
+            if self.state is DriveState.ENABLED:
+                self._quick_stop()
+            else:
+                self._ignore(f"quick stop while {self.state.value}")
+        elif value == ControlWord.CLEAR_FAULT:
+            for ch in self.channels:
+                ch.fault = 0
+                ch.overload_time = 0.0
+            if self.state is DriveState.FAULT:
+                self.state = DriveState.DISABLED
+        elif value in (ControlWord.START_SYNC, ControlWord.START_LEFT, ControlWord.START_RIGHT):
+            self._start(value)
+        else:
+            self._ignore(f"control word 0x{value:02X} is not a command")
+
+    def _enable(self) -> None:
+        if self.state is DriveState.FAULT:
+            self._ignore("enable while faulted (clear faults first)")
+            return
+        if self.state is DriveState.ENABLED:
+            return
+        self.state = DriveState.ENABLED
+        self.offline = False
+        self.set("software_connected_status", 1)
+        for ch in self.channels:
+            ch.reset_loops()
+            if self.mode == ControlMode.VELOCITY:
+                ch.set_velocity_target(self.get(ch.reg["target_velocity"]))
+
+    def _quick_stop(self) -> None:
+        was = self.state is DriveState.ENABLED
+        self.state = DriveState.QUICK_STOP
+        for ch in self.channels:
+            ch.begin_quick_stop(self.quick_stop_option, was)
+
+    def _mode_changed(self) -> None:
+        if self.state is not DriveState.ENABLED:
+            return
+        for ch in self.channels:
+            ch.reset_loops()
+            if self.mode == ControlMode.VELOCITY:
+                ch.set_velocity_target(self.get(ch.reg["target_velocity"]))
+
+    def _start(self, value: int) -> None:
+        word = ControlWord(value)
+        if self.state is not DriveState.ENABLED:
+            self._ignore(f"{word.name} while {self.state.value}")
+            return
+        if self.mode not in (ControlMode.RELATIVE_POSITION, ControlMode.ABSOLUTE_POSITION):
+            self._ignore(f"{word.name} outside the position modes (control mode {self.mode})")
+            return
+        sync = self.sync == SyncMode.SYNCHRONOUS
+        if word is ControlWord.START_SYNC:
+            if not sync:
+                self._ignore("START_SYNC in asynchronous control (0x200F = 0)")
+                return
+            targets: tuple[ZlacChannel, ...] = self.channels
+        else:
+            if sync:
+                self._ignore(f"{word.name} in synchronous control (0x200F = 1)")
+                return
+            targets = (self.left,) if word is ControlWord.START_LEFT else (self.right,)
+        absolute = self.mode == ControlMode.ABSOLUTE_POSITION
+        for ch in targets:
+            if not ch.start_move(absolute):
+                self._ignore(f"{word.name}: {ch.side} absolute target outside +-0x3FFFFFFF")
+
+    def raise_fault(self, ch: ZlacChannel, bit: Fault) -> None:
+        """A channel detected a fault: set its bit, switch both motors off."""
+        ch.fault |= int(bit)
+        self.state = DriveState.FAULT
+
+    # -- physics side --------------------------------------------------------------------------
+    def tick(self, t: float) -> None:
+        """Drive-level work once per substep (the first channel step with a new ``t``)."""
+        if t <= self._ticked:
+            return
+        self._ticked = t
+        self.time = t
+        wd = self.watchdog
+        if (
+            wd > 0.0
+            and self.last_frame >= 0.0
+            and self.state is DriveState.ENABLED
+            and t - self.last_frame > wd + 1e-9
+        ):
+            self.offline = True
+            self.set("software_connected_status", 0)
+            self._quick_stop()
+
+    def step_both(
+        self, t: float, dt: float, q_left: float, qd_left: float, q_right: float, qd_right: float
+    ) -> tuple[float, float]:
+        """Both channels for one substep: ``(torque_left, torque_right)`` [N*m]."""
+        return self.left.step(t, dt, q_left, qd_left), self.right.step(t, dt, q_right, qd_right)
+
+    # -- status registers ----------------------------------------------------------------------
+    def _publish(self) -> None:
+        s = self.set
+        left, right = self.left, self.right
+        for ch in self.channels:
+            r = ch.reg
+            s(r["actual_motor_position"], ch.counts())
+            s(r["actual_velocity"], round(ch.rpm() * 10))
+            s(r["actual_torque"], round(ch.i_out * 10))
+            s(r["error_code"], ch.fault)
+
+        def pack(a: int, b: int) -> int:
+            return (max(0, min(255, a)) << 8) | max(0, min(255, b))
+
+        s("motor_state", pack(int(left.energised), int(right.energised)))
+        s("hall_state", pack(left.hall(), right.hall()))
+        s("motor_temperature", pack(round(left.temperature), round(right.temperature)))
+        s("dc_voltage", round(self.profile.bus_voltage * 100))
