@@ -185,6 +185,7 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
                                2 * self.torque_limits, t_hi]).astype(np.float64)
         self.observation_space = spaces.Box(low, high, dtype=np.float64)
         self._obs_low, self._obs_high = self.observation_space.low.copy(), self.observation_space.high.copy()
+        self._obs_dim = int(low.shape[0])
         self._lo_stop = self.position_limits[:, 0] - LIMIT_MARGIN
         self._hi_stop = self.position_limits[:, 1] + LIMIT_MARGIN
 
@@ -257,10 +258,10 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def command_of(self, action: Sequence[float] | np.ndarray) -> np.ndarray:
         """SI commands (rad | rad/s | N*m per the action mode) of a normalised action."""
-        a = np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
+        a = np.asarray(action, dtype=np.float64).reshape(-1).clip(-1.0, 1.0)
         if self.action_mode == "position":
             lo, hi = self.position_limits[:, 0], self.position_limits[:, 1]
-            out: np.ndarray = np.clip(lo + (a + 1.0) * 0.5 * (hi - lo), lo, hi)
+            out: np.ndarray = (lo + (a + 1.0) * 0.5 * (hi - lo)).clip(lo, hi)
         elif self.action_mode == "velocity":
             out = a * self.velocity_limits
         else:
@@ -330,13 +331,16 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
         if not np.isfinite(a).all():
             raise ValueError(f"action must be finite, got {a.tolist()}")
         a = a.clip(-1.0, 1.0)
-        self._queue.append(a)
-        self._command(self._queue.popleft())
+        if self._queue:  # bus latency (domain randomisation): the action waits its turn
+            self._queue.append(a)
+            self._command(self._queue.popleft())
+        else:
+            self._command(a)
         self._tick += 1
         self._wait_until(self._t0 + self._tick * self.control_period)
         states = self._read()
-        obs = self._observation(states)
         positions = np.array([s.position for s in states])
+        obs = self._observation(states, positions)
         reward, terms = self._reward(positions, a)
         self._prev_action = a
         info = self._info(states)
@@ -383,15 +387,19 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
         self._states = [j.state() for j in self.joints]
         return self._states
 
-    def _observation(self, states: Sequence[joints.JointState]) -> np.ndarray:
-        pos = np.array([s.position for s in states])
-        vel = np.array([s.velocity for s in states])
-        tau = np.array([s.torque for s in states])
-        seen = pos
+    def _observation(self, states: Sequence[joints.JointState], pos: np.ndarray | None = None) -> np.ndarray:
+        n = len(states)
+        if pos is None:
+            pos = np.array([s.position for s in states])
+        obs = np.empty(self._obs_dim)
+        obs[:n] = pos
         if self._noise_rng is not None and self._noise.any():
-            seen = pos + self._noise_rng.normal(0.0, 1.0, pos.shape) * self._noise
-        obs = np.concatenate([seen, vel, tau, self._task_terms(pos)])
-        return obs.clip(self._obs_low, self._obs_high)
+            obs[:n] += self._noise_rng.normal(0.0, 1.0, n) * self._noise
+        obs[n:2 * n] = [s.velocity for s in states]
+        obs[2 * n:3 * n] = [s.torque for s in states]
+        obs[3 * n:] = self._task_terms(pos)
+        np.maximum(obs, self._obs_low, out=obs)
+        return np.minimum(obs, self._obs_high, out=obs)
 
     def _info(self, states: Sequence[joints.JointState]) -> dict[str, Any]:
         return {
@@ -400,16 +408,17 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
         }
 
     def _command(self, action: np.ndarray) -> None:
-        cmd = self.command_of(action)
+        cmd = self.command_of(action).tolist()
+        mode = self.action_mode
         for j, c in zip(self.joints, cmd):
             if not j.enabled:  # faulted/disabled drive: the episode has ended; never command it
                 continue
-            if self.action_mode == "position":
-                j.move_to(float(c))
-            elif self.action_mode == "velocity":
-                j.set_velocity(float(c))
+            if mode == "torque":
+                j.set_torque(c)
+            elif mode == "velocity":
+                j.set_velocity(c)
             else:
-                j.set_torque(float(c))
+                j.move_to(c)
 
     def _hold(self, start: np.ndarray) -> None:
         """The action mode's neutral command: hold the start pose, zero speed or zero torque."""

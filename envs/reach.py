@@ -14,6 +14,10 @@ from envs.kinematics import ARM3_REACH, ARM3_SHOULDER_HEIGHT, erob_arm3_ee, erob
 from envs.render import CameraSpec
 
 
+def _sq(d: np.ndarray) -> float:
+    return float(np.dot(d, d))
+
+
 def _range(name: str, r: Sequence[float], lo: float, hi: float) -> tuple[float, float]:
     """``r`` intersected with the limits ``[lo, hi]``; must not be empty."""
     if len(r) != 2 or not all(math.isfinite(v) for v in r) or r[0] > r[1]:
@@ -164,7 +168,7 @@ class ErobReachEnv(JointsEnv):
     def _reward(self, positions: np.ndarray, action: np.ndarray) -> tuple[float, dict[str, Any]]:
         distance = abs(self.target - float(positions[0]))
         r_dist = -distance
-        r_rate = -self.action_rate_weight * float(((action - self._prev_action) ** 2).sum())
+        r_rate = -self.action_rate_weight * _sq(action - self._prev_action)
         return r_dist + r_rate, {
             "reward_distance": r_dist,
             "reward_action_rate": r_rate,
@@ -334,7 +338,7 @@ class ErobArmReachEnv(JointsEnv):
     def _reward(self, positions: np.ndarray, action: np.ndarray) -> tuple[float, dict[str, Any]]:
         distance = float(np.linalg.norm(self.target - self._ee))
         r_dist = -distance
-        r_rate = -self.action_rate_weight * float(((action - self._prev_action) ** 2).sum())
+        r_rate = -self.action_rate_weight * _sq(action - self._prev_action)
         return r_dist + r_rate, {
             "reward_distance": r_dist,
             "reward_action_rate": r_rate,

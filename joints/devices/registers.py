@@ -65,19 +65,14 @@ class Register:
     default: int = 0  #: power-on value where the manual gives one
     persistent: bool = False  #: writing it is persistent/dangerous (needs confirmation)
     low_word_first: bool = False  #: word order of 32-bit pairs (eRob/ZLAC: Hi first)
+    words: int = field(init=False, repr=False, compare=False)  #: 16-bit registers spanned (1 or 2)
+    signed: bool = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.type not in _RANGES:
             raise ValueError(f"register {self.name}: unknown type {self.type!r}")
-
-    @property
-    def words(self) -> int:
-        """Number of 16-bit registers the entry spans (1 or 2)."""
-        return _RANGES[self.type][2]
-
-    @property
-    def signed(self) -> bool:
-        return self.type.startswith("int")
+        object.__setattr__(self, "words", _RANGES[self.type][2])
+        object.__setattr__(self, "signed", self.type.startswith("int"))
 
     @property
     def type_range(self) -> tuple[int, int]:
@@ -138,6 +133,8 @@ class RegisterTable:
     _by_name: Mapping[str, Register] = field(init=False, repr=False, compare=False)
     _by_address: Mapping[int, Register] = field(init=False, repr=False, compare=False)
     _word_owner: Mapping[int, Register] = field(init=False, repr=False, compare=False)
+    _plans: dict[tuple[int, int], tuple[tuple[str, int, int, bool, bool], ...]] = field(
+        init=False, repr=False, compare=False, default_factory=dict)
 
     def __post_init__(self) -> None:
         by_name: dict[str, Register] = {}
@@ -208,12 +205,24 @@ class RegisterTable:
 
         Registers only partly covered, and gaps, are skipped.
         """
+        plan = self._plans.get((start, len(words)))
+        if plan is None:
+            end = start + len(words)
+            plan = tuple(
+                (reg.name, reg.address - start, reg.words, reg.signed, reg.low_word_first)
+                for reg in self.registers
+                if reg.address >= start and reg.address + reg.words <= end
+            )
+            self._plans[(start, len(words))] = plan
         out: dict[str, int] = {}
-        end = start + len(words)
-        for reg in self.registers:
-            if reg.address >= start and reg.address + reg.words <= end:
-                i = reg.address - start
-                out[reg.name] = reg.from_words(words[i : i + reg.words])
+        for name, i, n, signed, low_first in plan:
+            if n == 1:
+                raw = words[i] & 0xFFFF
+                out[name] = raw - 0x10000 if signed and raw & 0x8000 else raw
+            else:
+                a, b = words[i] & 0xFFFF, words[i + 1] & 0xFFFF
+                raw = (b << 16 | a) if low_first else (a << 16 | b)
+                out[name] = raw - 0x100000000 if signed and raw & 0x80000000 else raw
         return out
 
     def encode_block(self, values: Mapping[Any, int]) -> tuple[int, list[int]]:

@@ -40,6 +40,8 @@ class ModbusSlave:
         self.words: dict[int, int] = {}
         #: typed value of every register by name, kept in step with ``words`` (fast reads for emulators)
         self.v: dict[str, int] = {}
+        self._read_plans: dict[tuple[int, int], tuple[int, ...]] = {}
+        self._by_name = {reg.name: (reg, *reg.type_range) for reg in table}
         for reg in table:
             self._store(reg, reg.default)
         for name, value in (values or {}).items():
@@ -76,12 +78,20 @@ class ModbusSlave:
 
     def set(self, key: str | int, value: int) -> None:
         """Set a register in the image (no access check: this is the device itself)."""
-        reg = self.table.get(key)
-        lo, hi = reg.type_range
-        if not lo <= int(value) <= hi:
+        entry = self._by_name.get(key) if isinstance(key, str) else None
+        if entry is None:
+            reg = self.table.get(key)
+            entry = self._by_name[reg.name]
+        reg, lo, hi = entry
+        value = int(value)
+        if not lo <= value <= hi:
             # saturate like a drive's status registers would, never wrap silently
-            value = max(lo, min(hi, int(value)))
-        self._store(reg, int(value))
+            value = max(lo, min(hi, value))
+        self.v[reg.name] = value
+        if reg.words == 1:
+            self.words[reg.address] = value & 0xFFFF
+        else:
+            self._store(reg, value)
 
     # -- hooks ------------------------------------------------------------------------------
     def on_read(self, start: int, count: int) -> None:
@@ -105,14 +115,15 @@ class ModbusSlave:
     def read(self, start: int, count: int) -> tuple[int, ...]:
         self._check_read(start, count)
         self.on_read(start, count)
-        out = []
-        for a in range(start, start + count):
-            reg = self.table.owner(a)
-            if reg is None or reg.access is Access.COMMAND:
-                out.append(0)  # gaps and write-only command registers read as 0
-            else:
-                out.append(self.words.get(a, 0))
-        return tuple(out)
+        plan = self._read_plans.get((start, count))
+        if plan is None:
+            # addresses that hold data; gaps and write-only command registers read as 0
+            plan = self._read_plans[(start, count)] = tuple(
+                a if (reg := self.table.owner(a)) is not None and reg.access is not Access.COMMAND else -1
+                for a in range(start, start + count)
+            )
+        words = self.words
+        return tuple(words.get(a, 0) if a >= 0 else 0 for a in plan)
 
     def write(self, start: int, words: tuple[int, ...]) -> None:
         if not 1 <= len(words) <= mb.MAX_WRITE:

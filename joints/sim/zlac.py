@@ -14,26 +14,26 @@ below), corrected by ``/work/shared/vectors/ERRATA.md`` (DOC-ZLAC-1..7).
 
 Semantics taken from the manual
 -------------------------------
-* Control word 0x200E (lines 853-872): 0x08 enable, 0x07 stop, 0x05 quick stop, 0x06 clear
-  faults, 0x10 start both wheels / 0x11 start left / 0x12 start right (position modes). ONE state
-  machine for both motors (there is one control word). Control mode 0x200D (lines 838-851) is
-  shared too: 1 relative position, 2 absolute position, 3 velocity, 4 torque.
-* Stop 0x07: 0x2012 "Stop control" says "Stop (switch to ready to switch on)" (lines 920-925),
+* Control word 0x200E (lines 852-868; 312-316, 400-408): 0x08 enable, 0x07 stop, 0x05 quick stop,
+  0x06 clear faults, 0x10 start both wheels / 0x11 start left / 0x12 start right (position modes).
+  ONE state machine for both motors (there is one control word). Control mode 0x200D (lines
+  831-846) is shared too: 1 relative position, 2 absolute position, 3 velocity, 4 torque.
+* Stop 0x07: 0x2012 "Stop control" says "Stop (switch to ready to switch on)" (lines 918-926),
   i.e. the power stage switches off and the wheels coast (friction only). 0x2012 = 0 ("Invalid")
   is treated the same. The community drivers' "disable" writes 0x07 as well.
-* Quick stop 0x05 follows 0x2011 "Quick stop control" (lines 902-911): 5 = stop with the normal
+* Quick stop 0x05 follows 0x2011 "Quick stop control" (lines 900-912): 5 = stop with the normal
   deceleration time (0x2082/0x2083), 6 = quick stop with the quick-stop deceleration time
-  (0x2084/0x2085, default 10 ms), 7 = quick stop without deceleration time (speed command 0 at
-  once, the velocity loop brakes at the current limit). The codes are the CiA 402 quick-stop
+  (0x2084/0x2085, default 10 ms, lines 1092-1097), 7 = quick stop without deceleration time
+  (speed command 0 at once, the velocity loop brakes at the current limit). The codes are the CiA 402 quick-stop
   option codes 5/6/7, which all STAY in "quick stop active": the motors remain energised and hold
   zero speed until enable (0x08) resumes operation or stop (0x07) switches them off. Set-points
   written meanwhile are stored but not executed.
-* Clear faults 0x06 (lines 774-776) clears both error-code registers 0x20A5/0x20A6; the drive is
+* Clear faults 0x06 (lines 744-777) clears both error-code registers 0x20A5/0x20A6; the drive is
   then disabled and needs 0x08. A fault whose cause persists (over-temperature) comes back.
 * Synchronous/asynchronous 0x200F follows the EXAMPLES (ERRATA DOC-ZLAC-1): 0 = asynchronous
   (lines 457-462: each wheel started with 0x11/0x12), 1 = synchronous (line 566: both started
   with 0x10).
-* Acceleration / deceleration time 0x2080-0x2083 (lines 318-328, 416-425, 1079-1091): the manual
+* Acceleration / deceleration time 0x2080-0x2083 (lines 318-329, 416-426, 1080-1091): the manual
   gives only "Acceleration time", unit ms, range 0-32767 ms, default 500, in the velocity-mode
   table next to the target velocity and in the position-mode table next to the target speed. No
   reference speed is named anywhere (0x2008 "Maximum motor speed", line 813, is a separate
@@ -60,8 +60,8 @@ Semantics taken from the manual
 * Target velocity 0x2088/0x2089 (r/min, +-3000, lines 330-335) is clamped to 0x2008 (max motor
   speed, default 1000 r/min); one FC16 write of 0x2088-0x2089 sets both wheels (line 391).
 * Position modes: target position 0x208A/0x208C (int32 counts, high word first; relative
-  +-0x7FFFFFFF, absolute +-0x3FFFFFFF, lines 426-436 - an absolute-mode write outside the latter
-  is refused with exception 03); target speed 0x208E/0x208F (1-1000 r/min, lines 438-446).
+  +-0x7FFFFFFF, absolute +-0x3FFFFFFF, lines 427-440 - an absolute-mode write outside the latter
+  is refused with exception 03); target speed 0x208E/0x208F (1-1000 r/min, lines 441-446).
   A relative move goes ``target`` counts from the end point of the previous move (from the
   position at enable if there was none), so repeated relative moves do not accumulate error; an
   absolute move goes to ``target`` counts of the feedback-position frame (see 0x2005/0x2006).
@@ -69,20 +69,20 @@ Semantics taken from the manual
 * Torque mode: target torque 0x2090/0x2091 in mA (+-30000), reached with the torque slope
   0x2086/0x2087 in mA/s (lines 646-660; default printed "300ms", DOC-ZLAC-5, read as 300 mA/s).
   Slope 0 = step. The speed is capped at 0x2008 (the current is reduced near it).
-* Feedback (lines 1193-1369): actual position 0x20A7/0x20A9 int32 counts (4 x encoder lines
+* Feedback (lines 1193-1368): actual position 0x20A7/0x20A9 int32 counts (4 x encoder lines
   0x2030/0x2060 per turn; the incremental counter starts at 0 at power-on), actual velocity
   0x20AB/0x20AC in 0.1 r/min, actual torque (current) 0x20AD/0x20AE in 0.1 A, error codes
   0x20A5/0x20A6 (:class:`~joints.devices.zlac.registers.Fault` bits), DC voltage 0x20A1 in 0.01 V,
   motor state 0x20A2 / hall state 0x20A3 / motor temperature 0x20A4 (1 degC) packed high byte =
   left, low byte = right.
-* 0x2005 clear feedback position (line 798; 1 = clear; the table allows 0-1, so both wheels) and
+* 0x2005 clear feedback position (lines 798-802; 1 = clear; the table allows 0-1: both wheels) and
   0x2006 reset the zero point (lines 803-807: 1 left, 2 right, 3 printed "right" again -> both,
   DOC-ZLAC-4) make the present position read 0 and become the zero of absolute targets. They move
   nothing, act at once and read back 0 ("Not saved").
 * 0x2000 communication offline time (lines 782-785, ms, default 1000): with the motors energised
   and no frame received for longer than this, the drive treats the host as offline and performs a
   quick stop per 0x2011 (above), so the robot stops and holds; it does not restart until an
-  enable. The fault list (lines 757-772) has no communication bit, so no error code is set; the
+  enable. The fault list (lines 760-772) has no communication bit, so no error code is set; the
   trip is visible as 0x20AF "software connected status" = 0 (see conventions) and as
   :attr:`ZlacEmulator.offline`.
 * 0x2010 = 1 stores the RW settings (they survive :meth:`ZlacEmulator.power_cycle`); 0x2009 = 1
@@ -93,13 +93,20 @@ Emulator conventions (the manual leaves these open)
 ---------------------------------------------------
 * Gains (units are not printed): Vl Kp 0x203C/0x206C is the velocity-loop bandwidth in 0.1 rad/s
   (default 500 -> 50 rad/s): current = J x Kp x speed error / kt, J = the inertia the drive is
-  tuned for (``inertia_left``/``inertia_right``, default :attr:`HubMotorProfile.tuning_inertia`);
+  tuned for = the wheel's own inertia at the joint (``inertia_left``/``inertia_right``: rotor +
+  wheel body, i.e. MuJoCo's joint-space diagonal incl. armature; default the rotor,
+  :attr:`HubMotorProfile.armature`) + the vehicle's share :attr:`HubMotorProfile.load_inertia`
+  (a wheel joint's mass-matrix diagonal never contains the vehicle, which acts through the
+  contacts; a real drive's fixed default gains assume a vehicle too). For a wheel in the air
+  use a profile with ``load_inertia=0``;
   Vl Ki 0x203D/0x206D is the integral corner in 0.1 rad/s (default 100 -> 10 rad/s); Vl Kf
   0x203E/0x206E is the acceleration feed-forward in 0.1 % of J x a (default 500 -> 50 %). Pl Kp
   0x203F/0x206F is the position gain in 0.1 /s (default 100 -> 10 /s); Pl Kf 0x2040/0x2070 is the
   velocity feed-forward in % (default 50 -> 50 %). The current loop (Cl Kp/Ki), the smoothing
-  factors, the velocity observer and the initial velocities are not modelled (ideal current
-  loop: the motor current is the current command).
+  factors, the velocity observer and the position-mode initial velocity are not modelled (ideal
+  current loop: the motor current is the current command). The velocity-mode initial velocity
+  0x2043/0x2073 (default 1 r/min) is only the standstill threshold: when a ramp starts from the
+  measured speed (enable, mode change), a speed below it counts as 0.
 * Current limits: peak = min(maximum current 0x2034/0x2064, rated current 0x2033/0x2063 x
   overload factor 0x2032/0x2062 / 100) (factor 0 = no factor limit); in the motoring direction
   also the back-EMF limit (bus voltage - ke x speed) / phase resistance, so the wheel cannot
@@ -169,7 +176,7 @@ __all__ = [
 TWO_PI = 2.0 * math.pi
 RPM = TWO_PI / 60.0  #: rad/s per r/min
 MIN_RAMP_TIME = 1e-3  #: s; a ramp time of 0 ms is taken as 1 ms
-ABSOLUTE_TARGET_LIMIT = 0x3FFFFFFF  #: absolute-mode target position range (line 436)
+ABSOLUTE_TARGET_LIMIT = 0x3FFFFFFF  #: absolute-mode target position range (lines 432, 439)
 
 THERMAL_RISE = 60.0  #: K above ambient at the motor's rated current (EST)
 THERMAL_TAU = 600.0  #: s, winding time constant (EST)
@@ -192,14 +199,6 @@ _NOT_STORED = frozenset({
     "target_torque_right",
 })
 _SETTINGS = tuple(r.name for r in ZLAC8015D if r.access is Access.RW and r.name not in _NOT_STORED)
-
-_DRIVE_SETTINGS = frozenset({
-    "maximum_motor_speed",
-    "communication_offline_time",
-    "quick_stop_control",
-    "control_mode",
-    "synchronous_asynchronous_control_status",
-})
 
 
 class DriveState(enum.Enum):
@@ -243,17 +242,18 @@ class ZlacChannel:
             raise ValueError(f"{side} channel: inertia must be positive and finite, got {inertia!r}")
         self.drive = drive
         self.side = side
-        self.inertia = float(inertia)  #: J [kg*m^2] the velocity-loop gains are scaled with
+        self.inertia = float(inertia)  #: J [kg*m^2] the velocity-loop gains are scaled with (tuned for)
         self.reg = {key: f"{key}_{side}" for key in (
             "encoder_line", "hall_offset_angle", "overload_factor", "rated_current", "maximum_current",
             "overload_protection_time", "position_following_error_threshold", "vl_kp", "vl_ki", "vl_kf",
             "pl_kp", "pl_kf", "poles_of_motor", "over_temperature_threshold", "acceleration_time",
             "deceleration_time", "deceleration_time_of_quick_stop", "torque_rate", "target_velocity",
             "target_position", "target_speed", "target_torque", "error_code", "actual_motor_position",
-            "actual_velocity", "actual_torque",
+            "actual_velocity", "actual_torque", "initial_velocity_velocity_mode",
         )}
         self.kt = drive.profile.torque_constant
         self.temperature = drive.ambient
+        self.v_start = RPM  #: initial velocity [rad/s] (cached from 0x2043/0x2073)
         self.reset_power()
 
     # -- state ----------------------------------------------------------------------------
@@ -270,8 +270,11 @@ class ZlacChannel:
 
     def reset_loops(self) -> None:
         """Loops and generators to rest at the present state (enable, mode change, power off)."""
-        self.v_ref = self.qd  #: speed command of the ramp / profile [rad/s]
-        self.v_target = self.qd  #: velocity-mode ramp target [rad/s]
+        # the speed command starts at the measured speed; below the initial velocity
+        # (0x2043/0x2073, default 1 r/min) that is standstill
+        v0 = self.qd if abs(self.qd) >= self.v_start else 0.0
+        self.v_ref = v0  #: speed command of the ramp / profile [rad/s]
+        self.v_target = v0  #: velocity-mode ramp target [rad/s]
         self.acc_slope = math.inf
         self.dec_slope = math.inf
         self.p_ref = self.q  #: position command [rad]
@@ -310,6 +313,7 @@ class ZlacChannel:
         self.hall_offset = math.radians(g(r["hall_offset_angle"]))
         self.temp_limit = g(r["over_temperature_threshold"]) * 0.1
         self.target_speed = g(r["target_speed"]) * RPM
+        self.v_start = g(r["initial_velocity_velocity_mode"]) * RPM
 
     # -- conversions -----------------------------------------------------------------------
     def counts(self) -> int:
@@ -324,7 +328,7 @@ class ZlacChannel:
         """Velocity-mode target changed: start the ramp to it (see the module docstring)."""
         vmax = self.drive.vmax
         target = max(-vmax, min(vmax, rpm * RPM))
-        if target == self.v_target and not self.fresh:
+        if target == self.v_target:
             return
         self.v_target = target
         v = self.v_ref
@@ -369,11 +373,20 @@ class ZlacChannel:
             t = self.dec_time if option == QuickStopBehaviour.STOP else self.qs_time
             ref = self.drive.ramp_reference
             self.qs_slope = (ref if ref is not None else abs(start)) / t
-        self.integ = min(max(self.integ, -1.0), 1.0)
 
     def clear_position(self) -> None:
         """0x2005 / 0x2006: the present position reads 0 and is the zero of absolute targets."""
         self.origin = self.q
+
+    def place(self, q: float) -> None:
+        """The wheel is at ``q`` [rad] and at rest (start state, reset): the encoder sees it, the
+        loops rest there. Right after power-on the position counter reads 0 there; later the
+        counter follows the move (an incremental encoder counts a wheel turned by hand)."""
+        if self.fresh:
+            self.origin = q
+        self.q = q
+        self.qd = 0.0
+        self.reset_loops()
 
     # -- physics side ----------------------------------------------------------------------
     def step(self, t: float, dt: float, q: float, qd: float) -> float:
@@ -381,14 +394,16 @@ class ZlacChannel:
         at ``q`` [rad], ``qd`` [rad/s]; return the motor torque at the wheel [N*m]."""
         drive = self.drive
         drive.tick(t)
+        if self.fresh:
+            # first substep after power-on: the counter starts at 0 here; commands that came
+            # before it were taken relative to the unknown angle (0), shift them to the real one
+            self.fresh = False
+            delta = q - self.q
+            self.origin = q
+            self.p_ref += delta
+            self.goal += delta
         self.q = q
         self.qd = qd
-        if self.fresh:
-            self.fresh = False
-            self.origin = q
-            self.reset_loops()
-            if drive.state is DriveState.ENABLED and drive.mode == ControlMode.VELOCITY:
-                self.set_velocity_target(drive.get(self.reg["target_velocity"]))
         state = drive.state
         if state is DriveState.DISABLED or state is DriveState.FAULT or dt <= 0.0:
             return self._off(dt)
@@ -569,8 +584,10 @@ class ZlacEmulator(ModbusSlave):
         super().__init__(ZLAC8015D, address, values=self._defaults)
         #: (time, text) of commands that were acknowledged but did nothing
         self.ignored: list[tuple[float, str]] = []
-        self.left = ZlacChannel(self, "left", inertia_left if inertia_left is not None else profile.tuning_inertia)
-        self.right = ZlacChannel(self, "right", inertia_right if inertia_right is not None else profile.tuning_inertia)
+        own = profile.armature
+        load = profile.load_inertia
+        self.left = ZlacChannel(self, "left", (inertia_left if inertia_left is not None else own) + load)
+        self.right = ZlacChannel(self, "right", (inertia_right if inertia_right is not None else own) + load)
         self.channels = (self.left, self.right)
         self._power_on()
 
@@ -583,8 +600,8 @@ class ZlacEmulator(ModbusSlave):
         self._cache()
         for ch in self.channels:
             ch.reset_power()
-        if self.get("driver_state") == 1:
-            self.state = DriveState.ENABLED  # channels latch q and start their loops at the first step
+        if self.get("driver_state") == 1:  # saved "enabled at power-on"
+            self._enable()
 
     def power_cycle(self) -> None:
         """Simulated power off/on: stored settings survive, everything else is power-on default.
@@ -618,7 +635,8 @@ class ZlacEmulator(ModbusSlave):
         self.mode = g("control_mode")
         self.sync = g("synchronous_asynchronous_control_status")
         option = g("quick_stop_control")
-        self.quick_stop_option = option if option in (5, 6, 7) else int(QuickStopBehaviour.QUICK_STOP_WITH_DECELERATION)
+        default = int(QuickStopBehaviour.QUICK_STOP_WITH_DECELERATION)
+        self.quick_stop_option = option if option in (5, 6, 7) else default
         for ch in getattr(self, "channels", ()):
             ch.cache()
 
@@ -677,6 +695,7 @@ class ZlacEmulator(ModbusSlave):
                     self.set(n, self._defaults.get(n, self.table.get(n).default))
                 self._saved = {}
                 self._cache()
+                self._mode_changed()
             self.set(name, 0)
             return
         if name == "maximum_motor_speed":
@@ -731,7 +750,8 @@ class ZlacEmulator(ModbusSlave):
             return
         self.state = DriveState.ENABLED
         self.offline = False
-        self.set("software_connected_status", 1)
+        if self.last_frame >= 0.0:
+            self.set("software_connected_status", 1)
         for ch in self.channels:
             ch.reset_loops()
             if self.mode == ControlMode.VELOCITY:
@@ -783,7 +803,7 @@ class ZlacEmulator(ModbusSlave):
     # -- physics side --------------------------------------------------------------------------
     def tick(self, t: float) -> None:
         """Drive-level work once per substep (the first channel step with a new ``t``)."""
-        if t <= self._ticked:
+        if t == self._ticked:  # the other channel of the same substep (time may restart on a reset)
             return
         self._ticked = t
         self.time = t

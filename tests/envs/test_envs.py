@@ -438,3 +438,61 @@ def test_human_mode_without_display_warns_and_steps(monkeypatch: pytest.MonkeyPa
         assert env.render() is None
     finally:
         env.close()
+
+
+# -- the hardware code paths, exercised on the in-process emulator ---------------------------
+
+def _as_hardware(env: Any) -> Any:
+    """Take the env's hardware branches (reset by moving, FK task terms, rendering twin) while the
+    rig stays the lockstep sim - the public Joint API is all those branches use."""
+    env.sim = False
+    return env
+
+
+def test_hardware_reset_moves_with_a_safe_profile_and_recovers_from_faults() -> None:
+    env = _as_hardware(ErobReachEnv(action_mode="velocity", reset_velocity=0.5, reset_acceleration=1.0))
+    rig, j = env.rig, env.rig.joints["joint1"]
+    try:
+        t0 = rig.time
+        obs, info = env.reset(seed=0, options={"start": [0.6], "target": 0.0})
+        assert abs(obs[0] - 0.6) <= env.reset_tolerance and abs(obs[1]) < 0.05
+        assert info["time"] - t0 >= 0.5 + 0.6 / 0.5  # enable wait + at most 0.5 rad/s
+        assert "randomization" not in info and j.read("operation_mode") == 2  # speed mode, zero speed
+        # a fault ends the episode; the next reset clears it, enables again and moves
+        j.write("max_speed_error", 10)  # count/s: any acceleration is a speed error
+        for _ in range(20):
+            _obs, _r, term, _t, info = env.step(np.array([1.0], np.float32))
+            if term:
+                break
+        assert term and info["faults"]["joint1"] == 0x8400
+        j.write("max_speed_error", 84000)
+        obs, info = env.reset(seed=0, options={"start": [-0.4], "target": 0.0})
+        assert info["faults"]["joint1"] == 0 and abs(obs[0] + 0.4) <= env.reset_tolerance
+    finally:
+        env.close()
+
+
+def test_hardware_task_terms_from_forward_kinematics() -> None:
+    env = _as_hardware(ErobArmReachEnv())
+    try:
+        obs, _ = env.reset(seed=1, options={"start": [0.3, -0.4, 0.8]})
+        site = env.rig.world.data.site_xpos[env._site]
+        assert np.allclose(obs[9:12], site, atol=1e-4)  # FK of measured angles == MuJoCo's site
+    finally:
+        env.close()
+
+
+def test_hardware_rendering_twin_follows_the_measured_angles(gl_unavailable: str) -> None:
+    if gl_unavailable:
+        pytest.skip(gl_unavailable)
+    env = _as_hardware(ErobArmReachEnv(render_mode="rgb_array", width=64, height=48))
+    try:
+        env.reset(seed=1, options={"start": [0.3, -0.4, 0.8]})
+        frame = env.render()
+        assert frame is not None and frame.shape == (48, 64, 3)
+        assert env._twin is not None
+        twin_model, twin_data, _adr = env._twin
+        assert twin_model is not env.rig.world.model
+        assert np.allclose(twin_data.qpos, env.rig.world.data.qpos, atol=1e-4)
+    finally:
+        env.close()

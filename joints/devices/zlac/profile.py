@@ -176,7 +176,11 @@ class HubMotorProfile:
 
     @property
     def tuning_inertia(self) -> float:
-        """Inertia the drive's default velocity-loop gains assume at one wheel: rotor + vehicle share."""
+        """Inertia the drive's default velocity-loop gains assume at one wheel: rotor + vehicle share.
+
+        (The emulator uses the wheel's own joint inertia + ``load_inertia``; with the default rotor
+        that is this value.)
+        """
         return self.rotor_inertia + self.load_inertia
 
     @property
