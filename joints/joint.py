@@ -188,15 +188,19 @@ class Joint:
         here = self.state().position
         self.move_to(here + delta, **kw)
 
-    def set_velocity(self, velocity: float, *, acceleration: float | None = None) -> None:
-        """Run at ``velocity`` [rad/s] (speed control) until stop() or another command."""
+    def velocity_command(self, velocity: float, acceleration: float | None = None) -> tuple[int, int]:
+        """Check a velocity command against the limits; return it in device units (velocity, ramp)."""
         velocity = self._finite("velocity", velocity)
         self._check_velocity(velocity)
         a = self._finite("acceleration", self.motion.acceleration if acceleration is None else acceleration)
         self._check_accel(a, "acceleration")
         self._require_enabled()
-        acc = self._to_acc(a)
-        self.driver.set_velocity(self._to_vel(velocity), acceleration=acc, deceleration=acc)
+        return self._to_vel(velocity), self._to_acc(a)
+
+    def set_velocity(self, velocity: float, *, acceleration: float | None = None) -> None:
+        """Run at ``velocity`` [rad/s] (speed control) until stop() or another command."""
+        v, acc = self.velocity_command(velocity, acceleration)
+        self.driver.set_velocity(v, acceleration=acc, deceleration=acc)
 
     def set_torque(self, torque: float) -> None:
         """Apply ``torque`` [N*m] (current control through the device's torque constant)."""

@@ -92,6 +92,28 @@ class Rig:
                 out[name] = j.to_si(j.driver.state_from(block, t))  # type: ignore[attr-defined]
         return {name: out[name] for name in self.joints if name in out}
 
+    def set_velocities(self, velocities: Mapping[str, float]) -> None:
+        """Set several joints' velocities [rad/s] at once; every command is checked first.
+
+        Joints on one drive that supports synchronous commands (both wheels of a ZLAC8015D) get one
+        FC16 for both targets; the others are commanded one by one.
+        """
+        checked = {name: self.joints[name].velocity_command(v) for name, v in velocities.items()}
+        done: set[str] = set()
+        for name, (v, acc) in checked.items():
+            driver = self.joints[name].driver
+            group = getattr(driver, "status_group", None)
+            sync = getattr(group, "set_velocity_pair", None)
+            if sync is not None and name not in done:
+                pair = {n: self.joints[n] for n in checked if getattr(self.joints[n].driver, "status_group", None) is group}
+                if len(pair) == 2:
+                    sync({getattr(j.driver, "side"): (checked[n][0], checked[n][1]) for n, j in pair.items()})
+                    done.update(pair)
+                    continue
+            if name not in done:
+                driver.set_velocity(v, acceleration=acc, deceleration=acc)
+                done.add(name)
+
     def reset(self) -> None:
         """Sim: physics to the model's initial state and every emulated drive to power-on.
 

@@ -181,7 +181,7 @@ class ErobModbusDriver(JointDriver):
 
     def _set_many(self, values: dict[str, int]) -> None:
         """Write settings; one FC16 when they form a contiguous block, else one by one."""
-        if not values:
+        if not values or all(self._cache.get(k) == v for k, v in values.items()):
             return
         try:
             self.table.encode_block(values)

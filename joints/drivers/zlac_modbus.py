@@ -30,16 +30,13 @@ SIDES = ("left", "right")
 #: status block read in ONE FC03: motor state (0x20A2) .. actual torque right (0x20AE)
 STATUS_START = 0x20A2
 STATUS_WORDS = 0x20AE - 0x20A2 + 1
-#: The acceleration/deceleration time registers are the ramp time from 0 to this speed [r/min]
-#: (the emulator uses the same reference; see joints.sim.zlac).
-RAMP_REFERENCE_RPM = 1000.0
-
-
-def ramp_time_ms(rpm_per_s: float) -> int:
-    """Acceleration/deceleration-time register value for a ramp of ``rpm_per_s``."""
+def ramp_time_ms(delta_rpm: float, rpm_per_s: float) -> int:
+    """Acceleration/deceleration-time register value [ms] for a speed change of ``delta_rpm`` at
+    ``rpm_per_s``: the ramp time is the time the drive takes to reach the commanded speed (the
+    manual gives no other reference speed; joints.sim.zlac follows the same reading)."""
     if rpm_per_s <= 0:
         raise CommandError(f"ramp rate must be > 0 r/min/s, got {rpm_per_s}")
-    return max(0, min(32767, round(RAMP_REFERENCE_RPM / rpm_per_s * 1000.0)))
+    return max(0, min(32767, round(abs(delta_rpm) / rpm_per_s * 1000.0)))
 
 
 @dataclass
@@ -169,6 +166,25 @@ class ZlacDrive:
             self.require_mode(side, zr.ControlMode.VELOCITY)
         self.set_block({"target_velocity_left": left, "target_velocity_right": right})
 
+    def set_velocity_pair(self, commands: Mapping[str, tuple[int, int]]) -> None:
+        """Rig.set_velocities: side -> (velocity [0.1 r/min], ramp [0.1 r/min/s]); ramps as needed,
+        then both targets in one FC16."""
+        rpm = {side: round(commands[side][0] / 10.0) for side in SIDES}
+        for side in SIDES:
+            self.table[f"target_velocity_{side}"].check(rpm[side])
+        self._need_both("set_velocities")
+        ramps: dict[str, int] = {}
+        for side in SIDES:
+            self.require_mode(side, zr.ControlMode.VELOCITY)
+            last = self._cache.get(f"target_velocity_{side}", 0)
+            ms = ramp_time_ms(rpm[side] - last, commands[side][1] / 10.0) if rpm[side] != last else None
+            for stem in ("acceleration_time", "deceleration_time"):
+                name = f"{stem}_{side}"
+                ramps[name] = self._cache.get(name, 500) if ms is None else ms
+        if any(self._cache.get(k) != v for k, v in ramps.items()):
+            self.set_block(ramps)  # 0x2080..0x2083 are contiguous: one FC16
+        self.set_block({"target_velocity_left": rpm["left"], "target_velocity_right": rpm["right"]})
+
     def set_torques(self, left: int, right: int) -> None:
         """Both target torques [mA] in one FC16 (torque mode)."""
         self._need_both("set_torques")
@@ -255,12 +271,14 @@ class ZlacChannelDriver(JointDriver):
         elif self.is_enabled and mode == zr.ControlMode.TORQUE:
             self.drive.set(self._r("target_torque"), 0, force=True)
 
-    def _ramps(self, acceleration: int | None, deceleration: int | None) -> None:
-        """Acceleration/deceleration [0.1 r/min per s] -> the ramp-time registers [ms]."""
+    def _ramps(self, delta_rpm: float, acceleration: int | None, deceleration: int | None) -> None:
+        """Acceleration/deceleration [0.1 r/min per s] for a change of ``delta_rpm`` -> ramp times [ms]."""
+        if delta_rpm == 0:
+            return
         if acceleration is not None:
-            self.drive.set(self._r("acceleration_time"), ramp_time_ms(acceleration / 10.0))
+            self.drive.set(self._r("acceleration_time"), ramp_time_ms(delta_rpm, acceleration / 10.0))
         if deceleration is not None:
-            self.drive.set(self._r("deceleration_time"), ramp_time_ms(deceleration / 10.0))
+            self.drive.set(self._r("deceleration_time"), ramp_time_ms(delta_rpm, deceleration / 10.0))
 
     # -- velocity mode --
     def set_velocity(self, velocity: int, *, acceleration: int | None = None, deceleration: int | None = None) -> None:
@@ -269,7 +287,8 @@ class ZlacChannelDriver(JointDriver):
         self.table[self._r("target_velocity")].check(rpm)
         self._require_enabled()
         self.drive.require_mode(self.side, zr.ControlMode.VELOCITY)
-        self._ramps(acceleration, deceleration)
+        last = self.drive._cache.get(self._r("target_velocity"), 0)
+        self._ramps(rpm - last, acceleration, deceleration)
         self.drive.set(self._r("target_velocity"), rpm, force=True)
 
     # -- position modes --
@@ -280,7 +299,7 @@ class ZlacChannelDriver(JointDriver):
         self._require_enabled()
         self.drive.require_mode(self.side, mode)
         self.drive.set_sync(False)
-        self._ramps(acceleration, deceleration)
+        self._ramps(rpm or self.drive._cache.get(self._r("target_speed"), 120), acceleration, deceleration)
         if rpm is not None:
             self.drive.set(self._r("target_speed"), rpm)
         self.drive.set(self._r("target_position"), counts, force=True)
