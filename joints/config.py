@@ -38,6 +38,7 @@ class SimConfig:
     model: str = "erob_stand.xml"
     timestep: float = 0.001
     realtime: bool = False
+    direct: bool = False  #: in-process direct path (message objects, no bytes); identical results
 
 
 @dataclass(frozen=True)
@@ -178,7 +179,10 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
         raise r.err(where, f"{chosen!r} is not a backend", BACKENDS)
 
     s = r.table(data, "sim")
-    r.known(s, "sim", ("model", "timestep", "realtime"))
+    r.known(s, "sim", ("model", "timestep", "realtime", "direct"))
+    direct = s.get("direct", False)
+    if not isinstance(direct, bool):
+        raise r.err("sim.direct", f"expected true or false, got {direct!r}")
     realtime = s.get("realtime", False)
     if not isinstance(realtime, bool):
         raise r.err("sim.realtime", f"expected true or false, got {realtime!r}")
@@ -186,6 +190,7 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
         model=str(s.get("model", SimConfig.model)),
         timestep=r.number(s, "sim.timestep", SimConfig.timestep, positive=True, maximum=0.01),
         realtime=realtime,
+        direct=direct,
     )
 
     buses: dict[str, BusConfig] = {}

@@ -194,8 +194,12 @@ def _in_file(exc: ConfigError, source: str) -> ConfigError:
 
 
 def build(config: RigConfig, *, transports: Mapping[str, ByteTransport] | None = None,
-          clock: Clock | None = None, world: Any = None) -> Rig:
-    """Assemble a rig from a validated config and ready transports (one per bus)."""
+          clock: Clock | None = None, world: Any = None, peers: Mapping[str, Any] | None = None) -> Rig:
+    """Assemble a rig from a validated config and ready transports (one per bus).
+
+    ``peers`` (sim): bus name -> emulated bus answering message objects; those buses get the
+    direct link (no bytes) instead of the byte path.
+    """
     from joints.drivers import make_driver
 
     clock = clock or MonotonicClock()
@@ -205,8 +209,15 @@ def build(config: RigConfig, *, transports: Mapping[str, ByteTransport] | None =
         for name, bcfg in config.buses.items():
             if name not in opened:
                 opened[name] = _open_hardware_transport(bcfg)
-            link = ModbusLink(
-                opened[name],
+            link_type: Any = ModbusLink
+            extra: dict[str, Any] = {}
+            if peers and name in peers:
+                from joints.link.modbus import DirectModbusLink
+
+                link_type, extra = DirectModbusLink, {"peer": peers[name]}
+            link = link_type(
+                transport=opened[name],
+                **extra,
                 policy=RetryPolicy(timeout=bcfg.timeout, retries=bcfg.retries),
                 echo=bcfg.echo,
                 clock=clock,
@@ -279,4 +290,5 @@ def open_sim(cfg: RigConfig) -> Rig:
         from joints.sim.pacing import RealtimeClock
 
         clock = RealtimeClock(world)
-    return build(cfg, transports=transports, clock=clock, world=world)
+    peers = {name: world.buses[name] for name in cfg.buses if name in world.buses} if cfg.sim.direct else None
+    return build(cfg, transports=transports, clock=clock, world=world, peers=peers)

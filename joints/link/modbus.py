@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Callable, Protocol, Sequence
 
 from joints.clock import Clock, MonotonicClock
 from joints.codecs import modbus as mb
@@ -197,3 +197,38 @@ class ModbusLink:
             ):
                 return reply
         raise UnexpectedReply(f"reply {_describe(reply)} does not answer {_describe(request)}")
+
+
+class MessagePeer(Protocol):
+    """An in-process Modbus bus that answers message objects (the emulated drives)."""
+
+    def exchange(self, msg: mb.Request) -> mb.Reply | None: ...
+
+
+class DirectModbusLink(ModbusLink):
+    """The sim's direct path: requests go to the emulated bus as message objects, no bytes.
+
+    Rule: identical results to the byte path - the same validation (every request is still
+    encoded, so an illegal one raises the same EncodeError before anything happens), the same
+    reply matching and errors, the same trace records (frames are encoded only when tracing).
+    """
+
+    def __init__(self, peer: MessagePeer, transport: ByteTransport, **kw: object) -> None:
+        super().__init__(transport, **kw)  # type: ignore[arg-type]
+        self.peer = peer
+
+    def _once(self, request: mb.Request, frame: bytes) -> mb.Reply | None:
+        self.transactions += 1
+        if self.trace is not None:
+            self._record("tx", frame, _describe(request))
+        reply = self.peer.exchange(request)
+        if request.slave == BROADCAST:
+            return None
+        if reply is None:
+            raise ReplyTimeout(
+                f"{self.name}: no reply from slave {request.slave} to {_describe(request)} "
+                f"(no emulated drive at that address)"
+            )
+        if self.trace is not None:
+            self._record("rx", mb.encode(reply), _describe(reply))
+        return self._match(request, reply)

@@ -215,6 +215,20 @@ class ModbusDeviceBus:
         self._codec.flush()
         return self.receive(b"")
 
+    def exchange(self, msg: mb.Request) -> mb.Reply | None:
+        """Message-level twin of :meth:`receive` (the sim's direct path: no bytes, no CRC).
+
+        Gives the reply :meth:`receive` would encode - None where the bus stays silent
+        (broadcast, no such slave).
+        """
+        if msg.slave == 0:
+            if not isinstance(msg, (mb.ReadHoldingRegisters, mb.ReadInputRegisters)):
+                for s in self.slaves.values():
+                    s.handle(msg)
+            return None
+        slave = self.slaves.get(msg.slave)
+        return None if slave is None else slave.handle(msg)
+
     def _dispatch(self, msg: mb.Message) -> bytes:
         if not isinstance(msg, (mb.ReadHoldingRegisters, mb.ReadInputRegisters, mb.WriteSingleRegister, mb.WriteMultipleRegisters, mb.UnsupportedRequest)):
             return b""

@@ -498,7 +498,8 @@ _REGISTERS: list[Register] = [
            "velocity observer coefficient 4.", minimum=0, maximum=30000, default=1000),
     # ---- Control parameters (lines 1079-1191) ----------------------------------------------
     _reg(0x2080, "Acceleration time(Left)", "uint16", _RW, "ms",
-         "Left wheel: acceleration ramp time (0 to rated speed).",
+         "Left wheel: acceleration ramp time: the time to reach the commanded speed (the manual gives "
+         "no reference speed; driver and emulator both read it so).",
          minimum=0, maximum=32767, default=500),
     _reg(0x2081, "Acceleration time(Right)", "uint16", _RW, "ms",
          "Right wheel: acceleration ramp time.",
