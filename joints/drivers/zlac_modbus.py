@@ -341,7 +341,9 @@ class ZlacChannelDriver(JointDriver):
         self.drive.control(zr.ControlWord.QUICK_STOP)
 
     def clear_errors(self) -> None:
+        """Clear faults (0x06, both wheels). The drive is then disabled and needs "enable" (0x08)."""
         self.drive.control(zr.ControlWord.CLEAR_FAULT)
+        self.drive.state.enabled.clear()
 
     # -- status --
     def state(self) -> RawState:
@@ -350,6 +352,9 @@ class ZlacChannelDriver(JointDriver):
     def state_from(self, v: Mapping[str, int], t: float) -> RawState:
         """This wheel's part of a status block read by :meth:`ZlacDrive.read_status`."""
         hi = self.side == "left"
+        if v["error_code_left"] or v["error_code_right"]:
+            # a fault switches BOTH motors off (one state machine): the drive disabled itself
+            self.drive.state.enabled.clear()
         running = (v["motor_state"] >> 8) & 0xFF if hi else v["motor_state"] & 0xFF
         temp = (v["motor_temperature"] >> 8) & 0xFF if hi else v["motor_temperature"] & 0xFF
         return RawState(
