@@ -100,10 +100,69 @@ def cmd_write(args: argparse.Namespace) -> int:
 
 
 def cmd_registers(args: argparse.Namespace) -> int:
-    from joints.devices.erob.registers import EROB_MODBUS
+    if args.device == "zlac8015d":
+        from joints.devices.zlac.registers import ZLAC8015D as table
+    else:
+        from joints.devices.erob.registers import EROB_MODBUS as table
 
-    for r in EROB_MODBUS:
-        print(f"0x{r.address:04X}  {r.name:<40} {r.type:<6} {r.access.value:<7} {r.unit}")
+    for r in table:
+        flag = "  (persistent: needs --confirm)" if r.persistent else ""
+        print(f"0x{r.address:04X}  {r.name:<48} {r.type:<6} {r.access.value:<7} {r.unit}{flag}")
+    return 0
+
+
+def cmd_monitor(args: argparse.Namespace) -> int:
+    """Frame monitor: poll every joint's state and print each frame (time, direction, bus, data, meaning)."""
+    from joints.link.trace import Trace
+
+    trace = Trace(echo=lambda r: print(str(r), flush=True))
+    with _open(args) as rig:
+        rig.trace(trace)
+        end = rig.time + args.duration
+        while rig.time < end:
+            rig.read_states()
+            rig.sleep(args.period)
+        rig.trace(None)
+    if args.export:
+        path = trace.export(args.export)
+        print(f"exported {len(trace)} frames to {path}", file=sys.stderr)
+    return 0
+
+
+def cmd_send(args: argparse.Namespace) -> int:
+    """Send one custom Modbus frame on a bus and print the decoded reply."""
+    from joints.codecs import modbus as mb
+    from joints.codecs.crc import append_crc, crc_ok
+    from joints.errors import FrameError
+
+    raw = bytes.fromhex(args.frame.replace(" ", ""))
+    if not crc_ok(raw):
+        raw = append_crc(raw)  # accept frames typed without their CRC
+    codec = mb.ModbusRtuCodec(mb.Role.DEVICE)
+    codec.feed(raw)
+    codec.flush()
+    try:
+        msg = codec.next_message()
+    except FrameError as exc:
+        raise FrameError(f"not a Modbus request: {exc}", data=raw) from exc
+    if not isinstance(msg, (mb.ReadHoldingRegisters, mb.ReadInputRegisters, mb.WriteSingleRegister,
+                            mb.WriteMultipleRegisters)):
+        print(f"joints: error: unsupported request {msg!r}", file=sys.stderr)
+        return 2
+    if not isinstance(msg, (mb.ReadHoldingRegisters, mb.ReadInputRegisters)) and not args.confirm:
+        print("joints: error: this frame writes to the drive (it may move a motor or change settings); "
+              "add --confirm to send it", file=sys.stderr)
+        return 2
+    from joints.link.trace import Trace
+
+    trace = Trace(echo=lambda r: print(str(r), flush=True))
+    with _open(args) as rig:
+        if args.bus not in rig.buses:
+            print(f"joints: error: no bus {args.bus!r} (have {', '.join(rig.buses)})", file=sys.stderr)
+            return 2
+        link = rig.buses[args.bus].link
+        link.trace = trace
+        link.transact(msg, idempotent=False)
     return 0
 
 
@@ -151,8 +210,25 @@ def build_parser() -> argparse.ArgumentParser:
     sv.add_argument("config")
     sv.set_defaults(func=cmd_sim_serve)
 
-    r = sub.add_parser("registers", help="list the eRob Modbus register table")
+    r = sub.add_parser("registers", help="list a device's Modbus register table")
+    r.add_argument("--device", choices=("erob", "zlac8015d"), default="erob")
     r.set_defaults(func=cmd_registers)
+
+    m = sub.add_parser("monitor", help="frame monitor: poll the joints and print every frame")
+    m.add_argument("config")
+    m.add_argument("--backend", choices=("sim", "hardware"))
+    m.add_argument("--duration", type=float, default=1.0, help="seconds (simulated time in sim)")
+    m.add_argument("--period", type=float, default=0.1, help="seconds between polls")
+    m.add_argument("--export", help="write the frames to a .csv or .jsonl file")
+    m.set_defaults(func=cmd_monitor)
+
+    se = sub.add_parser("send", help="send one custom Modbus frame (hex, CRC optional) and print the reply")
+    se.add_argument("config")
+    se.add_argument("bus")
+    se.add_argument("frame", help='e.g. "02 03 00 66 00 02"')
+    se.add_argument("--backend", choices=("sim", "hardware"))
+    se.add_argument("--confirm", action="store_true", help="required for frames that write")
+    se.set_defaults(func=cmd_send)
     return p
 
 

@@ -185,3 +185,42 @@ def test_read_only_write_returns_2(loopback: tuple[Path, Drive], capsys: pytest.
     assert main(["write", str(path), "shoulder", "actual_position", "1"]) == 2
     assert "read-only" in capsys.readouterr().err
     assert drive.write_log == []
+
+
+# --- frame monitor and custom frames on an emulated bus ---------------------------------------
+
+SIM_TOML = """
+backend = "sim"
+[sim]
+model = "erob_stand.xml"
+[buses.rs485]
+protocol = "modbus-rtu"
+[joints.joint1]
+device = "erob"
+bus = "rs485"
+address = 2
+"""
+
+
+def test_monitor_prints_and_exports_frames(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
+    pytest.importorskip("mujoco")
+    cfg = tmp_path / "sim.toml"
+    cfg.write_text(SIM_TOML)
+    out = tmp_path / "frames.csv"
+    assert main(["monitor", str(cfg), "--duration", "0.3", "--period", "0.1", "--export", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "02 03 00 60 00 19 84 2D" in printed and "ReadHoldingRegisters" in printed
+    rows = out.read_text().splitlines()
+    assert rows[0] == "time,direction,bus,data,meaning" and len(rows) == 1 + 6  # 3 polls x (tx, rx)
+
+
+def test_send_custom_frame_adds_crc_and_refuses_unconfirmed_writes(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
+    pytest.importorskip("mujoco")
+    cfg = tmp_path / "sim.toml"
+    cfg.write_text(SIM_TOML)
+    assert main(["send", str(cfg), "rs485", "02 03 00 66 00 02"]) == 0
+    assert "02 03 00 66 00 02 24 27" in capsys.readouterr().out
+    assert main(["send", str(cfg), "rs485", "02 06 00 F0 00 01"]) == 2
+    assert "--confirm" in capsys.readouterr().err
+    assert main(["send", str(cfg), "rs485", "02 06 00 F0 00 01", "--confirm"]) == 0
+    assert main(["send", str(cfg), "rs485", "02 03 00 66 00 02 00 00"]) == 2  # bad CRC, not silently fixed
