@@ -5,7 +5,9 @@ Importing ``envs`` registers, under the ``joints/`` namespace:
 * ``joints/ErobReach-v0`` - one eRob joint (models/erob_stand.xml) to a random target angle
   (:class:`envs.reach.ErobReachEnv`);
 * ``joints/ErobArmReach-v0`` - the 3-joint eRob arm (models/erob_arm3.xml), end effector to a
-  random point (:class:`envs.reach.ErobArmReachEnv`).
+  random point (:class:`envs.reach.ErobArmReachEnv`);
+* ``joints/DiffDriveGoal-v0`` - a differential-drive base on one ZLAC8015D (models/zlac_diffdrive.xml)
+  to a random goal pose, wheel-speed actions, wheel odometry (:class:`envs.diffdrive.DiffDriveGoalEnv`).
 
 >>> import gymnasium as gym, envs
 >>> env = gym.make("joints/ErobReach-v0", action_mode="torque")          # doctest: +SKIP
@@ -28,20 +30,25 @@ from gymnasium.envs.registration import register, registry
 
 from envs.base import ACTION_MODES, JointsEnv
 from envs.configs import SHIPPED, config_path, default_config
+from envs.diffdrive import DiffDriveGoalEnv
 from envs.kinematics import erob_arm3_ee
 from envs.randomization import DomainRandomization
 from envs.reach import ErobArmReachEnv, ErobReachEnv
 
-#: id -> (entry point, max_episode_steps)
+#: id -> (entry point, max_episode_steps): the joint-space envs (JointsEnv: one action per joint, action_mode)
 ENV_IDS = {
     "joints/ErobReach-v0": ("envs.reach:ErobReachEnv", 250),
     "joints/ErobArmReach-v0": ("envs.reach:ErobArmReachEnv", 250),
+}
+#: id -> (entry point, max_episode_steps): mobile bases (wheel-speed actions, no action_mode)
+BASE_ENV_IDS = {
+    "joints/DiffDriveGoal-v0": ("envs.diffdrive:DiffDriveGoalEnv", 400),
 }
 
 
 def register_envs() -> None:
     """Register the ``joints/`` ids with gymnasium (idempotent; done on ``import envs``)."""
-    for env_id, (entry_point, steps) in ENV_IDS.items():
+    for env_id, (entry_point, steps) in {**ENV_IDS, **BASE_ENV_IDS}.items():
         if env_id not in registry:
             register(id=env_id, entry_point=entry_point, max_episode_steps=steps)
 
@@ -50,8 +57,10 @@ register_envs()
 
 __all__ = [
     "ACTION_MODES",
+    "BASE_ENV_IDS",
     "ENV_IDS",
     "SHIPPED",
+    "DiffDriveGoalEnv",
     "DomainRandomization",
     "ErobArmReachEnv",
     "ErobReachEnv",

@@ -123,8 +123,12 @@ class Rig:
         if self.world is None:
             raise JointsError("reset() is only available with backend = \"sim\"")
         self.world.reset()
-        for j in self.joints.values():
+        for name, j in self.joints.items():
             j.driver_reset()
+            watchdog = self.config.joints[name].watchdog_ms
+            setter = getattr(j.driver, "set_communication_timeout", None)
+            if watchdog is not None and setter is not None:
+                setter(watchdog)  # the power cycle restored the drive's default: re-apply the config
 
     def trace(self, sink: Callable[[TraceRecord], None] | None) -> None:
         """Route every frame of every bus to ``sink`` (None stops tracing)."""

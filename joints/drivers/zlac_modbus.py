@@ -148,7 +148,15 @@ class ZlacDrive:
 
     # -- power --
     def enable(self, side: str) -> None:
+        """Enable the drive (both motors) - after zeroing any velocity or torque target left in
+        the registers, so that enabling never restarts an old command (e.g. after a fault)."""
         if not self.state.enabled:
+            targets = self.table.decode_block(0x2088, self.link.read_registers(self.slave, 0x2088, 0x2091 - 0x2088 + 1))
+            for pair in (("target_velocity_left", "target_velocity_right"), ("target_torque_left", "target_torque_right")):
+                if any(targets[n] for n in pair):
+                    self.set_block({n: 0 for n in pair})
+                else:
+                    self._cache.update({n: 0 for n in pair})
             self.control(zr.ControlWord.ENABLE)
         self.state.enabled.add(side)
 

@@ -266,6 +266,9 @@ class ZlacChannel:
         self.fault = 0  #: Fault bits (error code register)
         self.overload_time = 0.0
         self.i_out = 0.0  #: motor current [A]
+        # the winding starts at ambient (as the eRob emulator's power cycle): a World.reset must
+        # not carry heat from one episode into the next
+        self.temperature = self.drive.ambient
         self.reset_loops()
 
     def reset_loops(self) -> None:

@@ -43,7 +43,8 @@ def _rig() -> tuple[ZlacDrive, ZlacChannelDriver, ZlacChannelDriver, Trace, Modb
 
 
 def _frames(trace: Trace) -> list[str]:
-    return [r.data.hex(" ").upper() for r in trace if r.direction == "tx"]
+    """Frames that write (the driver also reads the targets before enabling: reads change nothing)."""
+    return [r.data.hex(" ").upper() for r in trace if r.direction == "tx" and r.data[1] in (0x06, 0x10)]
 
 
 def _manual(seq_ids: list[str]) -> list[str]:
@@ -97,6 +98,18 @@ def test_driver_sends_the_manuals_frames(seq_id: str) -> None:
     ours = _frames(trace)
     # the manual enables once; we enable per wheel, which sends the control word only once
     assert ours == expected
+
+
+def test_enable_zeroes_stale_targets_first() -> None:
+    d, left, right, trace, slave = _rig()
+    slave.set("target_velocity_left", 250)  # left over from before a fault
+    vel_init(d, left, right)
+    writes = _frames(trace)
+    zero = "01 10 20 88 00 02 04 00 00 00 00"
+    enable = "01 06 20 0E 00 08 E2 0F"
+    assert any(w.startswith(zero) for w in writes)
+    assert [i for i, w in enumerate(writes) if w.startswith(zero)][0] < writes.index(enable)
+    assert slave.get("target_velocity_left") == 0
 
 
 def test_mode_belongs_to_the_drive() -> None:

@@ -22,10 +22,10 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-import joints  # noqa: E402
-from joints.devices.zlac.registers import Fault  # noqa: E402
-from joints.errors import StateError  # noqa: E402
-from joints.link.trace import Trace  # noqa: E402
+import joints
+from joints.devices.zlac.registers import Fault
+from joints.errors import StateError
+from joints.link.trace import Trace
 
 RPM = 2 * math.pi / 60  #: rad/s per r/min
 RADIUS = 0.1016  #: m, wheel radius of models/zlac_diffdrive.xml

@@ -1,0 +1,780 @@
+"""joints/DiffDriveGoal-v0: drive a differential-drive base (two hub motors on one ZLAC8015D) to a
+goal pose, with wheel-speed actions and wheel odometry - the same env on the emulated drive and on a
+real one.
+
+Rules (as :mod:`envs.base`):
+
+* The env acts only through the public API: ``joint.enable / disable / clear_faults / read /
+  write / stop``, ``rig.set_velocities`` (both wheels of the drive in ONE FC16),
+  ``rig.read_states`` (both wheels in ONE FC03), ``rig.sleep``, ``rig.reset``. Sim-only extras
+  (ground truth in ``info``, domain randomisation, rendering of the world) use ``rig.world`` and
+  only when ``rig.backend == "sim"``.
+* The pose the agent sees is an estimate from wheel odometry (measured wheel angles, the wheel
+  radius and the track), so observations and rewards mean the same on hardware.
+* Fixed control period on the rig's clock; deterministic in sim (every draw from ``np_random``).
+* The ZLAC8015D quick-stops both wheels when the host is silent longer than 0x2000 (1000 ms by
+  default). Every step talks to the drive; between steps, call ``step`` at least every ~0.5 s on
+  hardware (a gap longer than the watchdog ends the episode, see "Episode End").
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import sys
+from collections import deque
+from collections.abc import Iterator, Mapping, Sequence
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+import joints
+from envs.randomization import DomainRandomization
+from envs.render import CameraSpec, SceneRenderer
+from joints.errors import DeviceFault, MotionTimeout
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+#: m, wheel radius of models/zlac_diffdrive.xml (8-inch hub)
+WHEEL_RADIUS = 0.1016
+#: m, wheel centre to wheel centre in models/zlac_diffdrive.xml
+TRACK = 0.40
+#: the shipped default config (``joints/configs/zlac_diffdrive.toml``)
+CONFIG_NAME = "zlac_diffdrive"
+#: domain-randomisation gain factors -> the ZLAC8015D registers they scale (per wheel: _left/_right)
+ZLAC_GAIN_REGISTERS = {"speed_loop_gain": "vl_kp", "speed_loop_integral": "vl_ki", "position_loop_gain": "pl_kp"}
+#: ZLAC8015D control mode 0x200D: velocity
+VELOCITY_MODE = 3
+#: s the chassis gets to settle on its wheels after a sim reset (the model starts it 1 mm up)
+SIM_SETTLE = 0.1
+#: rad/s below which a wheel counts as standing still (hardware reset)
+STANDSTILL = 0.05
+
+
+@contextlib.contextmanager
+def config_path() -> Iterator[Path]:
+    """A filesystem path of the shipped ``zlac_diffdrive.toml`` (valid inside the ``with`` block)."""
+    with resources.as_file(resources.files("joints.configs") / f"{CONFIG_NAME}.toml") as p:
+        yield Path(p)
+
+
+def default_config() -> dict[str, Any]:
+    """The shipped diff-drive config as a fresh, editable dict (e.g. set the bus port for hardware)."""
+    text = (resources.files("joints.configs") / f"{CONFIG_NAME}.toml").read_text(encoding="utf-8")
+    data: dict[str, Any] = tomllib.loads(text)
+    return data
+
+
+def wrap_angle(a: float) -> float:
+    """``a`` [rad] wrapped to [-pi, pi)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+class WheelOdometry:
+    """Pose (x, y, heading) of a differential-drive base from its two wheel angles.
+
+    Sign convention of ``models/zlac_diffdrive.xml``: a positive angle increment on either wheel
+    rolls that side forward; the left wheel is on +y. Increments are integrated at the midpoint
+    heading (exact for constant wheel speeds between two readings).
+    """
+
+    def __init__(self, wheel_radius: float = WHEEL_RADIUS, track: float = TRACK) -> None:
+        if not (math.isfinite(wheel_radius) and wheel_radius > 0 and math.isfinite(track) and track > 0):
+            raise ValueError(f"wheel_radius and track must be > 0 m, got {wheel_radius!r}, {track!r}")
+        self.wheel_radius = float(wheel_radius)
+        self.track = float(track)
+        self.x = self.y = self.heading = 0.0
+        self._last: tuple[float, float] | None = None
+
+    def restart(self, left: float, right: float) -> None:
+        """Pose (0, 0, 0) at the wheel angles ``left``, ``right`` [rad]."""
+        self.x = self.y = self.heading = 0.0
+        self._last = (float(left), float(right))
+
+    def update(self, left: float, right: float) -> tuple[float, float, float]:
+        """Integrate to the wheel angles ``left``, ``right`` [rad]; returns (x [m], y [m], heading [rad])."""
+        if self._last is None:
+            self.restart(left, right)
+            return self.pose
+        dl = (left - self._last[0]) * self.wheel_radius
+        dr = (right - self._last[1]) * self.wheel_radius
+        self._last = (float(left), float(right))
+        ds = 0.5 * (dl + dr)
+        dth = (dr - dl) / self.track
+        mid = self.heading + 0.5 * dth
+        self.x += ds * math.cos(mid)
+        self.y += ds * math.sin(mid)
+        self.heading = wrap_angle(self.heading + dth)
+        return self.pose
+
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        return self.x, self.y, self.heading
+
+
+class DiffDriveGoalEnv(gym.Env[np.ndarray, np.ndarray]):
+    """Drive a differential-drive base to a goal pose (x, y, heading).
+
+    ## Description
+    A base with two 8-inch hub motors on one ZLAC8015D dual-channel driver over Modbus RTU
+    (``models/zlac_diffdrive.xml``: wheel radius 0.1016 m, track 0.40 m, 23.8 kg, two casters) -
+    emulated in MuJoCo with the sim backend, or a real base with the hardware backend, from the
+    same config. At every reset a goal pose is drawn relative to where the base stands; the agent
+    commands the two wheel speeds and must bring the base to the goal position, facing the goal
+    heading. The base pose is estimated from the measured wheel angles (wheel odometry), exactly
+    as on a real robot.
+
+    ## Action Space
+    ``Box(-1, 1, (2,), float32)``: ``[left, right]`` wheel speed commands, ``a x limits.velocity``
+    [rad/s] of each wheel (default config: 10 rad/s = 95 r/min = 1.02 m/s at the rim). Both are
+    sent in ONE Modbus FC16 (``Rig.set_velocities``) and reached with the drive's own ramp at the
+    config's ``motion.acceleration`` (default 20 rad/s^2). A positive speed on a wheel rolls that
+    side forward: ``[1, 1]`` drives straight ahead, ``[1, -1]`` turns clockwise in place.
+    ``env.unwrapped.command_of(a)`` / ``action_of(rad_s)`` convert. The drive holds the command
+    for the control period (zero-order hold, ``dt`` = 50 ms by default).
+
+    ## Observation Space
+    ``Box(float64, (10,))`` (values clipped to the bounds; ``A`` = ``arena`` = 4 m by default,
+    ``G`` = the largest goal distance, ``V`` = the wheel velocity limit):
+
+    | index | observation | unit | bounds |
+    |---|---|---|---|
+    | 0, 1 | base position estimate x, y (episode frame: the pose at reset is the origin, x ahead) | m | +- 2A |
+    | 2, 3 | cos, sin of the heading estimate | - | [-1, 1] |
+    | 4, 5 | goal position in the base frame (x ahead, y to the left) | m | +- (2A + G) |
+    | 6, 7 | cos, sin of (goal heading - heading estimate) | - | [-1, 1] |
+    | 8, 9 | measured wheel speeds left, right | rad/s | +- 2V |
+
+    The estimate integrates the measured wheel angles with ``wheel_radius`` and ``track``; in sim
+    it drifts from the truth only by tyre slip and scrub (~3 % of the angle turned in place).
+
+    ## Rewards
+    ``reward = reward_progress + reward_heading + reward_action + reward_success`` (all in
+    ``info``), computed from the estimate (so the same on hardware):
+
+    - ``reward_progress = progress_weight * (d_{t-1} - d_t)``: metres gained towards the goal
+      position (``progress_weight`` = 10);
+    - ``reward_heading = -heading_weight * |heading error| / pi * exp(-d_t / heading_scale)``: the
+      goal heading matters near the goal (``heading_weight`` = 0.2, ``heading_scale`` = 0.3 m);
+    - ``reward_action = -action_weight * sum(a^2)`` (``action_weight`` = 0.01);
+    - ``reward_success = success_bonus`` (5) at the step the goal is reached.
+
+    ``info`` also holds ``distance`` [m], ``heading_error`` [rad], ``is_success`` (distance <
+    ``success_distance`` = 0.1 m and |heading error| < ``success_heading`` = 0.2 rad),
+    ``pose_estimate`` and ``goal`` (x, y, heading in the episode frame), ``wheel_velocities``
+    [rad/s], ``time`` [s], ``faults`` (wheel -> drive error code, 0 = none). In sim also
+    ``true_pose`` (the chassis site ``base`` from the physics, same frame) and ``true_distance``.
+
+    ## Starting State
+    Sim: physics and the emulated drive at power-on (``rig.reset``): the base stands at the world
+    origin facing +x; both wheels enabled in velocity mode at zero speed, then 0.1 s to settle
+    (the first observation is at t = 0.1 s). Hardware: faults are cleared, the drive is (re-)enabled
+    in velocity mode with zero speed and the env waits until both wheels stand still; the pose
+    estimate restarts at zero wherever the base is. The goal is drawn (seeded) at a distance
+    uniform in ``goal_distance`` (0.5-2.0 m), a bearing uniform in [-pi, pi) and a heading
+    uniform in [-pi, pi), relative to the start pose. ``reset(options={"goal": [x, y, heading]})``
+    fixes it.
+
+    ## Episode End
+    - Termination: success (when ``terminate_on_success``, the default); a drive fault on either
+      wheel; the estimate leaving the square ``|x|, |y| <= arena``; on hardware, a gap between
+      steps longer than the drive's communication-offline time (the drive has quick-stopped;
+      ``info["watchdog"]``). The env then commands zero speed (the drive ramps down).
+    - Truncation: 400 steps (20 s at the default control period), by the registered
+      ``max_episode_steps``.
+
+    ## Arguments
+    ``gymnasium.make("joints/DiffDriveGoal-v0", config=None, backend=None, control_period=0.05,
+    render_mode=None, domain_randomization=False, goal_distance=(0.5, 2.0), success_distance=0.1,
+    success_heading=0.2, terminate_on_success=True, progress_weight=10.0, heading_weight=0.2,
+    heading_scale=0.3, action_weight=0.01, success_bonus=5.0, arena=4.0, wheel_radius=0.1016,
+    track=0.40, reset_timeout=10.0, width=480, height=480)``
+
+    - ``config``: joints config (TOML path or dict) with the two wheels of a ZLAC8015D
+      (``device = "zlac8015d"``, ``channel = "left"`` / ``"right"``), each with a velocity limit; default
+      the shipped ``joints/configs/zlac_diffdrive.toml`` (:func:`envs.diffdrive.default_config`).
+      ``backend``: ``"sim"`` | ``"hardware"``, overrides it.
+    - ``control_period`` [s] (sim: a whole number of physics substeps), ``render_mode``
+      (``"rgb_array"``, ``"human"``; on hardware a kinematic twin posed from the estimate),
+      ``domain_randomization`` (sim only, :class:`envs.DomainRandomization`: the gain factors
+      scale the drive's Vl Kp / Vl Ki / Pl Kp registers; friction, armature, torque constant
+      change the wheel joints; ``encoder_noise`` [rad] is added to the wheel angles the odometry
+      sees; ``latency`` delays actions by whole periods).
+    - ``wheel_radius``, ``track`` [m]: the odometry's geometry (measure your base).
+    - ``reset_timeout`` [s]: hardware reset, time for the wheels to come to rest.
+
+    ## Version History
+    - v0: initial version (ZLAC8015D over Modbus RTU; sim and hardware backends).
+    """
+
+    metadata: dict[str, Any] = {"render_modes": ["human", "rgb_array"], "render_fps": 20}  # noqa: RUF012
+    camera = CameraSpec(lookat=(0.0, 0.0, 0.0), distance=6.0, azimuth=90.0, elevation=-60.0)
+
+    def __init__(
+        self,
+        config: str | os.PathLike[str] | Mapping[str, Any] | None = None,
+        backend: str | None = None,
+        *,
+        control_period: float = 0.05,
+        render_mode: str | None = None,
+        domain_randomization: bool | Mapping[str, Any] | DomainRandomization = False,
+        goal_distance: Sequence[float] = (0.5, 2.0),
+        success_distance: float = 0.1,
+        success_heading: float = 0.2,
+        terminate_on_success: bool = True,
+        progress_weight: float = 10.0,
+        heading_weight: float = 0.2,
+        heading_scale: float = 0.3,
+        action_weight: float = 0.01,
+        success_bonus: float = 5.0,
+        arena: float = 4.0,
+        wheel_radius: float = WHEEL_RADIUS,
+        track: float = TRACK,
+        reset_timeout: float = 10.0,
+        width: int = 480,
+        height: int = 480,
+    ) -> None:
+        if isinstance(control_period, bool) or not isinstance(control_period, (int, float)) \
+                or not math.isfinite(control_period) or control_period <= 0:
+            raise ValueError(f"control_period must be a finite number of seconds > 0, got {control_period!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode {render_mode!r} is not one of {self.metadata['render_modes']}")
+        positive = {"success_distance": success_distance, "success_heading": success_heading,
+                    "heading_scale": heading_scale, "arena": arena, "reset_timeout": reset_timeout}
+        for what, v in positive.items():
+            if not math.isfinite(v) or v <= 0:
+                raise ValueError(f"{what} must be > 0, got {v!r}")
+        weights = {"progress_weight": progress_weight, "heading_weight": heading_weight,
+                   "action_weight": action_weight, "success_bonus": success_bonus}
+        for what, v in weights.items():
+            if not math.isfinite(v) or v < 0:
+                raise ValueError(f"{what} must be >= 0, got {v!r}")
+        gd = tuple(float(v) for v in goal_distance)
+        if len(gd) != 2 or not all(math.isfinite(v) for v in gd) or not 0 <= gd[0] <= gd[1] or gd[1] >= arena:
+            raise ValueError(f"goal_distance must be (low, high) with 0 <= low <= high < arena, got {goal_distance!r}")
+        self.odometry = WheelOdometry(wheel_radius, track)  # validates the geometry
+        self.control_period = float(control_period)
+        self.render_mode = render_mode
+        self.goal_distance = gd
+        self.success_distance = float(success_distance)
+        self.success_heading = float(success_heading)
+        self.terminate_on_success = bool(terminate_on_success)
+        self.progress_weight = float(progress_weight)
+        self.heading_weight = float(heading_weight)
+        self.heading_scale = float(heading_scale)
+        self.action_weight = float(action_weight)
+        self.success_bonus = float(success_bonus)
+        self.arena = float(arena)
+        self.reset_timeout = float(reset_timeout)
+        self.width, self.height = int(width), int(height)
+        self.metadata = {**type(self).metadata, "render_fps": round(1.0 / self.control_period)}
+
+        self.rig = self._open(config, backend)
+        try:
+            self._setup(domain_randomization)
+        except BaseException:
+            self.rig.close()
+            raise
+        self._closed = False
+
+    # -- construction -----------------------------------------------------------------------
+    @staticmethod
+    def _open(config: Any, backend: str | None) -> joints.Rig:
+        if config is None:
+            with config_path() as p:
+                return joints.open(p, backend=backend)
+        return joints.open(config, backend=backend)
+
+    def _select_wheels(self, rig: joints.Rig) -> tuple[str, str]:
+        by_side: dict[str, str] = {}
+        for name, jc in rig.config.joints.items():
+            if jc.device == "zlac8015d" and jc.channel in ("left", "right"):
+                by_side.setdefault(jc.channel, name)
+        if len(rig.joints) != 2 or set(by_side) != {"left", "right"}:
+            raise joints.ConfigError(
+                "DiffDriveGoal drives exactly two wheels of a ZLAC8015D (device = \"zlac8015d\"), one with "
+                f"channel = \"left\" and one with channel = \"right\"; the config has {list(rig.joints)}",
+                file=rig.config.source, key="joints")
+        return by_side["left"], by_side["right"]
+
+    def _setup(self, domain_randomization: Any) -> None:
+        rig = self.rig
+        self.sim = rig.backend == "sim"
+        self.wheel_names = list(self._select_wheels(rig))  #: [left, right]
+        self.wheels = [rig.joints[n] for n in self.wheel_names]
+        vlim = []
+        for name, j in zip(self.wheel_names, self.wheels):
+            if j.limits.velocity is None:
+                raise joints.ConfigError("the env needs the wheel's velocity limit (it scales actions)",
+                                         file=rig.config.source, key=f"joints.{name}.limits.velocity")
+            vlim.append(j.limits.velocity)
+        self.velocity_limits = np.array(vlim, dtype=np.float64)  #: (2,) rad/s
+        watchdog = [rig.config.joints[n].watchdog_ms for n in self.wheel_names]
+        #: s of host silence after which the drive quick-stops (0x2000; its default 1000 ms)
+        self.watchdog = min((w if w is not None else 1000) for w in watchdog) / 1000.0
+        if self.sim:
+            steps = self.control_period / rig.world.timestep
+            if abs(steps - round(steps)) > 1e-6 or round(steps) < 1:
+                raise ValueError(f"control_period {self.control_period} s must be a whole number of physics "
+                                 f"substeps of {rig.world.timestep} s")
+        self.randomization = DomainRandomization.from_arg(domain_randomization)
+        if self.randomization is not None and not self.sim:
+            gym.logger.warn("domain randomisation acts on the simulation only; ignored on hardware")
+            self.randomization = None
+
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+        a, g, v = self.arena, self.goal_distance[1], self.velocity_limits
+        low = np.array([-2 * a, -2 * a, -1, -1, -2 * a - g, -2 * a - g, -1, -1, -2 * v[0], -2 * v[1]], np.float64)
+        self.observation_space = spaces.Box(low, -low, dtype=np.float64)
+        self._obs_low, self._obs_high = low, -low
+
+        self._mjcf = [rig.config.joints[n].mjcf_joint or n for n in self.wheel_names]
+        self._site = -1
+        self._nominal: dict[str, np.ndarray] = {}
+        self._gains: dict[str, dict[str, int]] = {}
+        if self.sim:
+            self._setup_sim()
+
+        self._renderer: SceneRenderer | None = None
+        self._twin: tuple[Any, Any, int, list[int]] | None = None
+        self.goal = np.zeros(3)  #: goal (x, y, heading) in the episode frame
+        self._queue: deque[np.ndarray] = deque()
+        self._states: dict[str, joints.JointState] = {}
+        self._angles = np.zeros(2)
+        self._distance = 0.0
+        self._tick = 0
+        self._t0 = 0.0
+        self._last_io = 0.0
+        self._origin = np.zeros(3)  #: sim: the true pose at which the estimate restarted
+        self._noise = 0.0
+        self._noise_rng: np.random.Generator | None = None
+        self.randomization_sample: dict[str, Any] | None = None
+        self.overruns = 0  #: hardware: steps whose tick had passed before the commands were sent
+
+    def _setup_sim(self) -> None:
+        world = self.rig.world
+        mj, model = world.mujoco, world.model
+        self._site = mj.mj_name2id(model, mj.mjtObj.mjOBJ_SITE, "base")
+        if self._site < 0:
+            raise joints.ConfigError("the model has no site 'base' (the chassis reference the env reports "
+                                     "as ground truth)", file=self.rig.config.source, key="sim.model")
+        jids = [mj.mj_name2id(model, mj.mjtObj.mjOBJ_JOINT, m) for m in self._mjcf]
+        self._dofs = np.array([model.jnt_dofadr[j] for j in jids])
+        self._actuators = np.array([mj.mj_name2id(model, mj.mjtObj.mjOBJ_ACTUATOR, f"{n}_motor")
+                                    for n in self.wheel_names])
+        self._nominal = {"frictionloss": model.dof_frictionloss.copy(), "damping": model.dof_damping.copy(),
+                         "armature": model.dof_armature.copy(), "gear": model.actuator_gear.copy()}
+        # the odometry's geometry against the model's (the axle anchors and the tyres' radius)
+        data = world.data
+        anchors = [np.array(data.xanchor[j]) for j in jids]
+        track = float(np.linalg.norm(anchors[0] - anchors[1]))
+        bodies = [model.jnt_bodyid[j] for j in jids]
+        radii = [float(model.geom_size[g][0]) for g in range(model.ngeom)
+                 if model.geom_bodyid[g] in bodies and model.geom_type[g] == mj.mjtGeom.mjGEOM_CYLINDER]
+        if abs(track - self.odometry.track) > 0.1 * track or \
+                (radii and abs(max(radii) - self.odometry.wheel_radius) > 0.1 * max(radii)):
+            gym.logger.warn(f"odometry geometry (radius {self.odometry.wheel_radius} m, track "
+                            f"{self.odometry.track} m) differs from the model's (radius "
+                            f"{max(radii) if radii else '?'} m, track {track:.4f} m)")
+        if self.randomization is not None:
+            # power-on values of the gain registers (the factors apply to these)
+            self._gains = {n: {reg: j.read(self._gain_register(reg, n)) for reg in ZLAC_GAIN_REGISTERS}
+                           for n, j in zip(self.wheel_names, self.wheels)}
+
+    def _gain_register(self, factor: str, wheel: str) -> str:
+        return f"{ZLAC_GAIN_REGISTERS[factor]}_{self._side(wheel)}"
+
+    def _side(self, wheel: str) -> str:
+        return "left" if wheel == self.wheel_names[0] else "right"
+
+    # -- conversions ------------------------------------------------------------------------
+    @property
+    def dt(self) -> float:
+        """Seconds per step: the control period."""
+        return self.control_period
+
+    def command_of(self, action: Sequence[float] | np.ndarray) -> np.ndarray:
+        """Wheel speeds [rad/s] (left, right) for a normalised action (clipped to [-1, 1])."""
+        a = np.asarray(action, dtype=np.float64).reshape(-1).clip(-1.0, 1.0)
+        out: np.ndarray = a * self.velocity_limits
+        return out
+
+    def action_of(self, wheel_speeds: Sequence[float] | np.ndarray) -> np.ndarray:
+        """The normalised action (float32, clipped) for wheel speeds [rad/s]; inverse of :meth:`command_of`."""
+        a = np.asarray(wheel_speeds, dtype=np.float64).reshape(-1) / self.velocity_limits
+        out: np.ndarray = np.clip(a, -1.0, 1.0).astype(np.float32)
+        return out
+
+    def wheel_speeds_of(self, v: float, omega: float) -> np.ndarray:
+        """Wheel speeds [rad/s] (left, right) for a base speed ``v`` [m/s] and yaw rate ``omega`` [rad/s]."""
+        r, half = self.odometry.wheel_radius, 0.5 * self.odometry.track
+        return np.array([(v - omega * half) / r, (v + omega * half) / r])
+
+    # -- gymnasium API ----------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start an episode; ``options={"goal": [x, y, heading]}`` fixes the goal (episode frame)."""
+        super().reset(seed=seed)
+        self._check_open()
+        options = dict(options or {})
+        self.goal = self._sample_goal(options)
+        if self.sim:
+            self._reset_sim()
+        else:
+            self._reset_hardware()
+        latency = self.randomization_sample["latency"] if self.randomization_sample else 0
+        self._queue = deque(np.zeros(2) for _ in range(latency))
+        self._tick = 0
+        states = self._read()
+        self.odometry.restart(*self._angles)
+        if self.sim:
+            self._origin = self._world_pose()
+        self._t0 = self.rig.time
+        self._distance = self._goal_terms()[0]
+        obs = self._observation()
+        info = self._info(states)
+        if self.randomization_sample is not None:
+            info["randomization"] = self.randomization_sample
+        if self.render_mode == "human":
+            self.render()
+        return obs, info
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        self._check_open()
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != self.action_space.shape:
+            raise ValueError(f"action shape {a.shape} != {self.action_space.shape}")
+        if not np.isfinite(a).all():
+            raise ValueError(f"action must be finite, got {a.tolist()}")
+        a = a.clip(-1.0, 1.0)
+        watchdog = not self.sim and self._watchdog_tripped()
+        if self._queue:  # bus latency (domain randomisation): the action waits its turn
+            self._queue.append(a)
+            self._command(self._queue.popleft())
+        else:
+            self._command(a)
+        self._tick += 1
+        self._wait_until(self._t0 + self._tick * self.control_period)
+        states = self._read()
+        self.odometry.update(*self._angles)
+        d, e = self._goal_terms()
+        success = d < self.success_distance and abs(e) < self.success_heading
+        r_progress = self.progress_weight * (self._distance - d)
+        r_heading = -self.heading_weight * abs(e) / math.pi * math.exp(-d / self.heading_scale)
+        r_action = -self.action_weight * float(np.dot(a, a))
+        r_success = self.success_bonus if success else 0.0
+        self._distance = d
+        obs = self._observation()
+        info = self._info(states)
+        info.update(reward_progress=r_progress, reward_heading=r_heading, reward_action=r_action,
+                    reward_success=r_success)
+        x, y, _ = self.odometry.pose
+        out_of_arena = abs(x) > self.arena or abs(y) > self.arena
+        info["out_of_arena"] = out_of_arena
+        info["watchdog"] = watchdog
+        fault = any(s.fault for s in states.values())
+        terminated = fault or out_of_arena or watchdog or (success and self.terminate_on_success)
+        if terminated:
+            self._safe_stop()
+        if self.render_mode == "human":
+            self.render()
+        return obs, float(r_progress + r_heading + r_action + r_success), bool(terminated), False, info
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            gym.logger.warn("render() was called without a render_mode; pass render_mode='rgb_array' or 'human'")
+            return None
+        self._check_open()
+        if self._renderer is None:
+            model, data = self._scene()
+            self._renderer = SceneRenderer(self.render_mode, model, data, width=self.width, height=self.height,
+                                           camera=self.camera)
+        if not self.sim:
+            self._update_twin()
+        return self._renderer.render(self.rig.time - self._t0, self._markers())
+
+    def close(self) -> None:
+        if getattr(self, "_closed", True):
+            return
+        self._closed = True
+        try:
+            if self._renderer is not None:
+                self._renderer.close()
+                self._renderer = None
+        finally:
+            self.rig.close()
+
+    # -- task -------------------------------------------------------------------------------
+    def _sample_goal(self, options: Mapping[str, Any]) -> np.ndarray:
+        if "goal" in options:
+            g = np.asarray(options["goal"], dtype=np.float64).reshape(-1)
+            if g.shape != (3,) or not np.all(np.isfinite(g)):
+                raise ValueError(f"goal must be [x, y, heading] (m, m, rad), finite, got {options['goal']!r}")
+            if max(abs(g[0]), abs(g[1])) >= self.arena:
+                raise ValueError(f"goal {g[:2].tolist()} lies outside the arena (|x|, |y| < {self.arena} m)")
+            return np.array([g[0], g[1], wrap_angle(float(g[2]))])
+        rng = self.np_random
+        dist = float(rng.uniform(*self.goal_distance))
+        bearing = float(rng.uniform(-math.pi, math.pi))
+        heading = float(rng.uniform(-math.pi, math.pi))
+        return np.array([dist * math.cos(bearing), dist * math.sin(bearing), heading])
+
+    def _goal_terms(self) -> tuple[float, float]:
+        """(distance [m], heading error [rad]) of the estimate to the goal."""
+        x, y, th = self.odometry.pose
+        return math.hypot(self.goal[0] - x, self.goal[1] - y), wrap_angle(float(self.goal[2]) - th)
+
+    def _observation(self) -> np.ndarray:
+        x, y, th = self.odometry.pose
+        c, s = math.cos(th), math.sin(th)
+        dx, dy = self.goal[0] - x, self.goal[1] - y
+        e = float(self.goal[2]) - th
+        v = [self._states[n].velocity for n in self.wheel_names]
+        obs = np.array([x, y, c, s, c * dx + s * dy, -s * dx + c * dy, math.cos(e), math.sin(e), v[0], v[1]])
+        out: np.ndarray = np.clip(obs, self._obs_low, self._obs_high)
+        return out
+
+    def _info(self, states: Mapping[str, joints.JointState]) -> dict[str, Any]:
+        d, e = self._goal_terms()
+        info: dict[str, Any] = {
+            "time": float(self.rig.time),  # s on the rig's clock (sim: simulated seconds since reset)
+            "faults": {n: int(states[n].fault) for n in self.wheel_names},
+            "distance": d,
+            "heading_error": e,
+            "is_success": bool(d < self.success_distance and abs(e) < self.success_heading),
+            "pose_estimate": np.array(self.odometry.pose),
+            "goal": self.goal.copy(),
+            "wheel_velocities": np.array([states[n].velocity for n in self.wheel_names]),
+        }
+        if self.sim:
+            tp = self.true_pose()
+            info["true_pose"] = tp
+            info["true_distance"] = math.hypot(self.goal[0] - tp[0], self.goal[1] - tp[1])
+        return info
+
+    def true_pose(self) -> np.ndarray:
+        """Sim: the chassis site ``base`` from the physics, (x, y, heading) in the episode frame."""
+        if not self.sim:
+            raise RuntimeError("the true pose is known in simulation only")
+        x, y, th = self._world_pose()
+        ox, oy, oth = self._origin
+        c, s = math.cos(oth), math.sin(oth)
+        return np.array([c * (x - ox) + s * (y - oy), -s * (x - ox) + c * (y - oy), wrap_angle(th - oth)])
+
+    def _world_pose(self) -> np.ndarray:
+        """Sim: (x, y, heading) of the chassis site ``base`` in the world frame."""
+        data = self.rig.world.data
+        p = data.site_xpos[self._site]
+        m = data.site_xmat[self._site]
+        return np.array([float(p[0]), float(p[1]), math.atan2(float(m[3]), float(m[0]))])
+
+    # -- bus --------------------------------------------------------------------------------
+    def _read(self) -> dict[str, joints.JointState]:
+        self._states = self.rig.read_states()  # one FC03 per drive
+        self._last_io = self.rig.time
+        angles = np.array([self._states[n].position for n in self.wheel_names])
+        if self._noise_rng is not None and self._noise > 0:
+            angles += self._noise_rng.normal(0.0, self._noise, 2)
+        self._angles = angles
+        return self._states
+
+    def _command(self, action: np.ndarray) -> None:
+        if not all(j.enabled for j in self.wheels):  # faulted/disabled drive: the episode has ended
+            return
+        cmd = self.command_of(action)
+        self.rig.set_velocities({n: float(c) for n, c in zip(self.wheel_names, cmd)})  # one FC16
+
+    def _wait_until(self, t: float) -> None:
+        remaining = t - self.rig.time
+        if remaining > 0:
+            self.rig.sleep(remaining)
+        elif remaining < -1e-9:
+            self.overruns += 1
+
+    def _watchdog_tripped(self) -> bool:
+        """Hardware: after a silence longer than the drive's offline time, has it quick-stopped?
+
+        The drive shows the trip as 0x20AF "software connected status" = 0 until the next enable.
+        """
+        if self.rig.time - self._last_io <= 0.9 * self.watchdog:
+            return False
+        try:
+            return self.wheels[0].read("software_connected_status") == 0
+        except joints.JointsError:
+            return True
+
+    def _safe_stop(self) -> None:
+        try:
+            if all(j.enabled for j in self.wheels):
+                self.rig.set_velocities({n: 0.0 for n in self.wheel_names})  # ramp down, keep holding
+        except joints.JointsError as exc:  # keep going: the drive's own protections still apply
+            gym.logger.warn(f"stopping the wheels failed: {exc}")
+
+    def _enable_velocity_mode(self) -> None:
+        """The manual's velocity-mode start: zero targets, velocity mode, enable; then hold zero speed.
+
+        The targets go to zero first because "enable" in velocity mode runs the wheels to the
+        target registers as they stand (a quick stop or a fault leaves the old ones there).
+        """
+        for n, j in zip(self.wheel_names, self.wheels):
+            j.write(f"target_velocity_{self._side(n)}", 0)
+        self.wheels[0].write("control_mode", VELOCITY_MODE)  # one mode for the drive (both wheels)
+        for j in self.wheels:
+            j.enable()
+        self.rig.set_velocities({n: 0.0 for n in self.wheel_names})
+
+    # -- resets -----------------------------------------------------------------------------
+    def _reset_sim(self) -> None:
+        self.rig.reset()  # physics + drive to power-on; drivers forget, wheels count as disabled
+        self._randomize()
+        for j in self.wheels:
+            # the configured watchdog (the power cycle restored the register's default)
+            w = self.rig.config.joints[j.name].watchdog_ms
+            if w is not None and w != 1000:
+                j.write("communication_offline_time", w)
+        if self.randomization_sample is not None:
+            for n, j in zip(self.wheel_names, self.wheels):
+                f = self.randomization_sample["joints"][n]
+                for factor in ZLAC_GAIN_REGISTERS:
+                    j.write(self._gain_register(factor, n), max(1, min(65535, round(self._gains[n][factor] * f[factor]))))
+        self._enable_velocity_mode()
+        self.rig.sleep(SIM_SETTLE)
+
+    def _randomize(self) -> None:
+        model = self.rig.world.model
+        model.dof_frictionloss[:] = self._nominal["frictionloss"]
+        model.dof_damping[:] = self._nominal["damping"]
+        model.dof_armature[:] = self._nominal["armature"]
+        model.actuator_gear[:] = self._nominal["gear"]
+        self.randomization_sample = None
+        self._noise = 0.0
+        self._noise_rng = None
+        if self.randomization is None:
+            return
+        sample = self.randomization.sample(self.np_random, self.wheel_names)
+        self.randomization_sample = sample
+        noise = []
+        for i, n in enumerate(self.wheel_names):
+            f = sample["joints"][n]
+            dof, act = self._dofs[i], self._actuators[i]
+            model.dof_frictionloss[dof] = self._nominal["frictionloss"][dof] * f["friction"]
+            model.dof_damping[dof] = self._nominal["damping"][dof] * f["friction"]
+            model.dof_armature[dof] = self._nominal["armature"][dof] * f["armature"]
+            model.actuator_gear[act, 0] = self._nominal["gear"][act, 0] * f["torque_constant"]
+            noise.append(f["encoder_noise"])
+        self._noise = float(np.mean(noise))
+        self._noise_rng = np.random.default_rng(int(self.np_random.integers(2**63)))
+
+    def _reset_hardware(self) -> None:
+        rig = self.rig
+        self.randomization_sample = None
+        states = rig.read_states()
+        faulted = [n for n in self.wheel_names if states[n].fault]
+        if faulted:
+            self.wheels[0].clear_faults()  # one control word clears both wheels
+            states = rig.read_states()
+            for n, j in zip(self.wheel_names, self.wheels):
+                if states[n].fault:
+                    raise DeviceFault(f"joint {n}", states[n].fault, j.driver.fault_text(states[n].fault))
+        tripped = self.wheels[0].read("software_connected_status") == 0  # offline watchdog stop
+        if tripped or faulted or not all(j.enabled for j in self.wheels):
+            for j in self.wheels:  # "stop" then "enable": the drive leaves quick stop / disabled
+                j.disable()
+        self._enable_velocity_mode()
+        deadline = rig.time + self.reset_timeout
+        while True:
+            states = rig.read_states()
+            for n, j in zip(self.wheel_names, self.wheels):
+                if states[n].fault:
+                    raise DeviceFault(f"joint {n}", states[n].fault, j.driver.fault_text(states[n].fault))
+            if all(abs(states[n].velocity) < STANDSTILL for n in self.wheel_names):
+                break
+            if rig.time > deadline:
+                speeds = {n: round(states[n].velocity, 3) for n in self.wheel_names}
+                raise MotionTimeout(f"reset: the wheels did not come to rest within {self.reset_timeout} s "
+                                    f"(rad/s: {speeds})")
+            rig.sleep(self.control_period)
+
+    # -- rendering --------------------------------------------------------------------------
+    def _markers(self) -> list[tuple[np.ndarray, tuple[float, float, float, float]]]:
+        """The goal (green) and a point 0.25 m along its heading (blue), in world coordinates."""
+        gx, gy, gth = (float(v) for v in self.goal)
+        pts = [(gx, gy), (gx + 0.25 * math.cos(gth), gy + 0.25 * math.sin(gth))]
+        if self.sim:  # episode frame -> world
+            ox, oy, oth = self._origin
+            c, s = math.cos(oth), math.sin(oth)
+            pts = [(ox + c * x - s * y, oy + s * x + c * y) for x, y in pts]
+        return [(np.array([pts[0][0], pts[0][1], 0.05]), (0.1, 0.9, 0.2, 0.6)),
+                (np.array([pts[1][0], pts[1][1], 0.05]), (0.1, 0.3, 0.9, 0.6))]
+
+    def _scene(self) -> tuple[Any, Any]:
+        if self.sim:
+            return self.rig.world.model, self.rig.world.data
+        import mujoco
+
+        model = mujoco.MjModel.from_xml_path(str(self._model_path()))
+        data = mujoco.MjData(model)
+        free = next(j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE)
+        wheels = [int(model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, m)]) for m in self._mjcf]
+        self._twin = (model, data, int(model.jnt_qposadr[free]), wheels)
+        return model, data
+
+    def _model_path(self) -> Path:
+        """The config's model file: a path (relative to the config's folder) or a model shipped in
+        ``joints.models``."""
+        cfg = self.rig.config
+        p = Path(cfg.sim.model)
+        candidates = [p] if p.is_absolute() else [(cfg.base_dir or Path.cwd()) / p]
+        candidates.append(Path(str(resources.files("joints.models") / p.name)))
+        for c in candidates:
+            if c.is_file():
+                return c
+        raise joints.ConfigError(f"model {cfg.sim.model!r} not found (rendering needs it on hardware too)",
+                                 file=cfg.source, key="sim.model")
+
+    def _update_twin(self) -> None:
+        """Hardware: pose the kinematic copy of the model at the estimate, wheels at their angles."""
+        import mujoco
+
+        assert self._twin is not None
+        model, data, free, wheels = self._twin
+        x, y, th = self.odometry.pose
+        data.qpos[free:free + 2] = (x, y)
+        data.qpos[free + 3:free + 7] = (math.cos(th / 2), 0.0, 0.0, math.sin(th / 2))
+        for adr, q in zip(wheels, self._angles):
+            data.qpos[adr] = q
+        mujoco.mj_forward(model, data)
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise RuntimeError("the env is closed")
+
+    # -- a scripted baseline ------------------------------------------------------------------
+    def go_to_goal_action(self, obs: np.ndarray, *, k_distance: float = 1.5, k_bearing: float = 3.0,
+                          k_heading: float = 2.0, max_speed: float = 0.8, max_turn: float = 3.0) -> np.ndarray:
+        """A scripted controller from the observation alone (works on sim and hardware): drive to
+        the goal position (forwards or backwards, whichever faces it), then turn to the goal
+        heading. Returns the normalised action."""
+        gx, gy = float(obs[4]), float(obs[5])  # goal in the base frame
+        e = math.atan2(float(obs[7]), float(obs[6]))  # heading error
+        rho = math.hypot(gx, gy)
+        if rho > 0.5 * self.success_distance:
+            bearing = math.atan2(gy, gx)
+            forward = math.cos(bearing) >= 0.0
+            steer = bearing if forward else wrap_angle(bearing + math.pi)
+            v = k_distance * rho * math.cos(bearing)
+            omega = k_bearing * steer
+        else:
+            v, omega = 0.0, k_heading * e
+        v = max(-max_speed, min(max_speed, v))
+        omega = max(-max_turn, min(max_turn, omega))
+        w = self.wheel_speeds_of(v, omega)
+        scale = max(1.0, float(np.max(np.abs(w) / self.velocity_limits)))  # keep the curvature
+        return self.action_of(w / scale)
