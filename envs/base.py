@@ -399,7 +399,8 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
         obs[2 * n:3 * n] = [s.torque for s in states]
         obs[3 * n:] = self._task_terms(pos)
         np.maximum(obs, self._obs_low, out=obs)
-        return np.minimum(obs, self._obs_high, out=obs)
+        np.minimum(obs, self._obs_high, out=obs)
+        return obs
 
     def _info(self, states: Sequence[joints.JointState]) -> dict[str, Any]:
         return {

@@ -7,7 +7,7 @@ or the device told us so) versus :class:`PeerProtocolError` (the peer sent somet
 
 from __future__ import annotations
 
-from typing import Iterable
+from collections.abc import Iterable
 
 
 class JointsError(Exception):

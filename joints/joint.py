@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 from joints.clock import Clock
 from joints.drivers.base import JointDriver, RawState, Units

@@ -11,10 +11,11 @@ import dataclasses
 import logging
 import math
 import os
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Callable, Mapping
+from typing import Any
 
 from joints.clock import Clock, MonotonicClock
 from joints.config import BusConfig, RigConfig, load, parse
@@ -107,7 +108,7 @@ class Rig:
             if sync is not None and name not in done:
                 pair = {n: self.joints[n] for n in checked if getattr(self.joints[n].driver, "status_group", None) is group}
                 if len(pair) == 2:
-                    sync({getattr(j.driver, "side"): (checked[n][0], checked[n][1]) for n, j in pair.items()})
+                    sync({getattr(j.driver, "side"): checked[n] for n, j in pair.items()})  # noqa: B009
                     done.update(pair)
                     continue
             if name not in done:
@@ -164,7 +165,7 @@ class Rig:
         if errors:
             raise JointsError(f"errors while closing the rig: {'; '.join(map(str, errors))}") from errors[0]
 
-    def __enter__(self) -> "Rig":
+    def __enter__(self) -> Rig:
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
@@ -245,7 +246,7 @@ def build(config: RigConfig, *, transports: Mapping[str, ByteTransport] | None =
     return Rig(config, clock=clock, buses=buses, joints=joints, world=world)
 
 
-def open(config: str | os.PathLike[str] | Mapping[str, Any] | RigConfig, *, backend: str | None = None) -> Rig:  # noqa: A001
+def open(config: str | os.PathLike[str] | Mapping[str, Any] | RigConfig, *, backend: str | None = None) -> Rig:
     """Open a rig from a TOML path, a dict or a parsed config.
 
     ``backend`` (or the environment variable ``JOINTS_BACKEND``) overrides the file's backend.

@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import enum
 import re
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Iterator, Mapping, Sequence
+from typing import Any
 
 from joints.errors import CommandError, RegisterError
 
@@ -79,7 +80,7 @@ class Register:
         lo, hi, _ = _RANGES[self.type]
         return lo, hi
 
-    def check(self, value: int | float) -> int:
+    def check(self, value: float) -> int:
         """Validate a value for writing; returns it as int or raises :class:`CommandError`."""
         if isinstance(value, bool) or not isinstance(value, int):
             if isinstance(value, float) and value.is_integer():
@@ -248,5 +249,5 @@ class RegisterTable:
         return [r.name for r in self.registers]
 
     @staticmethod
-    def build(device: str, registers: Iterable[Register]) -> "RegisterTable":
+    def build(device: str, registers: Iterable[Register]) -> RegisterTable:
         return RegisterTable(device, tuple(sorted(registers, key=lambda r: r.address)))

@@ -12,7 +12,7 @@ if TYPE_CHECKING:
     from joints.devices.erob.profiles import ErobProfile
 
 
-def erob_profile(cfg: "JointConfig") -> "ErobProfile":
+def erob_profile(cfg: JointConfig) -> ErobProfile:
     """The device profile of a configured eRob joint (``model`` + ``profile`` overrides).
 
     Errors name the joint's key (``joints.<name>.model`` / ``joints.<name>.profile.<field>``).
@@ -33,7 +33,7 @@ def erob_profile(cfg: "JointConfig") -> "ErobProfile":
     return prof
 
 
-def hub_profile(cfg: "JointConfig") -> Any:
+def hub_profile(cfg: JointConfig) -> Any:
     """The hub-motor profile of a configured ZLAC8015D wheel (``profile`` overrides applied)."""
     from joints.devices.zlac.profile import HubMotorProfile
     from joints.errors import ConfigError
@@ -46,12 +46,12 @@ def hub_profile(cfg: "JointConfig") -> Any:
                           allowed=exc.allowed) from exc
 
 
-def device_profile(cfg: "JointConfig") -> Any:
+def device_profile(cfg: JointConfig) -> Any:
     """The physical profile of a configured joint, by device."""
     return hub_profile(cfg) if cfg.device == "zlac8015d" else erob_profile(cfg)
 
 
-def make_driver(cfg: "JointConfig", link: object, clock: "Clock", shared: dict[Any, Any] | None = None) -> JointDriver:
+def make_driver(cfg: JointConfig, link: object, clock: Clock, shared: dict[Any, Any] | None = None) -> JointDriver:
     """Build the driver for a configured joint on its bus link.
 
     ``shared`` holds per-drive objects (a ZLAC8015D's two channels share one ZlacDrive).

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import abc
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Mapping
 
 from joints.devices.registers import Register, RegisterTable
 from joints.errors import ConfirmationRequired, RegisterError
@@ -26,7 +26,7 @@ class Units:
     torque_constant: float  #: N*m per A at the output
 
     @staticmethod
-    def from_counts(counts_per_rev: int, current_unit: float, torque_constant: float) -> "Units":
+    def from_counts(counts_per_rev: int, current_unit: float, torque_constant: float) -> Units:
         rad = 2.0 * math.pi / counts_per_rev
         return Units(rad, rad, current_unit, torque_constant)
 

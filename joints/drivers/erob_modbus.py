@@ -12,7 +12,8 @@ from dataclasses import dataclass
 
 from joints.clock import Clock, MonotonicClock
 from joints.devices.erob import faults
-from joints.devices.erob.profiles import DEFAULT_MODEL, ErobProfile, profile as lookup_profile
+from joints.devices.erob.profiles import DEFAULT_MODEL, ErobProfile
+from joints.devices.erob.profiles import profile as lookup_profile
 from joints.devices.erob.registers import (
     COUNTS_PER_REV,
     EROB_MODBUS,

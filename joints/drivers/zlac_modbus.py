@@ -16,8 +16,9 @@ in 0.1 r/min (the feedback unit; commands are rounded to the register's 1 r/min)
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 from joints.clock import Clock, MonotonicClock
 from joints.devices.registers import Register

@@ -9,8 +9,9 @@ never start a motion twice.
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Protocol, Sequence
+from typing import Protocol
 
 from joints.clock import Clock, MonotonicClock
 from joints.codecs import modbus as mb

@@ -8,9 +8,9 @@ from __future__ import annotations
 import csv
 import json
 from collections import deque
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable, Deque, Iterator
 
 
 @dataclass(frozen=True, slots=True)
@@ -35,7 +35,7 @@ class Trace:
     """A bounded in-memory recorder; callable, so it plugs into ``ModbusLink(trace=...)``."""
 
     def __init__(self, maxlen: int | None = 100_000, *, echo: Callable[[TraceRecord], None] | None = None) -> None:
-        self.records: Deque[TraceRecord] = deque(maxlen=maxlen)
+        self.records: deque[TraceRecord] = deque(maxlen=maxlen)
         self._echo = echo
 
     def __call__(self, record: TraceRecord) -> None:

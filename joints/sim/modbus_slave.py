@@ -11,7 +11,7 @@ behaviour.
 
 from __future__ import annotations
 
-from typing import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 
 from joints.codecs import modbus as mb
 from joints.devices.registers import Access, Register, RegisterTable

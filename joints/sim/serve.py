@@ -12,7 +12,8 @@ import select
 import signal
 import threading
 import time
-from typing import Any, Callable, TextIO
+from collections.abc import Callable
+from typing import Any, TextIO
 
 from joints.transports.pty import PtyEndpoint
 

@@ -10,10 +10,11 @@ profile, not from the XML. Nothing here reads the wall clock.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping, Protocol, Sequence
+from typing import Any, Protocol
 
 from joints.clock import ManualClock
 from joints.errors import ConfigError, MissingDependencyError
@@ -146,7 +147,7 @@ class World:
                 raise ConfigError(f"MJCF joint {d.mjcf_joint!r} must be a hinge", key=f"joints.{d.name}.mjcf_joint")
             prof = d.profile
             jnt.armature = prof.armature
-            damping = getattr(jnt, "damping")
+            damping = jnt.damping
             if hasattr(damping, "__len__"):  # MuJoCo >= 4: [linear, quadratic, cubic] coefficients
                 jnt.damping = [prof.viscous_friction] + [0.0] * (len(damping) - 1)
             else:

@@ -25,7 +25,7 @@ class ByteTransport(abc.ABC):
     def read(self, timeout: float) -> bytes:
         """Bytes received so far, waiting up to ``timeout`` s for the first one."""
 
-    def reset_input(self) -> None:  # noqa: B027 - optional hook
+    def reset_input(self) -> None:
         """Discard bytes received but not read yet."""
 
     @abc.abstractmethod
@@ -36,7 +36,7 @@ class ByteTransport(abc.ABC):
     def name(self) -> str:
         return type(self).__name__
 
-    def __enter__(self) -> "ByteTransport":
+    def __enter__(self) -> ByteTransport:
         return self
 
     def __exit__(

@@ -7,7 +7,8 @@ an empty read is a timeout that cost no wall-clock time).
 
 from __future__ import annotations
 
-from typing import Callable, Protocol
+from collections.abc import Callable
+from typing import Protocol
 
 from joints.errors import TransportError
 from joints.transports.base import ByteTransport

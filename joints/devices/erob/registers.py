@@ -31,16 +31,16 @@ import enum
 from joints.devices.registers import Access, Register, RegisterTable
 
 __all__ = [
-    "AchieveStatus",
-    "BaudRate",
     "COUNTS_PER_REV",
     "EROB_MODBUS",
     "MANUAL_DEFINITIONS",
+    "STATUS_BLOCK_START",
+    "STATUS_BLOCK_WORDS",
+    "AchieveStatus",
+    "BaudRate",
     "MotionMode",
     "MotionStatus",
     "OperationMode",
-    "STATUS_BLOCK_START",
-    "STATUS_BLOCK_WORDS",
 ]
 
 #: Output-shaft encoder resolution (19-bit single-turn): counts per output revolution.
@@ -95,7 +95,7 @@ class BaudRate(enum.IntEnum):
         return _BPS[self]
 
     @classmethod
-    def from_bps(cls, bps: int) -> "BaudRate":
+    def from_bps(cls, bps: int) -> BaudRate:
         """The code for a line speed in bit/s (ValueError if the drive does not support it)."""
         for code, rate in _BPS.items():
             if rate == bps:
