@@ -10,10 +10,7 @@ wall clock).
 
 from __future__ import annotations
 
-import json
 import math
-import select
-import subprocess
 import sys
 import time
 from collections.abc import Iterator
@@ -395,7 +392,7 @@ def test_render_rgb_array_sim_and_hardware_twin(gl_unavailable: str) -> None:
 # -- hardware backend against `joints sim serve` -----------------------------------------------
 
 @pytest.fixture
-def served(tmp_path: Path) -> Iterator[str]:
+def served(tmp_path: Path, sim_server) -> Iterator[str]:  # type: ignore[no-untyped-def]
     """``joints sim serve`` of the shipped diff-drive config in another process; yields the pty port."""
     pytest.importorskip("serial")
     if sys.platform == "win32":
@@ -403,23 +400,8 @@ def served(tmp_path: Path) -> Iterator[str]:
     cfg = tmp_path / "served.toml"
     with envs.diffdrive.config_path() as p:
         cfg.write_text(p.read_text())
-    proc = subprocess.Popen([sys.executable, "-m", "joints", "sim", "serve", str(cfg)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
-    try:
-        ready, _, _ = select.select([proc.stdout], [], [], 30)
-        assert ready, "joints sim serve printed no port within 30 s"
-        assert proc.stdout is not None
-        line = json.loads(proc.stdout.readline())
-        assert line["bus"] == "rs485" and line["port"].startswith("/dev/")
-        yield line["port"]
-    finally:
-        proc.terminate()
-        try:
-            rc = proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            raise
-        assert rc == 0, proc.stderr.read() if proc.stderr else rc
+    with sim_server(cfg) as port:
+        yield port
 
 
 def test_same_controller_through_the_hardware_backend(served: str) -> None:

@@ -5,9 +5,6 @@ pseudo-terminal, the real serial transport, the wall clock)."""
 from __future__ import annotations
 
 import importlib.util
-import json
-import select
-import subprocess
 import sys
 import time
 from collections.abc import Iterator
@@ -46,7 +43,7 @@ def test_pd_policy_reaches_target_in_sim(pd: ModuleType) -> None:
 
 
 @pytest.fixture
-def served(tmp_path: Path) -> Iterator[str]:
+def served(tmp_path: Path, sim_server) -> Iterator[str]:  # type: ignore[no-untyped-def]
     """``joints sim serve`` of the shipped ErobReach config in another process; yields the pty port."""
     pytest.importorskip("serial")
     if sys.platform == "win32":
@@ -54,23 +51,8 @@ def served(tmp_path: Path) -> Iterator[str]:
     cfg = tmp_path / "served.toml"
     with envs.config_path("erob_reach") as p:
         cfg.write_text(p.read_text())
-    proc = subprocess.Popen([sys.executable, "-m", "joints", "sim", "serve", str(cfg)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
-    try:
-        ready, _, _ = select.select([proc.stdout], [], [], 30)
-        assert ready, "joints sim serve printed no port within 30 s"
-        assert proc.stdout is not None
-        line = json.loads(proc.stdout.readline())
-        assert line["bus"] == "rs485" and line["port"].startswith("/dev/")
-        yield line["port"]
-    finally:
-        proc.terminate()
-        try:
-            rc = proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            raise
-        assert rc == 0, proc.stderr.read() if proc.stderr else rc
+    with sim_server(cfg) as port:
+        yield port
 
 
 def test_same_pd_policy_reaches_target_through_hardware_backend(pd: ModuleType, served: str) -> None:

@@ -6,10 +6,7 @@ status on the bus - never a fixed sleep - with generous upper bounds.
 
 from __future__ import annotations
 
-import json
 import math
-import select
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -40,30 +37,13 @@ limits = {{ position = [-3.1, 3.1], velocity = 2.0, torque = 20.0 }}
 
 
 @pytest.fixture
-def served(tmp_path: Path) -> Iterator[tuple[str, Path]]:
+def served(tmp_path: Path, sim_server) -> Iterator[tuple[str, Path]]:  # type: ignore[no-untyped-def]
     cfg = tmp_path / "robot.toml"
     cfg.write_text(CONFIG.format(backend="sim", port="/dev/null"))
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "joints", "sim", "serve", str(cfg)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )
-    try:
-        ready, _, _ = select.select([proc.stdout], [], [], 30)
-        assert ready, "joints sim serve printed no port within 30 s"
-        assert proc.stdout is not None
-        line = json.loads(proc.stdout.readline())
-        assert line["bus"] == "rs485" and line["port"].startswith("/dev/")
+    with sim_server(cfg) as port:
         hw = tmp_path / "hw.toml"
-        hw.write_text(CONFIG.format(backend="hardware", port=line["port"]))
-        yield line["port"], hw
-    finally:
-        proc.terminate()
-        try:
-            rc = proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            raise
-        assert rc == 0, proc.stderr.read() if proc.stderr else rc
+        hw.write_text(CONFIG.format(backend="hardware", port=port))
+        yield port, hw
 
 
 def _script(rig: joints.Rig) -> float:

@@ -15,10 +15,7 @@ keeps the drive's communication-offline watchdog (0x2000, 1000 ms by default) fe
 
 from __future__ import annotations
 
-import json
 import math
-import select
-import subprocess
 import sys
 import time
 from collections.abc import Iterator
@@ -69,30 +66,15 @@ VELOCITY_MODE, ENABLE, STOP = 3, 0x08, 0x07
 
 
 @pytest.fixture(scope="module")
-def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path]]:
+def served(tmp_path_factory: pytest.TempPathFactory, sim_server) -> Iterator[tuple[str, Path]]:  # type: ignore[no-untyped-def]
     """``joints sim serve`` of the diff drive; yields (pty port, a hardware config pointing at it)."""
     tmp = tmp_path_factory.mktemp("zlac_serve")
     cfg = tmp / "robot.toml"
     cfg.write_text(CONFIG.format(backend="sim", port="/dev/null"))
-    proc = subprocess.Popen([sys.executable, "-m", "joints", "sim", "serve", str(cfg)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
-    try:
-        ready, _, _ = select.select([proc.stdout], [], [], 30)
-        assert ready, "joints sim serve printed no port within 30 s"
-        assert proc.stdout is not None
-        line = json.loads(proc.stdout.readline())
-        assert line["bus"] == "rs485" and line["port"].startswith("/dev/")
+    with sim_server(cfg) as port:
         hw = tmp / "hw.toml"
-        hw.write_text(CONFIG.format(backend="hardware", port=line["port"]))
-        yield line["port"], hw
-    finally:
-        proc.terminate()
-        try:
-            rc = proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            raise
-        assert rc == 0, proc.stderr.read() if proc.stderr else rc
+        hw.write_text(CONFIG.format(backend="hardware", port=port))
+        yield port, hw
 
 
 def test_minimalmodbus_master_drives_the_served_zlac(served: tuple[str, Path]) -> None:
