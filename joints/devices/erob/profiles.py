@@ -57,9 +57,10 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields
 from types import MappingProxyType
 
+from joints.devices.profile import validate_fields, with_overrides
 from joints.errors import ConfigError
 
 __all__ = ["DEFAULT_MODEL", "PROFILES", "ErobProfile", "profile"]
@@ -108,27 +109,7 @@ class ErobProfile:
     sources: Mapping[str, str] = field(default_factory=_empty_sources, compare=False, hash=False)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.model, str) or not self.model.strip():
-            raise ConfigError(f"expected a non-empty model name, got {self.model!r}", key="model")
-        for name in _INT_FIELDS:
-            value = getattr(self, name)
-            if isinstance(value, float) and value.is_integer():
-                value = int(value)
-            if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
-                raise ConfigError(
-                    f"{self.model}: expected a positive integer, got {value!r}", key=name
-                )
-            object.__setattr__(self, name, value)
-        for name in _FLOAT_FIELDS:
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise ConfigError(f"{self.model}: expected a number, got {value!r}", key=name)
-            value = float(value)
-            low_ok = value >= 0.0 if name in _NON_NEGATIVE_FIELDS else value > 0.0
-            if not (math.isfinite(value) and low_ok):
-                need = "finite and >= 0" if name in _NON_NEGATIVE_FIELDS else "finite and > 0"
-                raise ConfigError(f"{self.model}: expected {need}, got {value!r}", key=name)
-            object.__setattr__(self, name, value)
+        validate_fields(self, _INT_FIELDS, _FLOAT_FIELDS, _NON_NEGATIVE_FIELDS)
         if self.efficiency > 1.0:
             raise ConfigError(
                 f"{self.model}: efficiency must be in (0, 1], got {self.efficiency!r}",
@@ -184,20 +165,7 @@ class ErobProfile:
         Raises :class:`ConfigError` for an unknown key (the message lists the allowed keys) and
         for a value that is not a positive finite number (friction may be 0).
         """
-        allowed = _OVERRIDABLE
-        unknown = sorted(k for k in kw if k not in allowed)
-        if unknown:
-            raise ConfigError(
-                f"{self.model}: unknown profile key(s) {', '.join(map(repr, unknown))}",
-                key=unknown[0],
-                allowed=allowed,
-            )
-        if not kw:
-            return self
-        sources = dict(self.sources)
-        for key in kw:
-            sources[key] = f"CFG: overridden from config (default {getattr(self, key)!r})"
-        return replace(self, sources=MappingProxyType(sources), **kw)  # type: ignore[arg-type]
+        return with_overrides(self, _OVERRIDABLE, kw)
 
 
 _OVERRIDABLE: tuple[str, ...] = tuple(f.name for f in fields(ErobProfile) if f.name != "sources")
