@@ -215,6 +215,11 @@ class ErobEmulator(ModbusSlave):
         self.peak_time = g("peak_current_time") * 1e-3
         self.vmax = float(max(g("max_speed"), 1))
         self.amax = float(max(g("max_acceleration"), 1))
+        # profile registers as floats for the per-substep loops (refreshed on every settings write)
+        self.acc = float(g("profile_acceleration")) or self.amax
+        self.dec = float(g("profile_deceleration")) or self.amax
+        self.speed = float(g("profile_speed"))
+        self.vprof = min(abs(self.speed), self.vmax)
 
     def place(self, q: float) -> None:
         """The joint is at ``q`` [rad] and at rest (start state, reset): encoder, setpoint and brake follow."""
@@ -501,8 +506,8 @@ class ErobEmulator(ModbusSlave):
     def _speed_ramp(self, dt: float) -> None:
         target = self.mode_speed_target
         v = self.v_ref
-        accel = float(self.v["profile_acceleration"]) or self.amax
-        decel = float(self.v["profile_deceleration"]) or self.amax
+        accel = self.acc
+        decel = self.dec
         speeding_up = abs(target) > abs(v) and (v == 0 or (v > 0) == (target > 0))
         rate = accel if speeding_up else decel
         g = self.gen
@@ -526,9 +531,9 @@ class ErobEmulator(ModbusSlave):
                     self._next_repetitive_leg()
                 return
             return
-        accel = float(self.v["profile_acceleration"]) or self.amax
-        decel = g.rate or float(self.v["profile_deceleration"]) or self.amax
-        vmax = min(float(abs(self.v["profile_speed"])), self.vmax)
+        accel = self.acc
+        decel = g.rate or self.dec
+        vmax = self.vprof
         if g.stopping:
             dv = -v
             step = decel * dt
@@ -542,7 +547,7 @@ class ErobEmulator(ModbusSlave):
                 self.dwell_until = -1.0
             return
         if g.continuous:
-            target_v = math.copysign(vmax, self.v["profile_speed"]) if self.v["profile_speed"] else 0.0
+            target_v = math.copysign(vmax, self.speed) if self.speed else 0.0
             dv = target_v - v
             rate = accel if abs(target_v) > abs(v) else decel
             step = rate * dt
