@@ -61,7 +61,71 @@ LIMIT_MARGIN = 0.05
 OBS_POSITION_MARGIN = 0.5
 
 
-class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
+class RigEnv(gym.Env[np.ndarray, np.ndarray]):
+    """What every ``joints/`` env shares: a rig, a fixed control schedule, rendering and closing.
+
+    Subclasses set ``rig``, ``sim``, ``overruns``, ``_t0``, ``_closed``, ``_renderer``, ``width``,
+    ``height`` and implement ``_scene``, ``_update_twin`` and ``_markers``.
+    """
+
+    rig: joints.Rig
+    sim: bool
+    overruns: int
+    width: int
+    height: int
+    _t0: float
+    _closed: bool
+    _renderer: SceneRenderer | None
+    #: how the renderer looks at the model
+    camera = CameraSpec()
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            gym.logger.warn("render() was called without a render_mode; pass render_mode='rgb_array' or 'human'")
+            return None
+        self._check_open()
+        if self._renderer is None:
+            model, data = self._scene()
+            self._renderer = SceneRenderer(self.render_mode, model, data, width=self.width, height=self.height,
+                                           camera=self.camera)
+        if not self.sim:
+            self._update_twin()
+        return self._renderer.render(self.rig.time - self._t0, self._markers())
+
+    def close(self) -> None:
+        if getattr(self, "_closed", True):
+            return
+        self._closed = True
+        try:
+            if self._renderer is not None:
+                self._renderer.close()
+                self._renderer = None
+        finally:
+            self.rig.close()
+
+    # -- internals --------------------------------------------------------------------------
+    def _check_open(self) -> None:
+        if self._closed:
+            raise RuntimeError("the env is closed")
+
+    def _wait_until(self, t: float) -> None:
+        remaining = t - self.rig.time
+        if remaining > 0:
+            self.rig.sleep(remaining)
+        elif remaining < -1e-9:
+            self.overruns += 1
+
+    def _scene(self) -> tuple[Any, Any]:
+        raise NotImplementedError
+
+    def _update_twin(self) -> None:
+        raise NotImplementedError
+
+    def _markers(self) -> list[tuple[np.ndarray, tuple[float, float, float, float]]]:
+        return []
+
+
+class JointsEnv(RigEnv):
     """Base of the ``joints/`` environments. Subclasses define the task (see :class:`envs.ErobReachEnv`).
 
     Args:
@@ -83,8 +147,6 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
 
     #: the shipped config used when ``config`` is None (file stem in ``joints/configs``)
     default_config: str = ""
-    #: how the renderer looks at the model
-    camera = CameraSpec()
 
     def __init__(
         self,
@@ -354,35 +416,6 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
             self.render()
         return obs, float(reward), bool(terminated), False, info
 
-    def render(self) -> np.ndarray | None:
-        if self.render_mode is None:
-            gym.logger.warn("render() was called without a render_mode; pass render_mode='rgb_array' or 'human'")
-            return None
-        self._check_open()
-        if self._renderer is None:
-            model, data = self._scene()
-            self._renderer = SceneRenderer(self.render_mode, model, data, width=self.width, height=self.height,
-                                           camera=self.camera)
-        if not self.sim:
-            self._update_twin()
-        return self._renderer.render(self.rig.time - self._t0, self._markers())
-
-    def close(self) -> None:
-        if getattr(self, "_closed", True):
-            return
-        self._closed = True
-        try:
-            if self._renderer is not None:
-                self._renderer.close()
-                self._renderer = None
-        finally:
-            self.rig.close()
-
-    # -- internals --------------------------------------------------------------------------
-    def _check_open(self) -> None:
-        if self._closed:
-            raise RuntimeError("the env is closed")
-
     def _read(self) -> list[joints.JointState]:
         self._states = [j.state() for j in self.joints]
         return self._states
@@ -430,13 +463,6 @@ class JointsEnv(gym.Env[np.ndarray, np.ndarray]):
                 j.set_velocity(0.0)
             else:
                 j.set_torque(0.0)
-
-    def _wait_until(self, t: float) -> None:
-        remaining = t - self.rig.time
-        if remaining > 0:
-            self.rig.sleep(remaining)
-        elif remaining < -1e-9:
-            self.overruns += 1
 
     def _safe_stop(self) -> None:
         for j in self.joints:

@@ -41,6 +41,6 @@ def config_path(name: str) -> Iterator[Path]:
 
 
 def default_config(name: str) -> dict[str, Any]:
-    """The shipped config ``name`` ("erob_reach" | "erob_arm_reach") as a fresh, editable dict."""
+    """The shipped config ``name`` (one of SHIPPED) as a fresh, editable dict."""
     data: dict[str, Any] = tomllib.loads(_ref(name).read_text(encoding="utf-8"))
     return data

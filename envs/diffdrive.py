@@ -24,7 +24,7 @@ import math
 import os
 import sys
 from collections import deque
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -34,14 +34,16 @@ import numpy as np
 from gymnasium import spaces
 
 import joints
+from envs import configs
+from envs.base import RigEnv
 from envs.randomization import DomainRandomization
 from envs.render import CameraSpec, SceneRenderer
 from joints.errors import DeviceFault, MotionTimeout
 
 if sys.version_info >= (3, 11):
-    import tomllib
+    pass
 else:  # pragma: no cover
-    import tomli as tomllib
+    pass
 
 #: m, wheel radius of models/zlac_diffdrive.xml (8-inch hub)
 WHEEL_RADIUS = 0.1016
@@ -59,18 +61,14 @@ SIM_SETTLE = 0.1
 STANDSTILL = 0.05
 
 
-@contextlib.contextmanager
-def config_path() -> Iterator[Path]:
+def config_path() -> contextlib.AbstractContextManager[Path]:
     """A filesystem path of the shipped ``zlac_diffdrive.toml`` (valid inside the ``with`` block)."""
-    with resources.as_file(resources.files("joints.configs") / f"{CONFIG_NAME}.toml") as p:
-        yield Path(p)
+    return configs.config_path(CONFIG_NAME)
 
 
 def default_config() -> dict[str, Any]:
     """The shipped diff-drive config as a fresh, editable dict (e.g. set the bus port for hardware)."""
-    text = (resources.files("joints.configs") / f"{CONFIG_NAME}.toml").read_text(encoding="utf-8")
-    data: dict[str, Any] = tomllib.loads(text)
-    return data
+    return configs.default_config(CONFIG_NAME)
 
 
 def wrap_angle(a: float) -> float:
@@ -120,7 +118,7 @@ class WheelOdometry:
         return self.x, self.y, self.heading
 
 
-class DiffDriveGoalEnv(gym.Env[np.ndarray, np.ndarray]):
+class DiffDriveGoalEnv(RigEnv):
     """Drive a differential-drive base to a goal pose (x, y, heading).
 
     ## Description
@@ -487,30 +485,6 @@ class DiffDriveGoalEnv(gym.Env[np.ndarray, np.ndarray]):
             self.render()
         return obs, float(r_progress + r_heading + r_action + r_success), bool(terminated), False, info
 
-    def render(self) -> np.ndarray | None:
-        if self.render_mode is None:
-            gym.logger.warn("render() was called without a render_mode; pass render_mode='rgb_array' or 'human'")
-            return None
-        self._check_open()
-        if self._renderer is None:
-            model, data = self._scene()
-            self._renderer = SceneRenderer(self.render_mode, model, data, width=self.width, height=self.height,
-                                           camera=self.camera)
-        if not self.sim:
-            self._update_twin()
-        return self._renderer.render(self.rig.time - self._t0, self._markers())
-
-    def close(self) -> None:
-        if getattr(self, "_closed", True):
-            return
-        self._closed = True
-        try:
-            if self._renderer is not None:
-                self._renderer.close()
-                self._renderer = None
-        finally:
-            self.rig.close()
-
     # -- task -------------------------------------------------------------------------------
     def _sample_goal(self, options: Mapping[str, Any]) -> np.ndarray:
         if "goal" in options:
@@ -590,13 +564,6 @@ class DiffDriveGoalEnv(gym.Env[np.ndarray, np.ndarray]):
             return
         cmd = self.command_of(action)
         self.rig.set_velocities({n: float(c) for n, c in zip(self.wheel_names, cmd)})  # one FC16
-
-    def _wait_until(self, t: float) -> None:
-        remaining = t - self.rig.time
-        if remaining > 0:
-            self.rig.sleep(remaining)
-        elif remaining < -1e-9:
-            self.overruns += 1
 
     def _watchdog_tripped(self) -> bool:
         """Hardware: after a silence longer than the drive's offline time, has it quick-stopped?
@@ -751,10 +718,6 @@ class DiffDriveGoalEnv(gym.Env[np.ndarray, np.ndarray]):
         for adr, q in zip(wheels, self._angles):
             data.qpos[adr] = q
         mujoco.mj_forward(model, data)
-
-    def _check_open(self) -> None:
-        if self._closed:
-            raise RuntimeError("the env is closed")
 
     # -- a scripted baseline ------------------------------------------------------------------
     def go_to_goal_action(self, obs: np.ndarray, *, k_distance: float = 1.5, k_bearing: float = 3.0,
