@@ -371,6 +371,12 @@ def _decode_request(frame: bytes) -> Request | UnsupportedRequest:
     return UnsupportedRequest(slave, fc, frame[2:-2])
 
 
+#: Interned write replies by their 8 bytes (valid CRC only). An FC16 reply echoes address and
+#: count, an FC06 reply the written value, so a host writing the same registers again and again
+#: gets the same frames back; messages are frozen, so sharing them is safe.
+_WRITE_REPLIES: dict[bytes, Reply] = {}
+
+
 class ModbusRtuCodec:
     """Incremental RTU framer/decoder for one end of a bus (see module docstring)."""
 
@@ -441,12 +447,19 @@ class ModbusRtuCodec:
                     # Hot path, same result as the general one below: a write reply is always
                     # 8 bytes and needs no check against the request; a bad CRC falls through.
                     frame = bytes(buf[:8])
+                    known = _WRITE_REPLIES.get(frame)
+                    if known is not None:  # the same 8 bytes decode to the same (immutable) reply
+                        del buf[:8]
+                        return known
                     if crc16_modbus(frame) == 0:
                         del buf[:8]
                         slave, fc, a, b = _HEAD.unpack_from(frame)
-                        if fc == WRITE_SINGLE_REGISTER:
-                            return WriteSingleRegisterReply(slave, a, b)
-                        return WriteMultipleRegistersReply(slave, a, b)
+                        reply: Reply = (WriteSingleRegisterReply(slave, a, b) if fc == WRITE_SINGLE_REGISTER
+                                        else WriteMultipleRegistersReply(slave, a, b))
+                        if len(_WRITE_REPLIES) >= 512:
+                            _WRITE_REPLIES.clear()
+                        _WRITE_REPLIES[frame] = reply
+                        return reply
                 length = self._host_length(buf)
             else:
                 length = _request_length(buf)
