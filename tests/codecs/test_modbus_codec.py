@@ -530,3 +530,19 @@ def test_frames_longer_than_rtu_maximum_are_garbage() -> None:
     msgs, _ = drain(codec)
     assert msgs == []
     assert codec.buffered == 0
+
+
+def test_write_replies_are_interned_but_never_for_a_bad_crc() -> None:
+    frame = mb.encode(mb.WriteMultipleRegistersReply(7, 0x0047, 2))
+    first = mb.ModbusRtuCodec(mb.Role.HOST)
+    first.feed(frame)
+    a = first.next_message()
+    second = mb.ModbusRtuCodec(mb.Role.HOST)
+    second.feed(frame)
+    b = second.next_message()
+    assert a == mb.WriteMultipleRegistersReply(7, 0x0047, 2) and a is b
+    bad = frame[:-1] + bytes([frame[-1] ^ 0x01])
+    third = mb.ModbusRtuCodec(mb.Role.HOST)
+    third.feed(bad)
+    with pytest.raises(ChecksumError):
+        third.next_message()
