@@ -46,6 +46,8 @@ from joints.sim.modbus_slave import ILLEGAL_DATA_VALUE, ModbusException, ModbusS
 COUNTS_PER_RAD = COUNTS_PER_REV / (2.0 * math.pi)
 ENABLE_DELAY = 0.5  #: s from "enable" to motor ready (manual: wait 500 ms before start)
 ESTOP_TIME = 0.04  #: s, emergency stop decelerates within this (manual: < 50 ms)
+_TORQUE = int(OperationMode.TORQUE)
+_SPEED = int(OperationMode.SPEED)
 SUPERVISION_PERIOD = 0.002  #: s between the drive's slow tasks (stall, thermal, settle timer)
 
 FOLLOWING_ERROR = 0x8611
@@ -213,6 +215,12 @@ class ErobEmulator(ModbusSlave):
         self.i_peak = float(max(g("peak_current"), 1))
         self.i_max = float(max(g("max_motor_current"), 1))
         self.peak_time = g("peak_current_time") * 1e-3
+        self.i_lim = min(self.i_peak, self.i_max)
+        # holding brake: ~100 Hz stiffness against the drive's own inertia, damping ratio 0.7,
+        # slipping above twice the rated torque
+        self.brake_k = self.inertia * 400.0**2 / 4
+        self.brake_c = 2.0 * 0.7 * math.sqrt(self.brake_k * self.inertia)
+        self.brake_hold_torque = 2.0 * self.profile.rated_torque
         self.vmax = float(max(g("max_speed"), 1))
         self.amax = float(max(g("max_acceleration"), 1))
         # profile registers as floats for the per-substep loops (refreshed on every settings write)
@@ -399,7 +407,8 @@ class ErobEmulator(ModbusSlave):
         self.time = t
         self.pos = q * COUNTS_PER_RAD
         self.vel = qd * COUNTS_PER_RAD
-        wd = self.v["modbus_communication_timeout_duration"]
+        v = self.v
+        wd = v["modbus_communication_timeout_duration"]
         if wd and self.last_frame >= 0 and t - self.last_frame > wd * 1e-3:
             if self.fault != faults.RS485_TIMEOUT:
                 self.fault = 0
@@ -413,37 +422,50 @@ class ErobEmulator(ModbusSlave):
             if self.enabled and (not self.fault or self.fault == faults.START_WHILE_DISABLED):
                 self.p_ref = self.pos  # brake still releasing (or start refused): hold here
             return self._brake_torque(q, qd)
-        mode = self._mode()
-        if mode == OperationMode.TORQUE:
+        mode = v["operation_mode"]
+        if mode == _TORQUE:
             i = self._torque_loop(dt)
         else:
             v_prev = self.v_ref
-            if mode == OperationMode.SPEED:
+            pos, vel = self.pos, self.vel
+            if mode == _SPEED:
                 self._speed_ramp(dt)
-                v_cmd = self.v_ref
+                v_ref = v_cmd = self.v_ref
             else:
                 self._profile_step(dt)
-                v_cmd = self.v_ref + self.kp * (self.p_ref - self.pos)
-                err = abs(self.p_ref - self.pos)
-                lim = self.v["max_position_error"]
-                if lim and err > lim:
+                v_ref = self.v_ref
+                err = self.p_ref - pos
+                v_cmd = v_ref + self.kp * err
+                lim = v["max_position_error"]
+                if lim and abs(err) > lim:
                     self._raise_fault(FOLLOWING_ERROR)
                     return self._brake_torque(q, qd)
-            v_cmd = max(-self.vmax, min(self.vmax, v_cmd))
+            vmax = self.vmax
+            if v_cmd > vmax:
+                v_cmd = vmax
+            elif v_cmd < -vmax:
+                v_cmd = -vmax
             self.v_cmd = v_cmd
-            e = v_cmd - self.vel
-            slim = self.v["max_speed_error"]
-            if slim and abs(self.v_ref - self.vel) > slim:
+            e = v_cmd - vel
+            slim = v["max_speed_error"]
+            if slim and abs(v_ref - vel) > slim:
                 self._raise_fault(SPEED_ERROR)
                 return self._brake_torque(q, qd)
             # PI speed loop plus acceleration feedforward (the current the profile's own
             # acceleration needs, J x a / kt): without it the integral has to carry every ramp
             # and the joint overshoots when a ramp ends (an emergency stop bounced back ~8 %)
-            i = self.kv * e + self.ki * self.integ + self.kff * (self.v_ref - v_prev) / dt
-            lim_i = self._current_limit(dt, i)
+            i = self.kv * e + self.ki * self.integ + self.kff * (v_ref - v_prev) / dt
+            if -self.i_cont <= i <= self.i_cont:  # common case: within the continuous current
+                self.peak_since = -1.0
+                lim_i = self.i_lim
+            else:
+                lim_i = self._current_limit(dt, i)
             if -lim_i < i < lim_i:
                 self.integ += e * dt  # anti-windup: integrate only while unsaturated
-            i = max(-lim_i, min(lim_i, i))
+            elif i > lim_i:
+                i = lim_i
+            else:
+                i = -lim_i
         self.i_cmd = i
         self.i_out = i
         return i * 1e-3 * self.kt
@@ -461,11 +483,8 @@ class ErobEmulator(ModbusSlave):
         self.i_cmd = self.i_out = 0.0
         if self.brake_hold is None:
             self.brake_hold = self.pos
-        j = self.inertia
-        k = j * 400.0**2 / 4  # ~100 Hz stiffness against the drive's own inertia
-        c = 2.0 * 0.7 * math.sqrt(k * j)
-        tau = -k * (self.pos - self.brake_hold) / COUNTS_PER_RAD - c * qd
-        hold = 2.0 * self.profile.rated_torque
+        tau = -self.brake_k * (self.pos - self.brake_hold) / COUNTS_PER_RAD - self.brake_c * qd
+        hold = self.brake_hold_torque
         return max(-hold, min(hold, tau))
 
     def _current_limit(self, dt: float, i: float) -> float:
