@@ -70,6 +70,7 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
 
     rig: joints.Rig
     sim: bool
+    control_period: float
     overruns: int
     width: int
     height: int
@@ -114,6 +115,24 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
             self.rig.sleep(remaining)
         elif remaining < -1e-9:
             self.overruns += 1
+
+    def _start(self, config: Any, backend: str | None, domain_randomization: Any) -> None:
+        """Open the rig and set the task up; the rig is closed again if the setup fails."""
+        # per instance: render_fps follows the control period
+        self.metadata = {**type(self).metadata, "render_fps": round(1.0 / self.control_period)}
+        self.rig = self._open(config, backend)
+        try:
+            self._setup(domain_randomization)
+        except BaseException:
+            self.rig.close()
+            raise
+        self._closed = False
+
+    def _open(self, config: Any, backend: str | None) -> joints.Rig:
+        raise NotImplementedError
+
+    def _setup(self, domain_randomization: Any) -> None:
+        raise NotImplementedError
 
     def _scene(self) -> tuple[Any, Any]:
         raise NotImplementedError
@@ -183,16 +202,7 @@ class JointsEnv(RigEnv):
         self.reset_timeout = float(reset_timeout)
         self.reset_tolerance = float(reset_tolerance)
         self.width, self.height = int(width), int(height)
-        # per instance: render_fps follows the control period
-        self.metadata = {**type(self).metadata, "render_fps": round(1.0 / self.control_period)}
-
-        self.rig = self._open(config, backend)
-        try:
-            self._setup(domain_randomization)
-        except BaseException:
-            self.rig.close()
-            raise
-        self._closed = False
+        self._start(config, backend, domain_randomization)
 
     # -- construction -----------------------------------------------------------------------
     def _open(self, config: Any, backend: str | None) -> joints.Rig:

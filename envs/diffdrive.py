@@ -273,15 +273,7 @@ class DiffDriveGoalEnv(RigEnv):
         self.arena = float(arena)
         self.reset_timeout = float(reset_timeout)
         self.width, self.height = int(width), int(height)
-        self.metadata = {**type(self).metadata, "render_fps": round(1.0 / self.control_period)}
-
-        self.rig = self._open(config, backend)
-        try:
-            self._setup(domain_randomization)
-        except BaseException:
-            self.rig.close()
-            raise
-        self._closed = False
+        self._start(config, backend, domain_randomization)
 
     # -- construction -----------------------------------------------------------------------
     @staticmethod

@@ -165,7 +165,7 @@ class Rig:
         if errors:
             raise JointsError(f"errors while closing the rig: {'; '.join(map(str, errors))}") from errors[0]
 
-    def __enter__(self) -> Rig:
+    def __enter__(self) -> Rig:  # noqa: PYI034 - typing.Self needs Python 3.11
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,

@@ -20,7 +20,7 @@ import enum
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Union
+from typing import Any
 
 from joints.codecs.crc import crc16_modbus
 from joints.errors import ByteCountError, ChecksumError, EncodeError, FrameError
@@ -135,11 +135,9 @@ class ExceptionReply:
         return EXCEPTION_TEXT.get(self.code, "unknown exception")
 
 
-Request = Union[
-    ReadHoldingRegisters, ReadInputRegisters, WriteSingleRegister, WriteMultipleRegisters
-]
-Reply = Union[ReadRegistersReply, WriteSingleRegisterReply, WriteMultipleRegistersReply, ExceptionReply]
-Message = Union[Request, Reply, UnsupportedRequest]
+Request = ReadHoldingRegisters | ReadInputRegisters | WriteSingleRegister | WriteMultipleRegisters
+Reply = ReadRegistersReply | WriteSingleRegisterReply | WriteMultipleRegistersReply | ExceptionReply
+Message = Request | Reply | UnsupportedRequest
 
 
 # --- encoding --------------------------------------------------------------------------------

@@ -110,7 +110,7 @@ class ModbusLink:
         if self.trace is not None:
             try:
                 self.trace(TraceRecord(self.clock.now(), direction, self.name, data, meaning))
-            except Exception:  # noqa: BLE001 - tracing must not break the bus
+            except Exception:  # noqa: BLE001, S110 - tracing must not break the bus
                 pass
 
     def _once(self, request: mb.Request, frame: bytes) -> mb.Reply | None:
@@ -180,9 +180,9 @@ class ModbusLink:
                 function=reply.function,
             )
         if isinstance(request, (mb.ReadHoldingRegisters, mb.ReadInputRegisters)):
-            if isinstance(reply, mb.ReadRegistersReply) and reply.function == request.function:
-                if len(reply.values) == request.count:
-                    return reply
+            if (isinstance(reply, mb.ReadRegistersReply) and reply.function == request.function
+                    and len(reply.values) == request.count):
+                return reply
         elif isinstance(request, mb.WriteSingleRegister):
             if (
                 isinstance(reply, mb.WriteSingleRegisterReply)
@@ -190,13 +190,13 @@ class ModbusLink:
                 and reply.value == request.value
             ):
                 return reply
-        elif isinstance(request, mb.WriteMultipleRegisters):
-            if (
-                isinstance(reply, mb.WriteMultipleRegistersReply)
-                and reply.address == request.address
-                and reply.count == len(request.values)
-            ):
-                return reply
+        elif (
+            isinstance(request, mb.WriteMultipleRegisters)
+            and isinstance(reply, mb.WriteMultipleRegistersReply)
+            and reply.address == request.address
+            and reply.count == len(request.values)
+        ):
+            return reply
         raise UnexpectedReply(f"reply {_describe(reply)} does not answer {_describe(request)}")
 
 

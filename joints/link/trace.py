@@ -43,7 +43,7 @@ class Trace:
         if self._echo is not None:
             try:
                 self._echo(record)
-            except Exception:  # noqa: BLE001 - a monitor must never break the bus
+            except Exception:  # noqa: BLE001, S110 - a monitor must never break the bus
                 pass
 
     def __iter__(self) -> Iterator[TraceRecord]:

@@ -46,6 +46,13 @@ from joints.sim.modbus_slave import ILLEGAL_DATA_VALUE, ModbusException, ModbusS
 COUNTS_PER_RAD = COUNTS_PER_REV / (2.0 * math.pi)
 ENABLE_DELAY = 0.5  #: s from "enable" to motor ready (manual: wait 500 ms before start)
 ESTOP_TIME = 0.04  #: s, emergency stop decelerates within this (manual: < 50 ms)
+#: registers whose values _cache_settings() turns into loop constants (a write to any other
+#: register, e.g. a target, does not need the recomputation)
+_CACHED_SETTINGS = frozenset((
+    "position_offset", "position_loop_gain", "speed_loop_gain", "speed_loop_integral",
+    "continuous_current", "peak_current", "max_motor_current", "peak_current_time", "max_speed",
+    "max_acceleration", "profile_acceleration", "profile_deceleration", "profile_speed",
+))
 _TORQUE = int(OperationMode.TORQUE)
 _SPEED = int(OperationMode.SPEED)
 SUPERVISION_PERIOD = 0.002  #: s between the drive's slow tasks (stall, thermal, settle timer)
@@ -252,7 +259,8 @@ class ErobEmulator(ModbusSlave):
         if reg.access.value == "R/W":
             if name == "torque_control_mode_max_speed" and self.enabled:
                 raise ModbusException(ILLEGAL_DATA_VALUE, "torque-mode max speed only while disabled")
-            self._cache_settings()
+            if name in _CACHED_SETTINGS:
+                self._cache_settings()
             if name == "target_speed" and self._mode() == OperationMode.SPEED:
                 self._speed_command(value)
             elif name == "target_current" and self._mode() == OperationMode.TORQUE and value:

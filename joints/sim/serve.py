@@ -63,11 +63,11 @@ def serve(
                         ep.write(reply)
                     last_rx[name] = now
                     pending[name] = True
-            for name in endpoints:
+            for name, ep in endpoints.items():
                 if pending[name] and now - last_rx[name] > IDLE_FLUSH:
                     reply = world.buses[name].silence()
                     if reply:
-                        endpoints[name].write(reply)
+                        ep.write(reply)
                     pending[name] = False
             behind = (now - t0_wall) - (world.time - t0_sim)
             if behind >= dt:

@@ -36,7 +36,7 @@ class ByteTransport(abc.ABC):
     def name(self) -> str:
         return type(self).__name__
 
-    def __enter__(self) -> ByteTransport:
+    def __enter__(self) -> ByteTransport:  # noqa: PYI034 - typing.Self needs Python 3.11
         return self
 
     def __exit__(

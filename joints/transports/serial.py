@@ -102,7 +102,7 @@ class SerialTransport(ByteTransport):
     def reset_input(self) -> None:
         try:
             self._ser.reset_input_buffer()
-        except Exception:  # noqa: BLE001 - best effort
+        except Exception:  # noqa: BLE001, S110 - best effort
             pass
 
     def close(self) -> None:

@@ -47,14 +47,14 @@ def served(tmp_path: Path, sim_server) -> Iterator[tuple[str, Path]]:  # type: i
 
 
 def _script(rig: joints.Rig) -> float:
-    """The same user script for both backends: enable, move, wait for 'target reached', read."""
+    """The same user script for both backends: enable, move, wait for 'target reached' and standstill, read."""
     j = rig.joints["joint1"]
     j.write("position_reaches_set_precision", 20)
     j.enable()
     j.move_to(0.8, velocity=1.0, acceleration=4.0, deceleration=4.0)
     j.wait(timeout=20, poll=0.02, until=lambda s: j.read("status_of_achieving_position") == 4)
-    rig.sleep(0.3)
-    return j.state().position
+    # settled: the drive's own speed feedback is below one count per millisecond
+    return j.wait(timeout=5, poll=0.02, until=lambda s: abs(s.velocity) < 0.012).position
 
 
 def test_same_script_sim_and_served_hardware_agree(served: tuple[str, Path], tmp_path: Path) -> None:
