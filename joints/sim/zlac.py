@@ -9,8 +9,8 @@ current x torque constant - from the registers it holds. :attr:`ZlacEmulator.lef
 ``right.step(t, dt, q, qd)`` every substep with the same ``t`` and applies the returned wheel
 torque. The emulator never writes positions. No wall clock: time advances only through ``step``.
 
-Manual: ``/work/shared/manuals/zlac8015d-rs485-modbus-manual-v1.04.txt`` (OCR text, 1-based lines
-below), corrected by ``/work/shared/vectors/ERRATA.md`` (DOC-ZLAC-1..7).
+Manual: ``../shared/manuals/zlac8015d-rs485-modbus-manual-v1.04.txt`` (OCR text, 1-based lines
+below), corrected by ``../shared/vectors/ERRATA.md`` (DOC-ZLAC-1..7).
 
 Semantics taken from the manual
 -------------------------------

@@ -1,6 +1,6 @@
 """Golden Modbus RTU frames of the eRob manuals (EN v1.6 + CN v1.3) against the codec.
 
-Source: ``/work/shared/vectors/vectors.json`` (schema in its README, deviations in ERRATA.md).
+Source: ``tests/data/vectors.json`` (vendored from ../shared/vectors) (schema in its README, deviations in ERRATA.md).
 Every eRob ``modbus-rtu`` vector: the corrected frame decodes in the right role to the
 documented fields and re-encodes byte-exact; every printed frame that the errata correct is
 rejected (or decodes to something else) the way its erratum kind predicts. Every eRob Modbus
@@ -19,7 +19,7 @@ from joints.codecs import modbus as mb
 from joints.codecs.crc import crc16_modbus, crc_ok
 from joints.errors import ByteCountError, ChecksumError, FrameError
 
-VECTORS = Path(__file__).resolve().parents[2].parent / "shared" / "vectors" / "vectors.json"
+from testdata import VECTORS
 
 
 def _load() -> list[dict[str, Any]]:

@@ -23,7 +23,7 @@ from joints.devices.erob.registers import (
 from joints.devices.registers import Access, Register, snake_name
 from joints.errors import CommandError, RegisterError
 
-MANUALS = Path(__file__).resolve().parents[2].parent / "shared" / "manuals"
+from testdata import MANUALS
 MANUAL_EN = MANUALS / "erob-modbus-rtu-manual-v1.6-en.txt"
 
 SIZES = {"uint16": 1, "int16": 1, "uint32": 2, "int32": 2}

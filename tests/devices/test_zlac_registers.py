@@ -33,9 +33,9 @@ from joints.devices.zlac.registers import (
 )
 from joints.errors import CommandError, RegisterError
 
-SHARED = Path(__file__).resolve().parents[2].parent / "shared"
-MANUAL = SHARED / "manuals" / "zlac8015d-rs485-modbus-manual-v1.04.txt"
-VECTORS = SHARED / "vectors" / "vectors.json"
+from testdata import MANUALS, VECTORS
+
+MANUAL = MANUALS / "zlac8015d-rs485-modbus-manual-v1.04.txt"
 
 SIZES = {"uint16": 1, "int16": 1, "uint32": 2, "int32": 2}
 UNITS = {"", "ms", "10 ms", "r/min", "0.1 r/min", "mA", "mA/s", "0.1 A", "0.01 V", "counts",

@@ -21,7 +21,7 @@ from joints.link.trace import Trace
 from joints.sim.modbus_slave import ModbusDeviceBus, ModbusSlave
 from joints.transports.loopback import LoopbackTransport
 
-VECTORS = Path(__file__).resolve().parents[2].parent / "shared" / "vectors" / "vectors.json"
+from testdata import VECTORS
 
 
 class _Profile:

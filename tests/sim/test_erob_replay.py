@@ -20,7 +20,7 @@ from joints.devices.erob.profiles import profile  # noqa: E402
 from joints.devices.erob.registers import COUNTS_PER_REV, EROB_MODBUS, OperationMode  # noqa: E402
 from joints.sim.world import DriveSpec, World  # noqa: E402
 
-VECTORS = Path(__file__).resolve().parents[2].parent / "shared" / "vectors" / "vectors.json"
+from testdata import VECTORS
 MOTION_DEPENDENT = {"current_speed", "actual_position", "motor_current", "motion_status",
                     "status_of_achieving_position", "given_position", "given_speed", "position_error"}
 

@@ -32,7 +32,7 @@ from joints.sim.modbus_slave import ModbusDeviceBus
 from joints.sim.zlac import DriveState, ZlacEmulator
 
 ROOT = Path(__file__).resolve().parents[2]
-VECTORS = ROOT.parent / "shared" / "vectors" / "vectors.json"
+from testdata import VECTORS
 RPM = 2 * math.pi / 60
 PROFILE = HubMotorProfile()
 DT = 1e-3

@@ -1,7 +1,7 @@
 """ZeroErr eRob rotary actuator: Modbus RTU register table.
 
 Source: "eRob Modbus RTU User Manual" v1.6 (EN), chapter 4 "Parameter Register Address"
-(``/work/shared/manuals/erob-modbus-rtu-manual-v1.6-en.txt``), cross-checked against the
+(``../shared/manuals/erob-modbus-rtu-manual-v1.6-en.txt``), cross-checked against the
 v1.3 Chinese manual.
 
 Rules of this table:

@@ -1,9 +1,9 @@
 """ZLAC8015D dual-channel hub servo driver: Modbus RTU register table.
 
 Source: "ZLAC8015D Servo Driver (Special for Hub Servo Motor) RS485 Communication Instruction"
-v1.04, chapter 4 "ADDRESS DIRECTIONARY" (``/work/shared/manuals/zlac8015d-rs485-modbus-manual-v1.04.txt``,
+v1.04, chapter 4 "ADDRESS DIRECTIONARY" (``../shared/manuals/zlac8015d-rs485-modbus-manual-v1.04.txt``,
 an OCR text; chapter 4 is lines 778-1373), cross-checked against the parameter tables of
-chapter 3 (lines 308-777), the manual's example frames (``/work/shared/vectors/vectors.json``,
+chapter 3 (lines 308-777), the manual's example frames (``../shared/vectors/vectors.json``,
 device ``zlac8015d``) and ``ERRATA.md`` (DOC-ZLAC-1..7). Line numbers below are 1-based lines
 of that text file.
 
