@@ -6,29 +6,15 @@ Hi word first on the wire (unless the table says otherwise). Names are the manua
 
 from __future__ import annotations
 
-import enum
 import re
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from joints.devices.params import Access, Param, ParamMap, ParamSet, check_value, suggest
 from joints.errors import CommandError, RegisterError
 
-
-class Access(enum.Enum):
-    """Access attribute as printed in the manual."""
-
-    R = "R"  #: read only
-    RW = "R/W"  #: read and write
-    COMMAND = "Command"  #: write-only command (writing triggers an action)
-
-    @property
-    def readable(self) -> bool:
-        return self is not Access.COMMAND
-
-    @property
-    def writable(self) -> bool:
-        return self is not Access.R
+__all__ = ["Access", "Register", "RegisterTable", "snake_name"]
 
 
 _RANGES = {
@@ -80,24 +66,16 @@ class Register:
         lo, hi, _ = _RANGES[self.type]
         return lo, hi
 
-    def check(self, value: float) -> int:
+    def check(self, value: object) -> int:
         """Validate a value for writing; returns it as int or raises :class:`CommandError`."""
-        if isinstance(value, bool) or not isinstance(value, int):
-            if isinstance(value, float) and value.is_integer():
-                value = int(value)
-            else:
-                raise CommandError(f"{self.name}: expected an integer, got {value!r}")
-        lo, hi = self.type_range
-        if self.minimum is not None:
-            lo = max(lo, self.minimum)
-        if self.maximum is not None:
-            hi = min(hi, self.maximum)
-        if not lo <= value <= hi:
-            raise CommandError(
-                f"{self.name} (0x{self.address:04X}): value {value} out of range [{lo}, {hi}]"
-                + (f" {self.unit}" if self.unit else "")
-            )
-        return value
+        return check_value(self.name, self.type, value, self.minimum, self.maximum, self.unit,
+                           f" (0x{self.address:04X})")
+
+    @property
+    def param(self) -> Param:
+        """The protocol-neutral parameter this register carries."""
+        return Param(self.name, self.type, self.access, self.unit, self.description, self.minimum,
+                     self.maximum, self.default, self.persistent)
 
     def to_words(self, value: int) -> tuple[int, ...]:
         """Encode a value into its 16-bit words in wire order (range-checked)."""
@@ -175,9 +153,7 @@ class RegisterTable:
         if isinstance(key, str):
             reg = self._by_name.get(key)
             if reg is None:
-                close = [n for n in self._by_name if key.lower().replace(" ", "_") in n][:5]
-                hint = f"; did you mean {', '.join(close)}?" if close else ""
-                raise RegisterError(f"{self.device}: no register named {key!r}{hint}")
+                raise RegisterError(f"{self.device}: no register named {key!r}{suggest(key, self._by_name)}")
             return reg
         if isinstance(key, int) and not isinstance(key, bool):
             reg = self._by_address.get(key)
@@ -247,6 +223,19 @@ class RegisterTable:
 
     def names(self) -> list[str]:
         return [r.name for r in self.registers]
+
+    @property
+    def params(self) -> ParamSet:
+        """The parameters these registers carry (one per register, by the same name)."""
+        cached = self.__dict__.get("_params")
+        if cached is None:
+            cached = ParamSet(self.device, (r.param for r in self.registers))
+            object.__setattr__(self, "_params", cached)
+        return cached
+
+    def as_map(self, params: ParamSet | None = None) -> ParamMap[Register]:
+        """This table as the Modbus RTU map of ``params`` (default: its own parameters)."""
+        return ParamMap("modbus-rtu", params or self.params, {r.name: r for r in self.registers})
 
     @staticmethod
     def build(device: str, registers: Iterable[Register]) -> RegisterTable:

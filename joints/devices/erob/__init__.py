@@ -1,1 +1,1 @@
-"""ZeroErr eRob rotary actuators: register table and physical device profiles."""
+"""ZeroErr eRob: register table, parameters, profiles and faults (pure data)."""
