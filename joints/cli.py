@@ -162,7 +162,7 @@ def cmd_send(args: argparse.Namespace) -> int:
             return 2
         link = rig.buses[args.bus].link
         link.trace = trace
-        link.transact(msg, idempotent=False)
+        link.request(msg, idempotent=False)
     return 0
 
 

@@ -214,15 +214,9 @@ def build(config: RigConfig, *, transports: Mapping[str, ByteTransport] | None =
         for name, bcfg in config.buses.items():
             if name not in opened:
                 opened[name] = _open_hardware_transport(bcfg)
-            link_type: Any = ModbusLink
-            extra: dict[str, Any] = {}
-            if peers and name in peers:
-                from joints.link.modbus import DirectModbusLink
-
-                link_type, extra = DirectModbusLink, {"peer": peers[name]}
-            link = link_type(
-                transport=opened[name],
-                **extra,
+            link = ModbusLink(
+                opened[name],
+                peer=peers.get(name) if peers else None,
                 policy=RetryPolicy(timeout=bcfg.timeout, retries=bcfg.retries),
                 echo=bcfg.echo,
                 clock=clock,

@@ -106,7 +106,7 @@ def test_read_write_round_trip(bus: ModbusDeviceBus, slave: ModbusSlave, clock: 
     assert link.read_registers(SLAVE, 0x0043, 2) == (raw >> 16, raw & 0xFFFF)
     assert link.read_registers(SLAVE, 0x0043, 2, input_registers=True) == (raw >> 16, raw & 0xFFFF)
 
-    reply = link.transact(mb.ReadHoldingRegisters(SLAVE, 0x0040, 3), idempotent=True)
+    reply = link.request(mb.ReadHoldingRegisters(SLAVE, 0x0040, 3), idempotent=True)
     assert reply == mb.ReadRegistersReply(SLAVE, 3, (3, 0, 0))
     assert link.transactions == 6 and link.retries_used == 0
     assert slave.write_log == [("operation_mode", 3), ("target_absolute_position", -500000)]
@@ -235,7 +235,7 @@ def test_broadcast_write_returns_none_and_slave_executes(
 ) -> None:
     peer = Counting(bus)
     link = make_link(peer, clock)
-    assert link.transact(mb.WriteSingleRegister(0, 0x0040, 2)) is None
+    assert link.request(mb.WriteSingleRegister(0, 0x0040, 2)) is None
     assert slave.get("operation_mode") == 2
     link.write_registers(0, 0x0047, [0, 10000])  # profile speed
     assert slave.get("profile_speed") == 10000

@@ -11,7 +11,8 @@ pytest.importorskip("mujoco")
 
 import joints  # noqa: E402
 from joints.errors import DeviceRejected, ReplyTimeout  # noqa: E402
-from joints.link.modbus import DirectModbusLink, ModbusLink  # noqa: E402
+from joints.link.base import DirectFraming  # noqa: E402
+from joints.link.modbus import ModbusLink  # noqa: E402
 from joints.link.trace import Trace  # noqa: E402
 
 CFG = {
@@ -33,7 +34,7 @@ def _run(direct: bool) -> tuple[list[object], list[tuple[str, bytes, str]]]:
     trace = Trace()
     with joints.open(cfg) as rig:
         link = rig.buses["rs485"].link
-        assert isinstance(link, DirectModbusLink) is direct
+        assert isinstance(link, ModbusLink) and isinstance(link.framing, DirectFraming) is direct
         rig.trace(trace)
         j1, j2, j3 = (rig.joints[f"joint{i}"] for i in (1, 2, 3))
         for j in (j1, j2, j3):

@@ -1,0 +1,385 @@
+"""The link: the one place for waiting on a bus, the same for every protocol.
+
+Rule: a link owns one transport (through a :class:`Framing`) and one clock, and has two paths.
+:meth:`Link.request` sends a frame and waits for the frame that the protocol's :class:`Rule`
+accepts as its reply (timeouts, retries of idempotent requests, echo skipping by rule);
+:meth:`Link.send` sends frames that get no reply (broadcast, NMT, SYNC, PDOs, MKS group and long
+packets). Every other received frame is unsolicited: it goes to the subscribers whose predicate
+accepts it or, when nobody subscribed, to a bounded log (:attr:`Link.unsolicited`) and the trace.
+Nothing is dropped silently. One lock per bus: two threads never interleave their frames.
+"""
+
+from __future__ import annotations
+
+import abc
+import logging
+import threading
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Generic, TypeVar
+
+from joints.clock import Clock, MonotonicClock
+from joints.errors import FrameError, PeerProtocolError, ReplyTimeout, UnexpectedReply
+from joints.link.trace import TraceRecord
+
+log = logging.getLogger("joints.link")
+
+M = TypeVar("M")  #: a decoded message of the protocol
+#: frames a link keeps for nobody (no subscriber matched); the oldest go first, and are counted
+UNSOLICITED_LOG = 1000
+
+
+@dataclass(frozen=True, slots=True)
+class RetryPolicy:
+    timeout: float = 0.1  #: seconds to wait for a complete reply
+    retries: int = 2  #: extra attempts for idempotent requests after a timeout or corrupt reply
+
+
+class Framing(abc.ABC, Generic[M]):
+    """How messages cross one transport: frames out, decoded messages (or framing errors) in."""
+
+    transport: Any  #: the transport underneath (closed by the rig)
+
+    @abc.abstractmethod
+    def write(self, message: Any, frame: Any) -> None:
+        """Send ``frame`` (the encoded ``message``)."""
+
+    @abc.abstractmethod
+    def receive(self, deadline: float, *, settle: bool = True) -> M | FrameError | None:
+        """The next complete message, or a framing error, arriving by ``deadline`` (clock time).
+
+        ``None``: nothing complete by then. With ``settle`` the line counts as silent once the
+        time is up, so a frame that stopped half-way becomes a :class:`FrameError`; without it a
+        partial frame stays buffered (it may still be arriving).
+        """
+
+    def discard(self) -> None:
+        """Drop a partial frame at the head of the input (before a new request)."""
+
+    def close(self) -> None:
+        self.transport.close()
+
+    @property
+    def name(self) -> str:
+        return str(getattr(self.transport, "name", type(self.transport).__name__))
+
+
+class Rule(abc.ABC, Generic[M]):
+    """What one protocol says about requests and replies (Modbus RTU, MKS native, CAN ...)."""
+
+    protocol: str = ""
+
+    @abc.abstractmethod
+    def encode(self, message: Any) -> Any:
+        """The frame for ``message``; raises :class:`~joints.errors.EncodeError` before anything is sent."""
+
+    @abc.abstractmethod
+    def expects_reply(self, request: Any) -> bool:
+        """Whether ``request`` gets a reply (broadcasts and send-only frames do not)."""
+
+    @abc.abstractmethod
+    def is_reply(self, request: Any, message: M) -> bool:
+        """Whether ``message`` answers ``request``.
+
+        True: it is the reply. False: it is not for this request (an unsolicited frame; the link
+        keeps waiting). Raises :class:`~joints.errors.DeviceRejected` for a refusal and
+        :class:`~joints.errors.UnexpectedReply` for a frame that can only be a wrong answer.
+        """
+
+    def before_send(self, framing: Framing[M], request: Any, frame: Any) -> None:
+        """Prepare the framing for this request's reply (expected length, adapter echo ...)."""
+
+    def describe(self, message: Any) -> str:
+        return repr(message)
+
+    def frame_bytes(self, message: Any) -> bytes:
+        """The wire bytes of a received message, for the trace."""
+        return b""
+
+    def timeout_text(self, request: Any) -> str:
+        """What to check when ``request`` got no reply."""
+        return "check wiring, address, bit rate and that the device is powered"
+
+
+@dataclass(eq=False)
+class Subscription(Generic[M]):
+    """Unsolicited frames for which ``predicate`` holds go to ``callback`` (see :meth:`Link.subscribe`)."""
+
+    predicate: Callable[[M], bool]
+    callback: Callable[[M], None]
+    link: Link[M] | None = None
+
+    def cancel(self) -> None:
+        if self.link is not None:
+            self.link._subscriptions = [s for s in self.link._subscriptions if s is not self]
+            self.link = None
+
+
+class Link(Generic[M]):
+    """Host side of one bus: request/reply by rule, send-only frames, subscriptions."""
+
+    def __init__(
+        self,
+        framing: Framing[M],
+        rule: Rule[M],
+        *,
+        policy: RetryPolicy | None = None,
+        clock: Clock | None = None,
+        trace: Callable[[TraceRecord], None] | None = None,
+        name: str = "bus",
+    ) -> None:
+        self.framing = framing
+        self.rule = rule
+        self.policy = policy or RetryPolicy()
+        self.clock: Clock = clock or MonotonicClock()
+        self.trace = trace
+        self.name = name
+        self._lock = threading.RLock()
+        self._subscriptions: list[Subscription[M]] = []
+        #: unsolicited frames nobody subscribed to (bounded; :attr:`unsolicited_dropped` counts overflow)
+        self.unsolicited: deque[tuple[float, M]] = deque(maxlen=UNSOLICITED_LOG)
+        self.unsolicited_dropped = 0
+        self.transactions = 0  #: frames sent (requests and send-only)
+        self.retries_used = 0
+        self.callback_errors = 0
+
+    @property
+    def transport(self) -> Any:
+        return self.framing.transport
+
+    # -- the two paths ----------------------------------------------------------------------
+    def request(self, request: Any, *, idempotent: bool = False) -> M | None:
+        """Send ``request`` and return its reply (None if the protocol gives it none).
+
+        Only ``idempotent`` requests are sent again after a timeout or a corrupt reply, so a
+        lost reply to a command can never execute it twice.
+        """
+        frame = self.rule.encode(request)  # raises EncodeError before anything is sent
+        attempts = 1 + (self.policy.retries if idempotent else 0)
+        with self._lock:
+            last: Exception | None = None
+            for attempt in range(attempts):
+                if attempt:
+                    self.retries_used += 1
+                try:
+                    return self._once(request, frame)
+                except (ReplyTimeout, PeerProtocolError) as exc:
+                    if isinstance(exc, UnexpectedReply):
+                        raise
+                    last = exc
+            assert last is not None
+            if attempts > 1 and isinstance(last, ReplyTimeout):
+                raise ReplyTimeout(f"{last} (after {attempts} attempts)") from last
+            raise last
+
+    def send(self, message: Any) -> None:
+        """Send a frame that gets no reply (nothing is waited for)."""
+        frame = self.rule.encode(message)
+        with self._lock:
+            self._drain()
+            self.transactions += 1
+            if self.trace is not None:
+                self._record("tx", self._bytes(frame), self.rule.describe(message))
+            self.framing.write(message, frame)
+
+    # -- unsolicited frames -----------------------------------------------------------------
+    def subscribe(self, predicate: Callable[[M], bool], callback: Callable[[M], None]) -> Subscription[M]:
+        """Deliver every unsolicited frame for which ``predicate`` holds to ``callback``.
+
+        Callbacks run in the thread that reads the bus (during a request, :meth:`poll` or
+        :meth:`wait_for`); an exception in one is logged and counted, never raised into the bus.
+        """
+        sub = Subscription(predicate, callback, self)
+        with self._lock:
+            self._subscriptions.append(sub)
+        return sub
+
+    def poll(self, timeout: float = 0.0) -> int:
+        """Read what arrives within ``timeout`` s and deliver it; returns the number of frames."""
+        with self._lock:
+            deadline = self.clock.now() + max(timeout, 0.0)
+            n = 0
+            while True:
+                got = self.framing.receive(deadline, settle=timeout > 0)
+                if got is None:
+                    return n
+                n += 1
+                self._unsolicited(got)
+
+    def wait_for(self, predicate: Callable[[M], bool], timeout: float) -> M:
+        """Wait for an unsolicited frame for which ``predicate`` holds (others are delivered as usual)."""
+        with self._lock:
+            deadline = self.clock.now() + timeout
+            while True:
+                got = self.framing.receive(deadline)
+                if got is None:
+                    raise ReplyTimeout(f"{self.name}: the awaited frame did not arrive within {timeout:g} s")
+                if not isinstance(got, FrameError) and predicate(got):
+                    self._trace_rx(got, "")
+                    return got
+                self._unsolicited(got)
+
+    def close(self) -> None:
+        self.framing.close()
+
+    # -- internals --------------------------------------------------------------------------
+    def _once(self, request: Any, frame: Any) -> M | None:
+        rule, framing = self.rule, self.framing
+        self._drain()
+        self.transactions += 1
+        if self.trace is not None:
+            self._record("tx", self._bytes(frame), rule.describe(request))
+        rule.before_send(framing, request, frame)
+        framing.write(request, frame)
+        if not rule.expects_reply(request):
+            return None
+        timeout = self.policy.timeout
+        deadline = self.clock.now() + timeout
+        error: FrameError | None = None
+        while True:
+            got = framing.receive(deadline)
+            if got is None:
+                break
+            if isinstance(got, FrameError):
+                self._record("rx", got.data, f"error: {got}")
+                error = error or got
+                continue
+            if rule.is_reply(request, got):
+                if self.trace is not None:
+                    self._trace_rx(got, "")
+                return got
+            self._unsolicited(got)
+        if error is not None:
+            raise error
+        raise ReplyTimeout(
+            f"{self.name}: no reply to {rule.describe(request)} within {timeout * 1000:.0f} ms on "
+            f"{framing.name}; {rule.timeout_text(request)}"
+        )
+
+    def _drain(self) -> None:
+        """Deliver complete frames that arrived before a request; drop a partial one."""
+        framing = self.framing
+        while True:
+            got = framing.receive(self.clock.now(), settle=False)
+            if got is None:
+                break
+            self._unsolicited(got)
+        framing.discard()
+
+    def _unsolicited(self, got: M | FrameError) -> None:
+        if isinstance(got, FrameError):
+            self._record("rx", got.data, f"error: {got}")
+            return
+        claimed = False
+        for sub in tuple(self._subscriptions):
+            try:
+                if sub.predicate(got):
+                    claimed = True
+                    sub.callback(got)
+            except Exception:  # noqa: BLE001 - a subscriber must not break the bus
+                self.callback_errors += 1
+                log.exception("%s: subscriber failed on %s", self.name, self.rule.describe(got))
+        if self.trace is not None:
+            self._trace_rx(got, "unsolicited" if claimed else "unsolicited, unclaimed")
+        if not claimed:
+            if len(self.unsolicited) == self.unsolicited.maxlen:
+                self.unsolicited_dropped += 1
+            self.unsolicited.append((self.clock.now(), got))
+
+    def _trace_rx(self, msg: M, note: str) -> None:
+        if self.trace is not None:
+            text = self.rule.describe(msg)
+            self._record("rx", self.rule.frame_bytes(msg), f"{note}: {text}" if note else text)
+
+    @staticmethod
+    def _bytes(frame: Any) -> bytes:
+        if isinstance(frame, (bytes, bytearray)):
+            return bytes(frame)
+        data = getattr(frame, "data", b"")
+        return bytes(data)
+
+    def _record(self, direction: str, data: bytes, meaning: str) -> None:
+        if self.trace is not None:
+            try:
+                self.trace(TraceRecord(self.clock.now(), direction, self.name, data, meaning))
+            except Exception:  # noqa: BLE001, S110 - tracing must not break the bus
+                pass
+
+
+class StreamFraming(Framing[M]):
+    """Messages over a byte stream (serial port, pseudo-terminal, in-process loopback) via a sans-I/O codec."""
+
+    def __init__(self, transport: Any, codec: Any, clock: Clock) -> None:
+        self.transport = transport
+        self.codec = codec
+        self.clock = clock
+
+    def write(self, message: Any, frame: Any) -> None:
+        self.transport.write(frame)
+
+    def receive(self, deadline: float, *, settle: bool = True) -> M | FrameError | None:
+        codec = self.codec
+        settled = False
+        while True:
+            try:
+                msg = codec.next_message()
+            except FrameError as exc:
+                return exc
+            if msg is not None:
+                return msg  # type: ignore[no-any-return]
+            if settled:
+                return None
+            chunk = self.transport.read(max(deadline - self.clock.now(), 0.0))
+            if chunk:
+                codec.feed(chunk)
+                continue
+            if not settle:
+                return None
+            codec.flush()  # silence until the deadline: a partial frame will not complete
+            settled = True
+
+    def discard(self) -> None:
+        self.codec.clear()
+
+
+class DirectFraming(Framing[M]):
+    """The sim's direct path: request objects go to an in-process peer, replies come back as objects.
+
+    Rule: identical results to the byte path (the link still encodes every request, so an
+    illegal one raises the same error before anything happens), with no bytes on the way.
+    """
+
+    def __init__(self, peer: Any, transport: Any) -> None:
+        self.peer = peer
+        self.transport = transport
+        self._queue: deque[M] = deque()
+
+    def write(self, message: Any, frame: Any) -> None:
+        reply = self.peer.exchange(message)
+        if reply is not None:
+            self._queue.append(reply)
+
+    def receive(self, deadline: float, *, settle: bool = True) -> M | FrameError | None:
+        return self._queue.popleft() if self._queue else None
+
+
+class FrameFraming(Framing[M]):
+    """Messages over a frame transport (CAN): one transport frame decodes to one message."""
+
+    def __init__(self, transport: Any, decode: Callable[[Any], M], clock: Clock) -> None:
+        self.transport = transport
+        self.decode = decode
+        self.clock = clock
+
+    def write(self, message: Any, frame: Any) -> None:
+        self.transport.send(frame)
+
+    def receive(self, deadline: float, *, settle: bool = True) -> M | FrameError | None:
+        frame = self.transport.recv(max(deadline - self.clock.now(), 0.0))
+        if frame is None:
+            return None
+        try:
+            return self.decode(frame)
+        except FrameError as exc:
+            return exc
