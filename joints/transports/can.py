@@ -1,0 +1,116 @@
+"""CAN frame transports: python-can's ``Bus`` of any interface behind one small ABC.
+
+Rule: frames only (python-can's :class:`can.Message`; no frame class of our own), no decoding,
+no retries. ``recv(timeout)`` waits at most ``timeout`` seconds and returns one frame or None.
+Hardware and served channels are python-can buses chosen by config (``interface``, ``channel``,
+``bitrate`` and the interface's own keywords, e.g. ``port`` of udp_multicast); the sim's
+in-process bus is a python-can bus too, so the same wrapper serves every case.
+"""
+
+from __future__ import annotations
+
+import abc
+import time
+from types import TracebackType
+from typing import Any
+
+from joints.errors import ConfigError, MissingDependencyError, TransportError
+
+
+def python_can() -> Any:
+    try:
+        import can
+    except ImportError as exc:  # pragma: no cover - depends on the install
+        raise MissingDependencyError("python-can", "can") from exc
+    return can
+
+
+class FrameTransport(abc.ABC):
+    """A bidirectional stream of CAN frames."""
+
+    @abc.abstractmethod
+    def send(self, frame: Any) -> None:
+        """Send one ``can.Message``."""
+
+    @abc.abstractmethod
+    def recv(self, timeout: float) -> Any | None:
+        """The next received ``can.Message``, waiting up to ``timeout`` s; None if none arrived."""
+
+    @abc.abstractmethod
+    def close(self) -> None:
+        """Release the bus. Idempotent."""
+
+    @property
+    def name(self) -> str:
+        return type(self).__name__
+
+    def __enter__(self) -> FrameTransport:  # noqa: PYI034 - typing.Self needs Python 3.11
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+
+class PythonCanTransport(FrameTransport):
+    """Any python-can bus (socketcan, pcan, kvaser, slcan, virtual, udp_multicast, the sim's lockstep bus).
+
+    ``ignore_own`` drops frames this bus sent itself that come back to it (udp_multicast echoes
+    every frame to its sender; a real controller never does).
+    """
+
+    def __init__(self, bus: Any, *, ignore_own: bool = True) -> None:
+        self.bus = bus
+        self.ignore_own = ignore_own
+        self._closed = False
+
+    @classmethod
+    def open(cls, interface: str, channel: str | int | None, bitrate: int | None = None, **kwargs: Any) -> PythonCanTransport:
+        """Open ``can.Bus(interface=..., channel=..., bitrate=..., **kwargs)`` with a clear error if it fails."""
+        can = python_can()
+        if bitrate is not None:
+            kwargs["bitrate"] = bitrate
+        try:
+            bus = can.Bus(interface=interface, channel=channel, **kwargs)
+        except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
+            raise TransportError(
+                f"cannot open CAN bus interface={interface!r} channel={channel!r}: {exc}. Check the interface name "
+                "(python -m can.viewer), that the adapter is connected and up (ip link set can0 up type can "
+                "bitrate 1000000), and that no other program holds it exclusively."
+            ) from exc
+        except TypeError as exc:
+            raise ConfigError(f"CAN interface {interface!r} does not take these settings: {exc}", key="interface") from exc
+        return cls(bus)
+
+    @property
+    def name(self) -> str:
+        return f"can:{getattr(self.bus, 'channel_info', type(self.bus).__name__)}"
+
+    def send(self, frame: Any) -> None:
+        if self._closed:
+            raise TransportError(f"{self.name} is closed")
+        try:
+            self.bus.send(frame)
+        except Exception as exc:
+            raise TransportError(f"send on {self.name} failed: {exc}") from exc
+
+    def recv(self, timeout: float) -> Any | None:
+        if self._closed:
+            raise TransportError(f"{self.name} is closed")
+        deadline = time.monotonic() + max(timeout, 0.0)
+        try:
+            while True:
+                frame = self.bus.recv(timeout=max(timeout, 0.0))
+                if frame is None:
+                    return None
+                if self.ignore_own and getattr(frame, "is_rx", True) is False:
+                    timeout = deadline - time.monotonic()  # our own frame came back: wait out the rest
+                    continue
+                return frame
+        except Exception as exc:
+            raise TransportError(f"receive on {self.name} failed: {exc}") from exc
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self.bus.shutdown()
