@@ -286,7 +286,7 @@ class DiffDriveGoalEnv(RigEnv):
     def _select_wheels(self, rig: joints.Rig) -> tuple[str, str]:
         by_side: dict[str, str] = {}
         for name, jc in rig.config.joints.items():
-            if jc.device == "zlac8015d" and jc.channel in ("left", "right"):
+            if jc.channel in ("left", "right"):  # a two-channel drive's wheels (config allows channels only there)
                 by_side.setdefault(jc.channel, name)
         if len(rig.joints) != 2 or set(by_side) != {"left", "right"}:
             raise joints.ConfigError(

@@ -11,6 +11,7 @@ import json
 import sys
 from collections.abc import Sequence
 
+from joints import registry
 from joints.errors import JointsError
 
 
@@ -77,8 +78,9 @@ def _open(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 def cmd_state(args: argparse.Namespace) -> int:
     with _open(args) as rig:
         for name, s in rig.read_states().items():
-            d = {k: getattr(s, k) for k in ("position", "velocity", "torque", "current", "temperature",
-                                            "enabled", "moving", "fault", "time")}
+            d = {"position": s.position, "velocity": s.velocity, "torque": s.torque, "current": s.current,
+                 "temperature": s.temperature, "enabled": s.enabled, "moving": s.moving, "fault": s.fault,
+                 "time": s.time}
             print(json.dumps({"joint": name, **d}))
     return 0
 
@@ -87,9 +89,9 @@ def cmd_read(args: argparse.Namespace) -> int:
     with _open(args) as rig:
         j = _joint(rig, args.joint)
         for key in args.register:
-            reg = j.driver.table.get(_key(key))
-            print(json.dumps({"joint": args.joint, "register": reg.name, "address": f"0x{reg.address:04X}",
-                              "value": j.read(reg.name), "unit": reg.unit}))
+            param, where = j.driver.describe(_key(key))
+            print(json.dumps({"joint": args.joint, "register": param.name, "address": where,
+                              "value": j.read(param.name), "unit": param.unit}))
     return 0
 
 
@@ -100,11 +102,8 @@ def cmd_write(args: argparse.Namespace) -> int:
 
 
 def cmd_registers(args: argparse.Namespace) -> int:
-    if args.device == "zlac8015d":
-        from joints.devices.zlac.registers import ZLAC8015D as table
-    else:
-        from joints.devices.erob.registers import EROB_MODBUS as table
-
+    fam = registry.family(args.device)
+    table = fam.tables["modbus-rtu"]()
     for r in table:
         flag = "  (persistent: needs --confirm)" if r.persistent else ""
         print(f"0x{r.address:04X}  {r.name:<48} {r.type:<6} {r.access.value:<7} {r.unit}{flag}")
@@ -211,7 +210,7 @@ def build_parser() -> argparse.ArgumentParser:
     sv.set_defaults(func=cmd_sim_serve)
 
     r = sub.add_parser("registers", help="list a device's Modbus register table")
-    r.add_argument("--device", choices=("erob", "zlac8015d"), default="erob")
+    r.add_argument("--device", choices=registry.devices(), default="erob")
     r.set_defaults(func=cmd_registers)
 
     m = sub.add_parser("monitor", help="frame monitor: poll the joints and print every frame")

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from joints import registry
 from joints.errors import ConfigError
 from joints.joint import Limits, Motion
 
@@ -24,14 +25,11 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 BACKENDS = ("sim", "hardware")
-PROTOCOLS = ("modbus-rtu", "mks-serial", "erob-can", "canopen")
-DEVICES = ("erob", "zlac8015d", "mks-servo42d", "mks-servo57d")
-#: (device, protocol) pairs with a driver in this version
-SUPPORTED = {("erob", "modbus-rtu"), ("zlac8015d", "modbus-rtu")}
+#: protocol and device names a config may use (the registry's, plus those planned but not built yet)
+PROTOCOLS = registry.protocols() + registry.PLANNED_PROTOCOLS
+DEVICES = registry.devices() + registry.PLANNED_DEVICES
 PARITIES = ("N", "E", "O")
 ON_EXIT = ("disable", "stop", "none")
-#: devices with more than one motor per address (the joint's ``channel`` selects one)
-MULTI_CHANNEL = ("zlac8015d",)
 
 
 @dataclass(frozen=True)
@@ -236,21 +234,22 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
         if not isinstance(bus, str) or bus not in buses:
             raise r.err(f"{key}.bus", f"{bus!r} is not a bus defined under [buses]", sorted(buses))
         protocol = buses[str(bus)].protocol
-        if (device, protocol) not in SUPPORTED:
-            raise r.err(
-                f"{key}.device",
-                f"device {device!r} on protocol {protocol!r} is not supported yet",
-                sorted(f"{d} on {p}" for d, p in SUPPORTED),
-            )
-        address = r.number(j, f"{key}.address", None, integer=True, minimum=1, maximum=247)
+        fam = registry.FAMILIES.get(next((f for f, e in registry.FAMILIES.items() if device in e.devices), ""))
+        if fam is None or protocol not in fam.drivers:
+            raise r.err(f"{key}.device", f"device {device!r} on protocol {protocol!r} is not supported yet",
+                        registry.pairs())
+        lo, hi = fam.address_range(protocol)
+        address = r.number(j, f"{key}.address", None, integer=True, minimum=lo, maximum=hi)
         if address is None:
-            raise r.err(f"{key}.address", "is required (Modbus slave id / MKS address / CAN node id)")
+            raise r.err(f"{key}.address", f"is required ({protocol}: {lo}..{hi})")
         channel = j.get("channel")
-        if device in MULTI_CHANNEL and channel not in ("left", "right"):
-            raise r.err(f"{key}.channel", f"{channel!r}: a {device} joint must name its motor", ("left", "right"))
-        ident = (str(bus), address, channel if device in MULTI_CHANNEL else None)
+        if fam.channels and channel not in fam.channels:
+            raise r.err(f"{key}.channel", f"{channel!r}: a {device} joint must name its motor", fam.channels)
+        ident = (str(bus), address, channel if fam.channels else None)
         if ident in seen:
             raise r.err(f"{key}.address", f"address {address} on bus {bus!r} is already used by joint {seen[ident]!r}")
+        if not fam.channels and channel is not None:
+            raise r.err(f"{key}.channel", f"a {device} has one motor per address; remove the key")
         seen[ident] = name
         profile = j.get("profile", {})
         if not isinstance(profile, Mapping):

@@ -17,13 +17,14 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+from joints import registry
 from joints.clock import Clock, MonotonicClock
 from joints.config import BusConfig, RigConfig, load, parse
+from joints.drivers.capabilities import CommunicationWatchdog, DriveGroup, GroupedChannel, SyncVelocityGroup
 from joints.errors import ConfigError, JointsError
 from joints.joint import Joint, JointState
-from joints.link.modbus import ModbusLink, RetryPolicy
+from joints.link.base import Link
 from joints.link.trace import TraceRecord
-from joints.transports.base import ByteTransport
 
 log = logging.getLogger("joints")
 
@@ -33,8 +34,8 @@ class Bus:
     """One configured bus: its transport and link."""
 
     config: BusConfig
-    transport: ByteTransport
-    link: ModbusLink
+    transport: Any  #: a byte transport (serial, pty, loopback) or a CAN frame transport
+    link: Link[Any]
 
 
 class Rig:
@@ -78,19 +79,20 @@ class Rig:
         by one block read of that drive.
         """
         out: dict[str, JointState] = {}
-        groups: dict[int, Any] = {}
+        groups: dict[int, tuple[Mapping[str, int], float]] = {}
         for bus in self.buses:
             for name, j in self.joints.items():
                 if self.config.joints[name].bus != bus:
                     continue
-                group = getattr(j.driver, "status_group", None)
-                if group is None:
+                driver = j.driver
+                if not isinstance(driver, GroupedChannel):
                     out[name] = j.state()
                     continue
+                group: DriveGroup = driver.group
                 if id(group) not in groups:
                     groups[id(group)] = (group.read_status(), self.clock.now())
                 block, t = groups[id(group)]
-                out[name] = j.to_si(j.driver.state_from(block, t))  # type: ignore[attr-defined]
+                out[name] = j.to_si(driver.state_from(block, t))
         return {name: out[name] for name in self.joints if name in out}
 
     def set_velocities(self, velocities: Mapping[str, float]) -> None:
@@ -102,18 +104,22 @@ class Rig:
         checked = {name: self.joints[name].velocity_command(v) for name, v in velocities.items()}
         done: set[str] = set()
         for name, (v, acc) in checked.items():
+            if name in done:
+                continue
             driver = self.joints[name].driver
-            group = getattr(driver, "status_group", None)
-            sync = getattr(group, "set_velocity_pair", None)
-            if sync is not None and name not in done:
-                pair = {n: self.joints[n] for n in checked if getattr(self.joints[n].driver, "status_group", None) is group}
-                if len(pair) == 2:
-                    sync({getattr(j.driver, "side"): checked[n] for n, j in pair.items()})  # noqa: B009
-                    done.update(pair)
+            if isinstance(driver, GroupedChannel) and isinstance(driver.group, SyncVelocityGroup):
+                group = driver.group
+                members: dict[str, GroupedChannel] = {}
+                for n in checked:
+                    d = self.joints[n].driver
+                    if isinstance(d, GroupedChannel) and d.group is group:
+                        members[n] = d
+                if {d.channel for d in members.values()} == set(group.channels):
+                    group.set_channel_velocities({d.channel: checked[n] for n, d in members.items()})
+                    done.update(members)
                     continue
-            if name not in done:
-                driver.set_velocity(v, acceleration=acc, deceleration=acc)
-                done.add(name)
+            driver.set_velocity(v, acceleration=acc, deceleration=acc)
+            done.add(name)
 
     def reset(self) -> None:
         """Sim: physics to the model's initial state and every emulated drive to power-on.
@@ -127,9 +133,8 @@ class Rig:
         for name, j in self.joints.items():
             j.driver_reset()
             watchdog = self.config.joints[name].watchdog_ms
-            setter = getattr(j.driver, "set_communication_timeout", None)
-            if watchdog is not None and setter is not None:
-                setter(watchdog)  # the power cycle restored the drive's default: re-apply the config
+            if watchdog is not None and isinstance(j.driver, CommunicationWatchdog):
+                j.driver.set_communication_timeout(watchdog)  # the power cycle restored the default: re-apply
 
     def trace(self, sink: Callable[[TraceRecord], None] | None) -> None:
         """Route every frame of every bus to ``sink`` (None stops tracing)."""
@@ -157,7 +162,7 @@ class Rig:
                 b.transport.close()
             except Exception as exc:  # noqa: BLE001
                 errors.append(exc)
-        if self.world is not None and hasattr(self.world, "close"):
+        if self.world is not None:
             try:
                 self.world.close()
             except Exception as exc:  # noqa: BLE001 - report with the others
@@ -182,54 +187,37 @@ class Rig:
         return f"Rig(backend={self.backend!r}, joints={list(self.joints)})"
 
 
-def _open_hardware_transport(cfg: BusConfig) -> ByteTransport:
-    if cfg.protocol == "modbus-rtu":
-        from joints.transports.serial import SerialTransport
-
-        if cfg.port is None:  # e.g. a sim config opened with backend="hardware"
-            raise ConfigError("is required for backend = \"hardware\" (e.g. \"/dev/ttyUSB0\")",
-                              key=f"buses.{cfg.name}.port")
-        return SerialTransport(cfg.port, cfg.baudrate, parity=cfg.parity, stopbits=cfg.stopbits)
-    raise ConfigError(f"protocol {cfg.protocol!r} has no transport yet", key=f"buses.{cfg.name}.protocol")
-
-
 def _in_file(exc: ConfigError, source: str) -> ConfigError:
     """The same error, naming the config file (errors from below the config know only the key)."""
     return ConfigError(exc.message, file=source, key=exc.key, allowed=exc.allowed)
 
 
-def build(config: RigConfig, *, transports: Mapping[str, ByteTransport] | None = None,
+def build(config: RigConfig, *, transports: Mapping[str, Any] | None = None,
           clock: Clock | None = None, world: Any = None, peers: Mapping[str, Any] | None = None) -> Rig:
-    """Assemble a rig from a validated config and ready transports (one per bus).
+    """Assemble a rig from a validated config and ready transports (one per bus; missing ones are opened).
 
     ``peers`` (sim): bus name -> emulated bus answering message objects; those buses get the
-    direct link (no bytes) instead of the byte path.
+    direct path (no bytes) instead of the byte path.
     """
-    from joints.drivers import make_driver
-
     clock = clock or MonotonicClock()
-    opened: dict[str, ByteTransport] = dict(transports or {})
+    opened: dict[str, Any] = dict(transports or {})
     buses: dict[str, Bus] = {}
     try:
         for name, bcfg in config.buses.items():
+            proto = registry.protocol(bcfg.protocol, key=f"buses.{name}.protocol")
             if name not in opened:
-                opened[name] = _open_hardware_transport(bcfg)
-            link = ModbusLink(
-                opened[name],
-                peer=peers.get(name) if peers else None,
-                policy=RetryPolicy(timeout=bcfg.timeout, retries=bcfg.retries),
-                echo=bcfg.echo,
-                clock=clock,
-                name=name,
-            )
+                opened[name] = proto.open_transport(bcfg)
+            link = proto.link(bcfg, opened[name], clock, peers.get(name) if peers else None)
             buses[name] = Bus(bcfg, opened[name], link)
         joints: dict[str, Joint] = {}
         shared: dict[Any, Any] = {}
         for name, jcfg in config.joints.items():
-            driver = make_driver(jcfg, buses[jcfg.bus].link, clock, shared)
+            bus = buses[jcfg.bus]
+            fam = registry.family(jcfg.device, key=f"joints.{name}.device")
+            driver = fam.driver(jcfg, bus.link, clock, shared, bus.config.protocol)
             joints[name] = Joint(name, driver, clock=clock, limits=jcfg.limits, motion=jcfg.motion,
                                  offset=jcfg.offset, direction=jcfg.direction)
-            if jcfg.watchdog_ms is not None and hasattr(driver, "set_communication_timeout"):
+            if jcfg.watchdog_ms is not None and isinstance(driver, CommunicationWatchdog):
                 driver.set_communication_timeout(jcfg.watchdog_ms)
     except BaseException as exc:
         for t in opened.values():
@@ -264,16 +252,21 @@ def open(config: str | os.PathLike[str] | Mapping[str, Any] | RigConfig, *, back
 
 
 def sim_world(cfg: RigConfig) -> Any:
-    """The simulated world for a config: its model with one emulated drive per joint."""
-    from joints.drivers import device_profile
-    from joints.sim.world import DriveSpec, World
+    """The simulated world for a config: its model with one twin per drive, on one device bus per bus."""
+    from joints.sim.world import BusSpec, DriveSpec, World
 
-    drives = []
     try:
+        buses = {}
+        for name, b in cfg.buses.items():
+            proto = registry.protocol(b.protocol, key=f"buses.{name}.protocol")
+            buses[name] = BusSpec(name, b.protocol, proto.device_bus, proto.sim_transport)
+        drives = []
         for name, j in cfg.joints.items():
+            fam = registry.family(j.device, key=f"joints.{name}.device")
             drives.append(DriveSpec(bus=j.bus, name=name, mjcf_joint=j.mjcf_joint or name, address=j.address,
-                                    profile=device_profile(j), device=j.device, channel=j.channel))
-        return World(cfg.sim.model, drives, timestep=cfg.sim.timestep, base_dir=cfg.base_dir)
+                                    profile=fam.config_profile(j), device=j.device, channel=j.channel,
+                                    protocol=cfg.buses[j.bus].protocol, maker=fam))
+        return World(cfg.sim.model, drives, buses=buses, timestep=cfg.sim.timestep, base_dir=cfg.base_dir)
     except ConfigError as exc:  # `joints sim serve` comes here directly: name the file too
         if exc.file is None:
             raise _in_file(exc, cfg.source) from exc
@@ -289,5 +282,6 @@ def open_sim(cfg: RigConfig) -> Rig:
         from joints.sim.pacing import RealtimeClock
 
         clock = RealtimeClock(world)
-    peers = {name: world.buses[name] for name in cfg.buses if name in world.buses} if cfg.sim.direct else None
+    peers = ({name: world.buses[name] for name in cfg.buses
+              if registry.protocol(cfg.buses[name].protocol).direct} if cfg.sim.direct else None)
     return build(cfg, transports=transports, clock=clock, world=world, peers=peers)

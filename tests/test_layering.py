@@ -32,13 +32,15 @@ ALLOWED: dict[str, frozenset[str]] = {
     "link": frozenset({"codecs", "transports", "clock", "errors"}),
     "drivers": frozenset({"link", "devices", "codecs", "clock", "errors"}),
     "joint": frozenset({"drivers", "devices", "clock", "errors"}),
-    "config": frozenset({"joint", "errors"}),
+    # the one list of device families and protocols: it names every driver, link and twin
+    "registry": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "sim"}),
+    "config": frozenset({"joint", "errors", "registry"}),
     # emulated drives: device semantics + transports to be served on; never the host side
     "sim": frozenset({"devices", "codecs", "transports", "clock", "errors"}),
     "rig": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
-                      "config", "sim"}),
+                      "registry", "config", "sim"}),
     "cli": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
-                      "config", "sim", "rig", API}),
+                      "registry", "config", "sim", "rig", API}),
 }
 #: the package entry points import whatever they re-export
 EXEMPT = {"joints", "joints.__main__"}
@@ -204,7 +206,8 @@ def test_checker_resolves_relative_imports_in_a_package_init() -> None:
 @pytest.mark.parametrize("layer,forbidden", [("sim", "drivers"), ("sim", "joint"), ("sim", "rig"), ("sim", "link"),
                                              ("codecs", "transports"), ("devices", "codecs"),
                                              ("joint", "link"), ("config", "drivers"), ("rig", "cli"),
-                                             ("drivers", "joint"), ("link", "drivers"), ("clock", "errors")])
+                                             ("drivers", "joint"), ("link", "drivers"), ("clock", "errors"),
+                                             ("drivers", "registry"), ("sim", "registry"), ("drivers", "config")])
 def test_rules_forbid(layer: str, forbidden: str) -> None:
     assert forbidden not in ALLOWED[layer]
 
@@ -228,3 +231,47 @@ def test_import_joints_pulls_in_no_heavy_dependency() -> None:
                           timeout=60, check=False)
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout.strip().splitlines()[-1]) == []
+
+
+# --- one list of devices: names are compared only in the registry and the device's own modules ---
+
+#: where a device family's name may appear in a comparison (its own definitions and the registry)
+DEVICE_HOMES = ("joints/registry.py", "joints/devices/")
+
+
+def _device_names() -> set[str]:
+    from joints import registry
+
+    return set(registry.devices()) | set(registry.PLANNED_DEVICES)
+
+
+def test_no_comparison_against_a_device_name_outside_the_registry() -> None:
+    names = _device_names()
+    offenders: list[str] = []
+    for path in [*modules(), *sorted((ROOT / "envs").rglob("*.py"))]:
+        rel = path.relative_to(ROOT).as_posix()
+        if rel.startswith(DEVICE_HOMES):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Compare):
+                for c in ast.walk(node):
+                    if isinstance(c, ast.Constant) and c.value in names:
+                        offenders.append(f"{rel}:{node.lineno}: compares with {c.value!r}")
+    assert not offenders, "device names compared outside the registry:\n" + "\n".join(offenders)
+
+
+def test_no_capability_probing_by_attribute_name() -> None:
+    """Optional driver abilities are typed protocols (joints.drivers.capabilities), not getattr/hasattr probes."""
+    probes = {"getattr", "hasattr"}
+    offenders: list[str] = []
+    for rel in ("joints/rig.py", "joints/joint.py", "joints/cli.py", "joints/registry.py", "joints/config.py"):
+        path = ROOT / rel
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in probes:
+                offenders.append(f"{rel}:{node.lineno}")
+    for path in sorted((ROOT / "envs").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in probes
+                    and node.args and isinstance(node.args[0], ast.Attribute) and "driver" in ast.unparse(node.args[0])):
+                offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+    assert not offenders, f"attribute probing where a capability protocol belongs: {offenders}"

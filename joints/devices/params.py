@@ -55,7 +55,7 @@ def check_value(name: str, type_: str, value: object, minimum: int | None = None
         if isinstance(value, float) and value.is_integer():
             value = int(value)
         elif hasattr(value, "__index__") and not isinstance(value, bool):  # numpy integers
-            value = int(value)  # type: ignore[call-overload]
+            value = int(value)
         else:
             raise CommandError(f"{name}: expected an integer, got {value!r}")
     lo, hi, _ = TYPES[type_]
@@ -63,9 +63,9 @@ def check_value(name: str, type_: str, value: object, minimum: int | None = None
         lo = max(lo, minimum)
     if maximum is not None:
         hi = min(hi, maximum)
-    if not lo <= value <= hi:  # type: ignore[operator]
+    if not lo <= value <= hi:
         raise CommandError(f"{name}{where}: value {value} out of range [{lo}, {hi}]" + (f" {unit}" if unit else ""))
-    return int(value)  # type: ignore[call-overload]
+    return int(value)
 
 
 @dataclass(frozen=True, slots=True)

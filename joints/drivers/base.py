@@ -1,8 +1,12 @@
-"""The driver contract: register-level logic of one device family, in the device's own units.
+"""The driver contract: parameter-level logic of one device family, in the device's own units.
 
-Rule: drivers never touch bytes (they call a link) and never read the wall clock (they are given
-a clock). The same driver object runs against hardware and against an emulator. SI units, user
-limits and safety policy live one layer up, in :class:`joints.joint.Joint`.
+Rule: drivers never touch bytes (they call a :class:`~joints.drivers.access.ParamAccess`, which
+calls a link) and never read the wall clock (they are given a clock). They speak in parameter
+names, so one family's logic serves every protocol that reaches the same parameters. The same
+driver object runs against hardware and against a twin. SI units, user limits and safety policy
+live one layer up, in :class:`joints.joint.Joint`. Optional abilities (a shared status read,
+synchronous multi-channel commands, a communication watchdog) are the typed protocols of
+:mod:`joints.drivers.capabilities`.
 """
 
 from __future__ import annotations
@@ -12,7 +16,8 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from joints.devices.registers import Register, RegisterTable
+from joints.devices.params import Param, ParamSet
+from joints.drivers.access import ParamAccess
 from joints.errors import ConfirmationRequired, RegisterError
 
 
@@ -50,8 +55,18 @@ class JointDriver(abc.ABC):
     """One joint on one drive (a dual-channel drive has one driver per channel)."""
 
     device: str = ""
-    table: RegisterTable
+    name: str = ""
+    access: ParamAccess
     units: Units
+
+    @property
+    def params(self) -> ParamSet:
+        """The family's parameters (by manual name), as this driver's protocol reaches them."""
+        return self.access.params
+
+    @property
+    def protocol(self) -> str:
+        return self.access.protocol
 
     # -- power --
     @abc.abstractmethod
@@ -92,26 +107,37 @@ class JointDriver(abc.ABC):
     @abc.abstractmethod
     def fault_text(self, code: int) -> str: ...
 
-    # -- registers --
-    @abc.abstractmethod
-    def read(self, key: str | int) -> int: ...
+    # -- parameters --
+    def describe(self, key: str | int) -> tuple[Param, str]:
+        """The parameter for a name or protocol address, and where it lives on this protocol."""
+        name = self.access.resolve(key)
+        return self.params[name], self.access.where(name)
 
-    @abc.abstractmethod
-    def write_register(self, reg: Register, value: int) -> None: ...
+    def read(self, key: str | int) -> int:
+        """Read one parameter by manual name (or protocol address)."""
+        name = self.access.resolve(key)
+        p = self.params[name]
+        if not p.access.readable:
+            raise RegisterError(f"{self.device}: {name} ({self.access.where(name)}) cannot be read "
+                                f"({p.access.value}); nothing was sent")
+        return self.access.read(name)
 
     def write(self, key: str | int, value: int, *, confirm: bool = False) -> None:
-        """Write one register by manual name or address (persistent ones need ``confirm=True``)."""
-        reg = self.table.get(key)
-        if not reg.access.writable:
-            raise RegisterError(
-                f"{self.device}: {reg.name} (0x{reg.address:04X}) is read-only; nothing was sent"
-            )
-        if reg.persistent and not confirm:
+        """Write one parameter by manual name or address (persistent ones need ``confirm=True``)."""
+        name = self.access.resolve(key)
+        p = self.params[name]
+        if not p.access.writable:
+            raise RegisterError(f"{self.device}: {name} ({self.access.where(name)}) is read-only; nothing was sent")
+        if p.persistent and not confirm:
             raise ConfirmationRequired(
-                f"{self.device}: writing {reg.name} (0x{reg.address:04X}) is persistent or "
-                "dangerous; pass confirm=True if you mean it"
+                f"{self.device}: writing {name} ({self.access.where(name)}) is persistent or dangerous; "
+                "pass confirm=True if you mean it"
             )
-        self.write_register(reg, value)
+        self.write_param(name, value)
+
+    def write_param(self, name: str, value: int) -> None:
+        """Write a parameter the driver may track (range-checked; subclasses note what they write)."""
+        self.access.write(name, value)
 
     @property
     @abc.abstractmethod

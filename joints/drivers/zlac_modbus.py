@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from joints.clock import Clock, MonotonicClock
-from joints.devices.registers import Register
 from joints.devices.zlac import registers as zr
+from joints.drivers.access import ModbusAccess
 from joints.drivers.base import JointDriver, RawState, Units
 from joints.errors import CommandError, ConfirmationRequired, StateError
 from joints.link.modbus import ModbusLink
@@ -31,6 +31,9 @@ SIDES = ("left", "right")
 #: status block read in ONE FC03: motor state (0x20A2) .. actual torque right (0x20AE)
 STATUS_START = 0x20A2
 STATUS_WORDS = 0x20AE - 0x20A2 + 1
+#: the velocity and torque targets of both wheels (0x2088..0x2091 with the position targets between)
+_TARGETS = ("target_velocity_left", "target_velocity_right", "target_torque_left", "target_torque_right")
+
 def ramp_time_ms(delta_rpm: float, rpm_per_s: float) -> int:
     """Acceleration/deceleration-time register value [ms] for a speed change of ``delta_rpm`` at
     ``rpm_per_s``: the ramp time is the time the drive takes to reach the commanded speed (the
@@ -49,9 +52,10 @@ class _DriveState:
 
 
 class ZlacDrive:
-    """One ZLAC8015D on a Modbus link: the state both wheels share."""
+    """One ZLAC8015D on a Modbus link: the state both wheels share (a drive group of two channels)."""
 
     table = zr.ZLAC8015D
+    channels = SIDES
 
     def __init__(self, link: ModbusLink, slave: int, *, clock: Clock | None = None, name: str = "") -> None:
         if not 1 <= slave <= 127:
@@ -61,34 +65,30 @@ class ZlacDrive:
         self.clock: Clock = clock or link.clock or MonotonicClock()
         self.name = name or f"zlac8015d@{slave}"
         self.state = _DriveState()
+        self.access = ModbusAccess(link, slave, self.table)
         self._cache: dict[str, int] = {}
 
-    # -- registers --
-    def read(self, key: str | int) -> int:
-        reg = self.table.get(key)
-        return reg.from_words(self.link.read_registers(self.slave, reg.address, reg.words))
+    # -- parameters --
+    def write_param(self, name: str, value: int, *, idempotent: bool = True) -> None:
+        self.access.write(name, value, idempotent=idempotent)
+        self._cache[name] = int(value)
 
-    def write_register(self, reg: Register, value: int, *, idempotent: bool = True) -> None:
-        words = reg.to_words(value)
-        if len(words) == 1:
-            self.link.write_register(self.slave, reg.address, words[0], idempotent=idempotent)
-        else:
-            self.link.write_registers(self.slave, reg.address, words, idempotent=idempotent)
-        self._cache[reg.name] = int(value)
+    def written(self, name: str, default: int) -> int:
+        """The last value this host wrote to ``name`` (``default`` if it wrote none)."""
+        return self._cache.get(name, default)
 
     def set(self, name: str, value: int, *, force: bool = False) -> None:
         if force or self._cache.get(name) != value:
-            self.write_register(self.table[name], value)
+            self.write_param(name, value)
 
     def set_block(self, values: Mapping[str, int]) -> None:
         """Several contiguous registers in one FC16."""
-        start, words = self.table.encode_block(values)
-        self.link.write_registers(self.slave, start, words)
+        self.access.write_many(values)
         self._cache.update(values)
 
     def control(self, word: zr.ControlWord) -> None:
         """Write the control word (commands are never retried)."""
-        self.write_register(self.table["control_word"], int(word), idempotent=False)
+        self.write_param("control_word", int(word), idempotent=False)
         self._cache.pop("control_word", None)
 
     def forget(self) -> None:
@@ -152,7 +152,7 @@ class ZlacDrive:
         """Enable the drive (both motors) - after zeroing any velocity or torque target left in
         the registers, so that enabling never restarts an old command (e.g. after a fault)."""
         if not self.state.enabled:
-            targets = self.table.decode_block(0x2088, self.link.read_registers(self.slave, 0x2088, 0x2091 - 0x2088 + 1))
+            targets = self.access.read_many(_TARGETS)  # 0x2088..0x2091: one FC03
             for pair in (("target_velocity_left", "target_velocity_right"), ("target_torque_left", "target_torque_right")):
                 if any(targets[n] for n in pair):
                     self.set_block({n: 0 for n in pair})
@@ -175,7 +175,7 @@ class ZlacDrive:
             self.require_mode(side, zr.ControlMode.VELOCITY)
         self.set_block({"target_velocity_left": left, "target_velocity_right": right})
 
-    def set_velocity_pair(self, commands: Mapping[str, tuple[int, int]]) -> None:
+    def set_channel_velocities(self, commands: Mapping[str, tuple[int, int]]) -> None:
         """Rig.set_velocities: side -> (velocity [0.1 r/min], ramp [0.1 r/min/s]); ramps as needed,
         then both targets in one FC16."""
         rpm = {side: round(commands[side][0] / 10.0) for side in SIDES}
@@ -219,8 +219,7 @@ class ZlacDrive:
     # -- status --
     def read_status(self) -> dict[str, int]:
         """Both wheels' status in ONE FC03 (motor state .. actual torque right)."""
-        words = self.link.read_registers(self.slave, STATUS_START, STATUS_WORDS)
-        return self.table.decode_block(STATUS_START, words)
+        return self.access.read_block(STATUS_START, STATUS_WORDS)
 
 
 class ZlacChannelDriver(JointDriver):
@@ -234,6 +233,8 @@ class ZlacChannelDriver(JointDriver):
             raise CommandError(f"ZLAC8015D channel must be 'left' or 'right', got {side!r}")
         self.drive = drive
         self.side = side
+        self.channel = side
+        self.access = drive.access
         self.profile = profile
         self.name = name or f"{drive.name}:{side}"
         rad_per_count = 2.0 * math.pi / zr.COUNTS_PER_REV
@@ -243,16 +244,12 @@ class ZlacChannelDriver(JointDriver):
         return f"{stem}_{self.side}"
 
     @property
-    def status_group(self) -> ZlacDrive:
-        """Channels with the same group share one status read (Rig.read_states)."""
+    def group(self) -> ZlacDrive:
+        """Both wheels share one drive: one status read (Rig.read_states), one velocity FC16."""
         return self.drive
 
-    # -- registers --
-    def read(self, key: str | int) -> int:
-        return self.drive.read(key)
-
-    def write_register(self, reg: Register, value: int) -> None:
-        self.drive.write_register(reg, value)
+    def write_param(self, name: str, value: int) -> None:
+        self.drive.write_param(name, value)
 
     @property
     def is_enabled(self) -> bool:
@@ -296,7 +293,7 @@ class ZlacChannelDriver(JointDriver):
         self.table[self._r("target_velocity")].check(rpm)
         self._require_enabled()
         self.drive.require_mode(self.side, zr.ControlMode.VELOCITY)
-        last = self.drive._cache.get(self._r("target_velocity"), 0)
+        last = self.drive.written(self._r("target_velocity"), 0)
         self._ramps(rpm - last, acceleration, deceleration)
         self.drive.set(self._r("target_velocity"), rpm, force=True)
 
@@ -308,7 +305,7 @@ class ZlacChannelDriver(JointDriver):
         self._require_enabled()
         self.drive.require_mode(self.side, mode)
         self.drive.set_sync(False)
-        self._ramps(rpm or self.drive._cache.get(self._r("target_speed"), 120), acceleration, deceleration)
+        self._ramps(rpm or self.drive.written(self._r("target_speed"), 120), acceleration, deceleration)
         if rpm is not None:
             self.drive.set(self._r("target_speed"), rpm)
         self.drive.set(self._r("target_position"), counts, force=True)
@@ -390,11 +387,10 @@ class ZlacChannelDriver(JointDriver):
         """Absolute position mode: the present position becomes zero (0x2006)."""
         if not confirm:
             raise ConfirmationRequired(f"{self.name}: resetting the zero point moves the position reference; pass confirm=True")
-        self.drive.write_register(self.table["in_absolute_position_control_reset_the_zero_point"],
-                                  1 if self.side == "left" else 2)
+        self.drive.write_param("in_absolute_position_control_reset_the_zero_point", 1 if self.side == "left" else 2)
 
     def clear_feedback_position(self, *, confirm: bool = False) -> None:
         """Clear the feedback position of both wheels (0x2005)."""
         if not confirm:
             raise ConfirmationRequired(f"{self.name}: clearing the feedback position resets both wheels' counts; pass confirm=True")
-        self.drive.write_register(self.table["clear_feedback_position"], 1)
+        self.drive.write_param("clear_feedback_position", 1)

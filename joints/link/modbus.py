@@ -45,11 +45,10 @@ class ModbusRule(Rule[Any]):
         return request.slave != BROADCAST  # type: ignore[no-any-return]
 
     def before_send(self, framing: Framing[Any], request: Any, frame: Any) -> None:
-        codec = getattr(framing, "codec", None)
-        if codec is not None:
-            codec.expect_reply_to(request)
+        if isinstance(framing, StreamFraming):
+            framing.codec.expect_reply_to(request)
             if self.echo:
-                codec.expect_echo(frame)
+                framing.codec.expect_echo(frame)
 
     def describe(self, message: Any) -> str:
         return _describe(message)

@@ -10,7 +10,7 @@ profile, not from the XML. Nothing here reads the wall clock.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -18,9 +18,6 @@ from typing import Any, Protocol
 
 from joints.clock import ManualClock
 from joints.errors import ConfigError, MissingDependencyError
-from joints.sim.erob import ErobEmulator
-from joints.sim.modbus_slave import ModbusDeviceBus
-from joints.transports.loopback import LoopbackTransport
 
 
 def _mujoco() -> Any:
@@ -63,6 +60,31 @@ class JointProfile(Protocol):
     max_torque: float
 
 
+class Stepper(Protocol):
+    """What runs one joint's drive loops every substep."""
+
+    def step(self, t: float, dt: float, q: float, qd: float) -> float:
+        """Run the loops for the substep ending at ``t``; return the motor torque [N*m]."""
+        ...
+
+    def place(self, q: float) -> None:
+        """The joint is at ``q`` and at rest (start state): encoder and setpoints follow."""
+        ...
+
+
+class TwinMaker(Protocol):
+    """Builds one drive's twin and its protocol front (the registry's device families are makers)."""
+
+    def build_twin(self, specs: Sequence[DriveSpec], inertia: Mapping[str, float]) -> tuple[Any, Mapping[Any, Stepper]]:
+        """The twin of one drive serving ``specs`` (one per channel; it has ``power_cycle()`` and a ``time``
+        attribute) and the stepper of each spec's channel (``None`` for a single-channel drive)."""
+        ...
+
+    def front(self, protocol: str, twin: Any, address: int) -> Any:
+        """The object that answers ``protocol`` frames for ``twin`` at ``address`` on a device bus."""
+        ...
+
+
 @dataclass(frozen=True)
 class DriveSpec:
     """One emulated joint: which bus/address (and channel) answers for it and which MJCF joint it drives."""
@@ -71,65 +93,59 @@ class DriveSpec:
     name: str
     mjcf_joint: str
     address: int
-    profile: Any  #: ErobProfile | HubMotorProfile (anything with the JointProfile fields)
-    device: str = "erob"
-    channel: str | None = None  #: "left" / "right" for a dual-channel drive
+    profile: Any  #: the device profile (anything with the JointProfile fields)
+    device: str
+    maker: TwinMaker
+    protocol: str = "modbus-rtu"
+    channel: str | None = None  #: a multi-channel drive's channel ("left" / "right")
     extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class BusSpec:
+    """One emulated bus: its protocol's device side and the in-process transport to it."""
+
+    name: str
+    protocol: str
+    device_bus: Callable[[], Any]
+    transport: Callable[[Any], Any]
 
 
 @dataclass
 class _Bound:
     name: str
-    emulator: Any  #: the drive (one Modbus slave)
-    stepper: Any  #: what runs the loops of this joint: .step(t, dt, q, qd) -> torque, .place(q)
+    emulator: Any  #: the drive's twin (shared by its channels)
+    stepper: Stepper  #: what runs the loops of this joint
     qadr: int
     dadr: int
     aid: int
 
 
-def _make_emulators(specs: Sequence[DriveSpec], inertia: Mapping[str, float]) -> dict[str, tuple[Any, Any]]:
-    """Build one emulator per drive (bus, address); returns joint name -> (emulator, stepper)."""
-    out: dict[str, tuple[Any, Any]] = {}
+def _make_twins(specs: Sequence[DriveSpec], inertia: Mapping[str, float]) -> dict[str, tuple[Any, Stepper]]:
+    """Build one twin per drive (bus, address); returns joint name -> (twin, stepper)."""
+    out: dict[str, tuple[Any, Stepper]] = {}
     groups: dict[tuple[str, int], list[DriveSpec]] = {}
     for d in specs:
         groups.setdefault((d.bus, d.address), []).append(d)
     for (bus, address), group in groups.items():
-        device = group[0].device
-        if any(g.device != device for g in group):
+        if any(g.device != group[0].device for g in group):
             raise ConfigError(f"bus {bus!r} address {address}: joints of different devices share one address",
                               key=f"joints.{group[0].name}.address")
-        if device == "erob":
-            if len(group) > 1:
-                raise ConfigError(f"bus {bus!r} address {address} is used by {[g.name for g in group]}",
-                                  key=f"joints.{group[1].name}.address")
-            d = group[0]
-            emu: Any = ErobEmulator(d.profile, address, inertia=inertia[d.name])
-            out[d.name] = (emu, emu)
-        elif device == "zlac8015d":
-            from joints.sim.zlac import ZlacEmulator
-
-            by_channel = {g.channel: g for g in group}
-            if len(by_channel) != len(group) or not set(by_channel) <= {"left", "right"}:
-                raise ConfigError(f"zlac8015d at address {address}: each of channel 'left'/'right' at most once",
-                                  key=f"joints.{group[0].name}.channel", allowed=("left", "right"))
-            emu = ZlacEmulator(
-                group[0].profile, address,
-                inertia_left=inertia[by_channel["left"].name] if "left" in by_channel else None,
-                inertia_right=inertia[by_channel["right"].name] if "right" in by_channel else None,
-            )
-            for ch, g in by_channel.items():
-                out[g.name] = (emu, emu.channel(str(ch)))
-        else:
-            raise ConfigError(f"no emulator for device {device!r}", key=f"joints.{group[0].name}.device",
-                              allowed=("erob", "zlac8015d"))
+        channels = [g.channel for g in group]
+        if len(set(channels)) != len(channels):
+            raise ConfigError(f"bus {bus!r} address {address} is used by {[g.name for g in group]}",
+                              key=f"joints.{group[1].name}.address")
+        twin, steppers = group[0].maker.build_twin(group, inertia)
+        for g in group:
+            out[g.name] = (twin, steppers[g.channel])
     return out
 
 
 class World:
     """MuJoCo model + data + emulated drives + the simulated clock."""
 
-    def __init__(self, model: str | Path, drives: Sequence[DriveSpec], *, timestep: float = 0.001,
-                 base_dir: Path | None = None) -> None:
+    def __init__(self, model: str | Path, drives: Sequence[DriveSpec], *, buses: Mapping[str, BusSpec],
+                 timestep: float = 0.001, base_dir: Path | None = None) -> None:
         mj = _mujoco()
         self.mujoco = mj
         self.path = resolve_model(model, base_dir)
@@ -177,18 +193,20 @@ class World:
             aid = mj.mj_name2id(self.model, mj.mjtObj.mjOBJ_ACTUATOR, f"{d.name}_motor")
             addr[d.name] = (int(self.model.jnt_qposadr[jid]), int(self.model.jnt_dofadr[jid]), aid)
         inertia = {name: self._dof_inertia(dof) for name, (_qa, dof, _aid) in addr.items()}
-        made = _make_emulators(drives, inertia)
-        self.drives: dict[str, Any] = {}  #: joint name -> its drive's emulator (shared by channels)
-        self.buses: dict[str, ModbusDeviceBus] = {}
+        made = _make_twins(drives, inertia)
+        self.drives: dict[str, Any] = {}  #: joint name -> its drive's twin (shared by channels)
+        self.bus_specs = dict(buses)
+        self.buses: dict[str, Any] = {name: b.device_bus() for name, b in self.bus_specs.items()}
         self._bound: list[_Bound] = []
+        fronts: set[tuple[str, int]] = set()
         for d in drives:
-            emu, stepper = made[d.name]
-            self.drives[d.name] = emu
-            bus = self.buses.setdefault(d.bus, ModbusDeviceBus())
-            if bus.slaves.get(d.address) is not emu:
-                bus.add(emu)
+            twin, stepper = made[d.name]
+            self.drives[d.name] = twin
+            if (d.bus, d.address) not in fronts:
+                self.buses[d.bus].add(d.maker.front(d.protocol, twin, d.address))
+                fronts.add((d.bus, d.address))
             qa, da, aid = addr[d.name]
-            self._bound.append(_Bound(d.name, emu, stepper, qa, da, aid))
+            self._bound.append(_Bound(d.name, twin, stepper, qa, da, aid))
             stepper.place(float(self.data.qpos[qa]))
         self._bind = [(b.stepper.step, b.qadr, b.dadr, b.aid) for b in self._bound]
 
@@ -207,11 +225,11 @@ class World:
         """Simulated seconds since the last reset."""
         return self.steps * self.timestep
 
-    def transport(self, bus: str) -> LoopbackTransport:
+    def transport(self, bus: str) -> Any:
         """An in-process transport whose peer is every emulated drive on ``bus``."""
         if bus not in self.buses:
-            raise ConfigError(f"no emulated drives on bus {bus!r}", key="buses", allowed=sorted(self.buses))
-        return LoopbackTransport(self.buses[bus])
+            raise ConfigError(f"no emulated bus {bus!r}", key="buses", allowed=sorted(self.buses))
+        return self.bus_specs[bus].transport(self.buses[bus])
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics substeps (drives' loops every substep)."""

@@ -9,21 +9,26 @@ SAME compiled model, measured in the same run, and their ratio (goal: >= 0.5).
 
 from __future__ import annotations
 
+import sys
 import time
+from pathlib import Path
 
 import mujoco
 
 from joints.devices.erob.profiles import profile
 from joints.drivers.erob_modbus import ErobModbusDriver
 from joints.link.modbus import ModbusLink
-from joints.sim.world import DriveSpec, World
+from joints.sim.world import World
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: the simkit helpers
+from simkit import erob_world  # noqa: E402
 
 STEPS = 20000
 REPEATS = 5
 
 
 def _world(model: str, names: list[str]) -> World:
-    w = World(model, [DriveSpec("rs485", n, n, i + 1, profile("eRob80H100")) for i, n in enumerate(names)])
+    w = erob_world(model, names, profile("eRob80H100"))
     for i, n in enumerate(names):
         d = ErobModbusDriver(ModbusLink(w.transport("rs485"), clock=w.clock), i + 1, clock=w.clock)
         d.enable()

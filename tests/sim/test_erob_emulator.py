@@ -28,7 +28,7 @@ from joints.errors import DeviceFault, DeviceRejected, StateError
 from joints.joint import Joint
 from joints.link.modbus import ModbusLink
 from joints.sim.erob import FOLLOWING_ERROR, STALL
-from joints.sim.world import DriveSpec, World
+from simkit import erob_world
 
 PROFILE = profile("eRob80H100")
 C = COUNTS_PER_REV / (2.0 * math.pi)  #: counts per rad
@@ -39,8 +39,7 @@ class Bench:
     """A world with one emulated eRob per joint and a host driver for each, on one RS485 bus."""
 
     def __init__(self, model: str = "erob_stand.xml", names: tuple[str, ...] = ("joint1",)) -> None:
-        specs = [DriveSpec("rs485", n, n, i + 1, PROFILE) for i, n in enumerate(names)]
-        self.world = World(model, specs, timestep=0.001)
+        self.world = erob_world(model, names, PROFILE)
         self.link = ModbusLink(self.world.transport("rs485"), clock=self.world.clock)
         self.drv = {
             n: ErobModbusDriver(self.link, i + 1, profile=PROFILE, clock=self.world.clock, name=n)

@@ -23,7 +23,7 @@ from joints.devices.erob.profiles import profile
 from joints.devices.erob.registers import COUNTS_PER_REV, AchieveStatus, MotionStatus
 from joints.drivers.erob_modbus import ErobModbusDriver
 from joints.link.modbus import ModbusLink
-from joints.sim.world import DriveSpec, World
+from simkit import erob_world
 
 MODEL = "eRob80H100"
 PROFILE = profile(MODEL)
@@ -34,8 +34,7 @@ class Bench:
     """A world with one emulated eRob per joint and a host driver for each, on one RS485 bus."""
 
     def __init__(self, model: str = "erob_stand.xml", names: tuple[str, ...] = ("joint1",)) -> None:
-        specs = [DriveSpec("rs485", n, n, i + 1, PROFILE) for i, n in enumerate(names)]
-        self.world = World(model, specs, timestep=0.001)
+        self.world = erob_world(model, names, PROFILE)
         self.link = ModbusLink(self.world.transport("rs485"), clock=self.world.clock)
         self.drv = {
             n: ErobModbusDriver(self.link, i + 1, profile=PROFILE, clock=self.world.clock, name=n)

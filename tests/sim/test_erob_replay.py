@@ -18,7 +18,7 @@ pytest.importorskip("mujoco")
 from joints.codecs import modbus as mb  # noqa: E402
 from joints.devices.erob.profiles import profile  # noqa: E402
 from joints.devices.erob.registers import COUNTS_PER_REV, EROB_MODBUS, OperationMode  # noqa: E402
-from joints.sim.world import DriveSpec, World  # noqa: E402
+import simkit  # noqa: E402
 
 from testdata import VECTORS
 MOTION_DEPENDENT = {"current_speed", "actual_position", "motor_current", "motion_status",
@@ -43,7 +43,7 @@ def _decode(frame: bytes, role: mb.Role, expect: mb.Request | None = None) -> mb
 
 class Replay:
     def __init__(self, slave: int) -> None:
-        self.world = World("erob_stand.xml", [DriveSpec("rs485", "joint1", "joint1", slave, profile("eRob80H100"))])
+        self.world = simkit.world("erob_stand.xml", [simkit.drive("joint1", slave, profile("eRob80H100"))])
         self.emu = self.world.drives["joint1"]
         self.bus = self.world.buses["rs485"]
         self.start_pos = 0

@@ -1,0 +1,55 @@
+"""Optional driver abilities as typed protocols (checked with ``isinstance``, never by probing names).
+
+Rule: a capability is a small Protocol; a driver has it by implementing its methods. The rig and
+the CLI ask ``isinstance(driver, Capability)`` and use the typed methods.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Protocol, runtime_checkable
+
+from joints.drivers.base import RawState
+
+
+@runtime_checkable
+class DriveGroup(Protocol):
+    """One drive with several channels (joints): one status read serves them all."""
+
+    def read_status(self) -> Mapping[str, int]:
+        """The status of every channel, in one transaction where the protocol allows."""
+        ...
+
+
+@runtime_checkable
+class SyncVelocityGroup(DriveGroup, Protocol):
+    """A multi-channel drive that takes every channel's velocity in one command."""
+
+    channels: tuple[str, ...]
+
+    def set_channel_velocities(self, commands: Mapping[str, tuple[int, int]]) -> None:
+        """channel -> (velocity, acceleration) in the drivers' units, sent together."""
+        ...
+
+
+@runtime_checkable
+class GroupedChannel(Protocol):
+    """A joint that is one channel of a :class:`DriveGroup`."""
+
+    channel: str
+
+    @property
+    def group(self) -> DriveGroup: ...
+
+    def state_from(self, status: Mapping[str, int], time: float) -> RawState:
+        """This channel's state from a status read of its group."""
+        ...
+
+
+@runtime_checkable
+class CommunicationWatchdog(Protocol):
+    """A drive that stops (or faults) when the host stays silent longer than a set time."""
+
+    def set_communication_timeout(self, milliseconds: int) -> None:
+        """0 switches the watchdog off."""
+        ...

@@ -1,0 +1,293 @@
+"""The registry: the one list of bus protocols and device families, and what each brings.
+
+Rule: nothing else in ``joints`` compares device or protocol names. Config validation, driver
+creation, the simulated world, ``joints sim serve``, the CLI's ``--device`` choices and ``scan``
+all ask this module. Adding a device family is one :class:`DeviceFamily` entry here plus its own
+files (devices/, drivers/, sim/); adding a protocol is one :class:`BusProtocol` entry plus its
+codec, link rule, parameter access and twin front. Heavy modules (drivers, twins, python-can,
+pyserial, MuJoCo) are imported only when an entry is used.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from joints.errors import ConfigError
+
+if TYPE_CHECKING:
+    from joints.clock import Clock
+    from joints.config import BusConfig, JointConfig
+    from joints.devices.params import ParamSet
+    from joints.drivers.base import JointDriver
+    from joints.link.base import Link
+
+#: protocol -> (bus config, transport, clock, in-process peer for the direct path or None) -> link
+LinkFactory = Callable[["BusConfig", Any, "Clock", Any], "Link[Any]"]
+#: (joint config, the bus's link, clock, objects shared by the joints of one rig) -> driver
+DriverFactory = Callable[["JointConfig", Any, "Clock", dict[Any, Any]], "JointDriver"]
+
+
+@dataclass(frozen=True)
+class BusProtocol:
+    """One protocol a bus can speak."""
+
+    name: str
+    medium: str  #: "serial" (a byte stream: RS485 port, pty) or "can" (python-can frames)
+    addresses: tuple[int, int]  #: joint addresses on this protocol (inclusive)
+    description: str
+    link: LinkFactory
+    open_transport: Callable[[BusConfig], Any]  #: hardware: the bus's transport from its config
+    device_bus: Callable[[], Any]  #: sim: the emulated side of the bus (fronts attach by address)
+    sim_transport: Callable[[Any], Any]  #: sim: an in-process transport to a device bus
+    direct: bool = False  #: the sim may skip bytes (message objects straight to the device bus)
+
+
+@dataclass(frozen=True)
+class DeviceFamily:
+    """One family of drives: its parameters, profiles, a driver per protocol and its twin."""
+
+    name: str
+    devices: tuple[str, ...]  #: config ``device`` names of this family
+    description: str
+    params: Callable[[], ParamSet]
+    profile: Callable[[str | None], Any]  #: variant name (None = default) -> physical profile
+    drivers: Mapping[str, DriverFactory]  #: protocol -> driver factory
+    #: protocol -> its parameter map (what ``joints registers`` lists: rows of address/name/type/access/unit)
+    tables: Mapping[str, Callable[[], Any]]
+    channels: tuple[str, ...] = ()  #: a multi-motor drive's channel names (joint key ``channel``)
+    #: protocol -> (lo, hi) joint addresses where the family narrows the protocol's range
+    addresses: Mapping[str, tuple[int, int]] = field(default_factory=dict)
+    #: sim: (joint specs of one drive, their inertia) -> (the twin of that drive, channel -> stepper)
+    twin: Callable[[Sequence[Any], Mapping[str, float]], tuple[Any, Mapping[Any, Any]]] | None = None
+    #: sim: protocol -> (twin, address) -> the object that answers that protocol's frames for it
+    fronts: Mapping[str, Callable[[Any, int], Any]] = field(default_factory=dict)
+
+    @property
+    def protocols(self) -> tuple[str, ...]:
+        return tuple(self.drivers)
+
+    def address_range(self, protocol: str) -> tuple[int, int]:
+        return self.addresses.get(protocol) or PROTOCOLS[protocol].addresses
+
+    def config_profile(self, cfg: JointConfig) -> Any:
+        """The profile of a configured joint (``model`` + ``profile`` overrides); errors name the joint's key."""
+        key = f"joints.{cfg.name}.model"
+        try:
+            prof = self.profile(cfg.model)
+            if cfg.profile:
+                key = f"joints.{cfg.name}.profile"
+                prof = prof.with_overrides(**dict(cfg.profile))
+        except ConfigError as exc:
+            if exc.key and key.endswith(".profile"):
+                key += f".{exc.key}"
+            raise ConfigError(exc.message, key=key, allowed=exc.allowed) from exc
+        return prof
+
+    def driver(self, cfg: JointConfig, link: Any, clock: Clock, shared: dict[Any, Any], protocol: str) -> JointDriver:
+        try:
+            make = self.drivers[protocol]
+        except KeyError:
+            raise ConfigError(f"device {cfg.device!r} has no driver for protocol {protocol!r} yet",
+                              key=f"joints.{cfg.name}.device", allowed=pairs()) from None
+        return make(cfg, link, clock, shared)
+
+    # the world's view of a family (joints.sim.world.TwinMaker)
+    def build_twin(self, specs: Sequence[Any], inertia: Mapping[str, float]) -> tuple[Any, Mapping[Any, Any]]:
+        if self.twin is None:
+            raise ConfigError(f"device {specs[0].device!r} has no simulated twin yet", key=f"joints.{specs[0].name}.device")
+        return self.twin(specs, inertia)
+
+    def front(self, protocol: str, twin: Any, address: int) -> Any:
+        try:
+            make = self.fronts[protocol]
+        except KeyError:
+            raise ConfigError(f"the {self.name} twin cannot be reached over {protocol!r} yet",
+                              key="buses", allowed=sorted(self.fronts)) from None
+        return make(twin, address)
+
+
+# --- protocols ----------------------------------------------------------------------------------
+
+
+def _modbus_link(cfg: BusConfig, transport: Any, clock: Clock, peer: Any) -> Link[Any]:
+    from joints.link.base import RetryPolicy
+    from joints.link.modbus import ModbusLink
+
+    return ModbusLink(transport, peer=peer, policy=RetryPolicy(timeout=cfg.timeout, retries=cfg.retries),
+                      echo=cfg.echo, clock=clock, name=cfg.name)
+
+
+def _serial_transport(cfg: BusConfig) -> Any:
+    from joints.transports.serial import SerialTransport
+
+    if cfg.port is None:  # e.g. a sim config opened with backend="hardware"
+        raise ConfigError("is required for backend = \"hardware\" (e.g. \"/dev/ttyUSB0\")", key=f"buses.{cfg.name}.port")
+    return SerialTransport(cfg.port, cfg.baudrate, parity=cfg.parity, stopbits=cfg.stopbits)
+
+
+def _modbus_device_bus() -> Any:
+    from joints.sim.modbus_slave import ModbusDeviceBus
+
+    return ModbusDeviceBus()
+
+
+def _byte_loopback(device_bus: Any) -> Any:
+    from joints.transports.loopback import LoopbackTransport
+
+    return LoopbackTransport(device_bus)
+
+
+PROTOCOLS: dict[str, BusProtocol] = {
+    "modbus-rtu": BusProtocol(
+        name="modbus-rtu", medium="serial", addresses=(1, 247),
+        description="Modbus RTU over RS485 (FC03/04/06/16)",
+        link=_modbus_link, open_transport=_serial_transport, device_bus=_modbus_device_bus,
+        sim_transport=_byte_loopback, direct=True,
+    ),
+}
+
+
+# --- device families ----------------------------------------------------------------------------
+
+
+def _erob_params() -> ParamSet:
+    from joints.devices.erob.params import EROB_PARAMS
+
+    return EROB_PARAMS
+
+
+def _erob_profile(model: str | None) -> Any:
+    from joints.devices.erob.profiles import DEFAULT_MODEL, profile
+
+    return profile(model or DEFAULT_MODEL)
+
+
+def _erob_modbus_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[Any, Any]) -> JointDriver:
+    from joints.drivers.erob_modbus import ErobModbusDriver
+
+    return ErobModbusDriver(link, cfg.address, profile=FAMILIES["erob"].config_profile(cfg), clock=clock,
+                            name=cfg.name)
+
+
+def _erob_modbus_table() -> Any:
+    from joints.devices.erob.registers import EROB_MODBUS
+
+    return EROB_MODBUS
+
+
+def _erob_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> Any:
+    from joints.sim.erob import ErobEmulator
+
+    if len(specs) > 1:
+        raise ConfigError(f"bus {specs[0].bus!r} address {specs[0].address} is used by {[s.name for s in specs]}",
+                          key=f"joints.{specs[1].name}.address")
+    d = specs[0]
+    twin = ErobEmulator(d.profile, d.address, inertia=inertia[d.name])
+    return twin, {None: twin}
+
+
+def _zlac_params() -> ParamSet:
+    from joints.devices.zlac.registers import ZLAC8015D
+
+    return ZLAC8015D.params
+
+
+def _zlac_profile(model: str | None) -> Any:
+    from joints.devices.zlac.profile import DEFAULT_MODEL, profile
+
+    return profile(model or DEFAULT_MODEL)
+
+
+def _zlac_modbus_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[Any, Any]) -> JointDriver:
+    from joints.drivers.zlac_modbus import ZlacChannelDriver, ZlacDrive
+
+    key = ("zlac8015d", cfg.bus, cfg.address)
+    drive = shared.get(key)
+    if drive is None:
+        drive = shared[key] = ZlacDrive(link, cfg.address, clock=clock, name=f"zlac8015d@{cfg.bus}:{cfg.address}")
+    return ZlacChannelDriver(drive, cfg.channel or "", profile=FAMILIES["zlac8015d"].config_profile(cfg),
+                             name=cfg.name)
+
+
+def _zlac_modbus_table() -> Any:
+    from joints.devices.zlac.registers import ZLAC8015D
+
+    return ZLAC8015D
+
+
+def _zlac_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> Any:
+    from joints.sim.zlac import ZlacEmulator
+
+    by_channel = {s.channel: s for s in specs}
+    twin = ZlacEmulator(
+        specs[0].profile, specs[0].address,
+        inertia_left=inertia[by_channel["left"].name] if "left" in by_channel else None,
+        inertia_right=inertia[by_channel["right"].name] if "right" in by_channel else None,
+    )
+    return twin, {"left": twin.left, "right": twin.right}
+
+
+def _same_object_front(twin: Any, address: int) -> Any:
+    return twin  # the Modbus twins answer frames themselves (one object per drive)
+
+
+FAMILIES: dict[str, DeviceFamily] = {
+    "erob": DeviceFamily(
+        name="erob", devices=("erob",),
+        description="ZeroErr eRob rotary actuator (70/80/90/110/142, ratios 50-160)",
+        params=_erob_params, profile=_erob_profile,
+        drivers={"modbus-rtu": _erob_modbus_driver},
+        tables={"modbus-rtu": _erob_modbus_table},
+        twin=_erob_twin, fronts={"modbus-rtu": _same_object_front},
+    ),
+    "zlac8015d": DeviceFamily(
+        name="zlac8015d", devices=("zlac8015d",),
+        description="ZLAC8015D dual-channel hub servo driver (two hub motors, left/right)",
+        params=_zlac_params, profile=_zlac_profile,
+        drivers={"modbus-rtu": _zlac_modbus_driver},
+        tables={"modbus-rtu": _zlac_modbus_table},
+        channels=("left", "right"), addresses={"modbus-rtu": (1, 127)},
+        twin=_zlac_twin, fronts={"modbus-rtu": _same_object_front},
+    ),
+}
+
+#: the config names users may write but no entry serves yet (a clear "not yet" instead of "unknown")
+PLANNED_DEVICES = ("mks-servo42d", "mks-servo57d")
+PLANNED_PROTOCOLS = ("mks-serial", "erob-can", "canopen")
+
+
+# --- queries ----------------------------------------------------------------------------------
+
+
+def devices() -> tuple[str, ...]:
+    """Every config ``device`` name with an entry."""
+    return tuple(d for f in FAMILIES.values() for d in f.devices)
+
+
+def protocols() -> tuple[str, ...]:
+    return tuple(PROTOCOLS)
+
+
+def pairs() -> list[str]:
+    """"device on protocol" for every pair that has a driver."""
+    return sorted(f"{d} on {p}" for f in FAMILIES.values() for d in f.devices for p in f.drivers)
+
+
+def family(device: str, *, key: str = "device") -> DeviceFamily:
+    """The family of a config ``device`` name (a :class:`ConfigError` listing the known ones otherwise)."""
+    for f in FAMILIES.values():
+        if device in f.devices:
+            return f
+    if device in PLANNED_DEVICES:
+        raise ConfigError(f"device {device!r} is not supported yet", key=key, allowed=devices())
+    raise ConfigError(f"{device!r} is not a device", key=key, allowed=devices())
+
+
+def protocol(name: str, *, key: str = "protocol") -> BusProtocol:
+    try:
+        return PROTOCOLS[name]
+    except KeyError:
+        what = "is not supported yet" if name in PLANNED_PROTOCOLS else "is not a protocol"
+        raise ConfigError(f"{name!r} {what}", key=key, allowed=protocols()) from None

@@ -1,0 +1,30 @@
+"""Build simulated worlds in tests without a config file (the rig does the same from a config)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from joints import registry
+from joints.sim.world import BusSpec, DriveSpec, World
+
+
+def bus_spec(name: str = "rs485", protocol: str = "modbus-rtu") -> BusSpec:
+    p = registry.protocol(protocol)
+    return BusSpec(name, protocol, p.device_bus, p.sim_transport)
+
+
+def drive(name: str, address: int, profile: Any, *, device: str = "erob", bus: str = "rs485",
+          protocol: str = "modbus-rtu", mjcf_joint: str | None = None, channel: str | None = None) -> DriveSpec:
+    return DriveSpec(bus=bus, name=name, mjcf_joint=mjcf_joint or name, address=address, profile=profile,
+                     device=device, maker=registry.family(device), protocol=protocol, channel=channel)
+
+
+def world(model: str, drives: Sequence[DriveSpec], *, timestep: float = 0.001) -> World:
+    buses = {d.bus: bus_spec(d.bus, d.protocol) for d in drives}
+    return World(model, drives, buses=buses, timestep=timestep)
+
+
+def erob_world(model: str, names: Sequence[str], profile: Any, *, timestep: float = 0.001) -> World:
+    """eRob joints ``names`` at Modbus addresses 1, 2, ... on bus "rs485"."""
+    return world(model, [drive(n, i + 1, profile) for i, n in enumerate(names)], timestep=timestep)
