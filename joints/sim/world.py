@@ -17,9 +17,10 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from joints.clock import ManualClock
+from joints.devices.erob.registers import EROB_MODBUS
 from joints.errors import ConfigError, MissingDependencyError
-from joints.sim.erob import ErobEmulator
-from joints.sim.modbus_slave import ModbusDeviceBus
+from joints.sim.erob import ErobFirmware
+from joints.sim.modbus_front import ModbusDeviceBus, ModbusFront
 from joints.transports.loopback import LoopbackTransport
 
 
@@ -87,9 +88,11 @@ class _Bound:
     aid: int
 
 
-def _make_emulators(specs: Sequence[DriveSpec], inertia: Mapping[str, float]) -> dict[str, tuple[Any, Any]]:
-    """Build one emulator per drive (bus, address); returns joint name -> (emulator, stepper)."""
-    out: dict[str, tuple[Any, Any]] = {}
+def _make_emulators(specs: Sequence[DriveSpec], inertia: Mapping[str, float]
+                    ) -> dict[str, tuple[Any, Any, ModbusFront]]:
+    """Build one firmware and its Modbus front per drive (bus, address); returns joint name ->
+    (firmware, stepper, front)."""
+    out: dict[str, tuple[Any, Any, ModbusFront]] = {}
     groups: dict[tuple[str, int], list[DriveSpec]] = {}
     for d in specs:
         groups.setdefault((d.bus, d.address), []).append(d)
@@ -103,22 +106,24 @@ def _make_emulators(specs: Sequence[DriveSpec], inertia: Mapping[str, float]) ->
                 raise ConfigError(f"bus {bus!r} address {address} is used by {[g.name for g in group]}",
                                   key=f"joints.{group[1].name}.address")
             d = group[0]
-            emu: Any = ErobEmulator(d.profile, address, inertia=inertia[d.name])
-            out[d.name] = (emu, emu)
+            emu: Any = ErobFirmware(d.profile, address, inertia=inertia[d.name])
+            out[d.name] = (emu, emu, ModbusFront(emu, EROB_MODBUS, node_id="modbus_address"))
         elif device == "zlac8015d":
-            from joints.sim.zlac import ZlacEmulator
+            from joints.devices.zlac.registers import ZLAC8015D
+            from joints.sim.zlac import ZlacFirmware
 
             by_channel = {g.channel: g for g in group}
             if len(by_channel) != len(group) or not set(by_channel) <= {"left", "right"}:
                 raise ConfigError(f"zlac8015d at address {address}: each of channel 'left'/'right' at most once",
                                   key=f"joints.{group[0].name}.channel", allowed=("left", "right"))
-            emu = ZlacEmulator(
+            emu = ZlacFirmware(
                 group[0].profile, address,
                 inertia_left=inertia[by_channel["left"].name] if "left" in by_channel else None,
                 inertia_right=inertia[by_channel["right"].name] if "right" in by_channel else None,
             )
+            front = ModbusFront(emu, ZLAC8015D, node_id="rs485_node_id")
             for ch, g in by_channel.items():
-                out[g.name] = (emu, emu.channel(str(ch)))
+                out[g.name] = (emu, emu.channel(str(ch)), front)
         else:
             raise ConfigError(f"no emulator for device {device!r}", key=f"joints.{group[0].name}.device",
                               allowed=("erob", "zlac8015d"))
@@ -182,11 +187,11 @@ class World:
         self.buses: dict[str, ModbusDeviceBus] = {}
         self._bound: list[_Bound] = []
         for d in drives:
-            emu, stepper = made[d.name]
+            emu, stepper, front = made[d.name]
             self.drives[d.name] = emu
             bus = self.buses.setdefault(d.bus, ModbusDeviceBus())
-            if bus.slaves.get(d.address) is not emu:
-                bus.add(emu)
+            if bus.slaves.get(d.address) is not front:
+                bus.add(front)
             qa, da, aid = addr[d.name]
             self._bound.append(_Bound(d.name, emu, stepper, qa, da, aid))
             stepper.place(float(self.data.qpos[qa]))
