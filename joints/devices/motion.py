@@ -68,23 +68,32 @@ def move_step(p: float, v: float, goal: float, cruise: float, acc: float, dec: f
     position is ``goal`` and the speed 0.
     """
     s = goal - p
-    before = arrival is Arrival.BEFORE_STEP
-    if before and abs(s) < window and abs(v) <= dec * dt:
+    dist = abs(s)
+    h = dec * dt  # the speed one period of deceleration removes
+    before = arrival is _BEFORE_STEP
+    if before and dist < window and abs(v) <= h:
         return goal, 0.0, True
-    direction = 1.0 if s > 0 else -1.0
-    h = dec * dt
-    v_here = abs(v) if v * direction > 0 else 0.0
-    disc = h * h + 4.0 * (2.0 * dec * abs(s) - h * v_here)
+    if s > 0:
+        direction = 1.0
+        v_here = v if v > 0 else 0.0  # speed towards the goal
+    else:
+        direction = -1.0
+        v_here = -v if v < 0 else 0.0
+    # fastest speed from which the deceleration still stops at the goal in discrete steps
+    disc = h * h + 4.0 * (2.0 * dec * dist - h * v_here)
     v_allow = 0.5 * (sqrt(disc) - h) if disc > 0.0 else 0.0
-    v_des = direction * min(cruise, v_allow)
+    speed = min(cruise, v_allow)
+    v_des = speed if direction > 0 else -speed
     dv = v_des - v
-    speeding_up = abs(v_des) > abs(v) and v * v_des >= 0.0
-    step = (acc if speeding_up else dec) * dt
+    step = acc * dt if abs(speed) > abs(v) and v * v_des >= 0.0 else h  # speeding up: the acceleration
     new_v = v_des if abs(dv) <= step else v + copysign(step, dv)
     ds = 0.5 * (v + new_v) * dt
     if before:
-        if abs(ds) >= abs(s) and new_v * direction >= 0.0:
+        if abs(ds) >= dist and new_v * direction >= 0.0:
             return goal, 0.0, True
-    elif abs(ds) >= abs(s) or (abs(s) < window and abs(new_v) <= dec * dt):
+    elif abs(ds) >= dist or (dist < window and abs(new_v) <= h):
         return goal, 0.0, True
     return p + ds, new_v, False
+
+
+_BEFORE_STEP = Arrival.BEFORE_STEP

@@ -81,6 +81,7 @@ _CACHED_SETTINGS = frozenset((
     "position_offset", "position_loop_gain", "speed_loop_gain", "speed_loop_integral",
     "continuous_current", "peak_current", "max_motor_current", "peak_current_time", "max_speed",
     "max_acceleration", "profile_acceleration", "profile_deceleration", "profile_speed",
+    "modbus_communication_timeout_duration", "max_position_error", "max_speed_error",
 ))
 _TORQUE = int(OperationMode.TORQUE)
 _SPEED = int(OperationMode.SPEED)
@@ -159,6 +160,7 @@ _SETTINGS = tuple(r.name for r in EROB_MODBUS if r.access.value == "R/W")
 _POSITION = int(OperationMode.POSITION)
 _READY, _ENABLING, _REFUSED_ON = DriveState.READY, DriveState.ENABLING, DriveState.REFUSED_ON
 ARRIVAL_WINDOW = 1.0  #: counts: a move closer than this at a speed one period can stop has arrived
+_ON_STEP = Arrival.ON_STEP
 
 
 @dataclass
@@ -269,6 +271,10 @@ class ErobFirmware(Firmware):
     # -- typed helpers ----------------------------------------------------------------------
     def _cache_settings(self) -> None:
         g = self.values
+        self.mode = g["operation_mode"]
+        self.watchdog = g["modbus_communication_timeout_duration"] * 1e-3  # s, 0 = off
+        self.max_position_error = g["max_position_error"]
+        self.max_speed_error = g["max_speed_error"]
         self.offset = g["position_offset"]
         self.kp = g["position_loop_gain"] / 10.0
         bw = float(g["speed_loop_gain"])
@@ -320,12 +326,13 @@ class ErobFirmware(Firmware):
         elif name in _CACHED_SETTINGS:
             self._cache_settings()
         elif name == "target_speed":
-            if self.values["operation_mode"] == _SPEED:
+            if self.mode == _SPEED:
                 self._speed_command(value)
         elif name == "target_current":
-            if self.values["operation_mode"] == _TORQUE and value:
+            if self.mode == _TORQUE and value:
                 self._ready_or_refuse()
         elif name == "operation_mode":
+            self.mode = value
             self._change_mode()
 
     # -- state machine ----------------------------------------------------------------------
@@ -408,7 +415,7 @@ class ErobFirmware(Firmware):
 
     def _start(self, value: int) -> None:
         v = self.values
-        if v["operation_mode"] != _POSITION:
+        if self.mode != _POSITION:
             return
         if not self._ready_or_refuse():
             return
@@ -438,7 +445,7 @@ class ErobFirmware(Firmware):
 
     def _stop(self, decel: float) -> None:
         g = self.gen
-        mode = self.values["operation_mode"]
+        mode = self.mode
         if mode == _TORQUE:
             # no speed profile in torque mode: the current command goes to zero
             self.values["target_current"] = 0
@@ -482,9 +489,8 @@ class ErobFirmware(Firmware):
         self.time = t
         self.pos = q * COUNTS_PER_RAD
         self.vel = qd * COUNTS_PER_RAD
-        v = self.values
-        wd = v["modbus_communication_timeout_duration"]
-        if wd and self.last_frame >= 0 and t - self.last_frame > wd * 1e-3:
+        wd = self.watchdog
+        if wd and self.last_frame >= 0 and t - self.last_frame > wd:
             if self.fault != faults.RS485_TIMEOUT:  # the watchdog's code replaces a latched one
                 self.fault = faults.RS485_TIMEOUT
                 self.state = transition(self.state, Event.WATCHDOG) or DriveState.FAULT
@@ -502,7 +508,7 @@ class ErobFirmware(Firmware):
                 if state is _ENABLING or state is _REFUSED_ON:
                     self.p_ref = self.pos  # brake still releasing (or start refused): hold here
                 return self._brake_torque(q, qd)
-        mode = v["operation_mode"]
+        mode = self.mode
         if mode == _TORQUE:
             i = self._torque_loop(dt)
         else:
@@ -516,7 +522,7 @@ class ErobFirmware(Firmware):
                 v_ref = self.v_ref
                 err = self.p_ref - pos
                 v_cmd = v_ref + self.kp * err
-                lim = v["max_position_error"]
+                lim = self.max_position_error
                 if lim and abs(err) > lim:
                     self._raise_fault(FOLLOWING_ERROR)
                     return self._brake_torque(q, qd)
@@ -527,7 +533,7 @@ class ErobFirmware(Firmware):
                 v_cmd = -vmax
             self.v_cmd = v_cmd
             e = v_cmd - vel
-            slim = v["max_speed_error"]
+            slim = self.max_speed_error
             if slim and abs(v_ref - vel) > slim:
                 self._raise_fault(SPEED_ERROR)
                 return self._brake_torque(q, qd)
@@ -552,8 +558,9 @@ class ErobFirmware(Firmware):
 
     def _supervise(self, period: float) -> None:
         """The drive's slow tasks: settle timer, stall and thermal protection."""
-        on = self.state in ENABLED
-        if on and self.started and self.values["operation_mode"] == _POSITION:
+        state = self.state
+        on = state is _READY or state is _ENABLING or state is _REFUSED_ON  # in ENABLED (no enum hash per substep)
+        if on and self.started and self.mode == _POSITION:
             self._achieve(self._moving())  # the settle timer of 0x007A runs on the drive
         self._stall(period)
         self._thermal(period, self.i_out if on else 0.0)
@@ -645,7 +652,7 @@ class ErobFirmware(Firmware):
             self.v_ref = new_v
             return
         self.p_ref, self.v_ref, arrived = move_step(self.p_ref, v, g.target, self.vprof, self.acc, decel, dt,
-                                                    ARRIVAL_WINDOW, Arrival.ON_STEP)
+                                                    ARRIVAL_WINDOW, _ON_STEP)
         if arrived:
             self._leg_done()
 
@@ -697,12 +704,15 @@ class ErobFirmware(Firmware):
         return int(MotionStatus.MOVING if self._moving() else MotionStatus.STOP)
 
     def _moving(self) -> bool:
-        return self.gen.active or self.dwell_until >= 0 or (self.state in ENABLED and abs(self.v_ref) > 0.5)
+        if self.gen.active or self.dwell_until >= 0:
+            return True
+        state = self.state
+        return (state is _READY or state is _ENABLING or state is _REFUSED_ON) and abs(self.v_ref) > 0.5
 
     def _achieve(self, moving: bool) -> AchieveStatus:
         if not self._ready():
             return AchieveStatus.MOTOR_OFF
-        if self.values["operation_mode"] != _POSITION or not self.started:
+        if self.mode != _POSITION or not self.started:
             return AchieveStatus.OPERATION if moving else AchieveStatus.MOTOR_ON
         if moving:
             self.in_window_since = -1.0

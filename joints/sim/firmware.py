@@ -58,7 +58,8 @@ class Firmware:
         #: power-on value of every parameter (the manual's defaults, then ``values``)
         self.defaults: dict[str, int] = {p.name: p.default for p in params}
         for name, value in (values or {}).items():
-            self.defaults[self.params.get(name).name] = self._saturate(name, value)
+            self.params.get(name)  # an unknown name is a RegisterError
+            self.defaults[name] = self._saturate(name, value)
         #: settings kept over a power cycle (what "save parameters" stored)
         self.saved: dict[str, int] = {}
         #: the stored value of every parameter
@@ -99,28 +100,40 @@ class Firmware:
 
     def read_many(self, names: Sequence[str]) -> list[int]:
         """Read several parameters as one request (one :meth:`on_read`, one moment in time)."""
+        return self.reader(names)()
+
+    def reader(self, names: Sequence[str]) -> Callable[[], list[int]]:
+        """A prepared read of ``names`` (validated once; a front keeps one per block it serves).
+
+        Calling it is :meth:`read_many` without the checks. Which parameters are computed is
+        looked up here, so :attr:`computed` must be complete before readers are made (fill it in
+        ``__init__``).
+        """
+        names = tuple(names)
         readable = self._readable
         for name in names:
             if name not in readable:
                 reason = Refusal.NOT_READABLE if name in self._limits else Refusal.UNKNOWN
                 raise ParameterRefused(reason, name, self.params.device)
-        self.on_read(names)
-        computed = self.computed
-        values = self.values
-        out: list[int] = []
-        for name in names:
-            fn = computed.get(name)
-            if fn is None:
-                out.append(values[name])
-            else:
-                lo, hi = self._type_range[name]
+        entries = tuple((name, self.computed.get(name), *self._type_range[name]) for name in names)
+
+        def read() -> list[int]:
+            self.on_read(names)
+            values = self.values
+            out: list[int] = []
+            for name, fn, lo, hi in entries:
+                if fn is None:
+                    out.append(values[name])
+                    continue
                 v = fn()
-                if v < lo:
+                if v < lo:  # saturate, never wrap
                     v = lo
                 elif v > hi:
                     v = hi
                 out.append(v)
-        return out
+            return out
+
+        return read
 
     def write(self, name: str, value: int) -> None:
         """Write one parameter as a protocol would (see :meth:`write_many`)."""

@@ -55,8 +55,9 @@ EXCEPTION_FOR: Mapping[Refusal, int] = {
 
 _PLAN_CACHE = 4096  #: (start, count) plans kept per front (a fuzzer cannot grow memory without bound)
 
-#: a read plan: names to read, and per name (index in the padded output, words, low word first)
-_ReadPlan = tuple[tuple[str, ...], tuple[tuple[int, int, bool], ...]]
+#: a read plan: the firmware's prepared read (None: nothing to read), and per parameter (index in
+#: the padded output, words, low word first)
+_ReadPlan = tuple[Callable[[], list[int]] | None, tuple[tuple[int, int, bool], ...]]
 #: a write plan: per register (name, offset in the block, words, signed, low word first)
 _WritePlan = tuple[tuple[str, int, int, bool, bool], ...]
 
@@ -117,7 +118,11 @@ class ModbusFront:
             if reg.address < end and reg.address + reg.words > start and reg.access is not Access.COMMAND:
                 names.append(reg.name)
                 slots.append((reg.address - start + 1, reg.words, reg.low_word_first))
-        return tuple(names), tuple(slots)
+        try:
+            reader = self.firmware.reader(names) if names else None
+        except ParameterRefused as exc:
+            return EXCEPTION_FOR[exc.reason]
+        return reader, tuple(slots)
 
     def _write_plan(self, start: int, count: int) -> _WritePlan | int:
         if not 1 <= count <= mb.MAX_WRITE:
@@ -142,9 +147,9 @@ class ModbusFront:
             plan = plans[(start, count)] = self._read_plan(start, count)
         if isinstance(plan, int):
             raise ModbusException(plan)
-        names, slots = plan
+        reader, slots = plan
         try:
-            values = self.firmware.read_many(names) if names else []
+            values = reader() if reader is not None else []
         except ParameterRefused as exc:
             raise ModbusException(EXCEPTION_FOR[exc.reason], str(exc)) from exc
         out = [0] * (count + 2)  # one pad word each side: pairs cut by the block's ends

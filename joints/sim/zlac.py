@@ -187,6 +187,8 @@ ABSOLUTE_TARGET_LIMIT = 0x3FFFFFFF  #: absolute-mode target position range (line
 THERMAL_RISE = 60.0  #: K above ambient at the motor's rated current (EST)
 THERMAL_TAU = 600.0  #: s, winding time constant (EST)
 
+_BEFORE_STEP = Arrival.BEFORE_STEP
+
 #: 120-degree hall code of each 60-degree electrical sector.
 _HALL_SEQUENCE = (1, 3, 2, 6, 4, 5)
 
@@ -465,7 +467,7 @@ class ZlacChannel:
     def _profile(self, dt: float) -> None:
         """Trapezoidal move from ``p_ref`` to ``goal`` (discrete-time exact stopping)."""
         self.p_ref, self.v_ref, arrived = move_step(self.p_ref, self.v_ref, self.goal, self.cruise, self.p_acc,
-                                                    self.p_dec, dt, self.arrival_window, Arrival.BEFORE_STEP)
+                                                    self.p_dec, dt, self.arrival_window, _BEFORE_STEP)
         self.moving = not arrived
 
     def _track_lag(self, dt: float) -> bool:

@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Sequence
+
 import pytest
 
 from joints.codecs import modbus as mb
 from joints.codecs.crc import append_crc
 from joints.devices.erob.params import EROB_PARAMS
 from joints.devices.erob.registers import EROB_MODBUS, STATUS_BLOCK_START, STATUS_BLOCK_WORDS
+from joints.devices.params import Access, ParamSet
 from joints.errors import ParameterRefused, Refusal
 from joints.sim.firmware import Firmware
 from joints.sim.modbus_front import (
+    EXCEPTION_FOR,
     ILLEGAL_DATA_ADDRESS,
     ILLEGAL_DATA_VALUE,
     ILLEGAL_FUNCTION,
@@ -29,6 +34,12 @@ def words32(value: int) -> tuple[int, int]:
 @pytest.fixture
 def slave() -> ModbusFront:
     return ModbusFront(Firmware(EROB_PARAMS), EROB_MODBUS, ADDR)
+
+
+def code(reply: mb.Message | None) -> int:
+    """The exception code of an exception reply."""
+    assert isinstance(reply, mb.ExceptionReply), reply
+    return reply.code
 
 
 def ask(bus: ModbusDeviceBus, request: mb.Message) -> mb.Message | None:
@@ -50,9 +61,9 @@ def test_read_unknown_address_is_exception_02(slave: ModbusFront) -> None:
     assert slave.handle(mb.ReadHoldingRegisters(ADDR, 0x0010, 1)) == mb.ExceptionReply(ADDR, 3, 2)
     assert slave.handle(mb.ReadInputRegisters(ADDR, 0x0010, 1)) == mb.ExceptionReply(ADDR, 4, 2)
     # starting in a gap, or ending past the table, is refused too
-    assert slave.handle(mb.ReadHoldingRegisters(ADDR, 0x0062, 1)).code == ILLEGAL_DATA_ADDRESS
-    assert slave.handle(mb.ReadHoldingRegisters(ADDR, 0x00F9, 2)).code == ILLEGAL_DATA_ADDRESS
-    assert slave.handle(mb.ReadHoldingRegisters(ADDR, 0xFFFF, 2)).code == ILLEGAL_DATA_ADDRESS
+    assert code(slave.handle(mb.ReadHoldingRegisters(ADDR, 0x0062, 1))) == ILLEGAL_DATA_ADDRESS
+    assert code(slave.handle(mb.ReadHoldingRegisters(ADDR, 0x00F9, 2))) == ILLEGAL_DATA_ADDRESS
+    assert code(slave.handle(mb.ReadHoldingRegisters(ADDR, 0xFFFF, 2))) == ILLEGAL_DATA_ADDRESS
     bus = ModbusDeviceBus([slave])
     assert ask(bus, mb.ReadHoldingRegisters(ADDR, 0x0010, 1)) == mb.ExceptionReply(ADDR, 3, 2)
 
@@ -62,14 +73,14 @@ def test_write_read_only_register_is_exception_02(slave: ModbusFront) -> None:
     assert slave.handle(mb.WriteSingleRegister(ADDR, 0x0060, 1)) == mb.ExceptionReply(ADDR, 6, 2)
     assert slave.handle(mb.WriteMultipleRegisters(ADDR, 0x0060, (1, 0))) == mb.ExceptionReply(ADDR, 16, 2)
     # a block that runs from writable registers into a read-only one is refused as a whole
-    assert slave.handle(mb.WriteMultipleRegisters(ADDR, 0x0051, (0, 1, 0))).code == ILLEGAL_DATA_ADDRESS
+    assert code(slave.handle(mb.WriteMultipleRegisters(ADDR, 0x0051, (0, 1, 0)))) == ILLEGAL_DATA_ADDRESS
     assert slave.image() == before
     assert slave.firmware.write_log == []
 
 
 def test_write_unknown_address_is_exception_02(slave: ModbusFront) -> None:
-    assert slave.handle(mb.WriteSingleRegister(ADDR, 0x0033, 1)).code == ILLEGAL_DATA_ADDRESS
-    assert slave.handle(mb.WriteSingleRegister(ADDR, 0x00F5, 1)).code == ILLEGAL_DATA_ADDRESS
+    assert code(slave.handle(mb.WriteSingleRegister(ADDR, 0x0033, 1))) == ILLEGAL_DATA_ADDRESS
+    assert code(slave.handle(mb.WriteSingleRegister(ADDR, 0x00F5, 1))) == ILLEGAL_DATA_ADDRESS
 
 
 def test_out_of_range_value_is_exception_03_and_image_unchanged(slave: ModbusFront) -> None:
@@ -80,9 +91,9 @@ def test_out_of_range_value_is_exception_03_and_image_unchanged(slave: ModbusFro
     assert slave.image() == before
     assert slave.firmware.get("operation_mode") == 2
     assert slave.firmware.write_log == []
-    assert slave.handle(mb.WriteSingleRegister(ADDR, 0x0040, 0)).code == ILLEGAL_DATA_VALUE
-    assert slave.handle(mb.WriteSingleRegister(ADDR, 0x0000, 0)).code == ILLEGAL_DATA_VALUE  # address 0
-    assert slave.handle(mb.WriteSingleRegister(ADDR, 0x0002, 4001)).code == ILLEGAL_DATA_VALUE
+    assert code(slave.handle(mb.WriteSingleRegister(ADDR, 0x0040, 0))) == ILLEGAL_DATA_VALUE
+    assert code(slave.handle(mb.WriteSingleRegister(ADDR, 0x0000, 0))) == ILLEGAL_DATA_VALUE  # address 0
+    assert code(slave.handle(mb.WriteSingleRegister(ADDR, 0x0002, 4001))) == ILLEGAL_DATA_VALUE
     assert slave.image() == before
 
 
@@ -273,3 +284,99 @@ def test_bus_answers_requests_fed_byte_by_byte() -> None:
     frame = mb.encode(mb.WriteSingleRegister(ADDR, 0x0041, 2))
     out = b"".join(bus.receive(frame[i : i + 1]) for i in range(len(frame)))
     assert out == frame  # FC06 reply echoes the request
+
+
+# ------------------------------------------------------------------- front over a firmware
+
+
+class Counting(Firmware):
+    """Counts frames and which parameters a read asked for; ``actual_position`` is computed."""
+
+    def __init__(self) -> None:
+        super().__init__(EROB_PARAMS, values={"modbus_address": ADDR})
+        self.frames = 0
+        self.asked: list[tuple[str, ...]] = []
+        self.position = -5
+        self.computed["actual_position"] = lambda: self.position
+
+    def frame_received(self) -> None:
+        self.frames += 1
+
+    def on_read(self, names: Sequence[str]) -> None:
+        self.asked.append(tuple(names))
+
+
+def test_a_read_asks_the_firmware_for_the_block_only() -> None:
+    fw = Counting()
+    front = ModbusFront(fw, EROB_MODBUS, ADDR)
+    assert front.read(0x0066, 2) == words32(-5)
+    fw.position = 70000
+    assert front.read(0x0064, 6) == (0, 0) + words32(70000) + (0, 0)
+    assert front.read(0x0041, 1) == (0,)
+    assert fw.asked == [("actual_position",), ("given_position", "actual_position", "position_error"),
+                        ("motion_mode",)]
+
+
+def test_block_ends_inside_a_pair_serve_that_word() -> None:
+    fw = Counting()
+    front = ModbusFront(fw, EROB_MODBUS, ADDR)
+    fw.set("target_absolute_position", 0x12345678)
+    fw.set("target_relative_position", -2)
+    assert front.read(0x0044, 2) == (0x5678, 0xFFFF)  # Lo of one pair, Hi of the next
+    # a single word into a pair merges with the pair's other word
+    assert front.handle(mb.WriteSingleRegister(ADDR, 0x0043, 0x0001)) == mb.WriteSingleRegisterReply(ADDR, 0x43, 1)
+    assert fw.get("target_absolute_position") == 0x00015678
+    front.write(0x0044, (0xBEEF, 0x0000))  # Lo of target_absolute_position, Hi of target_relative_position
+    assert fw.get("target_absolute_position") == 0x0001BEEF and fw.get("target_relative_position") == 0xFFFE
+    assert fw.write_log[-2:] == [("target_absolute_position", 0x0001BEEF), ("target_relative_position", 0xFFFE)]
+
+
+def test_frame_received_for_own_frames_and_broadcast_writes_only() -> None:
+    a, b = Counting(), Counting()
+    bus = ModbusDeviceBus([ModbusFront(a, EROB_MODBUS, 1), ModbusFront(b, EROB_MODBUS, 2)])
+    ask(bus, mb.ReadHoldingRegisters(1, 0x0040, 1))
+    ask(bus, mb.ReadHoldingRegisters(1, 0x0010, 1))  # an exception reply is a frame received too
+    ask(bus, mb.WriteSingleRegister(0, 0x0040, 2))  # broadcast write: every drive
+    ask(bus, mb.ReadHoldingRegisters(0, 0x0040, 1))  # broadcast read: nobody
+    bad = bytearray(mb.encode(mb.ReadHoldingRegisters(2, 0x0040, 1)))
+    bad[-1] ^= 1
+    bus.receive(bytes(bad))  # corrupt: not received
+    assert (a.frames, b.frames) == (3, 1)
+
+
+def test_address_from_the_node_id_held_at_power_on() -> None:
+    fw = Firmware(EROB_PARAMS, values={"modbus_address": 7})
+    front = ModbusFront(fw, EROB_MODBUS, node_id="modbus_address")
+    assert front.address == 7
+    front.write(0x0000, (9,))
+    assert front.address == 7  # takes effect after a power cycle, as on the drive
+    fw.save(["modbus_address"])
+    fw.power_cycle()
+    assert front.address == 9 and ModbusDeviceBus([front]).slaves == {9: front}
+    with pytest.raises(ValueError):
+        ModbusFront(fw, EROB_MODBUS)
+    with pytest.raises(ValueError):
+        ModbusFront(fw, EROB_MODBUS, 1, node_id="modbus_address")
+
+
+def test_every_refusal_has_an_exception_code_and_not_readable_is_02() -> None:
+    assert set(EXCEPTION_FOR) == set(Refusal)
+
+    class WriteOnlyTarget(Firmware):
+        def __init__(self) -> None:
+            base = EROB_PARAMS
+            params = ParamSet(base.device, (dataclasses.replace(p, access=Access.W) if p.name == "target_speed" else p
+                                            for p in base))
+            super().__init__(params)
+
+    front = ModbusFront(WriteOnlyTarget(), EROB_MODBUS, ADDR)
+    assert front.handle(mb.ReadHoldingRegisters(ADDR, 0x0051, 2)) == mb.ExceptionReply(ADDR, 3, ILLEGAL_DATA_ADDRESS)
+    assert front.handle(mb.WriteMultipleRegisters(ADDR, 0x0051, words32(5))) == mb.WriteMultipleRegistersReply(
+        ADDR, 0x0051, 2)
+
+
+def test_a_table_the_firmware_does_not_know_is_refused() -> None:
+    from joints.devices.zlac.registers import ZLAC8015D
+
+    with pytest.raises(ValueError, match="not parameters"):
+        ModbusFront(Firmware(EROB_PARAMS), ZLAC8015D, 1)
