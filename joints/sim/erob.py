@@ -569,11 +569,16 @@ class ErobFirmware(Firmware):
         """Holding brake: a stiff spring-damper to where it engaged, limited to the rated torque x 2."""
         self.v_ref = 0.0
         self.i_cmd = self.i_out = 0.0
-        if self.brake_hold is None:
-            self.brake_hold = self.pos
-        tau = -self.brake_k * (self.pos - self.brake_hold) / COUNTS_PER_RAD - self.brake_c * qd
+        at = self.brake_hold
+        if at is None:
+            at = self.brake_hold = self.pos
+        tau = -self.brake_k * (self.pos - at) / COUNTS_PER_RAD - self.brake_c * qd
         hold = self.brake_hold_torque
-        return max(-hold, min(hold, tau))
+        if tau > hold:
+            return hold
+        if tau < -hold:
+            return -hold
+        return tau
 
     def _current_limit(self, dt: float, i: float) -> float:
         peak = min(self.i_peak, self.i_max)

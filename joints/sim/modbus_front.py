@@ -21,6 +21,7 @@ Every frame addressed to a front (and every broadcast it executes) is reported t
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Callable, Iterable, Mapping
 
 from joints.codecs import modbus as mb
@@ -55,9 +56,13 @@ EXCEPTION_FOR: Mapping[Refusal, int] = {
 
 _PLAN_CACHE = 4096  #: (start, count) plans kept per front (a fuzzer cannot grow memory without bound)
 
-#: a read plan: the firmware's prepared read (None: nothing to read), and per parameter (index in
-#: the padded output, words, low word first)
-_ReadPlan = tuple[Callable[[], list[int]] | None, tuple[tuple[int, int, bool], ...]]
+#: a read plan: the firmware's prepared read (None: nothing to read); the block packed in one call
+#: (values -> big-endian bytes of the block with one pad word each side, then its words), or None
+#: where a register has its low word first; and per parameter (index in the padded block, words,
+#: low word first) for packing word by word
+_ReadPlan = tuple[Callable[[], list[int]] | None, struct.Struct | None, struct.Struct,
+                  tuple[tuple[int, int, bool], ...]]
+_FORMAT = {"uint16": "H", "int16": "h", "uint32": "I", "int32": "i"}
 #: a write plan: per register (name, offset in the block, words, signed, low word first)
 _WritePlan = tuple[tuple[str, int, int, bool, bool], ...]
 
@@ -112,17 +117,26 @@ class ModbusFront:
         end = start + count
         if table.owner(start) is None or table.owner(end - 1) is None:
             return ILLEGAL_DATA_ADDRESS
-        names: list[str] = []
-        slots: list[tuple[int, int, bool]] = []
-        for reg in table:
-            if reg.address < end and reg.address + reg.words > start and reg.access is not Access.COMMAND:
-                names.append(reg.name)
-                slots.append((reg.address - start + 1, reg.words, reg.low_word_first))
+        regs = [r for r in table
+                if r.address < end and r.address + r.words > start and r.access is not Access.COMMAND]
         try:
-            reader = self.firmware.reader(names) if names else None
+            reader = self.firmware.reader([r.name for r in regs]) if regs else None
         except ParameterRefused as exc:
             return EXCEPTION_FOR[exc.reason]
-        return reader, tuple(slots)
+        # the block with one pad word each side (a pair cut by the block's ends): gaps and command
+        # registers are pad bytes, which pack as 0
+        fmt, a, i = ">", start - 1, 0
+        while a < end + 1:
+            if i < len(regs) and regs[i].address == a:
+                fmt += _FORMAT[regs[i].type]
+                a += regs[i].words
+                i += 1
+            else:
+                fmt += "xx"
+                a += 1
+        packer = None if any(r.low_word_first for r in regs) else struct.Struct(fmt)
+        slots = tuple((r.address - start + 1, r.words, r.low_word_first) for r in regs)
+        return reader, packer, struct.Struct(f">{count}H"), slots
 
     def _write_plan(self, start: int, count: int) -> _WritePlan | int:
         if not 1 <= count <= mb.MAX_WRITE:
@@ -147,11 +161,17 @@ class ModbusFront:
             plan = plans[(start, count)] = self._read_plan(start, count)
         if isinstance(plan, int):
             raise ModbusException(plan)
-        reader, slots = plan
+        reader, packer, words, slots = plan
         try:
             values = reader() if reader is not None else []
         except ParameterRefused as exc:
             raise ModbusException(EXCEPTION_FOR[exc.reason], str(exc)) from exc
+        if packer is not None:
+            try:
+                block: tuple[int, ...] = words.unpack_from(packer.pack(*values), 2)
+                return block
+            except struct.error:  # a value outside its register's type: masked word by word below
+                pass
         out = [0] * (count + 2)  # one pad word each side: pairs cut by the block's ends
         for (i, n, low_first), v in zip(slots, values):
             if n == 1:

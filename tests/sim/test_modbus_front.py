@@ -12,6 +12,7 @@ from joints.codecs.crc import append_crc
 from joints.devices.erob.params import EROB_PARAMS
 from joints.devices.erob.registers import EROB_MODBUS, STATUS_BLOCK_START, STATUS_BLOCK_WORDS
 from joints.devices.params import Access, ParamSet
+from joints.devices.registers import Register, RegisterTable
 from joints.errors import ParameterRefused, Refusal
 from joints.sim.firmware import Firmware
 from joints.sim.modbus_front import (
@@ -380,3 +381,20 @@ def test_a_table_the_firmware_does_not_know_is_refused() -> None:
 
     with pytest.raises(ValueError, match="not parameters"):
         ModbusFront(Firmware(EROB_PARAMS), ZLAC8015D, 1)
+
+
+def test_low_word_first_pairs_and_values_outside_the_register_type() -> None:
+    table = RegisterTable.build("toy", (
+        Register(0x0010, "counter", "int32", low_word_first=True),
+        Register(0x0012, "flags"),
+        Register(0x0014, "wide", "int32"),
+    ))
+    front = ModbusFront.plain(table, 1)
+    fw = front.firmware
+    front.write(0x0010, (0x5678, 0x1234))  # Lo first
+    assert fw.get("counter") == 0x12345678
+    fw.set("flags", 7)
+    assert front.read(0x0010, 3) == (0x5678, 0x1234, 7)
+    assert front.read(0x0011, 1) == (0x1234,)  # the Hi word alone
+    fw.values["wide"] = 1 << 40 | 0xABCD0001  # held wider than the register: the register's words
+    assert front.read(0x0014, 2) == (0xABCD, 0x0001)
