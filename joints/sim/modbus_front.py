@@ -16,7 +16,9 @@ register reads and writes into firmware reads and writes through a
   not writable -> 02, out of range / refused in this state -> 03.
 
 Every frame addressed to a front (and every broadcast it executes) is reported to the firmware
-(:meth:`~joints.sim.firmware.Firmware.frame_received`) before it is served.
+(:meth:`~joints.sim.firmware.Firmware.frame_received`) before it is served. No register image is
+kept: the firmware holds typed values by name, a read packs only its block (plans are cached per
+block shape), a write touches only the registers written.
 """
 
 from __future__ import annotations
