@@ -130,7 +130,7 @@ def _serial_transport(cfg: BusConfig) -> Any:
 
 
 def _modbus_device_bus() -> Any:
-    from joints.sim.modbus_slave import ModbusDeviceBus
+    from joints.sim.modbus_front import ModbusDeviceBus
 
     return ModbusDeviceBus()
 
@@ -179,15 +179,19 @@ def _erob_modbus_table() -> Any:
     return EROB_MODBUS
 
 
-def _erob_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> Any:
-    from joints.sim.erob import ErobEmulator
+def _erob_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> tuple[Any, Mapping[Any, Any]]:
+    from joints.sim.erob import ErobFirmware
 
-    if len(specs) > 1:
-        raise ConfigError(f"bus {specs[0].bus!r} address {specs[0].address} is used by {[s.name for s in specs]}",
-                          key=f"joints.{specs[1].name}.address")
     d = specs[0]
-    twin = ErobEmulator(d.profile, d.address, inertia=inertia[d.name])
+    twin = ErobFirmware(d.profile, d.address, inertia=inertia[d.name])
     return twin, {None: twin}
+
+
+def _erob_modbus_front(twin: Any, address: int) -> Any:
+    from joints.devices.erob.registers import EROB_MODBUS
+    from joints.sim.modbus_front import ModbusFront
+
+    return ModbusFront(twin, EROB_MODBUS, node_id="modbus_address")
 
 
 def _zlac_params() -> ParamSet:
@@ -219,11 +223,11 @@ def _zlac_modbus_table() -> Any:
     return ZLAC8015D
 
 
-def _zlac_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> Any:
-    from joints.sim.zlac import ZlacEmulator
+def _zlac_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> tuple[Any, Mapping[Any, Any]]:
+    from joints.sim.zlac import ZlacFirmware
 
     by_channel = {s.channel: s for s in specs}
-    twin = ZlacEmulator(
+    twin = ZlacFirmware(
         specs[0].profile, specs[0].address,
         inertia_left=inertia[by_channel["left"].name] if "left" in by_channel else None,
         inertia_right=inertia[by_channel["right"].name] if "right" in by_channel else None,
@@ -231,8 +235,11 @@ def _zlac_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> Any:
     return twin, {"left": twin.left, "right": twin.right}
 
 
-def _same_object_front(twin: Any, address: int) -> Any:
-    return twin  # the Modbus twins answer frames themselves (one object per drive)
+def _zlac_modbus_front(twin: Any, address: int) -> Any:
+    from joints.devices.zlac.registers import ZLAC8015D
+    from joints.sim.modbus_front import ModbusFront
+
+    return ModbusFront(twin, ZLAC8015D, node_id="rs485_node_id")
 
 
 FAMILIES: dict[str, DeviceFamily] = {
@@ -242,7 +249,7 @@ FAMILIES: dict[str, DeviceFamily] = {
         params=_erob_params, profile=_erob_profile,
         drivers={"modbus-rtu": _erob_modbus_driver},
         tables={"modbus-rtu": _erob_modbus_table},
-        twin=_erob_twin, fronts={"modbus-rtu": _same_object_front},
+        twin=_erob_twin, fronts={"modbus-rtu": _erob_modbus_front},
         watchdog_ms=1000,  # off at power-on (0x0002 = 0): armed while enabled, restored on disable
     ),
     "zlac8015d": DeviceFamily(
@@ -252,7 +259,7 @@ FAMILIES: dict[str, DeviceFamily] = {
         drivers={"modbus-rtu": _zlac_modbus_driver},
         tables={"modbus-rtu": _zlac_modbus_table},
         channels=("left", "right"), addresses={"modbus-rtu": (1, 127)},
-        twin=_zlac_twin, fronts={"modbus-rtu": _same_object_front},
+        twin=_zlac_twin, fronts={"modbus-rtu": _zlac_modbus_front},
         watchdog_ms=1000,  # the drive's own default offline time (0x2000)
     ),
 }
