@@ -86,6 +86,18 @@ class Rig:
         return self.config.backend
 
     @property
+    def sim(self) -> Any:
+        """The simulated world (:class:`joints.sim.world.World`: ``model``, ``data``, ``joint(name)``,
+        ``perturb``, ``restore``, ``set_joint_positions``, ``joint_position`` ...); None on hardware."""
+        return self.world
+
+    def model_path(self) -> Path:
+        """The MJCF file the config names (``[sim] model``), on either backend (e.g. to render a twin)."""
+        from joints.sim.world import resolve_model
+
+        return resolve_model(self.config.sim.model, self.config.base_dir)
+
+    @property
     def time(self) -> float:
         """Seconds on the rig's clock (simulated time in sim)."""
         return self.clock.now()
@@ -225,7 +237,7 @@ class Rig:
                     log.error("shutdown of joint %s failed: %s", j.name, exc)
                     errors.append(exc)
                     self._shut.add(name)  # tried: a second close() would fail the same way
-                except BaseException as exc:  # KeyboardInterrupt, a signal: finish the others first
+                except BaseException as exc:  # noqa: BLE001 - KeyboardInterrupt, a signal: finish the others first
                     log.error("shutdown of joint %s interrupted (%s); shutting the others down", j.name,
                               type(exc).__name__)
                     interrupted = interrupted or exc
