@@ -144,6 +144,7 @@ class CanMedium:
         self.now = self.clock.now()
         self._clock_seen = self.now
         self._cap: float | None = None  # while we sleep the clock ourselves: process no further than this
+        self._delivering: float | None = None  # the time of the frame being delivered (peers answer then)
         self._nodes: list[_Node] = []
         self._pending: list[_Pending] = []
         self._wire: tuple[float, float, _Pending] | None = None  # (start, end, frame) on the bus
@@ -285,6 +286,13 @@ class CanMedium:
             self._deliver(pend, end)
 
     def _deliver(self, pend: _Pending, t: float) -> None:
+        self._delivering = t
+        try:
+            self._deliver_to_all(pend, t)
+        finally:
+            self._delivering = None
+
+    def _deliver_to_all(self, pend: _Pending, t: float) -> None:
         frame = pend.frame
         for node in tuple(self._nodes):
             own = node is pend.sender
@@ -315,6 +323,18 @@ class CanMedium:
         """``node`` sends ``frame`` now (it goes on the wire when it wins the bus)."""
         self._sync()
         self._enqueue(frame, node, self.now)
+        self._run(self.now)
+
+    def send_at(self, node: _Node, frame: can.Message, at: float) -> None:
+        """``node`` sends ``frame`` at simulated time ``at`` (not before now): a delayed answer of a peer.
+
+        A peer may call this from :meth:`FramePeer.on_frame` (``at`` then counts from the frame's end).
+        """
+        if self._delivering is not None:
+            self._enqueue(frame, node, max(at, self._delivering))
+            return
+        self._sync()
+        self._enqueue(frame, node, max(at, self.now))
         self._run(self.now)
 
     def receive(self, node: _Node, timeout: float | None) -> can.Message | None:
