@@ -11,6 +11,7 @@ differs by protocol, a small subclass.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from joints.clock import Clock, MonotonicClock
@@ -319,8 +320,12 @@ class ErobDriver(JointDriver):
     # -- status -----------------------------------------------------------------------------
     def state(self) -> RawState:
         """The drive's status in as few transactions as the protocol allows (Modbus: ONE FC03)."""
-        v = self.access.read_many(STATUS_NAMES)
-        t = self.clock.now()
+        return self.state_from(self.access.read_many(STATUS_NAMES), self.clock.now())
+
+    def state_from(self, v: Mapping[str, int], t: float) -> RawState:
+        """The state from status values read at ``t`` (at least error_code, motion_status,
+        status_of_achieving_position, actual_position, current_speed, motor_current,
+        part_of_power_temperature)."""
         achieve = v["status_of_achieving_position"]
         enabled = achieve != AchieveStatus.MOTOR_OFF
         settling = self._enabled_at is not None and t - self._enabled_at < ENABLE_SETTLE + 0.1

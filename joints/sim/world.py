@@ -14,7 +14,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, runtime_checkable
 
 from joints.clock import ManualClock
 from joints.errors import ConfigError, MissingDependencyError
@@ -82,6 +82,19 @@ class TwinMaker(Protocol):
 
     def front(self, protocol: str, twin: Any, address: int) -> Any:
         """The object that answers ``protocol`` frames for ``twin`` at ``address`` on a device bus."""
+        ...
+
+
+@runtime_checkable
+class TimedDeviceBus(Protocol):
+    """A device bus that lives on the simulated clock (a CAN medium: frames take wire time)."""
+
+    def bind_clock(self, clock: Any) -> None:
+        """Run on the world's clock from now on."""
+        ...
+
+    def tick(self, t: float) -> None:
+        """The world finished the physics substep ending at ``t``."""
         ...
 
 
@@ -209,6 +222,10 @@ class World:
             self._bound.append(_Bound(d.name, twin, stepper, qa, da, aid))
             stepper.place(float(self.data.qpos[qa]))
         self._bind = [(b.stepper.step, b.qadr, b.dadr, b.aid) for b in self._bound]
+        timed = [bus for bus in self.buses.values() if isinstance(bus, TimedDeviceBus)]
+        for bus in timed:
+            bus.bind_clock(self.clock)
+        self._ticks = [bus.tick for bus in timed]
 
     def _dof_inertia(self, dof: int) -> float:
         """Diagonal of the joint-space inertia (incl. armature) at the current pose [kg*m^2]."""
@@ -238,12 +255,17 @@ class World:
         qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
         dt = self.timestep
         bind = self._bind
+        ticks = self._ticks
         for _ in range(n):
             t = (self.steps + 1) * dt
             for step, qa, da, aid in bind:
                 ctrl[aid] = step(t, dt, float(qpos[qa]), float(qvel[da]))
             mj_step(m, d)
             self.steps += 1
+            if ticks:
+                self.clock.set(t)
+                for tick in ticks:
+                    tick(t)
         self._target = max(self._target, self.time)
         self.clock.set(self.time)
 
