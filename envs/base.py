@@ -50,7 +50,7 @@ import joints
 from envs.configs import config_path
 from envs.randomization import GAIN_REGISTERS, DomainRandomization
 from envs.render import CameraSpec, SceneRenderer
-from joints.errors import DeviceFault, MotionTimeout
+from joints.errors import MotionTimeout
 
 ACTION_MODES = ("position", "velocity", "torque")
 #: s between "enable" and the first motion command (the eRob manual's 500 ms; the emulator enforces it)
@@ -448,7 +448,7 @@ class JointsEnv(RigEnv):
     def _info(self, states: Sequence[joints.JointState]) -> dict[str, Any]:
         return {
             "time": float(self.rig.time),  # s on the rig's clock (sim: simulated seconds since reset)
-            "faults": {n: int(s.fault) for n, s in zip(self.joint_names, states)},
+            "faults": {n: (s.fault.name if s.fault else None) for n, s in zip(self.joint_names, states)},
         }
 
     def _command(self, action: np.ndarray) -> None:
@@ -531,9 +531,8 @@ class JointsEnv(RigEnv):
             s = j.state()
             if s.fault:
                 j.clear_faults()
+                j.check()  # still faulted: raises DeviceFault by name
                 s = j.state()
-                if s.fault:
-                    raise DeviceFault(f"joint {j.name}", s.fault, j.driver.fault_text(s.fault))
             if not (s.enabled and j.enabled):
                 need_enable.append(j)
         for j in need_enable:
@@ -550,7 +549,7 @@ class JointsEnv(RigEnv):
             states = [j.state() for j in self.joints]
             for j, s in zip(self.joints, states):
                 if s.fault:
-                    raise DeviceFault(f"joint {j.name}", s.fault, j.driver.fault_text(s.fault))
+                    j.check()
             if all(not s.moving and abs(s.position - q) <= self.reset_tolerance and abs(s.velocity) < 0.05
                    for s, q in zip(states, start)):
                 break

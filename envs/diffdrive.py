@@ -38,7 +38,7 @@ from envs import configs
 from envs.base import RigEnv
 from envs.randomization import DomainRandomization
 from envs.render import CameraSpec, SceneRenderer
-from joints.errors import DeviceFault, MotionTimeout
+from joints.errors import MotionTimeout
 
 if sys.version_info >= (3, 11):
     pass
@@ -511,7 +511,7 @@ class DiffDriveGoalEnv(RigEnv):
         d, e = self._goal_terms()
         info: dict[str, Any] = {
             "time": float(self.rig.time),  # s on the rig's clock (sim: simulated seconds since reset)
-            "faults": {n: int(states[n].fault) for n in self.wheel_names},
+            "faults": {n: _fault_name(states[n]) for n in self.wheel_names},
             "distance": d,
             "heading_error": e,
             "is_success": bool(d < self.success_distance and abs(e) < self.success_heading),
@@ -641,7 +641,7 @@ class DiffDriveGoalEnv(RigEnv):
             states = rig.read_states()
             for n, j in zip(self.wheel_names, self.wheels):
                 if states[n].fault:
-                    raise DeviceFault(f"joint {n}", states[n].fault, j.driver.fault_text(states[n].fault))
+                    j.check()  # still faulted: raises DeviceFault by name
         tripped = self.wheels[0].read("software_connected_status") == 0  # offline watchdog stop
         if tripped or faulted or not all(j.enabled for j in self.wheels):
             for j in self.wheels:  # "stop" then "enable": the drive leaves quick stop / disabled
@@ -652,7 +652,7 @@ class DiffDriveGoalEnv(RigEnv):
             states = rig.read_states()
             for n, j in zip(self.wheel_names, self.wheels):
                 if states[n].fault:
-                    raise DeviceFault(f"joint {n}", states[n].fault, j.driver.fault_text(states[n].fault))
+                    j.check()
             if all(abs(states[n].velocity) < STANDSTILL for n in self.wheel_names):
                 break
             if rig.time > deadline:
@@ -733,3 +733,7 @@ class DiffDriveGoalEnv(RigEnv):
         w = self.wheel_speeds_of(v, omega)
         scale = max(1.0, float(np.max(np.abs(w) / self.velocity_limits)))  # keep the curvature
         return self.action_of(w / scale)
+
+
+def _fault_name(state: joints.JointState) -> str | None:
+    return state.fault.name if state.fault is not None else None

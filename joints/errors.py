@@ -114,16 +114,18 @@ class UnexpectedReply(PeerProtocolError):
 
 
 class DeviceFault(JointsError):
-    """The drive reports a fault: carries the device's own code and the manual's text for it."""
+    """The drive reports a fault: carries the device's own code, its name and the manual's text for it."""
 
-    def __init__(self, device: str, code: int, text: str, *, hint: str = "") -> None:
+    def __init__(self, device: str, code: int, text: str, *, hint: str = "", name: str = "") -> None:
         self.device = device
         self.code = code
         self.text = text
         self.hint = hint
-        msg = f"{device}: fault 0x{code:04X} ({code}): {text}"
+        self.name = name
+        label = f"{name} (0x{code:04X})" if name and code < 0x10000 else name or f"0x{code:04X} ({code})"
+        msg = f"{device}: fault {label}: {text}"
         if hint:
-            msg += f" - {hint}"
+            msg += f" - to clear: {hint}"
         super().__init__(msg)
 
 
@@ -134,8 +136,19 @@ class RegisterError(JointsError, KeyError):
         return str(self.args[0]) if self.args else ""
 
 
+class UnknownJoint(JointsError, KeyError):
+    """A joint name the rig does not have; the message lists the ones it has."""
+
+    def __str__(self) -> str:  # KeyError would repr() the message
+        return str(self.args[0]) if self.args else ""
+
+
 class CommandError(JointsError, ValueError):
     """A command that is out of range or not allowed in the current state; nothing was sent."""
+
+
+class LimitError(CommandError):
+    """A command outside the joint's configured limits; nothing was sent (names the joint, value and limit)."""
 
 
 class MotionTimeout(JointsError, TimeoutError):
@@ -162,3 +175,10 @@ class TransportError(JointsError):
 
 class ReplyTimeout(TransportError, TimeoutError):
     """No (complete) reply arrived within the timeout."""
+
+
+class OutcomeUnknown(ReplyTimeout):
+    """A write got no reply: the drive may have executed it or not (a valid frame can arrive late).
+
+    The link never re-sends such a write blindly; read back what matters before acting again.
+    """

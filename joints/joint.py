@@ -1,8 +1,19 @@
 """Joint: what users hold. SI units, limits and safety on top of a device driver.
 
-Rule: every command is checked against the joint's limits BEFORE anything is sent; a command
-that fails a check raises :class:`~joints.errors.CommandError` and the motor does not move.
-Units: position rad, velocity rad/s, acceleration rad/s^2, torque N*m, current A.
+Rules:
+
+* Every command is checked against the joint's limits BEFORE anything is sent - raw parameter
+  writes of motion targets included; a command outside them raises :class:`~joints.errors.LimitError`
+  (naming the joint, the value and the limit) and the motor does not move.
+* "Enabled", "fault" and "moving" are what the drive reports. A drive that faulted is reported by
+  name (:class:`~joints.devices.faults.Fault`) at the next state read, and ``enable``,
+  ``move_to``, ``set_velocity`` and ``set_torque`` refuse to act on it with an error that says how
+  to clear it.
+* While enabled, the drive's communication watchdog is armed (where it has one) and the configured
+  limits are in the drive's own limit parameters (volatile), so the drive stops if the host dies.
+  Disabling restores the watchdog setting found before.
+
+Units: position rad (m for a linear joint), velocity rad/s, acceleration rad/s^2, torque N*m, current A.
 """
 
 from __future__ import annotations
@@ -13,8 +24,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from joints.clock import Clock
+from joints.devices.faults import Fault
 from joints.drivers.base import JointDriver, RawState, Units
-from joints.errors import CommandError, DeviceFault, MotionTimeout, StateError
+from joints.drivers.capabilities import CommunicationWatchdog, DriveLimits, MotionTargets
+from joints.errors import CommandError, DeviceFault, LimitError, MotionTimeout, StateError
 
 
 @dataclass(frozen=True, slots=True)
@@ -38,7 +51,7 @@ class Motion:
 
 @dataclass(frozen=True, slots=True)
 class JointState:
-    """One snapshot of a joint in SI units."""
+    """One snapshot of a joint in SI units, as the drive reports it."""
 
     position: float  #: rad
     velocity: float  #: rad/s
@@ -47,7 +60,7 @@ class JointState:
     temperature: float  #: degC
     enabled: bool
     moving: bool
-    fault: int  #: device error code, 0 = none
+    fault: Fault | None  #: the drive's fault by name, None when there is none
     time: float  #: s, on the rig's clock (simulated time in sim)
     raw: RawState | None = field(default=None, repr=False, compare=False)
 
@@ -65,6 +78,7 @@ class Joint:
         motion: Motion | None = None,
         offset: float = 0.0,
         direction: int = 1,
+        watchdog_ms: int | None = None,
     ) -> None:
         if direction not in (1, -1):
             raise CommandError(f"joint {name}: direction must be 1 or -1, got {direction}")
@@ -75,7 +89,16 @@ class Joint:
         self.motion = motion or Motion()
         self.offset = offset  #: rad added to the device position (user zero)
         self.direction = direction
+        #: the drive's communication watchdog while enabled [ms] (None: leave the drive's setting, 0: off)
+        self.watchdog_ms = watchdog_ms
         self._enabled_by_us = False
+        self._watchdog_before: int | None = None
+        #: the last state read from the drive (None before the first read)
+        self.last_state: JointState | None = None
+        #: clock time of the last frame exchanged with the drive through this joint
+        self.last_contact = -math.inf
+        #: how this joint waits (the rig's sleep: it keeps every drive of the rig fed meanwhile)
+        self.sleep: Callable[[float], None] = clock.sleep
 
     def __repr__(self) -> str:
         return f"Joint({self.name!r}, {self.driver.device}, enabled={self.driver.is_enabled})"
@@ -104,19 +127,26 @@ class Joint:
             raise CommandError(f"joint {self.name}: {what} must be a finite number, got {value!r}")
         return float(value)
 
-    def _check_position(self, rad: float) -> None:
+    def _check_position(self, rad: float, what: str = "position") -> None:
         lim = self.limits.position
         if lim is not None and not lim[0] <= rad <= lim[1]:
-            raise CommandError(
-                f"joint {self.name}: position {rad:.4f} rad is outside the limits "
+            raise LimitError(
+                f"joint {self.name}: {what} {rad:.4f} rad is outside the limits "
                 f"[{lim[0]:.4f}, {lim[1]:.4f}] rad; nothing was sent"
             )
 
     def _check_velocity(self, v: float, what: str = "velocity") -> None:
         lim = self.limits.velocity
         if lim is not None and abs(v) > lim:
-            raise CommandError(
+            raise LimitError(
                 f"joint {self.name}: {what} {v:.4f} rad/s exceeds the limit {lim:.4f} rad/s; nothing was sent"
+            )
+
+    def _check_torque(self, torque: float, what: str = "torque") -> None:
+        lim = self.limits.torque
+        if lim is not None and abs(torque) > lim:
+            raise LimitError(
+                f"joint {self.name}: {what} {torque:.3f} N*m exceeds the limit {lim:.3f} N*m; nothing was sent"
             )
 
     def _check_accel(self, a: float, what: str) -> None:
@@ -124,7 +154,7 @@ class Joint:
             raise CommandError(f"joint {self.name}: {what} must be > 0 rad/s^2, got {a}")
         lim = self.limits.acceleration
         if lim is not None and a > lim:
-            raise CommandError(
+            raise LimitError(
                 f"joint {self.name}: {what} {a:.4f} rad/s^2 exceeds the limit {lim:.4f}; nothing was sent"
             )
 
@@ -132,26 +162,77 @@ class Joint:
         if not self.driver.is_enabled:
             raise StateError(f"joint {self.name} is not enabled; call enable() first")
 
+    def _fault_error(self, fault: Fault, doing: str) -> DeviceFault:
+        return DeviceFault(f"joint {self.name}", fault.code, fault.text + (f"; {doing} refused" if doing else ""),
+                           hint=fault.clears, name=fault.name)
+
+    def _refuse_if_faulted(self, doing: str) -> None:
+        """Commands refuse to act on a drive whose last reported state shows a fault."""
+        s = self.last_state
+        if s is not None and s.fault is not None:
+            raise self._fault_error(s.fault, doing)
+
+    def _contact(self) -> None:
+        self.last_contact = self.clock.now()
+
     # -- power ------------------------------------------------------------------------------
     def enable(self) -> None:
-        """Enable the drive (brake releases). Leaving the rig disables it again."""
+        """Enable the drive (brake releases): arms its watchdog and writes the limits into it.
+
+        Refuses (:class:`~joints.errors.DeviceFault`) while the drive reports a fault. Leaving the
+        rig disables it again.
+        """
+        s = self.state()
+        if s.fault is not None:
+            raise self._fault_error(s.fault, "enable")
+        driver = self.driver
         # Mark first: if the reply to "enable" is lost the drive may be enabled all the same,
         # and leaving the rig must then still try to disable it.
         self._enabled_by_us = True
-        self.driver.enable()
+        if self.watchdog_ms is not None and isinstance(driver, CommunicationWatchdog):
+            if self._watchdog_before is None:
+                self._watchdog_before = driver.communication_timeout()
+            driver.set_communication_timeout(self.watchdog_ms)
+        if isinstance(driver, DriveLimits):
+            self._apply_drive_limits(driver)
+        driver.enable()
+        self._contact()
+
+    def _apply_drive_limits(self, driver: DriveLimits) -> None:
+        lim = self.limits
+        u = self.units
+        position = None
+        if lim.position is not None:
+            a, b = self._to_pos(lim.position[0]), self._to_pos(lim.position[1])
+            position = (min(a, b), max(a, b))
+        velocity = None if lim.velocity is None else max(1, round(lim.velocity / u.velocity))
+        current = None if lim.torque is None else max(1, round(lim.torque / u.torque_constant / u.current))
+        if position is not None or velocity is not None or current is not None:
+            driver.apply_limits(position=position, velocity=velocity, current=current)
 
     def disable(self) -> None:
-        """Disable the drive (brake engages)."""
+        """Disable the drive (brake engages); the watchdog goes back to what it was before enable()."""
         self.driver.disable()
         self._enabled_by_us = False
+        self._contact()
+        self._restore_watchdog()
+
+    def _restore_watchdog(self) -> None:
+        driver = self.driver
+        if self._watchdog_before is not None and isinstance(driver, CommunicationWatchdog):
+            before, self._watchdog_before = self._watchdog_before, None
+            driver.set_communication_timeout(before)
 
     def driver_reset(self) -> None:
         """The drive was power-cycled (sim reset): it is disabled and holds no settings."""
         self.driver.forget()
         self._enabled_by_us = False
+        self._watchdog_before = None
+        self.last_state = None
 
     @property
     def enabled(self) -> bool:
+        """Whether the drive is enabled, as it last said (host bookkeeping corrected by every state read)."""
         return self.driver.is_enabled
 
     # -- motion -----------------------------------------------------------------------------
@@ -174,6 +255,7 @@ class Joint:
         self._check_velocity(v, "profile velocity")
         self._check_accel(a, "acceleration")
         self._check_accel(d, "deceleration")
+        self._refuse_if_faulted("move_to")
         self._require_enabled()
         self.driver.move_to(
             self._to_pos(position),
@@ -181,6 +263,7 @@ class Joint:
             acceleration=self._to_acc(a),
             deceleration=self._to_acc(d),
         )
+        self._contact()
 
     def move_by(self, delta: float, **kw: float) -> None:
         """Move by ``delta`` [rad] from the present position (checked against the limits)."""
@@ -194,7 +277,9 @@ class Joint:
         self._check_velocity(velocity)
         a = self._finite("acceleration", self.motion.acceleration if acceleration is None else acceleration)
         self._check_accel(a, "acceleration")
+        self._refuse_if_faulted("set_velocity")
         self._require_enabled()
+        self._contact()
         return self._to_vel(velocity), self._to_acc(a)
 
     def set_velocity(self, velocity: float, *, acceleration: float | None = None) -> None:
@@ -205,36 +290,39 @@ class Joint:
     def set_torque(self, torque: float) -> None:
         """Apply ``torque`` [N*m] (current control through the device's torque constant)."""
         torque = self._finite("torque", torque)
-        lim = self.limits.torque
-        if lim is not None and abs(torque) > lim:
-            raise CommandError(
-                f"joint {self.name}: torque {torque:.3f} N*m exceeds the limit {lim:.3f} N*m; nothing was sent"
-            )
+        self._check_torque(torque)
+        self._refuse_if_faulted("set_torque")
         self._require_enabled()
         amps = torque * self.direction / self.units.torque_constant
         self.driver.set_current(round(amps / self.units.current))
+        self._contact()
 
     def stop(self) -> None:
         """Decelerate to standstill with the profile deceleration."""
         self.driver.stop()
+        self._contact()
 
     def emergency_stop(self) -> None:
         """Stop as fast as the drive can (eRob: < 50 ms)."""
         self.driver.emergency_stop()
+        self._contact()
 
     def clear_faults(self) -> None:
+        """Clear the drive's fault (then ``enable()`` again)."""
         self.driver.clear_errors()
+        self._contact()
+        self.last_state = None
 
     # -- status -----------------------------------------------------------------------------
     def state(self) -> JointState:
         """Read the joint's state (one bus transaction where the device allows)."""
-        raw = self.driver.state()
-        return self.to_si(raw)
+        return self.to_si(self.driver.state())
 
     def to_si(self, raw: RawState) -> JointState:
+        """A drive state in SI units; it becomes :attr:`last_state`."""
         u = self.units
         amps = raw.current * u.current * self.direction
-        return JointState(
+        s = JointState(
             position=self._from_pos(raw.position),
             velocity=raw.velocity * u.velocity * self.direction,
             torque=amps * u.torque_constant,
@@ -242,16 +330,19 @@ class Joint:
             temperature=raw.temperature,
             enabled=raw.enabled,
             moving=raw.moving,
-            fault=raw.fault,
+            fault=self.driver.fault(raw.fault) if raw.fault else None,
             time=raw.time,
             raw=raw,
         )
+        self.last_state = s
+        self.last_contact = raw.time
+        return s
 
     def check(self) -> None:
-        """Raise :class:`DeviceFault` if the drive reports a fault."""
-        s = self.driver.state()
-        if s.fault:
-            raise DeviceFault(f"joint {self.name}", s.fault, self.driver.fault_text(s.fault))
+        """Read the state; raise :class:`DeviceFault` (by name, with what clears it) if the drive reports a fault."""
+        s = self.state()
+        if s.fault is not None:
+            raise self._fault_error(s.fault, "")
 
     def wait(self, timeout: float = 10.0, *, poll: float = 0.01, until: Callable[[JointState], bool] | None = None) -> JointState:
         """Poll until the joint stops moving (or ``until(state)`` holds); raise on fault/timeout.
@@ -266,31 +357,63 @@ class Joint:
         deadline = self.clock.now() + timeout
         while True:
             s = self.state()
-            if s.fault:
-                raise DeviceFault(f"joint {self.name}", s.fault, self.driver.fault_text(s.fault))
+            if s.fault is not None:
+                raise self._fault_error(s.fault, "")
             done = until(s) if until is not None else not s.moving
             if done:
                 return s
             if self.clock.now() >= deadline:
                 raise MotionTimeout(f"joint {self.name}: still moving after {timeout} s")
-            self.clock.sleep(poll)
+            self.sleep(poll)
 
-    # -- registers --------------------------------------------------------------------------
+    # -- parameters -------------------------------------------------------------------------
     def read(self, key: str | int) -> int:
-        """Read a register by manual name or address (device units)."""
-        return self.driver.read(key)
+        """Read a parameter by manual name or protocol address (device units)."""
+        value = self.driver.read(key)
+        self._contact()
+        return value
 
     def write(self, key: str | int, value: int, *, confirm: bool = False) -> None:
-        """Write a register by manual name or address; persistent ones need ``confirm=True``."""
-        self.driver.write(key, value, confirm=confirm)
+        """Write a parameter by manual name or address; persistent ones need ``confirm=True``.
+
+        A motion target (a position, speed or current set-point) is checked against the joint's
+        limits like the matching command: :class:`~joints.errors.LimitError`, nothing sent.
+        """
+        driver = self.driver
+        if isinstance(driver, MotionTargets):
+            name = driver.access.resolve(key)
+            target = driver.motion_targets().get(name)
+            if target is not None:
+                kind, per_unit = target
+                self._check_raw_target(name, kind, per_unit, value)
+        driver.write(key, value, confirm=confirm)
+        self._contact()
+
+    def _check_raw_target(self, name: str, kind: str, per_unit: float, value: int) -> None:
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            return  # the driver's own check gives the error
+        what = f"{name} = {value}"
+        if kind == "position":
+            self._check_position(self._from_pos(float(value)), what)
+        elif kind == "relative":
+            s = self.last_state or self.state()
+            self._check_position(s.position + float(value) * per_unit * self.direction, what)
+        elif kind == "velocity":
+            self._check_velocity(float(value) * per_unit, what)
+        elif kind == "current":
+            self._check_torque(float(value) * per_unit * self.units.torque_constant, what)
 
     def shutdown(self) -> None:
         """Stop and disable if it was enabled through this joint (``enable()`` or a raw write of
-        the enable register; used when leaving the rig). Best effort."""
+        the enable parameter; used when leaving the rig), and restore the watchdog. Best effort."""
         if not (self._enabled_by_us or self.driver.is_enabled):
+            self._restore_watchdog()
             return
         try:
             self.driver.stop()
         finally:
-            self.driver.disable()
-            self._enabled_by_us = False
+            try:
+                self.driver.disable()
+                self._enabled_by_us = False
+            finally:
+                self._restore_watchdog()

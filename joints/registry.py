@@ -63,6 +63,8 @@ class DeviceFamily:
     twin: Callable[[Sequence[Any], Mapping[str, float]], tuple[Any, Mapping[Any, Any]]] | None = None
     #: sim: protocol -> (twin, address) -> the object that answers that protocol's frames for it
     fronts: Mapping[str, Callable[[Any, int], Any]] = field(default_factory=dict)
+    #: the communication watchdog armed while a joint is enabled [ms] unless its config says otherwise
+    watchdog_ms: int | None = None
 
     @property
     def protocols(self) -> tuple[str, ...]:
@@ -302,6 +304,7 @@ FAMILIES: dict[str, DeviceFamily] = {
         drivers={"modbus-rtu": _erob_modbus_driver, "erob-can": _erob_can_driver},
         tables={"modbus-rtu": _erob_modbus_table, "erob-can": _erob_can_table},
         twin=_erob_twin, fronts={"modbus-rtu": _same_object_front, "erob-can": _erob_can_front},
+        watchdog_ms=1000,  # off at power-on (0x0002 = 0): armed while enabled, restored on disable
     ),
     "zlac8015d": DeviceFamily(
         name="zlac8015d", devices=("zlac8015d",),
@@ -311,6 +314,7 @@ FAMILIES: dict[str, DeviceFamily] = {
         tables={"modbus-rtu": _zlac_modbus_table},
         channels=("left", "right"), addresses={"modbus-rtu": (1, 127)},
         twin=_zlac_twin, fronts={"modbus-rtu": _same_object_front},
+        watchdog_ms=1000,  # the drive's own default offline time (0x2000)
     ),
 }
 

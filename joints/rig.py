@@ -1,8 +1,15 @@
 """Rig: config -> buses, joints, (sim world) and one clock; the ``with`` block that keeps it safe.
 
-Rule: leaving the rig - normally or by an exception - stops and disables every joint this rig
-enabled (``on_exit = "disable"``, the default), then closes the buses. Shutdown errors of one
-joint never prevent the others from being shut down.
+Rules:
+
+* Leaving the rig by any path - normal exit, an exception, KeyboardInterrupt, SIGTERM/SIGHUP, or
+  interpreter exit with the rig still open - stops and disables every joint this rig enabled
+  (``on_exit = "disable"``, the default), then closes the buses. A joint whose shutdown fails (or is
+  interrupted) never keeps the others from being shut down; ``close()`` is idempotent and counts the
+  rig closed only when everything was tried.
+* Waiting is talking: :meth:`Rig.sleep` keeps every enabled drive's communication alive at a
+  rate derived from its watchdog and refreshes the joints' states while it waits, so a drive
+  that faults anyway is seen - by name - at the next call.
 """
 
 from __future__ import annotations
@@ -12,17 +19,17 @@ import functools
 import logging
 import math
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-from joints import registry
+from joints import exits, registry
 from joints.clock import Clock, MonotonicClock
 from joints.config import BusConfig, RigConfig, load, parse
 from joints.drivers.capabilities import CommunicationWatchdog, DriveGroup, GroupedChannel, SyncVelocityGroup
-from joints.errors import ConfigError, JointsError
+from joints.errors import ConfigError, JointsError, UnknownJoint
 from joints.joint import Joint, JointState
 from joints.link.base import Link
 from joints.link.trace import TraceRecord
@@ -37,6 +44,17 @@ class Bus:
     config: BusConfig
     transport: Any  #: a byte transport (serial, pty, loopback) or a CAN frame transport
     link: Link[Any]
+
+
+class JointMap(dict[str, Joint]):
+    """The rig's joints by name; an unknown name is an error that lists the known ones."""
+
+    def __missing__(self, key: str) -> Joint:
+        raise UnknownJoint(f"no joint named {key!r}; the rig has {sorted(self)}")
+
+
+#: a joint's keep-alive period is this fraction of its watchdog time
+KEEPALIVE_FRACTION = 0.25
 
 
 class Rig:
@@ -54,9 +72,15 @@ class Rig:
         self.config = config
         self.clock = clock
         self.buses = dict(buses)
-        self.joints: dict[str, Joint] = dict(joints)
+        self.joints: JointMap = JointMap(joints)
         self.world = world  #: the simulation (sim backend) or None
+        #: keep enabled drives fed while waiting (switch off only to test what a silent host does)
+        self.keepalive = True
+        for j in self.joints.values():
+            j.sleep = self.sleep  # a joint's waits keep the other drives fed too
         self._closed = False
+        self._shut: set[str] = set()
+        exits.register(self)
 
     @property
     def backend(self) -> str:
@@ -68,22 +92,55 @@ class Rig:
         return self.clock.now()
 
     def sleep(self, seconds: float) -> None:
-        """Sim: advance the world by ``seconds``; hardware: wait on the wall clock."""
-        if not math.isfinite(seconds) or seconds < 0:
-            raise ValueError(f"cannot sleep {seconds!r} s (need a finite time >= 0)")
-        self.clock.sleep(seconds)
+        """Sim: advance the world by ``seconds``; hardware: wait on the wall clock.
 
-    def read_states(self) -> dict[str, JointState]:
-        """State of every joint, bus by bus: one status transaction per drive.
-
-        Joints whose drivers share a ``status_group`` (the two wheels of a ZLAC8015D) are served
-        by one block read of that drive.
+        Meanwhile every enabled joint whose drive has a communication watchdog is read at least
+        every quarter of its watchdog time (its state refreshed, its watchdog fed).
         """
+        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not math.isfinite(seconds) \
+                or seconds < 0:
+            raise ValueError(f"cannot sleep {seconds!r} s (need a finite time >= 0)")
+        clock = self.clock
+        end = clock.now() + seconds
+        while True:
+            now = clock.now()
+            due, names = self._keepalive_due()
+            if due is None or due >= end:
+                if end > now:
+                    clock.sleep(end - now)
+                return
+            if due > now:
+                clock.sleep(due - now)
+            self.read_states(names)
+
+    def _keepalive_due(self) -> tuple[float | None, list[str]]:
+        """The earliest time an enabled joint must be talked to, and which joints are due then."""
+        if not self.keepalive:
+            return None, []
+        due: float | None = None
+        names: list[str] = []
+        for name, j in self.joints.items():
+            if not j.watchdog_ms or not j.enabled:
+                continue
+            t = j.last_contact + j.watchdog_ms * 1e-3 * KEEPALIVE_FRACTION
+            if due is None or t < due - 1e-9:
+                due, names = t, [name]
+            elif t <= due + 1e-9:
+                names.append(name)
+        return due, names
+
+    def read_states(self, names: Iterable[str] | None = None) -> dict[str, JointState]:
+        """State of every joint (or of ``names``), bus by bus: one status transaction per drive.
+
+        Joints that are channels of one drive (the two wheels of a ZLAC8015D) are served by one
+        status read of that drive.
+        """
+        wanted = set(self.joints) if names is None else {self.joints[n].name for n in names}
         out: dict[str, JointState] = {}
         groups: dict[int, tuple[Mapping[str, int], float]] = {}
         for bus in self.buses:
             for name, j in self.joints.items():
-                if self.config.joints[name].bus != bus:
+                if name not in wanted or self.config.joints[name].bus != bus:
                     continue
                 driver = j.driver
                 if not isinstance(driver, GroupedChannel):
@@ -131,33 +188,55 @@ class Rig:
         if self.world is None:
             raise JointsError("reset() is only available with backend = \"sim\"")
         self.world.reset()
-        for name, j in self.joints.items():
+        for j in self.joints.values():
             j.driver_reset()
-            watchdog = self.config.joints[name].watchdog_ms
-            if watchdog is not None and isinstance(j.driver, CommunicationWatchdog):
-                j.driver.set_communication_timeout(watchdog)  # the power cycle restored the default: re-apply
+
 
     def trace(self, sink: Callable[[TraceRecord], None] | None) -> None:
         """Route every frame of every bus to ``sink`` (None stops tracing)."""
         for b in self.buses.values():
             b.link.trace = sink
 
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
     def close(self) -> None:
-        """Stop and disable what this rig enabled (per ``on_exit``), then close the buses."""
+        """Stop and disable what this rig enabled (per ``on_exit``), then close the buses.
+
+        Every joint is tried even if another one fails or a KeyboardInterrupt / signal arrives in
+        the middle (that interruption is raised again once everything was tried). Calling it again
+        after an interrupted close finishes what was left; after a complete close it does nothing.
+        """
         if self._closed:
             return
-        self._closed = True
         errors: list[BaseException] = []
+        interrupted: BaseException | None = None
         if self.config.on_exit != "none":
-            for j in self.joints.values():
+            for name, j in self.joints.items():
+                if name in self._shut:
+                    continue
                 try:
                     if self.config.on_exit == "disable":
                         j.shutdown()
                     elif j.enabled:
                         j.stop()
+                    self._shut.add(name)
                 except Exception as exc:  # noqa: BLE001 - keep shutting the others down
                     log.error("shutdown of joint %s failed: %s", j.name, exc)
                     errors.append(exc)
+                    self._shut.add(name)  # tried: a second close() would fail the same way
+                except BaseException as exc:  # KeyboardInterrupt, a signal: finish the others first
+                    log.error("shutdown of joint %s interrupted (%s); shutting the others down", j.name,
+                              type(exc).__name__)
+                    interrupted = interrupted or exc
+                    try:  # the interrupted joint gets one more, uninterrupted try
+                        j.shutdown()
+                        self._shut.add(name)
+                    except BaseException as again:  # noqa: BLE001 - reported with the others below
+                        errors.append(again)
+        if interrupted is not None and len(self._shut) < len(self.joints) and self.config.on_exit != "none":
+            raise interrupted  # something is left: close() again finishes it
         for b in self.buses.values():
             try:
                 b.transport.close()
@@ -168,6 +247,10 @@ class Rig:
                 self.world.close()
             except Exception as exc:  # noqa: BLE001 - report with the others
                 errors.append(exc)
+        self._closed = True
+        exits.unregister(self)
+        if interrupted is not None:
+            raise interrupted
         if errors:
             raise JointsError(f"errors while closing the rig: {'; '.join(map(str, errors))}") from errors[0]
 
@@ -216,10 +299,10 @@ def build(config: RigConfig, *, transports: Mapping[str, Any] | None = None,
             bus = buses[jcfg.bus]
             fam = registry.family(jcfg.device, key=f"joints.{name}.device")
             driver = fam.driver(jcfg, bus.link, clock, shared, bus.config.protocol)
+            watchdog = jcfg.watchdog_ms if jcfg.watchdog_ms is not None else fam.watchdog_ms
             joints[name] = Joint(name, driver, clock=clock, limits=jcfg.limits, motion=jcfg.motion,
-                                 offset=jcfg.offset, direction=jcfg.direction)
-            if jcfg.watchdog_ms is not None and isinstance(driver, CommunicationWatchdog):
-                driver.set_communication_timeout(jcfg.watchdog_ms)
+                                 offset=jcfg.offset, direction=jcfg.direction,
+                                 watchdog_ms=watchdog if isinstance(driver, CommunicationWatchdog) else None)
     except BaseException as exc:
         for t in opened.values():
             t.close()

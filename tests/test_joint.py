@@ -183,7 +183,7 @@ def test_state_converts_to_si() -> None:
     assert st.current == pytest.approx(1.5)
     assert st.torque == pytest.approx(1.5 * KT)
     assert st.temperature == 41.0
-    assert st.enabled is True and st.moving is False and st.fault == 0
+    assert st.enabled is True and st.moving is False and st.fault is None
     assert st.time == pytest.approx(b.clock.now())
     assert st.raw is not None and st.raw.position == 262144
 

@@ -26,6 +26,7 @@ API = "api"
 ALLOWED: dict[str, frozenset[str]] = {
     "errors": frozenset(),
     "clock": frozenset(),
+    "exits": frozenset(),  # leaving safely: signals and atexit close open rigs
     "codecs": frozenset({"errors"}),
     "devices": frozenset({"errors"}),
     "transports": frozenset({"errors"}),
@@ -38,9 +39,9 @@ ALLOWED: dict[str, frozenset[str]] = {
     # emulated drives: device semantics + transports to be served on; never the host side
     "sim": frozenset({"devices", "codecs", "transports", "clock", "errors"}),
     "rig": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
-                      "registry", "config", "sim"}),
+                      "registry", "config", "sim", "exits"}),
     "cli": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
-                      "registry", "config", "sim", "rig", API}),
+                      "registry", "config", "sim", "rig", "exits", API}),
 }
 #: the package entry points import whatever they re-export
 EXEMPT = {"joints", "joints.__main__"}

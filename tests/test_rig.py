@@ -64,7 +64,8 @@ def _no_backend_env(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv("JOINTS_BACKEND", raising=False)
 
 
-STOP_AND_DISABLE = [("stop_operating", 0), ("enable_the_motor", 0)]
+#: leaving the rig: stop, disable, and the watchdog back to what it was before enable() (0: off)
+STOP_AND_DISABLE = [("stop_operating", 0), ("enable_the_motor", 0), ("modbus_communication_timeout_duration", 0)]
 
 
 def test_build_makes_every_joint() -> None:
@@ -79,12 +80,29 @@ def test_build_makes_every_joint() -> None:
     rig.close()
 
 
-def test_watchdog_ms_writes_register_0x0002() -> None:
+def test_watchdog_is_armed_while_enabled_and_restored_on_disable() -> None:
     s = Setup()
-    with s.build():
-        assert s.slaves["shoulder"].get(0x0002) == 500
-        assert s.log("shoulder") == [("modbus_communication_timeout_duration", 500)]
-        assert s.log("elbow") == []  # no watchdog configured: nothing written
+    with s.build() as rig:
+        assert s.log("shoulder") == s.log("elbow") == []  # opening a rig changes nothing on the drives
+        rig.joints["shoulder"].enable()
+        rig.joints["elbow"].enable()
+        assert s.slaves["shoulder"].get(0x0002) == 500  # watchdog_ms of the config
+        assert s.slaves["elbow"].get(0x0002) == 1000  # the eRob default while enabled
+        rig.joints["elbow"].disable()
+        assert s.slaves["elbow"].get(0x0002) == 0  # as found before enable()
+        assert s.log("elbow")[-1] == ("modbus_communication_timeout_duration", 0)
+    assert s.slaves["shoulder"].get(0x0002) == 0
+
+
+def test_enable_writes_the_limits_into_the_drive() -> None:
+    s = Setup()
+    with s.build() as rig:
+        rig.joints["shoulder"].enable()
+        drive = s.slaves["shoulder"]
+        counts = round(3.0 / (2 * 3.141592653589793 / 524288))
+        assert (drive.get("min_position_limit_value"), drive.get("max_position_limit_value")) == (-counts, counts)
+        assert drive.get("max_speed") == round(2.0 / (2 * 3.141592653589793 / 524288))
+        assert ("save_parameters", 2) not in s.log("shoulder")  # volatile: never saved
 
 
 def test_normal_exit_stops_and_disables_enabled_joints_only() -> None:
@@ -93,7 +111,7 @@ def test_normal_exit_stops_and_disables_enabled_joints_only() -> None:
         rig.joints["shoulder"].enable()
         rig.joints["shoulder"].move_to(1.0)
         assert s.slaves["shoulder"].get("status_of_achieving_position") == AchieveStatus.MOTOR_ON
-    assert s.log("shoulder")[-2:] == STOP_AND_DISABLE
+    assert s.log("shoulder")[-3:] == STOP_AND_DISABLE
     assert s.slaves["shoulder"].get("status_of_achieving_position") == AchieveStatus.MOTOR_OFF
     assert s.log("elbow") == []  # never enabled: not touched
     with pytest.raises(TransportError):  # the bus was closed
@@ -107,7 +125,7 @@ def test_exception_inside_stops_disables_and_propagates() -> None:
         rig.joints["shoulder"].set_velocity(0.5)
         raise RuntimeError("controller bug")
     log = s.log("shoulder")
-    assert log[-2:] == STOP_AND_DISABLE
+    assert log[-3:] == STOP_AND_DISABLE
     assert ("target_speed", 0) in log[log.index(("enable_the_motor", 1)):]  # speed mode: target zeroed
     assert s.log("elbow") == []
 
@@ -117,7 +135,7 @@ def test_keyboard_interrupt_inside_also_disables() -> None:
     with pytest.raises(KeyboardInterrupt), s.build() as rig:
         rig.joints["elbow"].enable()
         raise KeyboardInterrupt
-    assert s.log("elbow")[-2:] == STOP_AND_DISABLE
+    assert s.log("elbow")[-3:] == STOP_AND_DISABLE
 
 
 def test_disabled_again_inside_is_not_touched_on_exit() -> None:
@@ -133,7 +151,7 @@ def test_enabled_by_raw_register_write_is_disabled_on_exit() -> None:
     s = Setup()
     with s.build() as rig:
         rig.joints["elbow"].write("enable_the_motor", 1)
-    assert s.log("elbow")[-1] == ("enable_the_motor", 0)
+    assert s.log("elbow")[-2:] == STOP_AND_DISABLE[:2]  # no watchdog to restore: enable() never armed it
 
 
 def test_on_exit_none_leaves_joints_enabled() -> None:
@@ -162,7 +180,7 @@ def test_one_failing_joint_does_not_keep_the_others_enabled() -> None:
     with pytest.raises(JointsError, match="errors while closing the rig") as info:
         rig.close()
     assert isinstance(info.value.__cause__, ReplyTimeout)
-    assert s.log("elbow")[-2:] == STOP_AND_DISABLE
+    assert s.log("elbow")[-3:] == STOP_AND_DISABLE
 
 
 def test_shutdown_error_does_not_hide_the_original_exception(caplog: pytest.LogCaptureFixture) -> None:
@@ -172,7 +190,7 @@ def test_shutdown_error_does_not_hide_the_original_exception(caplog: pytest.LogC
         rig.joints["elbow"].enable()
         del s.bus.slaves[2]
         raise ZeroDivisionError("controller bug")
-    assert s.log("elbow")[-2:] == STOP_AND_DISABLE
+    assert s.log("elbow")[-3:] == STOP_AND_DISABLE
     assert "shoulder" in caplog.text
 
 
@@ -190,7 +208,7 @@ def test_lost_enable_reply_still_disables_on_exit() -> None:
     s.transport.attach(flaky)
     with pytest.raises(ReplyTimeout), s.build() as rig:
         rig.joints["elbow"].enable()
-    assert s.log("elbow")[-1] == ("enable_the_motor", 0)
+    assert s.log("elbow")[-2:] == STOP_AND_DISABLE[1:]
 
 
 def test_close_is_idempotent() -> None:

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "data"))
-import refresh  # noqa: E402
+import refresh
 
 MANIFEST = json.loads(refresh.MANIFEST.read_text(encoding="utf-8"))
 

@@ -52,9 +52,7 @@ def check_value(name: str, type_: str, value: object, minimum: int | None = None
                 unit: str = "", where: str = "") -> int:
     """``value`` as an int within the type's range and the documented bounds, else :class:`CommandError`."""
     if isinstance(value, bool) or not isinstance(value, int):
-        if isinstance(value, float) and value.is_integer():
-            value = int(value)
-        elif hasattr(value, "__index__") and not isinstance(value, bool):  # numpy integers
+        if isinstance(value, float) and value.is_integer() or hasattr(value, "__index__") and not isinstance(value, bool):
             value = int(value)
         else:
             raise CommandError(f"{name}: expected an integer, got {value!r}")

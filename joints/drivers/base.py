@@ -16,6 +16,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from joints.devices.faults import Fault
 from joints.devices.params import Param, ParamSet
 from joints.drivers.access import ParamAccess
 from joints.errors import ConfirmationRequired, RegisterError
@@ -106,6 +107,12 @@ class JointDriver(abc.ABC):
 
     @abc.abstractmethod
     def fault_text(self, code: int) -> str: ...
+
+    def fault(self, code: int) -> Fault | None:
+        """The drive's fault for an error code (None for 0); drivers give each code its name."""
+        if not code:
+            return None
+        return Fault(code, "drive_error", self.fault_text(code), "clear the fault, then enable again", self.device)
 
     # -- parameters --
     def describe(self, key: str | int) -> tuple[Param, str]:

@@ -53,3 +53,27 @@ class CommunicationWatchdog(Protocol):
     def set_communication_timeout(self, milliseconds: int) -> None:
         """0 switches the watchdog off."""
         ...
+
+    def communication_timeout(self) -> int:
+        """The watchdog time the drive holds now [ms] (0 = off)."""
+        ...
+
+
+@runtime_checkable
+class DriveLimits(Protocol):
+    """A drive with its own limit parameters: the joint writes its configured limits there (volatile)."""
+
+    def apply_limits(self, *, position: tuple[int, int] | None = None, velocity: int | None = None,
+                     current: int | None = None) -> None:
+        """Position range, speed magnitude and current magnitude in the driver's units (None: leave it)."""
+        ...
+
+
+@runtime_checkable
+class MotionTargets(Protocol):
+    """A driver that says which parameters are motion set-points, so raw writes obey the joint's limits."""
+
+    def motion_targets(self) -> Mapping[str, tuple[str, float]]:
+        """name -> (kind, SI per unit); kind is "position" (absolute, driver position units), "relative"
+        (a distance: rad per unit), "velocity" (rad/s per unit) or "current" (A per unit)."""
+        ...

@@ -25,9 +25,10 @@ from joints.devices.erob.registers import (
     MotionStatus,
     OperationMode,
 )
+from joints.devices.faults import Fault
 from joints.drivers.access import ParamAccess
 from joints.drivers.base import JointDriver, RawState, Units
-from joints.errors import ConfirmationRequired, DeviceFault, StateError
+from joints.errors import ConfirmationRequired, DeviceFault, OutcomeUnknown, StateError
 
 #: The manual: "After issuing the motor enable command, please wait for 500ms before issuing the
 #: start motion command."
@@ -224,7 +225,7 @@ class ErobDriver(JointDriver):
         )
         self._settle_after_enable()
         self._set("target_absolute_position", position, force=True)
-        self._command("start_operating", CMD_START)
+        self._start(position)
 
     def move_by(
         self,
@@ -240,14 +241,14 @@ class ErobDriver(JointDriver):
         self.configure_position(MotionMode.ABSOLUTE, speed=speed, acceleration=acceleration, deceleration=deceleration)
         self._settle_after_enable()
         self._set("target_relative_position", delta, force=True)
-        self._command("start_operating", CMD_START)
+        self._start(None)
 
     def move_continuous(self, speed: int, *, acceleration: int | None = None, deceleration: int | None = None) -> None:
         """Move Continuous (5.1.3): signed profile speed, start; stop() ends it."""
         self._validate(profile_speed=speed, profile_acceleration=acceleration, profile_deceleration=deceleration)
         self.configure_position(MotionMode.CONTINUOUS, speed=speed, acceleration=acceleration, deceleration=deceleration)
         self._settle_after_enable()
-        self._command("start_operating", CMD_START)
+        self._start(None)
 
     def move_repetitive(
         self,
@@ -266,7 +267,23 @@ class ErobDriver(JointDriver):
         )
         self._settle_after_enable()
         self._set("target_absolute_position", position, force=True)
-        self._command("start_operating", CMD_START)
+        self._start(position)
+
+    def _start(self, target: int | None) -> None:
+        """Start Operating, never sent twice blindly: if its reply is lost, read back whether the drive
+        started (moving, or its setpoint already at ``target``) and send it again only if it did not."""
+        try:
+            self._command("start_operating", CMD_START)
+        except OutcomeUnknown:
+            v = self.access.read_many(STATUS_NAMES)
+            started = (v["motion_status"] != MotionStatus.STOP
+                       or v["status_of_achieving_position"] in (AchieveStatus.OPERATION, AchieveStatus.WAIT_TIME)
+                       or (target is not None and v["given_position"] == target))
+            if started:
+                return
+            if target is None and v["status_of_achieving_position"] == AchieveStatus.TARGET_REACHED:
+                raise  # a short relative move may have run and ended already: unknown, do not repeat it
+            self._command("start_operating", CMD_START)
 
     def stop_repetitive(self) -> None:
         """Stop Repetitive Motion (0x00F4): return to the start or stop at the target."""
@@ -348,12 +365,34 @@ class ErobDriver(JointDriver):
     def fault_text(self, code: int) -> str:
         return faults.describe(code).text
 
+    def fault(self, code: int) -> Fault | None:
+        return faults.fault(code)
+
     def check_fault(self) -> None:
         """Raise :class:`DeviceFault` if the drive reports an error code."""
         code = self.read("error_code")
         if code:
             info = faults.describe(code)
-            raise DeviceFault(self.name, code, info.text, hint=info.hint)
+            raise DeviceFault(self.name, code, info.text, hint=info.hint, name=info.name)
+
+    def motion_targets(self) -> dict[str, tuple[str, float]]:
+        """Motion set-points, for the joint's checks of raw writes."""
+        rad = self.units.position
+        return {"target_absolute_position": ("position", rad), "target_relative_position": ("relative", rad),
+                "profile_speed": ("velocity", rad), "target_speed": ("velocity", rad),
+                "torque_control_mode_max_speed": ("velocity", rad), "target_current": ("current", 0.001)}
+
+    # -- limits the drive enforces itself -----------------------------------------------------
+    def apply_limits(self, *, position: tuple[int, int] | None = None, velocity: int | None = None,
+                     current: int | None = None) -> None:
+        """Software position limits (0x00BD/0x00BF, count incl. offset), max speed (count/s) and motor
+        current (mA) into the drive's RAM, so it enforces them if the host dies (not saved)."""
+        if position is not None:
+            self._set_many({"min_position_limit_value": position[0], "max_position_limit_value": position[1]})
+        if velocity is not None:
+            self._set("max_speed", max(1, min(velocity, self.params["max_speed"].type_range[1])))
+        if current is not None:
+            self._set("max_motor_current", max(1, min(current, self.params["max_motor_current"].type_range[1])))
 
     # -- persistent operations (need confirmation) ------------------------------------------
     def save_parameters(self, *, confirm: bool = False) -> None:

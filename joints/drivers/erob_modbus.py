@@ -55,3 +55,8 @@ class ErobModbusDriver(ErobDriver):
     def set_communication_timeout(self, milliseconds: int) -> None:
         """Modbus Communication Timeout Duration (0x0002): 0 disables, 1..4000 ms -> fault 0xFA2."""
         self._set("modbus_communication_timeout_duration", milliseconds)
+
+    def communication_timeout(self) -> int:
+        value = self.read("modbus_communication_timeout_duration")
+        self._cache["modbus_communication_timeout_duration"] = value
+        return value

@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from joints.clock import Clock, MonotonicClock
+from joints.devices.faults import Fault
+from joints.devices.zlac import faults as zf
 from joints.devices.zlac import registers as zr
 from joints.drivers.access import ModbusAccess
 from joints.drivers.base import JointDriver, RawState, Units
@@ -28,9 +30,9 @@ from joints.errors import CommandError, ConfirmationRequired, StateError
 from joints.link.modbus import ModbusLink
 
 SIDES = ("left", "right")
-#: status block read in ONE FC03: motor state (0x20A2) .. actual torque right (0x20AE)
+#: status block read in ONE FC03: motor state (0x20A2) .. software connected status (0x20AF)
 STATUS_START = 0x20A2
-STATUS_WORDS = 0x20AE - 0x20A2 + 1
+STATUS_WORDS = 0x20AF - 0x20A2 + 1
 #: the velocity and torque targets of both wheels (0x2088..0x2091 with the position targets between)
 _TARGETS = ("target_velocity_left", "target_velocity_right", "target_torque_left", "target_torque_right")
 
@@ -65,6 +67,7 @@ class ZlacDrive:
         self.clock: Clock = clock or link.clock or MonotonicClock()
         self.name = name or f"zlac8015d@{slave}"
         self.state = _DriveState()
+        self.offline = False  #: the drive quick-stopped because the host went silent (until enabled again)
         self.access = ModbusAccess(link, slave, self.table)
         self._cache: dict[str, int] = {}
 
@@ -72,6 +75,10 @@ class ZlacDrive:
     def write_param(self, name: str, value: int, *, idempotent: bool = True) -> None:
         self.access.write(name, value, idempotent=idempotent)
         self._cache[name] = int(value)
+
+    def remember(self, name: str, value: int) -> None:
+        """Note a value the drive holds (read back), so redundant writes of it are skipped."""
+        self._cache[name] = value
 
     def written(self, name: str, default: int) -> int:
         """The last value this host wrote to ``name`` (``default`` if it wrote none)."""
@@ -94,6 +101,7 @@ class ZlacDrive:
     def forget(self) -> None:
         self._cache.clear()
         self.state = _DriveState()
+        self.offline = False
 
     # -- mode ownership --
     def require_mode(self, side: str, mode: zr.ControlMode) -> None:
@@ -148,9 +156,19 @@ class ZlacDrive:
         self.state.enabled.clear()
 
     # -- power --
+    def energised(self, status: Mapping[str, int]) -> bool:
+        """Whether the drive says both motors are on and the host is connected (0x20A2, 0x20AF)."""
+        return (status["motor_state"] == 0x0101 and status["software_connected_status"] != 0
+                and not status["error_code_left"] and not status["error_code_right"])
+
     def enable(self, side: str) -> None:
         """Enable the drive (both motors) - after zeroing any velocity or torque target left in
-        the registers, so that enabling never restarts an old command (e.g. after a fault)."""
+        the registers, so that enabling never restarts an old command (e.g. after a fault).
+
+        Whether the drive is already on is what the drive says (one status read), not what this
+        host remembers: a drive that quick-stopped on its own is enabled again."""
+        if self.state.enabled and not self.energised(self.read_status()):
+            self.state.enabled.clear()  # it switched itself off (offline trip, fault)
         if not self.state.enabled:
             targets = self.access.read_many(_TARGETS)  # 0x2088..0x2091: one FC03
             for pair in (("target_velocity_left", "target_velocity_right"), ("target_torque_left", "target_torque_right")):
@@ -159,6 +177,7 @@ class ZlacDrive:
                 else:
                     self._cache.update({n: 0 for n in pair})
             self.control(zr.ControlWord.ENABLE)
+            self.offline = False
         self.state.enabled.add(side)
 
     def disable(self, side: str) -> None:
@@ -347,20 +366,34 @@ class ZlacChannelDriver(JointDriver):
         self.drive.control(zr.ControlWord.QUICK_STOP)
 
     def clear_errors(self) -> None:
-        """Clear faults (0x06, both wheels). The drive is then disabled and needs "enable" (0x08)."""
+        """Clear faults (0x06, both wheels; also acknowledges an offline trip). The drive is then
+        disabled and needs "enable" (0x08)."""
         self.drive.control(zr.ControlWord.CLEAR_FAULT)
         self.drive.state.enabled.clear()
+        self.drive.offline = False
 
     # -- status --
     def state(self) -> RawState:
         return self.state_from(self.drive.read_status(), self.drive.clock.now())
 
     def state_from(self, v: Mapping[str, int], t: float) -> RawState:
-        """This wheel's part of a status block read by :meth:`ZlacDrive.read_status`."""
+        """This wheel's part of a status block read by :meth:`ZlacDrive.read_status`.
+
+        "Enabled" is what the drive says: its motor is on (0x20A2), the host is connected
+        (0x20AF) and no wheel faulted. A drive that quick-stopped because the host went silent
+        (0x20AF = 0 while this host had it enabled) reports :data:`~joints.devices.zlac.faults.OFFLINE`.
+        """
         hi = self.side == "left"
+        fault = v[f"error_code_{self.side}"]
+        was_enabled = self.is_enabled
         if v["error_code_left"] or v["error_code_right"]:
             # a fault switches BOTH motors off (one state machine): the drive disabled itself
             self.drive.state.enabled.clear()
+        elif self.drive.state.enabled and v["software_connected_status"] == 0:
+            self.drive.state.enabled.clear()  # offline trip: the drive quick-stopped on its own
+            self.drive.offline = True
+        if not fault and self.drive.offline and (was_enabled or not self.drive.state.enabled):
+            fault = zf.OFFLINE_CODE
         running = (v["motor_state"] >> 8) & 0xFF if hi else v["motor_state"] & 0xFF
         temp = (v["motor_temperature"] >> 8) & 0xFF if hi else v["motor_temperature"] & 0xFF
         return RawState(
@@ -368,20 +401,53 @@ class ZlacChannelDriver(JointDriver):
             velocity=v[f"actual_velocity_{self.side}"],
             current=v[f"actual_torque_{self.side}"] * 100,  # 0.1 A -> mA
             temperature=float(temp),
-            enabled=self.is_enabled,
+            enabled=self.is_enabled and bool(running),
             moving=bool(running) and v[f"actual_velocity_{self.side}"] != 0,
-            fault=v[f"error_code_{self.side}"],
+            fault=fault,
             time=t,
             extra=dict(v),
         )
 
     def fault_text(self, code: int) -> str:
-        return "; ".join(zr.describe(code)) or "no fault"
+        f = zf.fault(code)
+        return f.text if f is not None else "no fault"
+
+    def fault(self, code: int) -> Fault | None:
+        return zf.fault(code)
+
+    def motion_targets(self) -> dict[str, tuple[str, float]]:
+        """Motion set-points of both wheels, for the joint's checks of raw writes."""
+        rpm = 2.0 * math.pi / 60.0
+        position = "position" if self.drive.state.mode == zr.ControlMode.ABSOLUTE_POSITION else "relative"
+        out: dict[str, tuple[str, float]] = {}
+        for side in SIDES:
+            out[f"target_velocity_{side}"] = ("velocity", rpm)
+            out[f"target_speed_{side}"] = ("velocity", rpm)
+            out[f"target_torque_{side}"] = ("current", 0.001)
+            out[f"target_position_{side}"] = (position, self.units.position)
+        return out
+
+    def apply_limits(self, *, position: tuple[int, int] | None = None, velocity: int | None = None,
+                     current: int | None = None) -> None:
+        """Maximum motor speed 0x2008 (r/min, the drive's: the larger of the two wheels' limits) and this
+        wheel's maximum current (0.1 A); the ZLAC has no position limits."""
+        if velocity is not None:
+            rpm = max(1, min(1000, math.ceil(abs(velocity) / 10.0)))
+            other = self.drive.written("maximum_motor_speed", 0) if self.drive.state.enabled else 0
+            self.drive.set("maximum_motor_speed", max(rpm, other))
+        if current is not None:
+            name = self._r("maximum_current")
+            self.drive.set(name, max(1, min(self.table[name].type_range[1], math.ceil(abs(current) / 100.0))))
 
     # -- watchdog and persistent operations --
     def set_communication_timeout(self, milliseconds: int) -> None:
         """Communication offline time (0x2000) [ms]: the drive stops when the host goes quiet."""
         self.drive.set("communication_offline_time", milliseconds)
+
+    def communication_timeout(self) -> int:
+        value = self.drive.access.read("communication_offline_time")
+        self.drive.remember("communication_offline_time", value)
+        return value
 
     def reset_zero_point(self, *, confirm: bool = False) -> None:
         """Absolute position mode: the present position becomes zero (0x2006)."""

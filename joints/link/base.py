@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
 from joints.clock import Clock, MonotonicClock
-from joints.errors import FrameError, PeerProtocolError, ReplyTimeout, UnexpectedReply
+from joints.errors import FrameError, OutcomeUnknown, PeerProtocolError, ReplyTimeout
 from joints.link.trace import TraceRecord
 
 log = logging.getLogger("joints.link")
@@ -33,7 +33,10 @@ UNSOLICITED_LOG = 1000
 @dataclass(frozen=True, slots=True)
 class RetryPolicy:
     timeout: float = 0.1  #: seconds to wait for a complete reply
-    retries: int = 2  #: extra attempts for idempotent requests after a timeout or corrupt reply
+    retries: int = 2  #: extra attempts for idempotent requests after a timeout, corrupt or wrong reply
+    #: after a failed attempt, frames arriving within this many seconds are late replies and are
+    #: discarded before anything else is sent (None: the timeout)
+    late: float | None = None
 
 
 class Framing(abc.ABC, Generic[M]):
@@ -77,6 +80,10 @@ class Rule(abc.ABC, Generic[M]):
     @abc.abstractmethod
     def expects_reply(self, request: Any) -> bool:
         """Whether ``request`` gets a reply (broadcasts and send-only frames do not)."""
+
+    def is_write(self, request: Any) -> bool:
+        """Whether ``request`` changes the drive (a timed-out write has an unknown outcome)."""
+        return False
 
     @abc.abstractmethod
     def is_reply(self, request: Any, message: M) -> bool:
@@ -143,6 +150,7 @@ class Link(Generic[M]):
         self.transactions = 0  #: frames sent (requests and send-only)
         self.retries_used = 0
         self.callback_errors = 0
+        self.late_discarded = 0  #: frames discarded as late replies after a failed attempt
 
     @property
     def transport(self) -> Any:
@@ -152,8 +160,11 @@ class Link(Generic[M]):
     def request(self, request: Any, *, idempotent: bool = False) -> M | None:
         """Send ``request`` and return its reply (None if the protocol gives it none).
 
-        Only ``idempotent`` requests are sent again after a timeout or a corrupt reply, so a
-        lost reply to a command can never execute it twice.
+        Only ``idempotent`` requests are sent again after a timeout, a corrupt reply or a reply
+        that does not answer them, so a lost reply to a command can never execute it twice.
+        After each failed attempt the link waits out late replies (:attr:`RetryPolicy.late`)
+        and discards them, so a late reply never answers a later request. A write whose reply
+        never came raises :class:`~joints.errors.OutcomeUnknown`: the drive may have executed it.
         """
         frame = self.rule.encode(request)  # raises EncodeError before anything is sent
         attempts = 1 + (self.policy.retries if idempotent else 0)
@@ -165,12 +176,16 @@ class Link(Generic[M]):
                 try:
                     return self._once(request, frame)
                 except (ReplyTimeout, PeerProtocolError) as exc:
-                    if isinstance(exc, UnexpectedReply):
-                        raise
                     last = exc
+                    self._discard_late()
             assert last is not None
-            if attempts > 1 and isinstance(last, ReplyTimeout):
-                raise ReplyTimeout(f"{last} (after {attempts} attempts)") from last
+            tried = f" (after {attempts} attempts)" if attempts > 1 else ""
+            if isinstance(last, ReplyTimeout) and self.rule.is_write(request):
+                raise OutcomeUnknown(
+                    f"{last}{tried}; the write's outcome is unknown: the drive may have executed it - read back "
+                    "what matters before sending it again") from last
+            if tried and isinstance(last, ReplyTimeout):
+                raise ReplyTimeout(f"{last}{tried}") from last
             raise last
 
     def send(self, message: Any) -> None:
@@ -257,6 +272,22 @@ class Link(Generic[M]):
             f"{framing.name}; {rule.timeout_text(request)}"
         )
 
+    def _discard_late(self) -> None:
+        """After a failed attempt: frames arriving within the late window are discarded (traced)."""
+        late = self.policy.timeout if self.policy.late is None else self.policy.late
+        framing = self.framing
+        deadline = self.clock.now() + late
+        while True:
+            got = framing.receive(deadline, settle=False)
+            if got is None:
+                break
+            if isinstance(got, FrameError):
+                self._record("rx", got.data, f"late, discarded: error: {got}")
+            elif self.trace is not None:
+                self._trace_rx(got, "late, discarded")
+            self.late_discarded += 1
+        framing.discard()
+
     def _drain(self) -> None:
         """Deliver complete frames that arrived before a request; drop a partial one."""
         framing = self.framing
@@ -277,7 +308,7 @@ class Link(Generic[M]):
                 if sub.predicate(got):
                     claimed = True
                     sub.callback(got)
-            except Exception:  # noqa: BLE001 - a subscriber must not break the bus
+            except Exception:
                 self.callback_errors += 1
                 log.exception("%s: subscriber failed on %s", self.name, self.rule.describe(got))
         if self.trace is not None:

@@ -44,6 +44,9 @@ class ModbusRule(Rule[Any]):
     def expects_reply(self, request: Any) -> bool:
         return request.slave != BROADCAST  # type: ignore[no-any-return]
 
+    def is_write(self, request: Any) -> bool:
+        return isinstance(request, (mb.WriteSingleRegister, mb.WriteMultipleRegisters))
+
     def before_send(self, framing: Framing[Any], request: Any, frame: Any) -> None:
         if isinstance(framing, StreamFraming):
             framing.codec.expect_reply_to(request)

@@ -21,7 +21,7 @@ from joints.link.modbus import ModbusLink
 from joints.sim.world import World
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: the simkit helpers
-from simkit import erob_world  # noqa: E402
+from simkit import erob_world
 
 STEPS = 20000
 REPEATS = 5

@@ -14,10 +14,10 @@ from typing import Any
 
 import can
 import pytest
-from testdata import by_id, sequences, vectors
 
 from joints.codecs import erob_can as ec
 from joints.errors import ByteCountError, FrameError
+from testdata import by_id, sequences, vectors
 
 VECTORS = vectors("erob-can", "erob")
 ERRATA = [r for r in VECTORS if r.get("correct_hex")]

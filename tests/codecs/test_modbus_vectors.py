@@ -10,7 +10,6 @@ sequence is replayed step by step (request in device role, reply in host role).
 from __future__ import annotations
 
 import json
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -18,7 +17,6 @@ import pytest
 from joints.codecs import modbus as mb
 from joints.codecs.crc import crc16_modbus, crc_ok
 from joints.errors import ByteCountError, ChecksumError, FrameError
-
 from testdata import VECTORS
 
 

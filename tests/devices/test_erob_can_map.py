@@ -7,7 +7,6 @@ import re
 from typing import Any
 
 import pytest
-from testdata import manual, vectors
 
 from joints.codecs import erob_can as ec
 from joints.devices.erob import can as ecan
@@ -17,6 +16,7 @@ from joints.devices.erob.params import EROB_PARAMS, OTHER_PROTOCOLS
 from joints.devices.erob.registers import EROB_MODBUS, AchieveStatus, MotionMode, OperationMode
 from joints.devices.params import Access
 from joints.errors import CommandError, RegisterError
+from testdata import manual, vectors
 
 MANUAL = manual("erob-erunner-can-canopen-manual-v1.7-zh.txt").splitlines()
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from pathlib import Path
 
 import pytest
 
@@ -22,8 +21,8 @@ from joints.devices.erob.registers import (
 )
 from joints.devices.registers import Access, Register, snake_name
 from joints.errors import CommandError, RegisterError
-
 from testdata import MANUALS
+
 MANUAL_EN = MANUALS / "erob-modbus-rtu-manual-v1.6-en.txt"
 
 SIZES = {"uint16": 1, "int16": 1, "uint32": 2, "int32": 2}

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import re
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -32,7 +31,6 @@ from joints.devices.zlac.registers import (
     split_left_right,
 )
 from joints.errors import CommandError, RegisterError
-
 from testdata import MANUALS, VECTORS
 
 MANUAL = MANUALS / "zlac8015d-rs485-modbus-manual-v1.04.txt"

@@ -10,22 +10,22 @@ batched into one FC16 by the driver.
 from __future__ import annotations
 
 import json
-from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
 import pytest
 
 from joints.clock import ManualClock
 from joints.codecs import modbus as mb
-from joints.devices.erob.registers import EROB_MODBUS, MotionMode
+from joints.devices.erob.registers import EROB_MODBUS, MotionMode, MotionStatus
+from joints.devices.registers import Register
 from joints.drivers.erob_modbus import ENABLE_SETTLE, ErobModbusDriver
 from joints.errors import ConfirmationRequired
 from joints.link.modbus import ModbusLink
 from joints.link.trace import Trace
 from joints.sim.modbus_slave import ModbusDeviceBus, ModbusSlave
 from joints.transports.loopback import LoopbackTransport
-
 from testdata import VECTORS
+
 COMMANDS = {
     "enable_the_motor",
     "start_operating",
@@ -233,10 +233,19 @@ def test_calibration_needs_confirmation_and_writes_nothing_without() -> None:
     assert len(trace) == 0
 
 
-def test_start_is_never_retried() -> None:
-    """A lost reply to "start operating" must not start a (relative) motion twice."""
+class StartingDrive(ModbusSlave):
+    """A register image whose motion status follows "start operating", as a real drive's does."""
+
+    def on_write(self, reg: Register, value: int) -> None:
+        if reg.name == "start_operating":
+            self.set("motion_status", int(MotionStatus.MOVING))
+
+
+def test_start_is_never_retried_blindly() -> None:
+    """A lost reply to "start operating" must not start a (relative) motion twice: the driver reads
+    back whether the drive started, and it did, so nothing is sent again."""
     calls = []
-    bus = ModbusDeviceBus([ModbusSlave(EROB_MODBUS, 2)])
+    bus = ModbusDeviceBus([StartingDrive(EROB_MODBUS, 2)])
 
     def flaky(data: bytes) -> bytes:
         calls.append(data)
@@ -249,6 +258,28 @@ def test_start_is_never_retried() -> None:
     link = ModbusLink(LoopbackTransport(flaky), clock=clock)
     d = ErobModbusDriver(link, 2, clock=clock)
     d.enable()
-    with pytest.raises(TimeoutError):
-        d.move_by(1000)
+    d.move_by(1000)
     assert sum(1 for c in calls if c[2:4] == bytes.fromhex("00F1")) == 1
+
+
+def test_start_lost_on_the_way_is_sent_again_after_reading_back() -> None:
+    """The request itself was lost (the drive never saw it): the read-back says not started, so the
+    driver sends it once more - and only once."""
+    calls = []
+    drive = StartingDrive(EROB_MODBUS, 2)
+    bus = ModbusDeviceBus([drive])
+    lost = []
+
+    def flaky(data: bytes) -> bytes:
+        calls.append(data)
+        if data[2:4] == bytes.fromhex("00F1") and not lost:
+            lost.append(data)
+            return b""  # the frame never reached the drive
+        return bus.receive(data)
+
+    clock = ManualClock()
+    d = ErobModbusDriver(ModbusLink(LoopbackTransport(flaky), clock=clock), 2, clock=clock)
+    d.enable()
+    d.move_by(1000)
+    assert sum(1 for c in calls if c[2:4] == bytes.fromhex("00F1")) == 2
+    assert drive.write_log.count(("start_operating", 1)) == 1  # executed exactly once

@@ -20,6 +20,7 @@ from joints.errors import (
     DeviceRejected,
     EncodeError,
     JointsError,
+    OutcomeUnknown,
     ReplyTimeout,
     TransportError,
     UnexpectedReply,
@@ -131,10 +132,11 @@ def test_reply_from_another_slave_is_unexpected(bus: ModbusDeviceBus, clock: Man
     with pytest.raises(UnexpectedReply) as info:
         link.read_registers(SLAVE, 0x0066, 2)
     assert "slave 3" in str(info.value)
-    assert peer.calls == 1  # never retried: a foreign reply is not a lost one
-    assert link.retries_used == 0
+    assert peer.calls == 3  # a read is retried on any mismatch (retries=2), and never accepts it
+    assert link.retries_used == 2
     with pytest.raises(UnexpectedReply):
-        link.write_register(SLAVE, 0x0040, 3)
+        link.write_register(SLAVE, 0x0040, 3, idempotent=False)
+    assert peer.calls == 4  # a command is never sent twice
 
 
 def test_reply_to_another_register_is_unexpected(bus: ModbusDeviceBus, clock: ManualClock) -> None:
@@ -177,9 +179,20 @@ def test_no_peer_times_out_without_waiting(clock: ManualClock) -> None:
 def test_no_reply_to_non_idempotent_write_is_not_retried(clock: ManualClock) -> None:
     transport = LoopbackTransport(None)
     link = ModbusLink(transport, policy=RetryPolicy(timeout=0.1, retries=2), clock=clock)
-    with pytest.raises(ReplyTimeout):
+    with pytest.raises(OutcomeUnknown) as info:
         link.write_register(SLAVE, 0x00F1, 1, idempotent=False)  # start operating
     assert link.transactions == 1 and link.retries_used == 0
+    assert isinstance(info.value, ReplyTimeout) and "outcome is unknown" in str(info.value)
+
+
+def test_timed_out_read_is_a_plain_timeout_and_a_timed_out_write_an_unknown_outcome(clock: ManualClock) -> None:
+    link = ModbusLink(LoopbackTransport(None), policy=RetryPolicy(timeout=0.1, retries=1), clock=clock)
+    with pytest.raises(ReplyTimeout) as read:
+        link.read_registers(SLAVE, 0x0066, 2)
+    assert not isinstance(read.value, OutcomeUnknown)
+    with pytest.raises(OutcomeUnknown):
+        link.write_register(SLAVE, 0x0047, 100)  # idempotent: retried once, then unknown
+    assert link.transactions == 4
 
 
 def test_corrupt_reply_is_checksum_error_after_retries(
@@ -347,3 +360,41 @@ def test_a_failing_trace_never_breaks_the_bus(bus: ModbusDeviceBus, clock: Manua
     link = make_link(bus, clock, trace=broken)
     link.write_register(SLAVE, 0x0040, 3)
     assert link.read_registers(SLAVE, 0x0040, 1) == (3,)
+
+
+class DelayedLine(LoopbackTransport):
+    """A line on the injected clock: each answer arrives ``delay`` s after its request (reads wait for it)."""
+
+    def __init__(self, peer: ModbusDeviceBus, clock: ManualClock, delay: float) -> None:
+        super().__init__(None)
+        self.bus = peer
+        self.clock = clock
+        self.delay = delay
+        self.pending: list[tuple[float, bytes]] = []
+
+    def write(self, data: bytes) -> None:
+        answer = self.bus.receive(data)
+        if answer:
+            self.pending.append((self.clock.now() + self.delay, answer))
+
+    def read(self, timeout: float) -> bytes:
+        due = [p for p in self.pending if p[0] <= self.clock.now() + timeout]
+        if not due:
+            self.clock.advance(max(timeout, 0.0))
+            return b""
+        first = min(due)
+        self.pending.remove(first)
+        self.clock.set(max(self.clock.now(), first[0]))
+        return first[1]
+
+
+def test_a_late_reply_never_answers_the_next_request(slave: ModbusSlave, clock: ManualClock) -> None:
+    line = DelayedLine(ModbusDeviceBus([slave]), clock, delay=0.15)
+    link = ModbusLink(line, policy=RetryPolicy(timeout=0.1, retries=0), clock=clock)
+    slave.set("profile_speed", 111)
+    with pytest.raises(ReplyTimeout):
+        link.read_registers(SLAVE, 0x0047, 2)  # its answer (111) comes 50 ms too late
+    slave.set("profile_speed", 222)
+    line.delay = 0.01
+    assert link.read_registers(SLAVE, 0x0047, 2) == (0, 222)  # the fresh value, never the late 111
+    assert link.late_discarded == 1

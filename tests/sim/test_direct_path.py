@@ -9,11 +9,11 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-import joints  # noqa: E402
-from joints.errors import DeviceRejected, ReplyTimeout  # noqa: E402
-from joints.link.base import DirectFraming  # noqa: E402
-from joints.link.modbus import ModbusLink  # noqa: E402
-from joints.link.trace import Trace  # noqa: E402
+import joints
+from joints.errors import DeviceRejected, ReplyTimeout
+from joints.link.base import DirectFraming
+from joints.link.modbus import ModbusLink
+from joints.link.trace import Trace
 
 CFG = {
     "backend": "sim",

@@ -9,18 +9,17 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import pytest
 
 pytest.importorskip("mujoco")
 
-from joints.codecs import modbus as mb  # noqa: E402
-from joints.devices.erob.profiles import profile  # noqa: E402
-from joints.devices.erob.registers import COUNTS_PER_REV, EROB_MODBUS, OperationMode  # noqa: E402
-import simkit  # noqa: E402
-
+import simkit
+from joints.codecs import modbus as mb
+from joints.devices.erob.profiles import profile
+from joints.devices.erob.registers import COUNTS_PER_REV, EROB_MODBUS, OperationMode
 from testdata import VECTORS
+
 MOTION_DEPENDENT = {"current_speed", "actual_position", "motor_current", "motion_status",
                     "status_of_achieving_position", "given_position", "given_speed", "position_error"}
 

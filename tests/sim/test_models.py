@@ -9,8 +9,8 @@ import pytest
 
 mujoco = pytest.importorskip("mujoco")
 
-from joints.errors import ConfigError  # noqa: E402
-from joints.sim.world import resolve_model  # noqa: E402
+from joints.errors import ConfigError
+from joints.sim.world import resolve_model
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -9,15 +9,15 @@ from __future__ import annotations
 import math
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import pytest
 
 pytest.importorskip("mujoco")
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals need POSIX")
 
-import joints  # noqa: E402
+import joints
 
 CONFIG = """
 backend = "{backend}"

@@ -33,6 +33,7 @@ from joints.sim.zlac import DriveState, ZlacEmulator
 
 ROOT = Path(__file__).resolve().parents[2]
 from testdata import VECTORS
+
 RPM = 2 * math.pi / 60
 PROFILE = HubMotorProfile()
 DT = 1e-3

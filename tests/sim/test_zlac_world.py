@@ -223,11 +223,11 @@ def test_a_drive_fault_decodes_to_its_named_fault(rig: joints.Rig) -> None:
         s = rig.read_states()
         if s["left_wheel"].fault:
             break
-    code = s["left_wheel"].fault
-    assert code == Fault.VELOCITY_FOLLOWING_ERROR == 0x0040
-    assert Fault(code).name == "VELOCITY_FOLLOWING_ERROR"
-    assert left.driver.fault_text(code) == "Velocity following error"  # the manual's text
-    assert s["right_wheel"].fault == 0  # the bit is the faulty channel's ...
+    fault = s["left_wheel"].fault
+    assert fault is not None and fault.code == Fault.VELOCITY_FOLLOWING_ERROR == 0x0040
+    assert fault.name == "velocity_following_error"  # by name, with the manual's text
+    assert fault.text == left.driver.fault_text(fault.code) == "Velocity following error"
+    assert s["right_wheel"].fault is None  # the bit is the faulty channel's ...
     with pytest.raises(joints.DeviceFault, match="Velocity following error") as exc:
         left.check()
     assert exc.value.code == 0x0040
@@ -237,13 +237,13 @@ def test_a_drive_fault_decodes_to_its_named_fault(rig: joints.Rig) -> None:
     assert (left.read("motor_state") >> 8, left.read("motor_state") & 0xFF) == (0, 0)
     assert left.driver.fault_text(Fault.OVER_LOAD | Fault.HALL_ERROR) == "Over load; Hall error"
     assert not left.enabled and not right.enabled  # the driver saw the drive switch itself off
-    with pytest.raises(StateError, match="not enabled"):
-        rig.set_velocities({"left_wheel": W100, "right_wheel": W100})
+    with pytest.raises(joints.DeviceFault, match="velocity_following_error.*clear_faults"):
+        rig.set_velocities({"left_wheel": W100, "right_wheel": W100})  # refused: it says how to clear it
     # clear faults (0x06) clears both error codes; the drive is then disabled: enable, and it drives
     left.write("position_following_error_threshold_left", 409, confirm=True)
     left.clear_faults()
     s = rig.read_states()
-    assert s["left_wheel"].fault == 0 and s["right_wheel"].fault == 0
+    assert s["left_wheel"].fault is None and s["right_wheel"].fault is None
     left.enable()
     right.enable()
     rig.set_velocities({"left_wheel": W100, "right_wheel": W100})

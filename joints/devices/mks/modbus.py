@@ -1,0 +1,322 @@
+"""The MKS SERVO42D/57D Modbus-RTU mode (manual Part 8) as typed data over the same parameters.
+
+Rule: pure data. Part 8 reuses the native function codes as register addresses: FC04 reads the
+5.1 quantities (and 0xF1), FC06 writes one-register settings and commands, FC16 sends the
+multi-field commands (home, 0_Mode, speed mode, the four position modes). Every entry is named
+after the parameter of :data:`~joints.devices.mks.params.MKS_PARAMS` that the native protocol
+reaches by the same command, so a driver (and a twin) speaks of ``working_current`` or
+``position_mode1_pulses`` whatever the bus protocol.
+
+Why not a :class:`~joints.devices.registers.RegisterTable`
+    The MKS "registers" are command codes, not a flat register file: the blocks overlap (FC04
+    0x30 reads 3 words 0x30-0x32 while 0x31 and 0x32 are reads of their own; FC16 0x90 spans
+    0x90-0x92, which are also FC06 0x91/0x92), values are packed by bytes inside words (dir and
+    acc share a word in 0xF6/0xFD), one value is int48 (0x31), and 0x90 sends 5 bytes for 3
+    registers. So each request is a :class:`ModbusBlock` (function, start address, register
+    count, byte count) of byte :class:`ModbusField` s, and :meth:`MksModbusMap.as_map` gives the
+    :class:`~joints.devices.params.ParamMap` the layers above use, like ``RegisterTable.as_map``.
+
+Layouts (Part 8 tables; data bytes after the byte count, big-endian)
+    FC04 0x30 (3 regs): carry int32, value uint16. 0x31 (3): int48. 0x32 (1): int16. 0x33 (2):
+    int32 pulses (Part 8 prints uint32; read as int32 like 5.1, ERRATA DOC-MKS-4). 0x39 (2):
+    int32. 0x34, 0x3A, 0x3B, 0x3E, 0xF1 (1): reserved byte 00, then the uint8 value.
+    FC06: the value in the register (commands write 1). FC16: 0x90 hmTrig(1) hmDir(1)
+    hmSpeed(2) EndLimit(1); 0x9A mode(1) enable(1) speed(1) dir(1); 0xF6 dir(1) acc(1) speed(2);
+    0xFD dir(1) acc(1) speed(2) pulses(4); 0xFE/0xF4/0xF5 acc(2) speed(2) position(4).
+    Native-only quantities (0x8C respond/active, 0x8D group address, 0x94 "noLimit" homing) have
+    no Modbus entry: :data:`NATIVE_ONLY`.
+
+The 0x90 quirk (ERRATA DOC-MKS-5, manual 8.2 #20, vector mks-modbus-8.2.20-recv)
+    The home-parameter request announces 3 registers but a byte count of 5 and carries 5 data
+    bytes. A Modbus codec rejects that frame (:class:`~joints.errors.ByteCountError`, the frame in
+    its ``data``); :attr:`ModbusBlock.quirk` records it, :meth:`ModbusBlock.accepts` says which
+    (count, byte count) a block takes (exactly the documented pair: the twin answers exception 03
+    to anything else), and :meth:`ModbusBlock.request_pdu` builds the PDU a driver sends (e.g. as
+    ``joints.codecs.modbus.UnsupportedRequest(slave, 16, pdu)``). The reply is an ordinary FC16
+    reply for 3 registers (01 10 00 90 00 03 80 25).
+
+Other choices: ``slave_address`` is 1-247 over Modbus (the Modbus address range); microsteps are
+written as the count 1-256 (Part 8 shows a 16-bit value, unlike the native byte).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+from joints.devices.mks.params import MKS_PARAMS
+from joints.devices.params import TYPES, Access, ParamMap, ParamSet, check_value, suggest
+from joints.errors import CommandError, RegisterError
+
+__all__ = ["FC_READ", "FC_WRITE_MULTIPLE", "FC_WRITE_SINGLE", "MKS_MODBUS", "NATIVE_ONLY", "MksModbusMap",
+           "ModbusBlock", "ModbusField"]
+
+FC_READ = 0x04  #: read input registers
+FC_WRITE_SINGLE = 0x06  #: write single register
+FC_WRITE_MULTIPLE = 0x10  #: write multiple registers
+
+
+@dataclass(frozen=True, slots=True)
+class ModbusField:
+    """One parameter inside a Modbus request's data (see the module docstring)."""
+
+    name: str  #: parameter name (MKS_PARAMS)
+    function: int  #: 4, 6 or 16
+    address: int  #: the block's start register (the native command code)
+    offset: int  #: byte offset in the block's data
+    size: int  #: bytes on the wire
+    type: str  #: value type (a key of joints.devices.params.TYPES)
+    access: Access
+    minimum: int | None = None  #: narrower bound than the parameter's, over Modbus only
+    maximum: int | None = None
+
+    @property
+    def signed(self) -> bool:
+        return self.type.startswith("int")
+
+    def check(self, value: object) -> int:
+        return check_value(self.name, self.type, value, self.minimum, self.maximum,
+                           where=f" (Modbus FC{self.function:02d} 0x{self.address:04X})")
+
+    def __repr__(self) -> str:
+        return f"ModbusField({self.name!r}, FC{self.function:02d} 0x{self.address:04X} +{self.offset}/{self.size})"
+
+
+@dataclass(frozen=True)
+class ModbusBlock:
+    """One Part 8 request: function, start register, register count, data bytes and their fields."""
+
+    function: int
+    address: int
+    count: int  #: registers announced in the request (FC04/FC16) or 1 (FC06)
+    byte_count: int  #: data bytes (FC16 byte-count field; 2 x count for FC04/FC06 data)
+    title: str  #: the manual's heading
+    fields: tuple[ModbusField, ...]
+    quirk: str = ""  #: how this request breaks a Modbus rule (an erratum), "" if it does not
+
+    def __post_init__(self) -> None:
+        end = 0
+        for f in sorted(self.fields, key=lambda f: f.offset):
+            if f.offset < end or f.offset + f.size > self.byte_count:
+                raise ValueError(f"{self.title}: field {f.name} overlaps or overruns the block")
+            if TYPES[f.type][2] > f.size:
+                raise ValueError(f"{self.title}: {f.type} does not fit {f.size} bytes ({f.name})")
+            end = f.offset + f.size
+        if not self.quirk and self.byte_count != 2 * self.count:
+            raise ValueError(f"{self.title}: {self.byte_count} bytes for {self.count} registers")
+
+    def accepts(self, count: int, byte_count: int) -> bool:
+        """Whether a request announcing ``count`` registers and ``byte_count`` bytes is this block's."""
+        return count == self.count and byte_count == self.byte_count
+
+    def decode(self, data: bytes | bytearray) -> dict[str, int]:
+        """The block's data bytes -> {parameter name: value}."""
+        if len(data) != self.byte_count:
+            raise CommandError(f"{self.title}: expected {self.byte_count} data bytes, got {len(data)}")
+        return {f.name: int.from_bytes(data[f.offset:f.offset + f.size], "big", signed=f.signed)
+                for f in self.fields}
+
+    def encode(self, values: Mapping[str, int]) -> bytes:
+        """{parameter name: value} (every field of the block) -> the data bytes, range-checked."""
+        missing = [f.name for f in self.fields if f.name not in values]
+        extra = sorted(set(values) - {f.name for f in self.fields})
+        if missing or extra:
+            raise CommandError(f"{self.title}: values needed for {', '.join(f.name for f in self.fields)}"
+                               + (f"; missing {', '.join(missing)}" if missing else "")
+                               + (f"; not in this block: {', '.join(extra)}" if extra else ""))
+        out = bytearray(self.byte_count)
+        for f in self.fields:
+            out[f.offset:f.offset + f.size] = f.check(values[f.name]).to_bytes(f.size, "big", signed=f.signed)
+        return bytes(out)
+
+    def words(self, values: Mapping[str, int]) -> tuple[int, ...]:
+        """The data as 16-bit register values (for FC06/FC16 requests with an even byte count)."""
+        if self.byte_count % 2:
+            raise CommandError(f"{self.title}: {self.byte_count} data bytes are not whole registers "
+                               f"(use request_pdu): {self.quirk}")
+        data = self.encode(values)
+        return tuple(int.from_bytes(data[i:i + 2], "big") for i in range(0, len(data), 2))
+
+    def decode_words(self, words: Sequence[int]) -> dict[str, int]:
+        """Register values (FC04 reply, FC06/FC16 request) -> {parameter name: value}."""
+        return self.decode(b"".join((w & 0xFFFF).to_bytes(2, "big") for w in words))
+
+    def request_pdu(self, values: Mapping[str, int]) -> bytes:
+        """FC16 PDU after the function code: start, count, byte count, data (quirk blocks included)."""
+        if self.function != FC_WRITE_MULTIPLE:
+            raise CommandError(f"{self.title}: request_pdu is for FC16 blocks")
+        return (self.address.to_bytes(2, "big") + self.count.to_bytes(2, "big") + bytes((self.byte_count,))
+                + self.encode(values))
+
+
+def _f(name: str, function: int, address: int, offset: int, size: int, type_: str, access: Access,
+       maximum: int | None = None) -> ModbusField:
+    return ModbusField(name, function, address, offset, size, type_, access, maximum=maximum)
+
+
+R, W, C = Access.R, Access.W, Access.COMMAND
+
+
+def _read(address: int, count: int, title: str, *fields: tuple[str, int, int, str]) -> ModbusBlock:
+    return ModbusBlock(FC_READ, address, count, 2 * count, title,
+                       tuple(_f(n, FC_READ, address, o, s, t, R) for n, o, s, t in fields))
+
+
+def _write(address: int, name: str, type_: str, access: Access, title: str,
+           maximum: int | None = None) -> ModbusBlock:
+    return ModbusBlock(FC_WRITE_SINGLE, address, 1, 2, title,
+                       (_f(name, FC_WRITE_SINGLE, address, 0, 2, type_, access, maximum),))
+
+
+def _multi(address: int, count: int, byte_count: int, title: str, access: Access,
+           *fields: tuple[str, int, int, str], quirk: str = "") -> ModbusBlock:
+    return ModbusBlock(FC_WRITE_MULTIPLE, address, count, byte_count, title,
+                       tuple(_f(n, FC_WRITE_MULTIPLE, address, o, s, t, access) for n, o, s, t in fields),
+                       quirk)
+
+
+_HOME_QUIRK = ("ERRATA DOC-MKS-5 (manual 8.2 #20): the request announces Quantity of Registers = 3 and "
+               "Bytes = 05 and carries 5 data bytes (hmTrig, hmDir, hmSpeed Hi/Lo, EndLimit); Modbus requires "
+               "2 x 3 = 6. The drive's own frame is taken as is; the reply is a normal FC16 reply for 3 registers.")
+
+_BLOCKS: tuple[ModbusBlock, ...] = (
+    # 8.1 read parameter command (FC04)
+    _read(0x30, 3, "8.1 #1 Read the encoder value(carry)",
+          ("encoder_carry", 0, 4, "int32"), ("encoder_value", 4, 2, "uint16")),
+    _read(0x31, 3, "8.1 #2 Read the encoder value(addition)", ("encoder_addition", 0, 6, "int48")),
+    _read(0x32, 1, "8.1 #3 Read the real-time speed of the motor", ("real_time_speed", 0, 2, "int16")),
+    _read(0x33, 2, "8.1 #4 Read the number of pulses", ("number_of_pulses", 0, 4, "int32")),
+    _read(0x34, 1, "8.1 #5 Read the IO Ports status", ("io_status", 1, 1, "uint8")),
+    _read(0x39, 2, "8.1 #6 Read the error of angle", ("angle_error", 0, 4, "int32")),
+    _read(0x3A, 1, "8.1 #7 Read the En pins status", ("en_pin_status", 1, 1, "bool")),
+    _read(0x3B, 1, "8.1 #8 Read the go back to zero status", ("go_back_to_zero_status", 1, 1, "uint8")),
+    _read(0x3E, 1, "8.1 #9 Read the motor shaft protection status", ("protection_state", 1, 1, "bool")),
+    _read(0xF1, 1, "8.1 #10 Read the motor status", ("motor_status", 1, 1, "uint8")),
+    # 8.2 write parameter command (FC06)
+    _write(0x3D, "release_protection", "bool", C, "8.2 #1 Release the motor shaft locked-rotor protection status"),
+    _write(0x3F, "restore_default_parameters", "bool", C, "8.2 #2 Restore the default parameter"),
+    _write(0x41, "restart_motor", "bool", C, "8.2 #3 Restart the motor"),
+    _write(0x80, "calibrate", "bool", C, "8.2 #4 Calibrate the motor"),
+    _write(0x82, "work_mode", "uint8", W, "8.2 #5 Set the work mode"),
+    _write(0x83, "working_current", "uint16", W, "8.2 #6 Set the work current"),
+    _write(0x9B, "holding_current", "uint8", W, "8.2 #7 Set the holding current percentage"),
+    _write(0x84, "microsteps", "uint16", W, "8.2 #8 Set subdivision"),
+    _write(0x85, "en_active_level", "uint8", W, "8.2 #9 Set the active of the En pin"),
+    _write(0x86, "motor_direction", "uint8", W, "8.2 #10 Set the direction of motor rotation"),
+    _write(0x87, "auto_screen_off", "bool", W, "8.2 #11 Set auto turn off the screen function"),
+    _write(0x88, "locked_rotor_protection", "bool", W, "8.2 #12 Set the motor shaft locked-rotor protection"),
+    _write(0x89, "subdivision_interpolation", "bool", W, "8.2 #13 Set the subdivision interpolation function"),
+    _write(0x8A, "baud_rate", "uint8", W, "8.2 #14 Set the baud rate"),
+    _write(0x8B, "slave_address", "uint8", W, "8.2 #15 Set the slave address", maximum=247),
+    _write(0x8E, "modbus_rtu", "bool", W, "8.2 #16 Set MODBUS-RTU communication protocol"),
+    _write(0x8F, "key_lock", "bool", W, "8.2 #17 Set the key locked or unlocked"),
+    _write(0x92, "set_current_axis_to_zero", "bool", C, "8.2 #18 Set Currnet Axis to zero"),
+    _write(0xF3, "motor_enable", "bool", W, "8.2 #19 Set serial mode motor enable"),
+    _multi(0x90, 3, 5, "8.2 #20 Set the parameter of home", W,
+           ("home_trigger_level", 0, 1, "uint8"), ("home_direction", 1, 1, "uint8"),
+           ("home_speed", 2, 2, "uint16"), ("end_limit", 4, 1, "bool"), quirk=_HOME_QUIRK),
+    _write(0x9E, "limit_port_remap", "bool", W, "8.2 #21 Set limit port remap"),
+    _multi(0x9A, 2, 4, "8.2 #22 Set the parameter of 0_Mode", W,
+           ("zero_mode", 0, 1, "uint8"), ("zero_mode_set_zero", 1, 1, "bool"),
+           ("zero_mode_speed", 2, 1, "uint8"), ("zero_mode_direction", 3, 1, "uint8")),
+    # 8.3 motor running command
+    _write(0xF7, "emergency_stop", "bool", C, "8.3.1 Emergency stop the motor"),
+    _write(0x91, "go_home", "bool", C, "8.3.2 Go home"),
+    _multi(0xF6, 2, 4, "8.3.3 #1 Run the motor in speed mode", C,
+           ("speed_mode_direction", 0, 1, "uint8"), ("speed_mode_acc", 1, 1, "uint8"),
+           ("speed_mode_speed", 2, 2, "uint16")),
+    _write(0xFF, "save_clean_speed_mode_parameter", "uint8", C, "8.3.3 #3 Save/Clean the parameter in speed mode"),
+    _multi(0xFD, 4, 8, "8.3.4 Position model: relative motion by pulses", C,
+           ("position_mode1_direction", 0, 1, "uint8"), ("position_mode1_acc", 1, 1, "uint8"),
+           ("position_mode1_speed", 2, 2, "uint16"), ("position_mode1_pulses", 4, 4, "uint32")),
+    _multi(0xFE, 4, 8, "8.3.5 Position mode2: absolute motion by pulses", C,
+           ("position_mode2_acc", 0, 2, "uint8"), ("position_mode2_speed", 2, 2, "uint16"),
+           ("position_mode2_abs_pulses", 4, 4, "int32")),
+    _multi(0xF4, 4, 8, "8.3.6 Position mode3: relative motion by axis", C,
+           ("position_mode3_acc", 0, 2, "uint8"), ("position_mode3_speed", 2, 2, "uint16"),
+           ("position_mode3_rel_axis", 4, 4, "int32")),
+    _multi(0xF5, 4, 8, "8.3.7 Position mode4: absolute motion by axis", C,
+           ("position_mode4_acc", 0, 2, "uint8"), ("position_mode4_speed", 2, 2, "uint16"),
+           ("position_mode4_abs_axis", 4, 4, "int32")),
+)
+
+
+@dataclass(frozen=True)
+class MksModbusMap:
+    """The Part 8 map: blocks by (function, address), fields by parameter name."""
+
+    device: str
+    params_all: ParamSet
+    blocks: tuple[ModbusBlock, ...]
+    _by_name: Mapping[str, ModbusField] = field(init=False, repr=False, compare=False)
+    _by_key: Mapping[tuple[int, int], ModbusBlock] = field(init=False, repr=False, compare=False)
+    _block_of: Mapping[str, ModbusBlock] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        by_name: dict[str, ModbusField] = {}
+        by_key: dict[tuple[int, int], ModbusBlock] = {}
+        block_of: dict[str, ModbusBlock] = {}
+        for b in self.blocks:
+            if (b.function, b.address) in by_key:
+                raise ValueError(f"{self.device}: two blocks at FC{b.function:02d} 0x{b.address:04X}")
+            by_key[b.function, b.address] = b
+            for f in b.fields:
+                if f.name in by_name:
+                    raise ValueError(f"{self.device}: {f.name!r} in two Modbus blocks")
+                if f.name not in self.params_all:
+                    raise ValueError(f"{self.device}: Modbus field {f.name!r} is not a parameter")
+                by_name[f.name] = f
+                block_of[f.name] = b
+        object.__setattr__(self, "_by_name", MappingProxyType(by_name))
+        object.__setattr__(self, "_by_key", MappingProxyType(by_key))
+        object.__setattr__(self, "_block_of", MappingProxyType(block_of))
+
+    def __iter__(self) -> Iterator[ModbusField]:
+        return iter(self._by_name.values())
+
+    def __len__(self) -> int:
+        return len(self._by_name)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._by_name
+
+    def names(self) -> list[str]:
+        return list(self._by_name)
+
+    def get(self, name: str) -> ModbusField:
+        f = self._by_name.get(name)
+        if f is None:
+            if name in self.params_all:
+                raise RegisterError(f"{self.device}: {name!r} cannot be reached over Modbus (native protocol only)")
+            raise RegisterError(f"{self.device}: no parameter named {name!r}{suggest(name, self._by_name)}")
+        return f
+
+    def block_of(self, name: str) -> ModbusBlock:
+        """The request that carries parameter ``name`` (with its sibling fields)."""
+        self.get(name)
+        return self._block_of[name]
+
+    def block(self, function: int, address: int) -> ModbusBlock:
+        b = self._by_key.get((function, address))
+        if b is None:
+            raise RegisterError(f"{self.device}: no Part 8 request FC{function:02d} at 0x{address:04X}")
+        return b
+
+    def find(self, function: int, address: int) -> ModbusBlock | None:
+        return self._by_key.get((function, address))
+
+    @property
+    def params(self) -> ParamSet:
+        """The parameters reachable over Modbus (a subset of MKS_PARAMS, same names)."""
+        return ParamSet(self.device, (p for p in self.params_all if p.name in self._by_name))
+
+    def as_map(self, params: ParamSet | None = None) -> ParamMap[ModbusField]:
+        """This table as the Modbus RTU map of ``params`` (default: all MKS parameters)."""
+        return ParamMap("modbus-rtu", params or self.params_all, dict(self._by_name))
+
+
+MKS_MODBUS = MksModbusMap("mks-servo42d57d", MKS_PARAMS, _BLOCKS)
+
+#: parameters only the native protocol reaches
+NATIVE_ONLY: frozenset[str] = frozenset(p.name for p in MKS_PARAMS if p.name not in MKS_MODBUS)
