@@ -66,6 +66,9 @@ class ErobDriver(JointDriver):
     device = "erob"
     #: the parameter that arms the drive's communication watchdog on this protocol (ms; 0 = off)
     watchdog_param: str | None = None
+    #: what a lost "start" reply is checked against (motion_status, status_of_achieving_position and,
+    #: where the protocol reaches it, given_position)
+    start_check_names: tuple[str, ...] = STATUS_NAMES
 
     def __init__(
         self,
@@ -275,10 +278,10 @@ class ErobDriver(JointDriver):
         try:
             self._command("start_operating", CMD_START)
         except OutcomeUnknown:
-            v = self.access.read_many(STATUS_NAMES)
+            v = self.access.read_many(self.start_check_names)
             started = (v["motion_status"] != MotionStatus.STOP
                        or v["status_of_achieving_position"] in (AchieveStatus.OPERATION, AchieveStatus.WAIT_TIME)
-                       or (target is not None and v["given_position"] == target))
+                       or (target is not None and v.get("given_position") == target))
             if started:
                 return
             if target is None and v["status_of_achieving_position"] == AchieveStatus.TARGET_REACHED:

@@ -16,8 +16,8 @@ Where the protocol differs from Modbus (each choice cites the manual):
   several times (chapter 4 figures); the link keeps those acknowledgements from answering later
   requests (:mod:`joints.link.erob_can`).
 * There is no "clear errors" command (7.5.2): the error table of appendix 1 (#4) says to disable,
-  fix the cause and enable again. :meth:`ErobCanDriver.clear_errors` disables; the drive clears a
-  latched error at the next enable (and reports it again if its cause persists).
+  fix the cause and enable again. :meth:`ErobCanDriver.clear_errors` disables (the drive drops a
+  latched error then and reports it again if its cause persists), :meth:`enable` follows.
 * There is no emergency-stop command: :meth:`ErobCanDriver.emergency_stop` zeroes the set-point
   and stops with a deceleration that halts the fastest speed within :data:`ESTOP_TIME` (the
   Modbus e-stop's 50 ms).
@@ -142,6 +142,8 @@ class ErobCanAccess(ParamAccess):
 class ErobCanDriver(ErobDriver):
     """One eRob actuator on an eRob CAN custom-protocol link (see the module docstring)."""
 
+    start_check_names = ("motion_status", "status_of_achieving_position")
+
     def __init__(
         self,
         link: Any,
@@ -216,10 +218,19 @@ class ErobCanDriver(ErobDriver):
     def clear_errors(self) -> None:
         """No clear command over CAN (7.5.2; appendix 1 #4: disable, fix, enable): disables the motor.
 
-        The brake engages; the drive clears its latched error at the next :meth:`enable` (and
-        reports it again if the cause persists).
+        The brake engages and the drive drops its latched error; an error whose cause persists is
+        reported again at once. Then :meth:`enable` again.
         """
         self.disable()
+
+    def motion_targets(self) -> dict[str, tuple[str, float]]:
+        """Motion set-points over CAN: the analog value is a speed or a current by operation mode."""
+        rad = self.units.position
+        analog = (("current", 0.001) if self._cache.get("operation_mode") == OperationMode.TORQUE
+                  else ("velocity", rad))
+        return {"target_absolute_position": ("position", rad), "target_relative_position": ("relative", rad),
+                "profile_speed": ("velocity", rad), "torque_control_mode_max_speed": ("velocity", rad),
+                "analog_quantity_value": analog}
 
     # -- status --------------------------------------------------------------------------------
     def state(self) -> RawState:

@@ -21,10 +21,11 @@ each from answering a later request:
   its next write or command the link reads ``error_code`` (0x001F) as a fence. A read is never
   answered by 0x3E, so the extra acknowledgements arriving first are unsolicited, and the
   fence's value proves they are all in (a node answers in order). A read is its own fence.
-* A request that timed out (or got a corrupt frame) may still be answered. Before the next
-  request to that node the link listens for one more reply timeout and treats what arrives as
-  unsolicited, then fences as above. A reply later than twice the timeout cannot be told from
-  an answer: that residual case is a device fault the protocol gives no means to detect.
+* A request that timed out (or got a corrupt frame) may still be answered. The link waits out
+  late replies after every failed attempt (:attr:`~joints.link.base.RetryPolicy.late`) and
+  discards them, and the node is unsynchronised: its next write or command is fenced as above.
+  A value later than the timeout plus the late window cannot be told from an answer to a later
+  read: a device fault the protocol gives no means to detect.
 """
 
 from __future__ import annotations
@@ -106,6 +107,9 @@ class ErobCanRule(Rule[Any]):
     def expects_reply(self, request: Any) -> bool:
         return True
 
+    def is_write(self, request: Any) -> bool:
+        return isinstance(request, (ec.Write, ec.Command))
+
     def is_reply(self, request: Any, message: Any) -> bool:
         if isinstance(message, OtherFrame) or not ec.answers(request, message):
             return False
@@ -150,15 +154,10 @@ class ErobCanLink(Link[Any]):
         super().__init__(FrameFraming(transport, decode_host, clock), ErobCanRule(error_text), policy=policy,
                          clock=clock, trace=trace, name=name)
         self._unsynced: set[int] = set()  #: nodes that may still send acknowledgements: fence first
-        self._suspect: set[int] = set()  #: nodes with a request that got no clean answer: listen first
         self.fences = 0  #: fence reads sent
 
     def _once(self, request: Any, frame: Any) -> Any:
         node = request.node
-        if node in self._suspect:
-            self._suspect.discard(node)
-            self.poll(self.policy.timeout)  # a late answer arrives now (unsolicited) or not at all
-            self._unsynced.add(node)
         if node in self._unsynced and not isinstance(request, ec.Read):
             self._fence(node)
         reply = self._guarded(request, frame)
@@ -172,13 +171,17 @@ class ErobCanLink(Link[Any]):
         try:
             return super()._once(request, frame)
         except (ReplyTimeout, PeerProtocolError):
-            self._suspect.add(request.node)
+            self._unsynced.add(request.node)  # a late answer may still come: fence before the next write
             raise
 
     def _fence(self, node: int) -> None:
         fence = ec.Read(node, FENCE_INDEX)
         self.fences += 1
-        self._guarded(fence, ec.encode(fence))
+        try:
+            self._guarded(fence, ec.encode(fence))
+        except (ReplyTimeout, PeerProtocolError):
+            self._discard_late()
+            raise
         self._unsynced.discard(node)
 
     def resync(self, node: int) -> None:
