@@ -257,9 +257,12 @@ class ErobCanDriver(ErobDriver):
         """(hardware version 0x0001/3, firmware version 0x0001/4), as the drive reports them."""
         return self.read("hardware_version"), self.read("firmware_version")
 
-    def module_info(self) -> ModuleInfo:
-        """Serial number, model string and versions (7.5.3); CommandError where the firmware lacks 0x0232."""
-        hardware, firmware = self.versions()
+    def module_info(self, versions: tuple[int, int] | None = None) -> ModuleInfo:
+        """Serial number, model string and versions (7.5.3); CommandError where the firmware lacks 0x0232.
+
+        ``versions``: (hardware, firmware) already read (else they are read first).
+        """
+        hardware, firmware = versions or self.versions()
         if module_info_supported(firmware) is False:
             raise CommandError(f"{self.name}: module information (index 0x0232) is not supported by firmware "
                                f"{firmware}; it needs X5061715X or later (eRunner 7.5.1); nothing was asked")
@@ -271,6 +274,19 @@ class ErobCanDriver(ErobDriver):
             raise CommandError(f"{self.name}: module information (index 0x0232) is not supported by this drive "
                                f"(firmware {firmware}): {exc}") from exc
         return ModuleInfo.from_values(values)
+
+    def identity(self) -> dict[str, object]:
+        """Model, serial number and versions as eRunner shows them (7.5.3); versions only on older firmware."""
+        versions = self.versions()
+        out: dict[str, object] = {"hardware_version": str(versions[0]), "firmware_version": versions[1]}
+        try:
+            info = self.module_info(versions)
+        except CommandError as exc:
+            out["module_info"] = f"not supported: {exc}"
+            return out
+        out.update(model=info.model, serial_number=info.serial_number, hardware_version=info.hardware_version_text,
+                   module_version=info.version_text)
+        return out
 
     # -- persistent / dangerous commands (need confirmation) ----------------------------------
     def reset_output_encoder(self, *, confirm: bool = False) -> None:

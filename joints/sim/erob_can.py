@@ -44,7 +44,7 @@ from typing import Any
 import can
 
 from joints.codecs import erob_can as ec
-from joints.devices.erob.can import EROB_CAN, BRAKE, ModuleConfig, ModuleInfo, Reach, module_info_supported
+from joints.devices.erob.can import BRAKE, EROB_CAN, ModuleConfig, ModuleInfo, Reach, module_info_supported
 from joints.devices.erob.registers import MotionMode, MotionStatus, OperationMode
 from joints.errors import FrameError, ParameterRefused, Refusal
 from joints.transports.can_sim import CanMedium, ClockLike
