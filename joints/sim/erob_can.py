@@ -29,8 +29,10 @@ Behaviour that is the CAN protocol's own:
   (7.4.4 writes it before "enable") it is held and acts when the motor becomes ready - "the
   motor turns at the target speed once enabled" (4.2 step 4). Disable or stop drops a held
   set-point;
-* there is no clear command: "enable" clears a latched error when the motor is off (appendix 1
-  #4: disable, fix, enable); an error whose cause persists trips again;
+* there is no clear command (7.5.2): appendix 1 #4 clears an error by disabling, fixing the
+  cause and enabling again. The twin drops a latched error at "disable" (the manual does not say
+  which of the two steps clears it; clearing at disable lets the host see before it enables
+  whether the cause persists - a protection whose cause persists trips again at once);
 * a start refused with 0x0027 leaves nothing latched (the reply tells the host);
 * module information (0x0232) and versions (0x0001/3, /4) are firmware parameters, set from the
   twin's configured model by :func:`identify` (7.5.3).
@@ -38,6 +40,7 @@ Behaviour that is the CAN protocol's own:
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -46,7 +49,7 @@ import can
 from joints.codecs import erob_can as ec
 from joints.devices.erob.can import BRAKE, EROB_CAN, ModuleConfig, ModuleInfo, Reach, module_info_supported
 from joints.devices.erob.registers import MotionMode, MotionStatus, OperationMode
-from joints.errors import FrameError, ParameterRefused, Refusal
+from joints.errors import CommandError, FrameError, ParameterRefused, Refusal
 from joints.transports.can_sim import CanMedium, ClockLike
 
 __all__ = [
@@ -56,6 +59,7 @@ __all__ = [
     "ErobCanBus",
     "ErobCanFront",
     "identify",
+    "identify_twin",
 ]
 
 #: firmware version a twin reports by default (0x0001/4): module information supported (X5061715X)
@@ -74,6 +78,7 @@ _MODULE_INDEX = 0x0232
 _SPEED, _TORQUE = int(OperationMode.SPEED), int(OperationMode.TORQUE)
 _INT32 = 1 << 32
 _BRAKE_CODE = {v: k for k, v in BRAKE.items()}
+_SIZE_RATIO = re.compile(r"eRob(\d+)H(\d+)")
 
 
 def identify(firmware: Any, config: ModuleConfig | str, *, serial: int, firmware_version: int = DEFAULT_FIRMWARE_VERSION,
@@ -89,6 +94,25 @@ def identify(firmware: Any, config: ModuleConfig | str, *, serial: int, firmware
     firmware.values.update(values)
     firmware.power_on_values = dict(firmware.values)
     return info
+
+
+def identify_twin(firmware: Any, model: str, node: int) -> ModuleInfo:
+    """What a twin reports by default: node id ``node`` (0x0043) and the module of ``model``.
+
+    ``model`` is a whole model string of 7.5.3 (``eRob70H100I-BM-18EN``), or a size and ratio
+    (``eRob80H100``) completed with harmonic reducer, I mounting, brake, multi-turn encoder, CAN
+    communication and no torque sensor (``eRob80H100I-BM-18CN``); the serial number's sequence is
+    the node id.
+    """
+    try:
+        config = ModuleConfig.from_model(model)
+    except CommandError:
+        m = _SIZE_RATIO.fullmatch(model)
+        size, ratio = (int(m.group(1)), int(m.group(2))) if m else (80, 100)
+        config = ModuleConfig(size, "H", ratio, "I", "B", "M", "C", "N")
+    firmware.defaults["can_address"] = node
+    firmware.values["can_address"] = node
+    return identify(firmware, config, serial=node)
 
 
 class ErobCanFront:
@@ -187,12 +211,12 @@ class ErobCanFront:
         if name == "enable_the_motor":
             assert parameter is not None
             if parameter:
-                if fw.fault and not fw.enabled:
-                    fw.write("clear_errors", 1)  # appendix 1 #4: disable, fix, enable
                 fw.write(name, parameter)
                 return [ec.Ack(node)] * self.acks
             self.held = None
             fw.write(name, 0)
+            if fw.fault:
+                fw.write("clear_errors", 1)  # no clear command over CAN: appendix 1 #4 - disable, fix, enable
             return [ec.Ack(node)] * self.disable_acks
         if name == "start_operating":
             if not fw.ready():
@@ -229,12 +253,7 @@ class ErobCanFront:
     def tick(self) -> None:
         """A physics substep passed: a held set-point acts once the motor is ready."""
         held = self.held
-        if held is None:
-            return
-        fw = self.firmware
-        if not fw.enabled:
-            self.held = None
-        elif fw.ready():
+        if held is not None and self.firmware.ready():
             self.held = None
             self._setpoint(held)
 

@@ -85,9 +85,13 @@ def codec_only(n: int) -> None:
         decode(reply)
 
 
+_OPEN: list[LockstepCanBus] = []  #: buses to shut down at the end
+
+
 def bare_medium() -> Bench:
     medium = CanMedium(clock=ManualClock())
     a, b = LockstepCanBus(medium=medium), LockstepCanBus(medium=medium)
+    _OPEN.extend((a, b))
     frame = can.Message(arbitration_id=0x641, data=b"\x00\x02", is_extended_id=False)
 
     def run(n: int) -> None:
@@ -108,8 +112,9 @@ def twin_link() -> tuple[ErobCanLink, object]:
     fw.power_on_values = dict(fw.values)
     device = ErobCanBus([ErobCanFront(fw)], name="bench")
     device.bind_clock(ManualClock())
-    link = ErobCanLink(PythonCanTransport(LockstepCanBus(medium=device.medium)), clock=device.medium.clock,
-                       policy=RetryPolicy(timeout=0.1, retries=0))
+    bus = LockstepCanBus(medium=device.medium)
+    _OPEN.append(bus)
+    link = ErobCanLink(PythonCanTransport(bus), clock=device.medium.clock, policy=RetryPolicy(timeout=0.1, retries=0))
     return link, device
 
 
@@ -239,6 +244,8 @@ def main() -> int:
     offered = worst * 1000 / BITRATE
     print(f"  => at 1 kHz the arm offers {offered:.0%} of a 1 Mbit/s bus (worst-case stuffing): the timed bus "
           f"saturates and the loop slows to ~{top:.0f} Hz")
+    for bus in _OPEN:
+        bus.shutdown()
     return 0
 
 

@@ -52,8 +52,8 @@ def test_move_to_speed_and_torque_through_the_joint_api(rig: joints.Rig) -> None
     rig.sleep(1.0)
     assert j.state().velocity == pytest.approx(-0.8, rel=0.03)
     j.stop()
-    s = j.wait(timeout=5)
-    assert abs(s.velocity) < 0.01
+    s = j.wait(timeout=5, until=lambda s: not s.moving and abs(s.velocity) < 0.012)
+    assert s.enabled and s.fault is None
     j.set_torque(2.0)
     rig.sleep(0.2)
     assert j.state().torque == pytest.approx(2.0, rel=0.1)
