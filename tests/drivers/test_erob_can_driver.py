@@ -227,3 +227,20 @@ def test_requests_are_the_protocols() -> None:
         access.message("dwell_time", 19999)
     with pytest.raises(CommandError):
         ErobCanAccess(object(), 128)
+
+
+def test_six_acknowledgements_of_enable_never_answer_later_writes(rig: joints.Rig) -> None:
+    """Figures 4-21 / 4-7: six 0x3E for one enable, five for one disable; the moves still work."""
+    for front in rig.world.buses["can"].fronts:
+        front.acks, front.disable_acks = 6, 5
+    link = rig.buses["can"].link
+    j = rig.joints["joint1"]
+    j.enable()
+    j.move_to(0.3, velocity=1.0, acceleration=5.0, deceleration=5.0)
+    assert j.wait(timeout=10).position == pytest.approx(0.3, abs=math.radians(0.05))
+    j.disable()
+    j.enable()
+    j.move_to(-0.2, velocity=1.0, acceleration=5.0, deceleration=5.0)
+    assert j.wait(timeout=10).position == pytest.approx(-0.2, abs=math.radians(0.05))
+    extra = [m for _, m in link.unsolicited if isinstance(m, ec.Ack)]
+    assert len(extra) == 5 + 4 + 5  # every surplus acknowledgement went to the unsolicited log
