@@ -33,16 +33,16 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-import can  # noqa: E402
+import can
 
-from joints.clock import ManualClock  # noqa: E402
-from joints.codecs import erob_can as ec  # noqa: E402
-from joints.devices.erob.profiles import profile  # noqa: E402
-from joints.link.base import RetryPolicy  # noqa: E402
-from joints.link.erob_can import ErobCanLink, decode_host  # noqa: E402
-from joints.transports.can import PythonCanTransport  # noqa: E402
-from joints.transports.can_sim import CanMedium, LockstepCanBus  # noqa: E402
-from joints.transports.can_timing import frame_bits  # noqa: E402
+from joints.clock import ManualClock
+from joints.codecs import erob_can as ec
+from joints.devices.erob.profiles import profile
+from joints.link.base import RetryPolicy
+from joints.link.erob_can import ErobCanLink, decode_host
+from joints.transports.can import PythonCanTransport
+from joints.transports.can_sim import CanMedium, LockstepCanBus
+from joints.transports.can_timing import frame_bits
 
 BITRATE = 1_000_000
 NODES = (1, 2, 3)

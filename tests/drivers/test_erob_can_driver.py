@@ -12,7 +12,7 @@ pytest.importorskip("mujoco")
 
 import joints
 from joints.codecs import erob_can as ec
-from joints.devices.erob.registers import AchieveStatus, COUNTS_PER_REV
+from joints.devices.erob.registers import COUNTS_PER_REV, AchieveStatus
 from joints.drivers.erob_can import CAN_STATUS_NAMES, TEMPERATURE_PERIOD, ErobCanDriver
 from joints.errors import CommandError, ConfirmationRequired, RegisterError
 from joints.link.trace import Trace

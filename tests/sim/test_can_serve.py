@@ -23,8 +23,8 @@ pytest.importorskip("mujoco")
 pytest.importorskip("msgpack")
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="udp_multicast serving is tested on POSIX")
 
-import joints  # noqa: E402
-from joints.cli import main  # noqa: E402
+import joints
+from joints.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
 
