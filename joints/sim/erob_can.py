@@ -191,6 +191,8 @@ class ErobCanFront:
             raise _Refused(ec.READ_FAILED)
         value = EROB_CAN.from_wire(name, request.value)
         fw = self.firmware
+        if name == "reset_output_encoder" and value != 1:
+            raise _Refused(ec.READ_FAILED)  # 7.5.1: "write 1" resets the load-side encoder
         if name == "analog_quantity_value":
             fw.write(name, value)
             self._setpoint(value)

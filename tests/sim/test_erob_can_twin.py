@@ -147,7 +147,7 @@ def test_torque_speed_limit_while_enabled_is_0x0016(make_twin: Callable[..., Twi
 
 
 @pytest.mark.parametrize("data", ["12 34", "00 01", "00 83 00 01", "00 02 00 00 00 05", "00 33 00 00 00 01",
-                                  "00 4E 00 00 00 09"])
+                                  "00 4E 00 00 00 09", "01 14 00 00 00 02"])
 def test_unknown_indexes_read_only_writes_and_bad_values_fail_with_0x80(data: str, make_twin: Callable[..., Twin]) -> None:
     twin = make_twin()
     (reply,) = twin.exchange(0x641, _hex(data))
@@ -177,6 +177,24 @@ def test_brake_release_needs_a_brake(make_twin: Callable[..., Twin]) -> None:
     assert bytes(reply.data) == b"\x01\x4a\x3e"
     (reply,) = twin.exchange(0x641, _hex("01 4F"))  # the default twin has one
     assert bytes(reply.data) == b"\x3e"
+
+
+def test_brake_release_lets_a_loaded_joint_fall(make_twin: Callable[..., Twin]) -> None:
+    twin = make_twin()
+    world = twin.world
+    world.set_joint_positions({"joint2": 0.0})  # the shoulder holds the arm level: gravity pulls it down
+    world.advance(0.5)
+    held = world.joint_position("joint2")
+    world.advance(0.5)
+    assert abs(world.joint_position("joint2") - held) < 1e-3  # the brake holds a disabled joint
+    (reply,) = twin.exchange(0x642, _hex("01 4F"))
+    assert bytes(reply.data) == b"\x3e"
+    world.advance(0.3)
+    assert abs(world.joint_position("joint2") - held) > 0.1  # released: a loaded joint falls
+    twin.exchange(0x642, _hex("01 00 00 00 00 00"))  # disable: the drive's brake control engages again
+    here = world.joint_position("joint2")
+    world.advance(0.5)
+    assert abs(world.joint_position("joint2") - here) < 0.02
 
 
 @pytest.mark.parametrize("model", ["eRob70H100I-BM-18EN", "eRob90H120T-BHM-18CT", "eRob142F160BI-FS-18CN",
