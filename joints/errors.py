@@ -7,6 +7,7 @@ or the device told us so) versus :class:`PeerProtocolError` (the peer sent somet
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Iterable
 
 
@@ -156,6 +157,29 @@ class MotionTimeout(JointsError, TimeoutError):
 
     Not a :class:`TransportError`: the bus worked, the motion took too long.
     """
+
+
+class Refusal(enum.Enum):
+    """Why a (simulated) drive refuses a parameter access, whatever the protocol that asked.
+
+    Each protocol front maps it to its own answer (a Modbus exception code, a CAN error code, an
+    SDO abort code).
+    """
+
+    UNKNOWN = "unknown parameter"
+    NOT_READABLE = "not readable"
+    NOT_WRITABLE = "not writable"
+    OUT_OF_RANGE = "value out of range"
+    STATE = "refused in this state"
+
+
+class ParameterRefused(JointsError):
+    """A drive's firmware refuses a read or write of one of its parameters (device side, sim)."""
+
+    def __init__(self, reason: Refusal, name: str, detail: str = "") -> None:
+        self.reason = reason
+        self.name = name
+        super().__init__(f"{name}: {reason.value}" + (f" ({detail})" if detail else ""))
 
 
 class StateError(JointsError):

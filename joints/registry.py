@@ -130,7 +130,7 @@ def _serial_transport(cfg: BusConfig) -> Any:
 
 
 def _modbus_device_bus(cfg: BusConfig) -> Any:
-    from joints.sim.modbus_slave import ModbusDeviceBus
+    from joints.sim.modbus_front import ModbusDeviceBus
 
     return ModbusDeviceBus()
 
@@ -240,15 +240,21 @@ def _erob_modbus_table() -> Any:
     return EROB_MODBUS
 
 
-def _erob_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> Any:
-    from joints.sim.erob import ErobEmulator
+def _erob_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> tuple[Any, Mapping[Any, Any]]:
+    from joints.sim.erob import ErobFirmware
+    from joints.sim.erob_can import identify_twin
 
-    if len(specs) > 1:
-        raise ConfigError(f"bus {specs[0].bus!r} address {specs[0].address} is used by {[s.name for s in specs]}",
-                          key=f"joints.{specs[1].name}.address")
     d = specs[0]
-    twin = ErobEmulator(d.profile, d.address, inertia=inertia[d.name])
+    twin = ErobFirmware(d.profile, d.address, inertia=inertia[d.name])
+    identify_twin(twin, d.profile.model, d.address)  # CAN node id, module information (7.5.3)
     return twin, {None: twin}
+
+
+def _erob_modbus_front(twin: Any, address: int) -> Any:
+    from joints.devices.erob.registers import EROB_MODBUS
+    from joints.sim.modbus_front import ModbusFront
+
+    return ModbusFront(twin, EROB_MODBUS, node_id="modbus_address")
 
 
 def _zlac_params() -> ParamSet:
@@ -280,11 +286,11 @@ def _zlac_modbus_table() -> Any:
     return ZLAC8015D
 
 
-def _zlac_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> Any:
-    from joints.sim.zlac import ZlacEmulator
+def _zlac_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> tuple[Any, Mapping[Any, Any]]:
+    from joints.sim.zlac import ZlacFirmware
 
     by_channel = {s.channel: s for s in specs}
-    twin = ZlacEmulator(
+    twin = ZlacFirmware(
         specs[0].profile, specs[0].address,
         inertia_left=inertia[by_channel["left"].name] if "left" in by_channel else None,
         inertia_right=inertia[by_channel["right"].name] if "right" in by_channel else None,
@@ -292,8 +298,11 @@ def _zlac_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> Any:
     return twin, {"left": twin.left, "right": twin.right}
 
 
-def _same_object_front(twin: Any, address: int) -> Any:
-    return twin  # the Modbus twins answer frames themselves (one object per drive)
+def _zlac_modbus_front(twin: Any, address: int) -> Any:
+    from joints.devices.zlac.registers import ZLAC8015D
+    from joints.sim.modbus_front import ModbusFront
+
+    return ModbusFront(twin, ZLAC8015D, node_id="rs485_node_id")
 
 
 FAMILIES: dict[str, DeviceFamily] = {
@@ -303,7 +312,7 @@ FAMILIES: dict[str, DeviceFamily] = {
         params=_erob_params, profile=_erob_profile,
         drivers={"modbus-rtu": _erob_modbus_driver, "erob-can": _erob_can_driver},
         tables={"modbus-rtu": _erob_modbus_table, "erob-can": _erob_can_table},
-        twin=_erob_twin, fronts={"modbus-rtu": _same_object_front, "erob-can": _erob_can_front},
+        twin=_erob_twin, fronts={"modbus-rtu": _erob_modbus_front, "erob-can": _erob_can_front},
         watchdog_ms=1000,  # off at power-on (0x0002 = 0): armed while enabled, restored on disable
     ),
     "zlac8015d": DeviceFamily(
@@ -313,7 +322,7 @@ FAMILIES: dict[str, DeviceFamily] = {
         drivers={"modbus-rtu": _zlac_modbus_driver},
         tables={"modbus-rtu": _zlac_modbus_table},
         channels=("left", "right"), addresses={"modbus-rtu": (1, 127)},
-        twin=_zlac_twin, fronts={"modbus-rtu": _same_object_front},
+        twin=_zlac_twin, fronts={"modbus-rtu": _zlac_modbus_front},
         watchdog_ms=1000,  # the drive's own default offline time (0x2000)
     ),
 }

@@ -226,7 +226,7 @@ class Rig:
                     log.error("shutdown of joint %s failed: %s", j.name, exc)
                     errors.append(exc)
                     self._shut.add(name)  # tried: a second close() would fail the same way
-                except BaseException as exc:  # KeyboardInterrupt, a signal: finish the others first
+                except BaseException as exc:  # noqa: BLE001 - KeyboardInterrupt, a signal: finish the others first
                     log.error("shutdown of joint %s interrupted (%s); shutting the others down", j.name,
                               type(exc).__name__)
                     interrupted = interrupted or exc

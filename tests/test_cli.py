@@ -15,9 +15,11 @@ import joints
 from joints.cli import main
 from joints.clock import ManualClock
 from joints.config import load
+from joints.devices.erob.params import EROB_PARAMS
 from joints.devices.erob.registers import EROB_MODBUS
 from joints.rig import Rig, build
-from joints.sim.modbus_slave import ModbusDeviceBus, ModbusSlave
+from joints.sim.firmware import Firmware
+from joints.sim.modbus_front import ModbusDeviceBus, ModbusFront
 from joints.transports.loopback import LoopbackTransport
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -102,9 +104,10 @@ def test_python_dash_m_joints_help() -> None:
 # --- read / write on a rig (joints.open replaced by a loopback rig) -----------------------------
 
 
-class Drive(ModbusSlave):
+class Drive(Firmware):
     def __init__(self, address: int) -> None:
-        super().__init__(EROB_MODBUS, address)
+        super().__init__(EROB_PARAMS)
+        self.address = address
 
 
 @pytest.fixture
@@ -115,7 +118,7 @@ def loopback(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[Path, Dri
 
     def fake_open(config: Any, *, backend: str | None = None) -> Rig:
         cfg = load(config, backend=backend)
-        return build(cfg, transports={"rs485": LoopbackTransport(ModbusDeviceBus([drive]))}, clock=ManualClock())
+        return build(cfg, transports={"rs485": LoopbackTransport(ModbusDeviceBus([ModbusFront(drive, EROB_MODBUS, drive.address)]))}, clock=ManualClock())
 
     monkeypatch.setattr(joints, "open", fake_open)
     return path, drive

@@ -1,18 +1,21 @@
 """Joint: SI units, limits and safety over the real eRob driver, link, codec and a scripted slave.
 
-Joint -> ErobModbusDriver -> ModbusLink -> LoopbackTransport -> ModbusDeviceBus -> scripted slave.
-The slave's ``write_log`` records every accepted write, so "nothing was sent" is checkable.
+Joint -> ErobModbusDriver -> ModbusLink -> LoopbackTransport -> ModbusDeviceBus -> ModbusFront ->
+scripted firmware. The firmware's ``write_log`` records every accepted write, so "nothing was sent"
+is checkable.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import pytest
 
 from joints.clock import ManualClock
+from joints.devices.erob.params import EROB_PARAMS
 from joints.devices.erob.profiles import DEFAULT_MODEL, profile
 from joints.devices.erob.registers import (
     COUNTS_PER_REV,
@@ -21,7 +24,6 @@ from joints.devices.erob.registers import (
     MotionStatus,
     OperationMode,
 )
-from joints.devices.registers import Register
 from joints.drivers.erob_modbus import ErobModbusDriver
 from joints.errors import (
     CommandError,
@@ -33,7 +35,8 @@ from joints.errors import (
 )
 from joints.joint import Joint, JointState, Limits, Motion
 from joints.link.modbus import ModbusLink
-from joints.sim.modbus_slave import ModbusDeviceBus, ModbusSlave
+from joints.sim.firmware import Firmware
+from joints.sim.modbus_front import ModbusDeviceBus, ModbusFront
 from joints.transports.loopback import LoopbackTransport
 
 RAD = 2 * math.pi / COUNTS_PER_REV  # rad per count
@@ -44,8 +47,8 @@ def counts(rad: float) -> int:
     return round(rad / (2 * math.pi) * COUNTS_PER_REV)
 
 
-class FakeErob(ModbusSlave):
-    """A register image that acts just enough like an eRob for the joint layer.
+class FakeErob(Firmware):
+    """A parameter store that acts just enough like an eRob for the joint layer.
 
     "Enable the Motor" switches the achieving-position status between motor off and motor on;
     "Start Operating" makes it move for ``move_reads`` status reads, then report target reached;
@@ -53,7 +56,8 @@ class FakeErob(ModbusSlave):
     """
 
     def __init__(self, address: int = 2, *, move_reads: int = 3) -> None:
-        super().__init__(EROB_MODBUS, address)
+        super().__init__(EROB_PARAMS)
+        self.address = address
         self.move_reads = move_reads
         self._left = 0
         self.status_reads = 0
@@ -63,20 +67,20 @@ class FakeErob(ModbusSlave):
         self.set("status_of_achieving_position", achieve)
         self._left = 0
 
-    def on_write(self, reg: Register, value: int) -> None:
-        if reg.name == "enable_the_motor":
+    def on_write(self, name: str, value: int) -> None:
+        if name == "enable_the_motor":
             self._standstill(AchieveStatus.MOTOR_ON if value else AchieveStatus.MOTOR_OFF)
-        elif reg.name == "start_operating" and self.get("status_of_achieving_position") != AchieveStatus.MOTOR_OFF:
+        elif name == "start_operating" and self.get("status_of_achieving_position") != AchieveStatus.MOTOR_OFF:
             self.set("motion_status", MotionStatus.MOVING)
             self.set("status_of_achieving_position", AchieveStatus.OPERATION)
             self._left = self.move_reads
-        elif reg.name in ("stop_operating", "emergency_stop") and self._left:
+        elif name in ("stop_operating", "emergency_stop") and self._left:
             self._standstill(AchieveStatus.MOTOR_ON)
-        elif reg.name == "clear_errors":
+        elif name == "clear_errors":
             self.set("error_code", 0)
 
-    def on_read(self, start: int, count: int) -> None:
-        if start <= 0x0061 < start + count:
+    def on_read(self, names: Sequence[str]) -> None:
+        if "motion_status" in names:
             self.status_reads += 1
             if self._left:
                 self._left -= 1
@@ -89,6 +93,9 @@ class FakeErob(ModbusSlave):
 
     def writes(self, name: str) -> list[int]:
         return [v for n, v in self.write_log if n == name]
+
+    def bus(self) -> ModbusDeviceBus:
+        return ModbusDeviceBus([ModbusFront(self, EROB_MODBUS, self.address)])
 
 
 @dataclass
@@ -106,7 +113,7 @@ def bench(*, limits: Limits | None = None, motion: Motion | None = None, offset:
           direction: int = 1, enabled: bool = False, move_reads: int = 3) -> Bench:
     slave = FakeErob(2, move_reads=move_reads)
     clock = ManualClock()
-    link = ModbusLink(LoopbackTransport(ModbusDeviceBus([slave])), clock=clock)
+    link = ModbusLink(LoopbackTransport(slave.bus()), clock=clock)
     driver = ErobModbusDriver(link, 2, clock=clock, name="shoulder")
     joint = Joint("shoulder", driver, clock=clock, limits=limits, motion=motion, offset=offset,
                   direction=direction)
@@ -494,6 +501,6 @@ def test_shutdown_disables_a_joint_enabled_by_a_raw_register_write() -> None:
 def test_direction_must_be_plus_or_minus_one() -> None:
     slave = FakeErob(2)
     clock = ManualClock()
-    link = ModbusLink(LoopbackTransport(ModbusDeviceBus([slave])), clock=clock)
+    link = ModbusLink(LoopbackTransport(slave.bus()), clock=clock)
     with pytest.raises(CommandError):
         Joint("j", ErobModbusDriver(link, 2, clock=clock), clock=clock, direction=2)

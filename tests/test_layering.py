@@ -174,7 +174,7 @@ def test_checker_sees_lazy_relative_and_from_imports() -> None:
         "import joints.link.modbus\n"
         "from joints import rig\n"
         "from joints import open\n"
-        "from . import modbus_slave\n"
+        "from . import firmware\n"
         "from ..drivers import base\n"
         "def f():\n"
         "    from joints.joint import Joint\n"
@@ -188,7 +188,7 @@ def test_checker_sees_lazy_relative_and_from_imports() -> None:
         "joints.link.modbus",
         "joints.rig",
         "joints",
-        "joints.sim.modbus_slave",
+        "joints.sim.firmware",
         "joints.drivers.base",
         "joints.joint",
         "joints.clock",

@@ -12,12 +12,13 @@ import pytest
 import joints
 from joints.clock import ManualClock
 from joints.config import parse
+from joints.devices.erob.params import EROB_PARAMS
 from joints.devices.erob.registers import EROB_MODBUS, AchieveStatus
-from joints.devices.registers import Register
 from joints.errors import ConfigError, JointsError, ReplyTimeout, TransportError
 from joints.joint import JointState
 from joints.rig import Rig, build
-from joints.sim.modbus_slave import ModbusDeviceBus, ModbusSlave
+from joints.sim.firmware import Firmware
+from joints.sim.modbus_front import ModbusDeviceBus, ModbusFront
 from joints.transports.loopback import LoopbackTransport
 
 CONFIG: dict[str, Any] = {
@@ -31,14 +32,15 @@ CONFIG: dict[str, Any] = {
 }
 
 
-class Drive(ModbusSlave):
-    """A register image whose achieving-position status follows "Enable the Motor"."""
+class Drive(Firmware):
+    """A parameter store whose achieving-position status follows "Enable the Motor"."""
 
     def __init__(self, address: int) -> None:
-        super().__init__(EROB_MODBUS, address)
+        super().__init__(EROB_PARAMS)
+        self.front = ModbusFront(self, EROB_MODBUS, address)
 
-    def on_write(self, reg: Register, value: int) -> None:
-        if reg.name == "enable_the_motor":
+    def on_write(self, name: str, value: int) -> None:
+        if name == "enable_the_motor":
             self.set("status_of_achieving_position", AchieveStatus.MOTOR_ON if value else AchieveStatus.MOTOR_OFF)
 
 
@@ -48,7 +50,7 @@ class Setup:
         data.update(overrides)
         self.config = parse(data, source="rig.toml")
         self.slaves = {"shoulder": Drive(2), "elbow": Drive(3)}
-        self.bus = ModbusDeviceBus(self.slaves.values())
+        self.bus = ModbusDeviceBus(s.front for s in self.slaves.values())
         self.transport = LoopbackTransport(self.bus)
         self.clock = ManualClock()
 
@@ -86,12 +88,12 @@ def test_watchdog_is_armed_while_enabled_and_restored_on_disable() -> None:
         assert s.log("shoulder") == s.log("elbow") == []  # opening a rig changes nothing on the drives
         rig.joints["shoulder"].enable()
         rig.joints["elbow"].enable()
-        assert s.slaves["shoulder"].get(0x0002) == 500  # watchdog_ms of the config
-        assert s.slaves["elbow"].get(0x0002) == 1000  # the eRob default while enabled
+        assert s.slaves["shoulder"].front.read(0x0002, 1) == (500,)  # watchdog_ms of the config
+        assert s.slaves["elbow"].front.read(0x0002, 1) == (1000,)  # the eRob default while enabled
         rig.joints["elbow"].disable()
-        assert s.slaves["elbow"].get(0x0002) == 0  # as found before enable()
+        assert s.slaves["elbow"].front.read(0x0002, 1) == (0,)  # as found before enable()
         assert s.log("elbow")[-1] == ("modbus_communication_timeout_duration", 0)
-    assert s.slaves["shoulder"].get(0x0002) == 0
+    assert s.slaves["shoulder"].front.read(0x0002, 1) == (0,)
 
 
 def test_enable_writes_the_limits_into_the_drive() -> None:
@@ -268,7 +270,7 @@ def test_build_closes_transports_when_a_joint_cannot_be_built() -> None:
     data = copy.deepcopy(CONFIG)
     data["joints"]["elbow"]["model"] = "eRob81H100"
     cfg = parse(data, source="rig.toml")
-    t = LoopbackTransport(ModbusDeviceBus([Drive(2), Drive(3)]))
+    t = LoopbackTransport(ModbusDeviceBus([Drive(2).front, Drive(3).front]))
     with pytest.raises(ConfigError) as info:
         build(cfg, transports={"rs485": t}, clock=ManualClock())
     msg = str(info.value)
@@ -282,7 +284,7 @@ def test_bad_profile_override_names_file_and_key() -> None:
     data["joints"]["elbow"]["profile"] = {"efficency": 0.6}
     cfg = parse(data, source="rig.toml")
     with pytest.raises(ConfigError) as info:
-        build(cfg, transports={"rs485": LoopbackTransport(ModbusDeviceBus([Drive(2), Drive(3)]))},
+        build(cfg, transports={"rs485": LoopbackTransport(ModbusDeviceBus([Drive(2).front, Drive(3).front]))},
               clock=ManualClock())
     msg = str(info.value)
     assert "rig.toml" in msg and "[joints.elbow.profile.efficency]" in msg and "'efficiency'" in msg

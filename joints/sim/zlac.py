@@ -1,13 +1,17 @@
-"""Emulated ZLAC8015D: one dual-channel hub-servo drive (one Modbus address, two motors).
+"""The ZLAC8015D's firmware: one dual-channel hub-servo drive (two motors), without a protocol.
 
-Rule: the emulator IS the drive. It answers Modbus frames from its register image (through
-:class:`~joints.sim.modbus_slave.ModbusSlave`, table :data:`~joints.devices.zlac.registers.ZLAC8015D`),
-acts on writes as the manual says the drive does, and every physics substep each channel closes its
-own loops - ramp / profile generator -> position loop -> velocity loop -> current limits -> torque =
-current x torque constant - from the registers it holds. :attr:`ZlacEmulator.left` and
-:attr:`ZlacEmulator.right` are the two channels; the world calls ``left.step(t, dt, q, qd)`` and
-``right.step(t, dt, q, qd)`` every substep with the same ``t`` and applies the returned wheel
-torque. The emulator never writes positions. No wall clock: time advances only through ``step``.
+Rule: the firmware IS the drive. It holds the drive's parameters (the names of the Modbus
+register table :data:`~joints.devices.zlac.registers.ZLAC8015D`), acts on writes as the manual
+says the drive does, runs the one drive state machine of :mod:`joints.devices.zlac.state`, and
+every physics substep each channel closes its own loops - ramp / profile generator
+(:mod:`joints.devices.motion`) -> position loop -> velocity loop -> current limits -> torque =
+current x torque constant - from the parameters it holds. Status values (positions, speeds,
+currents, error codes, motor/hall/temperature words) are computed when a front reads them. The
+Modbus front (:mod:`joints.sim.modbus_front`) serves it at the address ``rs485_node_id`` held at
+power-on. :attr:`ZlacFirmware.left` and :attr:`ZlacFirmware.right` are the two channels; the
+world calls ``left.step(t, dt, q, qd)`` and ``right.step(t, dt, q, qd)`` every substep with the
+same ``t`` and applies the returned wheel torque. The firmware never writes positions. No wall
+clock: time advances only through ``step``.
 
 Manual: ``../shared/manuals/zlac8015d-rs485-modbus-manual-v1.04.txt`` (OCR text, 1-based lines
 below), corrected by ``../shared/vectors/ERRATA.md`` (DOC-ZLAC-1..7).
@@ -37,7 +41,7 @@ Semantics taken from the manual
   gives only "Acceleration time", unit ms, range 0-32767 ms, default 500, in the velocity-mode
   table next to the target velocity and in the position-mode table next to the target speed. No
   reference speed is named anywhere (0x2008 "Maximum motor speed", line 813, is a separate
-  protection limit and is never linked to the ramp times). The emulator therefore reads the
+  protection limit and is never linked to the ramp times). The firmware therefore reads the
   register literally as the **duration of the ramp to the commanded speed**:
 
   - velocity mode: writing a new target velocity (0x2088/0x2089) starts a linear ramp from the
@@ -84,12 +88,12 @@ Semantics taken from the manual
   quick stop per 0x2011 (above), so the robot stops and holds; it does not restart until an
   enable. The fault list (lines 760-772) has no communication bit, so no error code is set; the
   trip is visible as 0x20AF "software connected status" = 0 (see conventions) and as
-  :attr:`ZlacEmulator.offline`.
-* 0x2010 = 1 stores the RW settings (they survive :meth:`ZlacEmulator.power_cycle`); 0x2009 = 1
+  :attr:`ZlacFirmware.offline`.
+* 0x2010 = 1 stores the RW settings (they survive :meth:`ZlacFirmware.power_cycle`); 0x2009 = 1
   restores the factory settings; 0x2007 = 1 (saved) enables the motors at power-on; a new RS485
   node id 0x2001 takes effect after a power cycle.
 
-Emulator conventions (the manual leaves these open)
+Firmware conventions (the manual leaves these open)
 ---------------------------------------------------
 * Gains (units are not printed): Vl Kp 0x203C/0x206C is the velocity-loop bandwidth in 0.1 rad/s
   (default 500 -> 50 rad/s): current = J x Kp x speed error / kt, J = the inertia the drive is
@@ -128,7 +132,7 @@ Emulator conventions (the manual leaves these open)
 * Start commands: 0x10 starts both wheels only in synchronous mode, 0x11/0x12 start one wheel
   only in asynchronous mode; a start in the other coupling, outside the position modes or while
   the drive is not enabled is acknowledged (echo) and does nothing (recorded in
-  :attr:`ZlacEmulator.ignored`). "Synchronous" starts both moves in the same substep; each wheel
+  :attr:`ZlacFirmware.ignored`). "Synchronous" starts both moves in the same substep; each wheel
   uses its own target, speed and ramp times.
 * Enabling (0x08) in velocity mode ramps from the present speed to the target velocity registers
   as they stand (write 0 first if the wheels must stay still); in torque mode the current ramps
@@ -149,11 +153,10 @@ Emulator conventions (the manual leaves these open)
 
 from __future__ import annotations
 
-import enum
 import math
 
-from joints.codecs import modbus as mb
-from joints.devices.registers import Access, Register
+from joints.devices.motion import Arrival, move_step, ramp
+from joints.devices.registers import Access
 from joints.devices.zlac.profile import HubMotorProfile
 from joints.devices.zlac.registers import (
     ZLAC8015D,
@@ -163,13 +166,16 @@ from joints.devices.zlac.registers import (
     QuickStopBehaviour,
     SyncMode,
 )
-from joints.sim.modbus_slave import ILLEGAL_DATA_VALUE, ModbusException, ModbusSlave
+from joints.devices.zlac.state import ENERGISED, DriveState, Event, command
+from joints.devices.zlac.state import step as transition
+from joints.errors import ParameterRefused, Refusal
+from joints.sim.firmware import Firmware
 
 __all__ = [
     "ABSOLUTE_TARGET_LIMIT",
     "DriveState",
     "ZlacChannel",
-    "ZlacEmulator",
+    "ZlacFirmware",
     "power_on_defaults",
 ]
 
@@ -181,10 +187,12 @@ ABSOLUTE_TARGET_LIMIT = 0x3FFFFFFF  #: absolute-mode target position range (line
 THERMAL_RISE = 60.0  #: K above ambient at the motor's rated current (EST)
 THERMAL_TAU = 600.0  #: s, winding time constant (EST)
 
+_BEFORE_STEP = Arrival.BEFORE_STEP
+
 #: 120-degree hall code of each 60-degree electrical sector.
 _HALL_SEQUENCE = (1, 3, 2, 6, 4, 5)
 
-#: Registers that are commands or set-points, never stored by 0x2010.
+#: Parameters that are commands or set-points, never stored by 0x2010.
 _NOT_STORED = frozenset({
     "control_word",
     "clear_feedback_position",
@@ -201,17 +209,8 @@ _NOT_STORED = frozenset({
 _SETTINGS = tuple(r.name for r in ZLAC8015D if r.access is Access.RW and r.name not in _NOT_STORED)
 
 
-class DriveState(enum.Enum):
-    """State of the drive's one state machine (both motors)."""
-
-    DISABLED = "disabled"  #: power stage off: after power-on, stop (0x07) or clear faults
-    ENABLED = "enabled"  #: operation enabled (0x08)
-    QUICK_STOP = "quick stop"  #: ramping to / holding zero speed (0x05 or the offline watchdog)
-    FAULT = "fault"  #: a channel faulted; power stage off until clear faults (0x06)
-
-
 def power_on_defaults(profile: HubMotorProfile, address: int) -> dict[str, int]:
-    """Register values after power-on of a factory-fresh drive with this motor on both channels."""
+    """Parameter values after power-on of a factory-fresh drive with this motor on both channels."""
     rated = min(150, round(profile.rated_current * 10))
     peak = min(300, round(profile.max_current * 10))
     values: dict[str, int] = {
@@ -237,7 +236,7 @@ def _ramp_seconds(ms: int) -> float:
 class ZlacChannel:
     """One motor channel of the drive: its loops, motor model and protections."""
 
-    def __init__(self, drive: ZlacEmulator, side: str, inertia: float) -> None:
+    def __init__(self, drive: ZlacFirmware, side: str, inertia: float) -> None:
         if inertia <= 0 or not math.isfinite(inertia):
             raise ValueError(f"{side} channel: inertia must be positive and finite, got {inertia!r}")
         self.drive = drive
@@ -266,7 +265,7 @@ class ZlacChannel:
         self.fault = 0  #: Fault bits (error code register)
         self.overload_time = 0.0
         self.i_out = 0.0  #: motor current [A]
-        # the winding starts at ambient (as the eRob emulator's power cycle): a World.reset must
+        # the winding starts at ambient (as the eRob firmware's power cycle): a World.reset must
         # not carry heat from one episode into the next
         self.temperature = self.drive.ambient
         self.reset_loops()
@@ -293,38 +292,51 @@ class ZlacChannel:
 
     # -- settings cache --------------------------------------------------------------------
     def cache(self) -> None:
-        g = self.drive.get
+        v = self.drive.values
         r = self.reg
-        self.cpr = 4 * max(g(r["encoder_line"]), 1)
+        self.cpr = 4 * max(v[r["encoder_line"]], 1)
         self.counts_per_rad = self.cpr / TWO_PI
-        self.acc_time = _ramp_seconds(g(r["acceleration_time"]))
-        self.dec_time = _ramp_seconds(g(r["deceleration_time"]))
-        self.qs_time = _ramp_seconds(g(r["deceleration_time_of_quick_stop"]))
-        self.torque_rate = g(r["torque_rate"]) * 1e-3  # A/s
-        self.rated = g(r["rated_current"]) * 0.1
-        i_max = g(r["maximum_current"]) * 0.1
-        factor = g(r["overload_factor"])
+        self.arrival_window = 0.5 / self.counts_per_rad  #: half a count [rad]
+        self.acc_time = _ramp_seconds(v[r["acceleration_time"]])
+        self.dec_time = _ramp_seconds(v[r["deceleration_time"]])
+        self.qs_time = _ramp_seconds(v[r["deceleration_time_of_quick_stop"]])
+        self.torque_rate = v[r["torque_rate"]] * 1e-3  # A/s
+        self.rated = v[r["rated_current"]] * 0.1
+        i_max = v[r["maximum_current"]] * 0.1
+        factor = v[r["overload_factor"]]
         self.peak = min(i_max, self.rated * factor / 100.0) if factor else i_max
-        self.overload_limit = g(r["overload_protection_time"]) * 0.01
-        self.follow_limit = g(r["position_following_error_threshold"]) * 10 / self.counts_per_rad
-        self.wv = g(r["vl_kp"]) * 0.1
-        self.wi = g(r["vl_ki"]) * 0.1
-        self.kfv = g(r["vl_kf"]) * 1e-3
-        self.kpp = g(r["pl_kp"]) * 0.1
-        self.kfp = g(r["pl_kf"]) * 1e-2
-        self.poles = g(r["poles_of_motor"])
-        self.hall_offset = math.radians(g(r["hall_offset_angle"]))
-        self.temp_limit = g(r["over_temperature_threshold"]) * 0.1
-        self.target_speed = g(r["target_speed"]) * RPM
-        self.v_start = g(r["initial_velocity_velocity_mode"]) * RPM
+        self.overload_limit = v[r["overload_protection_time"]] * 0.01
+        self.follow_limit = v[r["position_following_error_threshold"]] * 10 / self.counts_per_rad
+        self.wv = v[r["vl_kp"]] * 0.1
+        self.wi = v[r["vl_ki"]] * 0.1
+        self.kfv = v[r["vl_kf"]] * 1e-3
+        self.kpp = v[r["pl_kp"]] * 0.1
+        self.kfp = v[r["pl_kf"]] * 1e-2
+        self.poles = v[r["poles_of_motor"]]
+        self.hall_offset = math.radians(v[r["hall_offset_angle"]])
+        self.temp_limit = v[r["over_temperature_threshold"]] * 0.1
+        self.target_speed = v[r["target_speed"]] * RPM
+        self.v_start = v[r["initial_velocity_velocity_mode"]] * RPM
 
     # -- conversions -----------------------------------------------------------------------
     def counts(self) -> int:
-        """Actual position register value [counts]."""
+        """Actual position value [counts]."""
         return round((self.q - self.origin) * self.counts_per_rad)
 
     def rpm(self) -> float:
         return self.qd / RPM
+
+    def velocity_status(self) -> int:
+        """Actual velocity value [0.1 r/min]."""
+        return round(self.qd / RPM * 10)
+
+    def current_status(self) -> int:
+        """Actual torque (current) value [0.1 A]."""
+        return round(self.i_out * 10)
+
+    def error_status(self) -> int:
+        """Error code value (:class:`~joints.devices.zlac.registers.Fault` bits)."""
+        return self.fault
 
     # -- commands (from the drive) ---------------------------------------------------------
     def set_velocity_target(self, rpm: int) -> None:
@@ -350,7 +362,7 @@ class ZlacChannel:
 
     def start_move(self, absolute: bool) -> bool:
         """Position-mode start: latch target, speed and ramps; False if the target is refused."""
-        value = self.drive.get(self.reg["target_position"])
+        value = self.drive.values[self.reg["target_position"]]
         if absolute:
             if abs(value) > ABSOLUTE_TARGET_LIMIT:
                 return False
@@ -413,8 +425,7 @@ class ZlacChannel:
         mode = drive.mode
         if state is DriveState.QUICK_STOP:
             v_prev = self.v_ref
-            step = self.qs_slope * dt
-            self.v_ref = 0.0 if abs(self.v_ref) <= step else self.v_ref - math.copysign(step, self.v_ref)
+            self.v_ref = ramp(v_prev, 0.0, math.inf, self.qs_slope, dt, pause_at_zero=True)
             if not self._track_lag(dt):
                 return self._off(dt)
             i = self._speed_loop(self.v_ref, (self.v_ref - v_prev) / dt, dt)
@@ -451,41 +462,13 @@ class ZlacChannel:
         return 0.0
 
     def _ramp(self, dt: float) -> None:
-        v, target = self.v_ref, self.v_target
-        if v == target:
-            return
-        if v != 0.0 and (target * v <= 0.0 or abs(target) < abs(v)):
-            floor = target if target * v > 0.0 else 0.0
-            step = self.dec_slope * dt
-            self.v_ref = floor if abs(v - floor) <= step else v - math.copysign(step, v)
-        else:
-            step = self.acc_slope * dt
-            self.v_ref = target if abs(target - v) <= step else v + math.copysign(step, target - v)
+        self.v_ref = ramp(self.v_ref, self.v_target, self.acc_slope, self.dec_slope, dt, pause_at_zero=True)
 
     def _profile(self, dt: float) -> None:
         """Trapezoidal move from ``p_ref`` to ``goal`` (discrete-time exact stopping)."""
-        v = self.v_ref
-        s = self.goal - self.p_ref
-        eps = 0.5 / self.counts_per_rad
-        if abs(s) < eps and abs(v) <= self.p_dec * dt:
-            self.p_ref, self.v_ref, self.moving = self.goal, 0.0, False
-            return
-        direction = 1.0 if s > 0 else -1.0
-        dec, acc = self.p_dec, self.p_acc
-        h = dec * dt
-        v_here = abs(v) if v * direction > 0 else 0.0
-        disc = h * h + 4.0 * (2.0 * dec * abs(s) - h * v_here)
-        v_allow = 0.5 * (math.sqrt(disc) - h) if disc > 0.0 else 0.0
-        v_des = direction * min(self.cruise, v_allow)
-        speeding_up = abs(v_des) > abs(v) and v * v_des >= 0.0
-        step = (acc if speeding_up else dec) * dt
-        new_v = v_des if abs(v_des - v) <= step else v + math.copysign(step, v_des - v)
-        ds = 0.5 * (v + new_v) * dt
-        if abs(ds) >= abs(s) and new_v * direction >= 0.0:
-            self.p_ref, self.v_ref, self.moving = self.goal, 0.0, False
-            return
-        self.p_ref += ds
-        self.v_ref = new_v
+        self.p_ref, self.v_ref, arrived = move_step(self.p_ref, self.v_ref, self.goal, self.cruise, self.p_acc,
+                                                    self.p_dec, dt, self.arrival_window, _BEFORE_STEP)
+        self.moving = not arrived
 
     def _track_lag(self, dt: float) -> bool:
         self.lag += (self.v_ref - self.qd) * dt
@@ -521,7 +504,7 @@ class ZlacChannel:
         return i
 
     def _torque(self, dt: float) -> float:
-        target = self.drive.get(self.reg["target_torque"]) * 1e-3
+        target = self.drive.values[self.reg["target_torque"]] * 1e-3
         if self.torque_rate > 0.0:
             step = self.torque_rate * dt
             d = target - self.i_ref
@@ -562,29 +545,30 @@ class ZlacChannel:
 
     @property
     def energised(self) -> bool:
-        return self.drive.state in (DriveState.ENABLED, DriveState.QUICK_STOP)
+        return self.drive.state in ENERGISED
 
 
-class ZlacEmulator(ModbusSlave):
-    """One emulated ZLAC8015D on a Modbus bus: two hub motors, ``left`` and ``right``."""
+class ZlacFirmware(Firmware):
+    """One ZLAC8015D's firmware: two hub motors, ``left`` and ``right``, one state machine.
+
+    ``address`` is the power-on value of ``rs485_node_id``.
+    """
 
     def __init__(
         self,
         profile: HubMotorProfile,
-        address: int,
+        address: int = 1,
         *,
         inertia_left: float | None = None,
         inertia_right: float | None = None,
         ambient: float = 25.0,
         ramp_reference_rpm: float | None = None,
     ) -> None:
+        super().__init__(ZLAC8015D.params, values=power_on_defaults(profile, address))
         self.profile = profile
         self.ambient = float(ambient)
         self.ramp_reference = ramp_reference_rpm * RPM if ramp_reference_rpm else None
         self.time = 0.0
-        self._saved: dict[str, int] = {}
-        self._defaults = power_on_defaults(profile, address)
-        super().__init__(ZLAC8015D, address, values=self._defaults)
         #: (time, text) of commands that were acknowledged but did nothing
         self.ignored: list[tuple[float, str]] = []
         own = profile.armature
@@ -592,6 +576,16 @@ class ZlacEmulator(ModbusSlave):
         self.left = ZlacChannel(self, "left", (inertia_left if inertia_left is not None else own) + load)
         self.right = ZlacChannel(self, "right", (inertia_right if inertia_right is not None else own) + load)
         self.channels = (self.left, self.right)
+        for ch in self.channels:
+            r = ch.reg
+            self.computed[r["actual_motor_position"]] = ch.counts
+            self.computed[r["actual_velocity"]] = ch.velocity_status
+            self.computed[r["actual_torque"]] = ch.current_status
+            self.computed[r["error_code"]] = ch.error_status
+        left, right = self.left, self.right
+        self.computed["motor_state"] = lambda: _pack(int(left.energised), int(right.energised))
+        self.computed["hall_state"] = lambda: _pack(left.hall(), right.hall())
+        self.computed["motor_temperature"] = lambda: _pack(round(left.temperature), round(right.temperature))
         self._power_on()
 
     # -- power -------------------------------------------------------------------------------
@@ -603,22 +597,16 @@ class ZlacEmulator(ModbusSlave):
         self._cache()
         for ch in self.channels:
             ch.reset_power()
-        if self.get("driver_state") == 1:  # saved "enabled at power-on"
+        if self.values["driver_state"] == 1:  # saved "enabled at power-on"
             self._enable()
 
     def power_cycle(self) -> None:
         """Simulated power off/on: stored settings survive, everything else is power-on default.
 
-        The incremental position counters restart at 0 at the wheels' present angle.
+        The incremental position counters restart at 0 at the wheels' present angle; a new
+        ``rs485_node_id`` takes effect now.
         """
-        for reg in self.table:
-            self._store(reg, reg.default)
-        for name, value in self._defaults.items():
-            self.set(name, value)
-        for name, value in self._saved.items():
-            self.set(name, value)
-        self.address = self.get("rs485_node_id")
-        self.write_log.clear()
+        super().power_cycle()
         self.ignored.clear()
         self._power_on()
 
@@ -632,29 +620,29 @@ class ZlacEmulator(ModbusSlave):
 
     # -- settings cache ----------------------------------------------------------------------
     def _cache(self) -> None:
-        g = self.get
-        self.vmax = max(g("maximum_motor_speed"), 1) * RPM
-        self.watchdog = g("communication_offline_time") * 1e-3
-        self.mode = g("control_mode")
-        self.sync = g("synchronous_asynchronous_control_status")
-        option = g("quick_stop_control")
+        v = self.values
+        self.vmax = max(v["maximum_motor_speed"], 1) * RPM
+        self.watchdog = v["communication_offline_time"] * 1e-3
+        self.mode = v["control_mode"]
+        self.sync = v["synchronous_asynchronous_control_status"]
+        option = v["quick_stop_control"]
         default = int(QuickStopBehaviour.QUICK_STOP_WITH_DECELERATION)
         self.quick_stop_option = option if option in (5, 6, 7) else default
         for ch in getattr(self, "channels", ()):
             ch.cache()
 
-    # -- Modbus side ---------------------------------------------------------------------------
-    def handle(self, request: mb.Request | mb.UnsupportedRequest) -> mb.Reply:
+    # -- what the fronts call ------------------------------------------------------------------
+    def frame_received(self) -> None:
         self.last_frame = self.time
         if not self.offline:
-            self.set("software_connected_status", 1)
-        return super().handle(request)
+            self.values["software_connected_status"] = 1
 
-    def on_read(self, start: int, count: int) -> None:
-        self._publish()
+    def check_write(self, name: str, value: int) -> None:
+        if (name == "target_position_left" or name == "target_position_right") and (
+                self.mode == ControlMode.ABSOLUTE_POSITION and abs(value) > ABSOLUTE_TARGET_LIMIT):
+            raise ParameterRefused(Refusal.OUT_OF_RANGE, name, f"absolute target {value} outside +-0x3FFFFFFF")
 
-    def on_write(self, reg: Register, value: int) -> None:
-        name = reg.name
+    def on_write(self, name: str, value: int) -> None:
         if name == "control_word":
             self._command(value)
             return
@@ -667,45 +655,40 @@ class ZlacEmulator(ModbusSlave):
             if self.state is DriveState.ENABLED and self.mode == ControlMode.VELOCITY:
                 ch.set_velocity_target(value)
             return
-        if name in ("target_position_left", "target_position_right"):
-            if self.mode == ControlMode.ABSOLUTE_POSITION and abs(value) > ABSOLUTE_TARGET_LIMIT:
-                raise ModbusException(
-                    ILLEGAL_DATA_VALUE, f"{name}: absolute target {value} outside +-0x3FFFFFFF"
-                )
+        if name in ("target_position_left", "target_position_right", "target_torque_left", "target_torque_right"):
             return
-        if name in ("target_torque_left", "target_torque_right"):
-            return
+        v = self.values
         if name == "clear_feedback_position":
             if value:
                 for ch in self._sides(value, both_for_one=True):
                     ch.clear_position()
-                self.set(name, 0)
+                v[name] = 0
             return
         if name == "in_absolute_position_control_reset_the_zero_point":
             if value:
                 for ch in self._sides(value, both_for_one=False):
                     ch.clear_position()
-                self.set(name, 0)
+                v[name] = 0
             return
         if name == "whether_store_rw_register_to_eeprom":
             if value == 1:
-                self._saved = {n: self.get(n) for n in _SETTINGS}
-            self.set(name, 0)
+                self.save(_SETTINGS)
+            v[name] = 0
             return
         if name == "register_parameter_settings":
             if value == 1:
                 for n in _SETTINGS:
-                    self.set(n, self._defaults.get(n, self.table.get(n).default))
-                self._saved = {}
+                    v[n] = self.defaults[n]
+                self.saved = {}
                 self._cache()
                 self._mode_changed()
-            self.set(name, 0)
+            v[name] = 0
             return
         if name == "maximum_motor_speed":
             self._cache()
             if self.state is DriveState.ENABLED and self.mode == ControlMode.VELOCITY:
                 for ch in self.channels:  # a lower cap clamps the present targets
-                    ch.set_velocity_target(self.get(ch.reg["target_velocity"]))
+                    ch.set_velocity_target(v[ch.reg["target_velocity"]])
             return
         self._cache()
 
@@ -721,44 +704,53 @@ class ZlacEmulator(ModbusSlave):
     def _ignore(self, text: str) -> None:
         self.ignored.append((self.time, text))
 
+    # -- the control word (state machine of joints.devices.zlac.state) ---------------------------
     def _command(self, value: int) -> None:
-        if value == ControlWord.ENABLE:
+        word = command(value)
+        if word is None:
+            self._ignore(f"control word 0x{value:02X} is not a command")
+            return
+        state = self.state
+        new = transition(state, word)
+        if new is None:
+            if word is ControlWord.ENABLE:
+                self._ignore("enable while faulted (clear faults first)")
+            elif word is not ControlWord.STOP:  # stop while faulted: nothing to stop
+                what = "quick stop" if word is ControlWord.QUICK_STOP else word.name
+                self._ignore(f"{what} while {state.value}")
+            return
+        if word is ControlWord.ENABLE:
             self._enable()
-        elif value == ControlWord.STOP:
-            if self.state is not DriveState.FAULT:
-                self.state = DriveState.DISABLED
-                for ch in self.channels:
-                    ch.reset_loops()
-        elif value == ControlWord.QUICK_STOP:
-            if self.state is DriveState.ENABLED:
-                self._quick_stop()
-            else:
-                self._ignore(f"quick stop while {self.state.value}")
-        elif value == ControlWord.CLEAR_FAULT:
+        elif word is ControlWord.STOP:
+            self.state = new
+            for ch in self.channels:
+                ch.reset_loops()
+        elif word is ControlWord.QUICK_STOP:
+            self._quick_stop()
+        elif word is ControlWord.CLEAR_FAULT:
             for ch in self.channels:
                 ch.fault = 0
                 ch.overload_time = 0.0
-            if self.state is DriveState.FAULT:
-                self.state = DriveState.DISABLED
-        elif value in (ControlWord.START_SYNC, ControlWord.START_LEFT, ControlWord.START_RIGHT):
-            self._start(value)
+            self.state = new
         else:
-            self._ignore(f"control word 0x{value:02X} is not a command")
+            self._start(word)
 
     def _enable(self) -> None:
-        if self.state is DriveState.FAULT:
+        state = self.state
+        new = transition(state, ControlWord.ENABLE)
+        if new is None:
             self._ignore("enable while faulted (clear faults first)")
             return
-        if self.state is DriveState.ENABLED:
+        if state is DriveState.ENABLED:
             return
-        self.state = DriveState.ENABLED
+        self.state = new
         self.offline = False
         if self.last_frame >= 0.0:
-            self.set("software_connected_status", 1)
+            self.values["software_connected_status"] = 1
         for ch in self.channels:
             ch.reset_loops()
             if self.mode == ControlMode.VELOCITY:
-                ch.set_velocity_target(self.get(ch.reg["target_velocity"]))
+                ch.set_velocity_target(self.values[ch.reg["target_velocity"]])
 
     def _quick_stop(self) -> None:
         was = self.state is DriveState.ENABLED
@@ -772,13 +764,9 @@ class ZlacEmulator(ModbusSlave):
         for ch in self.channels:
             ch.reset_loops()
             if self.mode == ControlMode.VELOCITY:
-                ch.set_velocity_target(self.get(ch.reg["target_velocity"]))
+                ch.set_velocity_target(self.values[ch.reg["target_velocity"]])
 
-    def _start(self, value: int) -> None:
-        word = ControlWord(value)
-        if self.state is not DriveState.ENABLED:
-            self._ignore(f"{word.name} while {self.state.value}")
-            return
+    def _start(self, word: ControlWord) -> None:
         if self.mode not in (ControlMode.RELATIVE_POSITION, ControlMode.ABSOLUTE_POSITION):
             self._ignore(f"{word.name} outside the position modes (control mode {self.mode})")
             return
@@ -801,7 +789,7 @@ class ZlacEmulator(ModbusSlave):
     def raise_fault(self, ch: ZlacChannel, bit: Fault) -> None:
         """A channel detected a fault: set its bit, switch both motors off."""
         ch.fault |= int(bit)
-        self.state = DriveState.FAULT
+        self.state = transition(self.state, Event.FAULT) or DriveState.FAULT
 
     # -- physics side --------------------------------------------------------------------------
     def tick(self, t: float) -> None:
@@ -818,8 +806,8 @@ class ZlacEmulator(ModbusSlave):
             and t - self.last_frame > wd + 1e-9
         ):
             self.offline = True
-            self.set("software_connected_status", 0)
-            self._quick_stop()
+            self.values["software_connected_status"] = 0
+            self._quick_stop()  # transition(ENABLED, Event.OFFLINE)
 
     def step_both(
         self, t: float, dt: float, q_left: float, qd_left: float, q_right: float, qd_right: float
@@ -827,21 +815,7 @@ class ZlacEmulator(ModbusSlave):
         """Both channels for one substep: ``(torque_left, torque_right)`` [N*m]."""
         return self.left.step(t, dt, q_left, qd_left), self.right.step(t, dt, q_right, qd_right)
 
-    # -- status registers ----------------------------------------------------------------------
-    def _publish(self) -> None:
-        s = self.set
-        left, right = self.left, self.right
-        for ch in self.channels:
-            r = ch.reg
-            s(r["actual_motor_position"], ch.counts())
-            s(r["actual_velocity"], round(ch.rpm() * 10))
-            s(r["actual_torque"], round(ch.i_out * 10))
-            s(r["error_code"], ch.fault)
 
-        def pack(a: int, b: int) -> int:
-            return (max(0, min(255, a)) << 8) | max(0, min(255, b))
-
-        s("motor_state", pack(int(left.energised), int(right.energised)))
-        s("hall_state", pack(left.hall(), right.hall()))
-        s("motor_temperature", pack(round(left.temperature), round(right.temperature)))
-        s("dc_voltage", round(self.profile.bus_voltage * 100))
+def _pack(left: int, right: int) -> int:
+    """Two status bytes in one word: high byte = left, low byte = right (each saturated to 0-255)."""
+    return (max(0, min(255, left)) << 8) | max(0, min(255, right))

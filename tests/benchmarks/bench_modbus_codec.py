@@ -12,7 +12,7 @@ Run from the repository root::
     checked equal before timing. Messages: FC03 of 25 registers from 0x0060 (the eRob status
     block, ``ErobModbusDriver.state()``) and FC16 of 2 registers at 0x0047 (an int32 write).
 (b) Whole transactions through ``ModbusLink`` + ``LoopbackTransport`` + ``ModbusDeviceBus`` /
-    ``ModbusSlave`` (host codec, link matching, device codec, register image, driver decode),
+    ``ModbusFront`` (host codec, link matching, device codec, register image, driver decode),
     as transactions per second and as a multiple of the pure host codec cost.
 
 Timing: ``time.perf_counter`` around a loop of N iterations (N grown until one run lasts
@@ -37,7 +37,8 @@ from joints.codecs import modbus as mb
 from joints.devices.erob.registers import EROB_MODBUS, STATUS_BLOCK_START, STATUS_BLOCK_WORDS
 from joints.drivers.erob_modbus import ErobModbusDriver
 from joints.link.modbus import ModbusLink, RetryPolicy
-from joints.sim.modbus_slave import ModbusDeviceBus, ModbusSlave
+from joints.sim.firmware import Firmware
+from joints.sim.modbus_front import ModbusDeviceBus, ModbusFront
 from joints.transports.loopback import LoopbackTransport
 
 GOAL = 3.0  #: the issue's target: joints encode+decode at least 3x faster than pymodbus
@@ -196,10 +197,10 @@ def pymodbus_benches() -> dict[str, Bench] | None:
 # --- loopback -------------------------------------------------------------------------------
 
 
-def loopback_driver() -> tuple[ErobModbusDriver, ModbusSlave]:
-    slave = ModbusSlave(EROB_MODBUS, SLAVE, values={"actual_position": -123456, "status_of_achieving_position": 1})
+def loopback_driver() -> tuple[ErobModbusDriver, Firmware]:
+    slave = ModbusFront.plain(EROB_MODBUS, SLAVE, values={"actual_position": -123456, "status_of_achieving_position": 1})
     link = ModbusLink(LoopbackTransport(ModbusDeviceBus([slave])), policy=RetryPolicy(timeout=0.1, retries=0))
-    return ErobModbusDriver(link, SLAVE, clock=ManualClock()), slave
+    return ErobModbusDriver(link, SLAVE, clock=ManualClock()), slave.firmware
 
 
 def loop_state(n: int) -> None:
@@ -271,7 +272,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"    FC03+FC16: joints is {both:.1f}x faster than pymodbus")
         print(f"    goal >= {GOAL:.1f}x on each message: {'MET' if worst >= GOAL else 'NOT MET'} (worst {worst:.1f}x)")
 
-    print("\n(b) loopback transactions: ModbusLink + LoopbackTransport + ModbusDeviceBus/ModbusSlave")
+    print("\n(b) loopback transactions: ModbusLink + LoopbackTransport + ModbusDeviceBus/ModbusFront")
     j06, ls, lr, lw = run(joints_fc06, loop_state, loop_read_registers, loop_write)
     for label, t, codec in (
         (f"driver.state() (FC03 x{READ_COUNT})", ls, j03),

@@ -10,19 +10,20 @@ batched into one FC16 by the driver.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import pytest
 
 from joints.clock import ManualClock
 from joints.codecs import modbus as mb
+from joints.devices.erob.params import EROB_PARAMS
 from joints.devices.erob.registers import EROB_MODBUS, MotionMode, MotionStatus
-from joints.devices.registers import Register
 from joints.drivers.erob_modbus import ENABLE_SETTLE, ErobModbusDriver
 from joints.errors import ConfirmationRequired
 from joints.link.modbus import ModbusLink
 from joints.link.trace import Trace
-from joints.sim.modbus_slave import ModbusDeviceBus, ModbusSlave
+from joints.sim.firmware import Firmware
+from joints.sim.modbus_front import ModbusDeviceBus, ModbusFront
 from joints.transports.loopback import LoopbackTransport
 from testdata import VECTORS
 
@@ -82,40 +83,41 @@ def manual_segments(seq: dict) -> list[Segment]:
     return segments(writes)
 
 
-class ScriptedErob(ModbusSlave):
-    """A register image whose achieving-position status follows "Enable the Motor"."""
+class ScriptedErob(Firmware):
+    """A parameter store whose achieving-position status follows "Enable the Motor"."""
 
-    def __init__(self, address: int) -> None:
-        super().__init__(EROB_MODBUS, address)
+    def __init__(self) -> None:
+        super().__init__(EROB_PARAMS)
 
-    def on_write(self, reg, value):  # type: ignore[no-untyped-def]
-        if reg.name == "enable_the_motor":
+    def on_write(self, name: str, value: int) -> None:
+        if name == "enable_the_motor":
             self.set("status_of_achieving_position", 1 if value else 0)
 
 
-class CalibrationSlave(ModbusSlave):
-    """Scripted slave for chapter 7: actual position = encoder position + position offset."""
+class CalibrationSlave(Firmware):
+    """Scripted drive for chapter 7: actual position = encoder position + position offset."""
 
-    def __init__(self, address: int, encoder: int) -> None:
-        super().__init__(EROB_MODBUS, address)
+    def __init__(self, encoder: int) -> None:
+        super().__init__(EROB_PARAMS)
         self.encoder = encoder
-        self.saved = False
+        self.saved_parameters = False
 
-    def on_read(self, start: int, count: int) -> None:
+    def on_read(self, names: Sequence[str]) -> None:
         self.set("actual_position", self.encoder + self.get("position_offset"))
 
-    def on_write(self, reg, value):  # type: ignore[no-untyped-def]
-        if reg.name == "reset_output_encoder":
+    def on_write(self, name: str, value: int) -> None:
+        if name == "reset_output_encoder":
             self.encoder %= 524288
-        if reg.name == "save_parameters":
-            self.saved = True
+        if name == "save_parameters":
+            self.saved_parameters = True
 
 
-def _rig(slave_id: int, slave: ModbusSlave | None = None):  # type: ignore[no-untyped-def]
-    slave = slave or ScriptedErob(slave_id)
+def _rig(slave_id: int, slave: Firmware | None = None):  # type: ignore[no-untyped-def]
+    slave = slave or ScriptedErob()
     clock = ManualClock()
     trace = Trace()
-    link = ModbusLink(LoopbackTransport(ModbusDeviceBus([slave])), clock=clock, trace=trace)
+    link = ModbusLink(LoopbackTransport(ModbusDeviceBus([ModbusFront(slave, EROB_MODBUS, slave_id)])), clock=clock,
+                      trace=trace)
     return ErobModbusDriver(link, slave_id, clock=clock), slave, trace
 
 
@@ -184,7 +186,7 @@ PROCEDURES: dict[str, tuple[int, Callable[[ErobModbusDriver], None]]] = {
 def test_chapter5_procedure(seq_id: str) -> None:
     seq = _sequences()[seq_id]
     slave_id, script = PROCEDURES[seq_id]
-    driver, slave, trace = _rig(slave_id)
+    driver, slave, _trace = _rig(slave_id)
     script(driver)
     assert segments(slave.write_log) == manual_segments(seq)
 
@@ -192,7 +194,7 @@ def test_chapter5_procedure(seq_id: str) -> None:
 @pytest.mark.parametrize("seq_id", sorted(PROCEDURES))
 def test_motion_waits_500ms_after_enable(seq_id: str) -> None:
     slave_id, script = PROCEDURES[seq_id]
-    driver, slave, trace = _rig(slave_id)
+    driver, _slave, trace = _rig(slave_id)
     script(driver)
     tx = [r for r in trace if r.direction == "tx"]
     i = next(i for i, r in enumerate(tx) if r.data[1] == 0x06 and r.data[2:6] == bytes.fromhex("00F00001"))
@@ -208,18 +210,18 @@ def test_motion_waits_500ms_after_enable(seq_id: str) -> None:
 @pytest.mark.parametrize("seq_id,multi", [("seq-erob-modbus-en-7.2", False), ("seq-erob-modbus-en-7.3", True)])
 def test_chapter7_zero_calibration(seq_id: str, multi: bool) -> None:
     seq = _sequences()[seq_id]
-    slave = CalibrationSlave(2, encoder=10000)
-    driver, _, trace = _rig(2, slave)
+    slave = CalibrationSlave(encoder=10000)
+    driver, _, _trace = _rig(2, slave)
     result = driver.calibrate_zero(multi_turn=multi, confirm=True)
     assert (result.actual_position, result.position_offset, result.saved) == (10000, 252144, True)
     assert segments(slave.write_log) == manual_segments(seq)
-    assert slave.saved
+    assert slave.saved_parameters
     # after the offset the drive reads 262144 at the calibrated zero (the manual's final step)
     assert driver.read("actual_position") == 262144
 
 
 def test_calibration_needs_confirmation_and_writes_nothing_without() -> None:
-    slave = CalibrationSlave(2, encoder=10000)
+    slave = CalibrationSlave(encoder=10000)
     driver, _, trace = _rig(2, slave)
     with pytest.raises(ConfirmationRequired):
         driver.calibrate_zero()
@@ -233,11 +235,15 @@ def test_calibration_needs_confirmation_and_writes_nothing_without() -> None:
     assert len(trace) == 0
 
 
-class StartingDrive(ModbusSlave):
-    """A register image whose motion status follows "start operating", as a real drive's does."""
+class StartingDrive(Firmware):
+    """A parameter store whose motion status follows "start operating", as a real drive's does."""
 
-    def on_write(self, reg: Register, value: int) -> None:
-        if reg.name == "start_operating":
+    def __init__(self, address: int) -> None:
+        super().__init__(EROB_PARAMS)
+        self.front = ModbusFront(self, EROB_MODBUS, address)
+
+    def on_write(self, name: str, value: int) -> None:
+        if name == "start_operating":
             self.set("motion_status", int(MotionStatus.MOVING))
 
 
@@ -245,7 +251,7 @@ def test_start_is_never_retried_blindly() -> None:
     """A lost reply to "start operating" must not start a (relative) motion twice: the driver reads
     back whether the drive started, and it did, so nothing is sent again."""
     calls = []
-    bus = ModbusDeviceBus([StartingDrive(EROB_MODBUS, 2)])
+    bus = ModbusDeviceBus([StartingDrive(2).front])
 
     def flaky(data: bytes) -> bytes:
         calls.append(data)
@@ -266,8 +272,8 @@ def test_start_lost_on_the_way_is_sent_again_after_reading_back() -> None:
     """The request itself was lost (the drive never saw it): the read-back says not started, so the
     driver sends it once more - and only once."""
     calls = []
-    drive = StartingDrive(EROB_MODBUS, 2)
-    bus = ModbusDeviceBus([drive])
+    drive = StartingDrive(2)
+    bus = ModbusDeviceBus([drive.front])
     lost = []
 
     def flaky(data: bytes) -> bytes:

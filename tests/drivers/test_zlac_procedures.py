@@ -18,8 +18,9 @@ from joints.drivers.zlac_modbus import ZlacChannelDriver, ZlacDrive
 from joints.errors import ConfirmationRequired, StateError
 from joints.link.modbus import ModbusLink
 from joints.link.trace import Trace
-from joints.sim.modbus_slave import ModbusDeviceBus, ModbusSlave
-from joints.sim.zlac import ZlacEmulator
+from joints.sim.firmware import Firmware
+from joints.sim.modbus_front import ModbusDeviceBus, ModbusFront
+from joints.sim.zlac import ZlacFirmware
 from joints.transports.loopback import LoopbackTransport
 from testdata import VECTORS
 
@@ -34,12 +35,13 @@ def _sequences() -> dict[str, dict]:
     return {r["id"]: r for r in json.loads(VECTORS.read_text()) if r.get("record_type") == "sequence"}
 
 
-def _rig(twin: bool = True) -> tuple[ZlacDrive, ZlacChannelDriver, ZlacChannelDriver, Trace, ModbusSlave]:
+def _rig(twin: bool = True) -> tuple[ZlacDrive, ZlacChannelDriver, ZlacChannelDriver, Trace, Firmware]:
     # the twin answers as the drive does (status after enable, quick stop ...): the driver reads
-    # back what the drive says, so a plain register image only serves register-level checks
-    slave = ZlacEmulator(HubMotorProfile(), 1) if twin else ModbusSlave(ZLAC8015D, 1)
+    # back what the drive says, so a plain parameter store only serves register-level checks
+    slave = ZlacFirmware(HubMotorProfile(), 1) if twin else Firmware(ZLAC8015D.params)
     trace = Trace()
-    link = ModbusLink(LoopbackTransport(ModbusDeviceBus([slave])), clock=ManualClock(), trace=trace)
+    link = ModbusLink(LoopbackTransport(ModbusDeviceBus([ModbusFront(slave, ZLAC8015D, 1)])), clock=ManualClock(),
+                      trace=trace)
     drive = ZlacDrive(link, 1)
     return drive, ZlacChannelDriver(drive, "left", profile=_Profile()), ZlacChannelDriver(drive, "right", profile=_Profile()), trace, slave
 
@@ -110,7 +112,7 @@ def test_enable_zeroes_stale_targets_first() -> None:
     zero = "01 10 20 88 00 02 04 00 00 00 00"
     enable = "01 06 20 0E 00 08 E2 0F"
     assert any(w.startswith(zero) for w in writes)
-    assert [i for i, w in enumerate(writes) if w.startswith(zero)][0] < writes.index(enable)
+    assert next(i for i, w in enumerate(writes) if w.startswith(zero)) < writes.index(enable)
     assert slave.get("target_velocity_left") == 0
 
 
@@ -138,7 +140,7 @@ def test_state_of_both_wheels_is_one_block_read() -> None:
 
 
 def test_dangerous_writes_need_confirmation() -> None:
-    d, left, _right, trace, _slave = _rig()
+    _d, left, _right, trace, _slave = _rig()
     with pytest.raises(ConfirmationRequired):
         left.reset_zero_point()
     with pytest.raises(ConfirmationRequired):

@@ -216,10 +216,9 @@ def test_two_threads_hammering_one_bus_never_interleave_frames() -> None:
 def test_modbus_late_reply_before_a_request_is_unsolicited_not_an_answer() -> None:
     # a reply that arrived after its request had given up: the next read must not take it
     from joints.devices.erob.registers import EROB_MODBUS
-    from joints.sim.modbus_slave import ModbusDeviceBus, ModbusSlave
+    from joints.sim.modbus_front import ModbusDeviceBus, ModbusFront
 
-    slave = ModbusSlave(EROB_MODBUS, 2)
-    slave.set("actual_position", 1234)
+    slave = ModbusFront.plain(EROB_MODBUS, 2, values={"actual_position": 1234})
     transport = LoopbackTransport(ModbusDeviceBus([slave]))
     link = ModbusLink(transport, clock=ManualClock(), name="rs485")
     stale = mb.encode(mb.ReadRegistersReply(2, 3, (0, 999)))

@@ -14,6 +14,7 @@ import pytest
 from joints.clock import ManualClock
 from joints.codecs import modbus as mb
 from joints.codecs.crc import crc_ok
+from joints.devices.erob.params import EROB_PARAMS
 from joints.devices.erob.registers import EROB_MODBUS
 from joints.errors import (
     ChecksumError,
@@ -26,7 +27,8 @@ from joints.errors import (
     UnexpectedReply,
 )
 from joints.link import ModbusLink, RetryPolicy, Trace
-from joints.sim.modbus_slave import ModbusDeviceBus, ModbusSlave
+from joints.sim.firmware import Firmware
+from joints.sim.modbus_front import ModbusDeviceBus, ModbusFront
 from joints.transports.loopback import LoopbackTransport
 
 SLAVE = 2
@@ -65,13 +67,13 @@ def from_slave_3(frame: bytes) -> bytes:
 
 
 @pytest.fixture
-def slave() -> ModbusSlave:
-    return ModbusSlave(EROB_MODBUS, SLAVE)
+def slave() -> Firmware:
+    return Firmware(EROB_PARAMS)
 
 
 @pytest.fixture
-def bus(slave: ModbusSlave) -> ModbusDeviceBus:
-    return ModbusDeviceBus([slave])
+def bus(slave: Firmware) -> ModbusDeviceBus:
+    return ModbusDeviceBus([ModbusFront(slave, EROB_MODBUS, SLAVE)])
 
 
 @pytest.fixture
@@ -94,7 +96,7 @@ def make_link(peer, clock: ManualClock, *, echo: bool = False, trace=None, retri
 # --------------------------------------------------------------------------- round trips
 
 
-def test_read_write_round_trip(bus: ModbusDeviceBus, slave: ModbusSlave, clock: ManualClock) -> None:
+def test_read_write_round_trip(bus: ModbusDeviceBus, slave: Firmware, clock: ManualClock) -> None:
     link = make_link(bus, clock)
     link.write_register(SLAVE, 0x0040, 3)  # operation mode = position
     assert slave.get("operation_mode") == 3
@@ -196,7 +198,7 @@ def test_timed_out_read_is_a_plain_timeout_and_a_timed_out_write_an_unknown_outc
 
 
 def test_corrupt_reply_is_checksum_error_after_retries(
-    bus: ModbusDeviceBus, slave: ModbusSlave, clock: ManualClock
+    bus: ModbusDeviceBus, slave: Firmware, clock: ManualClock
 ) -> None:
     peer = Counting(bus, flip_crc_bit)
     link = make_link(peer, clock, retries=2)
@@ -225,7 +227,7 @@ def test_retry_recovers_from_one_corrupt_reply(bus: ModbusDeviceBus, clock: Manu
 
 
 def test_non_idempotent_write_sent_once_even_if_reply_corrupt(
-    bus: ModbusDeviceBus, slave: ModbusSlave, clock: ManualClock
+    bus: ModbusDeviceBus, slave: Firmware, clock: ManualClock
 ) -> None:
     peer = Counting(bus, flip_crc_bit)
     link = make_link(peer, clock, retries=5)
@@ -244,7 +246,7 @@ def test_non_idempotent_write_sent_once_even_if_reply_corrupt(
 
 
 def test_broadcast_write_returns_none_and_slave_executes(
-    bus: ModbusDeviceBus, slave: ModbusSlave, clock: ManualClock
+    bus: ModbusDeviceBus, slave: Firmware, clock: ManualClock
 ) -> None:
     peer = Counting(bus)
     link = make_link(peer, clock)
@@ -268,17 +270,17 @@ def test_broadcast_read_is_refused_before_sending(bus: ModbusDeviceBus, clock: M
 
 
 def test_broadcast_reaches_every_slave(clock: ManualClock) -> None:
-    slaves = [ModbusSlave(EROB_MODBUS, a) for a in (1, 2, 5)]
+    slaves = [ModbusFront.plain(EROB_MODBUS, a) for a in (1, 2, 5)]
     link = make_link(ModbusDeviceBus(slaves), clock)
     link.write_register(0, 0x0041, 1)
-    assert [s.get("motion_mode") for s in slaves] == [1, 1, 1]
+    assert [s.firmware.get("motion_mode") for s in slaves] == [1, 1, 1]
     assert link.read_registers(5, 0x0041, 1) == (1,)
 
 
 # ----------------------------------------------------------------------------------- echo
 
 
-def test_echo_transport(bus: ModbusDeviceBus, slave: ModbusSlave, clock: ManualClock) -> None:
+def test_echo_transport(bus: ModbusDeviceBus, slave: Firmware, clock: ManualClock) -> None:
     link = make_link(bus, clock, echo=True)
     assert link.transport.echo is True  # type: ignore[attr-defined]
     link.write_register(SLAVE, 0x0040, 3)  # FC06: the echo and the reply are the same bytes
@@ -388,8 +390,9 @@ class DelayedLine(LoopbackTransport):
         return first[1]
 
 
-def test_a_late_reply_never_answers_the_next_request(slave: ModbusSlave, clock: ManualClock) -> None:
-    line = DelayedLine(ModbusDeviceBus([slave]), clock, delay=0.15)
+def test_a_late_reply_never_answers_the_next_request(slave: Firmware, bus: ModbusDeviceBus,
+                                                      clock: ManualClock) -> None:
+    line = DelayedLine(bus, clock, delay=0.15)
     link = ModbusLink(line, policy=RetryPolicy(timeout=0.1, retries=0), clock=clock)
     slave.set("profile_speed", 111)
     with pytest.raises(ReplyTimeout):

@@ -5,7 +5,7 @@
     A pty can only be opened by path on its slave side, so two pty pairs are joined by a small
     forwarding thread (a software null-modem cable): pymodbus opens one slave path, we open the
     other.
-(b) minimalmodbus as the MASTER against OUR ``ModbusDeviceBus([ModbusSlave(EROB_MODBUS, 2)])``,
+(b) minimalmodbus as the MASTER against OUR ``ModbusDeviceBus([ModbusFront.plain(EROB_MODBUS, 2)])``,
     served on the master side of one pty by a thread that writes back ``bus.receive(data)``.
 
 Both peers frame, checksum and word-order 32-bit values with their own code, so a mistake shared
@@ -31,7 +31,8 @@ from joints.devices.erob.registers import EROB_MODBUS, STATUS_BLOCK_START, STATU
 from joints.drivers.erob_modbus import ErobModbusDriver
 from joints.errors import DeviceRejected
 from joints.link.modbus import ModbusLink, RetryPolicy
-from joints.sim.modbus_slave import ModbusDeviceBus, ModbusSlave
+from joints.sim.firmware import Firmware
+from joints.sim.modbus_front import ModbusDeviceBus, ModbusFront
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="needs POSIX pseudo-terminals")
 
@@ -352,22 +353,22 @@ def test_pymodbus_exception_reply_is_device_rejected(erob: ErobModbusDriver) -> 
 
 
 # --------------------------------------------------------------------------------------------
-# (b) minimalmodbus master  ->  our ModbusDeviceBus / ModbusSlave
+# (b) minimalmodbus master  ->  our ModbusDeviceBus / ModbusFront
 # --------------------------------------------------------------------------------------------
 
 
 @pytest.fixture
-def our_slave() -> Iterator[tuple[ModbusSlave, BusResponder]]:
-    slave = ModbusSlave(EROB_MODBUS, SLAVE)
-    responder = BusResponder(ModbusDeviceBus([slave]))
+def our_slave() -> Iterator[tuple[Firmware, BusResponder]]:
+    front = ModbusFront.plain(EROB_MODBUS, SLAVE)
+    responder = BusResponder(ModbusDeviceBus([front]))
     try:
-        yield slave, responder
+        yield front.firmware, responder
     finally:
         responder.close()
 
 
 @pytest.fixture
-def instrument(our_slave: tuple[ModbusSlave, BusResponder]) -> Iterator[Any]:
+def instrument(our_slave: tuple[Firmware, BusResponder]) -> Iterator[Any]:
     minimalmodbus = pytest.importorskip("minimalmodbus")
     inst = minimalmodbus.Instrument(our_slave[1].port, SLAVE, mode=minimalmodbus.MODE_RTU)
     inst.serial.baudrate = BAUD
@@ -378,7 +379,7 @@ def instrument(our_slave: tuple[ModbusSlave, BusResponder]) -> Iterator[Any]:
         inst.serial.close()
 
 
-def test_minimalmodbus_reads_our_int32_and_int16(instrument: Any, our_slave: tuple[ModbusSlave, BusResponder]) -> None:
+def test_minimalmodbus_reads_our_int32_and_int16(instrument: Any, our_slave: tuple[Firmware, BusResponder]) -> None:
     import minimalmodbus
 
     slave, _ = our_slave
@@ -395,13 +396,13 @@ def test_minimalmodbus_reads_our_int32_and_int16(instrument: Any, our_slave: tup
     assert block[0x62 - 0x60] == 0  # gap reads 0
 
 
-def test_minimalmodbus_writes_our_registers(instrument: Any, our_slave: tuple[ModbusSlave, BusResponder]) -> None:
+def test_minimalmodbus_writes_our_registers(instrument: Any, our_slave: tuple[Firmware, BusResponder]) -> None:
     import minimalmodbus
 
     slave, _ = our_slave
     instrument.write_long(0x0047, 10000, signed=True, byteorder=minimalmodbus.BYTEORDER_BIG)  # FC16
     assert slave.get("profile_speed") == 10000
-    assert [slave.words[0x47], slave.words[0x48]] == [0, 10000]
+    assert ModbusFront(slave, EROB_MODBUS, SLAVE).read(0x47, 2) == (0, 10000)
     instrument.write_long(0x0043, -500000, signed=True, byteorder=minimalmodbus.BYTEORDER_BIG)
     assert slave.get("target_absolute_position") == -500000
     assert instrument.read_long(0x0043, signed=True) == -500000
@@ -412,7 +413,7 @@ def test_minimalmodbus_writes_our_registers(instrument: Any, our_slave: tuple[Mo
     assert slave.write_log == [("profile_speed", 10000), ("target_absolute_position", -500000), ("operation_mode", 3)]
 
 
-def test_minimalmodbus_gets_exception_replies(instrument: Any, our_slave: tuple[ModbusSlave, BusResponder]) -> None:
+def test_minimalmodbus_gets_exception_replies(instrument: Any, our_slave: tuple[Firmware, BusResponder]) -> None:
     import minimalmodbus
 
     slave, responder = our_slave

@@ -1,4 +1,4 @@
-"""The emulated ZLAC8015D (joints.sim.zlac) and the hub-motor profile, without MuJoCo.
+"""The ZLAC8015D twin (joints.sim.zlac firmware + Modbus front) and the hub-motor profile, without MuJoCo.
 
 Each wheel is a rigid body integrated here (J dq/dt = tau - b*qd - coulomb*sign(qd) + load,
 q += qd*dt, dt = 1 ms); the drive is reached only through Modbus RTU frames on a
@@ -28,8 +28,8 @@ from joints.devices.zlac.registers import (
     split_left_right,
 )
 from joints.errors import ConfigError
-from joints.sim.modbus_slave import ModbusDeviceBus
-from joints.sim.zlac import DriveState, ZlacEmulator
+from joints.sim.modbus_front import ModbusDeviceBus, ModbusFront
+from joints.sim.zlac import DriveState, ZlacFirmware
 
 ROOT = Path(__file__).resolve().parents[2]
 from testdata import VECTORS
@@ -42,6 +42,11 @@ SIDES = ("left", "right")
 
 
 # ------------------------------------------------------------------------------------ bench
+
+
+def front(emu: ZlacFirmware) -> ModbusFront:
+    """The drive's Modbus front: its slave address is the node id held at power-on."""
+    return ModbusFront(emu, ZLAC8015D, node_id="rs485_node_id")
 
 
 @dataclass
@@ -64,8 +69,9 @@ class Bench:
         **kw: Any,
     ) -> None:
         prof = kw.pop("profile", PROFILE)
-        self.emu = ZlacEmulator(prof, address, inertia_left=own, inertia_right=own, **kw)
-        self.bus = ModbusDeviceBus([self.emu])
+        self.emu = ZlacFirmware(prof, address, inertia_left=own, inertia_right=own, **kw)
+        self.front = front(self.emu)
+        self.bus = ModbusDeviceBus([self.front])
         self.address = address
         j = inertia if inertia is not None else PROFILE.tuning_inertia
         self.J = [j, j]
@@ -904,8 +910,8 @@ def test_power_cycle_keeps_stored_settings_only() -> None:
     b.run(1.0)
     assert b.status()["actual_motor_position_left"] > 1000
     b.emu.power_cycle()
-    assert b.emu.address == 7 and b.emu.state is DriveState.DISABLED
-    bus = ModbusDeviceBus([b.emu])
+    assert b.front.address == 7 and b.emu.state is DriveState.DISABLED
+    bus = ModbusDeviceBus([b.front])
     reply = bus.receive(mb.encode(mb.ReadHoldingRegisters(7, 0x2080, 2)))
     assert reply == mb.encode(mb.ReadRegistersReply(7, 3, (250, 500)))
     b.bus, b.address = bus, 7
@@ -956,7 +962,7 @@ def test_free_wheel_with_default_tuning_is_stable() -> None:
 
 def test_gains_assume_the_wheel_plus_the_vehicle_share() -> None:
     """inertia_left/right is the wheel's own joint inertia; the drive's tuning adds the vehicle."""
-    emu = ZlacEmulator(PROFILE, 1, inertia_left=0.02)
+    emu = ZlacFirmware(PROFILE, 1, inertia_left=0.02)
     assert emu.left.inertia == pytest.approx(0.02 + PROFILE.load_inertia)
     assert emu.right.inertia == pytest.approx(PROFILE.tuning_inertia)
     # a wheel in the air on a bench: a profile without vehicle share, tight tracking
@@ -972,8 +978,8 @@ def test_gains_assume_the_wheel_plus_the_vehicle_share() -> None:
 
 
 def test_place_sets_the_start_state() -> None:
-    emu = ZlacEmulator(PROFILE, 1)
-    bus = ModbusDeviceBus([emu])
+    emu = ZlacFirmware(PROFILE, 1)
+    bus = ModbusDeviceBus([front(emu)])
     emu.left.place(1.0)  # before the first step (power-on): the counter reads 0 here
     emu.left.step(0.001, DT, 1.0, 0.0)
     reply = bus.receive(mb.encode(mb.ReadHoldingRegisters(1, 0x20A7, 2)))
@@ -1047,9 +1053,9 @@ def test_diffdrive_model_drives_straight_and_turns_in_place() -> None:
 
     dofs = {n: int(m.jnt_dofadr[m.joint(n).id]) for n in ("left_wheel", "right_wheel")}
     assert dof_inertia(dofs["left_wheel"]) == pytest.approx(PROFILE.armature + 2e-4)
-    emu = ZlacEmulator(PROFILE, 1, inertia_left=dof_inertia(dofs["left_wheel"]),
+    emu = ZlacFirmware(PROFILE, 1, inertia_left=dof_inertia(dofs["left_wheel"]),
                        inertia_right=dof_inertia(dofs["right_wheel"]))
-    bus = ModbusDeviceBus([emu])
+    bus = ModbusDeviceBus([front(emu)])
     bind = [(ch, int(m.jnt_qposadr[m.joint(n).id]), dofs[n], m.actuator(f"{n}_motor").id)
             for ch, n in ((emu.left, "left_wheel"), (emu.right, "right_wheel"))]
     for ch, qa, _da, _aid in bind:
