@@ -198,6 +198,11 @@ class ErobCanDriver(ErobDriver):
         self._set("control_source", 0)
         self._analog(current)
 
+    def stop_repetitive(self) -> None:
+        """Refused: 7.5.2 has no stop-repetitive command (Modbus 0x00F4); stop() ends a repetitive move."""
+        raise CommandError(f"{self.name}: the CAN custom protocol has no 'stop repetitive motion' command "
+                           "(eRunner 7.5.2); use stop(); nothing was sent")
+
     # -- stopping ------------------------------------------------------------------------------
     def _zero_setpoint(self) -> None:
         if self._cache.get("operation_mode") in (OperationMode.SPEED, OperationMode.TORQUE):

@@ -244,3 +244,88 @@ def test_six_acknowledgements_of_enable_never_answer_later_writes(rig: joints.Ri
     assert j.wait(timeout=10).position == pytest.approx(-0.2, abs=math.radians(0.05))
     extra = [m for _, m in link.unsolicited if isinstance(m, ec.Ack)]
     assert len(extra) == 5 + 4 + 5  # every surplus acknowledgement went to the unsolicited log
+
+
+def _manual_writes(seq_id: str) -> list[bytes]:
+    """The request frames of a 7.4 sequence that change the drive (reads left out)."""
+    from testdata import sequences
+
+    (seq,) = [s for s in sequences("erunner") if s["id"] == seq_id]
+    out = []
+    for step in seq["steps"]:
+        data = bytes.fromhex(step["send_hex"].replace(" ", ""))
+        if len(data) in (6, 8) or data in (b"\x00\x83", b"\x00\x84", b"\x00\xe8", b"\x01\x4f"):
+            out.append(data)
+    return out
+
+
+def _procedure(seq_id: str, d: ErobCanDriver, rig: joints.Rig) -> None:
+    from joints.devices.erob.registers import MotionMode
+
+    if seq_id == "seq-erob-can-7.4.1":
+        d.configure_position(MotionMode.ABSOLUTE, speed=10000, acceleration=10000, deceleration=10000)
+        d.enable()
+        d.move_to(262144, speed=10000, acceleration=10000, deceleration=10000)
+    elif seq_id == "seq-erob-can-7.4.2":
+        d.configure_position(MotionMode.ABSOLUTE, speed=10000, acceleration=10000, deceleration=10000)
+        d.enable()
+        d.move_by(10000)
+    elif seq_id == "seq-erob-can-7.4.3":
+        d.enable()
+        d.move_continuous(10000, acceleration=30000, deceleration=30000)
+    elif seq_id == "seq-erob-can-7.4.4":
+        d.configure_velocity(acceleration=30000, deceleration=30000)
+        d.enable()
+        d.set_velocity(10000, acceleration=30000, deceleration=30000)
+    else:
+        d.configure_torque(max_speed=10000)
+        d.enable()
+        d.set_current(1000)
+    rig.sleep(0.2)
+    d.state()
+    if seq_id in ("seq-erob-can-7.4.1", "seq-erob-can-7.4.2", "seq-erob-can-7.4.3"):
+        d.stop()
+    d.disable()
+
+
+@pytest.mark.parametrize("seq_id", [f"seq-erob-can-7.4.{i}" for i in range(1, 6)])
+def test_procedures_send_the_manuals_frames(seq_id: str) -> None:
+    """Every write and command of a 7.4 example is sent by the driver's procedure for that mode (node 1)."""
+    with joints.open(config(address=1)) as rig:
+        d = driver_of(rig)
+        trace = Trace()
+        rig.trace(trace)
+        _procedure(seq_id, d, rig)
+        sent_frames = [r.data for r in trace if r.direction == "tx"]
+        manual = _manual_writes(seq_id)
+        missing = [m.hex(" ") for m in manual if m not in sent_frames]
+        assert not missing, missing
+        # the motion command comes after its targets, the disable last
+        assert sent_frames[-1] == manual[-1] == bytes.fromhex("010000000000")
+        if b"\x00\x83" in manual:
+            start = sent_frames.index(b"\x00\x83")
+            assert all(sent_frames.index(m) < start for m in manual[:manual.index(b"\x00\x83")])
+
+
+def test_stop_repetitive_is_refused_over_can(rig: joints.Rig) -> None:
+    with pytest.raises(CommandError, match="use stop"):
+        driver_of(rig).stop_repetitive()
+
+
+def test_repetitive_motion_of_the_position_panel(rig: joints.Rig) -> None:
+    """Chapter 4's "repetitive" box: motion mode 2 with the dwell time (ms over CAN, 0.05 ms as a parameter)."""
+    d = driver_of(rig)
+    trace = Trace()
+    rig.trace(trace)
+    d.enable()
+    target = round(0.3 / (2 * math.pi / COUNTS_PER_REV))
+    d.move_repetitive(target, speed=100000, acceleration=400000, deceleration=400000, dwell=4000)
+    assert "node 4 write 0x0093 = 200" in sent(trace)  # 4000 x 0.05 ms = 200 ms
+    seen = []
+    for _ in range(40):
+        rig.sleep(0.1)
+        seen.append(d.state().position)
+    assert max(seen) > target - 200 and min(seen) < 200  # went out and came back
+    d.stop()
+    rig.sleep(1.0)
+    assert not d.state().moving
