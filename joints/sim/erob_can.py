@@ -281,6 +281,7 @@ class ErobCanBus:
         self.channel = self.medium.channel  #: ``can.Bus(interface="joints-sim", channel=...)`` joins this bus
         self.medium.attach_peer(self, latency=latency, name="twins")
         self.frame_errors = 0
+        self._last_tick = 0.0
         for f in fronts:
             self.add(f)
 
@@ -317,6 +318,10 @@ class ErobCanBus:
         self.medium.bind_clock(clock)
 
     def tick(self, t: float) -> None:
+        if t < self._last_tick:  # the world was reset: the drives were power-cycled
+            for f in self.fronts:
+                f.held = None
+        self._last_tick = t
         self.medium.tick(t)
         for f in self.fronts:
             if f.held is not None:

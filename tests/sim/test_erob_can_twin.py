@@ -115,6 +115,17 @@ def test_speed_set_point_before_enable_turns_the_motor_once_ready(make_twin: Cal
     assert abs(fw.read("current_speed")) < 50
 
 
+def test_a_held_set_point_does_not_survive_a_power_cycle(make_twin: Callable[..., Twin]) -> None:
+    twin = make_twin()
+    for data in ("00 4E 00 00 00 02", "01 FE 00 00 27 10"):  # speed mode, set-point held (motor off)
+        twin.exchange(0x641, _hex(data))
+    twin.world.reset()
+    twin.firmware(1).write("operation_mode", 2)  # speed mode again, not through the CAN front
+    twin.exchange(0x641, _hex("01 00 00 00 00 01"))
+    twin.world.advance(1.0)
+    assert abs(twin.firmware(1).read("current_speed")) < 50
+
+
 @pytest.mark.parametrize("data,code", [
     ("00 83", 0x0027),  # start while the motor is off (appendix 1 #4)
     ("01 00", 0x0032),  # enable without its parameter (#6)
