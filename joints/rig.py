@@ -87,6 +87,18 @@ class Rig:
         return self.config.backend
 
     @property
+    def sim(self) -> Any:
+        """The simulated world (:class:`joints.sim.world.World`: ``model``, ``data``, ``joint(name)``,
+        ``perturb``, ``restore``, ``set_joint_positions``, ``joint_position`` ...); None on hardware."""
+        return self.world
+
+    def model_path(self) -> Path:
+        """The MJCF file the config names (``[sim] model``), on either backend (e.g. to render a twin)."""
+        from joints.sim.world import resolve_model
+
+        return resolve_model(self.config.sim.model, self.config.base_dir)
+
+    @property
     def time(self) -> float:
         """Seconds on the rig's clock (simulated time in sim)."""
         return self.clock.now()

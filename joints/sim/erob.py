@@ -302,6 +302,10 @@ class ErobFirmware(Firmware):
         self.speed = float(g["profile_speed"])
         self.vprof = min(abs(self.speed), self.vmax)
 
+    def gain_params(self, channel: str | None = None) -> dict[str, str]:
+        """The loop-gain parameters (for domain randomisation: joints.sim.world.World.perturb)."""
+        return {"position": "position_loop_gain", "speed": "speed_loop_gain", "integral": "speed_loop_integral"}
+
     def place(self, q: float) -> None:
         """The joint is at ``q`` [rad] and at rest (start state, reset): encoder, setpoint and brake follow."""
         self.pos = self.p_ref = q * COUNTS_PER_RAD
