@@ -238,6 +238,15 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    """Every benchmark of issue 23 (ratios against references measured in the same run), then the
+    bus planner for ``--config``."""
+    from joints import bench
+
+    bench.run(quick=args.quick, config=args.config, rate=args.rate)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="joints", description=(__doc__ or "joints").splitlines()[0])
     p.add_argument("--version", action="version", version=f"joints {__import__('joints').__version__}")
@@ -300,6 +309,12 @@ def build_parser() -> argparse.ArgumentParser:
     se.add_argument("--backend", choices=("sim", "hardware"))
     se.add_argument("--confirm", action="store_true", help="required for frames that write")
     se.set_defaults(func=cmd_send)
+
+    b = sub.add_parser("bench", help="speed ratios against raw mj_step and pymodbus, and a bus planner")
+    b.add_argument("--config", help="plan the buses of this config: joints per bus at which control rate")
+    b.add_argument("--rate", type=float, default=None, help="control rate [Hz] the planner checks (default 50)")
+    b.add_argument("--quick", action="store_true", help="tiny sizes: checks that everything runs, not speed")
+    b.set_defaults(func=cmd_bench)
     return p
 
 

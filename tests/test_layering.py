@@ -42,6 +42,9 @@ ALLOWED: dict[str, frozenset[str]] = {
                       "registry", "config", "sim", "exits"}),
     "cli": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
                       "registry", "config", "sim", "rig", "exits", API}),
+    # `joints bench`: measures every layer against its reference (issue 23)
+    "bench": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
+                        "registry", "config", "sim", "rig", "exits", API}),
 }
 #: the package entry points import whatever they re-export
 EXEMPT = {"joints", "joints.__main__"}
