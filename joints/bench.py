@@ -133,7 +133,7 @@ def env_rows(*, steps: int, raw_steps: int, repeats: int, seed: int = 0) -> Iter
     for env_id, goal in ENV_ROWS:
         env = gym.make(f"{ENV_MODULE}:{env_id}")
         try:
-            u = env.unwrapped
+            u: Any = env.unwrapped
             substeps = round(u.dt / u.model.opt.timestep)
             t_env, t_raw = _best([_env_block(env, steps, seed), _raw(u.model, raw_steps)], repeats)
             sub_s = steps * substeps / t_env
@@ -157,13 +157,14 @@ def batched_row(*, steps: int, raw_steps: int, repeats: int, rigs: int = BATCH_R
     except (gym.error.Error, ValueError, TypeError, AttributeError) as exc:
         return Row(name, None, BATCH_GOAL, f"no batched env: {exc}")
     try:
-        models = list(vec.unwrapped.models)
-        substeps = round(vec.unwrapped.dt / models[0].opt.timestep)
+        u: Any = vec.unwrapped
+        models = list(u.models)
+        substeps = round(u.dt / models[0].opt.timestep)
         blocks = max(1, steps // rigs)
         t_env, t_raw = _best([_env_block(vec, blocks, seed), _raw_many(models, raw_steps)], repeats)
         sub_s = blocks * rigs * substeps / t_env
         raw_s = max(1, raw_steps // rigs) * rigs / t_raw
-        rtf = blocks * rigs * vec.unwrapped.dt / t_env
+        rtf = blocks * rigs * u.dt / t_env
         return Row(name, sub_s / raw_s, BATCH_GOAL,
                    f"{sub_s:,.0f} substeps/s vs raw {raw_s:,.0f}/s; real-time factor {rtf:.0f}x (all rigs)")
     finally:

@@ -41,7 +41,7 @@ ALLOWED: dict[str, frozenset[str]] = {
     "rig": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
                       "registry", "config", "sim", "exits"}),
     "cli": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
-                      "registry", "config", "sim", "rig", "exits", API}),
+                      "registry", "config", "sim", "rig", "exits", "bench", API}),
     # `joints bench`: measures every layer against its reference (issue 23)
     "bench": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
                         "registry", "config", "sim", "rig", "exits", API}),
