@@ -19,6 +19,7 @@ from typing import Any, Protocol, runtime_checkable
 
 from joints.clock import ManualClock
 from joints.errors import ConfigError, MissingDependencyError
+from joints.sim import kernel, stepping
 
 
 def _mujoco() -> Any:
@@ -180,8 +181,10 @@ class World:
     """MuJoCo model + data + emulated drives + the simulated clock."""
 
     def __init__(self, model: str | Path, drives: Sequence[DriveSpec], *, buses: Mapping[str, BusSpec],
-                 timestep: float = 0.001, base_dir: Path | None = None) -> None:
+                 timestep: float = 0.001, base_dir: Path | None = None, jit: bool | None = None) -> None:
         mj = _mujoco()
+        #: the drives' loops run compiled (numba; :mod:`joints.sim.kernel`) - default: when installed
+        self.compiled = kernel.default_mode() if jit is None else bool(jit and kernel.AVAILABLE)
         self.mujoco = mj
         self.path = resolve_model(model, base_dir)
         spec = mj.MjSpec.from_file(str(self.path))
@@ -243,7 +246,9 @@ class World:
             qa, da, aid = addr[d.name]
             self._bound.append(_Bound(d.name, twin, stepper, qa, da, aid, d.channel, d.mjcf_joint))
             stepper.place(float(self.data.qpos[qa]))
+        #: per joint, what steps it: (step function, qpos address, dof address, actuator)
         self._bind = [(b.stepper.step, b.qadr, b.dadr, b.aid) for b in self._bound]
+        self._bind_seen = list(self._bind)
         timed = [bus for bus in self.buses.values() if isinstance(bus, TimedDeviceBus)]
         for bus in timed:
             bus.bind_clock(self.clock)
@@ -256,6 +261,26 @@ class World:
         self._nominal_gains: dict[str, dict[str, int]] = {}
         #: one caller steps the physics at a time (two threads sleeping on one rig must not share MjData)
         self.lock = threading.RLock()
+        #: the table of the drives' kernel rows this world is stepped with (shared with the worlds
+        #: it is batched with: :func:`advance_together`), and this world's index in it
+        self.group = stepping.Group([self], self.compiled)
+        self.group_index = 0
+
+    # -- how the drives are stepped ---------------------------------------------------------------
+    def kernel_joints(self) -> list[_Bound]:
+        """The joints whose twin runs its loops as kernel rows (:mod:`joints.sim.stepping`)."""
+        return [b for b in self._bound if getattr(b.emulator, "KERNEL", None) in stepping.KINDS]
+
+    def kernel_stepped(self, b: _Bound) -> bool:
+        """Whether joint ``b`` is stepped by its kernel row (not by a function put in its place)."""
+        i = self._bound.index(b)
+        return bool(self._bind[i][0] == b.stepper.step)
+
+    def fusable(self) -> bool:
+        """Whether N substeps can run in one compiled call: every drive a kernel row, no timed bus."""
+        return not self._ticks and all(self.kernel_stepped(b) for b in self._bound
+                                       if getattr(b.emulator, "KERNEL", None) in stepping.KINDS) \
+            and len(self.kernel_joints()) == len(self._bound)
 
     def _dof_inertia(self, dof: int) -> float:
         """Diagonal of the joint-space inertia (incl. armature) at the current pose [kg*m^2]."""
@@ -284,26 +309,43 @@ class World:
         Timed device buses (a CAN medium) are ticked after every substep, with the clock at its end.
         """
         with self.lock:
-            mj_step = self.mujoco.mj_step
-            m, d = self.model, self.data
-            qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
-            dt = self.timestep
-            bind = self._bind
-            ticks = self._ticks
             try:
-                for _ in range(n):
-                    t = (self.steps + 1) * dt
-                    for step, qa, da, aid in bind:
-                        ctrl[aid] = step(t, dt, float(qpos[qa]), float(qvel[da]))
-                    mj_step(m, d)
-                    self.steps += 1
-                    if ticks:
-                        self.clock.set(t)
-                        for tick in ticks:
-                            tick(t)
+                self._step(n)
             finally:  # an interrupted step leaves the clock where the physics is
                 self._target = max(self._target, self.time)
                 self.clock.set(self.time)
+
+    def _step(self, n: int) -> None:
+        group = self.group
+        if self._bind != self._bind_seen:  # a joint's stepping was replaced (tests)
+            self._bind_seen = list(self._bind)
+            group.replan()
+        if n <= 0:
+            return
+        if group.compiled and group.fused([self.group_index]):
+            group.run([self.group_index], n)
+            return
+        mj_step = self.mujoco.mj_step
+        m, d = self.model, self.data
+        qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
+        dt = self.timestep
+        python = [self._bind[i] for i, b in enumerate(self._bound) if b not in self.kernel_joints()
+                  or not self.kernel_stepped(b)]
+        kernel_rows = len(python) < len(self._bound)
+        ticks = self._ticks
+        me = [self.group_index]
+        for _ in range(n):
+            t = (self.steps + 1) * dt
+            if kernel_rows:
+                group.substep(me)
+            for step, qa, da, aid in python:
+                ctrl[aid] = step(t, dt, float(qpos[qa]), float(qvel[da]))
+            mj_step(m, d)
+            self.steps += 1
+            if ticks:
+                self.clock.set(t)
+                for tick in ticks:
+                    tick(t)
 
     def advance(self, seconds: float) -> None:
         """Advance simulated time by ``seconds`` (rounded up to whole substeps, no drift).
