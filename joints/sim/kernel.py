@@ -8,7 +8,7 @@ points are compiled (:func:`compiled`) and the helpers they call are compiled in
 on tables of Python lists instead of numpy arrays (plain floats are what Python is fast with).
 Both give the same bits: only IEEE double arithmetic, no fused multiply-add, no fast-math.
 
-MuJoCo's own ``mj_step`` can be called from compiled code (:func:`mj_step_function`): the world
+MuJoCo's own ``mj_step`` can be called from compiled code (:func:`mj_step_address`, :func:`call`): the world
 then runs N substeps - every drive's loops and the physics - in one call.
 """
 
@@ -16,24 +16,29 @@ from __future__ import annotations
 
 import ctypes
 import glob
+import importlib
 import os
 from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
 
 from joints.devices import motion
 
-__all__ = ["AVAILABLE", "compiled", "default_mode", "jitable", "mj_step_function", "rows", "table"]
+__all__ = ["AVAILABLE", "arrays", "call", "compiled", "default_mode", "doubles", "jitable", "mj_step_address", "rows",
+           "table"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
-numba: Any
-register_jitable: Any
-try:  # the optional `fast` extra
-    import numba
-    from numba.extending import register_jitable
-except ImportError:  # pragma: no cover - depends on the install
-    numba = None
-    register_jitable = None
+
+def _load(name: str) -> Any:
+    try:
+        return importlib.import_module(name)
+    except ImportError:  # pragma: no cover - depends on the install
+        return None
+
+
+numba: Any = _load("numba")  # the optional `fast` extra
+_extending: Any = _load("numba.extending") if numba is not None else None
+register_jitable: Any = _extending.register_jitable if _extending is not None else None
 
 #: numba is installed (the compiled kernels can be used)
 AVAILABLE = numba is not None
@@ -95,19 +100,64 @@ def arrays(items: Sequence[Any], compiled_mode: bool) -> Any:
     return list(items)
 
 
-_MJ_STEP: list[Any] = []
+def _f64_at(typingctx: Any, address: Any) -> Any:
+    types = numba.types
+    sig = types.CPointer(types.float64)(types.int64)
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.float64)))
+
+    return sig, codegen
 
 
-def mj_step_function() -> Any:
-    """MuJoCo's ``mj_step(const mjModel*, mjData*)`` as a ctypes function of two addresses, or None.
+def _call_pp(typingctx: Any, function: Any, a: Any, b: Any) -> Any:
+    ir = importlib.import_module("llvmlite.ir")
+    types = numba.types
+    sig = types.void(types.int64, types.int64, types.int64)
 
-    It is the library the ``mujoco`` bindings themselves load (the same process-wide copy), so
-    ``model._address`` / ``data._address`` of the bindings' objects are valid arguments. None
-    where the library file cannot be found next to the bindings.
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        ptr = ir.IntType(8).as_pointer()
+        fn = builder.inttoptr(args[0], ir.FunctionType(ir.VoidType(), [ptr, ptr]).as_pointer())
+        builder.call(fn, [builder.inttoptr(args[1], ptr), builder.inttoptr(args[2], ptr)])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+def _doubles(address: int, n: int) -> Any:
+    """The ``n`` doubles at ``address`` as an array (compiled code only)."""
+    return numba.carray(f64_at(address), (n,))
+
+
+def _call(function: int, a: int, b: int) -> None:
+    """Call the C function ``void f(void*, void*)`` at address ``function`` (compiled code only)."""
+    call_pp(function, a, b)
+
+
+f64_at: Any = None
+call_pp: Any = None
+doubles: Any = None
+call: Any = None
+if numba is not None:
+    f64_at = _extending.intrinsic(_f64_at)
+    call_pp = _extending.intrinsic(_call_pp)
+    doubles = numba.njit(cache=True)(_doubles)
+    call = numba.njit(cache=True)(_call)
+
+
+_MJ_STEP: list[int | None] = []
+
+
+def mj_step_address() -> int | None:
+    """The address of MuJoCo's ``mj_step(const mjModel*, mjData*)``, or None.
+
+    It is in the library the ``mujoco`` bindings themselves load (the same process-wide copy), so
+    ``model._address`` / ``data._address`` of the bindings' objects are valid arguments (through
+    :func:`call`). None where the library file cannot be found next to the bindings.
     """
     if _MJ_STEP:
         return _MJ_STEP[0]
-    fn = None
+    fn: int | None = None
     try:
         import mujoco
 
@@ -116,9 +166,7 @@ def mj_step_function() -> Any:
                        + glob.glob(os.path.join(base, "mujoco.dll")))
         if found:
             lib = ctypes.CDLL(found[0])
-            fn = lib.mj_step
-            fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
-            fn.restype = None
+            fn = int(ctypes.cast(lib.mj_step, ctypes.c_void_p).value or 0) or None
     except (ImportError, OSError, AttributeError):  # pragma: no cover - depends on the install
         fn = None
     _MJ_STEP.append(fn)

@@ -1,17 +1,18 @@
 """Stepping worlds: every drive of one or more worlds, and their physics, in as few calls as possible.
 
 Rule: one table holds the rows of every kernel-backed twin (:mod:`joints.sim.kernel`) of a group
-of worlds (one world, or the N rigs of a batched env); one call of :func:`substep` runs the loops
-of all of them for one physics substep, and :func:`run` runs N substeps - loops, then
-``mj_step`` of every world - without returning to Python (compiled, with MuJoCo's ``mj_step``
-called directly). A world whose drives are not all kernel-backed (a twin that still steps in
-Python), or that ticks a timed bus after every substep (CAN), steps substep by substep from
-Python instead, with the same kernels. Every path gives the same bits.
+of worlds (one world, or the N rigs of a batched env). :func:`step_row` is the one dispatch from
+a row to its drive's loops. Compiled, :func:`run` runs N substeps of the active worlds - every
+row's loops, then MuJoCo's ``mj_step`` of each world - without returning to Python, reading the
+joints from and writing the torques into the worlds' ``MjData`` by address. Without a compiler
+(or for a world whose drives are not all kernel rows, or that ticks a timed CAN bus after every
+substep) the world steps substep by substep from Python: :func:`substep` runs the same rows
+through the same :func:`step_row`. Every path gives the same bits.
 
-Rows are stepped in the order of the world's joints (as the world has always stepped its
-drives); each joint's row, MuJoCo addresses and world index are in :attr:`Group.adr`:
-``[kind, qpos address, dof address, actuator, world, a, b, c]`` (``a``-``c``: rows a kind's
-loops reach besides their own, e.g. a dual-channel drive's shared row).
+Rows are stepped in the order of the worlds' joints (as a world has always stepped its drives);
+each stepped row's kind, MuJoCo addresses, world and the rows its loops reach besides its own
+are in :attr:`Group.adr` (columns :data:`KIND` ... :data:`C`); each world's addresses and
+step count in :attr:`Group.worlds_table` (columns :data:`ACTIVE` ... :data:`NU`).
 """
 
 from __future__ import annotations
@@ -22,52 +23,68 @@ from typing import Any
 from joints.sim import erob_kernel, kernel
 from joints.sim.kernel import jitable
 
-__all__ = ["CHUNK", "KINDS", "Group", "run", "substep"]
+__all__ = ["CHUNK", "KINDS", "Group", "step_row", "substep"]
 
 #: kernel kinds: a twin's ``KERNEL`` name -> code in the adr table
 KINDS = {"erob": 1}
 EROB = 1
+#: columns of :attr:`Group.adr`
 KIND, QPOS, DOF, ACT, WORLD, A, B, C = range(8)
 ADR_WIDTH = 8
+#: columns of :attr:`Group.worlds_table`
+ACTIVE, STEPS, MODEL, DATA, QPOS_AT, NQ, QVEL_AT, NV, CTRL_AT, NU = range(10)
+WORLD_WIDTH = 10
 #: substeps per compiled call at most (a KeyboardInterrupt lands between calls)
 CHUNK = 20_000
 
 
 @jitable
-def substep(table: Any, adr: Any, order: Any, active: Any, steps: Any, dts: Any, k: int,
-            qpos: Any, qvel: Any, ctrl: Any) -> None:
-    """The loops of every row in ``order`` whose world is active, for the ``k``-th substep from
-    each world's ``steps``; torques into the worlds' ``ctrl``."""
-    for j in range(len(order)):
-        i = order[j]
+def step_row(table: Any, adr: Any, i: int, t: float, dt: float, q: float, qd: float) -> float:
+    """The loops of row ``i`` (its kind's kernel) for the substep ending at ``t``: the torque."""
+    kind = adr[i][KIND]
+    if kind == EROB:
+        return erob_kernel.step(table[i], t, dt, q, qd)
+    return 0.0
+
+
+def substep(table: Any, adr: Any, order: Any, active: Sequence[int], steps: Sequence[int], dts: Sequence[float],
+            qpos: Sequence[Any], qvel: Sequence[Any], ctrl: Sequence[Any]) -> None:
+    """One substep of the rows in ``order`` whose world is active (Python: the worlds' arrays)."""
+    for i in order:
         a = adr[i]
         w = a[WORLD]
-        if active[w] == 0:
+        if not active[w]:
             continue
         dt = dts[w]
-        t = (steps[w] + k + 1) * dt
-        q = float(qpos[w][a[QPOS]])
-        qd = float(qvel[w][a[DOF]])
-        kind = a[KIND]
-        tau = 0.0
-        if kind == EROB:
-            tau = erob_kernel.step(table[i], t, dt, q, qd)
-        ctrl[w][a[ACT]] = tau
+        t = (steps[w] + 1) * dt
+        ctrl[w][a[ACT]] = step_row(table, adr, i, t, dt, float(qpos[w][a[QPOS]]), float(qvel[w][a[DOF]]))
 
 
-def _run(n: int, table: Any, adr: Any, order: Any, active: Any, steps: Any, dts: Any, qpos: Any, qvel: Any,
-         ctrl: Any, models: Any, datas: Any, mj_step: Any) -> None:
-    """``n`` substeps of every active world: the loops of all rows, then ``mj_step`` of each world."""
+def _run(n: int, physics: int, mj_step: int, table: Any, adr: Any, order: Any, worlds: Any, dts: Any) -> None:
+    """``n`` substeps of the active worlds: every row's loops, then (``physics``) each world's
+    ``mj_step`` (compiled only: the worlds' arrays are reached by address)."""
+    doubles, call = kernel.doubles, kernel.call
     for k in range(n):
-        substep(table, adr, order, active, steps, dts, k, qpos, qvel, ctrl)
-        for w in range(len(models)):
-            if active[w] != 0:
-                mj_step(models[w], datas[w])
+        for j in range(len(order)):
+            i = order[j]
+            a = adr[i]
+            w = a[WORLD]
+            row = worlds[w]
+            if row[ACTIVE] == 0:
+                continue
+            dt = dts[w]
+            t = (row[STEPS] + k + 1) * dt
+            q = doubles(row[QPOS_AT], row[NQ])[a[QPOS]]
+            qd = doubles(row[QVEL_AT], row[NV])[a[DOF]]
+            doubles(row[CTRL_AT], row[NU])[a[ACT]] = step_row(table, adr, i, t, dt, q, qd)
+        if physics:
+            for w in range(len(worlds)):
+                row = worlds[w]
+                if row[ACTIVE] != 0:
+                    call(mj_step, row[MODEL], row[DATA])
 
 
-run = _run
-_substep_compiled = kernel.compiled(substep)
-_run_compiled = kernel.compiled(_run)
+_run_compiled = kernel.compiled(_run) if kernel.AVAILABLE else None
 
 
 class Group:
@@ -77,7 +94,7 @@ class Group:
         import numpy as np
 
         self.worlds = list(worlds)
-        self.compiled = compiled
+        self.compiled = compiled and _run_compiled is not None
         rows: list[list[float]] = []
         adr: list[list[int]] = []
         self._owners: list[tuple[Any, int]] = []  #: (twin, first row)
@@ -97,62 +114,67 @@ class Group:
                 adr[i] = [KINDS[twin.KERNEL], b.qadr, b.dadr, b.aid, w, first, 0, 0]
                 self._row_of[(w, b.name)] = i
         width = max([len(r) for r in rows], default=1)
-        self.table = kernel.rows([r + [0.0] * (width - len(r)) for r in rows] or [[0.0]], compiled)
-        self.adr = kernel.rows(adr or [[0] * ADR_WIDTH], compiled, integer=True)
+        self.table = kernel.rows([r + [0.0] * (width - len(r)) for r in rows] or [[0.0]], self.compiled)
+        self.adr = kernel.rows(adr or [[0] * ADR_WIDTH], self.compiled, integer=True)
         for twin, first in self._owners:
             twin.adopt(self.table, first)
-        self.qpos = kernel.arrays([w.data.qpos for w in self.worlds], compiled)
-        self.qvel = kernel.arrays([w.data.qvel for w in self.worlds], compiled)
-        self.ctrl = kernel.arrays([w.data.ctrl for w in self.worlds], compiled)
-        self.dts = np.array([w.timestep for w in self.worlds]) if compiled else [w.timestep for w in self.worlds]
-        self.models = np.array([w.model._address for w in self.worlds], dtype=np.int64)
-        self.datas = np.array([w.data._address for w in self.worlds], dtype=np.int64)
-        self.mj_step = kernel.mj_step_function() if compiled else None
+        self.dts = [w.timestep for w in self.worlds]
+        self.mj_step = kernel.mj_step_address() if self.compiled else None
+        if self.compiled:
+            table = []
+            for world in self.worlds:
+                m, d = world.model, world.data
+                table.append([0, 0, m._address, d._address, d.qpos.ctypes.data, m.nq, d.qvel.ctypes.data, m.nv,
+                              d.ctrl.ctypes.data, m.nu])
+            self.worlds_table = np.array(table, dtype=np.int64).reshape(len(self.worlds), WORLD_WIDTH)
+            self.dts_array = np.array(self.dts)
         self.order: Any = None
+        self.fusable: list[bool] = []
         self.replan()
 
     def replan(self) -> None:
-        """Which rows step, in joint order (a world's joints stepped in Python are left out)."""
-        order = [self._row_of[(w, b.name)] for w, world in enumerate(self.worlds) for b in world.kernel_joints()
-                 if world.kernel_stepped(b)]
-        if self.compiled:
-            import numpy as np
-
-            self.order = np.array(order, dtype=np.int64)
-        else:
-            self.order = order
-
-    def _flags(self, worlds: Sequence[int], steps: Sequence[int]) -> tuple[Any, Any]:
+        """Which rows step, in joint order (a world's joints stepped in Python are left out), and
+        which worlds can run N substeps in one call."""
         import numpy as np
 
-        active = [0] * len(self.worlds)
-        counts = [0] * len(self.worlds)
-        for w, s in zip(worlds, steps):
-            active[w] = 1
-            counts[w] = s
-        if self.compiled:
-            return np.array(active, dtype=np.int64), np.array(counts, dtype=np.int64)
-        return active, counts
-
-    def fused(self, worlds: Sequence[int]) -> bool:
-        """Whether ``worlds`` can run N substeps in one compiled call."""
-        return self.mj_step is not None and all(self.worlds[w].fusable() for w in worlds)
+        order = [self._row_of[(w, b.name)] for w, world in enumerate(self.worlds) for b in world.kernel_joints()
+                 if world.kernel_stepped(b)]
+        self.order = np.array(order, dtype=np.int64) if self.compiled else order
+        self.fusable = [self.mj_step is not None and w.fusable() for w in self.worlds]
 
     def run(self, worlds: Sequence[int], n: int) -> None:
-        """``n`` substeps of ``worlds`` (indices) in compiled calls of at most :data:`CHUNK`
-        substeps; each world's ``steps`` counts up after every call."""
+        """``n`` substeps of ``worlds`` (indices, all fusable) in compiled calls of at most
+        :data:`CHUNK` substeps; each world's ``steps`` counts up after every call."""
+        table = self.worlds_table
+        all_worlds = self.worlds
+        table[:, ACTIVE] = 0
+        for w in worlds:
+            table[w, ACTIVE] = 1
         while n > 0:
             m = min(n, CHUNK)
-            active, steps = self._flags(worlds, [self.worlds[w].steps for w in worlds])
-            _run_compiled(m, self.table, self.adr, self.order, active, steps, self.dts, self.qpos,  # type: ignore[misc]
-                          self.qvel, self.ctrl, self.models, self.datas, self.mj_step)
             for w in worlds:
-                self.worlds[w].steps += m
+                table[w, STEPS] = all_worlds[w].steps
+            _run_compiled(m, 1, self.mj_step or 0, self.table, self.adr, self.order, table,  # type: ignore[misc]
+                          self.dts_array)
+            for w in worlds:
+                all_worlds[w].steps += m
             n -= m
 
     def substep(self, worlds: Sequence[int]) -> None:
         """The kernel loops of ``worlds`` for their next substep (torques into ``ctrl``; no physics)."""
-        active, steps = self._flags(worlds, [self.worlds[w].steps for w in worlds])
-        fn = _substep_compiled if self.compiled else substep
-        fn(self.table, self.adr, self.order, active, steps, self.dts, 0,  # type: ignore[misc]
-           self.qpos, self.qvel, self.ctrl)
+        if self.compiled:
+            table = self.worlds_table
+            table[:, ACTIVE] = 0
+            for w in worlds:
+                table[w, ACTIVE] = 1
+                table[w, STEPS] = self.worlds[w].steps
+            _run_compiled(1, 0, 0, self.table, self.adr, self.order, table, self.dts_array)  # type: ignore[misc]
+            return
+        active = [0] * len(self.worlds)
+        steps = [0] * len(self.worlds)
+        for w in worlds:
+            active[w] = 1
+            steps[w] = self.worlds[w].steps
+        substep(self.table, self.adr, self.order, active, steps, self.dts,
+                [w.data.qpos for w in self.worlds], [w.data.qvel for w in self.worlds],
+                [w.data.ctrl for w in self.worlds])

@@ -322,7 +322,7 @@ class World:
             group.replan()
         if n <= 0:
             return
-        if group.compiled and group.fused([self.group_index]):
+        if group.compiled and group.fusable[self.group_index]:
             group.run([self.group_index], n)
             return
         mj_step = self.mujoco.mj_step

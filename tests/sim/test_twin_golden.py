@@ -29,6 +29,7 @@ from joints.devices.erob.profiles import profile
 from joints.devices.erob.registers import MotionMode
 from joints.drivers.erob_modbus import ErobModbusDriver
 from joints.link.modbus import ModbusLink
+from joints.sim import kernel
 from simkit import erob_world
 
 GOLDEN = Path(__file__).resolve().parents[1] / "data" / "twin_golden.json"
@@ -244,8 +245,14 @@ def _golden() -> dict[str, Any]:
     return json.loads(GOLDEN.read_text()) if GOLDEN.is_file() else {}
 
 
+MODES = ["python", "compiled"] if kernel.AVAILABLE else ["python"]
+
+
+@pytest.mark.parametrize("mode", MODES)
 @pytest.mark.parametrize("name", list(SCENARIOS))
-def test_trajectory_is_the_recorded_one(name: str) -> None:
+def test_trajectory_is_the_recorded_one(name: str, mode: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Compiled kernels (fused N-substep calls) and the same kernels as Python: the recorded bits."""
+    monkeypatch.setenv("JOINTS_JIT", "1" if mode == "compiled" else "0")
     rec = Recorder()
     SCENARIOS[name](rec)
     got = rec.result()
