@@ -166,7 +166,7 @@ def _column(k: int, doc: str = "") -> property:
     """A float attribute that is column ``k`` of the firmware's row."""
 
     def get(self: ErobFirmware) -> float:
-        return float(self._row[k])
+        return float(self._get(k))
 
     def put(self: ErobFirmware, value: float) -> None:
         self._row[k] = float(value)
@@ -178,7 +178,7 @@ def _flag(k: int, doc: str = "") -> property:
     """A bool attribute held as 0.0 / 1.0 in column ``k``."""
 
     def get(self: ErobFirmware) -> bool:
-        return bool(self._row[k] != 0.0)
+        return bool(self._get(k) != 0.0)
 
     def put(self: ErobFirmware, value: bool) -> None:
         self._row[k] = 1.0 if value else 0.0
@@ -196,23 +196,23 @@ class _Generator:
 
     @property
     def active(self) -> bool:
-        return bool(self._fw._row[K.G_ACTIVE] != 0.0)
+        return bool(self._fw._get(K.G_ACTIVE) != 0.0)
 
     @property
     def target(self) -> float:
-        return float(self._fw._row[K.G_TARGET])
+        return float(self._fw._get(K.G_TARGET))
 
     @property
     def continuous(self) -> bool:
-        return bool(self._fw._row[K.G_CONTINUOUS] != 0.0)
+        return bool(self._fw._get(K.G_CONTINUOUS) != 0.0)
 
     @property
     def stopping(self) -> bool:
-        return bool(self._fw._row[K.G_STOPPING] != 0.0)
+        return bool(self._fw._get(K.G_STOPPING) != 0.0)
 
     @property
     def rate(self) -> float:
-        return float(self._fw._row[K.G_RATE])
+        return float(self._fw._get(K.G_RATE))
 
 
 class ErobFirmware(Firmware):
@@ -237,8 +237,7 @@ class ErobFirmware(Firmware):
         ambient: float = 30.0,
     ) -> None:
         super().__init__(EROB_PARAMS, values=power_on_defaults(profile, address))
-        #: the working state (a row of the world's table once a world adopted it)
-        self._row: Any = [0.0] * K.WIDTH
+        self._bind_row([0.0] * K.WIDTH)
         self.profile = profile
         self.multi_turn = multi_turn
         self.ambient = ambient
@@ -247,19 +246,19 @@ class ErobFirmware(Firmware):
         self.gen = _Generator(self)
         self.computed.update({
             "actual_position": self.counts,
-            "given_position": lambda: round(self._row[K.P_REF]) + self.offset,
-            "position_error": lambda: round(self._row[K.P_REF] - self._row[K.POS]),
-            "given_speed": lambda: round(self._row[K.V_CMD] if K.is_enabled(self._row[K.STATE]) else 0.0),
-            "current_speed": lambda: round(self._row[K.VEL]),
-            "speed_error": lambda: round((self._row[K.V_CMD] - self._row[K.VEL])
-                                         if K.is_enabled(self._row[K.STATE]) else 0.0),
-            "given_current": lambda: round(self._row[K.I_CMD]),
-            "motor_current": lambda: round(self._row[K.I_OUT]),
-            "part_of_power_temperature": lambda: round(self._row[K.TEMPERATURE]),
-            "torque_sensor_value": lambda: round(self._row[K.I_OUT] * self.kt),
-            "error_code": lambda: int(self._row[K.FAULT_CODE]),
+            "given_position": lambda: round(self._get(K.P_REF)) + self.offset,
+            "position_error": lambda: round(self._get(K.P_REF) - self._get(K.POS)),
+            "given_speed": lambda: round(self._get(K.V_CMD) if K.is_enabled(self._get(K.STATE)) else 0.0),
+            "current_speed": lambda: round(self._get(K.VEL)),
+            "speed_error": lambda: round((self._get(K.V_CMD) - self._get(K.VEL))
+                                         if K.is_enabled(self._get(K.STATE)) else 0.0),
+            "given_current": lambda: round(self._get(K.I_CMD)),
+            "motor_current": lambda: round(self._get(K.I_OUT)),
+            "part_of_power_temperature": lambda: round(self._get(K.TEMPERATURE)),
+            "torque_sensor_value": lambda: round(self._get(K.I_OUT) * self.kt),
+            "error_code": lambda: int(self._get(K.FAULT_CODE)),
             "motion_status": self._motion_status,
-            "status_of_achieving_position": lambda: K.achieve(self._row, K.moving(self._row)),
+            "status_of_achieving_position": lambda: self._k.achieve(self._row, self._k.moving(self._row)),
         })
         self._commands = {
             "enable_the_motor": self._enable_command,
@@ -275,6 +274,16 @@ class ErobFirmware(Firmware):
         self._reset_state()
 
     # -- the row --------------------------------------------------------------------------------
+    def _bind_row(self, row: Any) -> None:
+        #: the working state (a row of the world's table once a world adopted it)
+        self._row: Any = row
+        if isinstance(row, list):
+            self._get: Any = row.__getitem__  #: column -> float
+            self._k: Any = K.PY_OPS  #: the kernel helpers as Python
+        else:  # a numpy row: Python floats out, the helpers compiled
+            self._get = row.item
+            self._k = K.compiled_ops()
+
     def kernel_rows(self) -> list[list[float]]:
         """The twin's rows as they stand (one: the drive)."""
         return [[float(x) for x in self._row]]
@@ -285,7 +294,7 @@ class ErobFirmware(Firmware):
         row = table[first]
         for k, x in enumerate(values):
             row[k] = x
-        self._row = row
+        self._bind_row(row)
 
     def kernel_row(self, channel: str | None) -> int:
         """Which of the twin's rows steps ``channel``'s joint."""
@@ -321,7 +330,7 @@ class ErobFirmware(Firmware):
 
     @property
     def state(self) -> DriveState:
-        return K.STATES[int(self._row[K.STATE])]
+        return K.STATES[int(self._get(K.STATE))]
 
     @state.setter
     def state(self, value: DriveState) -> None:
@@ -330,7 +339,7 @@ class ErobFirmware(Firmware):
     @property
     def fault(self) -> int:
         """The latched error code (0x0027 or a fault), 0 = none."""
-        return int(self._row[K.FAULT_CODE])
+        return int(self._get(K.FAULT_CODE))
 
     @fault.setter
     def fault(self, value: int) -> None:
@@ -339,17 +348,17 @@ class ErobFirmware(Firmware):
     @property
     def mode(self) -> int:
         """The operation mode in force (0x0040)."""
-        return int(self._row[K.MODE])
+        return int(self._get(K.MODE))
 
     @property
     def offset(self) -> int:
         """The position offset in force (0x0052)."""
-        return int(self._row[K.OFFSET])
+        return int(self._get(K.OFFSET))
 
     @property
     def brake_hold(self) -> float | None:
         """Where the brake holds [count]; None: where the joint is when it engages."""
-        at = float(self._row[K.BRAKE_HOLD])
+        at = float(self._get(K.BRAKE_HOLD))
         return None if math.isnan(at) else at
 
     @brake_hold.setter
@@ -363,7 +372,7 @@ class ErobFirmware(Firmware):
             s[k] = 0.0
         s[K.STATE] = K.MOTOR_OFF
         s[K.ENABLED_AT] = -1.0
-        K.gen_clear(s)
+        self._k.gen_clear(s)
         s[K.REPEAT_LEG_TO_TARGET] = 1.0
         s[K.DWELL_UNTIL] = -1.0
         s[K.IN_WINDOW_SINCE] = -1.0
@@ -390,7 +399,7 @@ class ErobFirmware(Firmware):
     @property
     def enabled(self) -> bool:
         """The motor is enabled (brake released or releasing)."""
-        return K.is_enabled(self._row[K.STATE])
+        return K.is_enabled(self._get(K.STATE))
 
     # -- settings -----------------------------------------------------------------------------
     def _cache_settings(self) -> None:
@@ -456,7 +465,7 @@ class ErobFirmware(Firmware):
 
     def counts(self) -> int:
         """Actual position value: encoder counts + position offset."""
-        return round(float(self._row[K.POS])) + self.offset
+        return int(round(self._get(K.POS))) + self.offset
 
     # -- what the fronts call ---------------------------------------------------------------
     def frame_received(self) -> None:
@@ -488,10 +497,10 @@ class ErobFirmware(Firmware):
 
     # -- state machine ----------------------------------------------------------------------
     def _ready(self) -> bool:
-        return K.ready(self._row)
+        return bool(self._k.ready(self._row))
 
     def _ready_or_refuse(self) -> bool:
-        if K.ready(self._row):
+        if self._k.ready(self._row):
             return True
         # Not enabled / brake not released yet: no motion, the error is visible.
         self.state = transition(self.state, Event.MOTION) or self.state
@@ -499,14 +508,14 @@ class ErobFirmware(Firmware):
         return False
 
     def _raise_fault(self, code: int) -> None:
-        K.raise_fault(self._row, float(code))
+        self._k.raise_fault(self._row, float(code))
 
     def _enable_command(self, value: int) -> None:
         if value:
             self._enable()
         else:
             self.state = transition(self.state, Event.DISABLE) or self.state
-            K.motor_off(self._row)
+            self._k.motor_off(self._row)
 
     def _enable(self) -> None:
         state = self.state
@@ -520,13 +529,13 @@ class ErobFirmware(Firmware):
             s[K.P_REF] = s[K.POS]
             s[K.V_REF] = 0.0
             s[K.INTEG] = 0.0
-            K.gen_clear(s)
+            self._k.gen_clear(s)
             s[K.BRAKE_HOLD] = math.nan
             s[K.BRAKE_RELEASED] = 0.0
 
     def ready(self) -> bool:
         """The motor is on and its brake released: motion commands act now (for protocol fronts)."""
-        return K.ready(self._row)
+        return bool(self._k.ready(self._row))
 
     def _release_brake(self, value: int) -> None:
         """Release the holding brake of a motor that is off (CAN 0x014F): the joint moves freely until
@@ -536,7 +545,7 @@ class ErobFirmware(Firmware):
 
     def _motor_off(self) -> None:
         """Disable / fault: the loops stop and the brake engages where the joint is."""
-        K.motor_off(self._row)
+        self._k.motor_off(self._row)
 
     def _clear_errors(self, value: int) -> None:
         if value:
@@ -546,7 +555,7 @@ class ErobFirmware(Firmware):
     # -- commands ---------------------------------------------------------------------------
     def _change_mode(self) -> None:
         s = self._row
-        K.gen_clear(s)
+        self._k.gen_clear(s)
         s[K.INTEG] = 0.0
         s[K.P_REF] = s[K.POS]
         s[K.V_REF] = s[K.VEL] if K.is_enabled(s[K.STATE]) else 0.0
@@ -554,7 +563,7 @@ class ErobFirmware(Firmware):
         s[K.STARTED] = 0.0
 
     def _clamp_target(self, target: float) -> float:
-        return K.clamp_target(self._row, target)
+        return float(self._k.clamp_target(self._row, target))
 
     def _start(self, value: int) -> None:
         v = self.values
@@ -573,15 +582,15 @@ class ErobFirmware(Firmware):
         elif motion == MotionMode.ABSOLUTE:
             rel = v["target_relative_position"]
             if rel:
-                s[K.G_TARGET] = K.clamp_target(s, s[K.P_REF] + rel)
+                s[K.G_TARGET] = self._k.clamp_target(s, s[K.P_REF] + rel)
             else:
-                s[K.G_TARGET] = K.clamp_target(s, float(v["target_absolute_position"] - self.offset))
+                s[K.G_TARGET] = self._k.clamp_target(s, float(v["target_absolute_position"] - self.offset))
             s[K.G_ACTIVE], s[K.G_CONTINUOUS] = 1.0, 0.0
         elif motion == MotionMode.REPETITIVE:
             s[K.REPEAT_HOME] = s[K.P_REF]
             s[K.REPEAT_LEG_TO_TARGET] = 1.0
             s[K.REPEAT_STOP] = 0.0
-            s[K.G_TARGET] = K.clamp_target(s, float(v["target_absolute_position"] - self.offset))
+            s[K.G_TARGET] = self._k.clamp_target(s, float(v["target_absolute_position"] - self.offset))
             s[K.G_ACTIVE], s[K.G_CONTINUOUS] = 1.0, 0.0
         else:  # the parameter's range (0-2) keeps other values out
             s[K.STARTED] = 0.0
@@ -627,7 +636,7 @@ class ErobFirmware(Firmware):
             return
         s = self._row
         if value:
-            K.gen_clear(s)  # a new speed command ends a stop ramp in progress
+            self._k.gen_clear(s)  # a new speed command ends a stop ramp in progress
         vmax = s[K.VMAX]
         s[K.MODE_SPEED_TARGET] = float(max(-vmax, min(vmax, value)))
 
@@ -636,17 +645,17 @@ class ErobFirmware(Firmware):
         """Run the drive's loops for the substep ending at ``t`` (length ``dt``) with the joint at
         ``q`` [rad], ``qd`` [rad/s]; return the motor torque at the output [N*m]
         (:func:`joints.sim.erob_kernel.step` on this drive's row; a world steps all rows at once)."""
-        return K.step(self._row, t, dt, q, qd)
+        return float(self._k.step(self._row, t, dt, q, qd))
 
     # -- status values (computed when read) -------------------------------------------------
     def _motion_status(self) -> int:
         s = self._row
         if s[K.REPEAT_STOP] != 0.0 and self.values["motion_mode"] == MotionMode.REPETITIVE and s[K.G_ACTIVE] != 0.0:
             return int(MotionStatus.STOP_REPETITIVE)
-        return int(MotionStatus.MOVING if K.moving(s) else MotionStatus.STOP)
+        return int(MotionStatus.MOVING if self._k.moving(s) else MotionStatus.STOP)
 
     def _moving(self) -> bool:
-        return K.moving(self._row)
+        return bool(self._k.moving(self._row))
 
     def _achieve(self, moving: bool) -> AchieveStatus:
-        return AchieveStatus(K.achieve(self._row, moving))
+        return AchieveStatus(self._k.achieve(self._row, moving))

@@ -18,11 +18,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import MutableSequence
+from types import SimpleNamespace
+from typing import Any
 
 from joints.devices.erob import faults
 from joints.devices.erob.registers import COUNTS_PER_REV, AchieveStatus, MotionMode, OperationMode
 from joints.devices.erob.state import ENABLE_DELAY, TRANSITIONS, DriveState, Event
 from joints.devices.motion import Arrival, move_step, ramp
+from joints.sim import kernel
 from joints.sim.kernel import jitable
 
 Row = MutableSequence[float]
@@ -525,3 +528,19 @@ def step(s: Row, t: float, dt: float, q: float, qd: float) -> float:
     s[I_CMD] = i
     s[I_OUT] = i
     return i * 1e-3 * s[KT]
+
+
+#: the helpers the firmware object calls, as Python (rows that are lists)
+PY_OPS = SimpleNamespace(achieve=achieve, moving=moving, ready=ready, motor_off=motor_off, raise_fault=raise_fault,
+                         gen_clear=gen_clear, clamp_target=clamp_target, step=step)
+_COMPILED: list[Any] = []
+
+
+def compiled_ops() -> Any:
+    """The same helpers compiled (rows that are numpy arrays), or :data:`PY_OPS` without numba."""
+    if not _COMPILED:
+        if kernel.AVAILABLE:
+            _COMPILED.append(SimpleNamespace(**{k: kernel.compiled(fn) for k, fn in vars(PY_OPS).items()}))
+        else:  # pragma: no cover - depends on the install
+            _COMPILED.append(PY_OPS)
+    return _COMPILED[0]
