@@ -284,6 +284,45 @@ _FAST_ENCODERS: dict[type, Callable[[Any], bytes | None]] = {
 }
 
 
+def _plain_read(m: ReadHoldingRegisters | ReadInputRegisters) -> bool:
+    s, a, c = m.slave, m.address, m.count
+    return (type(s) is int and type(a) is int and type(c) is int
+            and 0 <= s <= 0xFF and 0 <= a <= 0xFFFF and 1 <= c <= MAX_READ)
+
+
+def _plain_write_single(m: WriteSingleRegister) -> bool:
+    s, a, v = m.slave, m.address, m.value
+    return (type(s) is int and type(a) is int and type(v) is int
+            and 0 <= s <= 0xFF and 0 <= a <= 0xFFFF and 0 <= v <= 0xFFFF)
+
+
+def _plain_write_multiple(m: WriteMultipleRegisters) -> bool:
+    s, a, values = m.slave, m.address, m.values
+    if not (type(s) is int and type(a) is int and 0 <= s <= 0xFF and 0 <= a <= 0xFFFF
+            and 1 <= len(values) <= MAX_WRITE):
+        return False
+    for v in values:
+        if type(v) is not int or not 0 <= v <= 0xFFFF:
+            return False
+    return True
+
+
+_PLAIN: dict[type, Callable[[Any], bool]] = {
+    ReadHoldingRegisters: _plain_read,
+    ReadInputRegisters: _plain_read,
+    WriteSingleRegister: _plain_write_single,
+    WriteMultipleRegisters: _plain_write_multiple,
+}
+
+
+def check(message: Message) -> None:
+    """Raise the :class:`~joints.errors.EncodeError` :func:`encode` would raise, without building
+    the frame (a message that passes would encode)."""
+    plain = _PLAIN.get(type(message))
+    if plain is None or not plain(message):
+        encode(message)
+
+
 def encode(message: Message) -> bytes:
     """Encode any request or reply into a complete RTU frame (address, PDU, CRC low first)."""
     fast = _FAST_ENCODERS.get(type(message))

@@ -77,6 +77,11 @@ class Rule(abc.ABC, Generic[M]):
     def encode(self, message: Any) -> Any:
         """The frame for ``message``; raises :class:`~joints.errors.EncodeError` before anything is sent."""
 
+    def check(self, message: Any) -> None:
+        """Raise what :meth:`encode` would raise for ``message``, without building the frame (the
+        direct path, which carries no bytes)."""
+        self.encode(message)
+
     @abc.abstractmethod
     def expects_reply(self, request: Any) -> bool:
         """Whether ``request`` gets a reply (broadcasts and send-only frames do not)."""
@@ -151,6 +156,8 @@ class Link(Generic[M]):
         self.retries_used = 0
         self.callback_errors = 0
         self.late_discarded = 0  #: frames discarded as late replies after a failed attempt
+        #: requests go to an in-process peer as objects (no frame is built unless traced)
+        self._direct = isinstance(framing, DirectFraming)
 
     @property
     def transport(self) -> Any:
@@ -166,7 +173,11 @@ class Link(Generic[M]):
         and discards them, so a late reply never answers a later request. A write whose reply
         never came raises :class:`~joints.errors.OutcomeUnknown`: the drive may have executed it.
         """
-        frame = self.rule.encode(request)  # raises EncodeError before anything is sent
+        if self._direct and self.trace is None:  # no bytes to carry or to trace: checks only
+            self.rule.check(request)  # raises EncodeError before anything is sent
+            frame = None
+        else:
+            frame = self.rule.encode(request)  # raises EncodeError before anything is sent
         attempts = 1 + (self.policy.retries if idempotent else 0)
         with self._lock:
             last: Exception | None = None
@@ -244,6 +255,8 @@ class Link(Generic[M]):
         self._drain()
         self.transactions += 1
         if self.trace is not None:
+            if frame is None:  # tracing started after the request was checked
+                frame = rule.encode(request)
             self._record("tx", self._bytes(frame), rule.describe(request))
         rule.before_send(framing, request, frame)
         framing.write(request, frame)
