@@ -40,6 +40,7 @@ Conventions the manuals leave open (documented firmware choices):
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 from joints.devices.erob import faults
@@ -278,7 +279,7 @@ class ErobFirmware(Firmware):
         #: the working state (a row of the world's table once a world adopted it)
         self._row: Any = row
         if isinstance(row, list):
-            self._get: Any = row.__getitem__  #: column -> float
+            self._get: Callable[[int], float] = row.__getitem__  #: column -> float
             self._k: Any = K.PY_OPS  #: the kernel helpers as Python
         else:  # a numpy row: Python floats out, the helpers compiled
             self._get = row.item
@@ -465,7 +466,7 @@ class ErobFirmware(Firmware):
 
     def counts(self) -> int:
         """Actual position value: encoder counts + position offset."""
-        return int(round(self._get(K.POS))) + self.offset
+        return round(self._get(K.POS)) + self.offset
 
     # -- what the fronts call ---------------------------------------------------------------
     def frame_received(self) -> None:

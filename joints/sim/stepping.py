@@ -20,14 +20,14 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from joints.sim import erob_kernel, kernel
+from joints.sim import erob_kernel, kernel, zlac_kernel
 from joints.sim.kernel import jitable
 
 __all__ = ["CHUNK", "KINDS", "Group", "step_row", "substep"]
 
 #: kernel kinds: a twin's ``KERNEL`` name -> code in the adr table
-KINDS = {"erob": 1}
-EROB = 1
+KINDS = {"erob": 1, "zlac": 2}
+EROB, ZLAC = 1, 2
 #: columns of :attr:`Group.adr`
 KIND, QPOS, DOF, ACT, WORLD, A, B, C = range(8)
 ADR_WIDTH = 8
@@ -41,9 +41,13 @@ CHUNK = 20_000
 @jitable
 def step_row(table: Any, adr: Any, i: int, t: float, dt: float, q: float, qd: float) -> float:
     """The loops of row ``i`` (its kind's kernel) for the substep ending at ``t``: the torque."""
-    kind = adr[i][KIND]
+    a = adr[i]
+    kind = a[KIND]
     if kind == EROB:
         return erob_kernel.step(table[i], t, dt, q, qd)
+    if kind == ZLAC:  # a channel row; A: the drive's first row
+        first = a[A]
+        return zlac_kernel.step(table, first, i - first - 1, t, dt, q, qd)
     return 0.0
 
 
