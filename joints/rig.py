@@ -23,7 +23,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, TypeGuard
 
 from joints import exits, registry
 from joints.clock import Clock, MonotonicClock
@@ -80,6 +80,9 @@ class Rig:
             j.sleep = self.sleep  # a joint's waits keep the other drives fed too
         self._closed = False
         self._shut: set[str] = set()
+        self._order: list[tuple[str, Joint]] | None = None
+        self._channels: dict[str, GroupedChannel | None] = {}
+        self._sync_groups: dict[int, tuple[DriveGroup, bool]] = {}
         exits.register(self)
 
     @property
@@ -150,20 +153,34 @@ class Rig:
         wanted = set(self.joints) if names is None else {self.joints[n].name for n in names}
         out: dict[str, JointState] = {}
         groups: dict[int, tuple[Mapping[str, int], float]] = {}
-        for bus in self.buses:
-            for name, j in self.joints.items():
-                if name not in wanted or self.config.joints[name].bus != bus:
-                    continue
-                driver = j.driver
-                if not isinstance(driver, GroupedChannel):
-                    out[name] = j.state()
-                    continue
-                group: DriveGroup = driver.group
-                if id(group) not in groups:
-                    groups[id(group)] = (group.read_status(), self.clock.now())
-                block, t = groups[id(group)]
-                out[name] = j.to_si(driver.state_from(block, t))
+        for name, j in self._bus_order():
+            if name not in wanted:
+                continue
+            driver = self._grouped(name)
+            if driver is None:
+                out[name] = j.state()
+                continue
+            group: DriveGroup = driver.group
+            if id(group) not in groups:
+                groups[id(group)] = (group.read_status(), self.clock.now())
+            block, t = groups[id(group)]
+            out[name] = j.to_si(driver.state_from(block, t))
         return {name: out[name] for name in self.joints if name in out}
+
+    def _bus_order(self) -> list[tuple[str, Joint]]:
+        """The joints bus by bus (the order read_states talks to them)."""
+        order = self._order
+        if order is None:
+            order = self._order = [(name, j) for bus in self.buses for name, j in self.joints.items()
+                                   if self.config.joints[name].bus == bus]
+        return order
+
+    def _grouped(self, name: str) -> GroupedChannel | None:
+        """The joint's driver if it is a channel of a multi-channel drive (checked once per joint)."""
+        if name not in self._channels:
+            driver = self.joints[name].driver
+            self._channels[name] = driver if isinstance(driver, GroupedChannel) else None
+        return self._channels[name]
 
     def set_velocities(self, velocities: Mapping[str, float]) -> None:
         """Set several joints' velocities [rad/s] at once; every command is checked first.
@@ -177,12 +194,13 @@ class Rig:
             if name in done:
                 continue
             driver = self.joints[name].driver
-            if isinstance(driver, GroupedChannel) and isinstance(driver.group, SyncVelocityGroup):
-                group = driver.group
+            grouped = self._grouped(name)
+            if grouped is not None and self._sync(grouped.group):
+                group = grouped.group
                 members: dict[str, GroupedChannel] = {}
                 for n in checked:
-                    d = self.joints[n].driver
-                    if isinstance(d, GroupedChannel) and d.group is group:
+                    d = self._grouped(n)
+                    if d is not None and d.group is group:
                         members[n] = d
                 if {d.channel for d in members.values()} == set(group.channels):
                     group.set_channel_velocities({d.channel: checked[n] for n, d in members.items()})
@@ -190,6 +208,13 @@ class Rig:
                     continue
             driver.set_velocity(v, acceleration=acc, deceleration=acc)
             done.add(name)
+
+    def _sync(self, group: DriveGroup) -> TypeGuard[SyncVelocityGroup]:
+        """Whether a drive takes its channels' velocities in one command (checked once per drive)."""
+        known = self._sync_groups.get(id(group))
+        if known is None or known[0] is not group:
+            known = self._sync_groups[id(group)] = (group, isinstance(group, SyncVelocityGroup))
+        return known[1]
 
     def reset(self) -> None:
         """Sim: physics to the model's initial state and every emulated drive to power-on.

@@ -154,7 +154,7 @@ Firmware conventions (the manual leaves these open)
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from joints.devices.registers import Access
@@ -509,6 +509,8 @@ class ZlacFirmware(Firmware):
         ramp_reference_rpm: float | None = None,
     ) -> None:
         super().__init__(ZLAC8015D.params, values=power_on_defaults(profile, address))
+        self._batch = False  #: inside write_many
+        self._stale = False  #: settings written whose loop constants are not computed yet
         self.profile = profile
         self.ambient = float(ambient)
         self.ramp_reference = ramp_reference_rpm * RPM if ramp_reference_rpm else None
@@ -667,6 +669,7 @@ class ZlacFirmware(Firmware):
 
     # -- settings cache ----------------------------------------------------------------------
     def _cache(self) -> None:
+        self._stale = False
         v = self.values
         d = self._drow
         d[Z.D_VMAX] = max(v["maximum_motor_speed"], 1) * RPM
@@ -691,7 +694,20 @@ class ZlacFirmware(Firmware):
                 self.mode == ControlMode.ABSOLUTE_POSITION and abs(value) > ABSOLUTE_TARGET_LIMIT):
             raise ParameterRefused(Refusal.OUT_OF_RANGE, name, f"absolute target {value} outside +-0x3FFFFFFF")
 
+    def write_many(self, items: Sequence[tuple[str, int]]) -> None:
+        """As :meth:`Firmware.write_many`; loop settings written in one block are turned into loop
+        constants once, before anything that uses them (a later command of the block, a substep)."""
+        self._batch = True
+        try:
+            super().write_many(items)
+        finally:
+            self._batch = False
+            if self._stale:
+                self._cache()
+
     def on_write(self, name: str, value: int) -> None:
+        if self._stale:  # settings written earlier in this block: in force before this write acts
+            self._cache()
         if name == "control_word":
             self._command(value)
             return
@@ -742,7 +758,10 @@ class ZlacFirmware(Firmware):
                 for ch in self.channels:  # a lower cap clamps the present targets
                     ch.set_velocity_target(v[ch.reg["target_velocity"]])
             return
-        self._cache()
+        if self._batch:
+            self._stale = True
+        else:
+            self._cache()
 
     def _sides(self, value: int, *, both_for_one: bool) -> tuple[ZlacChannel, ...]:
         if value == 1:
