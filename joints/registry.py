@@ -27,6 +27,9 @@ if TYPE_CHECKING:
 LinkFactory = Callable[["BusConfig", Any, "Clock", Any], "Link[Any]"]
 #: (joint config, the bus's link, clock, objects shared by the joints of one rig) -> driver
 DriverFactory = Callable[["JointConfig", Any, "Clock", dict[Any, Any]], "JointDriver"]
+#: (a bus's link, an address) -> what the drive there said (a scan), or raises JointsError when nothing of
+#: this family answers
+Probe = Callable[[Any, int], Mapping[str, Any]]
 
 
 @dataclass(frozen=True)
@@ -65,6 +68,10 @@ class DeviceFamily:
     fronts: Mapping[str, Callable[[Any, int], Any]] = field(default_factory=dict)
     #: the communication watchdog armed while a joint is enabled [ms] unless its config says otherwise
     watchdog_ms: int | None = None
+    #: device name -> its profile's model when the config names none (one family, several devices)
+    device_models: Mapping[str, str] = field(default_factory=dict)
+    #: protocol -> how ``joints scan`` recognises this family's drive at an address
+    probes: Mapping[str, Probe] = field(default_factory=dict)
 
     @property
     def protocols(self) -> tuple[str, ...]:
@@ -77,7 +84,11 @@ class DeviceFamily:
         """The profile of a configured joint (``model`` + ``profile`` overrides); errors name the joint's key."""
         key = f"joints.{cfg.name}.model"
         try:
-            prof = self.profile(cfg.model)
+            own = self.device_models.get(cfg.device)
+            prof = self.profile(cfg.model or own)
+            if cfg.model and own and prof != self.profile(own):
+                raise ConfigError(f"model {cfg.model!r} is not a {cfg.device} (that is {own!r})", key="",
+                                  allowed=(own,))
             if cfg.profile:
                 key = f"joints.{cfg.name}.profile"
                 prof = prof.with_overrides(**dict(cfg.profile))
@@ -141,12 +152,32 @@ def _byte_loopback(device_bus: Any) -> Any:
     return LoopbackTransport(device_bus)
 
 
+def _mks_link(cfg: BusConfig, transport: Any, clock: Clock, peer: Any) -> Link[Any]:
+    from joints.link.base import RetryPolicy
+    from joints.link.mks import MksLink
+
+    return MksLink(transport, policy=RetryPolicy(timeout=cfg.timeout, retries=cfg.retries), echo=cfg.echo,
+                   clock=clock, name=cfg.name)
+
+
+def _mks_device_bus() -> Any:
+    from joints.sim.mks_front import MksDeviceBus
+
+    return MksDeviceBus()
+
+
 PROTOCOLS: dict[str, BusProtocol] = {
     "modbus-rtu": BusProtocol(
         name="modbus-rtu", medium="serial", addresses=(1, 247),
         description="Modbus RTU over RS485 (FC03/04/06/16)",
         link=_modbus_link, open_transport=_serial_transport, device_bus=_modbus_device_bus,
         sim_transport=_byte_loopback, direct=True,
+    ),
+    "mks-serial": BusProtocol(
+        name="mks-serial", medium="serial", addresses=(1, 255),
+        description="MKS SERVO42D/57D native RS485 protocol (0xFA/0xFB/0xFC, checksum-8, completion frames)",
+        link=_mks_link, open_transport=_serial_transport, device_bus=_mks_device_bus,
+        sim_transport=_byte_loopback, direct=False,  # completion frames come unasked: the byte path only
     ),
 }
 
@@ -242,6 +273,81 @@ def _zlac_modbus_front(twin: Any, address: int) -> Any:
     return ModbusFront(twin, ZLAC8015D, node_id="rs485_node_id")
 
 
+def _erob_probe(link: Any, address: int) -> Mapping[str, Any]:
+    return {"error_code": link.read_registers(address, 0x0060, 1)[0]}
+
+
+def _mks_params() -> ParamSet:
+    from joints.devices.mks.params import MKS_PARAMS
+
+    return MKS_PARAMS
+
+
+def _mks_profile(model: str | None) -> Any:
+    from joints.devices.mks.profile import DEFAULT_MODEL, profile
+
+    return profile(model or DEFAULT_MODEL)
+
+
+def _mks_native_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[Any, Any]) -> JointDriver:
+    from joints.drivers.mks_native import MksNativeDriver
+
+    return MksNativeDriver(link, cfg.address, device=cfg.device, profile=FAMILIES["mks"].config_profile(cfg),
+                           clock=clock, name=cfg.name)
+
+
+def _mks_modbus_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[Any, Any]) -> JointDriver:
+    from joints.drivers.mks_modbus import MksModbusDriver
+
+    return MksModbusDriver(link, cfg.address, device=cfg.device, profile=FAMILIES["mks"].config_profile(cfg),
+                           clock=clock, name=cfg.name)
+
+
+def _mks_native_table() -> Any:
+    from joints.devices.mks.tables import native_rows
+
+    return native_rows()
+
+
+def _mks_modbus_table() -> Any:
+    from joints.devices.mks.tables import modbus_rows
+
+    return modbus_rows()
+
+
+def _mks_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> tuple[Any, Mapping[Any, Any]]:
+    from joints.devices.mks.params import model_params
+    from joints.sim.mks import MksFirmware
+
+    d = specs[0]
+    twin = MksFirmware(d.profile, model_params(d.device), d.address, inertia=inertia[d.name],
+                       modbus=d.protocol == "modbus-rtu")
+    return twin, {None: twin}
+
+
+def _mks_native_front(twin: Any, address: int) -> Any:
+    from joints.sim.mks_front import MksNativeFront
+
+    return MksNativeFront(twin)
+
+
+def _mks_modbus_front(twin: Any, address: int) -> Any:
+    from joints.sim.mks_modbus_front import MksModbusFront
+
+    return MksModbusFront(twin)
+
+
+def _mks_native_probe(link: Any, address: int) -> Mapping[str, Any]:
+    from joints.codecs import mks
+
+    reply = link.request(mks.QueryStatus(address), idempotent=False)
+    return {"motor_status": int(reply.status)}
+
+
+def _mks_modbus_probe(link: Any, address: int) -> Mapping[str, Any]:
+    return {"motor_status": link.read_registers(address, 0x00F1, 1, input_registers=True)[0] & 0xFF}
+
+
 FAMILIES: dict[str, DeviceFamily] = {
     "erob": DeviceFamily(
         name="erob", devices=("erob",),
@@ -251,6 +357,7 @@ FAMILIES: dict[str, DeviceFamily] = {
         tables={"modbus-rtu": _erob_modbus_table},
         twin=_erob_twin, fronts={"modbus-rtu": _erob_modbus_front},
         watchdog_ms=1000,  # off at power-on (0x0002 = 0): armed while enabled, restored on disable
+        probes={"modbus-rtu": _erob_probe},
     ),
     "zlac8015d": DeviceFamily(
         name="zlac8015d", devices=("zlac8015d",),
@@ -262,11 +369,22 @@ FAMILIES: dict[str, DeviceFamily] = {
         twin=_zlac_twin, fronts={"modbus-rtu": _zlac_modbus_front},
         watchdog_ms=1000,  # the drive's own default offline time (0x2000)
     ),
+    "mks": DeviceFamily(
+        name="mks", devices=("mks-servo42d", "mks-servo57d"),
+        description="MKS SERVO42D (NEMA17) / SERVO57D (NEMA23) closed-loop stepper drives; NO communication watchdog",
+        params=_mks_params, profile=_mks_profile,
+        drivers={"mks-serial": _mks_native_driver, "modbus-rtu": _mks_modbus_driver},
+        tables={"mks-serial": _mks_native_table, "modbus-rtu": _mks_modbus_table},
+        addresses={"mks-serial": (1, 255), "modbus-rtu": (1, 247)},
+        twin=_mks_twin, fronts={"mks-serial": _mks_native_front, "modbus-rtu": _mks_modbus_front},
+        device_models={"mks-servo42d": "SERVO42D", "mks-servo57d": "SERVO57D"},
+        probes={"mks-serial": _mks_native_probe, "modbus-rtu": _mks_modbus_probe},
+    ),
 }
 
 #: the config names users may write but no entry serves yet (a clear "not yet" instead of "unknown")
-PLANNED_DEVICES = ("mks-servo42d", "mks-servo57d")
-PLANNED_PROTOCOLS = ("mks-serial", "erob-can", "canopen")
+PLANNED_DEVICES: tuple[str, ...] = ()
+PLANNED_PROTOCOLS = ("erob-can", "canopen")
 
 
 # --- queries ----------------------------------------------------------------------------------

@@ -1,8 +1,9 @@
-"""Serve a simulated world in real time: each Modbus bus becomes a pseudo-terminal.
+"""Serve a simulated world in real time: each serial bus becomes a pseudo-terminal.
 
 Rule: the world runs on the wall clock here (and only here); the emulated drives answer whatever
-arrives on a pty between physics substeps, exactly as in process. Stops cleanly on SIGINT/SIGTERM
-or when ``stop`` is set.
+arrives on a pty between physics substeps, exactly as in process, and frames they send by
+themselves (MKS completion frames: an :class:`~joints.transports.loopback.UnsolicitedPeer`) go out
+as soon as the physics produced them. Stops cleanly on SIGINT/SIGTERM or when ``stop`` is set.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import time
 from collections.abc import Callable
 from typing import Any, TextIO
 
+from joints.transports.loopback import UnsolicitedPeer
 from joints.transports.pty import PtyEndpoint
 
 IDLE_FLUSH = 0.005  #: s of silence after which a partial frame is dropped (t3.5, generously)
@@ -73,6 +75,12 @@ def serve(
             if behind >= dt:
                 # catch up, but never more than 50 ms of physics in one go (stay responsive)
                 world.step(min(int(behind / dt), max(1, int(0.05 / dt))))
+                for name, ep in endpoints.items():
+                    bus = world.buses[name]
+                    if isinstance(bus, UnsolicitedPeer):
+                        data = bus.take_unsolicited()
+                        if data:
+                            ep.write(data)
     finally:
         for ep in endpoints.values():
             ep.close()
