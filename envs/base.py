@@ -5,7 +5,8 @@ Rules:
 * The env acts ONLY through the public API - ``joint.enable / move_to / set_velocity / set_torque
   / stop / state / write``, ``rig.sleep``, ``rig.reset`` - so the same code runs on emulated and on
   real drives. Sim-only extras (seeded start state, domain randomisation, rendering, ground-truth
-  task terms) use ``rig.world`` and only when ``rig.backend == "sim"``.
+  task terms) use the rig's public sim API ``rig.sim`` (None on hardware), as gymnasium's
+  ``MujocoEnv`` exposes ``model`` and ``data`` (here too, None on hardware).
 * Fixed control period (``dt``, default 20 ms): ``step`` sends the action's commands, waits on the
   rig's clock until the next tick of a fixed schedule (sim: advances physics; hardware: the wall
   clock, absorbing the bus time), then reads every joint's state. The drive holds the command
@@ -48,7 +49,7 @@ from gymnasium import spaces
 
 import joints
 from envs.configs import config_path
-from envs.randomization import GAIN_REGISTERS, DomainRandomization
+from envs.randomization import GAINS, DomainRandomization
 from envs.render import CameraSpec, SceneRenderer
 from joints.errors import MotionTimeout
 
@@ -235,11 +236,11 @@ class JointsEnv(RigEnv):
         self.velocity_limits = np.array(vlim, dtype=np.float64)  #: (n,) rad/s
         self.torque_limits = np.array(tlim, dtype=np.float64)  #: (n,) N*m
         if self.sim:
-            steps = self.control_period / rig.world.timestep
+            steps = self.control_period / rig.sim.timestep
             if abs(steps - round(steps)) > 1e-6 or round(steps) < 1:
                 raise ValueError(
                     f"control_period {self.control_period} s must be a whole number of physics substeps "
-                    f"of {rig.world.timestep} s"
+                    f"of {rig.sim.timestep} s"
                 )
             self.substeps = round(steps)  #: physics substeps per env step (sim)
         else:
@@ -261,26 +262,7 @@ class JointsEnv(RigEnv):
         self._lo_stop = self.position_limits[:, 0] - LIMIT_MARGIN
         self._hi_stop = self.position_limits[:, 1] + LIMIT_MARGIN
 
-        # sim-only handles: nominal model parameters (domain randomisation restores them each reset)
         self._mjcf_joints = [rig.config.joints[nm].mjcf_joint or nm for nm in self.joint_names]
-        self._nominal: dict[str, np.ndarray] = {}
-        self._gains: dict[str, dict[str, int]] = {}
-        if self.sim:
-            mj, model = rig.world.mujoco, rig.world.model
-            jids = [mj.mj_name2id(model, mj.mjtObj.mjOBJ_JOINT, m) for m in self._mjcf_joints]
-            self._dofs = np.array([model.jnt_dofadr[j] for j in jids])
-            self._actuators = np.array(
-                [mj.mj_name2id(model, mj.mjtObj.mjOBJ_ACTUATOR, f"{nm}_motor") for nm in self.joint_names])
-            self._nominal = {
-                "frictionloss": model.dof_frictionloss.copy(),
-                "damping": model.dof_damping.copy(),
-                "armature": model.dof_armature.copy(),
-                "gear": model.actuator_gear.copy(),
-            }
-            if self.randomization is not None:
-                # power-on values of the gain registers (the factors apply to these)
-                self._gains = {nm: {r: j.read(r) for r in GAIN_REGISTERS}
-                               for nm, j in zip(self.joint_names, self.joints)}
 
         self._renderer: SceneRenderer | None = None
         self._twin: tuple[Any, Any, np.ndarray] | None = None  # hardware: (model, data, qpos addresses)
@@ -483,28 +465,30 @@ class JointsEnv(RigEnv):
                     gym.logger.warn(f"stopping joint {j.name} failed: {exc}")
 
     # -- sim reset --------------------------------------------------------------------------
+    @property
+    def model(self) -> Any:
+        """The MuJoCo model in sim (as gymnasium's ``MujocoEnv``); None on hardware."""
+        return self.rig.sim.model if self.sim else None
+
+    @property
+    def data(self) -> Any:
+        """The MuJoCo data in sim (as gymnasium's ``MujocoEnv``); None on hardware."""
+        return self.rig.sim.data if self.sim else None
+
     def _reset_sim(self, start: np.ndarray) -> None:
-        rig, world = self.rig, self.rig.world
+        rig = self.rig
         rig.reset()  # physics + drives to power-on; drivers forget, joints count as disabled
         self._randomize()
-        world.set_joint_positions({nm: self._to_model(i, float(q))
-                                   for i, (nm, q) in enumerate(zip(self.joint_names, start))})
-        if self.randomization_sample is not None:
-            for nm, j in zip(self.joint_names, self.joints):
-                f = self.randomization_sample["joints"][nm]
-                for reg in GAIN_REGISTERS:
-                    j.write(reg, max(1, min(65535, round(self._gains[nm][reg] * f[reg]))))
+        rig.sim.set_joint_positions({nm: self._to_model(i, float(q))
+                                     for i, (nm, q) in enumerate(zip(self.joint_names, start))})
         for j in self.joints:
             j.enable()
         rig.sleep(ENABLE_SETTLE)
         self._hold(start)
 
     def _randomize(self) -> None:
-        model = self.rig.world.model
-        model.dof_frictionloss[:] = self._nominal["frictionloss"]
-        model.dof_damping[:] = self._nominal["damping"]
-        model.dof_armature[:] = self._nominal["armature"]
-        model.actuator_gear[:] = self._nominal["gear"]
+        sim = self.rig.sim
+        sim.restore()
         self.randomization_sample = None
         self._noise = np.zeros(len(self.joints))
         self._noise_rng = None
@@ -514,11 +498,8 @@ class JointsEnv(RigEnv):
         self.randomization_sample = sample
         for i, nm in enumerate(self.joint_names):
             f = sample["joints"][nm]
-            dof, act = self._dofs[i], self._actuators[i]
-            model.dof_frictionloss[dof] = self._nominal["frictionloss"][dof] * f["friction"]
-            model.dof_damping[dof] = self._nominal["damping"][dof] * f["friction"]
-            model.dof_armature[dof] = self._nominal["armature"][dof] * f["armature"]
-            model.actuator_gear[act, 0] = self._nominal["gear"][act, 0] * f["torque_constant"]
+            sim.perturb(nm, armature=f["armature"], coulomb_friction=f["friction"], viscous_friction=f["friction"],
+                        torque_constant=f["torque_constant"], gains={g: f[field] for field, g in GAINS.items()})
             self._noise[i] = f["encoder_noise"]
         self._noise_rng = np.random.default_rng(int(self.np_random.integers(2**63)))
 
@@ -563,13 +544,10 @@ class JointsEnv(RigEnv):
     # -- rendering --------------------------------------------------------------------------
     def _scene(self) -> tuple[Any, Any]:
         if self.sim:
-            return self.rig.world.model, self.rig.world.data
+            return self.rig.sim.model, self.rig.sim.data
         import mujoco
 
-        from joints.sim.world import resolve_model
-
-        cfg = self.rig.config
-        model = mujoco.MjModel.from_xml_path(str(resolve_model(cfg.sim.model, cfg.base_dir)))
+        model = mujoco.MjModel.from_xml_path(str(self.rig.model_path()))
         data = mujoco.MjData(model)
         adr = np.array([model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, m)]
                         for m in self._mjcf_joints])

@@ -7,7 +7,7 @@ Rules (as :mod:`envs.base`):
 * The env acts only through the public API: ``joint.enable / disable / clear_faults / read /
   write / stop``, ``rig.set_velocities`` (both wheels of the drive in ONE FC16),
   ``rig.read_states`` (both wheels in ONE FC03), ``rig.sleep``, ``rig.reset``. Sim-only extras
-  (ground truth in ``info``, domain randomisation, rendering of the world) use ``rig.world`` and
+  (ground truth in ``info``, domain randomisation, rendering of the world) use ``rig.sim`` and
   only when ``rig.backend == "sim"``.
 * The pose the agent sees is an estimate from wheel odometry (measured wheel angles, the wheel
   radius and the track), so observations and rewards mean the same on hardware.
@@ -25,7 +25,6 @@ import os
 import sys
 from collections import deque
 from collections.abc import Mapping, Sequence
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +35,7 @@ from gymnasium import spaces
 import joints
 from envs import configs
 from envs.base import RigEnv
-from envs.randomization import DomainRandomization
+from envs.randomization import GAINS, DomainRandomization
 from envs.render import CameraSpec, SceneRenderer
 from joints.errors import MotionTimeout
 
@@ -52,7 +51,7 @@ TRACK = 0.40
 #: the shipped default config (``joints/configs/zlac_diffdrive.toml``)
 CONFIG_NAME = "zlac_diffdrive"
 #: domain-randomisation gain factors -> the ZLAC8015D registers they scale (per wheel: _left/_right)
-ZLAC_GAIN_REGISTERS = {"speed_loop_gain": "vl_kp", "speed_loop_integral": "vl_ki", "position_loop_gain": "pl_kp"}
+
 #: ZLAC8015D control mode 0x200D: velocity
 VELOCITY_MODE = 3
 #: s the chassis gets to settle on its wheels after a sim reset (the model starts it 1 mm up)
@@ -311,10 +310,10 @@ class DiffDriveGoalEnv(RigEnv):
         #: s of host silence after which the drive quick-stops (0x2000; its default 1000 ms)
         self.watchdog = min((w if w is not None else 1000) for w in watchdog) / 1000.0
         if self.sim:
-            steps = self.control_period / rig.world.timestep
+            steps = self.control_period / rig.sim.timestep
             if abs(steps - round(steps)) > 1e-6 or round(steps) < 1:
                 raise ValueError(f"control_period {self.control_period} s must be a whole number of physics "
-                                 f"substeps of {rig.world.timestep} s")
+                                 f"substeps of {rig.sim.timestep} s")
         self.randomization = DomainRandomization.from_arg(domain_randomization)
         if self.randomization is not None and not self.sim:
             gym.logger.warn("domain randomisation acts on the simulation only; ignored on hardware")
@@ -328,8 +327,6 @@ class DiffDriveGoalEnv(RigEnv):
 
         self._mjcf = [rig.config.joints[n].mjcf_joint or n for n in self.wheel_names]
         self._site = -1
-        self._nominal: dict[str, np.ndarray] = {}
-        self._gains: dict[str, dict[str, int]] = {}
         if self.sim:
             self._setup_sim()
 
@@ -349,21 +346,28 @@ class DiffDriveGoalEnv(RigEnv):
         self.randomization_sample: dict[str, Any] | None = None
         self.overruns = 0  #: hardware: steps whose tick had passed before the commands were sent
 
+    @property
+    def model(self) -> Any:
+        """The MuJoCo model in sim (as gymnasium's ``MujocoEnv``); None on hardware."""
+        return self.rig.sim.model if self.sim else None
+
+    @property
+    def data(self) -> Any:
+        """The MuJoCo data in sim (as gymnasium's ``MujocoEnv``); None on hardware."""
+        return self.rig.sim.data if self.sim else None
+
     def _setup_sim(self) -> None:
-        world = self.rig.world
-        mj, model = world.mujoco, world.model
+        import mujoco as mj
+
+        sim = self.rig.sim
+        model = sim.model
         self._site = mj.mj_name2id(model, mj.mjtObj.mjOBJ_SITE, "base")
         if self._site < 0:
             raise joints.ConfigError("the model has no site 'base' (the chassis reference the env reports "
                                      "as ground truth)", file=self.rig.config.source, key="sim.model")
         jids = [mj.mj_name2id(model, mj.mjtObj.mjOBJ_JOINT, m) for m in self._mjcf]
-        self._dofs = np.array([model.jnt_dofadr[j] for j in jids])
-        self._actuators = np.array([mj.mj_name2id(model, mj.mjtObj.mjOBJ_ACTUATOR, f"{n}_motor")
-                                    for n in self.wheel_names])
-        self._nominal = {"frictionloss": model.dof_frictionloss.copy(), "damping": model.dof_damping.copy(),
-                         "armature": model.dof_armature.copy(), "gear": model.actuator_gear.copy()}
         # the odometry's geometry against the model's (the axle anchors and the tyres' radius)
-        data = world.data
+        data = sim.data
         anchors = [np.array(data.xanchor[j]) for j in jids]
         track = float(np.linalg.norm(anchors[0] - anchors[1]))
         bodies = [model.jnt_bodyid[j] for j in jids]
@@ -374,13 +378,6 @@ class DiffDriveGoalEnv(RigEnv):
             gym.logger.warn(f"odometry geometry (radius {self.odometry.wheel_radius} m, track "
                             f"{self.odometry.track} m) differs from the model's (radius "
                             f"{max(radii) if radii else '?'} m, track {track:.4f} m)")
-        if self.randomization is not None:
-            # power-on values of the gain registers (the factors apply to these)
-            self._gains = {n: {reg: j.read(self._gain_register(reg, n)) for reg in ZLAC_GAIN_REGISTERS}
-                           for n, j in zip(self.wheel_names, self.wheels)}
-
-    def _gain_register(self, factor: str, wheel: str) -> str:
-        return f"{ZLAC_GAIN_REGISTERS[factor]}_{self._side(wheel)}"
 
     def _side(self, wheel: str) -> str:
         return "left" if wheel == self.wheel_names[0] else "right"
@@ -536,7 +533,7 @@ class DiffDriveGoalEnv(RigEnv):
 
     def _world_pose(self) -> np.ndarray:
         """Sim: (x, y, heading) of the chassis site ``base`` in the world frame."""
-        data = self.rig.world.data
+        data = self.rig.sim.data
         p = data.site_xpos[self._site]
         m = data.site_xmat[self._site]
         return np.array([float(p[0]), float(p[1]), math.atan2(float(m[3]), float(m[0]))])
@@ -592,26 +589,13 @@ class DiffDriveGoalEnv(RigEnv):
     # -- resets -----------------------------------------------------------------------------
     def _reset_sim(self) -> None:
         self.rig.reset()  # physics + drive to power-on; drivers forget, wheels count as disabled
-        self._randomize()
-        for j in self.wheels:
-            # the configured watchdog (the power cycle restored the register's default)
-            w = self.rig.config.joints[j.name].watchdog_ms
-            if w is not None and w != 1000:
-                j.write("communication_offline_time", w)
-        if self.randomization_sample is not None:
-            for n, j in zip(self.wheel_names, self.wheels):
-                f = self.randomization_sample["joints"][n]
-                for factor in ZLAC_GAIN_REGISTERS:
-                    j.write(self._gain_register(factor, n), max(1, min(65535, round(self._gains[n][factor] * f[factor]))))
+        self._randomize()  # (enabling arms the configured watchdog again)
         self._enable_velocity_mode()
         self.rig.sleep(SIM_SETTLE)
 
     def _randomize(self) -> None:
-        model = self.rig.world.model
-        model.dof_frictionloss[:] = self._nominal["frictionloss"]
-        model.dof_damping[:] = self._nominal["damping"]
-        model.dof_armature[:] = self._nominal["armature"]
-        model.actuator_gear[:] = self._nominal["gear"]
+        sim = self.rig.sim
+        sim.restore()
         self.randomization_sample = None
         self._noise = 0.0
         self._noise_rng = None
@@ -622,11 +606,8 @@ class DiffDriveGoalEnv(RigEnv):
         noise = []
         for i, n in enumerate(self.wheel_names):
             f = sample["joints"][n]
-            dof, act = self._dofs[i], self._actuators[i]
-            model.dof_frictionloss[dof] = self._nominal["frictionloss"][dof] * f["friction"]
-            model.dof_damping[dof] = self._nominal["damping"][dof] * f["friction"]
-            model.dof_armature[dof] = self._nominal["armature"][dof] * f["armature"]
-            model.actuator_gear[act, 0] = self._nominal["gear"][act, 0] * f["torque_constant"]
+            sim.perturb(n, armature=f["armature"], coulomb_friction=f["friction"], viscous_friction=f["friction"],
+                        torque_constant=f["torque_constant"], gains={g: f[field] for field, g in GAINS.items()})
             noise.append(f["encoder_noise"])
         self._noise = float(np.mean(noise))
         self._noise_rng = np.random.default_rng(int(self.np_random.integers(2**63)))
@@ -675,28 +656,15 @@ class DiffDriveGoalEnv(RigEnv):
 
     def _scene(self) -> tuple[Any, Any]:
         if self.sim:
-            return self.rig.world.model, self.rig.world.data
+            return self.rig.sim.model, self.rig.sim.data
         import mujoco
 
-        model = mujoco.MjModel.from_xml_path(str(self._model_path()))
+        model = mujoco.MjModel.from_xml_path(str(self.rig.model_path()))
         data = mujoco.MjData(model)
         free = next(j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE)
         wheels = [int(model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, m)]) for m in self._mjcf]
         self._twin = (model, data, int(model.jnt_qposadr[free]), wheels)
         return model, data
-
-    def _model_path(self) -> Path:
-        """The config's model file: a path (relative to the config's folder) or a model shipped in
-        ``joints.models``."""
-        cfg = self.rig.config
-        p = Path(cfg.sim.model)
-        candidates = [p] if p.is_absolute() else [(cfg.base_dir or Path.cwd()) / p]
-        candidates.append(Path(str(resources.files("joints.models") / p.name)))
-        for c in candidates:
-            if c.is_file():
-                return c
-        raise joints.ConfigError(f"model {cfg.sim.model!r} not found (rendering needs it on hardware too)",
-                                 file=cfg.source, key="sim.model")
 
     def _update_twin(self) -> None:
         """Hardware: pose the kinematic copy of the model at the estimate, wheels at their angles."""

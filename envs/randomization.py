@@ -24,11 +24,12 @@ latency                bus latency: an action takes effect     control periods  
                        this many periods later                 (integer)
 =====================  ======================================  ====================  ==============
 
-The loop gains are written through the public register API (``joint.write``) after the drives'
-power-on reset, so they act exactly as on a real drive; friction, armature and the torque
-constant change the MuJoCo model (``dof_frictionloss``, ``dof_damping``, ``dof_armature``,
-``actuator_gear``) - the drive keeps tuning its loops for the nominal inertia, as a real drive
-whose load was mis-estimated does.
+Everything goes through the rig's public sim API, ``rig.sim.perturb`` (in profile terms: armature,
+Coulomb and viscous friction, torque constant, loop gains): the loop gains are written into the
+twin's gain parameters (whatever the drive calls them: eRob 0x0030-0x0032, ZLAC Pl Kp / Vl Kp /
+Vl Ki) as a write of them would, after the drives' power-on reset; friction, armature and the
+torque constant change the MuJoCo model - the drive keeps tuning its loops for the nominal
+inertia, as a real drive whose load was mis-estimated does.
 """
 
 from __future__ import annotations
@@ -40,8 +41,8 @@ from typing import Any
 
 import numpy as np
 
-#: per-joint factors on drive registers (register name -> field)
-GAIN_REGISTERS = ("position_loop_gain", "speed_loop_gain", "speed_loop_integral")
+#: the loop-gain factors -> the drive's loop they scale (World.perturb gains, whatever the drive calls them)
+GAINS = {"position_loop_gain": "position", "speed_loop_gain": "speed", "speed_loop_integral": "integral"}
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ Rules:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import math
 import os
@@ -84,6 +85,18 @@ class Rig:
     @property
     def backend(self) -> str:
         return self.config.backend
+
+    @property
+    def sim(self) -> Any:
+        """The simulated world (:class:`joints.sim.world.World`: ``model``, ``data``, ``joint(name)``,
+        ``perturb``, ``restore``, ``set_joint_positions``, ``joint_position`` ...); None on hardware."""
+        return self.world
+
+    def model_path(self) -> Path:
+        """The MJCF file the config names (``[sim] model``), on either backend (e.g. to render a twin)."""
+        from joints.sim.world import resolve_model
+
+        return resolve_model(self.config.sim.model, self.config.base_dir)
 
     @property
     def time(self) -> float:
@@ -225,7 +238,7 @@ class Rig:
                     log.error("shutdown of joint %s failed: %s", j.name, exc)
                     errors.append(exc)
                     self._shut.add(name)  # tried: a second close() would fail the same way
-                except BaseException as exc:  # KeyboardInterrupt, a signal: finish the others first
+                except BaseException as exc:  # noqa: BLE001 - KeyboardInterrupt, a signal: finish the others first
                     log.error("shutdown of joint %s interrupted (%s); shutting the others down", j.name,
                               type(exc).__name__)
                     interrupted = interrupted or exc
@@ -342,7 +355,7 @@ def sim_world(cfg: RigConfig) -> Any:
         buses = {}
         for name, b in cfg.buses.items():
             proto = registry.protocol(b.protocol, key=f"buses.{name}.protocol")
-            buses[name] = BusSpec(name, b.protocol, proto.device_bus, proto.sim_transport)
+            buses[name] = BusSpec(name, b.protocol, functools.partial(proto.device_bus, b), proto.sim_transport)
         drives = []
         for name, j in cfg.joints.items():
             fam = registry.family(j.device, key=f"joints.{name}.device")

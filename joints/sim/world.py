@@ -18,6 +18,7 @@ has end-stop inputs (:class:`EndStops`) the motor angles where the flag reaches 
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
@@ -80,15 +81,6 @@ class Stepper(Protocol):
         ...
 
 
-@runtime_checkable
-class EndStops(Protocol):
-    """A twin with end-stop switch inputs (the world computes where they trigger from the geometry)."""
-
-    def set_end_stops(self, low: float | None, high: float | None) -> None:
-        """Motor angles [rad] at or below / at or above which the low / high switch is triggered."""
-        ...
-
-
 class TwinMaker(Protocol):
     """Builds one drive's twin and its protocol front (the registry's device families are makers)."""
 
@@ -99,6 +91,28 @@ class TwinMaker(Protocol):
 
     def front(self, protocol: str, twin: Any, address: int) -> Any:
         """The object that answers ``protocol`` frames for ``twin`` at ``address`` on a device bus."""
+        ...
+
+
+@runtime_checkable
+class EndStops(Protocol):
+    """A twin with end-stop switch inputs (the world computes where they trigger from the geometry)."""
+
+    def set_end_stops(self, low: float | None, high: float | None) -> None:
+        """Motor angles [rad] at or below / at or above which the low / high switch is triggered."""
+        ...
+
+
+@runtime_checkable
+class TimedDeviceBus(Protocol):
+    """A device bus that lives on the simulated clock (a CAN medium: frames take wire time)."""
+
+    def bind_clock(self, clock: Any) -> None:
+        """Run on the world's clock from now on."""
+        ...
+
+    def tick(self, t: float) -> None:
+        """The world finished the physics substep ending at ``t``."""
         ...
 
 
@@ -137,7 +151,28 @@ class _Bound:
     qadr: int
     dadr: int
     aid: int
+    channel: str | None = None
+    mjcf_joint: str = ""
     ratio: float = 1.0  #: motor rad per joint unit (2 pi / lead for a slide, 1 for a hinge)
+
+
+@dataclass(frozen=True)
+class SimJoint:
+    """Where one joint of the rig lives in the MuJoCo model (indices into ``model``/``data`` arrays)."""
+
+    name: str  #: the joint's name in the config
+    mjcf_joint: str  #: the MJCF joint it drives
+    qpos: int  #: index into ``data.qpos``
+    dof: int  #: index into ``data.qvel`` and the ``model.dof_*`` arrays
+    actuator: int  #: index into ``data.ctrl`` and the ``model.actuator_*`` arrays (its motor)
+
+
+class Tunable(Protocol):
+    """A twin whose loop gains can be scaled (domain randomisation): parameter names per channel."""
+
+    def gain_params(self, channel: str | None) -> Mapping[str, str]:
+        """``{"position": name, "speed": name, "integral": name}`` for the channel's loop gains."""
+        ...
 
 
 def _ratio(mj: Any, jnt: Any, d: DriveSpec) -> float:
@@ -245,11 +280,23 @@ class World:
                 fronts.add((d.bus, d.address))
             qa, da, aid = addr[d.name]
             r = ratios[d.name]
-            self._bound.append(_Bound(d.name, twin, stepper, qa, da, aid, r))
+            self._bound.append(_Bound(d.name, twin, stepper, qa, da, aid, d.channel, d.mjcf_joint, r))
             if isinstance(stepper, EndStops):
                 stepper.set_end_stops(*self._switches(d.mjcf_joint, qa, r))
             stepper.place(float(self.data.qpos[qa]) * r)
         self._bind = [(b.stepper.step, b.qadr, b.dadr, b.aid, b.ratio) for b in self._bound]
+        timed = [bus for bus in self.buses.values() if isinstance(bus, TimedDeviceBus)]
+        for bus in timed:
+            bus.bind_clock(self.clock)
+        self._ticks = [bus.tick for bus in timed]
+        self.joints: dict[str, SimJoint] = {b.name: SimJoint(b.name, b.mjcf_joint, b.qadr, b.dadr, b.aid)
+                                            for b in self._bound}
+        m = self.model
+        self._nominal = {"armature": m.dof_armature.copy(), "frictionloss": m.dof_frictionloss.copy(),
+                         "damping": m.dof_damping.copy(), "gear": m.actuator_gear[:, 0].copy()}
+        self._nominal_gains: dict[str, dict[str, int]] = {}
+        #: one caller steps the physics at a time (two threads sleeping on one rig must not share MjData)
+        self.lock = threading.RLock()
 
     def _switches(self, joint: str, qadr: int, ratio: float) -> tuple[float | None, float | None]:
         """Motor angles where the ``<joint>_switch_flag`` site reaches ``<joint>_switch_low`` / ``_high``
@@ -293,29 +340,49 @@ class World:
         return self.bus_specs[bus].transport(self.buses[bus])
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` physics substeps (drives' loops every substep)."""
-        mj_step = self.mujoco.mj_step
-        m, d = self.model, self.data
-        qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
-        dt = self.timestep
-        bind = self._bind
-        for _ in range(n):
-            t = (self.steps + 1) * dt
-            for step, qa, da, aid, r in bind:
-                ctrl[aid] = step(t, dt, float(qpos[qa]) * r, float(qvel[da]) * r)
-            mj_step(m, d)
-            self.steps += 1
-        self._target = max(self._target, self.time)
-        self.clock.set(self.time)
+        """Advance ``n`` physics substeps (drives' loops every substep), one caller at a time.
+
+        Timed device buses (a CAN medium) are ticked after every substep, with the clock at its end.
+        """
+        with self.lock:
+            mj_step = self.mujoco.mj_step
+            m, d = self.model, self.data
+            qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
+            dt = self.timestep
+            bind = self._bind
+            ticks = self._ticks
+            try:
+                for _ in range(n):
+                    t = (self.steps + 1) * dt
+                    for step, qa, da, aid, r in bind:
+                        ctrl[aid] = step(t, dt, float(qpos[qa]) * r, float(qvel[da]) * r)
+                    mj_step(m, d)
+                    self.steps += 1
+                    if ticks:
+                        self.clock.set(t)
+                        for tick in ticks:
+                            tick(t)
+            finally:  # an interrupted step leaves the clock where the physics is
+                self._target = max(self._target, self.time)
+                self.clock.set(self.time)
 
     def advance(self, seconds: float) -> None:
-        """Advance simulated time by ``seconds`` (rounded up to whole substeps, no drift)."""
+        """Advance simulated time by ``seconds`` (rounded up to whole substeps, no drift).
+
+        Interrupted (KeyboardInterrupt, a signal), the world stops where it got to: the next
+        advance starts from there, never from the interrupted target.
+        """
         if seconds <= 0:
             return
-        self._target += seconds
-        n = math.ceil((self._target - self.time) / self.timestep - 1e-9)
-        if n > 0:
-            self.step(n)
+        with self.lock:
+            self._target += seconds
+            n = math.ceil((self._target - self.time) / self.timestep - 1e-9)
+            try:
+                if n > 0:
+                    self.step(n)
+            except BaseException:
+                self._target = self.time
+                raise
 
     def _emulators(self) -> list[Any]:
         seen: dict[int, Any] = {}
@@ -372,6 +439,62 @@ class World:
             if b.name == name:
                 return float(self.data.qvel[b.dadr])
         raise KeyError(name)
+
+    # -- the public sim API (envs and tests use only this) ----------------------------------------
+    def joint(self, name: str) -> SimJoint:
+        """Where joint ``name`` of the rig lives in the model."""
+        try:
+            return self.joints[name]
+        except KeyError:
+            raise KeyError(f"no simulated joint {name!r} (have {sorted(self.joints)})") from None
+
+    def perturb(self, name: str, *, armature: float = 1.0, coulomb_friction: float = 1.0,
+                viscous_friction: float = 1.0, torque_constant: float = 1.0,
+                gains: Mapping[str, float] | None = None) -> None:
+        """Scale one joint's physics and its drive's loop gains by factors of their nominal values.
+
+        ``armature`` (reflected rotor inertia), ``coulomb_friction`` (MuJoCo frictionloss),
+        ``viscous_friction`` (damping) and ``torque_constant`` (the motor's true torque per ampere;
+        the drive still converts with the nominal constant, as a real drive whose constant is off
+        does) change the model; ``gains`` (``"position"``, ``"speed"``, ``"integral"``) scale the
+        twin's loop-gain parameters as a write of them would. Factors act on the nominal values,
+        so calls do not compound; :meth:`restore` undoes every perturbation.
+        """
+        j = self.joint(name)
+        m, nom = self.model, self._nominal
+        for what, f in (("armature", armature), ("coulomb_friction", coulomb_friction),
+                        ("viscous_friction", viscous_friction), ("torque_constant", torque_constant)):
+            if isinstance(f, bool) or not isinstance(f, (int, float)) or not math.isfinite(f) or f <= 0:
+                raise ValueError(f"perturb {name}: {what} must be a factor > 0, got {f!r}")
+        m.dof_armature[j.dof] = nom["armature"][j.dof] * armature
+        m.dof_frictionloss[j.dof] = nom["frictionloss"][j.dof] * coulomb_friction
+        m.dof_damping[j.dof] = nom["damping"][j.dof] * viscous_friction
+        m.actuator_gear[j.actuator, 0] = nom["gear"][j.actuator] * torque_constant
+        if gains:
+            b = next(b for b in self._bound if b.name == name)
+            names = b.emulator.gain_params(b.channel)
+            nominal = self._nominal_gains.setdefault(name, {k: b.emulator.get(v) for k, v in names.items()})
+            writes = []
+            for k, f in gains.items():
+                if k not in names:
+                    raise ValueError(f"perturb {name}: unknown gain {k!r} (allowed: {sorted(names)})")
+                p = b.emulator.params[names[k]]
+                lo, hi = p.type_range
+                writes.append((names[k], max(max(lo, 1), min(hi, round(nominal[k] * f)))))
+            b.emulator.write_many(writes)
+
+    def restore(self) -> None:
+        """Every joint's physics and loop gains back to their nominal values."""
+        m, nom = self.model, self._nominal
+        m.dof_armature[:] = nom["armature"]
+        m.dof_frictionloss[:] = nom["frictionloss"]
+        m.dof_damping[:] = nom["damping"]
+        m.actuator_gear[:, 0] = nom["gear"]
+        for name, gains in self._nominal_gains.items():
+            b = next(b for b in self._bound if b.name == name)
+            names = b.emulator.gain_params(b.channel)
+            b.emulator.write_many([(names[k], v) for k, v in gains.items()])
+        self._nominal_gains.clear()
 
     def close(self) -> None:
         """Nothing to release for an in-process world (kept for symmetry with served worlds)."""

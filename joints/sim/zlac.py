@@ -610,6 +610,11 @@ class ZlacFirmware(Firmware):
         self.ignored.clear()
         self._power_on()
 
+    def gain_params(self, channel: str | None) -> dict[str, str]:
+        """A channel's loop-gain parameters (for domain randomisation: joints.sim.world.World.perturb)."""
+        side = channel or "left"
+        return {"position": f"pl_kp_{side}", "speed": f"vl_kp_{side}", "integral": f"vl_ki_{side}"}
+
     def channel(self, name: str) -> ZlacChannel:
         """The ``"left"`` or ``"right"`` channel."""
         if name == "left":

@@ -317,10 +317,9 @@ def test_domain_randomisation_scales_drive_gains_and_wheel_physics() -> None:
         f = s["joints"]["left_wheel"]
         assert env.wheels[0].read("vl_kp_left") == round(500 * f["speed_loop_gain"])
         assert env.wheels[0].read("vl_ki_left") == round(100 * f["speed_loop_integral"])
-        dof = env._dofs[0]
-        assert model.dof_frictionloss[dof] == pytest.approx(nominal[0][dof] * f["friction"])
-        assert model.actuator_gear[env._actuators[0], 0] == pytest.approx(nominal[1][env._actuators[0]]
-                                                                          * f["torque_constant"])
+        j = env.rig.sim.joint("left_wheel")
+        assert model.dof_frictionloss[j.dof] == pytest.approx(nominal[0][j.dof] * f["friction"])
+        assert model.actuator_gear[j.actuator, 0] == pytest.approx(nominal[1][j.actuator] * f["torque_constant"])
         _, info1 = env.reset(seed=1)
         assert info1["randomization"] == s
     finally:

@@ -1,5 +1,5 @@
-"""envs/ sits on top of DESIGN.md section 3: it imports the public joints API only (the package, its
-exceptions) - plus the model-file lookup that the hardware backend's rendering twin needs."""
+"""envs/ sits on top of DESIGN.md section 3: it imports the public joints API only (the package and
+its exceptions) and uses the rig's public sim API (``rig.sim``), nothing private."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import ast
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-ALLOWED = {"joints", "joints.errors", "joints.sim.world"}
+ALLOWED = {"joints", "joints.errors"}
 
 
 def test_envs_import_only_the_public_joints_api() -> None:
@@ -24,7 +24,18 @@ def test_envs_import_only_the_public_joints_api() -> None:
                     found.setdefault(n, set()).add(path.name)
     assert found, "envs should use joints"
     assert set(found) <= ALLOWED, {k: v for k, v in found.items() if k not in ALLOWED}
-    assert found.get("joints.sim.world", set()) <= {"base.py"}
+
+
+def test_envs_touch_nothing_private_of_joints() -> None:
+    """No ``._name`` attribute of a joints object (the rig, a joint, the sim world, a driver)."""
+    offenders = []
+    for path in sorted((ROOT / "envs").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__"):
+                base = ast.unparse(node.value)
+                if base != "self" and not base.startswith("self._") and not base.startswith("type("):
+                    offenders.append(f"{path.name}:{node.lineno}: {base}.{node.attr}")
+    assert not offenders, offenders
 
 
 def test_joints_never_imports_envs() -> None:
