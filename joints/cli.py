@@ -51,7 +51,8 @@ def _key(text: str) -> str | int:
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
-    """Find drives on a bus: every address of the range that answers a read of ``error_code``.
+    """Find drives on a bus: every address of the range that answers a read of the family's status
+    (``error_code``; the MKS: ``motor_status``).
 
     The bus is a serial port (``--port``), a CAN channel (``--interface``/``--channel``) or a bus
     of a config (``--config``/``--bus``; twins in sim). Drives that report what they are (eRob
@@ -95,7 +96,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
             jcfg = JointConfig(name=f"{args.device}@{addr}", device=args.device, bus=cfg.name, address=addr)
             driver = fam.driver(jcfg, link, clock, {}, cfg.protocol)
             try:
-                record: dict[str, object] = {"address": addr, "error_code": driver.read("error_code")}
+                record: dict[str, object] = {"address": addr, fam.scan_param: driver.read(fam.scan_param)}
             except JointsError:
                 continue
             if isinstance(driver, Identity):

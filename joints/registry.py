@@ -27,9 +27,6 @@ if TYPE_CHECKING:
 LinkFactory = Callable[["BusConfig", Any, "Clock", Any], "Link[Any]"]
 #: (joint config, the bus's link, clock, objects shared by the joints of one rig) -> driver
 DriverFactory = Callable[["JointConfig", Any, "Clock", dict[Any, Any]], "JointDriver"]
-#: (a bus's link, an address) -> what the drive there said (a scan), or raises JointsError when nothing of
-#: this family answers
-Probe = Callable[[Any, int], Mapping[str, Any]]
 
 
 @dataclass(frozen=True)
@@ -70,8 +67,8 @@ class DeviceFamily:
     watchdog_ms: int | None = None
     #: device name -> its profile's model when the config names none (one family, several devices)
     device_models: Mapping[str, str] = field(default_factory=dict)
-    #: protocol -> how ``joints scan`` recognises this family's drive at an address
-    probes: Mapping[str, Probe] = field(default_factory=dict)
+    #: the status parameter ``joints scan`` reads to find a drive (every protocol of the family reaches it)
+    scan_param: str = "error_code"
 
     @property
     def protocols(self) -> tuple[str, ...]:
@@ -336,10 +333,6 @@ def _zlac_modbus_front(twin: Any, address: int) -> Any:
     return ModbusFront(twin, ZLAC8015D, node_id="rs485_node_id")
 
 
-def _erob_probe(link: Any, address: int) -> Mapping[str, Any]:
-    return {"error_code": link.read_registers(address, 0x0060, 1)[0]}
-
-
 def _mks_params() -> ParamSet:
     from joints.devices.mks.params import MKS_PARAMS
 
@@ -400,17 +393,6 @@ def _mks_modbus_front(twin: Any, address: int) -> Any:
     return MksModbusFront(twin)
 
 
-def _mks_native_probe(link: Any, address: int) -> Mapping[str, Any]:
-    from joints.codecs import mks
-
-    reply = link.request(mks.QueryStatus(address), idempotent=False)
-    return {"motor_status": int(reply.status)}
-
-
-def _mks_modbus_probe(link: Any, address: int) -> Mapping[str, Any]:
-    return {"motor_status": link.read_registers(address, 0x00F1, 1, input_registers=True)[0] & 0xFF}
-
-
 FAMILIES: dict[str, DeviceFamily] = {
     "erob": DeviceFamily(
         name="erob", devices=("erob",),
@@ -420,7 +402,6 @@ FAMILIES: dict[str, DeviceFamily] = {
         tables={"modbus-rtu": _erob_modbus_table, "erob-can": _erob_can_table},
         twin=_erob_twin, fronts={"modbus-rtu": _erob_modbus_front, "erob-can": _erob_can_front},
         watchdog_ms=1000,  # off at power-on (0x0002 = 0): armed while enabled, restored on disable
-        probes={"modbus-rtu": _erob_probe},
     ),
     "zlac8015d": DeviceFamily(
         name="zlac8015d", devices=("zlac8015d",),
@@ -441,7 +422,7 @@ FAMILIES: dict[str, DeviceFamily] = {
         addresses={"mks-serial": (1, 255), "modbus-rtu": (1, 247)},
         twin=_mks_twin, fronts={"mks-serial": _mks_native_front, "modbus-rtu": _mks_modbus_front},
         device_models={"mks-servo42d": "SERVO42D", "mks-servo57d": "SERVO57D"},
-        probes={"mks-serial": _mks_native_probe, "modbus-rtu": _mks_modbus_probe},
+        scan_param="motor_status",  # 0xF1: the MKS reports no error code
     ),
 }
 

@@ -141,6 +141,8 @@ class MksDriver(JointDriver):
         self._last_acc = 0
         self._last_rpm = 0.0
         self._sent_at = -math.inf
+        self._sent_count = 0  #: completion frames received when the last run command went out
+        self.completions = 0  #: completion frames received (active mode, native protocol)
 
     # -- parameter primitives ----------------------------------------------------------------
     @property
@@ -173,6 +175,7 @@ class MksDriver(JointDriver):
             speed = self.image.get(RUN_GROUPS[mode][0], 0)
             self._running = mode if speed else None
             self._sent_at = self.clock.now()
+            self._sent_count = self.completions
 
     def _set(self, name: str, value: int) -> None:
         """Write a setting unless this host already wrote that value."""
@@ -448,6 +451,7 @@ class MksDriver(JointDriver):
     def go_home(self) -> None:
         """0x91 go home (limit switch, or 'noLimit' per 0x94); the end comes as a completion / status 1."""
         self.write_param("go_home", 1, idempotent=False)
+        self._sent_count = self.completions
         self._running = "home"
         self._sent_at = self.clock.now()
 

@@ -166,11 +166,11 @@ class MksNativeDriver(MksDriver):
 
     @property
     def motion_complete(self) -> bool:
-        """A completion frame arrived for the motion this host started last (active mode)."""
-        return self.completion_time >= self._sent_at
+        """A completion frame arrived after the motion this host started last (active mode)."""
+        return self.completions > self._sent_count
 
     def completed_since(self, since: float) -> bool:
-        return self.completion_time >= since
+        return self.completions > self._sent_count
 
     def prepare(self) -> None:
         """SR work mode, subdivision, and respond on + active as configured (0x8C)."""
@@ -258,6 +258,7 @@ class MksNativeDriver(MksDriver):
         speed = full[RUN_GROUPS[mode][0]]
         self._running = mode if speed else None
         self._sent_at = self.clock.now()
+        self._sent_count = self.completions
 
     def broadcast(self, request: Any, drivers: Sequence[MksNativeDriver] = ()) -> None:
         """Send ``request`` to address 0: every drive executes it, none answers; ``drivers`` note it."""

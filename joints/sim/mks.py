@@ -300,6 +300,7 @@ class MksFirmware(Firmware):
 
     def _work_mode(self, values: Mapping[str, int], answered: bool) -> int:
         self._end(st.RunEvent.STOP_NOW, quiet=True)
+        self._hold()  # the new mode starts from where the shaft is
         return int(_SET.SUCCESS)
 
     def _enable(self, values: Mapping[str, int], answered: bool) -> int:
