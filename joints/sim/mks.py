@@ -52,8 +52,9 @@ The model
       reboots, the encoder then needs calibrating (0x80) before motion; 0x41 reboots.
 
 Choices where the manual is silent (documented here, see also :mod:`joints.devices.mks.state`)
-    * The drive is enabled at power-on (the Part 7 examples run without 0xF3); motion and 0xF3 need
-      a serial work mode and a calibrated encoder; a run command while disabled fails (status 0).
+    * The drive is enabled at power-on (the Part 7 examples run without 0xF3); motion and 0xF3 enable
+      need a serial work mode (0xF3 disable always works) and a calibrated encoder; a run command
+      while disabled fails (status 0).
     * A stop command with any run code (speed 0) stops whatever motion runs.
     * In speed mode the reference is held at most :data:`SPEED_MODE_LEAD` ahead of a rotor that
       cannot follow (the protection, when on, still sees the error grow beyond 180 degrees).
@@ -304,10 +305,10 @@ class MksFirmware(Firmware):
         return int(_SET.SUCCESS)
 
     def _enable(self, values: Mapping[str, int], answered: bool) -> int:
-        if not self.mode.serial:
+        on = bool(values["motor_enable"])
+        if on and not self.mode.serial:  # the pulse interface's En pin rules there; releasing always works
             self.values["motor_enable"] = int(self.enabled)
             return int(_SET.FAIL)
-        on = bool(values["motor_enable"])
         if on and not self.enabled:
             self.enabled = True
             self._hold()
@@ -362,13 +363,13 @@ class MksFirmware(Firmware):
     def _run_command(self, values: Mapping[str, int], answered: bool) -> int:
         code = self._code_of(values)
         v = self.values
-        if not self._can_run():
-            return self._refuse()
         prefix = _PREFIX[code]
         acc = v[f"{prefix}_acc"]
         speed = v[f"{prefix}_speed"]
-        if speed == 0:  # a stop: decelerating with acc, at once with acc 0
+        if speed == 0:  # a stop: decelerating with acc, at once with acc 0 (always accepted)
             return self._stop(acc, code, answered)
+        if not self._can_run():
+            return self._refuse()
         goal = self._clamp_value(speed)
         if code == Command.SPEED_MODE:
             self._start(_Motion("speed", code, answered, goal=goal, acc=acc,
