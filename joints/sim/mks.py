@@ -15,7 +15,9 @@ The model
       once), converted to motor rpm by the subdivision (6.1) and clamped to the work mode's maximum
       (OPEN 400, CLOSE 1500, vFOC 3000 rpm). Position moves decelerate in time to end exactly on
       their target (pulses: a whole number of microsteps; axis: a whole encoder count); below the
-      last speed step they creep at 1 rpm.
+      last speed step they creep at 1 rpm. In closed modes a move is complete (status 2, 0xF1
+      stop) once the shaft is within :data:`IN_POSITION` of the target and at rest, or
+      :data:`SETTLE_TIMEOUT` after the reference got there.
     * Motor: the torque available is the profile's stepper curve, ``min(Kt x I, holding torque)``
       falling linearly to zero at the back-EMF speed (:meth:`~joints.devices.mks.profile.MksProfile.available_torque`)
       with I the working current (0x83; in OPEN and CLOSE modes at standstill the holding
@@ -90,6 +92,9 @@ SERVO_BANDWIDTH = 600.0  #: rad/s, closed-loop position servo
 SERVO_DAMPING = 1.0
 SPEED_MODE_LEAD = TAU  #: rad: how far the speed-mode reference may run ahead of the rotor
 HOME_STALL = 0.25  #: rad of error that counts as "blocked" in 'noLimit' homing
+IN_POSITION = 1.5 * TAU / COUNTS  #: rad: a closed-loop move is complete once the shaft is this close ...
+IN_POSITION_SPEED = 0.5 * RPM  #: ... and this slow (rad/s),
+SETTLE_TIMEOUT = 0.3  #: s - or this long after its reference arrived (a load may hold it off)
 CALIBRATION_TIME = 2.0  #: s
 FLASH_TIME = 0.01  #: s from a save/clean reply to its completion
 ZERO_MODE_RPM = (15, 30, 60, 120, 240)  #: 0_Speed 0 (slowest) .. 4 (fastest)
@@ -126,6 +131,7 @@ class _Motion:
     target: float = 0.0  #: rad (moves)
     stopping: bool = False
     phase: str = ""  #: homing: "leave" | "seek" | "back"
+    arrived: float = -1.0  #: when the reference reached the target (the rotor settles into the window)
 
 
 class MksFirmware(Firmware):
@@ -503,6 +509,8 @@ class MksFirmware(Firmware):
             return st.MotorStatus.STOP
         if m.kind == "home":
             return st.MotorStatus.HOMING
+        if m.arrived >= 0:
+            return st.MotorStatus.SPEED_DOWN  # settling on the target
         if self.speed == self.ramp_goal == 0:
             return st.MotorStatus.SPEED_UP  # about to start
         return st.motor_status(self.speed, self.ramp_goal)
@@ -588,8 +596,13 @@ class MksFirmware(Firmware):
             if self.speed == 0:
                 self._end(st.RunEvent.ARRIVED)
             return
-        if not self._advance(m, dt):
-            return
+        if m.arrived < 0:
+            if not self._advance(m, dt):
+                return
+            m.arrived = self.time
+        if (self.mode.closed_loop and self.time - m.arrived < SETTLE_TIMEOUT
+                and (abs(self.r - self.q) > IN_POSITION or abs(self.qd) > IN_POSITION_SPEED)):
+            return  # the reference is there; the shaft settles into the window
         if m.kind == "zero":
             self.zero_status = int(st.GoBackToZeroStatus.SUCCESS)
             self.motion = None
