@@ -12,7 +12,10 @@ do (manual Part 4, 5.2 #13 and #16, 5.7):
 * respond off (0x8C): a drive executes its run commands silently, queries still answer;
 * completion frames (status 2/3 of run commands and go home with active on; calibrate's 1/2; save/clean's
   2) are queued on the simulated clock and taken with :meth:`MksDeviceBus.take_unsolicited` - the
-  in-process transport and ``joints sim serve`` deliver them unasked. A command that reached the
+  in-process transport and ``joints sim serve`` deliver them unasked - or, with their times, with
+  :meth:`MksDeviceBus.take_frames` (the timed serial line). The bus lives on the world's clock
+  (a :class:`~joints.sim.world.TimedDeviceBus`): what listens with :meth:`MksDeviceBus.on_tick`
+  (a timed line) runs after every physics substep. A command that reached the
   drive by broadcast, group or long packet sends no completion either ("slave does not answer").
 
 A value the firmware refuses (unknown, out of range) is answered with status 0, as the drive's
@@ -134,11 +137,26 @@ class MksDeviceBus:
         self._codec = mks.MksCodec(mks.Role.DEVICE)
         self.trace = trace
         self.frame_errors = 0
+        self.clock: Any = None
+        self._listeners: list[Callable[[float], None]] = []
 
     def add(self, front: MksNativeFront) -> None:
         if any(f.address == front.address for f in self.fronts):
             raise ValueError(f"two emulated MKS drives at address {front.address}")
         self.fronts.append(front)
+
+    # -- the world's clock (joints.sim.world.TimedDeviceBus) -----------------------------------------
+    def bind_clock(self, clock: Any) -> None:
+        self.clock = clock
+
+    def tick(self, t: float) -> None:
+        """The world finished the substep ending at ``t``: whatever listens (a timed line) runs up to it."""
+        for listener in self._listeners:
+            listener(t)
+
+    def on_tick(self, callback: Callable[[float], None]) -> None:
+        """Call ``callback(t)`` after every physics substep."""
+        self._listeners.append(callback)
 
     @property
     def time(self) -> float:
@@ -148,7 +166,8 @@ class MksDeviceBus:
     def receive(self, data: bytes) -> bytes:
         """Feed received bytes; return the bytes the addressed drives send back."""
         codec = self._codec
-        codec.feed(data)
+        if data:  # feeding nothing would undo a flush (silence)
+            codec.feed(data)
         out = bytearray()
         while True:
             try:

@@ -303,7 +303,8 @@ class ModbusDeviceBus:
     def receive(self, data: bytes) -> bytes:
         """Feed received bytes; return the bytes the addressed slaves send back."""
         codec = self._codec
-        codec.feed(data)
+        if data:  # feeding nothing would undo a flush (silence)
+            codec.feed(data)
         out = bytearray()
         while True:
             try:

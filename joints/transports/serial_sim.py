@@ -16,7 +16,10 @@ Time model:
   frame overlap in time BOTH arrive corrupted (every byte inverted - the receivers' codecs see
   garbage and checksum errors), and :attr:`TimedSerialLine.collisions` counts it;
 * ``read(timeout)`` waits on the clock - waiting IS letting simulated time pass - and returns as
-  soon as a frame has arrived (at the latest when the time is up).
+  soon as a frame has arrived (at the latest when the time is up);
+* a device side that ticks with the world (:class:`Ticking`, e.g. the MKS device bus) lets the line
+  run after every physics substep, so frames arrive on time while the host does something else (a
+  broadcast is executed while the host sleeps); otherwise the line runs at the host's reads and writes.
 
 :attr:`TimedSerialLine.log` keeps every transmission (time, side, bytes, corrupted): the wire trace.
 """
@@ -24,13 +27,14 @@ Time model:
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 from joints.errors import TransportError
 from joints.transports.base import ByteTransport
 
-__all__ = ["LinePeer", "TimedFrames", "TimedSerialLine", "Transmission"]
+__all__ = ["LinePeer", "Ticking", "TimedFrames", "TimedSerialLine", "Transmission"]
 
 #: s the line waits at most in one step while nothing is on it (frames a device sends by itself are
 #: picked up at least this often)
@@ -58,6 +62,13 @@ class TimedFrames(Protocol):
     def take_frames(self, now: float | None = None) -> list[tuple[float, bytes]]:
         """Frames sent by ``now``: (time the first character went out, bytes), oldest first."""
         ...
+
+
+@runtime_checkable
+class Ticking(Protocol):
+    """A device side that runs on the simulated clock and calls back after every physics substep."""
+
+    def on_tick(self, callback: Callable[[float], None]) -> None: ...
 
 
 @dataclass
@@ -99,6 +110,12 @@ class TimedSerialLine(ByteTransport):
         self._rx = bytearray()
         self._free = {"host": -math.inf, "device": -math.inf}  #: when each side's UART is free again
         self._closed = False
+        if isinstance(peer, Ticking):
+            peer.on_tick(self._tick)
+
+    def _tick(self, t: float) -> None:
+        if not self._closed:
+            self._run(t)
 
     @property
     def name(self) -> str:
