@@ -240,3 +240,16 @@ def test_modbus_reads_and_native_only_parameters() -> None:
     assert len(drive.frames) == n
     driver.set_velocity(-320, acceleration=None)  # 8.3.3: dir, acc, speed in two registers
     assert drive.frames[-1][:11] == bytes.fromhex("01 10 00 F6 00 02 04 01 EC 01 40")
+
+
+def test_the_torque_limit_becomes_the_working_current_while_enabled() -> None:
+    from joints.joint import Limits
+
+    driver, drive = native()
+    joint = Joint("axis", driver, clock=driver.clock, limits=Limits(torque=0.3))
+    drive.hook = lambda m: (mks.encode(mks.ProtectionStateReply(1, False)) if isinstance(m, mks.ReadProtectionState)
+                            else mks.encode(mks.EnPinReply(1, True)) if isinstance(m, mks.ReadEnPin)
+                            else mks.encode(mks.SpeedReply(1, 0)) if isinstance(m, mks.ReadSpeed) else None)
+    joint.enable()
+    assert mks.SetWorkingCurrent(ADDRESS, round(0.3 / driver.profile.torque_constant * 1000)) in drive.requests
+    assert driver.written("working_current") == 1017

@@ -159,3 +159,15 @@ def test_servo57d_axis_variant() -> None:
         rig.sleep(0.3)  # "run complete" is the drive's reference; the heavier carriage settles after it
         assert rig.world.joint_position("carriage") == pytest.approx(0.02, abs=2e-6)
         assert fw.io_status() & 0b110 == 0b110  # IN_2 idle high, OUT_1 = 1 (not protected) on the 57D
+
+
+def test_the_device_picks_the_profile_and_a_contradicting_model_is_refused() -> None:
+    cfg = axis_config(device="mks-servo57d", model="mks_linear_axis_57d.xml")
+    cfg["joints"]["carriage"]["model"] = "SERVO42D"
+    with pytest.raises(ConfigError, match="not a mks-servo57d"):
+        joints.open(cfg)
+    cfg["joints"]["carriage"]["model"] = "servo57d"
+    cfg["joints"]["carriage"]["profile"] = {"holding_torque": 2.5}
+    with joints.open(cfg) as rig:
+        assert rig.joints["carriage"].driver.profile.holding_torque == 2.5
+        assert rig.world.drives["carriage"].profile.holding_torque == 2.5
