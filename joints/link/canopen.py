@@ -186,6 +186,8 @@ class CanopenLink(Link[Any]):
         self.monitors: dict[int, NodeMonitor] = {}
         self._clients: dict[int, co.SdoClient] = {}
         self.sdo_transfers = 0
+        #: the bus's SYNC period from its config (s; None: the joints' or the default 1 ms)
+        self.sync_period: float | None = None
         self.subscribe(lambda m: isinstance(m, (co.Heartbeat, co.BootUp)), self._error_control)
 
     # -- SDO ------------------------------------------------------------------------------------

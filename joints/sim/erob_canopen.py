@@ -825,7 +825,7 @@ def object_dictionary(node: int = 1) -> Any:
         var.default = default + node if obj.node_relative else default
         if obj.node_relative:  # a COB-ID: written as $NODEID+base, as CiA 306 allows
             var.relative = True
-            var.default_raw = f"$NODEID+0x{default:X}"
+            setattr(var, "default_raw", f"$NODEID+0x{default:X}")  # noqa: B010 - what the EDS writer reads
         var.value = var.default
         p = EROB_PARAMS[name]
         if p.unit and not obj.unit:
