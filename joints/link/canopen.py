@@ -265,6 +265,7 @@ class CanopenLink(Link[Any]):
     def guard(self, node: int, timeout: float) -> None:
         """Send a node-guarding request; the reply must come within ``timeout`` s (checked by :meth:`lost`)."""
         m = self.monitor(node)
+        self.poll(0.0)
         if m.guard_sent is not None:  # the last request is still unanswered: its timeout decides
             m.check(self.clock.now())
             return
@@ -278,7 +279,8 @@ class CanopenLink(Link[Any]):
         m.guard_timeout = 0.0
 
     def lost(self, node: int) -> str | None:
-        """Why ``node`` counts as lost at the clock's present time (None: alive)."""
+        """Why ``node`` counts as lost at the clock's present time (None: alive); reads what arrived first."""
+        self.poll(0.0)
         m = self.monitors.get(node)
         return None if m is None else m.check(self.clock.now())
 
