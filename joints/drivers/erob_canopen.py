@@ -157,6 +157,8 @@ class SyncCycle:
         self.cycles = 0
         self.late = 0  #: TPDOs that missed their cycle
         self.next_due: float | None = None
+        self._grid = 0.0
+        self._n = 0
         self.sync_time = 0.0
         self.drivers: list[ErobCanopenDriver] = []
         self._expect: list[ErobCanopenDriver] = []
@@ -164,17 +166,20 @@ class SyncCycle:
     def send(self, targets: Mapping[ErobCanopenDriver, int]) -> None:
         clock = self.link.clock
         now = clock.now()
-        if self.next_due is None or now > self.next_due + self.period:
-            self.next_due = now  # first cycle, or the caller fell behind: restart the grid
-        elif now < self.next_due:
+        eps = 1e-9
+        if self.next_due is None or now > self.next_due + self.period + eps:
+            self._grid, self._n = now, 0  # first cycle, or the caller fell behind: restart the grid
+        elif now < self.next_due - eps:
             clock.sleep(self.next_due - now)
+        self._n += 1
+        due = self._grid + self._n * self.period  # on a grid: no drift
         self.link.poll(0.0)  # TPDOs of earlier cycles still arriving: delivered as such
         for driver, target in targets.items():
             driver.cycle_send(target)
         self.link.sync()
         self.sync_time = clock.now()
         self.cycles += 1
-        self.next_due += self.period
+        self.next_due = due
         self._expect = list(targets)
 
     def collect(self) -> dict[ErobCanopenDriver, RawState]:
@@ -183,9 +188,10 @@ class SyncCycle:
         waiting = {d.tpdo1_cob: d for d in self._expect if d.status_cycle < cycle}
         deadline = self.next_due if self.next_due is not None else link.clock.now()
         while waiting:
+            # past the deadline only what has arrived by now is taken (in sim: by the end of the physics
+            # step that reached the deadline - the lockstep's granularity)
             left = deadline - link.clock.now()
-            if left <= 0:
-                break
+            left = left if left > 1e-9 else 0.0
             try:
                 msg = link.wait_for(lambda m: isinstance(m, co.Pdo) and m.cob_id in waiting, left)
             except ReplyTimeout:
@@ -499,7 +505,13 @@ class ErobCanopenDriver(ErobDriver):
             if self.clock.now() >= deadline:
                 raise StateError(f"{self.name}: the drive did not reach {want.value} within {timeout} s "
                                  f"(it reports {st.value}, statusword 0x{self.statusword:04X})")
-            self.clock.sleep(POLL)
+            self._pause()
+
+    def _pause(self) -> None:
+        """Wait a moment; the other nodes of the bus stay guarded meanwhile (their life guarding)."""
+        for d in self.group.drivers:
+            d._keepalive()
+        self.clock.sleep(POLL)
 
     def _hold_target(self) -> int:
         """The target that keeps the joint where it is in the present mode."""
@@ -572,7 +584,7 @@ class ErobCanopenDriver(ErobDriver):
                 self._control(base, target)
                 raise StateError(f"{self.name}: the drive did not acknowledge the set-point (statusword "
                                  f"0x{self.statusword:04X})")
-            self.clock.sleep(POLL)
+            self._pause()
         self._control(base, target)
 
     def move_continuous(self, speed: int, *, acceleration: int | None = None, deceleration: int | None = None) -> None:
