@@ -664,7 +664,8 @@ class ErobCanopenDriver(ErobDriver):
     def set_communication_timeout(self, milliseconds: int) -> None:
         """Life guarding: guard time = ``milliseconds`` / 4, life time factor 4 (0 = heartbeat again)."""
         self._watchdog_ms = int(milliseconds)
-        self._ensure()
+        if self._up is None or self.lost() is not None:
+            return  # applied at the next bring-up (a lost node cannot take it now)
         self._liveness()
 
     def communication_timeout(self) -> int:
