@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import can
 import pytest
-from testdata import records
 
 from joints.codecs import canopen as co
 from joints.devices.erob.profiles import profile
 from joints.sim.erob import ErobFirmware
 from joints.sim.erob_canopen import CanopenFront, ErobCanopenBus, write_eds
 from joints.transports.can_sim import LockstepCanBus
+from testdata import records
 
 
 class Bench:
