@@ -175,9 +175,12 @@ def _erob_can_device_bus(cfg: BusConfig) -> Any:
 def _canopen_link(cfg: BusConfig, transport: Any, clock: Clock, peer: Any) -> Link[Any]:
     from joints.link.base import RetryPolicy
     from joints.link.canopen import CanopenLink
+    from joints.transports.can import PythonCanTransport
+    from joints.transports.can_sim import LockstepCanBus
 
+    sim = isinstance(transport, PythonCanTransport) and isinstance(transport.bus, LockstepCanBus)
     link = CanopenLink(transport, policy=RetryPolicy(timeout=cfg.timeout, retries=cfg.retries), clock=clock,
-                       name=cfg.name)
+                       name=cfg.name, bus_clock=sim)
     link.sync_period = cfg.sync_period
     return link
 
@@ -249,7 +252,7 @@ def _erob_can_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[Any
 def _erob_canopen_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[Any, Any]) -> JointDriver:
     from joints.drivers.erob_canopen import ErobCanopenDriver, SyncCycle
 
-    period = cfg.sync_period or getattr(link, "sync_period", None) or 0.001
+    period = cfg.sync_period or link.sync_period or 0.001
     key = ("canopen-sync", id(link))
     cycle = shared.get(key)
     if cycle is None:

@@ -230,7 +230,7 @@ class Rig:
                     out[name] = self.joints[name].to_si(raw_state)
         except DeviceFault as exc:
             for name in targets:
-                if name != getattr(exc, "device", None) and self.joints[name].enabled:
+                if name != exc.device and self.joints[name].enabled:
                     try:
                         self.joints[name].stop()
                     except JointsError as stop_exc:  # keep stopping the others

@@ -164,20 +164,20 @@ class SyncCycle:
         self._expect: list[ErobCanopenDriver] = []
 
     def send(self, targets: Mapping[ErobCanopenDriver, int]) -> None:
-        clock = self.link.clock
-        now = clock.now()
+        link = self.link
+        now = link.bus_now()
         eps = 1e-9
         if self.next_due is None or now > self.next_due + self.period + eps:
             self._grid, self._n = now, 0  # first cycle, or the caller fell behind: restart the grid
         elif now < self.next_due - eps:
-            clock.sleep(self.next_due - now)
+            link.wait_bus(self.next_due)  # TPDOs of earlier cycles still arriving are delivered as such
         self._n += 1
         due = self._grid + self._n * self.period  # on a grid: no drift
-        self.link.poll(0.0)  # TPDOs of earlier cycles still arriving: delivered as such
+        link.poll(0.0)
         for driver, target in targets.items():
             driver.cycle_send(target)
-        self.link.sync()
-        self.sync_time = clock.now()
+        link.sync()
+        self.sync_time = link.bus_now()
         self.cycles += 1
         self.next_due = due
         self._expect = list(targets)
@@ -186,12 +186,11 @@ class SyncCycle:
         link = self.link
         cycle = self.cycles
         waiting = {d.tpdo1_cob: d for d in self._expect if d.status_cycle < cycle}
-        deadline = self.next_due if self.next_due is not None else link.clock.now()
+        deadline = self.next_due if self.next_due is not None else link.bus_now()
         while waiting:
-            # past the deadline only what has arrived by now is taken (in sim: by the end of the physics
-            # step that reached the deadline - the lockstep's granularity)
-            left = deadline - link.clock.now()
-            left = left if left > 1e-9 else 0.0
+            left = deadline - link.bus_now()
+            if left <= 1e-9:
+                break
             try:
                 msg = link.wait_for(lambda m: isinstance(m, co.Pdo) and m.cob_id in waiting, left)
             except ReplyTimeout:

@@ -179,16 +179,54 @@ class CanopenLink(Link[Any]):
         clock: Clock | None = None,
         trace: Callable[[TraceRecord], None] | None = None,
         name: str = "canopen",
+        bus_clock: bool = False,
     ) -> None:
         clock = clock or MonotonicClock()
-        super().__init__(FrameFraming(transport, decode_host, clock), CanopenRule(), policy=policy, clock=clock,
+        super().__init__(FrameFraming(transport, self._decode, clock), CanopenRule(), policy=policy, clock=clock,
                          trace=trace, name=name)
+        #: frames are stamped on the clock's own time base (the sim's timed bus, exact to the frame
+        #: edge while the physics clock moves in whole substeps): bus time is the last frame's stamp
+        self.bus_clock = bus_clock
+        self._stamp = clock.now()
         self.monitors: dict[int, NodeMonitor] = {}
         self._clients: dict[int, co.SdoClient] = {}
         self.sdo_transfers = 0
         #: the bus's SYNC period from its config (s; None: the joints' or the default 1 ms)
         self.sync_period: float | None = None
         self.subscribe(lambda m: isinstance(m, (co.Heartbeat, co.BootUp)), self._error_control)
+
+    def _decode(self, frame: can.Message) -> co.Message:
+        if self.bus_clock and frame.timestamp > self._stamp:
+            self._stamp = float(frame.timestamp)
+        return decode_host(frame)
+
+    def bus_now(self) -> float:
+        """The bus's present time: the clock, or (sim) where the timed bus is (it may lag a coarse clock)."""
+        return max(self._stamp, self.clock.now()) if not self.bus_clock else self._stamp
+
+    def poll(self, timeout: float = 0.0) -> int:
+        start = self.bus_now()
+        n = super().poll(timeout)
+        if self.bus_clock and timeout > 0:  # the timed bus ran the whole timeout
+            self._stamp = max(self._stamp, start + timeout)
+        return n
+
+    def wait_for(self, predicate: Callable[[Any], bool], timeout: float) -> Any:
+        start = self.bus_now()
+        try:
+            return super().wait_for(predicate, timeout)
+        except ReplyTimeout:
+            if self.bus_clock:
+                self._stamp = max(self._stamp, start + timeout)
+            raise
+
+    def wait_bus(self, until: float) -> None:
+        """Let the bus run until ``until`` (bus time), delivering what arrives."""
+        left = until - self.bus_now()
+        if left > 0:
+            self.poll(left)
+        if self.bus_clock:
+            self._stamp = max(self._stamp, until)
 
     # -- SDO ------------------------------------------------------------------------------------
     def _client(self, node: int) -> co.SdoClient:

@@ -216,9 +216,9 @@ class CanMedium:
         c = self.clock.now()
         if c < self._clock_seen - 1e-12:
             self._restart(c)
-        else:
-            self._clock_seen = max(self._clock_seen, c)
-            if c > self.now:  # also when a capped wait left the medium behind a clock it saw already
+        elif c > self._clock_seen:
+            self._clock_seen = c
+            if c > self.now:
                 self._run(c)
                 self.now = c
 

@@ -96,6 +96,8 @@ def test_csp_1khz_three_joint_arm_tracks_within_a_tenth_of_a_degree(capsys: pyte
         for j in rig.joints.values():
             j.enable()
         start = {n: j.state().position for n, j in rig.joints.items()}
+        rig.cycle(start)  # the first cycle shares the bus with the TPDOs of the state reads above
+        late0 = rig.cycle_late()
         medium = rig.world.buses["can"].medium
         medium.reset_load()
         t0 = rig.time
@@ -110,7 +112,7 @@ def test_csp_1khz_three_joint_arm_tracks_within_a_tenth_of_a_degree(capsys: pyte
                 sent.append(max(abs(states[n].position - targets[n]) for n in rig.joints))
         load = medium.load()
         elapsed = rig.time - t0
-        assert rig.cycle_late() == 0
+        assert rig.cycle_late() == late0  # no TPDO missed its cycle
     err_held, err_sent = math.degrees(max(held)), math.degrees(max(sent))
     with capsys.disabled():
         print(f"\nCSP 1 kHz, 3 joints, 1 Mbit/s: tracking error {err_held:.4f} deg vs the set-point in force, "
@@ -126,7 +128,7 @@ def timed_bus_late(nodes: int, cycles: int = 200) -> tuple[int, float]:
     for n in range(1, nodes + 1):
         device.add(CanopenFront(ErobFirmware(profile("eRob80H100"), n), n))
     bus = LockstepCanBus(medium=device.medium)
-    link = CanopenLink(PythonCanTransport(bus), clock=device.medium.clock)
+    link = CanopenLink(PythonCanTransport(bus), clock=device.medium.clock, bus_clock=True)
     cycle = SyncCycle(link, 0.001)
     drivers = [ErobCanopenDriver(link, n, mode="csp", heartbeat_ms=0, cycle=cycle) for n in range(1, nodes + 1)]
     device.tick(0.001)
