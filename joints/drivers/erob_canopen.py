@@ -527,6 +527,14 @@ class ErobCanopenDriver(ErobDriver):
             self._wait_state(want)
         self._control(cia402.COMMAND_WORD[cia402.Command.ENABLE_OPERATION] | self._mode_bits(), target)
         self._note_enable(True)
+        if self.mode in (Mode.CSP, Mode.CSV, Mode.CST):  # set-points act once the drive follows (bit 12)
+            deadline = self.clock.now() + STATE_TIMEOUT
+            while not self.statusword & cia402.SW_TARGET_FOLLOWED:
+                if self.clock.now() >= deadline:
+                    raise StateError(f"{self.name}: the drive does not follow the target after enable "
+                                     f"(statusword 0x{self.statusword:04X})")
+                self._pause()
+                self._snapshot()
 
     def _mode_bits(self) -> int:
         if self.mode is Mode.PP:

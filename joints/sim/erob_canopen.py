@@ -21,8 +21,9 @@ real eRob, also listed in the README):
   length 0x06070010, value out of range 0x06090030/31/32, 0x6060 in OPERATION ENABLED 0x08000022
   (E7), a mode not in 0x6502 0x06090030, PDO mapping changed while the PDO is valid 0x06010000,
   an object that cannot be mapped 0x06040041, more than 64 bits 0x06040042.
-* CiA 402: OPERATION ENABLED is reported once the holding brake is released (the firmware's
-  500 ms); until then the statusword shows SWITCHED ON. Quick stop (option code 0x605A = 2)
+* CiA 402: OPERATION ENABLED is reported at once; the holding brake releases in the firmware's
+  500 ms and set-points written meanwhile act when it has (a PP set-point is acknowledged at once
+  and started then); in CSP/CSV/CST statusword bit 12 ("drive follows the target") is set from then. Quick stop (option code 0x605A = 2)
   decelerates within the emergency-stop time, then SWITCH ON DISABLED. A firmware fault is
   FAULT with an EMCY carrying the eRob error code (0x603F) and an error register by CiA 301 class;
   fault reset (rising bit 7) clears it and sends EMCY 0x0000. Halt (bit 8) decelerates with the
@@ -66,6 +67,7 @@ from joints.devices.erob.canopen import (
     name_at,
     objects,
 )
+from joints.devices.erob.params import EROB_PARAMS
 from joints.devices.erob.registers import AchieveStatus, MotionMode, OperationMode
 from joints.errors import CommandError, DeviceRejected, FrameError, ParameterRefused, Refusal, RegisterError
 from joints.transports.can_sim import CanMedium, ClockLike
@@ -139,7 +141,18 @@ class CanopenFront:
         self.frames_in = 0
         self.emcy_sent: list[co.Emcy] = []
         self._outbox: list[can.Message] = []
+        self._node_relative()
         self._reset(power_on=True)
+
+    def _node_relative(self) -> None:
+        """COB-IDs are their base + the node id from power-on (the CiA 301 pre-defined connection set)."""
+        fw, node = self.firmware, self.node
+        for name, obj in objects():
+            if obj.node_relative:
+                value = EROB_PARAMS[name].default + node
+                fw.defaults[name] = value
+                fw.values[name] = value
+                fw.power_on_values[name] = value
 
     @property
     def node(self) -> int:
@@ -538,19 +551,18 @@ class CanopenFront:
             elif mode in (Mode.PV, Mode.CSV):
                 v, target = fw.read("current_speed"), fw.values["target_speed"]
                 reached = abs(v - target) <= max(100, abs(target) // 100) and abs(fw.v_ref - target) < 1
-                bit12 = abs(v) < 100 if mode is Mode.PV else True
+                bit12 = abs(v) < 100 if mode is Mode.PV else not self.enabling
             elif mode is Mode.IP:
                 bit12 = bool(self.controlword & cia402.CW_ENABLE_IP)
                 reached = not fw.gen.active and abs(fw.v_ref) < 1
             elif mode in (Mode.CSP, Mode.CST):
-                bit12 = not self.halted
+                bit12 = not self.halted and not self.enabling  # following the target (brake released)
                 reached = True
             else:
                 reached = True
             if self.halted and abs(fw.v_ref) < 1:
                 reached = True
-        display = State.SWITCHED_ON if self.enabling else state
-        return cia402.make_statusword(display, target_reached=reached, bit12=bit12, bit13=bit13,
+        return cia402.make_statusword(state, target_reached=reached, bit12=bit12, bit13=bit13,
                                       warning=False, remote=True)
 
     def _controlword(self, cw: int) -> None:
@@ -571,7 +583,7 @@ class CanopenFront:
         new = cia402.next_state(state, cw, prev, quick_stop_option_code=qsoc)
         if new is not state:
             self._enter(state, new)
-        if self.state is State.OPERATION_ENABLED and not self.enabling:
+        if self.state is State.OPERATION_ENABLED:
             self._mode_bits(cw, prev)
 
     def _enter(self, old: State, new: State) -> None:
@@ -610,7 +622,7 @@ class CanopenFront:
             target = fw.values["target_absolute_position"]
             immediate = bool(cw & cia402.CW_CHANGE_SET_IMMEDIATELY) or not fw.gen.active
             relative = bool(cw & cia402.CW_RELATIVE)
-            if immediate:
+            if immediate and fw.ready():
                 self._pp_start(target, relative)
             else:
                 self.pp_pending = (target, relative)
@@ -686,7 +698,7 @@ class CanopenFront:
             if self.state is not State.QUICK_STOP_ACTIVE:
                 self._switch_off()
         elif (state is State.OPERATION_ENABLED and self.pp_pending is not None and not fw.gen.active
-              and self._mode() is Mode.PP):
+              and self._mode() is Mode.PP and fw.ready()):
             target, relative = self.pp_pending
             self.pp_pending = None
             self._pp_start(target, relative)
@@ -802,8 +814,6 @@ def object_dictionary(node: int = 1) -> Any:
     """The eRob object dictionary as a ``canopen.ObjectDictionary`` (defaults of node ``node``)."""
     import canopen
     from canopen.objectdictionary import ODRecord, ODVariable
-
-    from joints.devices.erob.params import EROB_PARAMS
 
     od = canopen.ObjectDictionary()  # type: ignore[no-untyped-call]
     od.node_id = node
