@@ -67,7 +67,7 @@ def twin(tmp_path: Path) -> Iterator[tuple[Any, str, Path]]:
 
 
 def test_basenode402_pp_move_and_pv_run(twin: tuple[Any, str, Path]) -> None:
-    world, channel, eds = twin
+    _world, channel, eds = twin
     network = canopen.Network()
     network.connect(interface="virtual", channel=channel)
     try:
