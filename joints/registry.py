@@ -69,6 +69,8 @@ class DeviceFamily:
     device_models: Mapping[str, str] = field(default_factory=dict)
     #: the status parameter ``joints scan`` reads to find a drive (every protocol of the family reaches it)
     scan_param: str = "error_code"
+    #: protocol -> the operating modes a joint may name (joint key ``mode``; the first is the default)
+    modes: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
     @property
     def protocols(self) -> tuple[str, ...]:
@@ -178,6 +180,25 @@ def _erob_can_device_bus(cfg: BusConfig) -> Any:
     return ErobCanBus(name=cfg.name, bitrate=cfg.bitrate)
 
 
+def _canopen_link(cfg: BusConfig, transport: Any, clock: Clock, peer: Any) -> Link[Any]:
+    from joints.link.base import RetryPolicy
+    from joints.link.canopen import CanopenLink
+    from joints.transports.can import PythonCanTransport
+    from joints.transports.can_sim import LockstepCanBus
+
+    sim = isinstance(transport, PythonCanTransport) and isinstance(transport.bus, LockstepCanBus)
+    link = CanopenLink(transport, policy=RetryPolicy(timeout=cfg.timeout, retries=cfg.retries), clock=clock,
+                       name=cfg.name, bus_clock=sim)
+    link.sync_period = cfg.sync_period
+    return link
+
+
+def _canopen_device_bus(cfg: BusConfig) -> Any:
+    from joints.sim.erob_canopen import ErobCanopenBus
+
+    return ErobCanopenBus(name=cfg.name, bitrate=cfg.bitrate)
+
+
 def _lockstep_can(device_bus: Any) -> Any:
     from joints.transports.can import PythonCanTransport
     from joints.transports.can_sim import LockstepCanBus
@@ -218,6 +239,12 @@ PROTOCOLS: dict[str, BusProtocol] = {
         link=_mks_link, open_transport=_serial_transport, device_bus=_mks_device_bus,
         sim_transport=_byte_loopback, direct=False,  # completion frames come unasked: the byte path only
     ),
+    "canopen": BusProtocol(
+        name="canopen", medium="can", addresses=(1, 127),
+        description="CANopen CiA 301/402 (SDO 0x600/0x580+node, PDOs, SYNC, NMT, heartbeat)",
+        link=_canopen_link, open_transport=_can_transport, device_bus=_canopen_device_bus,
+        sim_transport=_lockstep_can,
+    ),
 }
 
 
@@ -248,6 +275,30 @@ def _erob_can_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[Any
 
     return ErobCanDriver(link, cfg.address, profile=FAMILIES["erob"].config_profile(cfg), clock=clock,
                          name=cfg.name)
+
+
+def _erob_canopen_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[Any, Any]) -> JointDriver:
+    from joints.drivers.erob_canopen import ErobCanopenDriver, SyncCycle
+
+    period = cfg.sync_period or link.sync_period or 0.001
+    key = ("canopen-sync", id(link))
+    cycle = shared.get(key)
+    if cycle is None:
+        cycle = shared[key] = SyncCycle(link, period)
+    return ErobCanopenDriver(link, cfg.address, profile=FAMILIES["erob"].config_profile(cfg), clock=clock,
+                             name=cfg.name, mode=cfg.mode, sync_period=cycle.period, cycle=cycle)
+
+
+def _erob_canopen_table() -> Any:
+    from joints.devices.erob.canopen import EROB_CANOPEN
+
+    return EROB_CANOPEN
+
+
+def _erob_canopen_front(twin: Any, address: int) -> Any:
+    from joints.sim.erob_canopen import CanopenFront
+
+    return CanopenFront(twin, address)
 
 
 def _erob_can_table() -> Any:
@@ -398,10 +449,12 @@ FAMILIES: dict[str, DeviceFamily] = {
         name="erob", devices=("erob",),
         description="ZeroErr eRob rotary actuator (70/80/90/110/142, ratios 50-160)",
         params=_erob_params, profile=_erob_profile,
-        drivers={"modbus-rtu": _erob_modbus_driver, "erob-can": _erob_can_driver},
-        tables={"modbus-rtu": _erob_modbus_table, "erob-can": _erob_can_table},
-        twin=_erob_twin, fronts={"modbus-rtu": _erob_modbus_front, "erob-can": _erob_can_front},
+        drivers={"modbus-rtu": _erob_modbus_driver, "erob-can": _erob_can_driver, "canopen": _erob_canopen_driver},
+        tables={"modbus-rtu": _erob_modbus_table, "erob-can": _erob_can_table, "canopen": _erob_canopen_table},
+        twin=_erob_twin,
+        fronts={"modbus-rtu": _erob_modbus_front, "erob-can": _erob_can_front, "canopen": _erob_canopen_front},
         watchdog_ms=1000,  # off at power-on (0x0002 = 0): armed while enabled, restored on disable
+        modes={"canopen": ("pp", "pv", "pt", "csp", "csv", "cst", "ip")},
     ),
     "zlac8015d": DeviceFamily(
         name="zlac8015d", devices=("zlac8015d",),
@@ -428,7 +481,7 @@ FAMILIES: dict[str, DeviceFamily] = {
 
 #: the config names users may write but no entry serves yet (a clear "not yet" instead of "unknown")
 PLANNED_DEVICES: tuple[str, ...] = ()
-PLANNED_PROTOCOLS = ("canopen",)
+PLANNED_PROTOCOLS: tuple[str, ...] = ()
 
 
 # --- queries ----------------------------------------------------------------------------------
