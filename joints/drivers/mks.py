@@ -286,6 +286,17 @@ class MksDriver(JointDriver):
         self.access.write_many(values, idempotent=True)  # a stop may be repeated: it never starts anything
         self._running = None
 
+    def stop_now(self) -> None:
+        """Immediate stop of the running mode (its stop command with acc 0). The manual advises against it above
+        1000 rpm (6.5-6.9 notes): :meth:`stop` decelerates."""
+        mode = self._running if self._running is not None and self._running in RUN_GROUPS else "speed"
+        speed_name, acc_name, target_name = RUN_GROUPS[mode]
+        values = {speed_name: 0, acc_name: 0, target_name: 0}
+        if mode == "pulses":
+            values["position_mode1_direction"] = 0
+        self.access.write_many(values, idempotent=True)
+        self._running = None
+
     def emergency_stop(self) -> None:
         """0xF7: stop at once (not from above 1000 rpm if avoidable: the manual's note)."""
         self.write_param("emergency_stop", 1, idempotent=False)

@@ -340,3 +340,44 @@ def test_settings_survive_a_restart_restore_defaults_needs_calibration(tmp_path:
         d.set_velocity(100)
         rig.sleep(0.3)
         assert d.read("real_time_speed") == 100
+
+
+def test_respond_off_run_commands_get_no_reply_queries_still_answer(tmp_path: Path) -> None:
+    with open_motor(tmp_path) as rig:
+        j = rig.joints["m1"]
+        d = j.driver
+        j.enable()
+        d.set_respond_active(False, True)
+        d.set_velocity(200, acceleration=2000)
+        assert d.access.last_reply is None  # nothing came back, nothing was waited for
+        rig.sleep(0.5)
+        assert d.read("real_time_speed") == 200  # it runs; queries answer
+        d.move_pulses(3200, speed=300, acceleration=2000)
+        assert d.wait_motion(5) is MotorStatus.STOP  # found by polling 0xF1: no completion frames now
+        d.link.poll(0)
+        assert d.completions == 0
+
+
+def test_decelerated_and_immediate_stops(tmp_path: Path) -> None:
+    with open_motor(tmp_path) as rig:
+        j = rig.joints["m1"]
+        d = j.driver
+        j.enable()
+        d.set_velocity(500, acceleration=1000)
+        rig.sleep(0.6)
+        t0 = rig.time
+        d.stop()  # decelerates with the same acc: 0.5 s from 500 rpm
+        while not d.motion_complete:
+            rig.sleep(0.01)
+            d.link.poll(0)
+        assert rig.time - t0 == pytest.approx(0.5, abs=0.02)
+        assert d.completion == mks.RunReply(1, 0xF6, mks.RunStatus.COMPLETE)
+        d.set_velocity(500, acceleration=1000)
+        rig.sleep(0.6)
+        steps = d.read("number_of_pulses")
+        before = d.completions
+        d.stop_now()
+        d.link.poll(0)
+        assert d.completions == before + 1  # complete at once
+        assert d.completion == mks.RunReply(1, 0xF6, mks.RunStatus.COMPLETE)
+        assert d.read("number_of_pulses") == steps
