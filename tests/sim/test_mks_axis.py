@@ -32,12 +32,15 @@ def _script(rig: joints.Rig) -> int:
 
 def test_same_script_on_the_native_protocol_and_modbus_ends_within_one_count() -> None:
     ends = {}
-    for protocol in ("mks-serial", "modbus-rtu"):
-        with joints.open(axis_config(protocol=protocol)) as rig:
+    for protocol in ("mks-serial", "modbus-rtu", "modbus-rtu direct"):
+        cfg = axis_config(protocol=protocol.split()[0])
+        cfg["sim"]["direct"] = protocol.endswith("direct")  # Modbus's no-bytes path: the same results
+        with joints.open(cfg) as rig:
             ends[protocol] = _script(rig)
             assert rig.joints["carriage"].state().position == pytest.approx(0.010, abs=LEAD / COUNTS)
             assert rig.world.joint_position("carriage") == pytest.approx(0.010, abs=2e-6)
     assert abs(ends["mks-serial"] - ends["modbus-rtu"]) <= 1, ends
+    assert ends["modbus-rtu direct"] == ends["modbus-rtu"]
     assert abs(ends["mks-serial"] - 0.010 / LEAD * COUNTS) <= 1
 
 
