@@ -322,6 +322,9 @@ class ErobFirmware(Firmware):
     brake_released = _flag(K.BRAKE_RELEASED, "released by command while the motor is off: nothing holds the joint")
     last_frame = _column(K.LAST_FRAME)
     started = _flag(K.STARTED)
+    #: a set-point stream drives the position reference (CiA 402 CSP/IP over CANopen): between
+    #: set-points the reference moves on at v_ref (linear interpolation); set by a protocol front
+    streaming = _flag(K.STREAMING)
     enabled_at = _column(K.ENABLED_AT)
     watchdog = _column(K.WATCHDOG, "s, 0 = off")
     kp = _column(K.KP)
@@ -537,6 +540,10 @@ class ErobFirmware(Firmware):
     def ready(self) -> bool:
         """The motor is on and its brake released: motion commands act now (for protocol fronts)."""
         return bool(self._k.ready(self._row))
+
+    def trip(self, code: int) -> None:
+        """A protection a protocol front supervises (CANopen life guarding) trips with ``code``."""
+        self._raise_fault(code)
 
     def _release_brake(self, value: int) -> None:
         """Release the holding brake of a motor that is off (CAN 0x014F): the joint moves freely until

@@ -103,6 +103,7 @@ BRAKE_HOLD = _column("brake_hold")  #: counts where the brake holds; NaN = where
 BRAKE_RELEASED = _column("brake_released")
 LAST_FRAME = _column("last_frame")
 STARTED = _column("started")
+STREAMING = _column("streaming")  #: set-points stream in (CANopen CSP/IP): p_ref moves on at v_ref between them
 SUP = _column("sup")  #: drive time since the last slow task
 STATE = _column("state")  #: code of :data:`STATES`
 ENABLED_AT = _column("enabled_at")
@@ -203,6 +204,7 @@ def motor_off(s: Row) -> None:
     """Disable / fault: the loops stop and the brake engages where the joint is."""
     gen_clear(s)
     s[V_REF] = 0.0
+    s[STREAMING] = 0.0
     s[MODE_SPEED_TARGET] = 0.0
     s[I_CMD] = 0.0
     s[I_OUT] = 0.0
@@ -378,6 +380,9 @@ def _next_repetitive_leg(s: Row) -> None:
 @jitable
 def _profile_step(s: Row, dt: float) -> None:
     if s[G_ACTIVE] == 0.0:
+        if s[STREAMING] != 0.0:
+            s[P_REF] += s[V_REF] * dt  # between two streamed set-points
+            return
         if s[DWELL_UNTIL] >= 0 and s[TIME] >= s[DWELL_UNTIL]:
             s[DWELL_UNTIL] = -1.0
             _next_repetitive_leg(s)

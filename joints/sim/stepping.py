@@ -51,8 +51,8 @@ def step_row(table: Any, adr: Any, i: int, t: float, dt: float, q: float, qd: fl
     return 0.0
 
 
-def substep(table: Any, adr: Any, order: Any, active: Sequence[int], steps: Sequence[int], dts: Sequence[float],
-            qpos: Sequence[Any], qvel: Sequence[Any], ctrl: Sequence[Any]) -> None:
+def substep(table: Any, adr: Any, ratio: Sequence[float], order: Any, active: Sequence[int], steps: Sequence[int],
+            dts: Sequence[float], qpos: Sequence[Any], qvel: Sequence[Any], ctrl: Sequence[Any]) -> None:
     """One substep of the rows in ``order`` whose world is active (Python: the worlds' arrays)."""
     for i in order:
         a = adr[i]
@@ -61,10 +61,12 @@ def substep(table: Any, adr: Any, order: Any, active: Sequence[int], steps: Sequ
             continue
         dt = dts[w]
         t = (steps[w] + 1) * dt
-        ctrl[w][a[ACT]] = step_row(table, adr, i, t, dt, float(qpos[w][a[QPOS]]), float(qvel[w][a[DOF]]))
+        r = ratio[i]
+        ctrl[w][a[ACT]] = step_row(table, adr, i, t, dt, float(qpos[w][a[QPOS]]) * r, float(qvel[w][a[DOF]]) * r)
 
 
-def _run(n: int, physics: int, mj_step: int, table: Any, adr: Any, order: Any, worlds: Any, dts: Any) -> None:
+def _run(n: int, physics: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any, worlds: Any,
+         dts: Any) -> None:
     """``n`` substeps of the active worlds: every row's loops, then (``physics``) each world's
     ``mj_step`` (compiled only: the worlds' arrays are reached by address)."""
     doubles, call = kernel.doubles, kernel.call
@@ -78,8 +80,9 @@ def _run(n: int, physics: int, mj_step: int, table: Any, adr: Any, order: Any, w
                 continue
             dt = dts[w]
             t = (row[STEPS] + k + 1) * dt
-            q = doubles(row[QPOS_AT], row[NQ])[a[QPOS]]
-            qd = doubles(row[QVEL_AT], row[NV])[a[DOF]]
+            r = ratio[i]
+            q = doubles(row[QPOS_AT], row[NQ])[a[QPOS]] * r
+            qd = doubles(row[QVEL_AT], row[NV])[a[DOF]] * r
             doubles(row[CTRL_AT], row[NU])[a[ACT]] = step_row(table, adr, i, t, dt, q, qd)
         if physics:
             for w in range(len(worlds)):
@@ -101,6 +104,7 @@ class Group:
         self.compiled = compiled and _run_compiled is not None
         rows: list[list[float]] = []
         adr: list[list[int]] = []
+        ratio: list[float] = []
         self._owners: list[tuple[Any, int]] = []  #: (twin, first row)
         self._row_of: dict[tuple[int, str], int] = {}  #: (world index, joint name) -> row
         for w, world in enumerate(self.worlds):
@@ -113,13 +117,16 @@ class Group:
                     for r in twin.kernel_rows():
                         rows.append(r)
                         adr.append([0] * ADR_WIDTH)
+                        ratio.append(1.0)
                     self._owners.append((twin, first))
                 i = first + twin.kernel_row(b.channel)
                 adr[i] = [KINDS[twin.KERNEL], b.qadr, b.dadr, b.aid, w, first, 0, 0]
+                ratio[i] = b.ratio  # motor rad per joint unit (a slide on a lead screw)
                 self._row_of[(w, b.name)] = i
         width = max([len(r) for r in rows], default=1)
         self.table = kernel.rows([r + [0.0] * (width - len(r)) for r in rows] or [[0.0]], self.compiled)
         self.adr = kernel.rows(adr or [[0] * ADR_WIDTH], self.compiled, integer=True)
+        self.ratio: Any = np.array(ratio or [1.0]) if self.compiled else (ratio or [1.0])
         for twin, first in self._owners:
             twin.adopt(self.table, first)
         self.dts = [w.timestep for w in self.worlds]
@@ -158,8 +165,8 @@ class Group:
             m = min(n, CHUNK)
             for w in worlds:
                 table[w, STEPS] = all_worlds[w].steps
-            _run_compiled(m, 1, self.mj_step or 0, self.table, self.adr, self.order, table,  # type: ignore[misc]
-                          self.dts_array)
+            _run_compiled(m, 1, self.mj_step or 0, self.table, self.adr, self.ratio, self.order,  # type: ignore[misc]
+                          table, self.dts_array)
             for w in worlds:
                 all_worlds[w].steps += m
             n -= m
@@ -172,13 +179,14 @@ class Group:
             for w in worlds:
                 table[w, ACTIVE] = 1
                 table[w, STEPS] = self.worlds[w].steps
-            _run_compiled(1, 0, 0, self.table, self.adr, self.order, table, self.dts_array)  # type: ignore[misc]
+            _run_compiled(1, 0, 0, self.table, self.adr, self.ratio, self.order, table,  # type: ignore[misc]
+                          self.dts_array)
             return
         active = [0] * len(self.worlds)
         steps = [0] * len(self.worlds)
         for w in worlds:
             active[w] = 1
             steps[w] = self.worlds[w].steps
-        substep(self.table, self.adr, self.order, active, steps, self.dts,
+        substep(self.table, self.adr, self.ratio, self.order, active, steps, self.dts,
                 [w.data.qpos for w in self.worlds], [w.data.qvel for w in self.worlds],
                 [w.data.ctrl for w in self.worlds])
