@@ -73,6 +73,7 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
     sim: bool
     control_period: float
     overruns: int
+    _tick: int
     width: int
     height: int
     _t0: float
@@ -109,6 +110,25 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
     def _check_open(self) -> None:
         if self._closed:
             raise RuntimeError("the env is closed")
+
+    #: step is _act (check the action, send its commands), a wait for the next tick, _outcome
+    #: (read, observe, reward): a batched env (envs.vector) waits for all its rigs at once
+    batchable = False
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        token = self._act(action)
+        self._wait_until(self.tick_time())
+        return self._outcome(token)
+
+    def tick_time(self) -> float:
+        """Rig time of the tick the last action waits for."""
+        return self._t0 + self._tick * self.control_period
+
+    def _act(self, action: np.ndarray) -> Any:
+        raise NotImplementedError
+
+    def _outcome(self, token: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        raise NotImplementedError
 
     def _wait_until(self, t: float) -> None:
         remaining = t - self.rig.time
@@ -380,13 +400,8 @@ class JointsEnv(RigEnv):
             self.render()
         return obs, info
 
-    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        a = self._act(action)
-        self._wait_until(self._t0 + self._tick * self.control_period)
-        return self._outcome(a)
+    batchable = True
 
-    # step = _act (check the action, send its commands), wait for the tick, _outcome (read the
-    # joints, observe, reward); a batched env (envs.vector) waits for all its rigs at once
     def _act(self, action: np.ndarray) -> np.ndarray:
         self._check_open()
         a = np.asarray(action, dtype=np.float64)

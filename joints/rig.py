@@ -19,7 +19,7 @@ import functools
 import logging
 import math
 import os
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -358,6 +358,37 @@ class Rig:
 
     def __repr__(self) -> str:
         return f"Rig(backend={self.backend!r}, joints={list(self.joints)})"
+
+
+def sleep_together(rigs: Sequence[Rig], seconds: float | Sequence[float]) -> None:
+    """:meth:`Rig.sleep` of several rigs (``seconds`` each, or one time for all), at once.
+
+    Simulated rigs advance together: their worlds join one stepping group and one compiled call
+    runs every drive's loops and every world's physics (N rigs of a batched env in one process,
+    each with its own model). The result is that of sleeping each rig in turn. A rig that must
+    talk to a drive during the sleep (a watchdog keep-alive falls due) or runs on hardware sleeps
+    on its own.
+    """
+    from joints.sim.world import advance_together
+
+    times = [seconds] * len(rigs) if isinstance(seconds, (int, float)) else list(seconds)
+    if len(times) != len(rigs):
+        raise ValueError(f"{len(rigs)} rigs but {len(times)} times")
+    worlds: list[Any] = []
+    spans: list[float] = []
+    for rig, t in zip(rigs, times):
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t) or t < 0:
+            raise ValueError(f"cannot sleep {t!r} s (need a finite time >= 0)")
+        now = rig.clock.now()
+        end = now + t
+        due, _names = rig._keepalive_due()
+        if rig.world is None or (due is not None and due < end):
+            rig.sleep(t)
+        elif end > now:  # as Rig.sleep: the clock sleeps end - now
+            worlds.append(rig.world)
+            spans.append(end - now)
+    if worlds:
+        advance_together(worlds, spans)
 
 
 def _in_file(exc: ConfigError, source: str) -> ConfigError:

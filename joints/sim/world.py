@@ -17,6 +17,7 @@ has end-stop inputs (:class:`EndStops`) the motor angles where the flag reaches 
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
 from collections.abc import Callable, Mapping, Sequence
@@ -377,11 +378,15 @@ class World:
                 self._target = max(self._target, self.time)
                 self.clock.set(self.time)
 
+    def _step_prepare(self) -> None:
+        """Before stepping: a joint whose stepping was replaced (tests) leaves its kernel row."""
+        if self._bind != self._bind_seen:
+            self._bind_seen = list(self._bind)
+            self.group.replan()
+
     def _step(self, n: int) -> None:
         group = self.group
-        if self._bind != self._bind_seen:  # a joint's stepping was replaced (tests)
-            self._bind_seen = list(self._bind)
-            group.replan()
+        self._step_prepare()
         if n <= 0:
             return
         if group.compiled and group.fusable[self.group_index]:
@@ -418,14 +423,18 @@ class World:
         if seconds <= 0:
             return
         with self.lock:
-            self._target += seconds
-            n = math.ceil((self._target - self.time) / self.timestep - 1e-9)
+            n = self._due(seconds)
             try:
                 if n > 0:
                     self.step(n)
             except BaseException:
                 self._target = self.time
                 raise
+
+    def _due(self, seconds: float) -> int:
+        """Book ``seconds`` more on the world's target time: the substeps that are now due."""
+        self._target += seconds
+        return math.ceil((self._target - self.time) / self.timestep - 1e-9)
 
     def _emulators(self) -> list[Any]:
         seen: dict[int, Any] = {}
@@ -541,3 +550,58 @@ class World:
 
     def close(self) -> None:
         """Nothing to release for an in-process world (kept for symmetry with served worlds)."""
+
+
+def join(worlds: Sequence[World]) -> stepping.Group:
+    """One stepping group for ``worlds`` (their drives' rows in one table), made once and kept."""
+    group = worlds[0].group
+    if group.worlds == list(worlds) and all(w.group is group for w in worlds):
+        return group
+    group = stepping.Group(worlds, all(w.compiled for w in worlds))
+    for i, w in enumerate(worlds):
+        w.group, w.group_index = group, i
+    return group
+
+
+def advance_together(worlds: Sequence[World], seconds: Sequence[float]) -> None:
+    """Advance each world by its ``seconds`` as :meth:`World.advance` does, stepping them together.
+
+    The worlds (separate models: N rigs of a batched env) join one stepping group; while all of
+    them still have substeps due, one compiled call runs the loops of every drive and every
+    world's physics for as many substeps as they share. A world that cannot run fused (a timed
+    bus, a twin stepping in Python) advances on its own. The results are those of advancing each
+    world alone.
+    """
+    if len(worlds) != len(seconds):
+        raise ValueError(f"{len(worlds)} worlds but {len(seconds)} times")
+    if len({id(w) for w in worlds}) != len(worlds):
+        raise ValueError("a world appears twice")
+    with contextlib.ExitStack() as stack:
+        for w in sorted(worlds, key=id):  # one order for every caller: no lock-order deadlock
+            stack.enter_context(w.lock)
+        group = join(worlds)
+        due = [w._due(s) if s > 0 else 0 for w, s in zip(worlds, seconds)]
+        try:
+            together = [i for i, w in enumerate(worlds) if group.compiled and group.fusable[w.group_index]]
+            for i, w in enumerate(worlds):
+                if i not in together and due[i] > 0:
+                    w.step(due[i])
+                    due[i] = 0
+            while True:
+                left = [i for i in together if due[i] > 0]
+                if not left:
+                    break
+                n = min(due[i] for i in left)
+                for i in left:
+                    worlds[i]._step_prepare()
+                group.run([worlds[i].group_index for i in left], n)
+                for i in left:
+                    due[i] -= n
+        except BaseException:
+            for w in worlds:
+                w._target = w.time
+            raise
+        finally:
+            for w in worlds:
+                w._target = max(w._target, w.time)
+                w.clock.set(w.time)
