@@ -37,6 +37,7 @@ from gymnasium.envs.registration import register, registry
 from envs.base import ACTION_MODES, JointsEnv
 from envs.configs import SHIPPED, config_path, default_config
 from envs.diffdrive import DiffDriveGoalEnv
+from envs.factory import make_env
 from envs.kinematics import erob_arm3_ee
 from envs.mks_axis import MksAxisPositionEnv
 from envs.randomization import DomainRandomization
@@ -84,6 +85,7 @@ __all__ = [
     "config_path",
     "default_config",
     "erob_arm3_ee",
+    "make_env",
     "make_vector_env",
     "register_envs",
 ]
