@@ -51,13 +51,15 @@ class Row:
         return self.measure, ratio, f">= {self.goal:g}", met
 
 
-def pin_one_core() -> int | None:
-    """Pin this process to one core (the lowest it may run on); the core, or None if unsupported."""
+def pin_one_core() -> tuple[int | None, set[int] | None]:
+    """Pin this process to one core (the lowest it may run on): (the core, the cores it had), or
+    (None, None) where the platform cannot."""
     if not hasattr(os, "sched_setaffinity"):
-        return None
-    cpu = min(os.sched_getaffinity(0))
+        return None, None
+    before = set(os.sched_getaffinity(0))
+    cpu = min(before)
     os.sched_setaffinity(0, {cpu})
-    return cpu
+    return cpu, before
 
 
 def _best(fns: Sequence[Callable[[], float]], repeats: int) -> list[float]:
@@ -321,12 +323,112 @@ def codec_row(*, repeats: int, min_time: float) -> Row:
                f"({jh * 1e6:.1f} / {jd * 1e6:.1f} us per FC03)")
 
 
-def run(*, quick: bool = False, config: str | None = None, rate: float | None = None,
+# -- the bus planner ------------------------------------------------------------------------------
+
+#: control rate the planner checks when none is given [Hz] (the envs' 20 ms period)
+PLAN_RATE = 50.0
+
+
+@dataclass
+class BusPlan:
+    """One bus of a config: its traffic per control cycle and what fits."""
+
+    bus: str
+    protocol: str
+    line: str  #: "115200 baud 8N1" / "1000000 bit/s"
+    joints: int
+    frames: int  #: frames per cycle (requests and replies)
+    data_bytes: int  #: bytes of those frames (serial: whole RTU frames; CAN: data fields)
+    load: Any  #: :class:`joints.transports.can_timing.CycleLoad` at the checked rate
+
+    def text(self, rate: float) -> str:
+        load = self.load
+        cycle = load.bits_worst / load.bitrate
+        fit = int(load.period // (cycle / self.joints)) if self.joints else 0
+        verdict = "fits" if load.fits else "does NOT fit"
+        return (f"bus {self.bus} ({self.protocol}, {self.line}): {self.joints} joint(s), {self.frames} frames / "
+                f"{self.data_bytes} bytes per control cycle -> {cycle * 1e3:.2f} ms on the wire; at {rate:g} Hz "
+                f"{load.worst:.0%} of the bus ({verdict}); these joints fit up to {load.max_rate:,.0f} Hz; at "
+                f"{rate:g} Hz up to {fit} joint(s) like these fit")
+
+
+def _cycle(rig: Any) -> None:
+    """One control cycle of every joint as the envs run it: a command, then every joint's state."""
+    from joints.drivers.capabilities import GroupedChannel, SyncVelocityGroup
+
+    velocities = {}
+    for name, j in rig.joints.items():
+        d = j.driver
+        if isinstance(d, GroupedChannel) and isinstance(d.group, SyncVelocityGroup):
+            velocities[name] = 0.0  # wheels: both targets in one command (as the diffdrive env)
+        else:
+            s = j.last_state or j.state()
+            j.move_to(s.position)
+    if velocities:
+        rig.set_velocities(velocities)
+    rig.read_states()
+
+
+def plan(config: Any, rate: float | None = None) -> list[BusPlan]:
+    """The traffic of one control cycle per bus of ``config``, from the frames the drivers really send
+    (run on the config's twins), timed with the wire-time model of each medium: Modbus RTU characters
+    and t3.5 (:mod:`joints.transports.serial_timing`), CAN frames with worst-case bit stuffing
+    (:func:`joints.transports.can_timing.cycle_load`)."""
+    import joints
+    from joints import registry
+    from joints.link.trace import TraceRecord
+    from joints.transports import can_timing, serial_timing
+
+    rate = rate or PLAN_RATE
+    if not rate > 0:
+        raise ValueError(f"the control rate must be > 0 Hz, got {rate!r}")
+    with joints.open(config, backend="sim") as rig:
+        for j in rig.joints.values():
+            j.enable()
+        rig.sleep(0.6)
+        _cycle(rig)  # the first cycle also configures modes and profiles: not counted
+        records: list[TraceRecord] = []
+        rig.trace(records.append)
+        _cycle(rig)
+        rig.trace(None)
+        out = []
+        for name, b in rig.config.buses.items():
+            mine = [r for r in records if r.bus == rig.buses[name].link.name]
+            n = sum(1 for c in rig.config.joints.values() if c.bus == name)
+            proto = registry.protocol(b.protocol)
+            sizes = [len(r.data) for r in mine]
+            if proto.medium == "can":
+                load = can_timing.cycle_load(sizes, period=1.0 / rate, bitrate=b.bitrate)
+                line = f"{b.bitrate} bit/s"
+            else:
+                rtu = b.protocol == "modbus-rtu"  # frames delimited by the t3.5 silence
+                load = serial_timing.cycle_load(sizes, period=1.0 / rate, baudrate=b.baudrate, parity=b.parity,
+                                                stopbits=b.stopbits, silence=rtu)
+                line = f"{b.baudrate} baud 8{b.parity}{b.stopbits}" + (", t3.5" if rtu else "")
+            out.append(BusPlan(name, b.protocol, line, n, len(mine), sum(sizes), load))
+        return out
+
+
+def run(*, quick: bool = False, config: str | None = None, rate: float | None = None, speed: bool = True,
         out: Callable[[str], None] = print) -> list[Row]:
-    """Run every benchmark; print and return the rows. ``quick``: tiny sizes (tests)."""
+    """Run every benchmark and (``config``) the bus planner; print, and return the rows.
+    ``quick``: tiny sizes (tests); ``speed=False``: the planner only."""
+    if not speed:
+        if config is not None:
+            _print_plan(config, rate, out)
+        return []
     import platform
 
-    core = pin_one_core()
+    core, cores = pin_one_core()
+    try:
+        return _run(quick, config, rate, out, core)
+    finally:
+        if cores is not None:
+            os.sched_setaffinity(0, cores)
+
+
+def _run(quick: bool, config: str | None, rate: float | None, out: Callable[[str], None],
+         core: int | None) -> list[Row]:
     steps, raw_steps, repeats, min_time = (20, 500, 1, 0.01) if quick else (500, 20000, 5, 0.2)
     out(f"Python {platform.python_version()} on {platform.machine()}; pinned to core {core}; best of {repeats}; "
         f"raw reference {raw_steps} mj_step on a fresh MjData")
@@ -335,7 +437,17 @@ def run(*, quick: bool = False, config: str | None = None, rate: float | None = 
     rows.append(codec_row(repeats=repeats, min_time=min_time))
     rows.append(batched_row(steps=steps * 4, raw_steps=raw_steps, repeats=repeats))
     out(table(rows))
+    if config is not None:
+        _print_plan(config, rate, out)
     return rows
+
+
+def _print_plan(config: Any, rate: float | None, out: Callable[[str], None]) -> None:
+    r = rate or PLAN_RATE
+    out(f"\nBus planner for {config} (one control cycle = a command and a state read per joint, as measured on "
+        f"its twins; wire time with worst-case CAN stuffing, Modbus t3.5; drive turnaround not included):")
+    for p in plan(config, r):
+        out("- " + p.text(r))
 
 
 def table(rows: Sequence[Row]) -> str:

@@ -249,7 +249,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     bus planner for ``--config``."""
     from joints import bench
 
-    bench.run(quick=args.quick, config=args.config, rate=args.rate)
+    bench.run(quick=args.quick, config=args.config, rate=args.rate, speed=not args.plan_only)
     return 0
 
 
@@ -321,6 +321,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--config", help="plan the buses of this config: joints per bus at which control rate")
     b.add_argument("--rate", type=float, default=None, help="control rate [Hz] the planner checks (default 50)")
     b.add_argument("--quick", action="store_true", help="tiny sizes: checks that everything runs, not speed")
+    b.add_argument("--plan-only", action="store_true", help="only the bus planner for --config")
     b.set_defaults(func=cmd_bench)
     return p
 
