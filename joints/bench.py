@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import os
+import platform
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -417,8 +418,6 @@ def run(*, quick: bool = False, config: str | None = None, rate: float | None = 
         if config is not None:
             _print_plan(config, rate, out)
         return []
-    import platform
-
     core, cores = pin_one_core()
     try:
         return _run(quick, config, rate, out, core)
