@@ -196,6 +196,37 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
         self._autoreset = np.logical_or(terminated, truncated)
         return self._obs.copy(), rewards, terminated, truncated, infos
 
+    def _add_info(self, vector_infos: dict[str, Any], env_info: dict[str, Any], env_num: int) -> dict[str, Any]:
+        """``VectorEnv._add_info`` (the same arrays, masks and key order), without allocating a
+        mask it then throws away for every key of every rig."""
+        n = self.num_envs
+        for key, value in env_info.items():
+            if key == "final_obs":
+                array = vector_infos.get("final_obs")
+                if array is None:
+                    array = np.full(n, fill_value=None, dtype=object)
+                array[env_num] = value
+            elif isinstance(value, dict):
+                array = self._add_info(vector_infos.get(key, {}), value, env_num)
+            else:
+                array = vector_infos.get(key) if key in vector_infos else None
+                if array is None:
+                    kind = type(value)
+                    if kind in (int, float, bool) or issubclass(kind, np.number):
+                        array = np.zeros(n, dtype=kind)
+                    elif isinstance(value, np.ndarray):
+                        array = np.zeros((n, *value.shape), dtype=value.dtype)
+                    else:
+                        array = np.full(n, fill_value=None, dtype=object)
+                array[env_num] = value
+            mask_key = "_" + key
+            mask = vector_infos.get(mask_key)
+            if mask is None:
+                mask = np.zeros(n, dtype=np.bool_)
+            mask[env_num] = True
+            vector_infos[key], vector_infos[mask_key] = array, mask
+        return vector_infos
+
     def render(self) -> tuple[Any, ...]:
         return tuple(e.render() for e in self.envs)
 

@@ -141,6 +141,7 @@ class Group:
             self.dts_array = np.array(self.dts)
         self.order: Any = None
         self.fusable: list[bool] = []
+        self._active: tuple[int, ...] = ()  #: the worlds whose ACTIVE flag is set in worlds_table
         self.replan()
 
     def replan(self) -> None:
@@ -158,16 +159,19 @@ class Group:
         :data:`CHUNK` substeps; each world's ``steps`` counts up after every call."""
         table = self.worlds_table
         all_worlds = self.worlds
-        table[:, ACTIVE] = 0
-        for w in worlds:
-            table[w, ACTIVE] = 1
+        active = tuple(worlds)
+        if active != self._active:  # the active worlds' flags (kept while the same worlds run)
+            table[:, ACTIVE] = 0
+            for w in active:
+                table[w, ACTIVE] = 1
+            self._active = active
         while n > 0:
             m = min(n, CHUNK)
-            for w in worlds:
+            for w in active:
                 table[w, STEPS] = all_worlds[w].steps
             _run_compiled(m, 1, self.mj_step or 0, self.table, self.adr, self.ratio, self.order,  # type: ignore[misc]
                           table, self.dts_array)
-            for w in worlds:
+            for w in active:
                 all_worlds[w].steps += m
             n -= m
 
@@ -176,6 +180,7 @@ class Group:
         if self.compiled:
             table = self.worlds_table
             table[:, ACTIVE] = 0
+            self._active = ()
             for w in worlds:
                 table[w, ACTIVE] = 1
                 table[w, STEPS] = self.worlds[w].steps
