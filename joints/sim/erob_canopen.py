@@ -13,7 +13,11 @@ What the node does (CiA 301 / 402 where chapter 5 is silent; each is an assumpti
 real eRob, also listed in the README):
 
 * NMT: boot-up (0x700+node, data 00) after power-on and after NMT reset node / reset
-  communication, then PRE-OPERATIONAL. Reset communication restores 0x1000-0x1FFF to their
+  communication, then PRE-OPERATIONAL. The boot-up follows a reset command by
+  :data:`BOOT_TIME_COMMUNICATION` / :data:`BOOT_TIME_NODE` of simulated time, not at once: a real
+  node needs time to reset, and a master that starts waiting for the boot-up only after sending the
+  command (canopen's ``wait_for_bootup``) misses an instant one (the node's state changes at the
+  command: frames in the meantime are treated as after the boot-up). Reset communication restores 0x1000-0x1FFF to their
   power-on values; reset node also the application (a firmware power cycle). SDO, SYNC and EMCY
   work in PRE-OPERATIONAL and OPERATIONAL, PDOs only in OPERATIONAL, only NMT and node guarding in
   STOPPED. NMT stop or a reset while the drive is enabled switches it off (brake holds).
@@ -75,6 +79,9 @@ from joints.transports.can_sim import CanMedium, ClockLike
 __all__ = ["LIFE_GUARD_ERROR", "CanopenFront", "ErobCanopenBus", "eds_text", "object_dictionary", "write_eds"]
 
 LIFE_GUARD_ERROR = 0x8130  #: EMCY / fault code of a life-guarding timeout (CiA 301)
+#: s from an NMT reset command to the node's boot-up (reset communication / reset node)
+BOOT_TIME_COMMUNICATION = 0.002
+BOOT_TIME_NODE = 0.05
 PDO_LENGTH_ERROR = 0x8210  #: EMCY of an RPDO shorter than its mapping
 _A = co.SdoAbortCode
 _POSITION, _SPEED, _TORQUE = int(OperationMode.POSITION), int(OperationMode.SPEED), int(OperationMode.TORQUE)
@@ -141,6 +148,8 @@ class CanopenFront:
         self.frames_in = 0
         self.emcy_sent: list[co.Emcy] = []
         self._outbox: list[can.Message] = []
+        #: answers due later than at once: (delay after the frame that caused them [s], frame)
+        self.later: list[tuple[float, can.Message]] = []
         self._node_relative()
         self._reset(power_on=True)
 
@@ -268,10 +277,12 @@ class CanopenFront:
         if command is co.NmtCommand.RESET_NODE:
             self.firmware.power_cycle()
             self._reset(power_on=True)
-            return [self._booted()]
+            self.later.append((BOOT_TIME_NODE, self._booted()))
+            return []
         if command is co.NmtCommand.RESET_COMMUNICATION:
             self._reset_communication()
-            return [self._booted()]
+            self.later.append((BOOT_TIME_COMMUNICATION, self._booted()))
+            return []
         if self.nmt is co.NmtState.INITIALISING:
             return []
         new = co.nmt_transition(self.nmt, command)
@@ -781,18 +792,28 @@ class ErobCanopenBus:
         if kind in (co.Kind.NMT, co.Kind.SYNC, co.Kind.TIME):
             out: list[can.Message] = []
             for f in self.fronts:
-                out.extend(f.on_frame(frame, route))
+                out.extend(self._answers(f, frame, route))
             return out
         if kind in (co.Kind.SDO_RX, co.Kind.GUARD_REQUEST):
             front = self.front(route.node)
-            return () if front is None else front.on_frame(frame, route)
+            return () if front is None else self._answers(front, frame, route)
         if kind.is_pdo:
             out = []
             for f in self.fronts:  # PDOs are routed by COB-ID: any front may have mapped it
                 if f.nmt is co.NmtState.OPERATIONAL:
-                    out.extend(f.on_frame(frame, route))
+                    out.extend(self._answers(f, frame, route))
             return out
         return ()
+
+    def _answers(self, front: CanopenFront, frame: can.Message, route: co.Route) -> list[can.Message]:
+        """The front's answers now; those it gives later (a boot-up) go on the medium at their time."""
+        out = front.on_frame(frame, route)
+        if front.later:
+            now = self.medium.time()
+            for delay, answer in front.later:
+                self.medium.send_at(self._node, answer, now + delay)
+            front.later.clear()
+        return out
 
     # -- the world's clock (joints.sim.world.TimedDeviceBus) ------------------------------------
     def bind_clock(self, clock: ClockLike) -> None:
