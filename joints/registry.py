@@ -182,6 +182,7 @@ def _canopen_link(cfg: BusConfig, transport: Any, clock: Clock, peer: Any) -> Li
     link = CanopenLink(transport, policy=RetryPolicy(timeout=cfg.timeout, retries=cfg.retries), clock=clock,
                        name=cfg.name, bus_clock=sim)
     link.sync_period = cfg.sync_period
+    link.bitrate = cfg.bitrate
     return link
 
 

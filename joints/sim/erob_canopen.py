@@ -14,10 +14,11 @@ real eRob, also listed in the README):
 
 * NMT: boot-up (0x700+node, data 00) after power-on and after NMT reset node / reset
   communication, then PRE-OPERATIONAL. The boot-up follows a reset command by
-  :data:`BOOT_TIME_COMMUNICATION` / :data:`BOOT_TIME_NODE` of simulated time, not at once: a real
-  node needs time to reset, and a master that starts waiting for the boot-up only after sending the
-  command (canopen's ``wait_for_bootup``) misses an instant one (the node's state changes at the
-  command: frames in the meantime are treated as after the boot-up). Reset communication restores 0x1000-0x1FFF to their
+  :data:`BOOT_TIME_COMMUNICATION` (1 ms, as eRunner's monitor shows it) / :data:`BOOT_TIME_NODE`
+  of simulated time, not in the same instant (the node's state changes at the command: frames in
+  the meantime are treated as after the boot-up). A master that starts waiting for the boot-up
+  only after sending the command (canopen's ``wait_for_bootup``) can miss it, here as on a real
+  eRob. Reset communication restores 0x1000-0x1FFF to their
   power-on values; reset node also the application (a firmware power cycle). SDO, SYNC and EMCY
   work in PRE-OPERATIONAL and OPERATIONAL, PDOs only in OPERATIONAL, only NMT and node guarding in
   STOPPED. NMT stop or a reset while the drive is enabled switches it off (brake holds).
@@ -27,7 +28,8 @@ real eRob, also listed in the README):
   an object that cannot be mapped 0x06040041, more than 64 bits 0x06040042.
 * CiA 402: OPERATION ENABLED is reported at once; the holding brake releases in the firmware's
   500 ms and set-points written meanwhile act when it has (a PP set-point is acknowledged at once
-  and started then); in CSP/CSV/CST statusword bit 12 ("drive follows the target") is set from then. Quick stop (option code 0x605A = 2)
+  and started then); in CSP/CSV/CST statusword bit 12 ("drive follows the target") and in IP bit
+  12 ("ip mode active", with controlword bit 4) are set from then. Quick stop (option code 0x605A = 2)
   decelerates within the emergency-stop time, then SWITCH ON DISABLED. A firmware fault is
   FAULT with an EMCY carrying the eRob error code (0x603F) and an error register by CiA 301 class;
   fault reset (rising bit 7) clears it and sends EMCY 0x0000. Halt (bit 8) decelerates with the
@@ -79,8 +81,9 @@ from joints.transports.can_sim import CanMedium, ClockLike
 __all__ = ["LIFE_GUARD_ERROR", "CanopenFront", "ErobCanopenBus", "eds_text", "object_dictionary", "write_eds"]
 
 LIFE_GUARD_ERROR = 0x8130  #: EMCY / fault code of a life-guarding timeout (CiA 301)
-#: s from an NMT reset command to the node's boot-up (reset communication / reset node)
-BOOT_TIME_COMMUNICATION = 0.002
+#: s from an NMT reset command to the node's boot-up: reset communication as eRunner's monitor shows
+#: it (figs 5-18, 5-23, 5-27: the boot-up within 1 ms), reset node (not shown) an assumption
+BOOT_TIME_COMMUNICATION = 0.001
 BOOT_TIME_NODE = 0.05
 PDO_LENGTH_ERROR = 0x8210  #: EMCY of an RPDO shorter than its mapping
 _A = co.SdoAbortCode
@@ -564,7 +567,7 @@ class CanopenFront:
                 reached = abs(v - target) <= max(100, abs(target) // 100) and abs(fw.v_ref - target) < 1
                 bit12 = abs(v) < 100 if mode is Mode.PV else not self.enabling
             elif mode is Mode.IP:
-                bit12 = bool(self.controlword & cia402.CW_ENABLE_IP)
+                bit12 = bool(self.controlword & cia402.CW_ENABLE_IP) and not self.enabling  # interpolating
                 reached = not fw.gen.active and abs(fw.v_ref) < 1
             elif mode in (Mode.CSP, Mode.CST):
                 bit12 = not self.halted and not self.enabling  # following the target (brake released)

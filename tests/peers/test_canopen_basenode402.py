@@ -86,8 +86,18 @@ def pp_move_and_pv_run(network: Any, eds: Path) -> Any:
     """The master's script: bring-up, PP move to 50000 counts, PV run at 30000 counts/s after SWITCHED ON."""
     node = canopen.BaseNode402(2, str(eds))
     network.add_node(node)
+    # the eRob boots within 1 ms of the reset (eRunner figs 5-18, 5-23, 5-27), possibly before canopen's
+    # wait_for_bootup has started listening: listen from before the command instead
+    booted = threading.Event()
+
+    def on_boot(can_id: int, data: bytearray, timestamp: float) -> None:
+        if bytes(data) == b"\x00":
+            booted.set()
+
+    network.subscribe(0x702, on_boot)
     node.nmt.state = "RESET COMMUNICATION"
-    node.nmt.wait_for_bootup(2.0)
+    assert booted.wait(2.0), "no boot-up within 2 s of the NMT reset communication"
+    network.unsubscribe(0x702, on_boot)
     node.sdo[0x1800][5].raw = 10  # TPDO1 (statusword) every 10 ms as well as on change
     node.sdo[0x1017].raw = 100
     node.setup_402_state_machine()
