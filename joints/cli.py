@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 from joints import registry
 from joints.errors import ConfigError, JointsError
@@ -55,7 +55,9 @@ def cmd_scan(args: argparse.Namespace) -> int:
 
     The bus is a serial port (``--port``), a CAN channel (``--interface``/``--channel``) or a bus
     of a config (``--config``/``--bus``; twins in sim). Drives that report what they are (eRob
-    over CAN: model, serial number, versions) say so on their line.
+    over CAN: model, serial number, versions) say so on their line. A protocol with a scan of its
+    own (CANopen: heartbeats and boot-ups heard for ``--listen`` s, then an SDO probe) finds any
+    node of the protocol, whatever its device family.
     """
     from joints.clock import MonotonicClock
     from joints.config import BusConfig, JointConfig
@@ -88,7 +90,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
     # CAN replies name their node in the identifier: a late one can never be taken for another node's
     link.policy = RetryPolicy(timeout=args.timeout, retries=0, late=0.0 if proto.medium == "can" else None)
     found = 0
-    try:
+
+    def probe() -> Iterator[dict[str, object]]:
         for addr in addresses:
             if not lo <= addr <= hi:
                 continue
@@ -103,6 +106,12 @@ def cmd_scan(args: argparse.Namespace) -> int:
                     record.update(driver.identity())
                 except JointsError as exc:
                     record["identity"] = f"failed: {exc}"
+            yield record
+
+    try:
+        records = probe() if proto.scan is None else \
+            proto.scan(link, [a for a in addresses if lo <= a <= hi], args.listen)
+        for record in records:
             found += 1
             print(json.dumps(record), flush=True)
     finally:
@@ -111,7 +120,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
         else:
             link.close()
     if not found:
-        print(f"no {args.device} answered on {where} ({cfg.protocol}) at addresses {addresses.start}-"
+        what = f"{cfg.protocol} node" if proto.scan is not None else args.device
+        print(f"no {what} answered on {where} ({cfg.protocol}) at addresses {addresses.start}-"
               f"{addresses.stop - 1}", file=sys.stderr)
         return 1
     return 0
@@ -259,6 +269,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--range", type=_parse_range, default=None,
                    help="addresses, e.g. 1-32 (default: 1-32 serial, the protocol's whole range on CAN: 1-127)")
     s.add_argument("--timeout", type=float, default=0.05)
+    s.add_argument("--listen", type=float, default=0.3,
+                   help="CANopen: seconds to listen for heartbeats/boot-ups before the SDO probe")
     s.set_defaults(func=cmd_scan)
 
     for name, func, helptext in (("state", cmd_state, "print the state of every joint (JSON lines)"),

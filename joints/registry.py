@@ -10,7 +10,7 @@ pyserial, MuJoCo) are imported only when an entry is used.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -42,6 +42,9 @@ class BusProtocol:
     device_bus: Callable[[BusConfig], Any]  #: sim: the emulated side of the bus (fronts attach with .add)
     sim_transport: Callable[[Any], Any]  #: sim: an in-process transport to a device bus
     direct: bool = False  #: the sim may skip bytes (message objects straight to the device bus)
+    #: ``joints scan`` of any node of the protocol: (link, addresses, listen [s]) -> a record per node found;
+    #: None: the scan probes each address with the device family's driver
+    scan: Callable[[Any, Sequence[int], float], Iterable[dict[str, object]]] | None = None
 
 
 @dataclass(frozen=True)
@@ -192,6 +195,12 @@ def _canopen_device_bus(cfg: BusConfig) -> Any:
     return ErobCanopenBus(name=cfg.name, bitrate=cfg.bitrate)
 
 
+def _canopen_scan(link: Any, addresses: Sequence[int], listen: float) -> Iterable[dict[str, object]]:
+    from joints.drivers.canopen_scan import scan
+
+    return scan(link, addresses, listen=listen)
+
+
 def _lockstep_can(device_bus: Any) -> Any:
     from joints.transports.can import PythonCanTransport
     from joints.transports.can_sim import LockstepCanBus
@@ -216,7 +225,7 @@ PROTOCOLS: dict[str, BusProtocol] = {
         name="canopen", medium="can", addresses=(1, 127),
         description="CANopen CiA 301/402 (SDO 0x600/0x580+node, PDOs, SYNC, NMT, heartbeat)",
         link=_canopen_link, open_transport=_can_transport, device_bus=_canopen_device_bus,
-        sim_transport=_lockstep_can,
+        sim_transport=_lockstep_can, scan=_canopen_scan,
     ),
 }
 

@@ -68,7 +68,6 @@ from joints.drivers.access import ParamAccess
 from joints.drivers.base import RawState
 from joints.drivers.erob import CalibrationResult, ErobDriver
 from joints.errors import CommandError, DeviceFault, FrameError, ReplyTimeout, StateError
-from joints.transports.can_timing import canopen_cycle_load
 
 __all__ = ["HEARTBEAT_MS", "MODES", "NODE_LOST", "CanopenAccess", "ErobCanopenDriver", "SyncCycle"]
 
@@ -179,15 +178,14 @@ class SyncCycle:
 
     def feedback_tpdo(self) -> PdoConfig:
         """The cyclic joints' TPDO1: with the motor current if the cycle still fits the bus with it
-        (every cyclic joint of the bus, worst-case bit stuffing: :func:`canopen_cycle_load`), else
-        eRunner's statusword + position."""
+        (every cyclic joint of the bus, worst-case bit stuffing:
+        :meth:`~joints.link.canopen.CanopenLink.cycle_load`), else eRunner's statusword + position."""
         if self.current is not None:
             return CYCLIC_TPDO1_CURRENT if self.current else ERUNNER_TPDOS[0]
         cyclic = [d for d in self.drivers if d.mode.cyclic]
-        load = canopen_cycle_load([d.node for d in cyclic] or [1],
-                                  rpdo_bytes=(max((ERUNNER_RPDO1[d.mode].size for d in cyclic), default=6),),
-                                  tpdo_bytes=(CYCLIC_TPDO1_CURRENT.size,), sync_period=self.period,
-                                  bitrate=int(getattr(self.link, "bitrate", 1_000_000)))
+        load = self.link.cycle_load([d.node for d in cyclic] or [1],
+                                    rpdo_bytes=(max((ERUNNER_RPDO1[d.mode].size for d in cyclic), default=6),),
+                                    tpdo_bytes=(CYCLIC_TPDO1_CURRENT.size,), period=self.period)
         return CYCLIC_TPDO1_CURRENT if load.fits else ERUNNER_TPDOS[0]
 
     def send(self, targets: Mapping[ErobCanopenDriver, int]) -> None:

@@ -82,12 +82,13 @@ def twin(tmp_path: Path) -> Iterator[tuple[Any, str, Path]]:
         side.shutdown()
 
 
-def pp_move_and_pv_run(network: Any, eds: Path) -> Any:
-    """The master's script: bring-up, PP move to 50000 counts, PV run at 30000 counts/s after SWITCHED ON."""
+def reset_communication(network: Any, eds: Path) -> Any:
+    """Node 2 as a BaseNode402, after NMT reset communication and its boot-up.
+
+    The eRob boots within 1 ms of the reset (eRunner figs 5-18, 5-23, 5-27), possibly before canopen's
+    ``wait_for_bootup`` has started listening: listen from before the command instead."""
     node = canopen.BaseNode402(2, str(eds))
     network.add_node(node)
-    # the eRob boots within 1 ms of the reset (eRunner figs 5-18, 5-23, 5-27), possibly before canopen's
-    # wait_for_bootup has started listening: listen from before the command instead
     booted = threading.Event()
 
     def on_boot(can_id: int, data: bytearray, timestamp: float) -> None:
@@ -98,6 +99,12 @@ def pp_move_and_pv_run(network: Any, eds: Path) -> Any:
     node.nmt.state = "RESET COMMUNICATION"
     assert booted.wait(2.0), "no boot-up within 2 s of the NMT reset communication"
     network.unsubscribe(0x702, on_boot)
+    return node
+
+
+def pp_move_and_pv_run(network: Any, eds: Path) -> Any:
+    """The master's script: bring-up, PP move to 50000 counts, PV run at 30000 counts/s after SWITCHED ON."""
+    node = reset_communication(network, eds)
     node.sdo[0x1800][5].raw = 10  # TPDO1 (statusword) every 10 ms as well as on change
     node.sdo[0x1017].raw = 100
     node.setup_402_state_machine()
@@ -135,6 +142,52 @@ def test_basenode402_pp_move_and_pv_run(twin: tuple[Any, str, Path]) -> None:
         node = pp_move_and_pv_run(network, eds)
         node.state = "SWITCH ON DISABLED"
     finally:
+        network.disconnect()
+
+
+def test_basenode402_runs_csv_on_its_own_sync_and_periodic_rpdo(twin: tuple[Any, str, Path]) -> None:
+    """CSV driven the CiA 402 way by canopen's master: RPDO1 (controlword + 0x60FF) and TPDO1 (statusword + 0x606C)
+    mapped synchronous (type 1) through canopen's PDO API, a 10 ms SYNC of its SyncProducer and the RPDO sent
+    periodically (BaseNode402 itself never sends a synchronous RPDO); the twin applies each RPDO at the SYNC."""
+    _world, channel, eds = twin
+    network = canopen.Network()
+    network.connect(interface="virtual", channel=channel)
+    try:
+        node = reset_communication(network, eds)
+        node.sdo[0x1006].raw = 10_000  # communication cycle period [us]
+        node.rpdo.read()
+        node.tpdo.read()
+        rpdo, tpdo = node.rpdo[1], node.tpdo[1]
+        rpdo.clear()
+        rpdo.add_variable(0x6040)
+        rpdo.add_variable(0x60FF)
+        rpdo.trans_type = 1
+        rpdo.enabled = True
+        tpdo.clear()
+        tpdo.add_variable(0x6041)
+        tpdo.add_variable(0x606C)
+        tpdo.trans_type = 1
+        tpdo.enabled = True
+        rpdo.save()
+        tpdo.save()
+        assert node.sdo[0x1600][2].raw == 0x60FF0020 and node.sdo[0x1400][2].raw == 1
+        node.setup_402_state_machine(read_pdos=False)
+        node.op_mode = "CYCLIC SYNCHRONOUS VELOCITY"
+        assert node.sdo[0x6061].raw == 9
+        node.nmt.state = "OPERATIONAL"
+        rpdo[0x60FF].raw = 0
+        rpdo.start(0.01)
+        network.sync.start(0.01)
+        wait_until(lambda: tpdo.is_received, 1.0, "TPDO1 on SYNC")
+        node.state = "OPERATION ENABLED"
+        wait_until(lambda: node.statusword & 0x1000, 2.0, "bit 12: the drive follows the target (brake released)")
+        rpdo[0x60FF].raw = 40_000  # count/s
+        wait_until(lambda: abs(tpdo[0x606C].raw - 40_000) < 1500, 5.0, "velocity 40000 count/s in TPDO1")
+        rpdo[0x60FF].raw = 0
+        wait_until(lambda: abs(tpdo[0x606C].raw) < 500, 5.0, "standstill")
+        node.state = "SWITCH ON DISABLED"
+    finally:
+        network.sync.stop()
         network.disconnect()
 
 
