@@ -248,6 +248,34 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_sim_eds(args: argparse.Namespace) -> int:
+    """Write the EDS of the emulated drive at node NODE of CONFIG (to ``-o FILE``, else to stdout)."""
+    from pathlib import Path
+
+    from joints.config import load
+
+    cfg = load(args.config, backend="sim")
+    found = []
+    for name, j in cfg.joints.items():
+        protocol = cfg.buses[j.bus].protocol
+        make = registry.family(j.device, key=f"joints.{name}.device").eds.get(protocol)
+        if make is not None and j.address == args.node:
+            found.append((name, make))
+    if len(found) != 1:
+        nodes = sorted({j.address for n, j in cfg.joints.items()
+                        if registry.family(j.device).eds.get(cfg.buses[j.bus].protocol) is not None})
+        what = "no joint" if not found else f"{len(found)} joints ({', '.join(n for n, _ in found)})"
+        raise ConfigError(f"{what} at node {args.node} on a bus with an EDS (CANopen)", file=cfg.source,
+                          key="joints", allowed=nodes)
+    text = found[0][1](args.node)
+    if args.output is None:
+        sys.stdout.write(text)
+    else:
+        Path(args.output).write_text(text, encoding="utf-8")
+        print(f"{args.output}: EDS of joint {found[0][0]} (node {args.node})", file=sys.stderr)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="joints", description=(__doc__ or "joints").splitlines()[0])
     p.add_argument("--version", action="version", version=f"joints {__import__('joints').__version__}")
@@ -292,6 +320,11 @@ def build_parser() -> argparse.ArgumentParser:
                                       "buses on python-can channels (one JSON line per bus)")
     sv.add_argument("config")
     sv.set_defaults(func=cmd_sim_serve)
+    ed = sim.add_parser("eds", help="write the CANopen EDS of the emulated drive at NODE of CONFIG")
+    ed.add_argument("config")
+    ed.add_argument("node", type=int)
+    ed.add_argument("-o", "--output", help="the .eds file to write (default: stdout)")
+    ed.set_defaults(func=cmd_sim_eds)
 
     r = sub.add_parser("registers", help="list a device's Modbus register table")
     r.add_argument("--device", choices=registry.devices(), default="erob")

@@ -70,6 +70,9 @@ class DeviceFamily:
     watchdog_ms: int | None = None
     #: protocol -> the operating modes a joint may name (joint key ``mode``; the first is the default)
     modes: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+    #: protocol -> the electronic data sheet of the family's twin on it for a node id (CANopen: an EDS,
+    #: CiA 306; ``joints sim eds``)
+    eds: Mapping[str, Callable[[int], str]] = field(default_factory=dict)
 
     @property
     def protocols(self) -> tuple[str, ...]:
@@ -283,6 +286,12 @@ def _erob_canopen_front(twin: Any, address: int) -> Any:
     return CanopenFront(twin, address)
 
 
+def _erob_eds(node: int) -> str:
+    from joints.sim.erob_canopen import eds_text
+
+    return eds_text(node)
+
+
 def _erob_can_table() -> Any:
     from joints.devices.erob.can import EROB_CAN
 
@@ -375,6 +384,7 @@ FAMILIES: dict[str, DeviceFamily] = {
         tables={"modbus-rtu": _erob_modbus_table, "erob-can": _erob_can_table, "canopen": _erob_canopen_table},
         twin=_erob_twin,
         fronts={"modbus-rtu": _erob_modbus_front, "erob-can": _erob_can_front, "canopen": _erob_canopen_front},
+        eds={"canopen": _erob_eds},
         watchdog_ms=1000,  # off at power-on (0x0002 = 0): armed while enabled, restored on disable
         modes={"canopen": ("pp", "pv", "pt", "csp", "csv", "cst", "ip")},
     ),
