@@ -111,23 +111,27 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
         if self._closed:
             raise RuntimeError("the env is closed")
 
-    #: step is _act (check the action, send its commands), a wait for the next tick, _outcome
-    #: (read, observe, reward): a batched env (envs.vector) waits for all its rigs at once
+    #: step is begin_step (check the action, send its commands), a wait for the next tick,
+    #: finish_step (read, observe, reward): a batched env (envs.vector) waits for all its rigs at once
     batchable = False
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        token = self._act(action)
+        token = self.begin_step(action)
         self._wait_until(self.tick_time())
-        return self._outcome(token)
+        return self.finish_step(token)
 
     def tick_time(self) -> float:
         """Rig time of the tick the last action waits for."""
         return self._t0 + self._tick * self.control_period
 
-    def _act(self, action: np.ndarray) -> Any:
+    def begin_step(self, action: np.ndarray) -> Any:
+        """The first half of :meth:`step`: check ``action`` and send its commands (returns what
+        :meth:`finish_step` needs)."""
         raise NotImplementedError
 
-    def _outcome(self, token: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+    def finish_step(self, token: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """The second half of :meth:`step`, once the rig's clock reached :meth:`tick_time`: read the
+        joints, observe, reward."""
         raise NotImplementedError
 
     def _wait_until(self, t: float) -> None:
@@ -402,7 +406,7 @@ class JointsEnv(RigEnv):
 
     batchable = True
 
-    def _act(self, action: np.ndarray) -> np.ndarray:
+    def begin_step(self, action: np.ndarray) -> np.ndarray:
         self._check_open()
         a = np.asarray(action, dtype=np.float64)
         if a.shape != self.action_space.shape:
@@ -420,7 +424,7 @@ class JointsEnv(RigEnv):
         self._tick += 1
         return a
 
-    def _outcome(self, a: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+    def finish_step(self, a: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         states = self._read()
         listed = [s.position for s in states]
         positions = np.array(listed)

@@ -435,7 +435,7 @@ class DiffDriveGoalEnv(RigEnv):
 
     batchable = True
 
-    def _act(self, action: np.ndarray) -> tuple[np.ndarray, bool]:
+    def begin_step(self, action: np.ndarray) -> tuple[np.ndarray, bool]:
         self._check_open()
         a = np.asarray(action, dtype=np.float64)
         if a.shape != self.action_space.shape:
@@ -452,7 +452,7 @@ class DiffDriveGoalEnv(RigEnv):
         self._tick += 1
         return a, watchdog
 
-    def _outcome(self, token: tuple[np.ndarray, bool]) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+    def finish_step(self, token: tuple[np.ndarray, bool]) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         a, watchdog = token
         states = self._read()
         self.odometry.update(*self._angles)

@@ -157,7 +157,7 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
             elif self.autoreset_mode is AutoresetMode.DISABLED and self._autoreset[i]:
                 raise gym.error.ResetNeeded(f"rig {i} ended its episode: reset it (autoreset is disabled)")
             elif env.batchable:
-                acting.append((i, env._act(actions[i])))
+                acting.append((i, env.begin_step(actions[i])))
             else:  # an env that cannot split its step: on its own
                 acting.append((i, None))
                 obs, rewards[i], terminated[i], truncated[i], infos_of[i] = env.step(actions[i])
@@ -179,7 +179,7 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
         for i, token in acting:
             env = self.envs[i]
             if env.batchable:
-                obs, rewards[i], terminated[i], truncated[i], infos_of[i] = env._outcome(token)
+                obs, rewards[i], terminated[i], truncated[i], infos_of[i] = env.finish_step(token)
                 self._obs[i] = obs
             self._elapsed[i] += 1
             if self.max_episode_steps is not None and self._elapsed[i] >= self.max_episode_steps:
