@@ -553,9 +553,10 @@ class World:
 
 
 def join(worlds: Sequence[World]) -> stepping.Group:
-    """One stepping group for ``worlds`` (their drives' rows in one table), made once and kept."""
+    """One stepping group holding ``worlds`` (their drives' rows in one table), made once and kept:
+    a group that already holds them all (and maybe more: the other rigs of a batch) steps any of them."""
     group = worlds[0].group
-    if group.worlds == list(worlds) and all(w.group is group for w in worlds):
+    if all(w.group is group for w in worlds):
         return group
     group = stepping.Group(worlds, all(w.compiled for w in worlds))
     for i, w in enumerate(worlds):
