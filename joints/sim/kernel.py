@@ -61,12 +61,47 @@ jitable(motion.ramp)
 jitable(motion.move_step)
 
 
+#: the sources compiled into the kernels: numba's on-disk cache checks only the file of the
+#: function it caches, so the cache lives in a directory named by a hash of all of them
+_SOURCES = ("joints/sim/kernel.py", "joints/sim/erob_kernel.py", "joints/sim/zlac_kernel.py",
+            "joints/sim/stepping.py", "joints/devices/motion.py")
+
+
+def cache_dir() -> str:
+    """Where the compiled kernels are cached: ``$NUMBA_CACHE_DIR`` (or ``$XDG_CACHE_HOME``, else
+    ``~/.cache``) ``/joints-kernels-<hash of the kernel sources and numba's version>``."""
+    import hashlib
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    digest = hashlib.sha256(str(getattr(numba, "__version__", "")).encode())
+    for name in _SOURCES:
+        try:
+            digest.update((root / name).read_bytes())
+        except OSError:  # pragma: no cover - an unusual install: the version still separates caches
+            digest.update(name.encode())
+    base = os.environ.get("NUMBA_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"))
+    return os.path.join(base, f"joints-kernels-{digest.hexdigest()[:16]}")
+
+
 def compiled(fn: F) -> F | None:
-    """The compiled version of a kernel entry point (cached on disk), or None without numba."""
+    """The compiled version of a kernel entry point (cached on disk in :func:`cache_dir`), or None
+    without numba."""
     if numba is None:
         return None
-    out: Any = numba.njit(cache=True)(fn)
+    if not _CACHE_DIR:
+        _CACHE_DIR.append(cache_dir())
+    before = numba.config.CACHE_DIR
+    numba.config.CACHE_DIR = _CACHE_DIR[0]
+    try:  # the cache's place is fixed when caching is enabled: the user's setting is back right after
+        out: Any = numba.njit(cache=True)(fn)
+    finally:
+        numba.config.CACHE_DIR = before
     return out  # type: ignore[no-any-return]
+
+
+_CACHE_DIR: list[str] = []
 
 
 def table(n: int, width: int, compiled_mode: bool) -> Any:
@@ -141,8 +176,8 @@ call: Any = None
 if numba is not None:
     f64_at = _extending.intrinsic(_f64_at)
     call_pp = _extending.intrinsic(_call_pp)
-    doubles = numba.njit(cache=True)(_doubles)
-    call = numba.njit(cache=True)(_call)
+    doubles = compiled(_doubles)
+    call = compiled(_call)
 
 
 _MJ_STEP: list[int | None] = []
