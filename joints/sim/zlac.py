@@ -207,6 +207,14 @@ _NOT_STORED = frozenset({
     "target_torque_right",
 })
 _SETTINGS = tuple(r.name for r in ZLAC8015D if r.access is Access.RW and r.name not in _NOT_STORED)
+#: writes that act (or read loop constants) rather than only store a setting: loop settings written
+#: before them in the same block are turned into loop constants first
+_ACTING = frozenset({
+    "control_word", "control_mode", "target_velocity_left", "target_velocity_right", "target_position_left",
+    "target_position_right", "target_torque_left", "target_torque_right", "clear_feedback_position",
+    "in_absolute_position_control_reset_the_zero_point", "whether_store_rw_register_to_eeprom",
+    "register_parameter_settings", "maximum_motor_speed",
+})
 
 
 def power_on_defaults(profile: HubMotorProfile, address: int) -> dict[str, int]:
@@ -706,7 +714,7 @@ class ZlacFirmware(Firmware):
                 self._cache()
 
     def on_write(self, name: str, value: int) -> None:
-        if self._stale:  # settings written earlier in this block: in force before this write acts
+        if self._stale and name in _ACTING:  # settings written earlier in this block: in force first
             self._cache()
         if name == "control_word":
             self._command(value)
