@@ -40,7 +40,7 @@ Conventions the manuals leave open (documented firmware choices):
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from joints.devices.erob import faults
@@ -161,6 +161,7 @@ def power_on_defaults(profile: ErobProfile, address: int) -> dict[str, int]:
 _SETTINGS = tuple(p.name for p in EROB_PARAMS if p.access.value == "R/W")
 _POSITION = int(OperationMode.POSITION)
 ARRIVAL_WINDOW = K.ARRIVAL_WINDOW
+_STATUS_INDEX = {name: i for i, name in enumerate(K.STATUS_NAMES)}
 
 
 def _column(k: int, doc: str = "") -> property:
@@ -466,6 +467,34 @@ class ErobFirmware(Firmware):
         s[K.POS] = s[K.P_REF] = q * COUNTS_PER_RAD
         s[K.VEL] = s[K.V_REF] = 0.0
         s[K.BRAKE_HOLD] = s[K.POS]
+
+    def reader(self, names: Sequence[str]) -> Callable[[], list[int]]:
+        """A prepared read (:meth:`Firmware.reader`); a block with the status values computes them
+        all in one kernel call (:func:`joints.sim.erob_kernel.status`, the same values)."""
+        generic = super().reader(names)
+        names = tuple(names)
+        index = _STATUS_INDEX
+        if "status_of_achieving_position" not in names or any(
+                n in self.computed and n not in index for n in names):
+            return generic
+        types = self._type_range
+        entries = tuple((index.get(n, -1), n, *types[n]) for n in names)
+        values = self.values
+        repetitive = int(MotionMode.REPETITIVE)
+
+        def read() -> list[int]:
+            self.on_read(names)
+            st = self._k.status(self._row, values["motion_mode"] == repetitive)
+            out: list[int] = []
+            for i, name, lo, hi in entries:
+                if i < 0:
+                    out.append(values[name])
+                    continue
+                v = st[i]
+                out.append(lo if v < lo else min(v, hi))  # saturate, never wrap
+            return out
+
+        return read
 
     def counts(self) -> int:
         """Actual position value: encoder counts + position offset."""

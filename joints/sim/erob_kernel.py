@@ -274,6 +274,43 @@ def clamp_target(s: Row, target: float) -> float:
     return target
 
 
+@jitable
+def round_half_even(x: float) -> int:
+    """``round(x)`` exactly as Python's builtin (ties to even), in compiled code too."""
+    r = math.floor(x)
+    d = x - r
+    if d > 0.5 or (d == 0.5 and r % 2 != 0):
+        r += 1
+    return int(r)
+
+
+#: the status values :func:`status` computes, in its order (the Modbus status block 0x0060-0x0078
+#: and the torque sensor)
+STATUS_NAMES = ("error_code", "motion_status", "status_of_achieving_position", "given_position", "actual_position",
+                "position_error", "given_speed", "current_speed", "speed_error", "given_current", "motor_current",
+                "part_of_power_temperature", "torque_sensor_value")
+STOP_REPETITIVE = 3  #: motion_status: stopping a repetitive motion
+
+
+@jitable
+def status(s: Row, repetitive: bool) -> tuple[int, int, int, int, int, int, int, int, int, int, int, int, int]:
+    """Every value of :data:`STATUS_NAMES` now (runs the settle timer, as reading 0x0063 does);
+    ``repetitive``: the motion mode is repetitive."""
+    is_moving = moving(s)
+    if s[REPEAT_STOP] != 0.0 and repetitive and s[G_ACTIVE] != 0.0:
+        motion = STOP_REPETITIVE
+    else:
+        motion = 1 if is_moving else 0
+    reached = achieve(s, is_moving)
+    offset = int(s[OFFSET])
+    on = is_enabled(s[STATE])
+    return (int(s[FAULT_CODE]), motion, reached, round_half_even(s[P_REF]) + offset,
+            round_half_even(s[POS]) + offset, round_half_even(s[P_REF] - s[POS]),
+            round_half_even(s[V_CMD] if on else 0.0), round_half_even(s[VEL]),
+            round_half_even((s[V_CMD] - s[VEL]) if on else 0.0), round_half_even(s[I_CMD]),
+            round_half_even(s[I_OUT]), round_half_even(s[TEMPERATURE]), round_half_even(s[I_OUT] * s[KT]))
+
+
 # -- the loops --------------------------------------------------------------------------------------
 @jitable
 def _brake_torque(s: Row, q: float, qd: float) -> float:
@@ -537,7 +574,8 @@ def step(s: Row, t: float, dt: float, q: float, qd: float) -> float:
 
 #: the helpers the firmware object calls, as Python (rows that are lists)
 PY_OPS = SimpleNamespace(achieve=achieve, moving=moving, ready=ready, motor_off=motor_off, raise_fault=raise_fault,
-                         gen_clear=gen_clear, clamp_target=clamp_target, step=step)
+                         gen_clear=gen_clear, clamp_target=clamp_target, step=step,
+                         status=status)
 _COMPILED: list[Any] = []
 
 
@@ -549,3 +587,25 @@ def compiled_ops() -> Any:
         else:  # pragma: no cover - depends on the install
             _COMPILED.append(PY_OPS)
     return _COMPILED[0]
+
+
+def warm() -> None:
+    """Compile (or load from the disk cache) every compiled helper now, on a scratch row, so that no
+    call later - in a real-time served world - waits for the compiler."""
+    ops = compiled_ops()
+    if ops is PY_OPS:
+        return
+    import numpy as np
+
+    s = np.ones((1, WIDTH))[0]  # no zero a loop divides by
+    s[STATE] = MOTOR_OFF
+    s[SUP] = 0.0
+    s[BRAKE_HOLD] = math.nan
+    ops.achieve(s, ops.moving(s))
+    ops.ready(s)
+    ops.motor_off(s)
+    ops.raise_fault(s, 0.0)
+    ops.gen_clear(s)
+    ops.clamp_target(s, 0.0)
+    ops.status(s, False)
+    ops.step(s, 0.001, 0.001, 0.0, 0.0)

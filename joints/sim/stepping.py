@@ -92,6 +92,15 @@ def _run(n: int, physics: int, mj_step: int, table: Any, adr: Any, ratio: Any, o
 
 
 _run_compiled = kernel.compiled(_run) if kernel.AVAILABLE else None
+_WARM: list[bool] = []
+
+
+def _warm() -> None:
+    """Every compiled kernel ready once per process (see :func:`joints.sim.erob_kernel.warm`)."""
+    if not _WARM:
+        erob_kernel.warm()
+        zlac_kernel.warm()
+        _WARM.append(True)
 
 
 class Group:
@@ -143,6 +152,10 @@ class Group:
         self.fusable: list[bool] = []
         self._active: tuple[int, ...] = ()  #: the worlds whose ACTIVE flag is set in worlds_table
         self.replan()
+        if self.compiled:
+            _warm()
+            _run_compiled(0, 0, 0, self.table, self.adr, self.ratio, self.order,  # type: ignore[misc]
+                          self.worlds_table, self.dts_array)  # compiled now, not in the first (paced) step
 
     def replan(self) -> None:
         """Which rows step, in joint order (a world's joints stepped in Python are left out), and

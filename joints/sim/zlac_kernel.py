@@ -324,3 +324,21 @@ def compiled_ops() -> Any:
         else:  # pragma: no cover - depends on the install
             _COMPILED.append(PY_OPS)
     return _COMPILED[0]
+
+
+def warm() -> None:
+    """Compile (or load from the disk cache) every compiled helper now, on scratch rows (see
+    :func:`joints.sim.erob_kernel.warm`)."""
+    ops = compiled_ops()
+    if ops is PY_OPS:
+        return
+    import numpy as np
+
+    t = np.ones((3, WIDTH))  # no zero a loop divides by
+    t[0, D_RAMP_REF] = math.nan
+    t[0, D_STATE] = DISABLED
+    ops.reset_loops(t[1])
+    ops.begin_quick_stop(t[0], t[1], 5.0, False)
+    ops.quick_stop(t, 0)
+    ops.tick(t, 0, 0.001)
+    ops.step(t, 0, 0, 0.001, 0.0, 0.0, 0.0)  # dt 0: the motors-off path
