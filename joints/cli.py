@@ -244,6 +244,34 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_identify(args: argparse.Namespace) -> int:
+    """System identification of one joint; writes its profile overlay (joints.s2r.identify)."""
+    from pathlib import Path
+
+    from joints.s2r.identify import Excitation, identify, write_overlay
+
+    exc = Excitation(mode=args.mode, duration=args.duration, amplitude=args.amplitude, f_min=args.f_min,
+                     f_max=args.f_max)
+
+    def progress(fraction: float, text: str) -> None:
+        bar = "#" * round(30 * fraction)
+        print(f"\ridentify [{bar:<30}] {fraction:4.0%}  {text}", end="", file=sys.stderr, flush=True)
+
+    with _open(args) as rig:
+        j = _joint(rig, args.joint)
+        print(f"identifying joint {args.joint} ({rig.backend}): {exc.mode} multi-sine {exc.f_min:g}-{exc.f_max:g} Hz "
+              f"for {exc.duration:g} s inside limits {j.limits}", file=sys.stderr)
+        ident = identify(rig, args.joint, exc, known_inertia=args.inertia, progress=progress)
+        print(file=sys.stderr)
+        profile = j.driver.profile
+        device = rig.config.joints[args.joint].device
+    out = Path(args.output) if args.output else Path(rig.config.base_dir) / f"{args.joint}.profile.toml"
+    write_overlay(out, profile, ident, device=device, config=rig.config.source)
+    print(ident)
+    print(f"wrote {out}; use it with  profile_overlay = \"{out.name}\"  under [joints.{args.joint}]")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="joints", description=(__doc__ or "joints").splitlines()[0])
     p.add_argument("--version", action="version", version=f"joints {__import__('joints').__version__}")
@@ -286,6 +314,21 @@ def build_parser() -> argparse.ArgumentParser:
                                       "buses on python-can channels (one JSON line per bus)")
     sv.add_argument("config")
     sv.set_defaults(func=cmd_sim_serve)
+
+    ident = sub.add_parser("identify", help="identify a joint's inertia, friction, torque constant and delay (a "
+                                            "safe excitation inside its limits) and write its profile overlay")
+    ident.add_argument("config")
+    ident.add_argument("joint")
+    ident.add_argument("--backend", choices=("sim", "hardware"))
+    ident.add_argument("--mode", choices=("torque", "speed"), default="torque",
+                       help="torque (default: needs gravity on the joint) or speed (the drive's loop holds it)")
+    ident.add_argument("--duration", type=float, default=20.0, help="seconds of excitation")
+    ident.add_argument("--amplitude", type=float, help="peak N*m (torque) or rad/s (speed); default half the limit")
+    ident.add_argument("--f-min", type=float, default=0.2, dest="f_min", help="Hz")
+    ident.add_argument("--f-max", type=float, default=3.0, dest="f_max", help="Hz")
+    ident.add_argument("--inertia", type=float, help="the joint's whole inertia [kg*m^2] when it has no gravity torque")
+    ident.add_argument("--output", help="overlay file (default: <joint>.profile.toml next to the config)")
+    ident.set_defaults(func=cmd_identify)
 
     r = sub.add_parser("registers", help="list a device's register table (its map on one protocol)")
     r.add_argument("--device", choices=registry.devices(), default="erob")
