@@ -532,6 +532,19 @@ def identify(rig: Any, name: str, excitation: Excitation | None = None, *, known
     if known_inertia is not None and not (math.isfinite(known_inertia) and known_inertia > 0):
         raise ConfigError(f"known_inertia must be > 0 kg*m^2, got {known_inertia!r}", key="known_inertia")
     terms = model_terms(rig, name)
+    if known_inertia is None and j.limits.position is not None:
+        import numpy as np
+
+        lo, hi = j.limits.position
+        grid = (np.linspace(lo, hi, 41) - j.offset) * j.direction
+        lim = j.limits.torque if excitation.mode == "torque" else None
+        peak = float(np.abs(terms.gravity(grid)).max())
+        if peak < 0.02 * (lim or 1.0):
+            raise ConfigError(
+                f"joint {name}: the model gives no gravity torque about this joint (at most {peak:.3g} N*m inside "
+                "its limits), so inertia and torque constant are known only as a ratio; identify on a "
+                "gravity-loaded stand (e.g. models/erob_pendulum.xml) or give the joint's whole inertia "
+                "(known_inertia, joints identify --inertia)", key="known_inertia")
     samples = excite(rig, name, excitation, progress=progress)
     info = {k: v for k, v in asdict(excitation).items()}
     if info.get("amplitude") is None:

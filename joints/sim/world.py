@@ -491,6 +491,8 @@ class World:
         for b in self._bound:
             if b.name == name:
                 return float(self.data.qpos[b.qadr])
+        if name in self.kinematic:  # a measured joint (mixed rig)
+            return float(self.data.qpos[self.kinematic[name][0]])
         raise KeyError(name)
 
     def joint_velocity(self, name: str) -> float:
@@ -498,6 +500,8 @@ class World:
         for b in self._bound:
             if b.name == name:
                 return float(self.data.qvel[b.dadr])
+        if name in self.kinematic:
+            return float(self.data.qvel[self.kinematic[name][1]])
         raise KeyError(name)
 
     # -- the public sim API (envs and tests use only this) ----------------------------------------
