@@ -272,6 +272,39 @@ def cmd_identify(args: argparse.Namespace) -> int:
     return 0
 
 
+def _perturbations(items: Sequence[str]) -> dict[str, dict[str, float]]:
+    """``JOINT:key=value,key=value`` -> {joint: {key: value}} (``joints replay --perturb``)."""
+    out: dict[str, dict[str, float]] = {}
+    for item in items:
+        joint, _, rest = item.partition(":")
+        try:
+            out[joint] = {k.strip(): float(v) for k, v in (kv.split("=", 1) for kv in rest.split(",") if kv)}
+        except ValueError:
+            raise ConfigError(f"expected JOINT:key=value,... got {item!r}", key="--perturb",
+                              allowed=("armature", "coulomb_friction", "viscous_friction", "torque_constant",
+                                       "command_delay")) from None
+        if not joint or not out[joint]:
+            raise ConfigError(f"expected JOINT:key=value,... got {item!r}", key="--perturb")
+    return out
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    """Replay a recording against fresh twins of its configuration; exit 1 when the replies differ."""
+    from joints.s2r.record import replay
+
+    report = replay(args.recording, perturb=_perturbations(args.perturb or ()))
+    print(report)
+    for d in report.differences[:args.show]:
+        print(f"frame {d.index} t {d.t:.6f} {d.bus}: {d.request}")
+        for q, (a, b) in d.quantities.items():
+            print(f"    {q}: recorded {a} replayed {b}")
+    if args.report:
+        from pathlib import Path
+
+        Path(args.report).write_text(json.dumps(report.to_json(), indent=1) + "\n", encoding="utf-8")
+    return 0 if report.identical else 1
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="joints", description=(__doc__ or "joints").splitlines()[0])
     p.add_argument("--version", action="version", version=f"joints {__import__('joints').__version__}")
@@ -329,6 +362,16 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument("--inertia", type=float, help="the joint's whole inertia [kg*m^2] when it has no gravity torque")
     ident.add_argument("--output", help="overlay file (default: <joint>.profile.toml next to the config)")
     ident.set_defaults(func=cmd_identify)
+
+    rp = sub.add_parser("replay", help="replay a recorded run against fresh twins of its configuration and diff "
+                                       "the replies (exit 1 if they differ)")
+    rp.add_argument("recording", help="the .jsonl file a joints.s2r.record.Recorder wrote")
+    rp.add_argument("--perturb", action="append", metavar="JOINT:key=value,...",
+                    help="perturb a twin first (World.perturb: armature, coulomb_friction, viscous_friction, "
+                         "torque_constant factors; command_delay in s)")
+    rp.add_argument("--report", help="write the whole report (every differing frame) as JSON")
+    rp.add_argument("--show", type=int, default=5, help="differing frames to print (default 5)")
+    rp.set_defaults(func=cmd_replay)
 
     r = sub.add_parser("registers", help="list a device's register table (its map on one protocol)")
     r.add_argument("--device", choices=registry.devices(), default="erob")
