@@ -160,7 +160,7 @@ def test_erob_arm_reach_runs_on_a_mixed_rig(served_base: str) -> None:
         assert world.joint_position("joint1") == pytest.approx(float(obs[0]), abs=0.02)
         action = u.action_of([0.6, -0.2, 0.7])  # one goal per joint, held (the drives' own profiles get there)
         for _ in range(40):
-            obs, reward, terminated, truncated, info = env.step(action)
+            obs, _reward, terminated, _truncated, info = env.step(action)
             assert not any(info["faults"].values()), info["faults"]
             assert not terminated
         state = rig.joints["joint1"].state()
