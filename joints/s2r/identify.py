@@ -344,9 +344,10 @@ def excite(rig: Any, name: str, excitation: Excitation, *, progress: Progress | 
                 break
             u = amplitude * shape(t)
             command(u * d)
+            asked = rig.time
             s = j.state()
             q = (s.position - off) * d
-            t_.append(s.time)
+            t_.append(0.5 * (asked + s.time))  # the drive sampled between our request and its reply
             w_.append(now)
             u_.append(u)
             q_.append(q)
@@ -393,14 +394,14 @@ def _cum(x: Any, dt: Any) -> Any:
 
 
 def fit(samples: Samples, terms: ModelTerms | None, *, known_inertia: float | None = None,
-        feedback_latency: float = 0.0, window: float = 0.01, max_delay: float = 0.02,
+        feedback_latency: float = 0.0, window: float | None = None, max_delay: float = 0.05,
         moving: float = MOVING, joint: str = "", excitation: Mapping[str, Any] | None = None) -> Identification:
     """Fit inertia, friction, torque scale and delay to ``samples`` (see the module docstring).
 
     ``terms`` supplies G(q) and the bodies' inertia (None: no model, no gravity); with no gravity
     torque worth the name ``known_inertia`` [kg*m^2, the whole J] is required. ``window`` [s] is
-    the integration window (a low-pass against measurement noise), ``max_delay`` [s] the largest
-    delay tried.
+    the integration window (a low-pass against measurement noise and timing jitter; default 10
+    sampling periods, at least 10 ms), ``max_delay`` [s] the largest delay tried.
     """
     import numpy as np
 
@@ -410,7 +411,7 @@ def fit(samples: Samples, terms: ModelTerms | None, *, known_inertia: float | No
     t, w, u, q, v, tau = samples.t, samples.w, samples.u, samples.q, samples.v, samples.tau
     dt = np.diff(t)
     period = float(np.median(dt))
-    win = max(1, round(window / period))
+    win = max(1, round((window if window is not None else max(0.01, 10 * period)) / period))
     a = np.arange(0, n - win)
     b = a + win
     g = terms.gravity(q) if terms is not None else np.zeros(n)
