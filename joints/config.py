@@ -87,6 +87,7 @@ class JointConfig:
     mode: str | None = None  #: operating mode where the protocol has several (CANopen: pp, pv, pt, csp, csv, cst, ip)
     sync_period: float | None = None  #: CANopen: s between two SYNCs (the bus's; set it on the bus or here)
     profile_overlay: str | None = None  #: the identified-profile file whose ``[profile]`` was merged into ``profile``
+    firmware: str | None = None  #: the drive's firmware profile (its quirks: joints.devices.quirks); None: default
 
 
 @dataclass(frozen=True)
@@ -313,6 +314,14 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
         model = j.get("model")
         if model is not None and not isinstance(model, str):
             raise r.err(f"{key}.model", f"expected a model name string, got {model!r}")
+        firmware = j.get("firmware")
+        if firmware is not None:
+            if not isinstance(firmware, str):
+                raise r.err(f"{key}.firmware", f"expected a firmware profile name, got {firmware!r}")
+            try:
+                fam.firmware_profile(firmware)
+            except ConfigError as exc:
+                raise r.err(f"{key}.firmware", exc.message, exc.allowed) from None
         modes = fam.modes.get(protocol, ())
         mode = j.get("mode")
         if mode is not None and not modes:
@@ -347,6 +356,7 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
             mode=None if mode is None else str(mode),
             sync_period=sync_period,
             profile_overlay=overlay,
+            firmware=firmware,
         )
     if not joints:
         raise r.err("joints", "no joints defined; add a [joints.<name>] table")

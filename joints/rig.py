@@ -424,7 +424,8 @@ def sim_world(cfg: RigConfig) -> Any:
             fam = registry.family(j.device, key=f"joints.{name}.device")
             drives.append(DriveSpec(bus=j.bus, name=name, mjcf_joint=j.mjcf_joint or name, address=j.address,
                                     profile=fam.config_profile(j), device=j.device, channel=j.channel,
-                                    protocol=cfg.buses[j.bus].protocol, maker=fam, lead=j.lead))
+                                    protocol=cfg.buses[j.bus].protocol, maker=fam, lead=j.lead,
+                                    extra={"firmware": j.firmware} if j.firmware is not None else {}))
         return World(cfg.sim.model, drives, buses=buses, timestep=cfg.sim.timestep, base_dir=cfg.base_dir,
                      **({"kinematic": kinematic} if kinematic else {}))
     except ConfigError as exc:  # `joints sim serve` comes here directly: name the file too
