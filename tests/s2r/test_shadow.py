@@ -15,6 +15,7 @@ import pytest
 pytest.importorskip("mujoco")
 
 import joints
+from joints.devices.erob.profiles import PROFILES
 from joints.errors import ConfigError
 from joints.s2r.identify import Excitation, identify, write_overlay
 from joints.s2r.shadow import Shadow
@@ -111,7 +112,7 @@ def served_perturbed(tmp_path: Path, sim_server: Any) -> Iterator[str]:
     """``joints sim serve`` of the pendulum stand whose joint has the perturbed profile (standing in for the
     real joint: armature +40 %, Coulomb x2, viscous x1.5, Kt -10 %, +2 ms); yields its pty."""
     pytest.importorskip("serial")
-    nominal = joints.devices.erob.profiles.PROFILES["eRob80H100"]
+    nominal = PROFILES["eRob80H100"]
     served = tmp_path / "served.toml"
     served.write_text(f"""backend = "sim"
 [sim]
