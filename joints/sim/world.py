@@ -540,8 +540,8 @@ class World:
         if delay < 0:
             raise ValueError(f"perturb {name}: the command delay would be {delay} s (< 0)")
         if delay != getattr(emu, "command_delay", 0.0):
-            if not hasattr(emu, "command_delay"):
-                raise ValueError(f"perturb {name}: this twin has no command delay")
+            if not getattr(emu, "DELAYED", None):
+                raise ValueError(f"perturb {name}: this twin has no command delay (no delayed motion commands)")
             emu.command_delay = delay
             self._update_ticks()
         m.dof_armature[j.dof] = nom["armature"][j.dof] * armature
