@@ -229,6 +229,12 @@ class ErobFirmware(Firmware):
     #: the kernel rows this twin steps (see :mod:`joints.sim.stepping`)
     KERNEL = "erob"
 
+    #: motion commands: the drive acts on them ``command_delay`` (the profile's) after they arrive
+    DELAYED = frozenset((
+        "target_current", "target_speed", "start_operating", "stop_operating", "emergency_stop",
+        "stop_repetitive_motion",
+    ))
+
     def __init__(
         self,
         profile: ErobProfile,
@@ -245,6 +251,7 @@ class ErobFirmware(Firmware):
         self.ambient = ambient
         self.inertia = inertia if inertia is not None else profile.armature  #: J the drive tunes for
         self.kt = profile.torque_constant
+        self.command_delay = profile.command_delay
         self.gen = _Generator(self)
         self.computed.update({
             "actual_position": self.counts,
@@ -637,17 +644,17 @@ class ErobFirmware(Firmware):
         mode = self.mode
         if mode == _TORQUE:
             # no speed profile in torque mode: the current command goes to zero
-            self._store("target_current", 0)
+            self._own("target_current", 0)
             return
         if mode == _SPEED:
             s[K.MODE_SPEED_TARGET] = 0.0
-            self._store("target_speed", 0)
+            self._own("target_speed", 0)
         if s[K.G_ACTIVE] != 0.0 or s[K.V_REF]:
             s[K.G_ACTIVE], s[K.G_CONTINUOUS], s[K.G_STOPPING] = 1.0, 0.0, 1.0
             s[K.G_RATE] = float(decel)
         s[K.REPEAT_STOP] = 1.0
 
-    def _store(self, name: str, value: int) -> None:
+    def _own(self, name: str, value: int) -> None:
         """The drive changes one of its own parameters (and the loops see it)."""
         self.values[name] = value
         k = K.PARAMS.get(name)
@@ -658,7 +665,7 @@ class ErobFirmware(Firmware):
         s = self._row
         self._stop(max(abs(s[K.V_REF]) / ESTOP_TIME, float(self.values["profile_deceleration"])))
         s[K.MODE_SPEED_TARGET] = 0.0
-        self._store("target_current", 0)
+        self._own("target_current", 0)
 
     def _stop_repetitive(self, value: int) -> None:
         self._row[K.REPEAT_STOP] = 1.0
