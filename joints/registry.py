@@ -78,6 +78,9 @@ class DeviceFamily:
     live_params: tuple[str, ...] = ()
     #: the parameters that select the drive's operating mode (one-shot commands restore what they found)
     mode_params: tuple[str, ...] = ()
+    #: the key parameters ``joints info`` shows (limits, gains, mode, watchdog, line settings), where the
+    #: joint's protocol reaches and can read them
+    info_params: tuple[str, ...] = ()
 
     @property
     def protocols(self) -> tuple[str, ...]:
@@ -467,6 +470,13 @@ FAMILIES: dict[str, DeviceFamily] = {
                      "target_torque", "controlword", "modes_of_operation", "interpolation_data_record_1",
                      "analog_quantity_value", "use_bus_to_tune_pid"),
         mode_params=("operation_mode", "motion_mode", "modes_of_operation"),
+        info_params=("modbus_address", "modbus_baud_rate", "can_address", "can_baud_rate",
+                     "modbus_communication_timeout_duration", "producer_heartbeat_time", "operation_mode",
+                     "motion_mode", "modes_of_operation_display", "control_source", "position_loop_gain",
+                     "speed_loop_gain", "speed_loop_integral", "min_position_limit_value", "max_position_limit_value",
+                     "max_speed", "max_acceleration", "continuous_current", "peak_current", "max_motor_current",
+                     "max_position_error", "profile_speed", "profile_acceleration", "profile_deceleration",
+                     "bus_voltage", "error_code"),
     ),
     "zlac8015d": DeviceFamily(
         name="zlac8015d", devices=("zlac8015d",),
@@ -483,6 +493,11 @@ FAMILIES: dict[str, DeviceFamily] = {
                      "target_position_right", "target_torque_left", "target_torque_right", "clear_feedback_position",
                      "in_absolute_position_control_reset_the_zero_point", "whether_store_rw_register_to_eeprom"),
         mode_params=("control_mode", "synchronous_asynchronous_control_status"),
+        info_params=("software_version", "rs485_node_id", "rs485_baud_rate", "communication_offline_time",
+                     "control_mode", "synchronous_asynchronous_control_status", "maximum_motor_speed",
+                     "rated_current_left", "maximum_current_left", "rated_current_right", "maximum_current_right",
+                     "pl_kp_left", "vl_kp_left", "vl_ki_left", "pl_kp_right", "vl_kp_right", "vl_ki_right",
+                     "dc_voltage", "motor_temperature", "error_code_left", "error_code_right"),
     ),
     "mks": DeviceFamily(
         name="mks", devices=("mks-servo42d", "mks-servo57d"),
@@ -498,6 +513,8 @@ FAMILIES: dict[str, DeviceFamily] = {
                          "slave_active"),
         live_params=("motor_enable",),
         mode_params=("work_mode",),  # write-only: a one-shot cannot read it back
+        info_params=("en_pin_status", "protection_state", "motor_status", "go_back_to_zero_status", "io_status",
+                     "work_mode", "working_current", "microsteps", "baud_rate", "slave_address"),
     ),
 }
 

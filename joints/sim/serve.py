@@ -74,12 +74,12 @@ def serve(
             name: {"bus": name, "port": str(links[name]) if links and name in links else ep.port}
             for name, ep in endpoints.items()}
         lines.update({name: ep.spec.line(name) for name, ep in cans.items()})
+        if on_ready is not None:  # first: what it prepares (a config file) exists once the lines are out
+            on_ready(lines)
         if out is not None:
             for line in lines.values():
                 out.write(json.dumps(line) + "\n")
             out.flush()
-        if on_ready is not None:
-            on_ready(lines)
         _run(world, endpoints, cans, stop, realtime_factor, log, tick)
     finally:
         for ep in endpoints.values():
