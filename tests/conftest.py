@@ -9,8 +9,9 @@ import select
 import subprocess
 import sys
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
-from typing import ContextManager
+from typing import Any, ContextManager
 
 import pytest
 
@@ -54,3 +55,67 @@ def _serve(config: Path, *, bus: str = "rs485", startup: float = 30.0) -> Iterat
 def sim_server() -> Callable[..., ContextManager[str]]:
     """``with sim_server(config_path) as port:`` - a served emulated bus in another process."""
     return _serve
+
+
+@dataclass
+class Served:
+    """A `joints sim serve` process: where each bus is, and a hardware config that points there."""
+
+    proc: subprocess.Popen[str]
+    lines: dict[str, dict[str, Any]]
+    hardware: Path  #: the served config as a hardware config (`--hardware-config`)
+
+    def port(self, bus: str) -> str:
+        return str(self.lines[bus]["port"])
+
+    def command(self, text: str, timeout: float = 10.0) -> dict[str, Any]:
+        """Send a control command (the server runs with --control) and return its JSON answer."""
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        self.proc.stdin.write(text + "\n")
+        self.proc.stdin.flush()
+        ready, _, _ = select.select([self.proc.stdout], [], [], timeout)
+        assert ready, f"no answer to {text!r} within {timeout} s"
+        answer: dict[str, Any] = json.loads(self.proc.stdout.readline())
+        return answer
+
+
+@contextlib.contextmanager
+def _serve_all(config: Path, *args: str, startup: float = 30.0) -> Iterator[Served]:
+    """Serve every bus of ``config`` (serial on ptys, CAN on udp_multicast) with ``--control``."""
+    if sys.platform == "win32":
+        pytest.skip("serving needs POSIX")
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover
+        import tomli as tomllib
+    n_buses = len(tomllib.loads(config.read_text(encoding="utf-8")).get("buses", {}))
+    hardware = config.with_name(config.stem + ".served.toml")
+    proc = subprocess.Popen([sys.executable, "-m", "joints", "sim", "serve", str(config), "--control",
+                             "--hardware-config", str(hardware), *args],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        lines: dict[str, dict[str, Any]] = {}
+        while len(lines) < n_buses:
+            ready, _, _ = select.select([proc.stdout], [], [], startup)
+            assert ready, f"joints sim serve printed {len(lines)} of {n_buses} buses within {startup:.0f} s"
+            assert proc.stdout is not None
+            text = proc.stdout.readline()
+            assert text, f"joints sim serve ended: {proc.stderr.read() if proc.stderr else ''}"
+            line = json.loads(text)
+            lines[line["bus"]] = line
+        yield Served(proc, lines, hardware)
+    finally:
+        proc.terminate()
+        try:
+            rc = proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            raise
+        assert rc == 0, proc.stderr.read() if proc.stderr else rc
+
+
+@pytest.fixture(scope="session")
+def sim_served() -> Callable[..., ContextManager[Served]]:
+    """``with sim_served(config_path) as served:`` - every bus of a config served in another process
+    (``served.lines``, ``served.hardware``: a hardware config for the served buses, ``served.command``)."""
+    return _serve_all

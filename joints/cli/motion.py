@@ -40,8 +40,9 @@ from joints.cli.common import (
     positive,
     warn,
 )
+from joints.cli.params import read_settings
 from joints.cli.ui import Progress, cell
-from joints.errors import CommandError, DeviceFault, DeviceRejected, JointsError, MotionTimeout, RegisterError
+from joints.errors import CommandError, DeviceFault, DeviceRejected, JointsError, MotionTimeout
 
 if TYPE_CHECKING:
     from joints.joint import Joint, JointState
@@ -104,22 +105,8 @@ class OneShot:
                 self.watchdog = driver.communication_timeout()
             except JointsError:
                 self.watchdog = None
-        self.modes = self._read_modes()
-
-    def _read_modes(self) -> dict[str, int]:
-        fam = registry.family(self.rig.config.joints[self.j.name].device)
-        found: dict[str, int] = {}
-        for name in fam.mode_params:
-            try:
-                param, _ = self.j.driver.describe(name)
-            except RegisterError:
-                continue
-            if param.access.readable and param.access.writable:
-                try:
-                    found[name] = self.j.driver.read(name)
-                except JointsError:
-                    pass
-        return found
+        fam = registry.family(rig.config.joints[j.name].device)
+        self.settings = read_settings(j, fam)
 
     def enable(self) -> None:
         self.j.enable()
@@ -137,8 +124,8 @@ class OneShot:
                      "feeds it now - if this host dies the drive keeps holding. Release it with "
                      f"`joints disable {self.rig.config.source} {j.name}`")
             else:
-                warn(f"joint {j.name} is left enabled and holding ({j.driver.device} has no communication "
-                     f"watchdog). Release it with `joints disable {self.rig.config.source} {j.name}`")
+                warn(f"joint {j.name} is left enabled and holding ({driver.device} over {driver.protocol} has no "
+                     f"communication watchdog). Release it with `joints disable {self.rig.config.source} {j.name}`")
             return
         try:
             j.stop()
@@ -148,15 +135,17 @@ class OneShot:
                 j.disable()
             elif isinstance(driver, CommunicationWatchdog) and self.watchdog is not None:
                 driver.set_communication_timeout(self.watchdog)
-            self._restore_modes()
+            self._restore()
 
-    def _restore_modes(self) -> None:
-        for name, value in self.modes.items():
+    def _restore(self) -> None:
+        """Settings and modes the command changed (the joint's limits in the drive, profile, mode) put back."""
+        driver = self.j.driver
+        for name, value in self.settings.items():
             try:
-                if self.j.driver.read(name) != value:
-                    self.j.driver.write(name, value)
+                if driver.read(name) != value:
+                    driver.write(name, value)
             except DeviceRejected:
-                pass  # the drive does not take the value it showed (CANopen 0x6060 = 0: "no mode yet")
+                pass  # the drive does not take back what it showed (CANopen 0x6060 = 0: "no mode yet"; PDO maps)
             except JointsError as exc:
                 warn(f"joint {self.j.name}: could not put {name} back to {value}: {exc}")
 

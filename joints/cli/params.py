@@ -91,6 +91,24 @@ def dump_joint(rig: Rig, j: Joint) -> dict[str, Any]:
     return {k: v for k, v in data.items() if v or k == "settings"}
 
 
+def read_settings(j: Joint, fam: registry.DeviceFamily) -> dict[str, int]:
+    """The joint's drive's settings as they are now: readable, writable, not persistent, not identity and not
+    live - plus its mode parameters (what a one-shot command puts back when it is done)."""
+    driver = j.driver
+    found: dict[str, int] = {}
+    for p in driver.params:
+        if not (p.access.readable and p.access.writable) or p.persistent:
+            continue
+        if p.name not in fam.mode_params and section(fam, p.name, True, True) != "settings":
+            continue
+        try:
+            name = driver.access.resolve(p.name)
+            found[name] = driver.read(name)
+        except JointsError:
+            continue  # not on this protocol, or not readable there
+    return found
+
+
 def read_dump(path: str) -> dict[str, Any]:
     p = Path(path)
     if not p.is_file():
