@@ -8,6 +8,7 @@ import os
 import select
 import subprocess
 import sys
+import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -64,19 +65,33 @@ class Served:
     proc: subprocess.Popen[str]
     lines: dict[str, dict[str, Any]]
     hardware: Path  #: the served config as a hardware config (`--hardware-config`)
+    buffer: bytearray
 
     def port(self, bus: str) -> str:
         return str(self.lines[bus]["port"])
 
+    def line(self, timeout: float) -> dict[str, Any]:
+        """The next JSON line the server prints (read from the pipe itself: no hidden buffering)."""
+        assert self.proc.stdout is not None
+        fd = self.proc.stdout.fileno()
+        end = time.monotonic() + timeout
+        while b"\n" not in self.buffer:
+            ready, _, _ = select.select([fd], [], [], max(0.0, end - time.monotonic()))
+            assert ready, f"joints sim serve printed nothing within {timeout:.0f} s"
+            chunk = os.read(fd, 65536)
+            assert chunk, f"joints sim serve ended: {self.proc.stderr.read() if self.proc.stderr else ''}"
+            self.buffer += chunk
+        text, _, rest = bytes(self.buffer).partition(b"\n")
+        self.buffer[:] = rest
+        answer: dict[str, Any] = json.loads(text)
+        return answer
+
     def command(self, text: str, timeout: float = 10.0) -> dict[str, Any]:
         """Send a control command (the server runs with --control) and return its JSON answer."""
-        assert self.proc.stdin is not None and self.proc.stdout is not None
+        assert self.proc.stdin is not None
         self.proc.stdin.write(text + "\n")
         self.proc.stdin.flush()
-        ready, _, _ = select.select([self.proc.stdout], [], [], timeout)
-        assert ready, f"no answer to {text!r} within {timeout} s"
-        answer: dict[str, Any] = json.loads(self.proc.stdout.readline())
-        return answer
+        return self.line(timeout)
 
 
 @contextlib.contextmanager
@@ -94,16 +109,11 @@ def _serve_all(config: Path, *args: str, startup: float = 30.0) -> Iterator[Serv
                              "--hardware-config", str(hardware), *args],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
     try:
-        lines: dict[str, dict[str, Any]] = {}
-        while len(lines) < n_buses:
-            ready, _, _ = select.select([proc.stdout], [], [], startup)
-            assert ready, f"joints sim serve printed {len(lines)} of {n_buses} buses within {startup:.0f} s"
-            assert proc.stdout is not None
-            text = proc.stdout.readline()
-            assert text, f"joints sim serve ended: {proc.stderr.read() if proc.stderr else ''}"
-            line = json.loads(text)
-            lines[line["bus"]] = line
-        yield Served(proc, lines, hardware)
+        served = Served(proc, {}, hardware, bytearray())
+        while len(served.lines) < n_buses:
+            line = served.line(startup)
+            served.lines[line["bus"]] = line
+        yield served
     finally:
         proc.terminate()
         try:

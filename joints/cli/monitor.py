@@ -200,7 +200,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
                 replies = [r for r in got if r.direction == "rx"]
                 recorded = [_key(r) for r in ex.replies]
                 replayed = [_key(r) for r in replies]
-                results.append({"index": i, "request": ex.request.meaning or ex.request.data.hex(" ").upper(),
+                results.append({"index": i, "request": rule.describe(msg),
                                 "recorded": [d for _i, d in recorded], "replayed": [d for _i, d in replayed],
                                 "same": recorded == replayed, **({"error": error} if error else {})})
         finally:
