@@ -27,6 +27,18 @@ def suffix(path: str | Path) -> str:
     return Path(path).suffix.lower()
 
 
+def export_path(text: str) -> str:
+    """argparse type: a file whose extension is a known log format (checked before anything is opened)."""
+    import argparse
+
+    ext = suffix(text)
+    if ext not in TEXT_FORMATS + CAN_FORMATS:
+        raise argparse.ArgumentTypeError(
+            f"unknown extension {ext or '(none)'!r} for {text}; allowed: {', '.join(TEXT_FORMATS)} (every bus), "
+            f"{', '.join(CAN_FORMATS)} (CAN buses)")
+    return text
+
+
 def check_export(path: str | Path, media: Iterable[str]) -> None:
     """A usage error unless ``path``'s extension can hold frames of buses of ``media`` ("serial", "can")."""
     ext = suffix(path)

@@ -35,7 +35,7 @@ from joints.cli.common import (
     out,
     positive,
 )
-from joints.cli.logs import CAN_FORMATS, TEXT_FORMATS, check_export, export, read
+from joints.cli.logs import CAN_FORMATS, TEXT_FORMATS, check_export, export, export_path, read
 from joints.errors import ConfigError, JointsError
 from joints.link.trace import Trace, TraceRecord
 
@@ -240,7 +240,8 @@ def register(sub: Any) -> None:
     m.add_argument("--kind", action="append", type=_kinds,
                    help="only frames whose meaning contains this (e.g. sdo, pdo, heartbeat, ReadHolding, Write)")
     m.add_argument("--direction", choices=("tx", "rx"), help="only frames sent (tx) or received (rx)")
-    m.add_argument("--export", metavar="FILE", help=f"write the frames to FILE, format by extension: {allowed}")
+    m.add_argument("--export", metavar="FILE", type=export_path,
+                   help=f"write the frames to FILE, format by extension: {allowed}")
     m.add_argument("--quiet", action="store_true", help="print nothing (with --export)")
     add_json(m)
 

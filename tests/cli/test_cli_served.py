@@ -8,7 +8,6 @@ udp_multicast channels). The served world runs on the wall clock: waits poll the
 from __future__ import annotations
 
 import json
-import math
 import os
 import select
 import sys
