@@ -45,7 +45,7 @@ def test_scan_finds_every_twin_with_its_model(tmp_path: Path, capsys: pytest.Cap
     assert found[17]["model"] == "eRob110H160T-FHS-18ET" and found[17]["serial"].startswith("110")
     assert found[127]["model"].startswith("eRob70H50")
     for f in found.values():
-        assert set(f) == {"bus", "protocol", "device", "address", "model", "serial", "firmware"}
+        assert set(f) == {"bus", "protocol", "device", "address", "model", "serial", "firmware", "details"}
         assert f["device"] == "erob" and f["protocol"] == "erob-can" and f["bus"] == "can" and f["firmware"]
 
 

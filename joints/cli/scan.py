@@ -8,7 +8,14 @@ reports about itself (:class:`~joints.drivers.capabilities.Identity`: model, ser
 firmware) is shown; what the protocol cannot read is null ("—"), never taken from the config.
 A family with several devices that the bus cannot tell apart (MKS SERVO42D/57D) is reported by
 its family name. On CAN buses the scan first listens (``--listen``) and reports nodes heard
-(CANopen boot-up, heartbeat) even if no probe succeeds.
+(boot-up, heartbeat) even if no probe succeeds. A protocol with a scan of its own
+(:attr:`~joints.registry.BusProtocol.scan`: CANopen listens, then probes 0x1000 by SDO) finds any
+node of the protocol, whatever its make: its ``device`` is null (the bus does not say which
+family it is), model/serial/firmware are 0x1008/0x1018:4/0x100A where the node has them.
+
+``--json``: a list of objects with the keys bus, protocol, device, address, model, serial,
+firmware, and ``details`` (everything else the drive reported: versions, CiA 402 state, NMT
+state ...; ``baudrate`` too with a baud-rate sweep).
 """
 
 from __future__ import annotations
@@ -57,6 +64,7 @@ class Found:
     def record(self, *, with_baud: bool) -> dict[str, object]:
         fields = dataclasses.asdict(self)
         d: dict[str, object] = {k: fields[k] for k in KEYS}
+        d["details"] = dict(self.details)
         if with_baud:
             d["baudrate"] = self.baudrate
         return d
@@ -142,6 +150,24 @@ def addresses(args: argparse.Namespace, protocol: str, medium: str) -> range:
     return range(max(lo, SERIAL_DEFAULT[0]), min(hi, SERIAL_DEFAULT[1]) + 1)
 
 
+def protocol_scan(bus: ScanBus, args: argparse.Namespace, progress: Progress) -> list[Found]:
+    """The protocol's own scan (CANopen): any node of the protocol, with what it says about itself."""
+    proto = registry.protocol(bus.config.protocol)
+    assert proto.scan is not None
+    span = addresses(args, bus.config.protocol, bus.medium)
+    out: list[Found] = []
+    for record in proto.scan(bus.link, list(span), args.listen if args.listen is not None else 0.3):
+        info = dict(record)
+        address = info.pop("address")
+        assert isinstance(address, int)
+        found = Found(bus.config.name, bus.config.protocol, address, model=_text(info.pop("device_name", None)),
+                      serial=_text(info.pop("serial_number", None)), firmware=_text(info.pop("software_version", None)))
+        found.details.update(info)
+        out.append(found)
+    progress.advance(len(span))
+    return out
+
+
 def scan_bus(bus: ScanBus, args: argparse.Namespace, families: Sequence[registry.DeviceFamily],
              progress: Progress, baudrate: int | None) -> list[Found]:
     from joints.link.base import RetryPolicy
@@ -149,6 +175,8 @@ def scan_bus(bus: ScanBus, args: argparse.Namespace, families: Sequence[registry
     can = bus.medium == "can"
     # CAN replies name their node in the identifier: a late one can never be taken for another node's
     bus.link.policy = RetryPolicy(timeout=args.timeout, retries=0, late=0.0 if can else None)
+    if registry.protocol(bus.config.protocol).scan is not None:
+        return protocol_scan(bus, args, progress)
     heard = listen(bus, args.listen if args.listen is not None else (0.2 if can else 0.0)) if can else set()
     out: list[Found] = []
     for addr in addresses(args, bus.config.protocol, bus.medium):
@@ -294,5 +322,6 @@ def register(sub: Any) -> None:
                    help="addresses, e.g. 1-32 (default: 1-32 on serial buses, the protocol's whole range on CAN)")
     s.add_argument("--timeout", type=positive, default=0.05, help="s to wait for each answer (default 0.05)")
     s.add_argument("--listen", type=nonnegative, default=None,
-                   help="CAN: s to listen for boot-up/heartbeat frames first (default 0.2)")
-    s.add_argument("--json", action="store_true", help="a JSON list of objects with the keys " + ", ".join(KEYS))
+                   help="CAN: s to listen for boot-up/heartbeat frames first (default 0.2; CANopen 0.3)")
+    s.add_argument("--json", action="store_true",
+                   help="a JSON list of objects with the keys " + ", ".join(KEYS) + " (and details)")

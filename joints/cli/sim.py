@@ -237,6 +237,33 @@ def cmd_view(args: argparse.Namespace) -> int:
     return serve_config(args, view=True)
 
 
+def cmd_eds(args: argparse.Namespace) -> int:
+    """Write the EDS of the emulated drive at node NODE of CONFIG (to ``-o FILE``, else to stdout)."""
+    from joints.config import load
+
+    cfg = load(args.config, backend="sim")
+    found = []
+    for name, j in cfg.joints.items():
+        protocol = cfg.buses[j.bus].protocol
+        make = registry.family(j.device, key=f"joints.{name}.device").eds.get(protocol)
+        if make is not None and j.address == args.node:
+            found.append((name, make))
+    if len(found) != 1:
+        nodes = sorted({j.address for n, j in cfg.joints.items()
+                        if registry.family(j.device).eds.get(cfg.buses[j.bus].protocol) is not None})
+        what = "no joint" if not found else f"{len(found)} joints ({', '.join(n for n, _ in found)})"
+        raise ConfigError(f"{what} at node {args.node} on a bus with an EDS (CANopen)", file=cfg.source,
+                          key="joints", allowed=nodes)
+    text = found[0][1](args.node)
+    if args.output is None:
+        sys.stdout.write(text)
+        sys.stdout.flush()
+    else:
+        Path(args.output).write_text(text, encoding="utf-8")
+        print(f"{args.output}: EDS of joint {found[0][0]} (node {args.node})", file=sys.stderr)
+    return 0
+
+
 def _serve_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("config")
     p.add_argument("--realtime-factor", type=positive, default=1.0, dest="realtime_factor",
@@ -264,6 +291,11 @@ def register(sub: Any) -> None:
     vw = command(sim, "view", help="serve the twins of CONFIG and show the world in MuJoCo's viewer",
                  example="joints sim view robot.toml", func=cmd_view)
     _serve_options(vw)
+    ed = command(sim, "eds", help="write the CANopen EDS of the emulated drive at NODE of CONFIG",
+                 example="joints sim eds robot.toml 3 -o node3.eds", func=cmd_eds)
+    ed.add_argument("config")
+    ed.add_argument("node", type=int)
+    ed.add_argument("-o", "--output", help="the .eds file to write (default: stdout)")
     for add in SIM_COMMANDS:
         add(sim)
 

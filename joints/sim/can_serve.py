@@ -19,7 +19,12 @@ A client joins with ``can.Bus(interface=..., channel=..., port=udp_port)`` (the 
 ``sim serve`` prints has the three values; a hardware config takes them as the bus keys
 ``interface``, ``channel`` and ``udp_port``). udp_multicast returns every frame to its sender and
 drops bursts above roughly 8000 frames/s, so the serve side filters its own frames and paces what
-it sends (:data:`MAX_FRAMES_PER_S`).
+it sends (:data:`MAX_FRAMES_PER_S`). Our own hardware transport filters the echoes too; any other
+python-can program (the canopen package as a master) joins with :func:`client_bus`, which wraps
+the bus in :class:`~joints.transports.can_echo.EchoFreeBus`.
+
+Frames the twins send by themselves (boot-ups, heartbeats, event TPDOs, EMCY) travel on the device
+bus's timed medium; :class:`CanEndpoint` taps the medium and forwards them, paced with the answers.
 """
 
 from __future__ import annotations
@@ -28,14 +33,14 @@ import ipaddress
 import os
 import socket
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from joints.errors import ConfigError, TransportError
 
-__all__ = ["MAX_FRAMES_PER_S", "CanEndpoint", "FrameLog", "ServedCan", "plan"]
+__all__ = ["MAX_FRAMES_PER_S", "CanEndpoint", "FrameLog", "ServedCan", "client_bus", "plan"]
 
 #: (bus, "rx" (from a client) | "tx" (the twins), data, CAN id or None) - ``sim serve --verbose``
 FrameLog = Callable[[str, str, bytes, "int | None"], None]
@@ -127,11 +132,28 @@ def plan(bus: str, interface: str | None, channel: str | int | None, udp_port: i
         "\"vcan0\")", key=f"{key}.interface")
 
 
+def client_bus(line: Mapping[str, Any]) -> Any:
+    """A python-can bus joined to a served CAN bus, from the JSON line ``sim serve`` printed for it.
+
+    On udp_multicast the bus is wrapped so that its own frames never come back to it (a real
+    controller's behaviour; see :mod:`joints.transports.can_echo`).
+    """
+    from joints.transports.can import python_can
+
+    can = python_can()
+    interface, channel, port = line["interface"], line["channel"], line.get("udp_port")
+    if interface != "udp_multicast":
+        return can.Bus(interface=interface, channel=channel)
+    from joints.transports.can_echo import EchoFreeBus
+
+    return EchoFreeBus(can.Bus(interface=interface, channel=channel, port=port, hop_limit=0))
+
+
 class CanEndpoint:
     """A served CAN bus: frames in to the device bus, its answers out, paced (no threads)."""
 
     def __init__(self, spec: ServedCan, device_bus: Any, *, max_rate: float = MAX_FRAMES_PER_S,
-                 log: FrameLog | None = None, bus: str = "can") -> None:
+                 log: FrameLog | None = None, name: str = "can") -> None:
         from joints.transports.can import PythonCanTransport, python_can
 
         can = self._can = python_can()
@@ -155,7 +177,7 @@ class CanEndpoint:
         self.frames_in = 0
         self.frames_out = 0
         self.log = log
-        self.bus = bus
+        self.name = name  #: the bus's name in the config (for the frame log)
 
     def fileno(self) -> int:
         return int(self.transport.bus.fileno())
@@ -165,7 +187,7 @@ class CanEndpoint:
         while (frame := self.transport.recv(0.0)) is not None:
             self.frames_in += 1
             if self.log is not None:
-                self.log(self.bus, "rx", bytes(frame.data), int(frame.arbitration_id))
+                self.log(self.name, "rx", bytes(frame.data), int(frame.arbitration_id))
             self.out.extend(self.device_bus.on_frame(frame))
         self.collect()
 
@@ -183,7 +205,7 @@ class CanEndpoint:
         while self.out and now >= self.next_send:
             frame = self.out.popleft()
             if self.log is not None:
-                self.log(self.bus, "tx", bytes(frame.data), int(frame.arbitration_id))
+                self.log(self.name, "tx", bytes(frame.data), int(frame.arbitration_id))
             self.transport.send(frame)
             self.frames_out += 1
             self.next_send = max(self.next_send, now) + self.spacing

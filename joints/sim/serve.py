@@ -66,7 +66,7 @@ def serve(
             if links and name in links:
                 made_links.append(_symlink(Path(links[name]), endpoints[name].port))
         for name, spec in (can_buses or {}).items():
-            cans[name] = CanEndpoint(spec, world.buses[name], log=log, bus=name)
+            cans[name] = CanEndpoint(spec, world.buses[name], log=log, name=name)
         if install_signals and threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
                 previous[sig] = signal.signal(sig, lambda *_: stop.set())

@@ -56,7 +56,7 @@ def test_scan_lists_the_five_serial_drives_with_device_and_address(served: Any,
     assert [(f["bus"], f["address"], f["device"]) for f in found] == [
         ("rs485", 1, "erob"), ("rs485", 2, "erob"), ("rs485", 3, "zlac8015d"), ("rs485", 4, "mks"), ("mks", 5, "mks")]
     for f in found:
-        assert set(f) == {"bus", "protocol", "device", "address", "model", "serial", "firmware"}
+        assert set(f) == {"bus", "protocol", "device", "address", "model", "serial", "firmware", "details"}
         assert f["model"] is None and f["serial"] is None  # no such registers: null, never from the config
     assert {f["address"]: f["firmware"] for f in found}[3].startswith("0x")  # ZLAC 0x20A0
     assert {f["address"]: f["firmware"] for f in found}[1] is None
@@ -70,7 +70,9 @@ def test_scan_finds_the_can_nodes_with_what_they_report(served: Any, capsys: pyt
     assert set(found) == {("can", 6), ("co", 7)}
     custom, canopen = found[("can", 6)], found[("co", 7)]
     assert custom["device"] == "erob" and custom["model"].startswith("eRob") and custom["serial"] and custom["firmware"]
-    assert canopen["device"] == "erob" and canopen["serial"].startswith("0x") and canopen["model"] is None
+    # CANopen's own scan finds any node: its make is not on the bus (device null), its identity is
+    assert canopen["device"] is None and canopen["serial"].startswith("0x") and canopen["model"] is None
+    assert canopen["details"]["profile"] == 402 and "pp" in canopen["details"]["modes"]
 
 
 def test_scan_baud_list_reports_the_rate(served: Any, capsys: pytest.CaptureFixture[str]) -> None:
