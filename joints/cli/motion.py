@@ -383,7 +383,7 @@ def _motion_options(p: argparse.ArgumentParser) -> None:
 
 def register(sub: Any) -> None:
     m = command(sub, "move", help="move a joint to a position (SI: rad, m with a lead) and wait until it is there",
-                example="joints move robot.toml shoulder 1.57\njoints move robot.toml shoulder -- -0.5 --relative\n"
+                example="joints move robot.toml shoulder 1.57\njoints move robot.toml shoulder -0.5 --relative\n"
                         "joints move robot.toml axis 3200 --pulses --relative   # MKS pulse mode\n"
                         "joints move robot.toml shoulder 0.5 --mode csp --hold", func=cmd_move)
     add_config(m)
