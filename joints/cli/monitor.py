@@ -84,14 +84,18 @@ def cmd_monitor(args: argparse.Namespace) -> int:
         raise UsageError("--listen needs CAN buses: on RS485 the host is the only one talking (drop --listen)")
     flt = Filter(frozenset(args.node or ()), tuple(k.lower() for k in args.kind or ()), args.direction)
     shown: list[TraceRecord] = []
+    closed: list[BrokenPipeError] = []  # the reader went away (| head): stop, quietly
 
     def echo(r: TraceRecord) -> None:
         if r.bus in names and flt(r):
             shown.append(r)
-            if args.json:
-                emit_json(record_dict(r))
-            elif not args.quiet:
-                out(line(r))
+            try:
+                if args.json:
+                    emit_json(record_dict(r))
+                elif not args.quiet:
+                    out(line(r))
+            except BrokenPipeError as exc:  # the trace swallows errors of its echo: remember it
+                closed.append(exc)
 
     trace = Trace(maxlen=None, echo=echo)
     from joints.cli.basic import read_all
@@ -103,6 +107,8 @@ def cmd_monitor(args: argparse.Namespace) -> int:
         end = None if args.duration == 0 else rig.time + args.duration
         try:
             while end is None or rig.time < end:
+                if closed:
+                    raise closed[0]
                 if args.listen:
                     for n in names:
                         rig.buses[n].link.poll(args.period)

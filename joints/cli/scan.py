@@ -238,6 +238,8 @@ def buses(args: argparse.Namespace) -> Iterator[tuple[ScanBus, int | None]]:
                 raise ConfigError(f"no bus {n!r}", file=rig_cfg.source, key="buses", allowed=sorted(rig_cfg.buses))
         backend = rig_cfg.backend
         if backend == "sim":
+            if args.baudrate or args.baud_sweep:
+                note("the twins of a sim config answer at any baud rate: --baudrate/--baud-sweep ignored")
             yield from _sim_buses(rig_cfg, names)
             return
         cfgs = [rig_cfg.buses[n] for n in names]

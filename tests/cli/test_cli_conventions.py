@@ -91,6 +91,13 @@ def test_registers_survives_a_closed_pipe(tail: str) -> None:
         assert proc.stdout.startswith("0x0000  modbus_address")
 
 
+@pytest.mark.parametrize("args", [["monitor", "{cfg}", "--duration", "0"], ["watch", "{cfg}", "a"],
+                                  ["state", "{cfg}"]])
+def test_endless_output_ends_quietly_when_the_reader_goes(args: list[str], sim_config: Path) -> None:
+    proc = joints_cmd(*(a.format(cfg=sim_config) for a in args), shell_tail="head -1", timeout=120)
+    assert proc.returncode == 0 and proc.stderr == "" and len(proc.stdout.splitlines()) == 1
+
+
 def test_help_survives_a_closed_pipe() -> None:
     proc = joints_cmd("--help", shell_tail="head -1")
     assert proc.returncode == 0 and proc.stderr == "" and proc.stdout.startswith("usage: joints")
