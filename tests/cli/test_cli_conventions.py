@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import joints_cmd  # tests/cli/conftest.py
+from clikit import joints_cmd
 
 from joints.cli import build_parser, main
 
@@ -168,6 +168,19 @@ def test_cyclic_modes_stream_set_points(sim: Path, capsys: pytest.CaptureFixture
     rc, out, err = run(capsys, "jog", sim, "o", "--velocity", "0.5", "--duration", "0.5", "--mode", "csv", "--json")
     assert rc == 0, err
     assert json.loads(out)["position"] > 0.1
+
+
+def test_other_cia402_modes(sim: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rc, out, err = run(capsys, "move", sim, "o", "0.2", "--mode", "ip", "--json")
+    assert rc == 0, err
+    assert json.loads(out)["position"] == pytest.approx(0.2, abs=0.01)
+    for mode in ("pt", "cst"):  # a torque well above the joint's static friction
+        start = json.loads(run(capsys, "state", sim, "o")[1])["position"]
+        rc, out, err = run(capsys, "jog", sim, "o", "--torque", "15", "--duration", "1", "--mode", mode, "--json")
+        assert rc == 0, (mode, err)
+        assert json.loads(out)["position"] - start > 0.05
+    rc, _, err = run(capsys, "jog", sim, "o", "--velocity", "0.5", "--mode", "cst")
+    assert rc == 2 and "--torque" in err
 
 
 def test_mks_pulse_moves(sim: Path, capsys: pytest.CaptureFixture[str]) -> None:

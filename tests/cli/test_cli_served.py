@@ -207,6 +207,18 @@ def test_modbus_monitor_csv_has_one_row_per_frame(served: Any, tmp_path: Path,
     assert {r["direction"] for r in rows} == {"tx", "rx"} and {r["node"] for r in rows} == {"1", "2", "3", "4"}
 
 
+def test_replay_a_log_against_the_served_twins(served: Any, tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    log = tmp_path / "frames.jsonl"
+    assert run(capsys, "monitor", served.hardware, "--bus", "mks", "--duration", "0.3", "--export", log,
+               "--quiet")[0] == 0
+    rc, _, err = run(capsys, "replay", log, served.hardware, "--bus", "mks")
+    assert rc == 2 and "--confirm" in err  # a hardware config: the log may write
+    rc, out, err = run(capsys, "replay", log, served.hardware, "--bus", "mks", "--confirm", "--json")
+    results = json.loads(out)
+    assert results and all(r["same"] for r in results), results  # the axis stands still: the same replies
+
+
 def test_monitor_filters_by_node_and_kind(served: Any, capsys: pytest.CaptureFixture[str]) -> None:
     rc, out, _ = run(capsys, "monitor", served.hardware, "--bus", "rs485", "--duration", "0.2", "--json",
                      "--node", "3", "--direction", "tx")
@@ -303,7 +315,7 @@ def test_watch_under_a_pseudo_terminal_redraws_and_quits_on_q(served: Any, capsy
     import pty
     import subprocess
 
-    from conftest import ROOT
+    from clikit import ROOT
 
     hw = served.hardware
     watchdog = json.loads(run(capsys, "read", hw, "a", "modbus_communication_timeout_duration")[1])["value"]
