@@ -50,7 +50,9 @@ def test_hardware_config_points_at_the_served_buses(served: Any) -> None:
 
 def test_scan_lists_the_five_serial_drives_with_device_and_address(served: Any,
                                                                    capsys: pytest.CaptureFixture[str]) -> None:
-    rc, out, err = run(capsys, "scan", "--config", served.hardware, "--bus", "rs485", "--bus", "mks", "--json")
+    # a served world steps its physics between frames: a loaded machine needs more than the default 50 ms
+    rc, out, err = run(capsys, "scan", "--config", served.hardware, "--bus", "rs485", "--bus", "mks", "--json",
+                       "--timeout", "0.1")
     assert rc == 0, err
     found = json.loads(out)
     assert [(f["bus"], f["address"], f["device"]) for f in found] == [
@@ -77,7 +79,7 @@ def test_scan_finds_the_can_nodes_with_what_they_report(served: Any, capsys: pyt
 
 def test_scan_baud_list_reports_the_rate(served: Any, capsys: pytest.CaptureFixture[str]) -> None:
     rc, out, _ = run(capsys, "scan", "--port", served.port("rs485"), "--baudrate", "9600,115200", "--range", "1-2",
-                     "--json")
+                     "--json", "--timeout", "0.2")
     assert rc == 0
     found = json.loads(out)
     assert [(f["baudrate"], f["address"]) for f in found] == [(9600, 1), (9600, 2), (115200, 1), (115200, 2)]
