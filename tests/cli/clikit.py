@@ -36,12 +36,15 @@ MODEL = """<mujoco model="every_family">
 </mujoco>
 """
 
+#: reply timeouts with room for a loaded machine (a served world steps its physics between frames)
 BUSES = """
 [buses.rs485]
 protocol = "modbus-rtu"
+timeout = 0.3
 [buses.mks]
 protocol = "mks-serial"
 baudrate = 38400
+timeout = 0.3
 [buses.can]
 protocol = "erob-can"
 timeout = 0.25
