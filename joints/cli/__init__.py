@@ -31,6 +31,7 @@ COMMANDS: tuple[str, ...] = (
     "send",  # raw frames
     "params",  # dump, load, diff
     "plot",  # trace / monitor log -> PNG
+    "s2r",  # identify (replay of recordings: monitor's replay)
     "sim",  # sim serve, sim view
 )
 

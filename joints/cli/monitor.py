@@ -36,6 +36,7 @@ from joints.cli.common import (
     positive,
 )
 from joints.cli.logs import CAN_FORMATS, TEXT_FORMATS, check_export, export, export_path, read
+from joints.cli.s2r import replay_options
 from joints.errors import ConfigError, JointsError
 from joints.link.trace import Trace, TraceRecord
 
@@ -168,6 +169,10 @@ def _key(r: TraceRecord) -> tuple[int | None, str]:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
+    if args.config is None:  # a Recorder's recording carries its configuration
+        from joints.cli.s2r import replay_recording
+
+        return replay_recording(args)
     records = read(args.log)
     cfg = load_config(args, on_exit="none")
     if cfg.backend != "sim" and not args.confirm:
@@ -252,10 +257,17 @@ def register(sub: Any) -> None:
     add_json(m)
 
     r = command(sub, "replay", help="send the requests of a recorded log to a twin and compare the replies",
-                example="joints monitor robot.toml --export run.jsonl\njoints replay run.jsonl robot.toml",
+                description="Replay a monitor log (with CONFIG: the twins or drives to send it to) or a recording "
+                            "of joints.s2r.record.Recorder (without CONFIG: fresh twins of the configuration it "
+                            "carries); compare the replies; exit 1 when they differ.",
+                example="joints monitor robot.toml --export run.jsonl\njoints replay run.jsonl robot.toml\n"
+                        "joints replay recorded.jsonl --perturb joint1:armature=1.4",
                 func=cmd_replay)
-    r.add_argument("log", help="a log written by `joints monitor --export` (or a python-can CAN log)")
-    add_config(r)
+    r.add_argument("log", help="a log written by `joints monitor --export` (or a python-can CAN log), or a "
+                               "Recorder's recording")
+    r.add_argument("config", nargs="?", help="monitor logs: the config of the bus to replay on")
+    r.add_argument("--backend", choices=("sim", "hardware"), help="override the config's backend")
+    replay_options(r)
     r.add_argument("--bus", help="the bus to replay on (default: the only one)")
     r.add_argument("--max-gap", type=nonnegative, default=1.0, dest="max_gap",
                    help="s at most between two requests (the recorded spacing is kept up to this)")
