@@ -272,6 +272,10 @@ class ZlacChannelDriver(JointDriver):
         """Both wheels share one drive: one status read (Rig.read_states), one velocity FC16."""
         return self.drive
 
+    def identity(self) -> dict[str, object]:
+        """The software version (0x20A0), the one identity register of the drive (no model, no serial number)."""
+        return {"firmware_version": f"0x{self.access.read('software_version'):04X}"}
+
     def write_param(self, name: str, value: int) -> None:
         self.drive.write_param(name, value)
 
