@@ -27,6 +27,25 @@ action mode    a in [-1, 1] means
 "torque"       torque command ``a * limits.torque`` [N*m] (``joint.set_torque``)
 =============  =========================================================================
 
+Safety: any action keeps the drives inside their limits, by construction rather than by luck
+(:meth:`JointsEnv.safe_command` is what is sent):
+
+* position targets lie within the joint's position limits; the drive's own profile (the config's
+  ``motion``) moves there, and a new target while moving is followed without a setpoint jump;
+* velocity commands are capped, per joint and per step, at the speed from which the drive's ramp
+  (``motion.acceleration``) still stops the joint at its position limit after one more period:
+  ``v <= sqrt((a dt)^2 + 2 a d) - a dt`` for the distance ``d`` left, so the whole range stays
+  reachable (the joint slows down as it nears a limit and stops on it);
+* a task may add its own rule (:meth:`JointsEnv._shield`; the arm keeps its links off the floor and
+  its base); torque commands are sent as they are (within the torque limit).
+
+The shipped configs fit the physics: profile speeds and velocity limits the drives sustain within
+their continuous current, accelerations within the torque limit, torque limits below the drives'
+stall-detection current (see the comments in ``joints/configs/*.toml``). A drive that faults
+anyway ends the episode (``terminated``; ``info["fault"]`` names the joint, the fault and its
+text), the env stops the other joints, and ``reset()`` clears it (sim: power cycle; hardware:
+clear the fault, enable again).
+
 Observation (float64) starts with the joint terms, then the task's terms:
 ``[position_1..n [rad], velocity_1..n [rad/s], torque_1..n [N*m], task...]``. Bounds per joint:
 position within its limits widened by 0.5 rad, velocity within +-2x its velocity limit, torque
@@ -60,6 +79,22 @@ ENABLE_SETTLE = 0.5
 LIMIT_MARGIN = 0.05
 #: rad the observation's position bounds extend beyond the limits
 OBS_POSITION_MARGIN = 0.5
+
+
+def braking_speed(distance: np.ndarray, acceleration: np.ndarray, period: float) -> np.ndarray:
+    """Fastest speed [rad/s] at which a joint may go on for one more ``period`` [s] and still stop
+    within ``distance`` [rad] braking with ``acceleration`` [rad/s^2]: the root of
+    ``v dt + v^2 / (2 a) = d`` (0 where the distance is <= 0)."""
+    ad = acceleration * period
+    out: np.ndarray = np.sqrt(ad * ad + 2.0 * acceleration * np.maximum(distance, 0.0)) - ad
+    return out
+
+
+def fault_info(name: str, state: joints.JointState) -> dict[str, Any]:
+    """``info["fault"]`` of a faulted joint: its name, the fault's name, code, text and what clears it."""
+    f = state.fault
+    assert f is not None
+    return {"joint": name, "name": f.name, "code": f.code, "text": f.text, "clears": f.clears}
 
 
 class RigEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -232,6 +267,11 @@ class JointsEnv(RigEnv):
             assert lim.position is not None and lim.velocity is not None and lim.torque is not None
             lo.append(lim.position[0]); hi.append(lim.position[1])
             vlim.append(lim.velocity); tlim.append(lim.torque)
+        #: (n,) the drives' own profile for position actions [rad/s, rad/s^2] (config ``motion``);
+        #: velocity actions ramp with ``profile_acceleration`` both ways
+        self.profile_velocity = np.array([j.motion.velocity for j in self.joints], dtype=np.float64)
+        self.profile_acceleration = np.array([j.motion.acceleration for j in self.joints], dtype=np.float64)
+        self.profile_deceleration = np.array([j.motion.deceleration for j in self.joints], dtype=np.float64)
         self.position_limits = np.array([lo, hi], dtype=np.float64).T  #: (n, 2) rad
         self.velocity_limits = np.array(vlim, dtype=np.float64)  #: (n,) rad/s
         self.torque_limits = np.array(tlim, dtype=np.float64)  #: (n,) N*m
@@ -269,6 +309,7 @@ class JointsEnv(RigEnv):
         self._queue: deque[np.ndarray] = deque()
         self._prev_action = np.zeros(n)
         self._states: list[joints.JointState] = []
+        self._sent = np.zeros(n)  # the SI command of the last step (after safe_command)
         self._tick = 0
         self._t0 = 0.0
         self._noise = np.zeros(n)
@@ -335,6 +376,72 @@ class JointsEnv(RigEnv):
         clipped: np.ndarray = np.clip(a, -1.0, 1.0).astype(np.float32)
         return clipped
 
+    # -- safety ---------------------------------------------------------------------------
+    def safe_command(self, command: Sequence[float] | np.ndarray) -> np.ndarray:
+        """The SI command the env sends for ``command`` (rad | rad/s | N*m per the action mode) in
+        the present state (the joint states of the last observation).
+
+        Position targets are clipped to the position limits; a velocity is capped towards each
+        limit at the :func:`braking_speed` of the distance left (the drive's ramp stops the joint
+        on the limit); torque is clipped to the torque limit. Then the task's rule
+        (:meth:`_shield`) applies. Without a state yet (before ``reset``) only the limits apply.
+        """
+        c: np.ndarray = np.asarray(command, dtype=np.float64).reshape(-1).copy()
+        if c.shape != (len(self.joints),) or not np.all(np.isfinite(c)):
+            raise ValueError(f"command must be one finite value per joint, got {command!r}")
+        if self.action_mode == "position":
+            np.clip(c, self.position_limits[:, 0], self.position_limits[:, 1], out=c)
+        elif self.action_mode == "velocity":
+            np.clip(c, -self.velocity_limits, self.velocity_limits, out=c)
+        else:
+            np.clip(c, -self.torque_limits, self.torque_limits, out=c)
+            return c
+        if not self._states:
+            return c
+        p = np.array([s.position for s in self._states])
+        if self.action_mode == "velocity":
+            a = self.profile_acceleration
+            np.clip(c, -braking_speed(p - self.position_limits[:, 0], a, self.control_period),
+                    braking_speed(self.position_limits[:, 1] - p, a, self.control_period), out=c)
+        return self._shield(c)
+
+    def _shield(self, command: np.ndarray) -> np.ndarray:
+        """The task's own safety rule on a position or velocity command (SI, within the limits);
+        default: none. See :meth:`_reach` and :meth:`_stop_command` for the motion it may predict."""
+        return command
+
+    def _stop_command(self, i: int) -> float:
+        """The command that stops joint ``i`` as soon as the drive can: the target where its
+        profile stops it (position mode, within the limits) or zero speed (velocity mode)."""
+        if self.action_mode == "velocity":
+            return 0.0
+        s = self._states[i]
+        stop = s.position + s.velocity * abs(s.velocity) / (2.0 * self.profile_deceleration[i])
+        return float(np.clip(stop, *self.position_limits[i]))
+
+    def _reach(self, command: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per joint, the lowest and highest position [rad] it can pass through if ``command``
+        (position or velocity, SI) is held for one period and the joint is then stopped with the
+        drive's deceleration - a conservative envelope of the drive's own profile."""
+        p = np.array([s.position for s in self._states])
+        v = np.array([s.velocity for s in self._states])
+        dt = self.control_period
+        if self.action_mode == "velocity":
+            acc = dec = self.profile_acceleration
+            step = acc * dt
+            v1 = np.where(np.abs(command - v) <= step, command, v + np.copysign(step, command - v))
+            p1 = p + 0.5 * (v + v1) * dt
+            ends = [p1, p1 + v1 * np.abs(v1) / (2.0 * dec)]
+        else:
+            acc, dec = self.profile_acceleration, self.profile_deceleration
+            u = np.minimum(np.maximum(self.profile_velocity, np.abs(v)), np.abs(v) + acc * dt)
+            travel = u * dt + u * u / (2.0 * dec)
+            d = command - p
+            ends = [p + np.copysign(np.minimum(travel, np.abs(d)), d)]
+        stop_now = p + v * np.abs(v) / (2.0 * dec)
+        pts = np.stack([p, stop_now, *ends])
+        return pts.min(axis=0), pts.max(axis=0)
+
     def _to_model(self, i: int, position: float) -> float:
         """Joint position (user frame) -> MJCF joint angle: ``(position - offset) * direction``."""
         j = self.joints[i]
@@ -364,6 +471,7 @@ class JointsEnv(RigEnv):
             self._reset_hardware(start)
         neutral = self.action_of(start) if self.action_mode == "position" else np.zeros(len(self.joints), np.float32)
         self._prev_action = neutral.astype(np.float64)
+        self._sent = start.copy() if self.action_mode == "position" else np.zeros(len(self.joints))
         latency = self.randomization_sample["latency"] if self.randomization_sample else 0
         self._queue = deque(neutral.astype(np.float64) for _ in range(latency))
         self._tick = 0
@@ -401,7 +509,11 @@ class JointsEnv(RigEnv):
         info.update(terms)
         violation = bool((positions < self._lo_stop).any() or (positions > self._hi_stop).any())
         info["limit_violation"] = violation
-        terminated = violation or any(s.fault for s in states)
+        info["command"] = self._sent.copy()
+        faulted = [(n, s) for n, s in zip(self.joint_names, states) if s.fault is not None]
+        if faulted:
+            info["fault"] = fault_info(*faulted[0])
+        terminated = violation or bool(faulted)
         if terminated:
             self._safe_stop()
         if self.render_mode == "human":
@@ -434,7 +546,8 @@ class JointsEnv(RigEnv):
         }
 
     def _command(self, action: np.ndarray) -> None:
-        cmd = self.command_of(action).tolist()
+        self._sent = self.safe_command(self.command_of(action))
+        cmd = self._sent.tolist()
         mode = self.action_mode
         for j, c in zip(self.joints, cmd):
             if not j.enabled:  # faulted/disabled drive: the episode has ended; never command it

@@ -10,7 +10,7 @@ import numpy as np
 
 import joints
 from envs.base import JointsEnv
-from envs.kinematics import ARM3_REACH, ARM3_SHOULDER_HEIGHT, erob_arm3_ee, erob_stand_tip
+from envs.kinematics import ARM3_REACH, ARM3_SHOULDER_HEIGHT, erob_arm3_clearance, erob_arm3_ee, erob_stand_tip
 from envs.render import CameraSpec
 
 
@@ -246,6 +246,10 @@ class ErobArmReachEnv(JointsEnv):
     MODEL_JOINTS = ("joint1", "joint2", "joint3")
     MIN_HEIGHT = 0.10  #: m, lowest target
     MIN_RADIUS = 0.15  #: m, closest target to the base axis
+    #: m the links keep from the floor, the base and link1 (:meth:`_shield`)
+    CLEARANCE = 0.02
+    #: rad between the shoulder/elbow poses at which the clearance is checked (<= 9 mm of gap)
+    GRID = 0.02
 
     def __init__(
         self,
@@ -330,6 +334,39 @@ class ErobArmReachEnv(JointsEnv):
 
     def _markers(self) -> list[tuple[np.ndarray, tuple[float, float, float, float]]]:
         return [(self.target, (0.1, 0.9, 0.2, 0.6))]
+
+    # -- safety -----------------------------------------------------------------------------
+    def clearance(self, lo: np.ndarray, hi: np.ndarray) -> float:
+        """Smallest gap [m] between the arm and the floor / its base over every pose with joint2,
+        joint3 (user frame, rad) anywhere in ``[lo, hi]`` (per joint; joint1 does not matter):
+        :func:`~envs.kinematics.erob_arm3_clearance` on a grid of :attr:`GRID` rad."""
+        axes = []
+        for i in (1, 2):
+            j = self.joints[i]
+            n = max(2, math.ceil((hi[i] - lo[i]) / self.GRID) + 1)
+            axes.append((np.linspace(lo[i], hi[i], n) - j.offset) * j.direction)  # user -> model frame
+        return float(erob_arm3_clearance(axes[0][:, None], axes[1][None, :]).min())
+
+    def _shield(self, command: np.ndarray) -> np.ndarray:
+        """Keep the arm :attr:`CLEARANCE` off the floor and its base: the shoulder and elbow commands
+        go out as asked if every pose they can lead to within the next period - and while stopping
+        after it - keeps the gap (:meth:`~envs.base.JointsEnv._reach`); else the shoulder, or the
+        elbow, or both are stopped instead (the first of these that keeps it; the one that moves
+        away from the obstacle goes on). Torque commands are not predicted and go out as they are.
+
+        Poses closer than the clearance are not reachable anyway (the links would be in contact);
+        every other pose in the position limits stays reachable, approached in steps that keep it.
+        """
+        if self.action_mode == "torque":
+            return command
+        c: np.ndarray = command
+        for hold in ((), (1,), (2,), (1, 2)):
+            c = command.copy()
+            for i in hold:
+                c[i] = self._stop_command(i)
+            if self.clearance(*self._reach(c)) >= self.CLEARANCE:
+                return c
+        return c  # nothing keeps it (the arm is there already): stop both
 
     def _task_terms(self, positions: np.ndarray) -> np.ndarray:
         self._ee = self.end_effector(None if self.sim else positions)
