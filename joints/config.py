@@ -52,8 +52,10 @@ class BusConfig:
     retries: int = 2
     echo: bool = False  #: the RS485 adapter echoes what it sends
     interface: str | None = None  #: CAN: python-can interface
-    channel: str | None = None  #: CAN: channel
+    channel: str | int | None = None  #: CAN: channel
     bitrate: int = 1_000_000
+    udp_port: int | None = None  #: CAN over udp_multicast: the port (`joints sim serve` prints it)
+    sync_period: float | None = None  #: CANopen: s between two SYNCs of the bus (cyclic modes; default 1 ms)
 
 
 @dataclass(frozen=True)
@@ -71,6 +73,8 @@ class JointConfig:
     watchdog_ms: int | None = None
     offset: float = 0.0
     direction: int = 1
+    mode: str | None = None  #: operating mode where the protocol has several (CANopen: pp, pv, pt, csp, csv, cst, ip)
+    sync_period: float | None = None  #: CANopen: s between two SYNCs (the bus's; set it on the bus or here)
 
 
 @dataclass(frozen=True)
@@ -207,6 +211,20 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
             raise r.err(f"{key}.echo", f"expected true or false, got {echo!r}")
         if chosen == "hardware" and protocol in ("modbus-rtu", "mks-serial") and not port:
             raise r.err(f"{key}.port", "is required for backend = \"hardware\" (e.g. \"/dev/ttyUSB0\")")
+        interface = b.get("interface")
+        if interface is not None and (not isinstance(interface, str) or not interface):
+            raise r.err(f"{key}.interface", f"expected a python-can interface name, got {interface!r}",
+                        ("socketcan", "pcan", "kvaser", "slcan", "udp_multicast", "virtual", "..."))
+        channel = b.get("channel")
+        if channel is not None and (isinstance(channel, bool) or not isinstance(channel, (str, int))):
+            raise r.err(f"{key}.channel", f"expected a channel name or number, got {channel!r}")
+        udp_port = r.number(b, f"{key}.udp_port", None, integer=True, minimum=1, maximum=65535)
+        if udp_port is not None and interface not in (None, "udp_multicast"):
+            raise r.err(f"{key}.udp_port", f"only for interface = \"udp_multicast\" (this bus: {interface!r})")
+        medium = registry.PROTOCOLS[protocol].medium if protocol in registry.PROTOCOLS else None
+        if chosen == "hardware" and medium == "can" and interface is None:
+            raise r.err(f"{key}.interface", "is required for a CAN bus with backend = \"hardware\"",
+                        ("socketcan", "pcan", "kvaser", "slcan", "udp_multicast", "..."))
         buses[name] = BusConfig(
             name=name,
             protocol=protocol,
@@ -217,9 +235,11 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
             timeout=r.number(b, f"{key}.timeout", 0.1, positive=True),
             retries=r.number(b, f"{key}.retries", 2, integer=True, minimum=0, maximum=10),
             echo=echo,
-            interface=b.get("interface"),
-            channel=b.get("channel"),
+            interface=interface,
+            channel=channel,
             bitrate=r.number(b, f"{key}.bitrate", 1_000_000, integer=True, positive=True),
+            udp_port=udp_port,
+            sync_period=_sync_period(r, b, f"{key}.sync_period", protocol),
         )
 
     joints: dict[str, JointConfig] = {}
@@ -260,6 +280,22 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
         model = j.get("model")
         if model is not None and not isinstance(model, str):
             raise r.err(f"{key}.model", f"expected a model name string, got {model!r}")
+        modes = fam.modes.get(protocol, ())
+        mode = j.get("mode")
+        if mode is not None and not modes:
+            raise r.err(f"{key}.mode", f"protocol {protocol!r} has no operating modes to choose; remove the key")
+        if mode is not None and mode not in modes:
+            raise r.err(f"{key}.mode", f"{mode!r} is not allowed", modes)
+        sync_period = _sync_period(r, j, f"{key}.sync_period", protocol)
+        bus_sync = buses[str(bus)].sync_period
+        if sync_period is not None and bus_sync is not None and not math.isclose(sync_period, bus_sync):
+            raise r.err(f"{key}.sync_period", f"{sync_period} s differs from the bus's sync_period {bus_sync} s "
+                        "(one SYNC per bus)")
+        for other in joints.values():
+            if (other.bus == bus and sync_period is not None and other.sync_period is not None
+                    and not math.isclose(other.sync_period, sync_period)):
+                raise r.err(f"{key}.sync_period", f"{sync_period} s differs from joint {other.name!r} on the same "
+                            f"bus ({other.sync_period} s; one SYNC per bus)")
         joints[name] = JointConfig(
             name=name,
             device=device,
@@ -274,6 +310,8 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
             watchdog_ms=r.number(j, f"{key}.watchdog_ms", None, integer=True, minimum=0, maximum=4000),
             offset=r.number(j, f"{key}.offset", 0.0),
             direction=int(direction),
+            mode=None if mode is None else str(mode),
+            sync_period=sync_period,
         )
     if not joints:
         raise r.err("joints", "no joints defined; add a [joints.<name>] table")
@@ -286,6 +324,14 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
         source=source,
         base_dir=base_dir or Path.cwd(),
     )
+
+
+def _sync_period(r: _Reader, data: Mapping[str, Any], key: str, protocol: str) -> float | None:
+    """A SYNC period [s] (protocols with cyclic modes, i.e. CANopen; 100 us .. 1 s)."""
+    value = r.number(data, key, None, minimum=1e-4, maximum=1.0)
+    if value is not None and not any(protocol in f.modes for f in registry.FAMILIES.values()):
+        raise r.err(key, f"only for a protocol with cyclic modes (this bus: {protocol!r})")
+    return None if value is None else float(value)
 
 
 def load(path: str | os.PathLike[str], *, backend: str | None = None) -> RigConfig:

@@ -297,6 +297,26 @@ class Joint:
         self.driver.set_current(round(amps / self.units.current))
         self._contact()
 
+    def cycle_target(self, value: float, kind: str) -> int:
+        """A cyclic set-point (``Rig.cycle``) in device units, checked against the limits first.
+
+        ``kind``: "position" [rad], "velocity" [rad/s] or "torque" [N*m] (current units for the driver).
+        """
+        value = self._finite(kind, value)
+        if kind == "position":
+            self._check_position(value)
+            out = self._to_pos(value)
+        elif kind == "velocity":
+            self._check_velocity(value)
+            out = self._to_vel(value)
+        elif kind == "torque":
+            self._check_torque(value)
+            out = round(value * self.direction / self.units.torque_constant / self.units.current)
+        else:
+            raise CommandError(f"joint {self.name}: unknown set-point kind {kind!r}")
+        self._contact()
+        return out
+
     def stop(self) -> None:
         """Decelerate to standstill with the profile deceleration."""
         self.driver.stop()
