@@ -34,8 +34,9 @@ Safety: any action keeps the drives inside their limits, by construction rather 
   ``motion``) moves there, and a new target while moving is followed without a setpoint jump;
 * velocity commands are capped, per joint and per step, at the speed from which the drive's ramp
   (``motion.acceleration``) still stops the joint at its position limit after one more period:
-  ``v <= sqrt((a dt)^2 + 2 a d) - a dt`` for the distance ``d`` left, so the whole range stays
-  reachable (the joint slows down as it nears a limit and stops on it);
+  ``v <= sqrt((a dt)^2 + 2 a d) - a dt`` for the distance ``d`` left (to 5 mrad short of the
+  limit), so the whole range stays reachable (the joint slows down as it nears a limit and stops
+  there);
 * a task may add its own rule (:meth:`JointsEnv._shield`; the arm keeps its links off the floor and
   its base); torque commands are sent as they are (within the torque limit).
 
@@ -79,6 +80,9 @@ ENABLE_SETTLE = 0.5
 LIMIT_MARGIN = 0.05
 #: rad the observation's position bounds extend beyond the limits
 OBS_POSITION_MARGIN = 0.5
+#: rad short of a position limit where velocity actions brake to (the joint lags the drive's speed
+#: ramp by a few ms, and carries on ~2 mrad at the last braking speed: it stops inside the limit)
+LIMIT_INSET = 0.005
 
 
 def braking_speed(distance: np.ndarray, acceleration: np.ndarray, period: float) -> np.ndarray:
@@ -382,8 +386,8 @@ class JointsEnv(RigEnv):
         the present state (the joint states of the last observation).
 
         Position targets are clipped to the position limits; a velocity is capped towards each
-        limit at the :func:`braking_speed` of the distance left (the drive's ramp stops the joint
-        on the limit); torque is clipped to the torque limit. Then the task's rule
+        limit at the :func:`braking_speed` of the distance left to :data:`LIMIT_INSET` short of it
+        (the drive's ramp stops the joint there); torque is clipped to the torque limit. Then the task's rule
         (:meth:`_shield`) applies. Without a state yet (before ``reset``) only the limits apply.
         """
         c: np.ndarray = np.asarray(command, dtype=np.float64).reshape(-1).copy()
@@ -401,8 +405,9 @@ class JointsEnv(RigEnv):
         p = np.array([s.position for s in self._states])
         if self.action_mode == "velocity":
             a = self.profile_acceleration
-            np.clip(c, -braking_speed(p - self.position_limits[:, 0], a, self.control_period),
-                    braking_speed(self.position_limits[:, 1] - p, a, self.control_period), out=c)
+            lo, hi = self.position_limits[:, 0] + LIMIT_INSET, self.position_limits[:, 1] - LIMIT_INSET
+            np.clip(c, -braking_speed(p - lo, a, self.control_period),
+                    braking_speed(hi - p, a, self.control_period), out=c)
         return self._shield(c)
 
     def _shield(self, command: np.ndarray) -> np.ndarray:

@@ -47,8 +47,14 @@ class ErobReachEnv(JointsEnv):
     | ``"torque"`` | torque ``a x limits.torque`` | N*m |
 
     ``env.unwrapped.command_of(a)`` / ``action_of(si)`` convert. The default config has limits
-    position [-3, 3] rad, velocity 3 rad/s, torque 40 N*m. The drive holds the command for the
-    control period (zero-order hold, ``dt`` = 20 ms by default).
+    position [-3, 3] rad, velocity 2 rad/s, torque 35 N*m (what the drive sustains on this stand
+    without tripping a protection) and the profile 2 rad/s, 10 rad/s^2. The drive holds the
+    command for the control period (zero-order hold, ``dt`` = 20 ms by default).
+
+    No action can fault the drive: position targets are reached with the drive's own profile (a
+    new target while moving included), velocity commands are capped near a position limit at the
+    speed the drive's ramp can stop from on the limit (:meth:`envs.JointsEnv.safe_command`; the
+    whole range stays reachable; ``info["command"]`` is what was sent).
 
     ## Observation Space
     ``Box(float64, (5,))``:
@@ -56,8 +62,8 @@ class ErobReachEnv(JointsEnv):
     | index | observation | unit | bounds (default config) |
     |---|---|---|---|
     | 0 | joint position | rad | [-3.5, 3.5] (limits +- 0.5) |
-    | 1 | joint velocity | rad/s | [-6, 6] (+- 2 x velocity limit) |
-    | 2 | joint torque (drive's estimate from its current) | N*m | [-80, 80] (+- 2 x torque limit) |
+    | 1 | joint velocity | rad/s | [-4, 4] (+- 2 x velocity limit) |
+    | 2 | joint torque (drive's estimate from its current) | N*m | [-70, 70] (+- 2 x torque limit) |
     | 3 | target angle | rad | position limits |
     | 4 | target - position | rad | +- (hi - lo) |
 
@@ -70,8 +76,9 @@ class ErobReachEnv(JointsEnv):
     - ``reward_action_rate = -action_rate_weight * sum((a_t - a_{t-1})^2)``: smooth commands.
 
     ``info`` also holds ``distance`` [rad], ``is_success`` (``distance < success_tolerance``),
-    ``time`` [s] (sim: simulated seconds since reset), ``faults`` (joint -> drive error code,
-    0 = none) and ``limit_violation``.
+    ``time`` [s] (sim: simulated seconds since reset), ``faults`` (joint -> the drive's fault by
+    name, None = none), ``limit_violation``, ``command`` (the SI command sent this step) and, when
+    a drive reports a fault, ``fault`` (``joint``, ``name``, ``code``, ``text``, ``clears``).
 
     ## Starting State
     Sim: physics and the emulated drive at power-on, the joint at rest at an angle uniform in
@@ -82,8 +89,9 @@ class ErobReachEnv(JointsEnv):
     fixes either.
 
     ## Episode End
-    - Termination: the drive reports a fault, or the joint passes its position limits by more
-      than 0.05 rad (the env then stops the joint).
+    - Termination: the drive reports a fault (``info["fault"]``; ``reset()`` clears it: sim power
+      cycle, hardware clear + enable), or the joint passes its position limits by more than
+      0.05 rad (torque actions only can drive it there; the env then stops the joint).
     - Truncation: 250 steps (5 s at the default control period), by the registered
       ``max_episode_steps``.
     The env does not end an episode on success: hold the target.
@@ -192,8 +200,11 @@ class ErobArmReachEnv(JointsEnv):
     ``action_mode`` as in :class:`ErobReachEnv`: ``"position"`` (default; target angle over the
     position limits, drive's own profile), ``"velocity"`` (``a x limits.velocity`` rad/s) or
     ``"torque"`` (``a x limits.torque`` N*m; the agent must then carry the arm against gravity).
-    Default limits: position joint1 [-3, 3], joint2 [-1.6, 1.2], joint3 [-2.4, 2.4] rad; velocity
-    3 rad/s; torque 40, 40, 20 N*m.
+    Default limits: position joint1 [-3, 3], joint2 [-1.6, 0.8], joint3 [-2.4, 2.4] rad; velocity
+    2, 1.2, 3 rad/s; torque 35, 35, 20 N*m (what the drives sustain on this arm without tripping a
+    protection, see the shipped config). Position and velocity commands are also kept from driving
+    a link into the floor or the base (:meth:`ErobArmReachEnv._shield`, 2 cm of clearance); every
+    other pose within the limits stays reachable.
 
     ## Observation Space
     ``Box(float64, (18,))``:
@@ -214,18 +225,21 @@ class ErobArmReachEnv(JointsEnv):
     ## Rewards
     ``reward = reward_distance + reward_action_rate``: ``-||target - ee||`` [m] and
     ``-action_rate_weight * sum((a_t - a_{t-1})^2)``. ``info`` also holds ``distance`` [m],
-    ``is_success`` (``distance < success_tolerance``), ``time``, ``faults``, ``limit_violation``.
+    ``is_success`` (``distance < success_tolerance``), ``time``, ``faults``, ``limit_violation``,
+    ``command``, and ``fault`` when a drive reports one (as in :class:`ErobReachEnv`).
 
     ## Starting State
     Sim: physics and the drives at power-on, the joints at rest at angles uniform in
     ``start_ranges`` (seeded), enabled and held for the drives' 500 ms (the brakes hold the arm
     meanwhile). Hardware: enable, move to the drawn pose with a safe profile, wait for standstill.
     The target is the ``ee`` position of joint angles drawn uniformly in ``target_ranges``,
-    redrawn until it is at least 0.10 m above the floor and 0.15 m from the base axis (so it is
+    redrawn until it is at least 0.10 m above the floor and 0.15 m from the base axis and the pose
+    keeps the arm's clearance (so it is
     reachable). ``reset(options={"start": [q1, q2, q3], "target": [x, y, z]})`` fixes either.
 
     ## Episode End
-    - Termination: a drive fault, or a joint past its position limits by more than 0.05 rad.
+    - Termination: a drive fault (``info["fault"]``; cleared by ``reset()``), or a joint past its
+      position limits by more than 0.05 rad (torque actions only).
     - Truncation: 250 steps (5 s at the default control period).
 
     ## Arguments
@@ -315,7 +329,8 @@ class ErobArmReachEnv(JointsEnv):
         for _ in range(1000):
             q = self._to_model_all(np.array([self.np_random.uniform(*r) for r in self.target_ranges]))
             p = erob_arm3_ee(q)
-            if p[2] >= self.MIN_HEIGHT and math.hypot(p[0], p[1]) >= self.MIN_RADIUS:
+            if p[2] >= self.MIN_HEIGHT and math.hypot(p[0], p[1]) >= self.MIN_RADIUS \
+                    and float(erob_arm3_clearance(q[1], q[2])) >= self.CLEARANCE:
                 self.target = p
                 return
         raise ValueError("target_ranges give no reachable target above the floor; widen them")

@@ -470,10 +470,12 @@ def test_hardware_reset_moves_with_a_safe_profile_and_recovers_from_faults() -> 
             _obs, _r, term, _t, info = env.step(np.array([1.0], np.float32))
             if term:
                 break
-        assert term and info["faults"]["joint1"] == "speed_error"
+        assert term and info["faults"]["joint1"] == "speed_error" and info["fault"]["code"] == 0x8400
         j.write("max_speed_error", 84000)
-        obs, info = env.reset(seed=0, options={"start": [-0.4], "target": 0.0})
+        obs, info = env.reset(seed=0, options={"start": [-0.4], "target": 0.0})  # clear_faults + enable
         assert info["faults"]["joint1"] is None and abs(obs[0] + 0.4) <= env.reset_tolerance
+        _obs, _r, term, _t, info = env.step(np.array([0.5], np.float32))
+        assert not term and "fault" not in info and j.state().enabled
     finally:
         env.close()
 
