@@ -366,11 +366,12 @@ class ErobArmReachEnv(JointsEnv):
         """Keep the arm :attr:`CLEARANCE` off the floor and its base: the shoulder and elbow commands
         go out as asked if every pose they can lead to within the next period - and while stopping
         after it - keeps the gap (:meth:`~envs.base.JointsEnv._reach`); else the shoulder, or the
-        elbow, or both are stopped instead (the first of these that keeps it; the one that moves
-        away from the obstacle goes on). Torque commands are not predicted and go out as they are.
+        elbow, or both are stopped instead (the first of these that keeps it: a joint that moves
+        away from the obstacle goes on while the other waits). Torque commands are not predicted
+        and go out as they are.
 
-        Poses closer than the clearance are not reachable anyway (the links would be in contact);
-        every other pose in the position limits stays reachable, approached in steps that keep it.
+        Poses in contact are not reachable anyway; the 2 cm cover the grid and the joints' tracking
+        of their profiles. Every other pose in the position limits stays reachable.
         """
         if self.action_mode == "torque":
             return command

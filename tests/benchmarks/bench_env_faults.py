@@ -86,6 +86,8 @@ def run_episode(env: gym.Env[Any, Any], act: Policy, seed: int) -> dict[str, Any
         if terminated or truncated:
             break
     fault = info.get("fault")
+    if fault is None:  # (envs before info["fault"]: the per-joint names)
+        fault = next(({"joint": j, "name": f} for j, f in info["faults"].items() if f), None)
     if fault is not None:
         end = "fault"
     elif truncated:
