@@ -73,6 +73,7 @@ class JointConfig:
     watchdog_ms: int | None = None
     offset: float = 0.0
     direction: int = 1
+    lead: float | None = None  #: m of travel per motor turn: a linear joint (positions in m, forces in N)
     mode: str | None = None  #: operating mode where the protocol has several (CANopen: pp, pv, pt, csp, csv, cst, ip)
     sync_period: float | None = None  #: CANopen: s between two SYNCs (the bus's; set it on the bus or here)
 
@@ -147,7 +148,7 @@ def _limits(r: _Reader, data: Mapping[str, Any], key: str) -> Limits:
         if (not isinstance(pos, (list, tuple)) or len(pos) != 2
                 or not all(isinstance(p, (int, float)) and not isinstance(p, bool) and math.isfinite(p) for p in pos)
                 or not pos[0] < pos[1]):
-            raise r.err(f"{key}.position", f"expected [min, max] in rad with min < max, got {pos!r}")
+            raise r.err(f"{key}.position", f"expected [min, max] in rad (m with a lead) with min < max, got {pos!r}")
         pos = (float(pos[0]), float(pos[1]))
     return Limits(
         position=pos,
@@ -310,6 +311,7 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
             watchdog_ms=r.number(j, f"{key}.watchdog_ms", None, integer=True, minimum=0, maximum=4000),
             offset=r.number(j, f"{key}.offset", 0.0),
             direction=int(direction),
+            lead=r.number(j, f"{key}.lead", None, positive=True),
             mode=None if mode is None else str(mode),
             sync_period=sync_period,
         )

@@ -365,7 +365,7 @@ def build(config: RigConfig, *, transports: Mapping[str, Any] | None = None,
             driver = fam.driver(jcfg, bus.link, clock, shared, bus.config.protocol)
             watchdog = jcfg.watchdog_ms if jcfg.watchdog_ms is not None else fam.watchdog_ms
             joints[name] = Joint(name, driver, clock=clock, limits=jcfg.limits, motion=jcfg.motion,
-                                 offset=jcfg.offset, direction=jcfg.direction,
+                                 offset=jcfg.offset, direction=jcfg.direction, lead=jcfg.lead,
                                  watchdog_ms=watchdog if isinstance(driver, CommunicationWatchdog) else None)
     except BaseException as exc:
         for t in opened.values():
@@ -413,7 +413,7 @@ def sim_world(cfg: RigConfig) -> Any:
             fam = registry.family(j.device, key=f"joints.{name}.device")
             drives.append(DriveSpec(bus=j.bus, name=name, mjcf_joint=j.mjcf_joint or name, address=j.address,
                                     profile=fam.config_profile(j), device=j.device, channel=j.channel,
-                                    protocol=cfg.buses[j.bus].protocol, maker=fam))
+                                    protocol=cfg.buses[j.bus].protocol, maker=fam, lead=j.lead))
         return World(cfg.sim.model, drives, buses=buses, timestep=cfg.sim.timestep, base_dir=cfg.base_dir)
     except ConfigError as exc:  # `joints sim serve` comes here directly: name the file too
         if exc.file is None:

@@ -15,6 +15,11 @@ register reads and writes into firmware reads and writes through a
 * firmware refusals map to exception codes (:data:`EXCEPTION_FOR`): unknown / not readable /
   not writable -> 02, out of range / refused in this state -> 03.
 
+A bus holds any :class:`ModbusSlave` (a family whose device is not a flat register file brings its
+own front, e.g. :mod:`joints.sim.mks_modbus_front`). A CRC-valid frame whose byte count breaks the
+Modbus rules is offered to its slave (:meth:`ModbusSlave.malformed`): a :class:`ModbusFront`
+stays silent, as before; a drive whose manual documents such a frame answers it.
+
 Every frame addressed to a front (and every broadcast it executes) is reported to the firmware
 (:meth:`~joints.sim.firmware.Firmware.frame_received`) before it is served. No register image is
 kept: the firmware holds typed values by name, a read packs only its block (plans are cached per
@@ -25,10 +30,11 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable, Iterable, Mapping
+from typing import Protocol
 
 from joints.codecs import modbus as mb
 from joints.devices.registers import Access, Register, RegisterTable
-from joints.errors import FrameError, ParameterRefused, Refusal
+from joints.errors import ByteCountError, FrameError, ParameterRefused, Refusal
 from joints.sim.firmware import Firmware
 
 __all__ = [
@@ -40,6 +46,7 @@ __all__ = [
     "ModbusDeviceBus",
     "ModbusException",
     "ModbusFront",
+    "ModbusSlave",
 ]
 
 ILLEGAL_FUNCTION = 0x01
@@ -67,6 +74,21 @@ _ReadPlan = tuple[Callable[[], list[int]] | None, struct.Struct | None, struct.S
 _FORMAT = {"uint16": "H", "int16": "h", "uint32": "I", "int32": "i"}
 #: a write plan: per register (name, offset in the block, words, signed, low word first)
 _WritePlan = tuple[tuple[str, int, int, bool, bool], ...]
+
+
+class ModbusSlave(Protocol):
+    """What a :class:`ModbusDeviceBus` needs from one slave."""
+
+    @property
+    def address(self) -> int: ...
+
+    def handle(self, request: mb.Request | mb.UnsupportedRequest) -> mb.Reply | None:
+        """Execute a request addressed to this slave; its reply (None: silence)."""
+        ...
+
+    def malformed(self, frame: bytes) -> mb.Reply | None:
+        """A CRC-valid frame for this slave whose byte count a Modbus codec rejects; the reply (None: silence)."""
+        ...
 
 
 class ModbusException(Exception):
@@ -249,6 +271,10 @@ class ModbusFront:
         except ModbusException as exc:
             return mb.ExceptionReply(request.slave, request.function, exc.code)
 
+    def malformed(self, frame: bytes) -> mb.Reply | None:
+        """A register-table drive stays silent on a frame with a wrong byte count."""
+        return None
+
     def __repr__(self) -> str:
         return f"ModbusFront({self.firmware!r}, {self.table.device!r}, address={self.address})"
 
@@ -260,15 +286,15 @@ _REQUESTS = (*_READS, mb.WriteSingleRegister, mb.WriteMultipleRegisters, mb.Unsu
 class ModbusDeviceBus:
     """All emulated slaves on one RS485 bus: bytes in, reply bytes out (a loopback/pty peer)."""
 
-    def __init__(self, slaves: Iterable[ModbusFront] = (), *, trace: Callable[[str, bytes], None] | None = None) -> None:
-        self.slaves: dict[int, ModbusFront] = {}
+    def __init__(self, slaves: Iterable[ModbusSlave] = (), *, trace: Callable[[str, bytes], None] | None = None) -> None:
+        self.slaves: dict[int, ModbusSlave] = {}
         for s in slaves:
             self.add(s)
         self._codec = mb.ModbusRtuCodec(mb.Role.DEVICE)
         self.trace = trace
         self.frame_errors = 0
 
-    def add(self, slave: ModbusFront) -> None:
+    def add(self, slave: ModbusSlave) -> None:
         address = slave.address
         if address in self.slaves:
             raise ValueError(f"two emulated slaves at address {address}")
@@ -277,11 +303,20 @@ class ModbusDeviceBus:
     def receive(self, data: bytes) -> bytes:
         """Feed received bytes; return the bytes the addressed slaves send back."""
         codec = self._codec
-        codec.feed(data)
+        if data:  # feeding nothing would undo a flush (silence)
+            codec.feed(data)
         out = bytearray()
         while True:
             try:
                 msg = codec.next_message()
+            except ByteCountError as exc:  # well framed, CRC valid, counts inconsistent: the slave decides
+                slave = self.slaves.get(exc.data[0]) if exc.data else None
+                answer = slave.malformed(exc.data) if slave is not None else None
+                if answer is None:
+                    self.frame_errors += 1
+                else:
+                    out += mb.encode(answer)
+                continue
             except FrameError:
                 self.frame_errors += 1  # a real slave stays silent on a corrupt frame
                 continue

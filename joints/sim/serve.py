@@ -1,8 +1,10 @@
 """Serve a simulated world in real time: each serial bus on a pseudo-terminal, each CAN bus on a python-can channel.
 
 Rule: the world runs on the wall clock here (and only here); the emulated drives answer whatever
-arrives between physics substeps, exactly as in process. Serial buses (Modbus RTU) are
-pseudo-terminals; CAN buses are python-can channels another process can open
+arrives between physics substeps, exactly as in process. Serial buses (Modbus RTU, MKS native) are
+pseudo-terminals; frames the drives send by themselves (MKS completion frames: an
+:class:`~joints.transports.loopback.UnsolicitedPeer`) go out as soon as the physics produced them.
+CAN buses are python-can channels another process can open
 (:mod:`joints.sim.can_serve`: udp_multicast by default, a vcan device where the config names one;
 never a real bus). Stops cleanly on SIGINT/SIGTERM or when ``stop`` is set.
 """
@@ -18,6 +20,7 @@ from collections.abc import Callable, Mapping
 from typing import Any, TextIO
 
 from joints.sim.can_serve import CanEndpoint, ServedCan
+from joints.transports.loopback import UnsolicitedPeer
 from joints.transports.pty import PtyEndpoint
 
 IDLE_FLUSH = 0.005  #: s of silence after which a partial frame is dropped (t3.5, generously)
@@ -109,3 +112,9 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
         if behind >= dt:
             # catch up, but never more than 50 ms of physics in one go (stay responsive)
             world.step(min(int(behind / dt), max(1, int(0.05 / dt))))
+            for name, ep in endpoints.items():
+                bus = world.buses[name]
+                if isinstance(bus, UnsolicitedPeer):
+                    data = bus.take_unsolicited()
+                    if data:
+                        ep.write(data)
