@@ -32,11 +32,10 @@ Safety: any action keeps the drives inside their limits, by construction rather 
 
 * position targets lie within the joint's position limits; the drive's own profile (the config's
   ``motion``) moves there, and a new target while moving is followed without a setpoint jump;
-* velocity commands are capped, per joint and per step, at the speed from which the drive's ramp
-  (``motion.acceleration``) still stops the joint at its position limit after one more period:
-  ``v <= sqrt((a dt)^2 + 2 a d) - a dt`` for the distance ``d`` left (to 5 mrad short of the
-  limit), so the whole range stays reachable (the joint slows down as it nears a limit and stops
-  there);
+* velocity commands are capped, per joint and per step, at the fastest speed that the drive's
+  ramp (``motion.acceleration``) reaches from the present speed during one period and still
+  stops from before the position limit (5 mrad short of it; :func:`braking_speed`), so the whole
+  range stays reachable (the joint slows down as it nears a limit and stops there);
 * a task may add its own rule (:meth:`JointsEnv._shield`; the arm keeps its links off the floor and
   its base); torque commands are sent as they are (within the torque limit).
 
@@ -81,16 +80,39 @@ LIMIT_MARGIN = 0.05
 #: rad the observation's position bounds extend beyond the limits
 OBS_POSITION_MARGIN = 0.5
 #: rad short of a position limit where velocity actions brake to (the joint lags the drive's speed
-#: ramp by a few ms, and carries on ~2 mrad at the last braking speed: it stops inside the limit)
+#: ramp and carries on ~2 mrad past where the ramp stops: it stops ~3 mrad inside the limit)
 LIMIT_INSET = 0.005
 
 
-def braking_speed(distance: np.ndarray, acceleration: np.ndarray, period: float) -> np.ndarray:
-    """Fastest speed [rad/s] at which a joint may go on for one more ``period`` [s] and still stop
-    within ``distance`` [rad] braking with ``acceleration`` [rad/s^2]: the root of
-    ``v dt + v^2 / (2 a) = d`` (0 where the distance is <= 0)."""
-    ad = acceleration * period
-    out: np.ndarray = np.sqrt(ad * ad + 2.0 * acceleration * np.maximum(distance, 0.0)) - ad
+def braking_speed(distance: np.ndarray, acceleration: np.ndarray, period: float,
+                  speed: np.ndarray | float = 0.0) -> np.ndarray:
+    """Fastest speed command ``v`` >= 0 towards a stop ``distance`` [rad] away that a joint moving
+    at ``speed`` [rad/s] towards it may get for one ``period`` [s] and still stop in time: the
+    drive ramps from ``speed`` to ``v`` with ``acceleration`` [rad/s^2] during the period, then
+    brakes with it. ``inf`` where any command is safe (the distance exceeds the run-out of a
+    whole period of acceleration), 0 where none is (the joint is too fast already: brake).
+
+    The distance covered, ``D(v)``, grows with ``v``; with ``a`` the acceleration, ``u`` the speed
+    (>= 0; moving away counts as standing) and ``t = dt``:
+
+    * ``v >= u`` (ramp up, done within the period): ``D = v t + u v / a - u^2 / (2a)``;
+    * ``u - a t <= v < u`` (ramp down within the period): ``D = v^2 / a + v (t - u / a) + u^2 / (2a)``;
+    * beyond those the period ends mid-ramp and ``D`` no longer depends on ``v``.
+    """
+    a = np.asarray(acceleration, dtype=np.float64)
+    d = np.asarray(distance, dtype=np.float64)
+    u = np.maximum(np.asarray(speed, dtype=np.float64), 0.0)
+    t = period
+    at = a * t
+    d_up = (2.0 * u + at) * 0.5 * t + (u + at) ** 2 / (2.0 * a)  # a whole period of ramping up
+    d_hold = u * t + u * u / (2.0 * a)  # v = u
+    lo = np.maximum(u - at, 0.0)  # the lowest speed reachable in the period
+    d_lo = lo * t + (u - lo) ** 2 / (2.0 * a) + lo * lo / (2.0 * a)
+    up = (d + u * u / (2.0 * a)) / (t + u / a)  # D(v) = d on the ramp-up branch
+    b = t - u / a
+    disc = np.maximum(b * b - 4.0 / a * (u * u / (2.0 * a) - d), 0.0)
+    down = np.maximum((np.sqrt(disc) - b) * a / 2.0, 0.0)  # D(v) = d on the ramp-down branch
+    out: np.ndarray = np.where(d >= d_up, np.inf, np.where(d >= d_hold, up, np.where(d >= d_lo, down, 0.0)))
     return out
 
 
@@ -386,9 +408,10 @@ class JointsEnv(RigEnv):
         the present state (the joint states of the last observation).
 
         Position targets are clipped to the position limits; a velocity is capped towards each
-        limit at the :func:`braking_speed` of the distance left to :data:`LIMIT_INSET` short of it
-        (the drive's ramp stops the joint there); torque is clipped to the torque limit. Then the task's rule
-        (:meth:`_shield`) applies. Without a state yet (before ``reset``) only the limits apply.
+        limit at the :func:`braking_speed` of the present speed and the distance left to
+        :data:`LIMIT_INSET` short of it (the drive's ramp stops the joint there); torque is clipped
+        to the torque limit. Then the task's rule (:meth:`_shield`) applies. Without a state yet
+        (before ``reset``) only the limits apply.
         """
         c: np.ndarray = np.asarray(command, dtype=np.float64).reshape(-1).copy()
         if c.shape != (len(self.joints),) or not np.all(np.isfinite(c)):
@@ -404,10 +427,10 @@ class JointsEnv(RigEnv):
             return c
         p = np.array([s.position for s in self._states])
         if self.action_mode == "velocity":
-            a = self.profile_acceleration
+            a, dt = self.profile_acceleration, self.control_period
+            v = np.array([s.velocity for s in self._states])
             lo, hi = self.position_limits[:, 0] + LIMIT_INSET, self.position_limits[:, 1] - LIMIT_INSET
-            np.clip(c, -braking_speed(p - lo, a, self.control_period),
-                    braking_speed(hi - p, a, self.control_period), out=c)
+            np.clip(c, -braking_speed(p - lo, a, dt, -v), braking_speed(hi - p, a, dt, v), out=c)
         return self._shield(c)
 
     def _shield(self, command: np.ndarray) -> np.ndarray:

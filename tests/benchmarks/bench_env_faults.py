@@ -1,9 +1,9 @@
 """Envs never fault by design: full-length episodes of every registered env under seeded action
 policies, counting drive faults and the other ways an episode ends.
 
-For every id of ``envs.ENV_IDS`` (each action mode; position is the default) and
-``envs.BASE_ENV_IDS``, ``--episodes`` episodes per policy, each to its registered length (or its
-termination), sim backend, shipped config:
+For every id ``import envs`` registers (each action mode of the env; the default one among them),
+``--episodes`` episodes per policy, each to its registered length (or its termination), sim
+backend, shipped config:
 
 * ``uniform`` - actions uniform over the whole action space (``action_space.sample()``, seeded);
 * ``corners`` - a random corner of the action space every step (bang-bang at the extremes);
@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import argparse
 import collections
+import importlib
+import inspect
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -34,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 import gymnasium as gym
 import numpy as np
 
-import envs
+import envs  # registers the joints/ ids
 
 Policy = Callable[[int], np.ndarray]
 POLICIES = ("uniform", "corners", "hold", "square")
@@ -67,13 +69,40 @@ def policy(name: str, env: gym.Env[Any, Any], seed: int) -> Policy:
     raise ValueError(f"unknown policy {name!r}; known: {POLICIES}")
 
 
+def env_class(env_id: str) -> Any:
+    module, name = str(gym.spec(env_id).entry_point).split(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def accepts(env_id: str, argument: str) -> bool:
+    return argument in inspect.signature(env_class(env_id).__init__).parameters
+
+
+def action_modes(env_id: str) -> tuple[str, ...] | None:
+    """The action modes of a registered env (its module's ``ACTION_MODES``), None if it has none."""
+    cls = env_class(env_id)
+    if issubclass(cls, envs.JointsEnv):
+        return envs.ACTION_MODES
+    if not accepts(env_id, "action_mode"):
+        return None
+    modes: tuple[str, ...] = sys.modules[cls.__module__].ACTION_MODES
+    return modes
+
+
+def env_ids() -> list[str]:
+    """Every id ``import envs`` registers under ``joints/``."""
+    return sorted(i for i in gym.registry if i.startswith("joints/"))
+
+
 def cases() -> Iterator[tuple[str, dict[str, Any]]]:
     """(env id, gym.make keyword arguments) of every registered env and action mode."""
-    for env_id in envs.ENV_IDS:
-        for mode in envs.ACTION_MODES:
-            yield env_id, {"action_mode": mode}
-    for env_id in envs.BASE_ENV_IDS:
-        yield env_id, {}
+    for env_id in env_ids():
+        modes = action_modes(env_id)
+        if modes is None:
+            yield env_id, {}
+        else:
+            for mode in modes:
+                yield env_id, {"action_mode": mode}
 
 
 def run_episode(env: gym.Env[Any, Any], act: Policy, seed: int) -> dict[str, Any]:
@@ -86,8 +115,10 @@ def run_episode(env: gym.Env[Any, Any], act: Policy, seed: int) -> dict[str, Any
         if terminated or truncated:
             break
     fault = info.get("fault")
+    if isinstance(fault, str):  # (a bare fault name)
+        fault = {"joint": "-", "name": fault}
     if fault is None:  # (envs before info["fault"]: the per-joint names)
-        fault = next(({"joint": j, "name": f} for j, f in info["faults"].items() if f), None)
+        fault = next(({"joint": j, "name": f} for j, f in info.get("faults", {}).items() if f), None)
     if fault is not None:
         end = "fault"
     elif truncated:
@@ -131,7 +162,7 @@ def main(argv: list[str] | None = None) -> int:
     for env_id, kwargs in cases():
         if args.env and env_id not in args.env:
             continue
-        if args.domain_randomization and env_id in envs.ENV_IDS:
+        if args.domain_randomization and accepts(env_id, "domain_randomization"):
             kwargs = {**kwargs, "domain_randomization": True}
         for name in args.policies:
             r = run(env_id, kwargs, name, args.episodes, args.seed)

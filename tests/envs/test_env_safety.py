@@ -1,7 +1,7 @@
 """Envs never fault by design (issue 18): any action in the action space keeps every drive inside its
 limits, and scripted policies still reach goals over each joint's whole configured range.
 
-The suite runs a seeded slice - per registered env and action mode, full-length episodes of
+The suite runs a seeded slice - per registered env (``joints/*``) and action mode, full-length episodes of
 uniform random actions (the space's own ``sample``), of random corners (bang-bang at the
 extremes) and of corners held for long moves. ``python tests/benchmarks/bench_env_faults.py``
 runs 100 episodes of each (the counts in the closing report of the issue).
@@ -9,8 +9,11 @@ runs 100 episodes of each (the counts in the closing report of the issue).
 
 from __future__ import annotations
 
+import importlib
 import importlib.util
+import inspect
 import math
+import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import ModuleType
@@ -31,12 +34,23 @@ from joints.devices.erob.profiles import profile
 ROOT = Path(__file__).resolve().parents[2]
 
 
+def _env_class(env_id: str) -> Any:
+    module, name = str(gym.spec(env_id).entry_point).split(":")
+    return getattr(importlib.import_module(module), name)
+
+
 def _cases() -> Iterator[tuple[str, str | None]]:
-    for env_id in envs.ENV_IDS:
-        for mode in ACTION_MODES:
+    """Every id ``import envs`` registers, with each action mode of the env (its module's ACTION_MODES)."""
+    for env_id in sorted(i for i in gym.registry if i.startswith("joints/")):
+        cls = _env_class(env_id)
+        if issubclass(cls, JointsEnv):
+            modes: tuple[str | None, ...] = ACTION_MODES
+        elif "action_mode" in inspect.signature(cls.__init__).parameters:
+            modes = sys.modules[cls.__module__].ACTION_MODES
+        else:
+            modes = (None,)
+        for mode in modes:
             yield env_id, mode
-    for env_id in envs.BASE_ENV_IDS:
-        yield env_id, None
 
 
 def _policies(space: Any, seed: int) -> dict[str, Callable[[int], np.ndarray]]:
@@ -83,12 +97,28 @@ def test_random_actions_never_fault_a_drive(env_id: str, mode: str | None) -> No
 
 # -- the velocity cap at the position limits --------------------------------------------------
 
-def test_braking_speed_goes_one_period_and_stops_on_the_distance() -> None:
-    d, a, dt = np.array([0.0, 1e-4, 0.05, 1.0, -0.3]), np.full(5, 10.0), 0.02
-    v = braking_speed(d, a, dt)
-    assert v[0] == 0.0 and v[-1] == 0.0
-    assert np.allclose(v[:4] * dt + v[:4] ** 2 / (2 * a[:4]), d[:4])
-    assert v[1] == pytest.approx(1e-4 / dt, rel=0.02)  # close to the limit: the gap closes within ~a period
+def _run_out(v: float, u: float, a: float, dt: float, n: int = 2000) -> float:
+    """Distance a joint at speed u covers ramping towards v at a for dt, then braking at a (simulated)."""
+    x, s, h = 0.0, max(u, 0.0), dt / n
+    for _ in range(n):
+        s2 = min(s + a * h, v) if v >= s else max(s - a * h, v)
+        x += 0.5 * (s + s2) * h
+        s = s2
+    return x + s * s / (2 * a)
+
+
+def test_braking_speed_is_the_fastest_command_that_still_stops_in_time() -> None:
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        a, dt, u, d = rng.uniform(0.2, 20.0), rng.uniform(0.01, 0.3), rng.uniform(-1.0, 3.0), rng.uniform(0.0, 1.5)
+        v = float(braking_speed(np.array([d]), np.array([a]), dt, u)[0])
+        if math.isinf(v):  # even a whole period of acceleration stops in time
+            assert _run_out(1e9, u, a, dt) <= d + 1e-6
+        elif v == 0.0:  # too fast already: brake
+            assert _run_out(0.0, u, a, dt) >= d - 1e-6
+        else:
+            assert _run_out(v, u, a, dt) == pytest.approx(d, abs=1e-6)
+    assert braking_speed(np.array([-0.1]), np.array([10.0]), 0.02)[0] == 0.0  # past the stop: no speed towards it
 
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])
@@ -282,10 +312,28 @@ def test_diffdrive_scripted_controller_reaches_goals_all_around(goal: tuple[floa
         env.close()
 
 
-def test_every_registered_env_is_covered() -> None:
-    ids = {i for i, _ in _cases()}
-    assert ids == set(envs.ENV_IDS) | set(envs.BASE_ENV_IDS)
+def test_every_registered_env_and_mode_is_covered() -> None:
+    cases = list(_cases())
+    assert {i for i, _ in cases} >= set(envs.ENV_IDS) | set(envs.BASE_ENV_IDS)
     for env_id in envs.ENV_IDS:
-        entry = gym.spec(env_id).entry_point
-        module, cls = str(entry).split(":")
-        assert issubclass(getattr(importlib.import_module(module), cls), JointsEnv)
+        assert issubclass(_env_class(env_id), JointsEnv)
+        assert {m for i, m in cases if i == env_id} == set(ACTION_MODES)
+    assert ("joints/MksAxisPosition-v0", "position") in cases and ("joints/MksAxisPosition-v0", "velocity") in cases
+
+
+@pytest.mark.parametrize("mode", ["velocity", "position"])
+@pytest.mark.parametrize(("start", "goal"), [(-0.05, 0.059), (0.05, -0.059)])
+def test_axis_reaches_goals_at_both_ends(mode: str, start: float, goal: float) -> None:
+    """The MKS axis' own scripted policy (``pd_action``) to goals 1 mm inside either end."""
+    env = gym.make("joints/MksAxisPosition-v0", action_mode=mode, success_tolerance=0.0005)
+    u = env.unwrapped
+    try:
+        obs, _ = env.reset(seed=0, options={"start": start, "goal": goal})
+        for _ in range(200):
+            obs, _r, term, _t, info = env.step(u.pd_action(obs))
+            assert not term, info
+            if info["is_success"]:
+                break
+        assert info["is_success"], obs
+    finally:
+        env.close()
