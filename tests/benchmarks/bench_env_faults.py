@@ -75,7 +75,11 @@ def env_class(env_id: str) -> Any:
 
 
 def accepts(env_id: str, argument: str) -> bool:
-    return argument in inspect.signature(env_class(env_id).__init__).parameters
+    """The env takes keyword ``argument`` (the JointsEnv arguments reach every subclass)."""
+    cls = env_class(env_id)
+    if issubclass(cls, envs.JointsEnv) and argument in inspect.signature(envs.JointsEnv.__init__).parameters:
+        return True
+    return argument in inspect.signature(cls.__init__).parameters
 
 
 def action_modes(env_id: str) -> tuple[str, ...] | None:
