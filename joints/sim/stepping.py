@@ -35,7 +35,11 @@ ADR_WIDTH = 8
 ACTIVE, STEPS, MODEL, DATA, QPOS_AT, NQ, QVEL_AT, NV, CTRL_AT, NU = range(10)
 WORLD_WIDTH = 10
 #: substeps per compiled call at most (a KeyboardInterrupt lands between calls)
-CHUNK = 20_000
+CHUNK = 50
+#: a world whose MuJoCo arena was ever this full leaves the fused path for good: inside the compiled call
+#: an mju_error (arena overflow with many contacts) would end the process; the per-substep path raises
+#: mujoco.FatalError instead, which the rig's exit handling survives
+ARENA_GUARD = 0.25
 
 
 @jitable
@@ -187,6 +191,16 @@ class Group:
             for w in active:
                 all_worlds[w].steps += m
             n -= m
+            crowded = [w for w in active if all_worlds[w].arena_crowded(ARENA_GUARD)]
+            if crowded:
+                for w in crowded:
+                    all_worlds[w].leave_fused_path()
+                self.replan()
+                for w in crowded:  # the rest of their substeps one by one, where errors raise
+                    all_worlds[w].step(n)
+                active = tuple(w for w in active if w not in crowded)
+                if not active:
+                    return
 
     def substep(self, worlds: Sequence[int]) -> None:
         """The kernel loops of ``worlds`` for their next substep (torques into ``ctrl``; no physics)."""

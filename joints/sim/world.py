@@ -23,6 +23,7 @@ has end-stop inputs (:class:`EndStops`) the motor angles where the flag reaches 
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import threading
 from collections.abc import Callable, Mapping, Sequence
@@ -68,6 +69,9 @@ def resolve_model(name: str | Path, base_dir: Path | None = None) -> Path:
             return c
     shipped = sorted({f.name for d in model_dirs() if d.is_dir() for f in d.glob("*.xml")})
     raise ConfigError(f"model {str(name)!r} not found", key="sim.model", allowed=shipped)
+
+
+log = logging.getLogger("joints.sim")
 
 
 class JointProfile(Protocol):
@@ -308,6 +312,7 @@ class World:
         #: what else runs after every substep (drives acting on delayed commands, kinematic joints)
         self._extra_ticks: list[Callable[[float], None]] = []
         self._ticks: list[Callable[[float], None]] = []
+        self._unfused = False
         self._nominal_delay = {id(e): float(getattr(e, "command_delay", 0.0)) for e in self._emulators()}
         self._update_ticks()
         self.joints: dict[str, SimJoint] = {b.name: SimJoint(b.name, b.mjcf_joint, b.qadr, b.dadr, b.aid)
@@ -382,9 +387,22 @@ class World:
         i = self._bound.index(b)
         return bool(self._bind[i][0] == b.stepper.step)
 
+    def arena_crowded(self, fraction: float) -> bool:
+        """Whether MuJoCo's arena was ever more than ``fraction`` full (many contacts/constraints)."""
+        return bool(self.data.maxuse_arena > fraction * self.model.narena)
+
+    def leave_fused_path(self) -> None:
+        """Step substep by substep from now on (see :data:`joints.sim.stepping.ARENA_GUARD`)."""
+        if not self._unfused:
+            self._unfused = True
+            log.warning("world %s: MuJoCo's arena is over %d%% full; stepping without the fused compiled call "
+                        "from now on (an arena overflow then raises mujoco.FatalError; raise <size memory=...>)",
+                        self.path.name, round(100 * stepping.ARENA_GUARD))
+
     def fusable(self) -> bool:
-        """Whether N substeps can run in one compiled call: every drive a kernel row, no timed bus."""
-        return not self._ticks and all(self.kernel_stepped(b) for b in self._bound
+        """Whether N substeps can run in one compiled call: every drive a kernel row, no timed bus, an arena
+        with room (the compiled call cannot turn MuJoCo's fatal errors into exceptions)."""
+        return not self._unfused and not self._ticks and all(self.kernel_stepped(b) for b in self._bound
                                        if getattr(b.emulator, "KERNEL", None) in stepping.KINDS) \
             and len(self.kernel_joints()) == len(self._bound)
 
