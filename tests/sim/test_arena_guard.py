@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import textwrap
@@ -39,7 +40,8 @@ def test_an_arena_overflow_raises_instead_of_ending_the_process(tmp_path: Path) 
         except mujoco.FatalError as exc:
             print("raised", "out of memory" in str(exc), rig.closed)
     """)
-    proc = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True, timeout=120,
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    proc = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120,
                           check=False)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.split() == ["raised", "True", "True"], (proc.stdout, proc.stderr)
