@@ -27,8 +27,9 @@ import struct
 from collections.abc import Callable, Iterable, Mapping
 
 from joints.codecs import modbus as mb
+from joints.codecs.crc import crc_ok
 from joints.devices.registers import Access, Register, RegisterTable
-from joints.errors import FrameError, ParameterRefused, Refusal
+from joints.errors import ByteCountError, FrameError, ParameterRefused, Refusal
 from joints.sim.firmware import Firmware
 
 __all__ = [
@@ -233,6 +234,12 @@ class ModbusFront:
                 out[reg.address], out[reg.address + 1] = (lo, hi) if reg.low_word_first else (hi, lo)
         return out
 
+    def reject(self, function: int, code: int) -> mb.ExceptionReply:
+        """A well-addressed, CRC-valid frame this slave cannot take (e.g. an FC16 whose byte count
+        disagrees with its register count): a frame received, answered with exception ``code``."""
+        self.firmware.frame_received()
+        return mb.ExceptionReply(self.address, function, code)
+
     def handle(self, request: mb.Request | mb.UnsupportedRequest) -> mb.Reply:
         """Execute a request addressed to this slave and build the reply."""
         self.firmware.frame_received()
@@ -258,10 +265,21 @@ _REQUESTS = (*_READS, mb.WriteSingleRegister, mb.WriteMultipleRegisters, mb.Unsu
 
 
 class ModbusDeviceBus:
-    """All emulated slaves on one RS485 bus: bytes in, reply bytes out (a loopback/pty peer)."""
+    """All emulated slaves on one RS485 bus: bytes in, reply bytes out (a loopback/pty peer).
+
+    As a real RTU slave: a frame cut by silence (:meth:`silence`, t3.5) is garbage even if its rest
+    arrives later; a corrupt frame gets no answer; a CRC-valid frame for a slave on the bus with an
+    unknown function code gets exception 01, an FC16 whose byte count disagrees with its register
+    count exception 03; broadcasts and frames for other addresses are never answered. A front
+    whose address comes from a parameter (``node_id``) moves to its new address at the next power
+    cycle (two fronts on one address: the one added first answers).
+    """
 
     def __init__(self, slaves: Iterable[ModbusFront] = (), *, trace: Callable[[str, bytes], None] | None = None) -> None:
-        self.slaves: dict[int, ModbusFront] = {}
+        self._fronts: list[ModbusFront] = []
+        #: per front, the power-on values its address was taken from (a power cycle replaces them)
+        self._seen: list[object] = []
+        self._slaves: dict[int, ModbusFront] = {}
         for s in slaves:
             self.add(s)
         self._codec = mb.ModbusRtuCodec(mb.Role.DEVICE)
@@ -272,16 +290,47 @@ class ModbusDeviceBus:
         address = slave.address
         if address in self.slaves:
             raise ValueError(f"two emulated slaves at address {address}")
-        self.slaves[address] = slave
+        self._fronts.append(slave)
+        self._seen.append(None)
+
+    @property
+    def slaves(self) -> dict[int, ModbusFront]:
+        """The fronts by the address each answers on now."""
+        fronts, seen = self._fronts, self._seen
+        for i, front in enumerate(fronts):
+            if front.firmware.power_on_values is not seen[i]:
+                break
+        else:
+            return self._slaves
+        by_address: dict[int, ModbusFront] = {}
+        for i, front in enumerate(fronts):
+            seen[i] = front.firmware.power_on_values
+            by_address.setdefault(front.address, front)
+        self._slaves = by_address
+        return by_address
 
     def receive(self, data: bytes) -> bytes:
         """Feed received bytes; return the bytes the addressed slaves send back."""
+        self._codec.feed(data)
+        return self._serve()
+
+    def silence(self) -> bytes:
+        """The line went quiet (t3.5): an incomplete frame is garbage now; returns any replies."""
+        self._codec.flush()
+        return self._serve()
+
+    def _serve(self) -> bytes:
         codec = self._codec
-        codec.feed(data)
         out = bytearray()
         while True:
             try:
                 msg = codec.next_message()
+            except ByteCountError as exc:
+                # a CRC-valid request whose byte count disagrees with its register count: exception 03
+                rejection = self._reject(exc.data, ILLEGAL_DATA_VALUE)
+                if rejection is not None:
+                    out += mb.encode(rejection)
+                continue
             except FrameError:
                 self.frame_errors += 1  # a real slave stays silent on a corrupt frame
                 continue
@@ -293,10 +342,12 @@ class ModbusDeviceBus:
                     out += mb.encode(reply)
         return bytes(out)
 
-    def silence(self) -> bytes:
-        """The line went quiet (t3.5): drop incomplete garbage."""
-        self._codec.flush()
-        return self.receive(b"")
+    def _reject(self, frame: bytes, code: int) -> mb.ExceptionReply | None:
+        self.frame_errors += 1
+        if len(frame) < 4 or not crc_ok(frame):
+            return None
+        slave = self.slaves.get(frame[0]) if frame[0] != 0 else None
+        return None if slave is None else slave.reject(frame[1], code)
 
     def exchange(self, msg: mb.Request | mb.UnsupportedRequest) -> mb.Reply | None:
         """Message-level twin of :meth:`receive` (the sim's direct path: no bytes, no CRC).
