@@ -12,13 +12,16 @@ import sys
 from collections.abc import Sequence
 
 from joints import registry
-from joints.errors import JointsError
+from joints.errors import ConfigError, JointsError
 
 
 def _parse_range(text: str) -> range:
     lo, _, hi = text.partition("-")
-    a = int(lo)
-    b = int(hi) if hi else a
+    try:
+        a = int(lo)
+        b = int(hi) if hi else a
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an address range like 1-32, got {text!r}") from None
     if not 1 <= a <= b <= 247:
         raise argparse.ArgumentTypeError(f"address range must be within 1-247, got {text!r}")
     return range(a, b + 1)
@@ -48,23 +51,68 @@ def _key(text: str) -> str | int:
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
-    """Probe Modbus slave addresses for an eRob (reads Error Code 0x0060)."""
-    from joints.link.modbus import ModbusLink, RetryPolicy
-    from joints.transports.serial import SerialTransport
+    """Find drives on a bus: every address of the range that answers a read of ``error_code``.
 
-    found = []
-    with SerialTransport(args.port, args.baudrate) as t:
-        link = ModbusLink(t, policy=RetryPolicy(timeout=args.timeout, retries=0))
-        for addr in args.range:
+    The bus is a serial port (``--port``), a CAN channel (``--interface``/``--channel``) or a bus
+    of a config (``--config``/``--bus``; twins in sim). Drives that report what they are (eRob
+    over CAN: model, serial number, versions) say so on their line.
+    """
+    from joints.clock import MonotonicClock
+    from joints.config import BusConfig, JointConfig
+    from joints.drivers.capabilities import Identity
+    from joints.link.base import RetryPolicy
+
+    rig = None
+    if args.config is not None:
+        rig = _open(args)
+        if args.bus not in rig.buses:
+            raise ConfigError(f"no bus {args.bus!r}", file=rig.config.source, key="buses", allowed=sorted(rig.buses))
+        bus = rig.buses[args.bus]
+        cfg, link, clock = bus.config, bus.link, rig.clock
+        where = f"bus {args.bus} of {args.config} ({rig.backend})"
+    else:
+        if (args.port is None) == (args.interface is None):
+            raise ConfigError("name either a serial port (--port) or a CAN interface (--interface, --channel), "
+                              "or a config (--config, --bus)", key="scan")
+        protocol = args.protocol or ("modbus-rtu" if args.port is not None else "erob-can")
+        cfg = BusConfig("scan", protocol, port=args.port, baudrate=args.baudrate, timeout=args.timeout, retries=0,
+                        interface=args.interface, channel=args.channel, bitrate=args.bitrate, udp_port=args.udp_port)
+        proto = registry.protocol(protocol, key="--protocol")
+        clock = MonotonicClock()
+        link = proto.link(cfg, proto.open_transport(cfg), clock, None)
+        where = args.port or f"{args.interface} {args.channel}"
+    proto = registry.protocol(cfg.protocol)
+    fam = registry.family(args.device, key="--device")
+    lo, hi = fam.address_range(cfg.protocol)
+    addresses = args.range or (range(lo, hi + 1) if proto.medium == "can" else range(lo, min(hi, 32) + 1))
+    # CAN replies name their node in the identifier: a late one can never be taken for another node's
+    link.policy = RetryPolicy(timeout=args.timeout, retries=0, late=0.0 if proto.medium == "can" else None)
+    found = 0
+    try:
+        for addr in addresses:
+            if not lo <= addr <= hi:
+                continue
+            jcfg = JointConfig(name=f"{args.device}@{addr}", device=args.device, bus=cfg.name, address=addr)
+            driver = fam.driver(jcfg, link, clock, {}, cfg.protocol)
             try:
-                code = link.read_registers(addr, 0x0060, 1)[0]
+                record: dict[str, object] = {"address": addr, "error_code": driver.read("error_code")}
             except JointsError:
                 continue
-            found.append({"address": addr, "error_code": code})
-            print(json.dumps({"address": addr, "error_code": code}), flush=True)
+            if isinstance(driver, Identity):
+                try:
+                    record.update(driver.identity())
+                except JointsError as exc:
+                    record["identity"] = f"failed: {exc}"
+            found += 1
+            print(json.dumps(record), flush=True)
+    finally:
+        if rig is not None:
+            rig.close()
+        else:
+            link.close()
     if not found:
-        print(f"no eRob answered on {args.port} at {args.baudrate} bd in {args.range.start}-{args.range.stop - 1}",
-              file=sys.stderr)
+        print(f"no {args.device} answered on {where} ({cfg.protocol}) at addresses {addresses.start}-"
+              f"{addresses.stop - 1}", file=sys.stderr)
         return 1
     return 0
 
@@ -166,15 +214,27 @@ def cmd_send(args: argparse.Namespace) -> int:
 
 
 def cmd_sim_serve(args: argparse.Namespace) -> int:
-    """Run the configured world in real time; each Modbus bus on a pseudo-terminal."""
+    """Run the configured world in real time; serial buses on pseudo-terminals, CAN buses on python-can channels."""
     from joints.config import load
+    from joints.errors import ConfigError
     from joints.rig import sim_world
+    from joints.sim import can_serve
     from joints.sim.serve import serve
 
     cfg = load(args.config, backend="sim")
+    serial: list[str] = []
+    cans: dict[str, can_serve.ServedCan] = {}
+    for i, (name, b) in enumerate(cfg.buses.items()):
+        medium = registry.protocol(b.protocol, key=f"buses.{name}.protocol").medium
+        if medium == "can":
+            try:
+                cans[name] = can_serve.plan(name, b.interface, b.channel, b.udp_port, index=i)
+            except ConfigError as exc:
+                raise ConfigError(exc.message, file=cfg.source, key=exc.key, allowed=exc.allowed) from None
+        else:
+            serial.append(name)
     world = sim_world(cfg)
-    buses = [name for name, b in cfg.buses.items() if b.protocol == "modbus-rtu"]
-    serve(world, buses, out=sys.stdout)
+    serve(world, serial, can_buses=cans, out=sys.stdout)
     return 0
 
 
@@ -183,10 +243,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"joints {__import__('joints').__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
-    s = sub.add_parser("scan", help="find eRob drives on a Modbus RTU port")
-    s.add_argument("--port", required=True)
+    s = sub.add_parser("scan", help="find drives on a serial port, a CAN channel or a configured bus")
+    s.add_argument("--port", help="serial port (Modbus RTU)")
     s.add_argument("--baudrate", type=int, default=115200)
-    s.add_argument("--range", type=_parse_range, default=range(1, 33), help="addresses, e.g. 1-32")
+    s.add_argument("--interface", help="python-can interface (socketcan, pcan, udp_multicast ...)")
+    s.add_argument("--channel", help="CAN channel (can0, the udp_multicast group ...)")
+    s.add_argument("--udp-port", type=int, dest="udp_port", help="udp_multicast port (as `sim serve` printed)")
+    s.add_argument("--bitrate", type=int, default=1_000_000)
+    s.add_argument("--protocol", choices=registry.protocols(),
+                   help="default: modbus-rtu on a serial port, erob-can on a CAN channel")
+    s.add_argument("--config", help="scan a bus of this config instead (sim: the twins)")
+    s.add_argument("--bus", help="the bus of --config")
+    s.add_argument("--backend", choices=("sim", "hardware"))
+    s.add_argument("--device", choices=registry.devices(), default="erob")
+    s.add_argument("--range", type=_parse_range, default=None,
+                   help="addresses, e.g. 1-32 (default: 1-32 serial, the protocol's whole range on CAN: 1-127)")
     s.add_argument("--timeout", type=float, default=0.05)
     s.set_defaults(func=cmd_scan)
 
@@ -205,7 +276,8 @@ def build_parser() -> argparse.ArgumentParser:
         c.set_defaults(func=func)
 
     sim = sub.add_parser("sim", help="simulation tools").add_subparsers(dest="sim_command", required=True)
-    sv = sim.add_parser("serve", help="serve the emulated drives of CONFIG on pseudo-terminals (JSON line per bus)")
+    sv = sim.add_parser("serve", help="serve the emulated drives of CONFIG: serial buses on pseudo-terminals, CAN "
+                                      "buses on python-can channels (one JSON line per bus)")
     sv.add_argument("config")
     sv.set_defaults(func=cmd_sim_serve)
 

@@ -52,8 +52,9 @@ class BusConfig:
     retries: int = 2
     echo: bool = False  #: the RS485 adapter echoes what it sends
     interface: str | None = None  #: CAN: python-can interface
-    channel: str | None = None  #: CAN: channel
+    channel: str | int | None = None  #: CAN: channel
     bitrate: int = 1_000_000
+    udp_port: int | None = None  #: CAN over udp_multicast: the port (`joints sim serve` prints it)
 
 
 @dataclass(frozen=True)
@@ -207,6 +208,20 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
             raise r.err(f"{key}.echo", f"expected true or false, got {echo!r}")
         if chosen == "hardware" and protocol in ("modbus-rtu", "mks-serial") and not port:
             raise r.err(f"{key}.port", "is required for backend = \"hardware\" (e.g. \"/dev/ttyUSB0\")")
+        interface = b.get("interface")
+        if interface is not None and (not isinstance(interface, str) or not interface):
+            raise r.err(f"{key}.interface", f"expected a python-can interface name, got {interface!r}",
+                        ("socketcan", "pcan", "kvaser", "slcan", "udp_multicast", "virtual", "..."))
+        channel = b.get("channel")
+        if channel is not None and (isinstance(channel, bool) or not isinstance(channel, (str, int))):
+            raise r.err(f"{key}.channel", f"expected a channel name or number, got {channel!r}")
+        udp_port = r.number(b, f"{key}.udp_port", None, integer=True, minimum=1, maximum=65535)
+        if udp_port is not None and interface not in (None, "udp_multicast"):
+            raise r.err(f"{key}.udp_port", f"only for interface = \"udp_multicast\" (this bus: {interface!r})")
+        medium = registry.PROTOCOLS[protocol].medium if protocol in registry.PROTOCOLS else None
+        if chosen == "hardware" and medium == "can" and interface is None:
+            raise r.err(f"{key}.interface", "is required for a CAN bus with backend = \"hardware\"",
+                        ("socketcan", "pcan", "kvaser", "slcan", "udp_multicast", "..."))
         buses[name] = BusConfig(
             name=name,
             protocol=protocol,
@@ -217,9 +232,10 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
             timeout=r.number(b, f"{key}.timeout", 0.1, positive=True),
             retries=r.number(b, f"{key}.retries", 2, integer=True, minimum=0, maximum=10),
             echo=echo,
-            interface=b.get("interface"),
-            channel=b.get("channel"),
+            interface=interface,
+            channel=channel,
             bitrate=r.number(b, f"{key}.bitrate", 1_000_000, integer=True, positive=True),
+            udp_port=udp_port,
         )
 
     joints: dict[str, JointConfig] = {}

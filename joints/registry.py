@@ -39,7 +39,7 @@ class BusProtocol:
     description: str
     link: LinkFactory
     open_transport: Callable[[BusConfig], Any]  #: hardware: the bus's transport from its config
-    device_bus: Callable[[], Any]  #: sim: the emulated side of the bus (fronts attach by address)
+    device_bus: Callable[[BusConfig], Any]  #: sim: the emulated side of the bus (fronts attach with .add)
     sim_transport: Callable[[Any], Any]  #: sim: an in-process transport to a device bus
     direct: bool = False  #: the sim may skip bytes (message objects straight to the device bus)
 
@@ -129,7 +129,7 @@ def _serial_transport(cfg: BusConfig) -> Any:
     return SerialTransport(cfg.port, cfg.baudrate, parity=cfg.parity, stopbits=cfg.stopbits)
 
 
-def _modbus_device_bus() -> Any:
+def _modbus_device_bus(cfg: BusConfig) -> Any:
     from joints.sim.modbus_front import ModbusDeviceBus
 
     return ModbusDeviceBus()
@@ -141,12 +141,54 @@ def _byte_loopback(device_bus: Any) -> Any:
     return LoopbackTransport(device_bus)
 
 
+def _erob_can_link(cfg: BusConfig, transport: Any, clock: Clock, peer: Any) -> Link[Any]:
+    from joints.devices.erob.can import describe_error_reply
+    from joints.link.base import RetryPolicy
+    from joints.link.erob_can import ErobCanLink
+
+    def error_text(code: int) -> tuple[str, str]:
+        info = describe_error_reply(code)
+        return info.text, info.hint
+
+    return ErobCanLink(transport, policy=RetryPolicy(timeout=cfg.timeout, retries=cfg.retries), clock=clock,
+                       name=cfg.name, error_text=error_text)
+
+
+def _can_transport(cfg: BusConfig) -> Any:
+    from joints.transports.can import PythonCanTransport
+
+    if cfg.interface is None:  # e.g. a sim config opened with backend="hardware"
+        raise ConfigError("is required for backend = \"hardware\" (e.g. \"socketcan\", \"pcan\", \"udp_multicast\")",
+                          key=f"buses.{cfg.name}.interface")
+    settings: dict[str, Any] = {} if cfg.udp_port is None else {"port": cfg.udp_port}
+    return PythonCanTransport.open(cfg.interface, cfg.channel, cfg.bitrate, **settings)
+
+
+def _erob_can_device_bus(cfg: BusConfig) -> Any:
+    from joints.sim.erob_can import ErobCanBus
+
+    return ErobCanBus(name=cfg.name, bitrate=cfg.bitrate)
+
+
+def _lockstep_can(device_bus: Any) -> Any:
+    from joints.transports.can import PythonCanTransport
+    from joints.transports.can_sim import LockstepCanBus
+
+    return PythonCanTransport(LockstepCanBus(medium=device_bus.medium))
+
+
 PROTOCOLS: dict[str, BusProtocol] = {
     "modbus-rtu": BusProtocol(
         name="modbus-rtu", medium="serial", addresses=(1, 247),
         description="Modbus RTU over RS485 (FC03/04/06/16)",
         link=_modbus_link, open_transport=_serial_transport, device_bus=_modbus_device_bus,
         sim_transport=_byte_loopback, direct=True,
+    ),
+    "erob-can": BusProtocol(
+        name="erob-can", medium="can", addresses=(1, 127),
+        description="ZeroErr eRob CAN custom protocol (requests 0x640+node, replies 0x5C0+node; 1 Mbit/s)",
+        link=_erob_can_link, open_transport=_can_transport, device_bus=_erob_can_device_bus,
+        sim_transport=_lockstep_can,
     ),
 }
 
@@ -173,6 +215,25 @@ def _erob_modbus_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[
                             name=cfg.name)
 
 
+def _erob_can_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[Any, Any]) -> JointDriver:
+    from joints.drivers.erob_can import ErobCanDriver
+
+    return ErobCanDriver(link, cfg.address, profile=FAMILIES["erob"].config_profile(cfg), clock=clock,
+                         name=cfg.name)
+
+
+def _erob_can_table() -> Any:
+    from joints.devices.erob.can import EROB_CAN
+
+    return EROB_CAN
+
+
+def _erob_can_front(twin: Any, address: int) -> Any:
+    from joints.sim.erob_can import ErobCanFront
+
+    return ErobCanFront(twin)
+
+
 def _erob_modbus_table() -> Any:
     from joints.devices.erob.registers import EROB_MODBUS
 
@@ -181,9 +242,11 @@ def _erob_modbus_table() -> Any:
 
 def _erob_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> tuple[Any, Mapping[Any, Any]]:
     from joints.sim.erob import ErobFirmware
+    from joints.sim.erob_can import identify_twin
 
     d = specs[0]
     twin = ErobFirmware(d.profile, d.address, inertia=inertia[d.name])
+    identify_twin(twin, d.profile.model, d.address)  # CAN node id, module information (7.5.3)
     return twin, {None: twin}
 
 
@@ -247,9 +310,9 @@ FAMILIES: dict[str, DeviceFamily] = {
         name="erob", devices=("erob",),
         description="ZeroErr eRob rotary actuator (70/80/90/110/142, ratios 50-160)",
         params=_erob_params, profile=_erob_profile,
-        drivers={"modbus-rtu": _erob_modbus_driver},
-        tables={"modbus-rtu": _erob_modbus_table},
-        twin=_erob_twin, fronts={"modbus-rtu": _erob_modbus_front},
+        drivers={"modbus-rtu": _erob_modbus_driver, "erob-can": _erob_can_driver},
+        tables={"modbus-rtu": _erob_modbus_table, "erob-can": _erob_can_table},
+        twin=_erob_twin, fronts={"modbus-rtu": _erob_modbus_front, "erob-can": _erob_can_front},
         watchdog_ms=1000,  # off at power-on (0x0002 = 0): armed while enabled, restored on disable
     ),
     "zlac8015d": DeviceFamily(
@@ -266,7 +329,7 @@ FAMILIES: dict[str, DeviceFamily] = {
 
 #: the config names users may write but no entry serves yet (a clear "not yet" instead of "unknown")
 PLANNED_DEVICES = ("mks-servo42d", "mks-servo57d")
-PLANNED_PROTOCOLS = ("mks-serial", "erob-can", "canopen")
+PLANNED_PROTOCOLS = ("mks-serial", "canopen")
 
 
 # --- queries ----------------------------------------------------------------------------------

@@ -15,6 +15,7 @@ Rules:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import math
 import os
@@ -354,7 +355,7 @@ def sim_world(cfg: RigConfig) -> Any:
         buses = {}
         for name, b in cfg.buses.items():
             proto = registry.protocol(b.protocol, key=f"buses.{name}.protocol")
-            buses[name] = BusSpec(name, b.protocol, proto.device_bus, proto.sim_transport)
+            buses[name] = BusSpec(name, b.protocol, functools.partial(proto.device_bus, b), proto.sim_transport)
         drives = []
         for name, j in cfg.joints.items():
             fam = registry.family(j.device, key=f"joints.{name}.device")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import select
 import subprocess
 import sys
@@ -14,6 +15,10 @@ from typing import ContextManager
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+
+# Headless rendering for every test module, whichever imports MuJoCo first (envs does the same on import).
+if sys.platform.startswith("linux") and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+    os.environ.setdefault("MUJOCO_GL", "egl")
 
 
 @contextlib.contextmanager

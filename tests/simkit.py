@@ -6,12 +6,15 @@ from collections.abc import Sequence
 from typing import Any
 
 from joints import registry
+from joints.config import BusConfig
 from joints.sim.world import BusSpec, DriveSpec, World
 
 
-def bus_spec(name: str = "rs485", protocol: str = "modbus-rtu") -> BusSpec:
+def bus_spec(name: str = "rs485", protocol: str = "modbus-rtu", **settings: Any) -> BusSpec:
+    """The sim side of a bus; ``settings`` are bus config keys (e.g. ``bitrate``)."""
     p = registry.protocol(protocol)
-    return BusSpec(name, protocol, p.device_bus, p.sim_transport)
+    cfg = BusConfig(name, protocol, **settings)
+    return BusSpec(name, protocol, lambda: p.device_bus(cfg), p.sim_transport)
 
 
 def drive(name: str, address: int, profile: Any, *, device: str = "erob", bus: str = "rs485",

@@ -359,7 +359,7 @@ def test_direction_must_be_plus_or_minus_one(direction: object) -> None:
 
 
 @pytest.mark.parametrize("device,protocol", [("zlac8015d", "canopen"), ("mks-servo42d", "modbus-rtu"),
-                                             ("erob", "canopen"), ("erob", "erob-can")])
+                                             ("erob", "canopen")])
 def test_unsupported_device_protocol_pair(device: str, protocol: str) -> None:
     data = good()
     data["buses"]["rs485"]["protocol"] = protocol

@@ -77,3 +77,12 @@ class MotionTargets(Protocol):
         """name -> (kind, SI per unit); kind is "position" (absolute, driver position units), "relative"
         (a distance: rad per unit), "velocity" (rad/s per unit) or "current" (A per unit)."""
         ...
+
+
+@runtime_checkable
+class Identity(Protocol):
+    """A drive that reports what it is (model, serial number, versions), e.g. for ``joints scan``."""
+
+    def identity(self) -> dict[str, object]:
+        """JSON-friendly facts by name; an ability the drive's firmware lacks is said, not guessed."""
+        ...

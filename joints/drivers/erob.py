@@ -11,6 +11,7 @@ differs by protocol, a small subclass.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from joints.clock import Clock, MonotonicClock
@@ -65,6 +66,9 @@ class ErobDriver(JointDriver):
     device = "erob"
     #: the parameter that arms the drive's communication watchdog on this protocol (ms; 0 = off)
     watchdog_param: str | None = None
+    #: what a lost "start" reply is checked against (motion_status, status_of_achieving_position and,
+    #: where the protocol reaches it, given_position)
+    start_check_names: tuple[str, ...] = STATUS_NAMES
 
     def __init__(
         self,
@@ -274,10 +278,10 @@ class ErobDriver(JointDriver):
         try:
             self._command("start_operating", CMD_START)
         except OutcomeUnknown:
-            v = self.access.read_many(STATUS_NAMES)
+            v = self.access.read_many(self.start_check_names)
             started = (v["motion_status"] != MotionStatus.STOP
                        or v["status_of_achieving_position"] in (AchieveStatus.OPERATION, AchieveStatus.WAIT_TIME)
-                       or (target is not None and v["given_position"] == target))
+                       or (target is not None and v.get("given_position") == target))
             if started:
                 return
             if target is None and v["status_of_achieving_position"] == AchieveStatus.TARGET_REACHED:
@@ -336,8 +340,12 @@ class ErobDriver(JointDriver):
     # -- status -----------------------------------------------------------------------------
     def state(self) -> RawState:
         """The drive's status in as few transactions as the protocol allows (Modbus: ONE FC03)."""
-        v = self.access.read_many(STATUS_NAMES)
-        t = self.clock.now()
+        return self.state_from(self.access.read_many(STATUS_NAMES), self.clock.now())
+
+    def state_from(self, v: Mapping[str, int], t: float) -> RawState:
+        """The state from status values read at ``t`` (at least error_code, motion_status,
+        status_of_achieving_position, actual_position, current_speed, motor_current,
+        part_of_power_temperature)."""
         achieve = v["status_of_achieving_position"]
         enabled = achieve != AchieveStatus.MOTOR_OFF
         settling = self._enabled_at is not None and t - self._enabled_at < ENABLE_SETTLE + 0.1

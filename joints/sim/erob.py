@@ -47,7 +47,6 @@ from joints.devices.erob.params import EROB_PARAMS
 from joints.devices.erob.profiles import ErobProfile
 from joints.devices.erob.registers import (
     COUNTS_PER_REV,
-    EROB_MODBUS,
     AchieveStatus,
     MotionMode,
     MotionStatus,
@@ -154,9 +153,9 @@ def power_on_defaults(profile: ErobProfile, address: int) -> dict[str, int]:
     }
 
 
-#: Parameters kept over a power cycle when saved (the Modbus manual's R/W registers: settings,
-#: not status or commands).
-_SETTINGS = tuple(r.name for r in EROB_MODBUS if r.access.value == "R/W")
+#: Parameters kept over a power cycle when saved: the R/W settings (not status or commands), those
+#: only the CAN custom protocol reaches (node id, jerk, ...) included.
+_SETTINGS = tuple(p.name for p in EROB_PARAMS if p.access.value == "R/W")
 _POSITION = int(OperationMode.POSITION)
 _READY, _ENABLING, _REFUSED_ON = DriveState.READY, DriveState.ENABLING, DriveState.REFUSED_ON
 ARRIVAL_WINDOW = 1.0  #: counts: a move closer than this at a speed one period can stop has arrived
@@ -221,6 +220,7 @@ class ErobFirmware(Firmware):
             "stop_repetitive_motion": self._stop_repetitive,
             "clear_errors": self._clear_errors,
             "save_parameters": lambda value: self.save(_SETTINGS),
+            "release_brake": self._release_brake,
             "reset_output_encoder": self._reset_output_encoder,
         }
         self._reset_state()
@@ -249,6 +249,7 @@ class ErobFirmware(Firmware):
         self.stall_since = -1.0
         self.temperature = self.ambient
         self.brake_hold: float | None = None
+        self.brake_released = False  #: released by command while the motor is off: nothing holds the joint
         self.last_frame = -1.0
         self.started = False
         self._sup = 0.0
@@ -385,6 +386,17 @@ class ErobFirmware(Firmware):
             self.integ = 0.0
             self.gen = _Profile()
             self.brake_hold = None
+            self.brake_released = False
+
+    def ready(self) -> bool:
+        """The motor is on and its brake released: motion commands act now (for protocol fronts)."""
+        return self._ready()
+
+    def _release_brake(self, value: int) -> None:
+        """Release the holding brake of a motor that is off (CAN 0x014F): the joint moves freely until
+        the next enable or disable hands the brake back to the drive."""
+        if self.state not in ENABLED:
+            self.brake_released = True
 
     def _motor_off(self) -> None:
         """Disable / fault: the loops stop and the brake engages where the joint is."""
@@ -395,6 +407,7 @@ class ErobFirmware(Firmware):
         self.integ = 0.0
         self.started = False
         self.brake_hold = self.pos
+        self.brake_released = False
 
     def _clear_errors(self, value: int) -> None:
         if value:
@@ -573,6 +586,8 @@ class ErobFirmware(Firmware):
         """Holding brake: a stiff spring-damper to where it engaged, limited to the rated torque x 2."""
         self.v_ref = 0.0
         self.i_cmd = self.i_out = 0.0
+        if self.brake_released:
+            return 0.0
         at = self.brake_hold
         if at is None:
             at = self.brake_hold = self.pos

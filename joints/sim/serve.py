@@ -1,8 +1,10 @@
-"""Serve a simulated world in real time: each Modbus bus becomes a pseudo-terminal.
+"""Serve a simulated world in real time: each serial bus on a pseudo-terminal, each CAN bus on a python-can channel.
 
 Rule: the world runs on the wall clock here (and only here); the emulated drives answer whatever
-arrives on a pty between physics substeps, exactly as in process. Stops cleanly on SIGINT/SIGTERM
-or when ``stop`` is set.
+arrives between physics substeps, exactly as in process. Serial buses (Modbus RTU) are
+pseudo-terminals; CAN buses are python-can channels another process can open
+(:mod:`joints.sim.can_serve`: udp_multicast by default, a vcan device where the config names one;
+never a real bus). Stops cleanly on SIGINT/SIGTERM or when ``stop`` is set.
 """
 
 from __future__ import annotations
@@ -12,9 +14,10 @@ import select
 import signal
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, TextIO
 
+from joints.sim.can_serve import CanEndpoint, ServedCan
 from joints.transports.pty import PtyEndpoint
 
 IDLE_FLUSH = 0.005  #: s of silence after which a partial frame is dropped (t3.5, generously)
@@ -24,55 +27,85 @@ def serve(
     world: Any,
     buses: list[str],
     *,
+    can_buses: Mapping[str, ServedCan] | None = None,
     out: TextIO | None = None,
     stop: threading.Event | None = None,
-    on_ready: Callable[[dict[str, str]], None] | None = None,
+    on_ready: Callable[[dict[str, dict[str, Any]]], None] | None = None,
     install_signals: bool = True,
 ) -> None:
-    """Expose ``buses`` of ``world`` on ptys and run the world in real time until stopped."""
+    """Expose serial ``buses`` of ``world`` on ptys and ``can_buses`` on their channels; run in real time until stopped.
+
+    ``out`` gets one JSON line per bus (``{"bus", "port"}`` for a pty; ``{"bus", "interface",
+    "channel", "udp_port"}`` for CAN); ``on_ready`` gets the same objects by bus name.
+    """
     stop = stop or threading.Event()
-    endpoints = {name: PtyEndpoint() for name in buses}
-    if install_signals and threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, lambda *_: stop.set())
-    ports = {name: ep.port for name, ep in endpoints.items()}
-    if out is not None:
-        for name, port in ports.items():
-            out.write(json.dumps({"bus": name, "port": port}) + "\n")
-        out.flush()
-    if on_ready is not None:
-        on_ready(ports)
-    by_fd = {ep.master: (name, ep) for name, ep in endpoints.items()}
+    endpoints: dict[str, PtyEndpoint] = {}
+    cans: dict[str, CanEndpoint] = {}
+    try:
+        for name in buses:
+            endpoints[name] = PtyEndpoint()
+        for name, spec in (can_buses or {}).items():
+            cans[name] = CanEndpoint(spec, world.buses[name])
+        if install_signals and threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(sig, lambda *_: stop.set())
+        lines: dict[str, dict[str, Any]] = {name: {"bus": name, "port": ep.port} for name, ep in endpoints.items()}
+        lines.update({name: ep.spec.line(name) for name, ep in cans.items()})
+        if out is not None:
+            for line in lines.values():
+                out.write(json.dumps(line) + "\n")
+            out.flush()
+        if on_ready is not None:
+            on_ready(lines)
+        _run(world, endpoints, cans, stop)
+    finally:
+        for ep in endpoints.values():
+            ep.close()
+        for can_ep in cans.values():
+            can_ep.close()
+
+
+def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, CanEndpoint],
+         stop: threading.Event) -> None:
+    by_fd: dict[int, tuple[str, Any]] = {ep.master: (name, ep) for name, ep in endpoints.items()}
+    by_fd.update({ep.fileno(): (name, ep) for name, ep in cans.items()})
     last_rx = {name: 0.0 for name in endpoints}
     pending = {name: False for name in endpoints}
     t0_wall = time.monotonic()
     t0_sim = world.time
     dt = world.timestep
-    try:
-        while not stop.is_set():
-            sim_behind = (time.monotonic() - t0_wall) - (world.time - t0_sim)
-            timeout = max(0.0, dt - sim_behind) if sim_behind < dt else 0.0
-            ready, _, _ = select.select(list(by_fd), [], [], timeout)
-            now = time.monotonic()
-            for fd in ready:
-                name, ep = by_fd[fd]
-                data = ep.read()
-                if data:
-                    reply = world.buses[name].receive(data)
-                    if reply:
-                        ep.write(reply)
-                    last_rx[name] = now
-                    pending[name] = True
-            for name, ep in endpoints.items():
-                if pending[name] and now - last_rx[name] > IDLE_FLUSH:
-                    reply = world.buses[name].silence()
-                    if reply:
-                        ep.write(reply)
-                    pending[name] = False
-            behind = (now - t0_wall) - (world.time - t0_sim)
-            if behind >= dt:
-                # catch up, but never more than 50 ms of physics in one go (stay responsive)
-                world.step(min(int(behind / dt), max(1, int(0.05 / dt))))
-    finally:
-        for ep in endpoints.values():
-            ep.close()
+    next_send: float | None = None
+    while not stop.is_set():
+        sim_behind = (time.monotonic() - t0_wall) - (world.time - t0_sim)
+        timeout = max(0.0, dt - sim_behind) if sim_behind < dt else 0.0
+        if next_send is not None:
+            timeout = min(timeout, max(0.0, next_send - time.monotonic()))
+        ready, _, _ = select.select(list(by_fd), [], [], timeout)
+        now = time.monotonic()
+        for fd in ready:
+            name, ep = by_fd[fd]
+            if isinstance(ep, CanEndpoint):
+                ep.receive()
+                continue
+            data = ep.read()
+            if data:
+                reply = world.buses[name].receive(data)
+                if reply:
+                    ep.write(reply)
+                last_rx[name] = now
+                pending[name] = True
+        for name, ep in endpoints.items():
+            if pending[name] and now - last_rx[name] > IDLE_FLUSH:
+                reply = world.buses[name].silence()
+                if reply:
+                    ep.write(reply)
+                pending[name] = False
+        next_send = None
+        for can_ep in cans.values():
+            due = can_ep.send_due(now)
+            if due is not None:
+                next_send = due if next_send is None else min(next_send, due)
+        behind = (now - t0_wall) - (world.time - t0_sim)
+        if behind >= dt:
+            # catch up, but never more than 50 ms of physics in one go (stay responsive)
+            world.step(min(int(behind / dt), max(1, int(0.05 / dt))))

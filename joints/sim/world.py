@@ -15,7 +15,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, runtime_checkable
 
 from joints.clock import ManualClock
 from joints.errors import ConfigError, MissingDependencyError
@@ -83,6 +83,19 @@ class TwinMaker(Protocol):
 
     def front(self, protocol: str, twin: Any, address: int) -> Any:
         """The object that answers ``protocol`` frames for ``twin`` at ``address`` on a device bus."""
+        ...
+
+
+@runtime_checkable
+class TimedDeviceBus(Protocol):
+    """A device bus that lives on the simulated clock (a CAN medium: frames take wire time)."""
+
+    def bind_clock(self, clock: Any) -> None:
+        """Run on the world's clock from now on."""
+        ...
+
+    def tick(self, t: float) -> None:
+        """The world finished the physics substep ending at ``t``."""
         ...
 
 
@@ -231,6 +244,10 @@ class World:
             self._bound.append(_Bound(d.name, twin, stepper, qa, da, aid, d.channel, d.mjcf_joint))
             stepper.place(float(self.data.qpos[qa]))
         self._bind = [(b.stepper.step, b.qadr, b.dadr, b.aid) for b in self._bound]
+        timed = [bus for bus in self.buses.values() if isinstance(bus, TimedDeviceBus)]
+        for bus in timed:
+            bus.bind_clock(self.clock)
+        self._ticks = [bus.tick for bus in timed]
         self.joints: dict[str, SimJoint] = {b.name: SimJoint(b.name, b.mjcf_joint, b.qadr, b.dadr, b.aid)
                                             for b in self._bound}
         m = self.model
@@ -262,13 +279,17 @@ class World:
         return self.bus_specs[bus].transport(self.buses[bus])
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` physics substeps (drives' loops every substep), one caller at a time."""
+        """Advance ``n`` physics substeps (drives' loops every substep), one caller at a time.
+
+        Timed device buses (a CAN medium) are ticked after every substep, with the clock at its end.
+        """
         with self.lock:
             mj_step = self.mujoco.mj_step
             m, d = self.model, self.data
             qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
             dt = self.timestep
             bind = self._bind
+            ticks = self._ticks
             try:
                 for _ in range(n):
                     t = (self.steps + 1) * dt
@@ -276,6 +297,10 @@ class World:
                         ctrl[aid] = step(t, dt, float(qpos[qa]), float(qvel[da]))
                     mj_step(m, d)
                     self.steps += 1
+                    if ticks:
+                        self.clock.set(t)
+                        for tick in ticks:
+                            tick(t)
             finally:  # an interrupted step leaves the clock where the physics is
                 self._target = max(self._target, self.time)
                 self.clock.set(self.time)

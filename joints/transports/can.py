@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import abc
 import time
+from collections import deque
 from types import TracebackType
 from typing import Any
 
@@ -55,13 +56,21 @@ class FrameTransport(abc.ABC):
 class PythonCanTransport(FrameTransport):
     """Any python-can bus (socketcan, pcan, kvaser, slcan, virtual, udp_multicast, the sim's lockstep bus).
 
-    ``ignore_own`` drops frames this bus sent itself that come back to it (udp_multicast echoes
-    every frame to its sender; a real controller never does).
+    ``ignore_own`` drops frames this bus sent itself that come back to it, marked as its own
+    (``is_rx`` False). ``echoes``: the bus returns every frame to its sender unmarked
+    (udp_multicast does: multicast loopback), so each received frame equal to one sent and not yet
+    seen back is taken for that echo and dropped (a real controller never echoes).
     """
 
-    def __init__(self, bus: Any, *, ignore_own: bool = True) -> None:
+    #: sent frames remembered for echo filtering (older ones were lost on the way back)
+    ECHO_WINDOW = 256
+
+    def __init__(self, bus: Any, *, ignore_own: bool = True, echoes: bool = False) -> None:
         self.bus = bus
         self.ignore_own = ignore_own
+        self.echoes = echoes
+        self._sent: deque[tuple[int, bool, bytes]] = deque(maxlen=self.ECHO_WINDOW)
+        self.echoes_dropped = 0
         self._closed = False
 
     @classmethod
@@ -70,6 +79,10 @@ class PythonCanTransport(FrameTransport):
         can = python_can()
         if bitrate is not None:
             kwargs["bitrate"] = bitrate
+        echoes = interface == "udp_multicast"
+        if echoes:
+            kwargs.setdefault("hop_limit", 0)  # simulated frames never leave this host
+            kwargs.pop("bitrate", None)  # a multicast group has no bit rate
         try:
             bus = can.Bus(interface=interface, channel=channel, **kwargs)
         except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
@@ -80,7 +93,7 @@ class PythonCanTransport(FrameTransport):
             ) from exc
         except TypeError as exc:
             raise ConfigError(f"CAN interface {interface!r} does not take these settings: {exc}", key="interface") from exc
-        return cls(bus)
+        return cls(bus, echoes=echoes)
 
     @property
     def name(self) -> str:
@@ -93,6 +106,8 @@ class PythonCanTransport(FrameTransport):
             self.bus.send(frame)
         except Exception as exc:
             raise TransportError(f"send on {self.name} failed: {exc}") from exc
+        if self.echoes:
+            self._sent.append(_key(frame))
 
     def recv(self, timeout: float) -> Any | None:
         if self._closed:
@@ -103,14 +118,29 @@ class PythonCanTransport(FrameTransport):
                 frame = self.bus.recv(timeout=max(timeout, 0.0))
                 if frame is None:
                     return None
-                if self.ignore_own and getattr(frame, "is_rx", True) is False:
+                if ((self.ignore_own and getattr(frame, "is_rx", True) is False)
+                        or (self._sent and self._is_echo(frame))):
                     timeout = deadline - time.monotonic()  # our own frame came back: wait out the rest
                     continue
                 return frame
         except Exception as exc:
             raise TransportError(f"receive on {self.name} failed: {exc}") from exc
 
+    def _is_echo(self, frame: Any) -> bool:
+        key = _key(frame)
+        sent = self._sent
+        if key not in sent:
+            return False
+        while sent.popleft() != key:  # echoes come back in order: older unmatched ones were lost
+            pass
+        self.echoes_dropped += 1
+        return True
+
     def close(self) -> None:
         if not self._closed:
             self._closed = True
             self.bus.shutdown()
+
+
+def _key(frame: Any) -> tuple[int, bool, bytes]:
+    return (frame.arbitration_id, bool(frame.is_extended_id), bytes(frame.data))

@@ -57,7 +57,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from types import MappingProxyType
 
 from joints.devices.profile import validate_fields, with_overrides
@@ -379,15 +379,27 @@ DEFAULT_MODEL = "eRob80H100"
 
 # "eRob80H100", "erob80-100", "80H100", "eRob80:100", "eRob80H-100", "erob 80 h 100"
 _MODEL_RE = re.compile(r"^(?:erob)?\s*(\d+)\s*(?:h\s*[-:_/]?|[-:_/\s])\s*(\d+)$", re.IGNORECASE)
+#: a whole model string of eRunner 7.5.3, e.g. "eRob70H100I-BM-18EN" (the profile's ``model`` keeps it;
+#: the reducer type F/H does not change the profile: the facts are of the harmonic "H" modules)
+_FULL_MODEL_RE = re.compile(r"eRob(\d+)([FH])(\d+)(BI|BT|I|T)-([FB])(HS|HM|S|M)-18([EC])([NT])")
 
 
 def profile(model: str) -> ErobProfile:
-    """The profile of ``model``; accepts "eRob80H100", "erob80-100", "80H100", "eRob80:100".
+    """The profile of ``model``; accepts "eRob80H100", "erob80-100", "80H100", "eRob80:100", and a
+    module's whole model string ("eRob70H100I-BM-18EN", eRunner 7.5.3: kept as the profile's ``model``).
 
     Matching is case-insensitive. Raises :class:`ConfigError` listing the available models if
     the name is not understood or the facts have no data for that size/ratio.
     """
     text = model.strip() if isinstance(model, str) else ""
+    full = _FULL_MODEL_RE.fullmatch(text)
+    if full is not None:  # a module's whole model string (eRunner 7.5.3): its size and ratio pick the profile
+        found = PROFILES.get(f"eRob{full.group(1)}H{full.group(3)}")
+        if found is None:
+            raise ConfigError(f"no eRob profile for {model!r} (size {full.group(1)}, ratio {full.group(3)}): "
+                              "the device facts have no torque/speed data for it", key="model",
+                              allowed=tuple(PROFILES))
+        return replace(found, model=text)
     match = _MODEL_RE.match(text)
     if match is None:
         raise ConfigError(

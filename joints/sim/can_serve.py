@@ -1,0 +1,168 @@
+"""Where `joints sim serve` puts a simulated CAN bus: a python-can channel another process can open.
+
+Rule: simulated frames never reach a real bus and never leave this host.
+
+* Default: python-can's ``udp_multicast`` (no kernel module needed) on an interface-local IPv6
+  group (ff01::/16: delivered on this host only, whatever hop limit a client uses) with hop limit
+  0, and a group and UDP port unique to the served world (its process id and a free port), so two
+  served worlds on one host never hear each other. The library's default group (site-local) with
+  hop limit 1 would put every frame on the LAN. Without IPv6 the group falls back to an IPv4
+  administratively scoped group with TTL 0 (host-local).
+* ``interface = "socketcan"`` with a virtual CAN device (``vcan``/``vxcan``, created by the admin:
+  ``ip link add dev vcan0 type vcan``) that the kernel has: served there.
+* A physical interface (socketcan on a real controller, pcan, kvaser, slcan, ixxat, vector ...)
+  is refused: the twins would answer on a real bus, next to (or instead of) real drives.
+* ``virtual``/``joints-sim`` (in-process buses another process cannot open) are served on the
+  default udp_multicast channel.
+
+A client joins with ``can.Bus(interface=..., channel=..., port=udp_port)`` (the JSON line that
+``sim serve`` prints has the three values; a hardware config takes them as the bus keys
+``interface``, ``channel`` and ``udp_port``). udp_multicast returns every frame to its sender and
+drops bursts above roughly 8000 frames/s, so the serve side filters its own frames and paces what
+it sends (:data:`MAX_FRAMES_PER_S`).
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import os
+import socket
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from joints.errors import ConfigError, TransportError
+
+__all__ = ["MAX_FRAMES_PER_S", "CanEndpoint", "ServedCan", "plan"]
+
+#: frames per second the serve side sends at most on one bus (udp_multicast drops bursts above ~8k/s)
+MAX_FRAMES_PER_S = 4000
+#: interfaces that cannot be opened from another process: served on the default channel instead
+_IN_PROCESS = ("virtual", "joints-sim")
+_ARPHRD_CAN = 280
+_SYS_NET = Path("/sys/class/net")
+_SYS_VIRTUAL = Path("/sys/devices/virtual/net")
+
+
+@dataclass(frozen=True)
+class ServedCan:
+    """The python-can channel one simulated CAN bus is served on."""
+
+    interface: str
+    channel: str
+    udp_port: int | None = None
+
+    def line(self, bus: str) -> dict[str, Any]:
+        """What ``sim serve`` prints for the bus (one JSON object)."""
+        return {"bus": bus, "interface": self.interface, "channel": self.channel, "udp_port": self.udp_port}
+
+    def kwargs(self) -> dict[str, Any]:
+        """``can.Bus`` keywords (besides interface and channel) to join it."""
+        return {} if self.udp_port is None else {"port": self.udp_port, "hop_limit": 0}
+
+
+def _interface_local(group: str) -> bool:
+    try:
+        addr = ipaddress.ip_address(group.split("%")[0])
+    except ValueError:
+        return False
+    return isinstance(addr, ipaddress.IPv6Address) and addr in ipaddress.ip_network("ff01::/16")
+
+
+def _free_udp_port() -> int:
+    for family, host in ((socket.AF_INET6, "::"), (socket.AF_INET, "")):
+        try:
+            with socket.socket(family, socket.SOCK_DGRAM) as s:
+                s.bind((host, 0))
+                return int(s.getsockname()[1])
+        except OSError:
+            continue
+    raise TransportError("no free UDP port for the served CAN bus")
+
+
+def is_virtual_can(name: str) -> bool | None:
+    """True for a virtual CAN netdev (vcan, vxcan), False for a real one, None if the kernel has no such device."""
+    dev = _SYS_NET / name
+    if not dev.exists():
+        return None
+    try:
+        kind = int((dev / "type").read_text().strip())
+    except (OSError, ValueError):
+        return False
+    return kind == _ARPHRD_CAN and (_SYS_VIRTUAL / name).exists()
+
+
+def plan(bus: str, interface: str | None, channel: str | int | None, udp_port: int | None, *,
+         index: int = 0) -> ServedCan:
+    """The channel to serve bus ``bus`` on, from its config keys (ConfigError for a real bus)."""
+    key = f"buses.{bus}"
+    if interface is None or interface in _IN_PROCESS or interface == "udp_multicast":
+        group = str(channel) if interface == "udp_multicast" and channel is not None else None
+        if group is not None and not _interface_local(group):
+            raise ConfigError(
+                f"udp_multicast group {group!r} is not interface-local: simulated frames would reach the LAN; "
+                "use a group in ff01::/16 or remove the channel key (sim serve picks one)", key=f"{key}.channel")
+        pid = os.getpid()
+        group = group or f"ff01::6a6f:{(pid >> 16) & 0xFFFF:x}:{pid & 0xFFFF:x}:{index & 0xFFFF:x}"
+        return ServedCan("udp_multicast", group, udp_port or _free_udp_port())
+    if interface == "socketcan" and channel is not None:
+        virtual = is_virtual_can(str(channel))
+        if virtual:
+            return ServedCan("socketcan", str(channel))
+        if virtual is None and str(channel).startswith(("vcan", "vxcan")):
+            raise ConfigError(
+                f"the kernel has no CAN device {channel!r}: create it (sudo modprobe vcan; sudo ip link add dev "
+                f"{channel} type vcan; sudo ip link set up {channel}) or remove interface/channel to serve on "
+                "udp_multicast", key=f"{key}.channel")
+    where = f"{interface} {channel}" if channel is not None else str(interface)
+    raise ConfigError(
+        f"refusing to serve simulated drives on {where}: that is a real CAN interface, and the twins would answer "
+        "on a physical bus next to (or instead of) real drives. Remove interface/channel (served on an "
+        "interface-local udp_multicast group) or name a vcan device (interface = \"socketcan\", channel = "
+        "\"vcan0\")", key=f"{key}.interface")
+
+
+class CanEndpoint:
+    """A served CAN bus: frames in to the device bus, its answers out, paced (no threads)."""
+
+    def __init__(self, spec: ServedCan, device_bus: Any, *, max_rate: float = MAX_FRAMES_PER_S) -> None:
+        from joints.transports.can import PythonCanTransport, python_can
+
+        can = python_can()
+        try:
+            bus = can.Bus(interface=spec.interface, channel=spec.channel, **spec.kwargs())
+        except can.CanInitializationError:
+            if spec.interface != "udp_multicast" or ":" not in spec.channel:
+                raise
+            pid = os.getpid()  # no IPv6 multicast here: an IPv4 group with TTL 0 stays on this host
+            spec = ServedCan(spec.interface, f"239.255.{(pid >> 8) & 0xFF}.{pid & 0xFF}", spec.udp_port)
+            bus = can.Bus(interface=spec.interface, channel=spec.channel, **spec.kwargs())
+        self.spec = spec
+        self.transport = PythonCanTransport(bus, echoes=spec.interface == "udp_multicast")
+        self.device_bus = device_bus
+        self.spacing = 1.0 / max_rate
+        self.out: deque[Any] = deque()
+        self.next_send = 0.0
+        self.frames_in = 0
+        self.frames_out = 0
+
+    def fileno(self) -> int:
+        return int(self.transport.bus.fileno())
+
+    def receive(self) -> None:
+        """Every frame waiting: the device bus answers (queued to be sent, paced)."""
+        while (frame := self.transport.recv(0.0)) is not None:
+            self.frames_in += 1
+            self.out.extend(self.device_bus.on_frame(frame))
+
+    def send_due(self, now: float) -> float | None:
+        """Send what the pacing allows at wall time ``now``; the time of the next send, if any wait."""
+        while self.out and now >= self.next_send:
+            self.transport.send(self.out.popleft())
+            self.frames_out += 1
+            self.next_send = max(self.next_send, now) + self.spacing
+        return self.next_send if self.out else None
+
+    def close(self) -> None:
+        self.transport.close()

@@ -1,0 +1,422 @@
+"""CAN in process: a timed, lockstep bus medium on the simulated clock, and python-can's ``BusABC`` over it.
+
+Rule: no threads, no wall clock. Time moves only by the clock the medium is bound to (the
+simulated world's clock) or, for a medium of its own, by the waits of its nodes. Every frame
+occupies the bus for its wire time at the medium's bit rate (:mod:`joints.transports.can_timing`;
+worst-case bit stuffing by default), frames waiting for the bus are arbitrated by identifier
+(the lowest wins, as the dominant bits do on a real bus; frames of one node keep their order),
+and the medium counts frames, bits and busy time so the bus load can be measured.
+
+Nodes:
+
+* :class:`LockstepCanBus` - a python-can bus (interface ``joints-sim``, registered through the
+  ``can.interface`` entry point): ``can.Bus(interface="joints-sim", channel=...)`` joins the
+  medium of that channel (a medium of its own is made for an unknown channel). ``recv`` counts
+  its timeout on the simulated clock - waiting IS letting simulated time pass - and returns as
+  soon as a frame is delivered; ``recv(None)`` returns None at once when nothing can arrive any
+  more (in lockstep nobody else could send).
+* peers (:meth:`CanMedium.attach_peer`): in-process devices (the sim's twins) that get every
+  delivered frame and answer with frames sent ``latency`` seconds after the frame that caused
+  them.
+
+Time model. The medium keeps its own time (``now``), exact to the frame edge. Waiting until a
+time the clock has not reached yet sleeps the clock (the world steps its physics up to or past
+it); frames delivered meanwhile are processed in time order. When the clock moves for another
+reason (the host sleeps, :meth:`CanMedium.tick` from the world each physics substep), the
+medium processes its frames up to the clock's time, so a frame in flight reaches its peers at
+its own time even while nobody waits on the bus. A clock that goes back (world reset) drops the
+frames in flight and restarts the medium there.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import weakref
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import can
+
+from joints.errors import TransportError
+from joints.transports.can_timing import STUFFING, frame_bits
+
+__all__ = ["INTERFACE", "BusLoad", "CanMedium", "ClockLike", "FramePeer", "LockstepCanBus"]
+
+#: the python-can interface name of :class:`LockstepCanBus` (pyproject: ``[project.entry-points."can.interface"]``)
+INTERFACE = "joints-sim"
+
+
+class ClockLike(Protocol):
+    """What the medium needs of a clock (``joints.clock.Clock``)."""
+
+    def now(self) -> float: ...
+
+    def sleep(self, seconds: float) -> None: ...
+
+
+class _OwnClock:
+    """A clock that only the medium's waits move (a medium nobody bound to a simulated world)."""
+
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep(self, seconds: float) -> None:
+        if seconds > 0:
+            self.t += seconds
+
+
+class FramePeer(Protocol):
+    """An in-process device on a medium: every delivered frame in, its answers out."""
+
+    def on_frame(self, frame: can.Message) -> Sequence[can.Message]: ...
+
+
+@dataclass(frozen=True, slots=True)
+class BusLoad:
+    """Traffic on a medium over a time window."""
+
+    frames: int
+    bits: int
+    busy: float  #: s the bus carried frames
+    elapsed: float  #: s of the window
+    bitrate: int
+
+    @property
+    def load(self) -> float:
+        """Busy time / elapsed time (1.0 = saturated)."""
+        return self.busy / self.elapsed if self.elapsed > 0 else 0.0
+
+    @property
+    def frames_per_second(self) -> float:
+        return self.frames / self.elapsed if self.elapsed > 0 else 0.0
+
+
+@dataclass(eq=False)
+class _Node:
+    """One attachment to the medium: a python-can bus (rx queue) or a peer (answers frames)."""
+
+    name: str
+    peer: FramePeer | None = None
+    latency: float = 0.0
+    receive_own: bool = False
+    rx: deque[can.Message] = field(default_factory=deque)
+    rx_dropped: int = 0
+    rx_limit: int = 100_000
+
+
+@dataclass(eq=False, slots=True)
+class _Pending:
+    ready: float
+    seq: int
+    frame: can.Message
+    sender: _Node
+    key: tuple[int, int, int] = (0, 0, 0)
+
+
+def _priority(frame: can.Message) -> tuple[int, int, int]:
+    """Arbitration order: base identifier, then standard before extended, then the extension."""
+    if frame.is_extended_id:
+        return (frame.arbitration_id >> 18, 1, frame.arbitration_id & 0x3FFFF)
+    return (frame.arbitration_id, 0, 0)
+
+
+_MEDIA: weakref.WeakValueDictionary[str, CanMedium] = weakref.WeakValueDictionary()
+
+
+class CanMedium:
+    """The wire of one in-process CAN bus (see the module docstring)."""
+
+    def __init__(self, channel: str | None = None, *, bitrate: int = 1_000_000, stuffing: str = "worst",
+                 clock: ClockLike | None = None, register: bool = True) -> None:
+        if stuffing not in STUFFING:
+            raise ValueError(f"stuffing must be one of {STUFFING}, got {stuffing!r}")
+        if not (isinstance(bitrate, int) and bitrate > 0):
+            raise ValueError(f"bitrate must be a positive integer (bit/s), got {bitrate!r}")
+        self.bitrate = bitrate
+        self.stuffing = stuffing
+        self.clock: ClockLike = clock or _OwnClock()
+        self.now = self.clock.now()
+        self._clock_seen = self.now
+        self._cap: float | None = None  # while we sleep the clock ourselves: process no further than this
+        self._delivering: float | None = None  # the time of the frame being delivered (peers answer then)
+        self._nodes: list[_Node] = []
+        self._pending: list[_Pending] = []
+        self._wire: tuple[float, float, _Pending] | None = None  # (start, end, frame) on the bus
+        self._free = self.now  # when the bus is idle again
+        self._seq = itertools.count()
+        self._bits_cache: dict[tuple[int, bool, bool, bytes], int] = {}
+        # statistics
+        self.frames = 0
+        self.bits = 0
+        self.busy = 0.0
+        self._mark = (self.now, 0, 0, 0.0)
+        self.channel = self._register(channel) if register else (channel or "joints-sim")
+
+    # -- naming ---------------------------------------------------------------------------
+    def _register(self, channel: str | None) -> str:
+        base = channel or "joints-sim"
+        name = base
+        for n in itertools.count(2):
+            if name not in _MEDIA:
+                break
+            name = f"{base}#{n}"
+        _MEDIA[name] = self
+        return name
+
+    @staticmethod
+    def named(channel: str | None, **kwargs: Any) -> CanMedium:
+        """The medium registered as ``channel`` in this process (a new one if there is none)."""
+        if channel is not None:
+            medium = _MEDIA.get(str(channel))
+            if medium is not None:
+                return medium
+        return CanMedium(None if channel is None else str(channel), **kwargs)
+
+    # -- attachment -----------------------------------------------------------------------
+    def attach(self, name: str, *, receive_own: bool = False) -> _Node:
+        node = _Node(name, receive_own=receive_own)
+        self._nodes.append(node)
+        return node
+
+    def attach_peer(self, peer: FramePeer, *, latency: float = 0.0, name: str = "peer") -> _Node:
+        """Attach an in-process device: it gets every frame others send and answers after ``latency`` s."""
+        if latency < 0 or not math.isfinite(latency):
+            raise ValueError(f"latency must be a finite number >= 0, got {latency!r}")
+        node = _Node(name, peer=peer, latency=latency)
+        self._nodes.append(node)
+        return node
+
+    def detach(self, node: _Node) -> None:
+        self._nodes = [n for n in self._nodes if n is not node]
+        self._pending = [p for p in self._pending if p.sender is not node]
+
+    # -- time -----------------------------------------------------------------------------
+    def bind_clock(self, clock: ClockLike) -> None:
+        """Run on ``clock`` from now on (the simulated world's clock); the medium restarts at its time."""
+        self.clock = clock
+        self._restart(clock.now())
+
+    def _restart(self, t: float) -> None:
+        self._pending.clear()
+        self._wire = None
+        for n in self._nodes:
+            n.rx.clear()
+        self.now = self._free = self._clock_seen = t
+        self._mark = (t, self.frames, self.bits, self.busy)
+
+    def _sync(self) -> None:
+        """Catch up with a clock that moved without us (the host slept) or went back (reset)."""
+        c = self.clock.now()
+        if c < self._clock_seen - 1e-12:
+            self._restart(c)
+        elif c > self._clock_seen:
+            self._clock_seen = c
+            if c > self.now:
+                self._run(c)
+                self.now = c
+
+    def tick(self, t: float) -> None:
+        """The clock reached ``t`` (the world calls this every physics substep): deliver what is due."""
+        if self._cap is not None:
+            t = min(t, self._cap)
+        if t > self.now and (self._pending or self._wire is not None):
+            self._run(t)
+        if self._cap is None and t > self.now:
+            self.now = t
+            self._clock_seen = max(self._clock_seen, t)
+
+    def _wait_until(self, t: float) -> None:
+        """Let time pass until ``t``: sleep the clock if it is behind, process frames up to ``t``."""
+        behind = t - self.clock.now()
+        if behind > 0:
+            self._cap = t
+            try:
+                self.clock.sleep(behind)
+            finally:
+                self._cap = None
+            self._clock_seen = self.clock.now()
+        self._run(t)
+        self.now = max(self.now, t)
+
+    def _next_event(self) -> float:
+        if self._wire is not None:
+            return self._wire[1]
+        if self._pending:
+            return max(self._free, min(p.ready for p in self._pending))
+        return math.inf
+
+    # -- the wire -------------------------------------------------------------------------
+    def _bits(self, frame: can.Message) -> int:
+        key = (frame.arbitration_id, frame.is_extended_id, frame.is_remote_frame, bytes(frame.data))
+        bits = self._bits_cache.get(key)
+        if bits is None:
+            if len(self._bits_cache) > 4096:
+                self._bits_cache.clear()
+            bits = self._bits_cache[key] = frame_bits(frame, self.stuffing)
+        return bits
+
+    def _run(self, until: float) -> None:
+        """Process every bus event up to ``until``: starts (arbitration) and ends (delivery)."""
+        while True:
+            wire = self._wire
+            if wire is None:
+                if not self._pending:
+                    return
+                start = max(self._free, min(p.ready for p in self._pending))
+                if start > until:
+                    return
+                winner = min((p for p in self._pending if p.ready <= start), key=lambda p: (p.key, p.seq))
+                self._pending.remove(winner)
+                bits = self._bits(winner.frame)
+                wire = self._wire = (start, start + bits / self.bitrate, winner)
+                self.frames += 1
+                self.bits += bits
+                self.busy += bits / self.bitrate
+            start, end, pend = wire
+            if end > until:
+                return
+            self._wire = None
+            self._free = end
+            self._deliver(pend, end)
+
+    def _deliver(self, pend: _Pending, t: float) -> None:
+        self._delivering = t
+        try:
+            self._deliver_to_all(pend, t)
+        finally:
+            self._delivering = None
+
+    def _deliver_to_all(self, pend: _Pending, t: float) -> None:
+        frame = pend.frame
+        for node in tuple(self._nodes):
+            own = node is pend.sender
+            if own and not node.receive_own:
+                continue
+            if node.peer is not None:
+                if own:
+                    continue
+                for answer in node.peer.on_frame(frame):
+                    self._enqueue(answer, node, t + node.latency)
+                continue
+            if len(node.rx) >= node.rx_limit:
+                node.rx.popleft()
+                node.rx_dropped += 1
+            node.rx.append(can.Message(
+                timestamp=t, arbitration_id=frame.arbitration_id, is_extended_id=frame.is_extended_id,
+                is_remote_frame=frame.is_remote_frame, is_error_frame=frame.is_error_frame, dlc=frame.dlc,
+                data=frame.data, channel=self.channel, is_rx=not own, check=False,
+            ))
+
+    def _enqueue(self, frame: can.Message, sender: _Node, ready: float) -> None:
+        if frame.is_fd:
+            raise TransportError(f"{self.channel}: CAN FD frames are not supported by the sim's classic CAN bus")
+        self._pending.append(_Pending(ready, next(self._seq), frame, sender, _priority(frame)))
+
+    # -- what nodes do --------------------------------------------------------------------
+    def submit(self, node: _Node, frame: can.Message) -> None:
+        """``node`` sends ``frame`` now (it goes on the wire when it wins the bus)."""
+        self._sync()
+        self._enqueue(frame, node, self.now)
+        self._run(self.now)
+
+    def send_at(self, node: _Node, frame: can.Message, at: float) -> None:
+        """``node`` sends ``frame`` at simulated time ``at`` (not before now): a delayed answer of a peer.
+
+        A peer may call this from :meth:`FramePeer.on_frame` (``at`` then counts from the frame's end).
+        """
+        if self._delivering is not None:
+            self._enqueue(frame, node, max(at, self._delivering))
+            return
+        self._sync()
+        self._enqueue(frame, node, max(at, self.now))
+        self._run(self.now)
+
+    def receive(self, node: _Node, timeout: float | None) -> can.Message | None:
+        """The next frame delivered to ``node`` within ``timeout`` s of simulated time (None: none came)."""
+        self._sync()
+        deadline = math.inf if timeout is None else self.now + max(timeout, 0.0)
+        while True:
+            if node.rx:
+                return node.rx.popleft()
+            target = min(self._next_event(), deadline)
+            if math.isinf(target):
+                return None  # nothing in flight: in lockstep nothing can arrive any more
+            self._wait_until(target)
+            if not node.rx and target >= deadline:
+                return None
+
+    def idle(self) -> bool:
+        """No frame on the wire or waiting for it."""
+        return self._wire is None and not self._pending
+
+    # -- statistics -----------------------------------------------------------------------
+    def load(self) -> BusLoad:
+        """Traffic since the last :meth:`reset_load` (or since the start)."""
+        self._sync()
+        t0, f0, b0, busy0 = self._mark
+        return BusLoad(self.frames - f0, self.bits - b0, self.busy - busy0, self.now - t0, self.bitrate)
+
+    def reset_load(self) -> None:
+        self._sync()
+        self._mark = (self.now, self.frames, self.bits, self.busy)
+
+
+class LockstepCanBus(can.BusABC):
+    """A python-can bus on an in-process :class:`CanMedium` (interface ``joints-sim``).
+
+    ``channel`` names the medium (the sim's CAN buses are registered under their device bus's
+    channel); ``medium`` passes one directly. ``bitrate`` and ``stuffing`` apply only when the
+    channel has no medium yet.
+    """
+
+    def __init__(self, channel: Any = None, can_filters: Any = None, *, medium: CanMedium | None = None,
+                 receive_own_messages: bool = False, bitrate: int | None = None, stuffing: str = "worst",
+                 **kwargs: Any) -> None:
+        if medium is None:
+            medium = CanMedium.named(None if channel is None else str(channel), bitrate=bitrate or 1_000_000,
+                                     stuffing=stuffing)
+        self.medium = medium
+        self.channel = medium.channel
+        self.channel_info = f"{INTERFACE} {medium.channel}"
+        self._node = medium.attach(self.channel_info, receive_own=receive_own_messages)
+        self._can_protocol = can.CanProtocol.CAN_20
+        super().__init__(channel=medium.channel, can_filters=can_filters, **kwargs)
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        if self._is_shutdown:
+            raise can.CanOperationError(f"{self.channel_info} is shut down")
+        if msg.is_fd:
+            raise can.CanOperationError(f"{self.channel_info}: classic CAN only, cannot send a CAN FD frame")
+        self.medium.submit(self._node, msg)
+
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        """The next frame within ``timeout`` s of SIMULATED time (see the module docstring)."""
+        if self._is_shutdown:
+            raise can.CanOperationError(f"{self.channel_info} is shut down")
+        medium = self.medium
+        deadline = None if timeout is None else medium.now + max(timeout, 0.0)
+        while True:
+            left = None if deadline is None else max(deadline - medium.now, 0.0)
+            msg = medium.receive(self._node, left)
+            if msg is None:
+                return None
+            if self._matches_filters(msg):
+                return msg
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        return self.medium.receive(self._node, 0.0), False
+
+    def shutdown(self) -> None:
+        if not self._is_shutdown:
+            self.medium.detach(self._node)
+        super().shutdown()
+
+    @property
+    def load(self) -> Callable[[], BusLoad]:
+        return self.medium.load

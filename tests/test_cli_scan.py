@@ -1,0 +1,61 @@
+"""`joints scan` on a CAN bus of twins (in process): every node, its model string, serial number and versions."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("mujoco")
+
+from joints.cli import main
+
+CONFIG = """
+backend = "sim"
+[sim]
+model = "erob_arm3.xml"
+[buses.can]
+protocol = "erob-can"
+[joints.joint1]
+device = "erob"
+model = "eRob80H100I-BM-18CN"
+bus = "can"
+address = 3
+[joints.joint2]
+device = "erob"
+model = "eRob110H160T-FHS-18ET"
+bus = "can"
+address = 17
+[joints.joint3]
+device = "erob"
+model = "eRob70H50"
+bus = "can"
+address = 127
+"""
+
+
+def test_scan_finds_every_twin_with_its_model(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cfg = tmp_path / "arm.toml"
+    cfg.write_text(CONFIG)
+    assert main(["scan", "--config", str(cfg), "--bus", "can"]) == 0  # the whole range 1..127
+    found = {f["address"]: f for f in map(json.loads, capsys.readouterr().out.splitlines())}
+    assert sorted(found) == [3, 17, 127]
+    assert found[3]["model"] == "eRob80H100I-BM-18CN"
+    assert found[17]["model"] == "eRob110H160T-FHS-18ET" and found[17]["serial_number"].startswith("110")
+    assert found[127]["model"].startswith("eRob70H50")
+    for f in found.values():
+        assert f["error_code"] == 0 and f["firmware_version"] and "_" in f["hardware_version"]
+        assert f["module_version"].startswith("MC")
+
+
+def test_scan_of_an_empty_range_says_so(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cfg = tmp_path / "arm.toml"
+    cfg.write_text(CONFIG)
+    assert main(["scan", "--config", str(cfg), "--bus", "can", "--range", "4-6"]) == 1
+    assert "no erob answered" in capsys.readouterr().err
+
+
+def test_scan_needs_a_bus(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["scan"]) == 2
+    assert "--port" in capsys.readouterr().err

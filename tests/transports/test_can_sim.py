@@ -1,0 +1,257 @@
+"""The in-process CAN medium: wire time, arbitration, bus load, lockstep waits, python-can interface."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import textwrap
+from collections.abc import Sequence
+from pathlib import Path
+
+import can
+import pytest
+
+from joints.clock import ManualClock
+from joints.transports.can import PythonCanTransport
+from joints.transports.can_sim import INTERFACE, CanMedium, LockstepCanBus
+from joints.transports.can_timing import frame_time
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+ROOT = Path(__file__).resolve().parents[2]
+US = 1e-6
+
+
+def msg(ident: int, data: bytes = b"") -> can.Message:
+    return can.Message(arbitration_id=ident, data=data, is_extended_id=False)
+
+
+class Echo:
+    """A peer that answers every request 0x640+n with a 5-byte value on 0x5C0+n (and counts when)."""
+
+    def __init__(self, medium: CanMedium, *, answers: int = 1) -> None:
+        self.medium = medium
+        self.answers = answers
+        self.seen: list[tuple[float, int]] = []
+
+    def on_frame(self, frame: can.Message) -> Sequence[can.Message]:
+        self.seen.append((self.medium.now, frame.arbitration_id))
+        if 0x640 < frame.arbitration_id < 0x6C0:
+            return [msg(frame.arbitration_id - 0x80, bytes([0, 0, 0, 1, 0x3E]))] * self.answers
+        return []
+
+
+def test_request_and_reply_take_their_wire_time_and_advance_the_clock() -> None:
+    clock = ManualClock()
+    medium = CanMedium(clock=clock)
+    medium.attach_peer(Echo(medium))
+    bus = LockstepCanBus(medium=medium)
+    req = msg(0x641, b"\x00\x02")
+    bus.send(req)
+    reply = bus.recv(0.1)
+    assert reply is not None and reply.arbitration_id == 0x5C1
+    expected = frame_time(req, 1e6) + frame_time(reply, 1e6)  # 75 + 105 bits, worst-case stuffing
+    assert expected == pytest.approx(180 * US)
+    assert reply.timestamp == pytest.approx(expected)
+    assert clock.now() == pytest.approx(expected)
+    assert medium.load().load == pytest.approx(1.0)
+    bus.shutdown()
+
+
+def test_recv_timeout_is_simulated_time_and_costs_no_wall_clock() -> None:
+    clock = ManualClock()
+    bus = LockstepCanBus(medium=CanMedium(clock=clock))
+    assert bus.recv(2.5) is None
+    assert clock.now() == pytest.approx(2.5)
+    assert bus.recv(None) is None  # nothing in flight: nothing can ever arrive in lockstep
+    assert clock.now() == pytest.approx(2.5)
+    bus.shutdown()
+
+
+def test_waiting_frames_are_arbitrated_by_identifier() -> None:
+    medium = CanMedium(clock=ManualClock())
+    a, b, c, sniffer = (LockstepCanBus(medium=medium) for _ in range(4))
+    a.send(msg(0x700, b"\x01"))  # takes the idle bus at once
+    c.send(msg(0x300, b"\x03"))  # these two wait for the bus: the lower id wins
+    b.send(msg(0x100, b"\x02"))
+    a.send(msg(0x050, b"\x04"))
+    got = [sniffer.recv(1.0) for _ in range(4)]
+    assert [m.arbitration_id for m in got if m] == [0x700, 0x050, 0x100, 0x300]
+    times = [m.timestamp for m in got if m]
+    assert times == sorted(times) and len(set(times)) == 4
+    for bus in (a, b, c, sniffer):
+        bus.shutdown()
+
+
+def test_frames_of_one_node_keep_their_order_and_a_reply_beats_a_request() -> None:
+    medium = CanMedium(clock=ManualClock())
+    echo = Echo(medium, answers=3)
+    medium.attach_peer(echo)
+    host, sniffer = LockstepCanBus(medium=medium), LockstepCanBus(medium=medium)
+    host.send(msg(0x641, b"\x00\x02"))
+    host.send(msg(0x642, b"\x00\x02"))  # queued behind the first; the three replies of node 1 win over it
+    ids = []
+    while (m := sniffer.recv(0.01)) is not None:
+        ids.append(m.arbitration_id)
+    assert ids == [0x641, 0x5C1, 0x5C1, 0x5C1, 0x642, 0x5C2, 0x5C2, 0x5C2]
+    host.shutdown()
+    sniffer.shutdown()
+
+
+def test_bus_load_of_back_to_back_frames_and_idle_time() -> None:
+    clock = ManualClock()
+    medium = CanMedium(clock=clock)
+    tx, rx = LockstepCanBus(medium=medium), LockstepCanBus(medium=medium)
+    for i in range(10):
+        tx.send(msg(0x100 + i, bytes(8)))
+    while rx.recv(0.0) is not None or not medium.idle():
+        rx.recv(1e-3)
+    busy = medium.load()
+    assert busy.frames == 10 and busy.bits == 1350
+    assert busy.load == pytest.approx(1350 * US / busy.elapsed)
+    rx.recv(busy.elapsed)  # as long again, idle
+    assert medium.load().load == pytest.approx(busy.load / 2)
+    medium.reset_load()
+    assert medium.load().frames == 0
+    tx.shutdown()
+    rx.shutdown()
+
+
+class SteppedClock(ManualClock):
+    """A world-like clock: sleeping runs whole 1 ms substeps and ticks the medium after each."""
+
+    def __init__(self, medium: CanMedium | None = None) -> None:
+        super().__init__()
+        self.medium = medium
+        self.steps = 0
+
+    def sleep(self, seconds: float) -> None:
+        n = math.ceil(seconds / 1e-3 - 1e-9)
+        for _ in range(max(n, 1)):
+            self.steps += 1
+            self.set(self.steps * 1e-3)
+            if self.medium is not None:
+                self.medium.tick(self.now())
+
+
+def test_round_trips_are_exact_inside_a_substep_of_a_coarse_clock() -> None:
+    clock = SteppedClock()
+    medium = CanMedium()
+    clock.medium = medium
+    medium.bind_clock(clock)
+    medium.attach_peer(Echo(medium))
+    bus = LockstepCanBus(medium=medium)
+    stamps = []
+    for _ in range(5):
+        bus.send(msg(0x641, b"\x00\x02"))
+        reply = bus.recv(0.1)
+        assert reply is not None
+        stamps.append(reply.timestamp)
+    assert stamps == pytest.approx([180 * US * (i + 1) for i in range(5)])
+    assert clock.steps == 1  # five request/reply pairs fit in one 1 ms physics substep
+    bus.shutdown()
+
+
+def test_a_frame_in_flight_reaches_its_peer_while_the_host_sleeps() -> None:
+    clock = SteppedClock()
+    medium = CanMedium()
+    clock.medium = medium
+    medium.bind_clock(clock)
+    echo = Echo(medium)
+    medium.attach_peer(echo)
+    bus = LockstepCanBus(medium=medium)
+    bus.send(msg(0x641, b"\x00\x02"))
+    clock.sleep(0.01)  # the host sleeps without reading: the world's ticks carry the frame
+    assert echo.seen and echo.seen[0][0] <= 1e-3
+    reply = bus.recv(0.0)
+    assert reply is not None and reply.timestamp == pytest.approx(180 * US)
+    bus.shutdown()
+
+
+def test_a_clock_going_back_drops_frames_in_flight() -> None:
+    clock = ManualClock()
+    medium = CanMedium(clock=clock)
+    medium.attach_peer(Echo(medium))
+    bus = LockstepCanBus(medium=medium)
+    clock.set(1.0)
+    bus.send(msg(0x641, b"\x00\x02"))
+    clock.set(0.0)  # world reset
+    assert bus.recv(0.01) is None
+    assert medium.now == pytest.approx(0.01)
+    bus.shutdown()
+
+
+def test_filters_and_own_messages() -> None:
+    medium = CanMedium(clock=ManualClock())
+    talker = LockstepCanBus(medium=medium, receive_own_messages=True)
+    listener = LockstepCanBus(medium=medium, can_filters=[{"can_id": 0x5C0, "can_mask": 0x7C0}])
+    talker.send(msg(0x641, b"\x01"))
+    talker.send(msg(0x5C1, b"\x3e"))
+    own = talker.recv(0.01)
+    assert own is not None and own.arbitration_id == 0x641 and not own.is_rx
+    got = listener.recv(0.01)
+    assert got is not None and got.arbitration_id == 0x5C1 and got.is_rx
+    assert listener.recv(0.01) is None
+    talker.shutdown()
+    listener.shutdown()
+
+
+def test_python_can_transport_over_the_lockstep_bus() -> None:
+    clock = ManualClock()
+    medium = CanMedium("tp-test", clock=clock)
+    medium.attach_peer(Echo(medium))
+    transport = PythonCanTransport(LockstepCanBus(medium=medium))
+    transport.send(msg(0x641, b"\x00\x02"))
+    reply = transport.recv(0.1)
+    assert reply is not None and bytes(reply.data) == bytes([0, 0, 0, 1, 0x3E])
+    transport.close()
+    transport.close()
+
+
+def test_channels_name_media_in_this_process() -> None:
+    first = CanMedium("arm")
+    second = CanMedium("arm")  # the name is taken while the first is alive
+    assert first.channel == "arm" and second.channel == "arm#2"
+    bus = LockstepCanBus("arm#2")
+    assert bus.medium is second
+    bus.shutdown()
+    with pytest.raises(can.CanOperationError):
+        bus.send(msg(1))
+
+
+def test_fd_frames_are_refused() -> None:
+    bus = LockstepCanBus(medium=CanMedium(clock=ManualClock()))
+    with pytest.raises(can.CanOperationError, match="classic"):
+        bus.send(can.Message(arbitration_id=1, data=bytes(12), is_fd=True))
+    bus.shutdown()
+
+
+def test_the_pyproject_entry_point_opens_the_bus_by_name(tmp_path: Path) -> None:
+    """``can.Bus(interface="joints-sim")`` in a fresh interpreter, with the entry point pyproject declares."""
+    declared = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    points = declared["project"]["entry-points"]["can.interface"]
+    assert points[INTERFACE] == "joints.transports.can_sim:LockstepCanBus"
+    entries = [f"{k} = {v}" for k, v in points.items()]
+    dist = tmp_path / "joints_entry_point_probe-0.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: joints-entry-point-probe\nVersion: 0\n")
+    (dist / "entry_points.txt").write_text('[can.interface]\n' + "\n".join(entries) + "\n")
+    code = textwrap.dedent(f"""
+        import can
+        a = can.Bus(interface={INTERFACE!r}, channel="probe")
+        b = can.Bus(interface={INTERFACE!r}, channel="probe")
+        a.send(can.Message(arbitration_id=0x123, data=b"hi", is_extended_id=False))
+        m = b.recv(1.0)
+        print(type(b).__name__, hex(m.arbitration_id), bytes(m.data))
+        a.shutdown(); b.shutdown()
+    """)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path), str(ROOT)]))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60,
+                          check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["LockstepCanBus", "0x123", "b'hi'"]
