@@ -234,11 +234,11 @@ class ModbusFront:
                 out[reg.address], out[reg.address + 1] = (lo, hi) if reg.low_word_first else (hi, lo)
         return out
 
-    def reject(self, function: int, code: int) -> mb.ExceptionReply:
-        """A well-addressed, CRC-valid frame this slave cannot take (e.g. an FC16 whose byte count
-        disagrees with its register count): a frame received, answered with exception ``code``."""
+    def malformed(self, frame: bytes) -> mb.Reply | None:
+        """A CRC-valid frame for this slave whose byte count the codec rejects (an FC16 whose byte
+        count disagrees with its register count): a frame received, answered with exception 03."""
         self.firmware.frame_received()
-        return mb.ExceptionReply(self.address, function, code)
+        return mb.ExceptionReply(frame[0], frame[1], ILLEGAL_DATA_VALUE)
 
     def handle(self, request: mb.Request | mb.UnsupportedRequest) -> mb.Reply:
         """Execute a request addressed to this slave and build the reply."""
@@ -277,8 +277,7 @@ class ModbusDeviceBus:
 
     def __init__(self, slaves: Iterable[ModbusFront] = (), *, trace: Callable[[str, bytes], None] | None = None) -> None:
         self._fronts: list[ModbusFront] = []
-        #: per front, the power-on values its address was taken from (a power cycle replaces them)
-        self._seen: list[object] = []
+        self._addresses: tuple[int, ...] = ()
         self._slaves: dict[int, ModbusFront] = {}
         for s in slaves:
             self.add(s)
@@ -291,23 +290,17 @@ class ModbusDeviceBus:
         if address in self.slaves:
             raise ValueError(f"two emulated slaves at address {address}")
         self._fronts.append(slave)
-        self._seen.append(None)
 
     @property
     def slaves(self) -> dict[int, ModbusFront]:
-        """The fronts by the address each answers on now."""
-        fronts, seen = self._fronts, self._seen
-        for i, front in enumerate(fronts):
-            if front.firmware.power_on_values is not seen[i]:
-                break
-        else:
-            return self._slaves
-        by_address: dict[int, ModbusFront] = {}
-        for i, front in enumerate(fronts):
-            seen[i] = front.firmware.power_on_values
-            by_address.setdefault(front.address, front)
-        self._slaves = by_address
-        return by_address
+        """The fronts by the address each answers on now (it may change at a power cycle)."""
+        addresses = tuple(f.address for f in self._fronts)
+        if addresses != self._addresses:
+            by_address: dict[int, ModbusFront] = {}
+            for address, front in zip(addresses, self._fronts):
+                by_address.setdefault(address, front)
+            self._slaves, self._addresses = by_address, addresses
+        return self._slaves
 
     def receive(self, data: bytes) -> bytes:
         """Feed received bytes; return the bytes the addressed slaves send back."""
@@ -326,10 +319,12 @@ class ModbusDeviceBus:
             try:
                 msg = codec.next_message()
             except ByteCountError as exc:
-                # a CRC-valid request whose byte count disagrees with its register count: exception 03
-                rejection = self._reject(exc.data, ILLEGAL_DATA_VALUE)
-                if rejection is not None:
-                    out += mb.encode(rejection)
+                # well framed, CRC valid, counts inconsistent: the addressed slave answers (exception 03)
+                answer = self._malformed(exc.data)
+                if answer is None:
+                    self.frame_errors += 1
+                else:
+                    out += mb.encode(answer)
                 continue
             except FrameError:
                 self.frame_errors += 1  # a real slave stays silent on a corrupt frame
@@ -342,12 +337,11 @@ class ModbusDeviceBus:
                     out += mb.encode(reply)
         return bytes(out)
 
-    def _reject(self, frame: bytes, code: int) -> mb.ExceptionReply | None:
-        self.frame_errors += 1
-        if len(frame) < 4 or not crc_ok(frame):
-            return None
-        slave = self.slaves.get(frame[0]) if frame[0] != 0 else None
-        return None if slave is None else slave.reject(frame[1], code)
+    def _malformed(self, frame: bytes) -> mb.Reply | None:
+        if len(frame) < 4 or frame[0] == 0 or not crc_ok(frame):
+            return None  # broadcast or corrupt: silence
+        slave = self.slaves.get(frame[0])
+        return None if slave is None else slave.malformed(frame)
 
     def exchange(self, msg: mb.Request | mb.UnsupportedRequest) -> mb.Reply | None:
         """Message-level twin of :meth:`receive` (the sim's direct path: no bytes, no CRC).
