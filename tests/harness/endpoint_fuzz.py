@@ -226,7 +226,7 @@ class ModbusAdapter(Adapter):
             cuts = sorted({0, len(frame), *(rng.randrange(len(frame) + 1) for _ in range(rng.randint(0, 2)))})
             for a, b in itertools.pairwise(cuts):
                 chunks.append((frame[a:b], rng.random() < 0.05))  # a gap inside a frame: garbage before it
-            if rng.random() < 0.5:
+            if chunks and rng.random() < 0.5:
                 chunks[-1] = (chunks[-1][0], True)
         self.run_chunks(t, chunks)
         return n
