@@ -13,10 +13,11 @@ check a reply's byte count against the request (a reply whose byte-count field d
 frame raises :class:`~joints.errors.ByteCountError`). ``expect_echo(frame)`` skips an RS485 adapter's local echo.
 Device role decodes requests; unsupported-but-well-framed function codes come out as
 :class:`UnsupportedRequest` so a server can answer "illegal function". A function code the
-codec knows no shape for (anything but 01-06, 15, 16) has no length field: such a request is
-delimited by its CRC, the shortest prefix of 4-256 bytes that ends in its own CRC (an RTU slave
-delimits frames by the t3.5 silence; the CRC finds the same end without waiting for it, and a
-chance match costs an exception reply, never an action).
+codec knows no shape for (a public or user-defined code other than 01-06, 15, 16) has no length
+field: such a request is delimited by its CRC, the shortest prefix of 4-256 bytes that ends in
+its own CRC (an RTU slave delimits frames by the t3.5 silence; the CRC finds the same end without
+waiting for it, and a chance match costs an exception reply, never an action). Unassigned
+function codes are garbage in both roles.
 
 A header announcing a frame longer than 256 bytes (the RTU maximum, Modbus over serial line
 2.5.1.1) is garbage at once: nothing is waited for. ``feed(b"")`` is no news: a line that went
@@ -306,9 +307,10 @@ def encode(message: Message) -> bytes:
 # --- decoding --------------------------------------------------------------------------------
 
 
-#: function codes an exception reply may answer: the public codes the Modbus application protocol
-#: assigns (v1.1b3, 5.1; a server answers 01 to those it does not implement) and the user-defined
-#: ranges 65-72 and 100-110
+#: the function codes that exist: the public codes the Modbus application protocol assigns
+#: (v1.1b3, 5.1) and the user-defined ranges 65-72 and 100-110. A device frames a request with one
+#: it does not implement (a server answers 01), a host decodes exception replies to any of them;
+#: any other code is garbage.
 _EXCEPTION_FCS = frozenset((1, 2, 3, 4, 5, 6, 7, 8, 11, 12, 15, 16, 17, 20, 21, 22, 23, 24, 43,
                             *range(65, 73), *range(100, 111)))
 _BYTE_COUNT_REPLY_FCS = frozenset((READ_HOLDING_REGISTERS, READ_INPUT_REGISTERS, 1, 2))
@@ -485,7 +487,7 @@ class ModbusRtuCodec:
                 length = self._host_length(buf)
             else:
                 length = _request_length(buf)
-                if length == 0 and 0 < buf[1] < 0x80:  # a function code this stack does not know
+                if length == 0 and buf[1] in _EXCEPTION_FCS:  # a function code this stack does not know
                     length = _unknown_request_length(buf)
                     if length is None and not self._silent:
                         # no end yet: garbage if a valid frame is already buffered behind it

@@ -10,6 +10,9 @@ Each test here failed before the fix it names:
 
 from __future__ import annotations
 
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
 from joints.codecs import modbus as mb
 from joints.codecs.crc import append_crc
 from joints.devices.erob.params import EROB_PARAMS
@@ -124,3 +127,44 @@ def test_a_saved_address_change_takes_effect_after_a_power_cycle() -> None:
     assert replies(bus.receive(mb.encode(mb.ReadHoldingRegisters(9, 0x0000, 1)))) == [
         mb.ReadRegistersReply(9, 3, (9,))]
     assert list(bus.slaves) == [9]
+
+
+def test_a_frame_cut_by_silence_never_answers_a_later_broadcast_or_absent_slave() -> None:
+    """The findings "replies to broadcast and to other slaves' addresses": the rest of a cut frame
+    arrives with the next request, and the old bus completed and answered the cut one."""
+    read = mb.encode(mb.ReadHoldingRegisters(ADDR, 0x0040, 1))
+    for follow in (mb.WriteSingleRegister(0, 0x0041, 1), mb.ReadHoldingRegisters(9, 0x0040, 1)):
+        bus, _, _ = two_slaves()
+        assert bus.receive(read[:4]) == b""
+        assert bus.silence() == b""
+        assert bus.receive(read[4:] + mb.encode(follow)) == b""  # the host asked a broadcast / nobody
+        assert bus.silence() == b""
+
+
+chunk = st.one_of(
+    st.binary(max_size=12),
+    st.builds(lambda s, a, n: mb.encode(mb.ReadHoldingRegisters(s, a, n)), st.sampled_from([0, 1, 2, 5]),
+              st.sampled_from([0x40, 0x47, 0x60, 0x10]), st.integers(1, 4)),
+    st.builds(lambda s, a, v: mb.encode(mb.WriteSingleRegister(s, a, v)), st.sampled_from([0, 1, 2, 5]),
+              st.sampled_from([0x40, 0x41, 0x60]), st.integers(0, 3)),
+    st.builds(lambda s, f, b: append_crc(bytes((s, f)) + b), st.sampled_from([1, 2, 5]),
+              st.sampled_from([0x08, 0x2B, 0x10]), st.binary(max_size=8)),
+)
+
+
+@settings(max_examples=300, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.tuples(chunk, st.booleans()), max_size=8), st.data())
+def test_whatever_arrives_only_present_slaves_answer_and_a_valid_request_after_silence_is_answered(
+        chunks: list[tuple[bytes, bool]], data: st.DataObject) -> None:
+    bus, _, _ = two_slaves()
+    out = b""
+    for piece, quiet in chunks:
+        out += bus.receive(piece)
+        if quiet:
+            out += bus.silence()
+    out += bus.silence()
+    for reply in replies(out):
+        assert reply.slave in (1, ADDR)
+    slave = data.draw(st.sampled_from([1, ADDR]))
+    assert replies(bus.receive(mb.encode(mb.ReadHoldingRegisters(slave, 0x0040, 1)))) == [
+        mb.ReadRegistersReply(slave, 3, (bus.slaves[slave].firmware.get("operation_mode"),))]
