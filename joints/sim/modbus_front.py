@@ -277,8 +277,9 @@ class ModbusDeviceBus:
 
     def __init__(self, slaves: Iterable[ModbusFront] = (), *, trace: Callable[[str, bytes], None] | None = None) -> None:
         self._fronts: list[ModbusFront] = []
-        self._addresses: tuple[int, ...] = ()
         self._slaves: dict[int, ModbusFront] = {}
+        #: fronts whose address comes from a parameter, with the power-on values it was taken from
+        self._watch: list[tuple[ModbusFront, object]] = []
         for s in slaves:
             self.add(s)
         self._codec = mb.ModbusRtuCodec(mb.Role.DEVICE)
@@ -290,16 +291,22 @@ class ModbusDeviceBus:
         if address in self.slaves:
             raise ValueError(f"two emulated slaves at address {address}")
         self._fronts.append(slave)
+        self._refresh()
+
+    def _refresh(self) -> None:
+        by_address: dict[int, ModbusFront] = {}
+        for front in self._fronts:
+            by_address.setdefault(front.address, front)
+        self._slaves = by_address
+        self._watch = [(f, f.firmware.power_on_values) for f in self._fronts if getattr(f, "node_id", None)]
 
     @property
     def slaves(self) -> dict[int, ModbusFront]:
-        """The fronts by the address each answers on now (it may change at a power cycle)."""
-        addresses = tuple(f.address for f in self._fronts)
-        if addresses != self._addresses:
-            by_address: dict[int, ModbusFront] = {}
-            for address, front in zip(addresses, self._fronts):
-                by_address.setdefault(address, front)
-            self._slaves, self._addresses = by_address, addresses
+        """The fronts by the address each answers on now (a power cycle may have moved one)."""
+        for front, seen in self._watch:
+            if front.firmware.power_on_values is not seen:
+                self._refresh()
+                break
         return self._slaves
 
     def receive(self, data: bytes) -> bytes:
