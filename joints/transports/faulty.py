@@ -48,9 +48,8 @@ import random
 from collections import Counter, deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, fields
-from typing import Any, Generic, TypeVar
+from typing import Any, Generic, Protocol, TypeVar
 
-from joints.clock import Clock
 from joints.transports.base import ByteTransport
 from joints.transports.can import FrameTransport
 
@@ -60,6 +59,12 @@ __all__ = ["KINDS", "FaultRecord", "Faults", "FaultyFrameTransport", "FaultyLine
 KINDS = ("drop", "corrupt", "split", "duplicate", "delay", "reorder", "echo")
 
 T = TypeVar("T")
+
+
+class Clock(Protocol):
+    """What the line needs of a clock (a :class:`joints.clock.Clock`: transports do not import it)."""
+
+    def now(self) -> float: ...
 
 
 @dataclass(frozen=True)
