@@ -7,7 +7,9 @@ Importing ``envs`` registers, under the ``joints/`` namespace:
 * ``joints/ErobArmReach-v0`` - the 3-joint eRob arm (models/erob_arm3.xml), end effector to a
   random point (:class:`envs.reach.ErobArmReachEnv`);
 * ``joints/DiffDriveGoal-v0`` - a differential-drive base on one ZLAC8015D (models/zlac_diffdrive.xml)
-  to a random goal pose, wheel-speed actions, wheel odometry (:class:`envs.diffdrive.DiffDriveGoalEnv`).
+  to a random goal pose, wheel-speed actions, wheel odometry (:class:`envs.diffdrive.DiffDriveGoalEnv`);
+* ``joints/MksAxisPosition-v0`` - the carriage of a lead-screw axis on an MKS SERVO42D
+  (models/mks_linear_axis.xml) to a goal position, in metres (:class:`envs.mks_axis.MksAxisPositionEnv`).
 
 >>> import gymnasium as gym, envs
 >>> env = gym.make("joints/ErobReach-v0", action_mode="torque")          # doctest: +SKIP
@@ -32,6 +34,7 @@ from envs.base import ACTION_MODES, JointsEnv
 from envs.configs import SHIPPED, config_path, default_config
 from envs.diffdrive import DiffDriveGoalEnv
 from envs.kinematics import erob_arm3_ee
+from envs.mks_axis import MksAxisPositionEnv
 from envs.randomization import DomainRandomization
 from envs.reach import ErobArmReachEnv, ErobReachEnv
 
@@ -44,11 +47,15 @@ ENV_IDS = {
 BASE_ENV_IDS = {
     "joints/DiffDriveGoal-v0": ("envs.diffdrive:DiffDriveGoalEnv", 400),
 }
+#: id -> (entry point, max_episode_steps): linear axes (a joint with a lead; positions in m)
+AXIS_ENV_IDS = {
+    "joints/MksAxisPosition-v0": ("envs.mks_axis:MksAxisPositionEnv", 200),
+}
 
 
 def register_envs() -> None:
     """Register the ``joints/`` ids with gymnasium (idempotent; done on ``import envs``)."""
-    for env_id, (entry_point, steps) in {**ENV_IDS, **BASE_ENV_IDS}.items():
+    for env_id, (entry_point, steps) in {**ENV_IDS, **BASE_ENV_IDS, **AXIS_ENV_IDS}.items():
         if env_id not in registry:
             register(id=env_id, entry_point=entry_point, max_episode_steps=steps)
 
@@ -57,6 +64,7 @@ register_envs()
 
 __all__ = [
     "ACTION_MODES",
+    "AXIS_ENV_IDS",
     "BASE_ENV_IDS",
     "ENV_IDS",
     "SHIPPED",
@@ -65,6 +73,7 @@ __all__ = [
     "ErobArmReachEnv",
     "ErobReachEnv",
     "JointsEnv",
+    "MksAxisPositionEnv",
     "config_path",
     "default_config",
     "erob_arm3_ee",

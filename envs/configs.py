@@ -23,7 +23,7 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 #: names of the shipped configs (files ``joints/configs/<name>.toml``)
-SHIPPED = ("erob_reach", "erob_arm_reach", "zlac_diffdrive")
+SHIPPED = ("erob_reach", "erob_arm_reach", "zlac_diffdrive", "mks_axis")
 
 
 def _ref(name: str) -> Any:

@@ -51,7 +51,8 @@ def _key(text: str) -> str | int:
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
-    """Find drives on a bus: every address of the range that answers a read of ``error_code``.
+    """Find drives on a bus: every address of the range that answers a read of the family's status
+    (``error_code``; the MKS: ``motor_status``).
 
     The bus is a serial port (``--port``), a CAN channel (``--interface``/``--channel``) or a bus
     of a config (``--config``/``--bus``; twins in sim). Drives that report what they are (eRob
@@ -95,7 +96,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
             jcfg = JointConfig(name=f"{args.device}@{addr}", device=args.device, bus=cfg.name, address=addr)
             driver = fam.driver(jcfg, link, clock, {}, cfg.protocol)
             try:
-                record: dict[str, object] = {"address": addr, "error_code": driver.read("error_code")}
+                record: dict[str, object] = {"address": addr, fam.scan_param: driver.read(fam.scan_param)}
             except JointsError:
                 continue
             if isinstance(driver, Identity):
@@ -150,8 +151,13 @@ def cmd_write(args: argparse.Namespace) -> int:
 
 
 def cmd_registers(args: argparse.Namespace) -> int:
+    from joints.errors import ConfigError
+
     fam = registry.family(args.device)
-    table = fam.tables["modbus-rtu"]()
+    protocol = args.protocol or ("modbus-rtu" if "modbus-rtu" in fam.tables else next(iter(fam.tables)))
+    if protocol not in fam.tables:
+        raise ConfigError(f"{args.device} has no {protocol} map", key="--protocol", allowed=tuple(fam.tables))
+    table = fam.tables[protocol]()
     for r in table:
         flag = "  (persistent: needs --confirm)" if r.persistent else ""
         print(f"0x{r.address:04X}  {r.name:<48} {r.type:<6} {r.access.value:<7} {r.unit}{flag}")
@@ -281,8 +287,9 @@ def build_parser() -> argparse.ArgumentParser:
     sv.add_argument("config")
     sv.set_defaults(func=cmd_sim_serve)
 
-    r = sub.add_parser("registers", help="list a device's Modbus register table")
+    r = sub.add_parser("registers", help="list a device's register table (its map on one protocol)")
     r.add_argument("--device", choices=registry.devices(), default="erob")
+    r.add_argument("--protocol", choices=registry.protocols(), help="default: modbus-rtu where the device has it")
     r.set_defaults(func=cmd_registers)
 
     m = sub.add_parser("monitor", help="frame monitor: poll the joints and print every frame")

@@ -55,6 +55,7 @@ class BusConfig:
     channel: str | int | None = None  #: CAN: channel
     bitrate: int = 1_000_000
     udp_port: int | None = None  #: CAN over udp_multicast: the port (`joints sim serve` prints it)
+    sync_period: float | None = None  #: CANopen: s between two SYNCs of the bus (cyclic modes; default 1 ms)
 
 
 @dataclass(frozen=True)
@@ -72,6 +73,9 @@ class JointConfig:
     watchdog_ms: int | None = None
     offset: float = 0.0
     direction: int = 1
+    lead: float | None = None  #: m of travel per motor turn: a linear joint (positions in m, forces in N)
+    mode: str | None = None  #: operating mode where the protocol has several (CANopen: pp, pv, pt, csp, csv, cst, ip)
+    sync_period: float | None = None  #: CANopen: s between two SYNCs (the bus's; set it on the bus or here)
 
 
 @dataclass(frozen=True)
@@ -144,7 +148,7 @@ def _limits(r: _Reader, data: Mapping[str, Any], key: str) -> Limits:
         if (not isinstance(pos, (list, tuple)) or len(pos) != 2
                 or not all(isinstance(p, (int, float)) and not isinstance(p, bool) and math.isfinite(p) for p in pos)
                 or not pos[0] < pos[1]):
-            raise r.err(f"{key}.position", f"expected [min, max] in rad with min < max, got {pos!r}")
+            raise r.err(f"{key}.position", f"expected [min, max] in rad (m with a lead) with min < max, got {pos!r}")
         pos = (float(pos[0]), float(pos[1]))
     return Limits(
         position=pos,
@@ -236,6 +240,7 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
             channel=channel,
             bitrate=r.number(b, f"{key}.bitrate", 1_000_000, integer=True, positive=True),
             udp_port=udp_port,
+            sync_period=_sync_period(r, b, f"{key}.sync_period", protocol),
         )
 
     joints: dict[str, JointConfig] = {}
@@ -276,6 +281,22 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
         model = j.get("model")
         if model is not None and not isinstance(model, str):
             raise r.err(f"{key}.model", f"expected a model name string, got {model!r}")
+        modes = fam.modes.get(protocol, ())
+        mode = j.get("mode")
+        if mode is not None and not modes:
+            raise r.err(f"{key}.mode", f"protocol {protocol!r} has no operating modes to choose; remove the key")
+        if mode is not None and mode not in modes:
+            raise r.err(f"{key}.mode", f"{mode!r} is not allowed", modes)
+        sync_period = _sync_period(r, j, f"{key}.sync_period", protocol)
+        bus_sync = buses[str(bus)].sync_period
+        if sync_period is not None and bus_sync is not None and not math.isclose(sync_period, bus_sync):
+            raise r.err(f"{key}.sync_period", f"{sync_period} s differs from the bus's sync_period {bus_sync} s "
+                        "(one SYNC per bus)")
+        for other in joints.values():
+            if (other.bus == bus and sync_period is not None and other.sync_period is not None
+                    and not math.isclose(other.sync_period, sync_period)):
+                raise r.err(f"{key}.sync_period", f"{sync_period} s differs from joint {other.name!r} on the same "
+                            f"bus ({other.sync_period} s; one SYNC per bus)")
         joints[name] = JointConfig(
             name=name,
             device=device,
@@ -290,6 +311,9 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
             watchdog_ms=r.number(j, f"{key}.watchdog_ms", None, integer=True, minimum=0, maximum=4000),
             offset=r.number(j, f"{key}.offset", 0.0),
             direction=int(direction),
+            lead=r.number(j, f"{key}.lead", None, positive=True),
+            mode=None if mode is None else str(mode),
+            sync_period=sync_period,
         )
     if not joints:
         raise r.err("joints", "no joints defined; add a [joints.<name>] table")
@@ -302,6 +326,14 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
         source=source,
         base_dir=base_dir or Path.cwd(),
     )
+
+
+def _sync_period(r: _Reader, data: Mapping[str, Any], key: str, protocol: str) -> float | None:
+    """A SYNC period [s] (protocols with cyclic modes, i.e. CANopen; 100 us .. 1 s)."""
+    value = r.number(data, key, None, minimum=1e-4, maximum=1.0)
+    if value is not None and not any(protocol in f.modes for f in registry.FAMILIES.values()):
+        raise r.err(key, f"only for a protocol with cyclic modes (this bus: {protocol!r})")
+    return None if value is None else float(value)
 
 
 def load(path: str | os.PathLike[str], *, backend: str | None = None) -> RigConfig:

@@ -13,7 +13,10 @@ Rules:
   limits are in the drive's own limit parameters (volatile), so the drive stops if the host dies.
   Disabling restores the watchdog setting found before.
 
-Units: position rad (m for a linear joint), velocity rad/s, acceleration rad/s^2, torque N*m, current A.
+Units: position rad, velocity rad/s, acceleration rad/s^2, torque N*m, current A. A joint with a
+``lead`` (m of travel per motor turn: a lead screw, a belt) is linear: position m, velocity m/s,
+acceleration m/s^2 and force N (``torque`` = motor torque x 2 pi / lead, an ideal screw); its
+limits are in the same units. Whatever the drive counts (encoder counts, pulses) stays motor side.
 """
 
 from __future__ import annotations
@@ -53,9 +56,9 @@ class Motion:
 class JointState:
     """One snapshot of a joint in SI units, as the drive reports it."""
 
-    position: float  #: rad
-    velocity: float  #: rad/s
-    torque: float  #: N*m (from motor current through the device profile)
+    position: float  #: rad (m with a lead)
+    velocity: float  #: rad/s (m/s with a lead)
+    torque: float  #: N*m (N with a lead; from motor current through the device profile)
     current: float  #: A
     temperature: float  #: degC
     enabled: bool
@@ -79,16 +82,24 @@ class Joint:
         offset: float = 0.0,
         direction: int = 1,
         watchdog_ms: int | None = None,
+        lead: float | None = None,
     ) -> None:
         if direction not in (1, -1):
             raise CommandError(f"joint {name}: direction must be 1 or -1, got {direction}")
+        if lead is not None and not (isinstance(lead, (int, float)) and math.isfinite(lead) and lead > 0):
+            raise CommandError(f"joint {name}: lead must be a positive number of metres per motor turn, got {lead!r}")
         self.name = name
         self.driver = driver
         self.clock = clock
         self.limits = limits or Limits()
         self.motion = motion or Motion()
-        self.offset = offset  #: rad added to the device position (user zero)
+        self.offset = offset  #: rad (m with a lead) added to the device position (user zero)
         self.direction = direction
+        #: m of travel per motor turn (None: a rotary joint)
+        self.lead = lead
+        #: SI position per motor radian: lead / 2 pi for a linear joint, 1 for a rotary one
+        self.scale = lead / (2.0 * math.pi) if lead is not None else 1.0
+        self._u = ("m", "m/s", "m/s^2", "N") if lead is not None else ("rad", "rad/s", "rad/s^2", "N*m")
         #: the drive's communication watchdog while enabled [ms] (None: leave the drive's setting, 0: off)
         self.watchdog_ms = watchdog_ms
         self._enabled_by_us = False
@@ -109,16 +120,16 @@ class Joint:
         return self.driver.units
 
     def _to_pos(self, rad: float) -> int:
-        return round((rad - self.offset) * self.direction / self.units.position)
+        return round((rad - self.offset) * self.direction / (self.units.position * self.scale))
 
     def _from_pos(self, counts: float) -> float:
-        return counts * self.units.position * self.direction + self.offset
+        return counts * self.units.position * self.scale * self.direction + self.offset
 
     def _to_vel(self, rad_s: float) -> int:
-        return round(rad_s * self.direction / self.units.velocity)
+        return round(rad_s * self.direction / (self.units.velocity * self.scale))
 
     def _to_acc(self, rad_s2: float) -> int:
-        return max(1, round(abs(rad_s2) / self.units.velocity))
+        return max(1, round(abs(rad_s2) / (self.units.velocity * self.scale)))
 
     # -- checks -----------------------------------------------------------------------------
     def _finite(self, what: str, value: float) -> float:
@@ -130,32 +141,35 @@ class Joint:
     def _check_position(self, rad: float, what: str = "position") -> None:
         lim = self.limits.position
         if lim is not None and not lim[0] <= rad <= lim[1]:
+            u = self._u[0]
             raise LimitError(
-                f"joint {self.name}: {what} {rad:.4f} rad is outside the limits "
-                f"[{lim[0]:.4f}, {lim[1]:.4f}] rad; nothing was sent"
+                f"joint {self.name}: {what} {rad:.4f} {u} is outside the limits "
+                f"[{lim[0]:.4f}, {lim[1]:.4f}] {u}; nothing was sent"
             )
 
     def _check_velocity(self, v: float, what: str = "velocity") -> None:
         lim = self.limits.velocity
         if lim is not None and abs(v) > lim:
             raise LimitError(
-                f"joint {self.name}: {what} {v:.4f} rad/s exceeds the limit {lim:.4f} rad/s; nothing was sent"
+                f"joint {self.name}: {what} {v:.4f} {self._u[1]} exceeds the limit {lim:.4f} {self._u[1]}; "
+                "nothing was sent"
             )
 
     def _check_torque(self, torque: float, what: str = "torque") -> None:
         lim = self.limits.torque
         if lim is not None and abs(torque) > lim:
             raise LimitError(
-                f"joint {self.name}: {what} {torque:.3f} N*m exceeds the limit {lim:.3f} N*m; nothing was sent"
+                f"joint {self.name}: {what} {torque:.3f} {self._u[3]} exceeds the limit {lim:.3f} {self._u[3]}; "
+                "nothing was sent"
             )
 
     def _check_accel(self, a: float, what: str) -> None:
         if a <= 0:
-            raise CommandError(f"joint {self.name}: {what} must be > 0 rad/s^2, got {a}")
+            raise CommandError(f"joint {self.name}: {what} must be > 0 {self._u[2]}, got {a}")
         lim = self.limits.acceleration
         if lim is not None and a > lim:
             raise LimitError(
-                f"joint {self.name}: {what} {a:.4f} rad/s^2 exceeds the limit {lim:.4f}; nothing was sent"
+                f"joint {self.name}: {what} {a:.4f} {self._u[2]} exceeds the limit {lim:.4f}; nothing was sent"
             )
 
     def _require_enabled(self) -> None:
@@ -205,8 +219,9 @@ class Joint:
         if lim.position is not None:
             a, b = self._to_pos(lim.position[0]), self._to_pos(lim.position[1])
             position = (min(a, b), max(a, b))
-        velocity = None if lim.velocity is None else max(1, round(lim.velocity / u.velocity))
-        current = None if lim.torque is None else max(1, round(lim.torque / u.torque_constant / u.current))
+        velocity = None if lim.velocity is None else max(1, round(lim.velocity / (u.velocity * self.scale)))
+        current = (None if lim.torque is None
+                   else max(1, round(lim.torque * self.scale / u.torque_constant / u.current)))
         if position is not None or velocity is not None or current is not None:
             driver.apply_limits(position=position, velocity=velocity, current=current)
 
@@ -251,7 +266,7 @@ class Joint:
         d = self._finite("deceleration", self.motion.deceleration if deceleration is None else deceleration)
         self._check_position(position)
         if v <= 0:
-            raise CommandError(f"joint {self.name}: profile velocity must be > 0 rad/s, got {v}")
+            raise CommandError(f"joint {self.name}: profile velocity must be > 0 {self._u[1]}, got {v}")
         self._check_velocity(v, "profile velocity")
         self._check_accel(a, "acceleration")
         self._check_accel(d, "deceleration")
@@ -293,9 +308,29 @@ class Joint:
         self._check_torque(torque)
         self._refuse_if_faulted("set_torque")
         self._require_enabled()
-        amps = torque * self.direction / self.units.torque_constant
+        amps = torque * self.scale * self.direction / self.units.torque_constant
         self.driver.set_current(round(amps / self.units.current))
         self._contact()
+
+    def cycle_target(self, value: float, kind: str) -> int:
+        """A cyclic set-point (``Rig.cycle``) in device units, checked against the limits first.
+
+        ``kind``: "position" [rad], "velocity" [rad/s] or "torque" [N*m] (current units for the driver).
+        """
+        value = self._finite(kind, value)
+        if kind == "position":
+            self._check_position(value)
+            out = self._to_pos(value)
+        elif kind == "velocity":
+            self._check_velocity(value)
+            out = self._to_vel(value)
+        elif kind == "torque":
+            self._check_torque(value)
+            out = round(value * self.direction / self.units.torque_constant / self.units.current)
+        else:
+            raise CommandError(f"joint {self.name}: unknown set-point kind {kind!r}")
+        self._contact()
+        return out
 
     def stop(self) -> None:
         """Decelerate to standstill with the profile deceleration."""
@@ -324,8 +359,8 @@ class Joint:
         amps = raw.current * u.current * self.direction
         s = JointState(
             position=self._from_pos(raw.position),
-            velocity=raw.velocity * u.velocity * self.direction,
-            torque=amps * u.torque_constant,
+            velocity=raw.velocity * u.velocity * self.scale * self.direction,
+            torque=amps * u.torque_constant / self.scale,
             current=amps,
             temperature=raw.temperature,
             enabled=raw.enabled,
@@ -397,11 +432,11 @@ class Joint:
             self._check_position(self._from_pos(float(value)), what)
         elif kind == "relative":
             s = self.last_state or self.state()
-            self._check_position(s.position + float(value) * per_unit * self.direction, what)
+            self._check_position(s.position + float(value) * per_unit * self.scale * self.direction, what)
         elif kind == "velocity":
-            self._check_velocity(float(value) * per_unit, what)
+            self._check_velocity(float(value) * per_unit * self.scale, what)
         elif kind == "current":
-            self._check_torque(float(value) * per_unit * self.units.torque_constant, what)
+            self._check_torque(float(value) * per_unit * self.units.torque_constant / self.scale, what)
 
     def shutdown(self) -> None:
         """Stop and disable if it was enabled through this joint (``enable()`` or a raw write of

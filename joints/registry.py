@@ -65,6 +65,12 @@ class DeviceFamily:
     fronts: Mapping[str, Callable[[Any, int], Any]] = field(default_factory=dict)
     #: the communication watchdog armed while a joint is enabled [ms] unless its config says otherwise
     watchdog_ms: int | None = None
+    #: device name -> its profile's model when the config names none (one family, several devices)
+    device_models: Mapping[str, str] = field(default_factory=dict)
+    #: the status parameter ``joints scan`` reads to find a drive (every protocol of the family reaches it)
+    scan_param: str = "error_code"
+    #: protocol -> the operating modes a joint may name (joint key ``mode``; the first is the default)
+    modes: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
     @property
     def protocols(self) -> tuple[str, ...]:
@@ -77,7 +83,11 @@ class DeviceFamily:
         """The profile of a configured joint (``model`` + ``profile`` overrides); errors name the joint's key."""
         key = f"joints.{cfg.name}.model"
         try:
-            prof = self.profile(cfg.model)
+            own = self.device_models.get(cfg.device)
+            prof = self.profile(cfg.model or own)
+            if cfg.model and own and prof != self.profile(own):
+                raise ConfigError(f"model {cfg.model!r} is not a {cfg.device} (that is {own!r})", key="",
+                                  allowed=(own,))
             if cfg.profile:
                 key = f"joints.{cfg.name}.profile"
                 prof = prof.with_overrides(**dict(cfg.profile))
@@ -170,11 +180,44 @@ def _erob_can_device_bus(cfg: BusConfig) -> Any:
     return ErobCanBus(name=cfg.name, bitrate=cfg.bitrate)
 
 
+def _canopen_link(cfg: BusConfig, transport: Any, clock: Clock, peer: Any) -> Link[Any]:
+    from joints.link.base import RetryPolicy
+    from joints.link.canopen import CanopenLink
+    from joints.transports.can import PythonCanTransport
+    from joints.transports.can_sim import LockstepCanBus
+
+    sim = isinstance(transport, PythonCanTransport) and isinstance(transport.bus, LockstepCanBus)
+    link = CanopenLink(transport, policy=RetryPolicy(timeout=cfg.timeout, retries=cfg.retries), clock=clock,
+                       name=cfg.name, bus_clock=sim)
+    link.sync_period = cfg.sync_period
+    return link
+
+
+def _canopen_device_bus(cfg: BusConfig) -> Any:
+    from joints.sim.erob_canopen import ErobCanopenBus
+
+    return ErobCanopenBus(name=cfg.name, bitrate=cfg.bitrate)
+
+
 def _lockstep_can(device_bus: Any) -> Any:
     from joints.transports.can import PythonCanTransport
     from joints.transports.can_sim import LockstepCanBus
 
     return PythonCanTransport(LockstepCanBus(medium=device_bus.medium))
+
+
+def _mks_link(cfg: BusConfig, transport: Any, clock: Clock, peer: Any) -> Link[Any]:
+    from joints.link.base import RetryPolicy
+    from joints.link.mks import MksLink
+
+    return MksLink(transport, policy=RetryPolicy(timeout=cfg.timeout, retries=cfg.retries), echo=cfg.echo,
+                   clock=clock, name=cfg.name)
+
+
+def _mks_device_bus(cfg: BusConfig) -> Any:
+    from joints.sim.mks_front import MksDeviceBus
+
+    return MksDeviceBus()
 
 
 PROTOCOLS: dict[str, BusProtocol] = {
@@ -188,6 +231,18 @@ PROTOCOLS: dict[str, BusProtocol] = {
         name="erob-can", medium="can", addresses=(1, 127),
         description="ZeroErr eRob CAN custom protocol (requests 0x640+node, replies 0x5C0+node; 1 Mbit/s)",
         link=_erob_can_link, open_transport=_can_transport, device_bus=_erob_can_device_bus,
+        sim_transport=_lockstep_can,
+    ),
+    "mks-serial": BusProtocol(
+        name="mks-serial", medium="serial", addresses=(1, 255),
+        description="MKS SERVO42D/57D native RS485 protocol (0xFA/0xFB/0xFC, checksum-8, completion frames)",
+        link=_mks_link, open_transport=_serial_transport, device_bus=_mks_device_bus,
+        sim_transport=_byte_loopback, direct=False,  # completion frames come unasked: the byte path only
+    ),
+    "canopen": BusProtocol(
+        name="canopen", medium="can", addresses=(1, 127),
+        description="CANopen CiA 301/402 (SDO 0x600/0x580+node, PDOs, SYNC, NMT, heartbeat)",
+        link=_canopen_link, open_transport=_can_transport, device_bus=_canopen_device_bus,
         sim_transport=_lockstep_can,
     ),
 }
@@ -220,6 +275,30 @@ def _erob_can_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[Any
 
     return ErobCanDriver(link, cfg.address, profile=FAMILIES["erob"].config_profile(cfg), clock=clock,
                          name=cfg.name)
+
+
+def _erob_canopen_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[Any, Any]) -> JointDriver:
+    from joints.drivers.erob_canopen import ErobCanopenDriver, SyncCycle
+
+    period = cfg.sync_period or link.sync_period or 0.001
+    key = ("canopen-sync", id(link))
+    cycle = shared.get(key)
+    if cycle is None:
+        cycle = shared[key] = SyncCycle(link, period)
+    return ErobCanopenDriver(link, cfg.address, profile=FAMILIES["erob"].config_profile(cfg), clock=clock,
+                             name=cfg.name, mode=cfg.mode, sync_period=cycle.period, cycle=cycle)
+
+
+def _erob_canopen_table() -> Any:
+    from joints.devices.erob.canopen import EROB_CANOPEN
+
+    return EROB_CANOPEN
+
+
+def _erob_canopen_front(twin: Any, address: int) -> Any:
+    from joints.sim.erob_canopen import CanopenFront
+
+    return CanopenFront(twin, address)
 
 
 def _erob_can_table() -> Any:
@@ -305,15 +384,77 @@ def _zlac_modbus_front(twin: Any, address: int) -> Any:
     return ModbusFront(twin, ZLAC8015D, node_id="rs485_node_id")
 
 
+def _mks_params() -> ParamSet:
+    from joints.devices.mks.params import MKS_PARAMS
+
+    return MKS_PARAMS
+
+
+def _mks_profile(model: str | None) -> Any:
+    from joints.devices.mks.profile import DEFAULT_MODEL, profile
+
+    return profile(model or DEFAULT_MODEL)
+
+
+def _mks_native_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[Any, Any]) -> JointDriver:
+    from joints.drivers.mks_native import MksNativeDriver
+
+    return MksNativeDriver(link, cfg.address, device=cfg.device, profile=FAMILIES["mks"].config_profile(cfg),
+                           clock=clock, name=cfg.name)
+
+
+def _mks_modbus_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[Any, Any]) -> JointDriver:
+    from joints.drivers.mks_modbus import MksModbusDriver
+
+    return MksModbusDriver(link, cfg.address, device=cfg.device, profile=FAMILIES["mks"].config_profile(cfg),
+                           clock=clock, name=cfg.name)
+
+
+def _mks_native_table() -> Any:
+    from joints.devices.mks.tables import native_rows
+
+    return native_rows()
+
+
+def _mks_modbus_table() -> Any:
+    from joints.devices.mks.tables import modbus_rows
+
+    return modbus_rows()
+
+
+def _mks_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> tuple[Any, Mapping[Any, Any]]:
+    from joints.devices.mks.params import model_params
+    from joints.sim.mks import MksFirmware
+
+    d = specs[0]
+    twin = MksFirmware(d.profile, model_params(d.device), d.address, inertia=inertia[d.name],
+                       modbus=d.protocol == "modbus-rtu")
+    return twin, {None: twin}
+
+
+def _mks_native_front(twin: Any, address: int) -> Any:
+    from joints.sim.mks_front import MksNativeFront
+
+    return MksNativeFront(twin)
+
+
+def _mks_modbus_front(twin: Any, address: int) -> Any:
+    from joints.sim.mks_modbus_front import MksModbusFront
+
+    return MksModbusFront(twin)
+
+
 FAMILIES: dict[str, DeviceFamily] = {
     "erob": DeviceFamily(
         name="erob", devices=("erob",),
         description="ZeroErr eRob rotary actuator (70/80/90/110/142, ratios 50-160)",
         params=_erob_params, profile=_erob_profile,
-        drivers={"modbus-rtu": _erob_modbus_driver, "erob-can": _erob_can_driver},
-        tables={"modbus-rtu": _erob_modbus_table, "erob-can": _erob_can_table},
-        twin=_erob_twin, fronts={"modbus-rtu": _erob_modbus_front, "erob-can": _erob_can_front},
+        drivers={"modbus-rtu": _erob_modbus_driver, "erob-can": _erob_can_driver, "canopen": _erob_canopen_driver},
+        tables={"modbus-rtu": _erob_modbus_table, "erob-can": _erob_can_table, "canopen": _erob_canopen_table},
+        twin=_erob_twin,
+        fronts={"modbus-rtu": _erob_modbus_front, "erob-can": _erob_can_front, "canopen": _erob_canopen_front},
         watchdog_ms=1000,  # off at power-on (0x0002 = 0): armed while enabled, restored on disable
+        modes={"canopen": ("pp", "pv", "pt", "csp", "csv", "cst", "ip")},
     ),
     "zlac8015d": DeviceFamily(
         name="zlac8015d", devices=("zlac8015d",),
@@ -325,11 +466,22 @@ FAMILIES: dict[str, DeviceFamily] = {
         twin=_zlac_twin, fronts={"modbus-rtu": _zlac_modbus_front},
         watchdog_ms=1000,  # the drive's own default offline time (0x2000)
     ),
+    "mks": DeviceFamily(
+        name="mks", devices=("mks-servo42d", "mks-servo57d"),
+        description="MKS SERVO42D (NEMA17) / SERVO57D (NEMA23) closed-loop stepper drives; NO communication watchdog",
+        params=_mks_params, profile=_mks_profile,
+        drivers={"mks-serial": _mks_native_driver, "modbus-rtu": _mks_modbus_driver},
+        tables={"mks-serial": _mks_native_table, "modbus-rtu": _mks_modbus_table},
+        addresses={"mks-serial": (1, 255), "modbus-rtu": (1, 247)},
+        twin=_mks_twin, fronts={"mks-serial": _mks_native_front, "modbus-rtu": _mks_modbus_front},
+        device_models={"mks-servo42d": "SERVO42D", "mks-servo57d": "SERVO57D"},
+        scan_param="motor_status",  # 0xF1: the MKS reports no error code
+    ),
 }
 
 #: the config names users may write but no entry serves yet (a clear "not yet" instead of "unknown")
-PLANNED_DEVICES = ("mks-servo42d", "mks-servo57d")
-PLANNED_PROTOCOLS = ("mks-serial", "canopen")
+PLANNED_DEVICES: tuple[str, ...] = ()
+PLANNED_PROTOCOLS: tuple[str, ...] = ()
 
 
 # --- queries ----------------------------------------------------------------------------------

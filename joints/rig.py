@@ -28,8 +28,15 @@ from typing import Any
 from joints import exits, registry
 from joints.clock import Clock, MonotonicClock
 from joints.config import BusConfig, RigConfig, load, parse
-from joints.drivers.capabilities import CommunicationWatchdog, DriveGroup, GroupedChannel, SyncVelocityGroup
-from joints.errors import ConfigError, JointsError, UnknownJoint
+from joints.drivers.capabilities import (
+    CommunicationWatchdog,
+    CycleGroup,
+    CyclicJoint,
+    DriveGroup,
+    GroupedChannel,
+    SyncVelocityGroup,
+)
+from joints.errors import CommandError, ConfigError, DeviceFault, JointsError, UnknownJoint
 from joints.joint import Joint, JointState
 from joints.link.base import Link
 from joints.link.trace import TraceRecord
@@ -191,6 +198,51 @@ class Rig:
             driver.set_velocity(v, acceleration=acc, deceleration=acc)
             done.add(name)
 
+    def cycle(self, targets: Mapping[str, float]) -> dict[str, JointState]:
+        """One control cycle of cyclic joints (CANopen csp/csv/cst/ip): set-points in, that cycle's feedback out.
+
+        ``targets``: joint name -> position [rad] (csp, ip), velocity [rad/s] (csv) or torque [N*m]
+        (cst), each checked against the joint's limits before anything is sent. Per bus: wait until
+        the cycle is due (``sync_period`` after the last one: lockstep on the simulated clock in
+        sim), send every joint's RPDO and ONE SYNC, then return as soon as every joint's TPDO of
+        that cycle is in (a TPDO later than the period counts as late: ``rig.cycle_late()``).
+        Buses run side by side. A node that goes silent (heartbeat consumer, node guarding) stops
+        every other joint of the call and raises :class:`~joints.errors.DeviceFault` naming it.
+        """
+        plans: dict[int, tuple[CycleGroup, dict[object, int]]] = {}
+        names: dict[int, str] = {}
+        for name, value in targets.items():
+            j = self.joints[name]
+            driver = j.driver
+            if not isinstance(driver, CyclicJoint):
+                raise CommandError(f"joint {name}: {driver.device} over {driver.protocol} has no cyclic mode")
+            raw = j.cycle_target(value, driver.cycle_kind)
+            group = driver.group
+            plans.setdefault(id(group), (group, {}))[1][driver] = raw
+            names[id(driver)] = name
+        for group, cmds in plans.values():
+            group.send(cmds)
+        out: dict[str, JointState] = {}
+        try:
+            for group, _cmds in plans.values():
+                for member, raw_state in group.collect().items():
+                    name = names[id(member)]
+                    out[name] = self.joints[name].to_si(raw_state)
+        except DeviceFault as exc:
+            for name in targets:
+                if name != exc.device and self.joints[name].enabled:
+                    try:
+                        self.joints[name].stop()
+                    except JointsError as stop_exc:  # keep stopping the others
+                        log.error("stopping joint %s after %s failed: %s", name, exc, stop_exc)
+            raise
+        return {name: out[name] for name in targets}
+
+    def cycle_late(self) -> int:
+        """Feedback frames (TPDOs) that missed their cycle, over every bus, since the rig opened."""
+        groups = {id(j.driver.group): j.driver.group for j in self.joints.values() if isinstance(j.driver, CyclicJoint)}
+        return sum(g.late for g in groups.values())
+
     def reset(self) -> None:
         """Sim: physics to the model's initial state and every emulated drive to power-on.
 
@@ -313,7 +365,7 @@ def build(config: RigConfig, *, transports: Mapping[str, Any] | None = None,
             driver = fam.driver(jcfg, bus.link, clock, shared, bus.config.protocol)
             watchdog = jcfg.watchdog_ms if jcfg.watchdog_ms is not None else fam.watchdog_ms
             joints[name] = Joint(name, driver, clock=clock, limits=jcfg.limits, motion=jcfg.motion,
-                                 offset=jcfg.offset, direction=jcfg.direction,
+                                 offset=jcfg.offset, direction=jcfg.direction, lead=jcfg.lead,
                                  watchdog_ms=watchdog if isinstance(driver, CommunicationWatchdog) else None)
     except BaseException as exc:
         for t in opened.values():
@@ -361,7 +413,7 @@ def sim_world(cfg: RigConfig) -> Any:
             fam = registry.family(j.device, key=f"joints.{name}.device")
             drives.append(DriveSpec(bus=j.bus, name=name, mjcf_joint=j.mjcf_joint or name, address=j.address,
                                     profile=fam.config_profile(j), device=j.device, channel=j.channel,
-                                    protocol=cfg.buses[j.bus].protocol, maker=fam))
+                                    protocol=cfg.buses[j.bus].protocol, maker=fam, lead=j.lead))
         return World(cfg.sim.model, drives, buses=buses, timestep=cfg.sim.timestep, base_dir=cfg.base_dir)
     except ConfigError as exc:  # `joints sim serve` comes here directly: name the file too
         if exc.file is None:

@@ -358,11 +358,13 @@ def test_direction_must_be_plus_or_minus_one(direction: object) -> None:
     assert "[joints.shoulder.direction]" in msg and "(allowed: 1, -1)" in msg
 
 
-@pytest.mark.parametrize("device,protocol", [("zlac8015d", "canopen"), ("mks-servo42d", "modbus-rtu"),
-                                             ("erob", "canopen")])
+@pytest.mark.parametrize("device,protocol", [("zlac8015d", "canopen"), ("mks-servo42d", "canopen"),
+                                             ("zlac8015d", "erob-can")])
 def test_unsupported_device_protocol_pair(device: str, protocol: str) -> None:
     data = good()
     data["buses"]["rs485"]["protocol"] = protocol
+    if protocol != "modbus-rtu":
+        data["buses"]["rs485"]["interface"] = "socketcan"
     data["joints"]["shoulder"]["device"] = device
     if device == "zlac8015d":
         data["joints"]["shoulder"]["channel"] = "left"

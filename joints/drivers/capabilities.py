@@ -86,3 +86,33 @@ class Identity(Protocol):
     def identity(self) -> dict[str, object]:
         """JSON-friendly facts by name; an ability the drive's firmware lacks is said, not guessed."""
         ...
+
+
+@runtime_checkable
+class CycleGroup(Protocol):
+    """The cyclic exchange of one bus (CANopen: every joint's RPDO, one SYNC, that cycle's TPDOs)."""
+
+    period: float  #: s between two cycles
+    late: int  #: feedback frames that missed their cycle
+
+    def send(self, targets: Mapping[object, int]) -> None:
+        """Wait until the cycle is due (the rig's clock), then send each driver's set-point and the SYNC."""
+        ...
+
+    def collect(self) -> Mapping[object, RawState]:
+        """This cycle's feedback per driver (returns as soon as all came, at the latest at the period's end)."""
+        ...
+
+
+@runtime_checkable
+class CyclicJoint(Protocol):
+    """A joint driven by cyclic set-points through its bus's :class:`CycleGroup` (``Rig.cycle``)."""
+
+    @property
+    def cycle_kind(self) -> str:
+        """What one set-point is: "position", "velocity" or "torque" (raises if the mode is not cyclic)."""
+        ...
+
+    @property
+    def group(self) -> CycleGroup: ...
+

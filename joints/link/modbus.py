@@ -2,7 +2,10 @@
 
 Rule: a reply is accepted only if its slave, function and address/count answer the request;
 anything else raises (a reply from another slave is never accepted). Broadcast (slave 0) gets
-no reply. Only reads and writes marked idempotent are retried, so a lost reply to "start" can
+no reply. A device whose own frame breaks a Modbus rule (the MKS FC16 home-parameter request that
+announces 3 registers and 5 bytes, ERRATA DOC-MKS-5) is reached by sending that PDU as an
+:class:`~joints.codecs.modbus.UnsupportedRequest`: an FC06/FC16 PDU is a write, answered by the
+ordinary write reply to its address (and count). Only reads and writes marked idempotent are retried, so a lost reply to "start" can
 never start a motion twice. Frames that arrive while no request is outstanding (a reply too late
 for a request that timed out) are unsolicited: logged and traced, never taken as an answer.
 """
@@ -45,6 +48,8 @@ class ModbusRule(Rule[Any]):
         return request.slave != BROADCAST  # type: ignore[no-any-return]
 
     def is_write(self, request: Any) -> bool:
+        if isinstance(request, mb.UnsupportedRequest):
+            return request.function in (mb.WRITE_SINGLE_REGISTER, mb.WRITE_MULTIPLE_REGISTERS)
         return isinstance(request, (mb.WriteSingleRegister, mb.WriteMultipleRegisters))
 
     def before_send(self, framing: Framing[Any], request: Any, frame: Any) -> None:
@@ -91,6 +96,16 @@ class ModbusRule(Rule[Any]):
         elif (isinstance(request, mb.WriteMultipleRegisters) and isinstance(reply, mb.WriteMultipleRegistersReply)
               and reply.address == request.address and reply.count == len(request.values)):
             return True
+        elif isinstance(request, mb.UnsupportedRequest) and len(request.pdu) >= 4:
+            # a raw write PDU: start address and count (FC16) or value (FC06) lead it, as in every write
+            address, second = int.from_bytes(request.pdu[0:2], "big"), int.from_bytes(request.pdu[2:4], "big")
+            if isinstance(reply, mb.WriteMultipleRegistersReply) and request.function == mb.WRITE_MULTIPLE_REGISTERS:
+                answered = reply.address == address and reply.count == second
+            else:
+                answered = (isinstance(reply, mb.WriteSingleRegisterReply) and request.function == mb.WRITE_SINGLE_REGISTER
+                            and reply.address == address and reply.value == second)
+            if answered:
+                return True
         raise UnexpectedReply(f"reply {_describe(reply)} does not answer {_describe(request)}")
 
 
@@ -138,6 +153,11 @@ class ModbusLink(Link[Any]):
     def write_registers(self, slave: int, address: int, values: Sequence[int], *, idempotent: bool = True) -> None:
         """FC16 write of consecutive registers."""
         self.request(mb.WriteMultipleRegisters(slave, address, tuple(values)), idempotent=idempotent)
+
+    def write_pdu(self, slave: int, function: int, pdu: bytes, *, idempotent: bool = True) -> None:
+        """Send a write PDU exactly as given (after the function code): a device's own frame that breaks a
+        Modbus rule, such as the MKS FC16 0x90 request (3 registers, 5 bytes); the reply is the normal one."""
+        self.request(mb.UnsupportedRequest(slave, function, bytes(pdu)), idempotent=idempotent)
 
 
 __all__ = ["BROADCAST", "MessagePeer", "ModbusLink", "ModbusRule", "RetryPolicy"]

@@ -129,7 +129,7 @@ class CanEndpoint:
     def __init__(self, spec: ServedCan, device_bus: Any, *, max_rate: float = MAX_FRAMES_PER_S) -> None:
         from joints.transports.can import PythonCanTransport, python_can
 
-        can = python_can()
+        can = self._can = python_can()
         try:
             bus = can.Bus(interface=spec.interface, channel=spec.channel, **spec.kwargs())
         except can.CanInitializationError:
@@ -141,6 +141,9 @@ class CanEndpoint:
         self.spec = spec
         self.transport = PythonCanTransport(bus, echoes=spec.interface == "udp_multicast")
         self.device_bus = device_bus
+        medium = getattr(device_bus, "medium", None)
+        #: frames the twins send by themselves on their timed medium (heartbeats, event PDOs, EMCY)
+        self._tap = medium.attach("sim serve") if medium is not None else None
         self.spacing = 1.0 / max_rate
         self.out: deque[Any] = deque()
         self.next_send = 0.0
@@ -155,9 +158,19 @@ class CanEndpoint:
         while (frame := self.transport.recv(0.0)) is not None:
             self.frames_in += 1
             self.out.extend(self.device_bus.on_frame(frame))
+        self.collect()
+
+    def collect(self) -> None:
+        """Queue what the twins sent by themselves on their medium since the last call."""
+        tap = self._tap
+        while tap is not None and tap.rx:
+            f = tap.rx.popleft()
+            self.out.append(self._can.Message(arbitration_id=f.arbitration_id, is_extended_id=f.is_extended_id,
+                                        is_remote_frame=f.is_remote_frame, dlc=f.dlc, data=f.data))
 
     def send_due(self, now: float) -> float | None:
         """Send what the pacing allows at wall time ``now``; the time of the next send, if any wait."""
+        self.collect()
         while self.out and now >= self.next_send:
             self.transport.send(self.out.popleft())
             self.frames_out += 1

@@ -252,6 +252,9 @@ class ErobFirmware(Firmware):
         self.brake_released = False  #: released by command while the motor is off: nothing holds the joint
         self.last_frame = -1.0
         self.started = False
+        #: a set-point stream drives the position reference (CiA 402 CSP/IP over CANopen): between
+        #: set-points the reference moves on at v_ref (linear interpolation); set by a protocol front
+        self.streaming = False
         self._sup = 0.0
         self._cache_settings()
 
@@ -392,6 +395,10 @@ class ErobFirmware(Firmware):
         """The motor is on and its brake released: motion commands act now (for protocol fronts)."""
         return self._ready()
 
+    def trip(self, code: int) -> None:
+        """A protection a protocol front supervises (CANopen life guarding) trips with ``code``."""
+        self._raise_fault(code)
+
     def _release_brake(self, value: int) -> None:
         """Release the holding brake of a motor that is off (CAN 0x014F): the joint moves freely until
         the next enable or disable hands the brake back to the drive."""
@@ -402,6 +409,7 @@ class ErobFirmware(Firmware):
         """Disable / fault: the loops stop and the brake engages where the joint is."""
         self.gen = _Profile()
         self.v_ref = 0.0
+        self.streaming = False
         self.mode_speed_target = 0.0
         self.i_cmd = self.i_out = 0.0
         self.integ = 0.0
@@ -650,6 +658,9 @@ class ErobFirmware(Firmware):
     def _profile_step(self, dt: float) -> None:
         g = self.gen
         if not g.active:
+            if self.streaming:
+                self.p_ref += self.v_ref * dt  # between two streamed set-points
+                return
             if self.dwell_until >= 0 and self.time >= self.dwell_until:
                 self.dwell_until = -1.0
                 self._next_repetitive_leg()

@@ -15,6 +15,12 @@ register reads and writes into firmware reads and writes through a
 * firmware refusals map to exception codes (:data:`EXCEPTION_FOR`): unknown / not readable /
   not writable -> 02, out of range / refused in this state -> 03.
 
+A bus holds any :class:`ModbusSlave` (a family whose device is not a flat register file brings its
+own front, e.g. :mod:`joints.sim.mks_modbus_front`). A CRC-valid frame whose byte count breaks the
+Modbus rules is offered to its slave (:meth:`ModbusSlave.malformed`): a :class:`ModbusFront`
+answers exception 03 (an FC16 whose byte count disagrees with its register count), as the Modbus
+application protocol requires; a drive whose manual documents such a frame answers it its way.
+
 Every frame addressed to a front (and every broadcast it executes) is reported to the firmware
 (:meth:`~joints.sim.firmware.Firmware.frame_received`) before it is served. No register image is
 kept: the firmware holds typed values by name, a read packs only its block (plans are cached per
@@ -25,6 +31,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable, Iterable, Mapping
+from typing import Any, Protocol
 
 from joints.codecs import modbus as mb
 from joints.codecs.crc import crc_ok
@@ -41,6 +48,7 @@ __all__ = [
     "ModbusDeviceBus",
     "ModbusException",
     "ModbusFront",
+    "ModbusSlave",
 ]
 
 ILLEGAL_FUNCTION = 0x01
@@ -68,6 +76,21 @@ _ReadPlan = tuple[Callable[[], list[int]] | None, struct.Struct | None, struct.S
 _FORMAT = {"uint16": "H", "int16": "h", "uint32": "I", "int32": "i"}
 #: a write plan: per register (name, offset in the block, words, signed, low word first)
 _WritePlan = tuple[tuple[str, int, int, bool, bool], ...]
+
+
+class ModbusSlave(Protocol):
+    """What a :class:`ModbusDeviceBus` needs from one slave."""
+
+    @property
+    def address(self) -> int: ...
+
+    def handle(self, request: mb.Request | mb.UnsupportedRequest) -> mb.Reply | None:
+        """Execute a request addressed to this slave; its reply (None: silence)."""
+        ...
+
+    def malformed(self, frame: bytes) -> mb.Reply | None:
+        """A CRC-valid frame for this slave whose byte count a Modbus codec rejects; the reply (None: silence)."""
+        ...
 
 
 class ModbusException(Exception):
@@ -275,18 +298,18 @@ class ModbusDeviceBus:
     cycle (two fronts on one address: the one added first answers).
     """
 
-    def __init__(self, slaves: Iterable[ModbusFront] = (), *, trace: Callable[[str, bytes], None] | None = None) -> None:
-        self._fronts: list[ModbusFront] = []
-        self._slaves: dict[int, ModbusFront] = {}
+    def __init__(self, slaves: Iterable[ModbusSlave] = (), *, trace: Callable[[str, bytes], None] | None = None) -> None:
+        self._fronts: list[ModbusSlave] = []
+        self._slaves: dict[int, ModbusSlave] = {}
         #: fronts whose address comes from a parameter, with the power-on values it was taken from
-        self._watch: list[tuple[ModbusFront, object]] = []
+        self._watch: list[tuple[Any, object]] = []
         for s in slaves:
             self.add(s)
         self._codec = mb.ModbusRtuCodec(mb.Role.DEVICE)
         self.trace = trace
         self.frame_errors = 0
 
-    def add(self, slave: ModbusFront) -> None:
+    def add(self, slave: ModbusSlave) -> None:
         address = slave.address
         if address in self.slaves:
             raise ValueError(f"two emulated slaves at address {address}")
@@ -294,14 +317,15 @@ class ModbusDeviceBus:
         self._refresh()
 
     def _refresh(self) -> None:
-        by_address: dict[int, ModbusFront] = {}
+        by_address: dict[int, ModbusSlave] = {}
         for front in self._fronts:
             by_address.setdefault(front.address, front)
         self._slaves = by_address
-        self._watch = [(f, f.firmware.power_on_values) for f in self._fronts if getattr(f, "node_id", None)]
+        fronts: list[Any] = self._fronts  # a ModbusFront's address may come from its firmware
+        self._watch = [(f, f.firmware.power_on_values) for f in fronts if getattr(f, "node_id", None)]
 
     @property
-    def slaves(self) -> dict[int, ModbusFront]:
+    def slaves(self) -> dict[int, ModbusSlave]:
         """The fronts by the address each answers on now (a power cycle may have moved one)."""
         for front, seen in self._watch:
             if front.firmware.power_on_values is not seen:
@@ -326,7 +350,7 @@ class ModbusDeviceBus:
             try:
                 msg = codec.next_message()
             except ByteCountError as exc:
-                # well framed, CRC valid, counts inconsistent: the addressed slave answers (exception 03)
+                # well framed, CRC valid, counts inconsistent: the addressed slave decides (03 from a ModbusFront)
                 answer = self._malformed(exc.data)
                 if answer is None:
                     self.frame_errors += 1

@@ -3,8 +3,10 @@
 Rule: the world runs on the wall clock here (and only here); the emulated drives answer whatever
 arrives between physics substeps, exactly as in process. A request is executed and answered as
 soon as it is read, and the ports are read after at most :data:`SERVICE_PERIOD` of physics, so
-no request waits behind a simulation that runs slower than real time. Serial buses (Modbus RTU) are
-pseudo-terminals; CAN buses are python-can channels another process can open
+no request waits behind a simulation that runs slower than real time. Serial buses (Modbus RTU,
+MKS native) are pseudo-terminals; frames the drives send by themselves (MKS completion frames: an
+:class:`~joints.transports.loopback.UnsolicitedPeer`) go out as soon as the physics produced them.
+CAN buses are python-can channels another process can open
 (:mod:`joints.sim.can_serve`: udp_multicast by default, a vcan device where the config names one;
 never a real bus). Stops cleanly on SIGINT/SIGTERM or when ``stop`` is set.
 """
@@ -20,6 +22,7 @@ from collections.abc import Callable, Mapping
 from typing import Any, TextIO
 
 from joints.sim.can_serve import CanEndpoint, ServedCan
+from joints.transports.loopback import UnsolicitedPeer
 from joints.transports.pty import PtyEndpoint
 
 IDLE_FLUSH = 0.005  #: s of silence after which a partial frame is dropped (t3.5, generously)
@@ -135,3 +138,9 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
             started = time.monotonic()
             world.step(n)
             slices.measured(n, time.monotonic() - started)
+            for name, ep in endpoints.items():
+                bus = world.buses[name]
+                if isinstance(bus, UnsolicitedPeer):
+                    data = bus.take_unsolicited()
+                    if data:
+                        ep.write(data)

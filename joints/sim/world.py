@@ -5,6 +5,14 @@ registers and writes a torque to its MuJoCo ``motor`` actuator; register traffic
 substeps, at the caller's rate, on the simulated clock (lockstep). Actuator and joint parameters
 (armature = reflected rotor inertia, damping, friction loss, torque range) come from the device
 profile, not from the XML. Nothing here reads the wall clock.
+
+Joints: a hinge is driven directly (joint angle = motor angle). A slide is driven through a lead
+screw: its drive's ``lead`` [m per motor turn] gives the ratio r = 2 pi / lead [rad per m]; the
+motor torque becomes the force r x torque on the slide (the actuator's gear), the rotor inertia
+the armature r^2 J, the motor's viscous and Coulomb friction r^2 b and r c; the twin sees the
+motor angle r x q. End-stop switches: a slide whose model has the sites ``<joint>_switch_low`` and
+``<joint>_switch_high`` (fixed) and ``<joint>_switch_flag`` (on the moving body) tells a twin that
+has end-stop inputs (:class:`EndStops`) the motor angles where the flag reaches each switch.
 """
 
 from __future__ import annotations
@@ -87,6 +95,15 @@ class TwinMaker(Protocol):
 
 
 @runtime_checkable
+class EndStops(Protocol):
+    """A twin with end-stop switch inputs (the world computes where they trigger from the geometry)."""
+
+    def set_end_stops(self, low: float | None, high: float | None) -> None:
+        """Motor angles [rad] at or below / at or above which the low / high switch is triggered."""
+        ...
+
+
+@runtime_checkable
 class TimedDeviceBus(Protocol):
     """A device bus that lives on the simulated clock (a CAN medium: frames take wire time)."""
 
@@ -113,6 +130,7 @@ class DriveSpec:
     protocol: str = "modbus-rtu"
     channel: str | None = None  #: a multi-channel drive's channel ("left" / "right")
     extra: dict[str, Any] = field(default_factory=dict)
+    lead: float | None = None  #: m of slide travel per motor turn (a slide joint on a lead screw)
 
 
 @dataclass(frozen=True)
@@ -135,6 +153,7 @@ class _Bound:
     aid: int
     channel: str | None = None
     mjcf_joint: str = ""
+    ratio: float = 1.0  #: motor rad per joint unit (2 pi / lead for a slide, 1 for a hinge)
 
 
 @dataclass(frozen=True)
@@ -154,6 +173,22 @@ class Tunable(Protocol):
     def gain_params(self, channel: str | None) -> Mapping[str, str]:
         """``{"position": name, "speed": name, "integral": name}`` for the channel's loop gains."""
         ...
+
+
+def _ratio(mj: Any, jnt: Any, d: DriveSpec) -> float:
+    """Motor rad per joint unit: 1 for a hinge, 2 pi / lead for a slide (which needs the lead)."""
+    if jnt.type == mj.mjtJoint.mjJNT_HINGE:
+        if d.lead is not None:
+            raise ConfigError(f"MJCF joint {d.mjcf_joint!r} is a hinge: a joint with a lead must be a slide",
+                              key=f"joints.{d.name}.lead")
+        return 1.0
+    if jnt.type == mj.mjtJoint.mjJNT_SLIDE:
+        if d.lead is None:
+            raise ConfigError(f"MJCF joint {d.mjcf_joint!r} is a slide: give the joint's lead [m per motor turn]",
+                              key=f"joints.{d.name}.lead")
+        return 2.0 * math.pi / d.lead
+    raise ConfigError(f"MJCF joint {d.mjcf_joint!r} must be a hinge (or a slide with a lead)",
+                      key=f"joints.{d.name}.mjcf_joint")
 
 
 def _make_twins(specs: Sequence[DriveSpec], inertia: Mapping[str, float]) -> dict[str, tuple[Any, Stepper]]:
@@ -194,16 +229,15 @@ class World:
                     f"joint {d.name!r}: MJCF joint {d.mjcf_joint!r} is not in {self.path.name}",
                     key=f"joints.{d.name}.mjcf_joint", allowed=joint_names,
                 )
-            if jnt.type != mj.mjtJoint.mjJNT_HINGE:
-                raise ConfigError(f"MJCF joint {d.mjcf_joint!r} must be a hinge", key=f"joints.{d.name}.mjcf_joint")
+            r = _ratio(mj, jnt, d)
             prof = d.profile
-            jnt.armature = prof.armature
+            jnt.armature = prof.armature * r * r
             damping = jnt.damping
             if hasattr(damping, "__len__"):  # MuJoCo >= 4: [linear, quadratic, cubic] coefficients
-                jnt.damping = [prof.viscous_friction] + [0.0] * (len(damping) - 1)
+                jnt.damping = [prof.viscous_friction * r * r] + [0.0] * (len(damping) - 1)
             else:
-                jnt.damping = prof.viscous_friction
-            jnt.frictionloss = prof.coulomb_friction
+                jnt.damping = prof.viscous_friction * r * r
+            jnt.frictionloss = prof.coulomb_friction * r
             for act in list(spec.actuators):
                 if act.target == d.mjcf_joint:
                     spec.delete(act)
@@ -212,6 +246,7 @@ class World:
             act.trntype = mj.mjtTrn.mjTRN_JOINT
             act.target = d.mjcf_joint
             act.gainprm[0] = 1.0
+            act.gear[0] = r  # ctrl is the motor torque; the slide gets r x torque
             act.ctrllimited = 1
             act.ctrlrange = [-prof.max_torque, prof.max_torque]
         self.model = spec.compile()
@@ -223,11 +258,14 @@ class World:
         self.clock = ManualClock()
         self.clock.bind(self.advance)
         addr: dict[str, tuple[int, int, int]] = {}
+        ratios: dict[str, float] = {}
         for d in drives:
             jid = mj.mj_name2id(self.model, mj.mjtObj.mjOBJ_JOINT, d.mjcf_joint)
             aid = mj.mj_name2id(self.model, mj.mjtObj.mjOBJ_ACTUATOR, f"{d.name}_motor")
             addr[d.name] = (int(self.model.jnt_qposadr[jid]), int(self.model.jnt_dofadr[jid]), aid)
-        inertia = {name: self._dof_inertia(dof) for name, (_qa, dof, _aid) in addr.items()}
+            ratios[d.name] = float(self.model.actuator_gear[aid, 0])
+        # the inertia each drive sees at its motor (joint-space inertia / r^2)
+        inertia = {name: self._dof_inertia(dof) / ratios[name] ** 2 for name, (_qa, dof, _aid) in addr.items()}
         made = _make_twins(drives, inertia)
         self.drives: dict[str, Any] = {}  #: joint name -> its drive's twin (shared by channels)
         self.bus_specs = dict(buses)
@@ -241,9 +279,12 @@ class World:
                 self.buses[d.bus].add(d.maker.front(d.protocol, twin, d.address))
                 fronts.add((d.bus, d.address))
             qa, da, aid = addr[d.name]
-            self._bound.append(_Bound(d.name, twin, stepper, qa, da, aid, d.channel, d.mjcf_joint))
-            stepper.place(float(self.data.qpos[qa]))
-        self._bind = [(b.stepper.step, b.qadr, b.dadr, b.aid) for b in self._bound]
+            r = ratios[d.name]
+            self._bound.append(_Bound(d.name, twin, stepper, qa, da, aid, d.channel, d.mjcf_joint, r))
+            if isinstance(stepper, EndStops):
+                stepper.set_end_stops(*self._switches(d.mjcf_joint, qa, r))
+            stepper.place(float(self.data.qpos[qa]) * r)
+        self._bind = [(b.stepper.step, b.qadr, b.dadr, b.aid, b.ratio) for b in self._bound]
         timed = [bus for bus in self.buses.values() if isinstance(bus, TimedDeviceBus)]
         for bus in timed:
             bus.bind_clock(self.clock)
@@ -256,6 +297,26 @@ class World:
         self._nominal_gains: dict[str, dict[str, int]] = {}
         #: one caller steps the physics at a time (two threads sleeping on one rig must not share MjData)
         self.lock = threading.RLock()
+
+    def _switches(self, joint: str, qadr: int, ratio: float) -> tuple[float | None, float | None]:
+        """Motor angles where the ``<joint>_switch_flag`` site reaches ``<joint>_switch_low`` / ``_high``
+        (a slide's sites; None where the model has no such switch)."""
+        mj, m, d = self.mujoco, self.model, self.data
+        jid = mj.mj_name2id(m, mj.mjtObj.mjOBJ_JOINT, joint)
+        flag = mj.mj_name2id(m, mj.mjtObj.mjOBJ_SITE, f"{joint}_switch_flag")
+        if flag < 0 or m.jnt_type[jid] != mj.mjtJoint.mjJNT_SLIDE:
+            return None, None
+        axis = d.xaxis[jid]
+        q = float(d.qpos[qadr])
+        out: list[float | None] = []
+        for end in ("low", "high"):
+            sid = mj.mj_name2id(m, mj.mjtObj.mjOBJ_SITE, f"{joint}_switch_{end}")
+            if sid < 0:
+                out.append(None)
+                continue
+            at = q + float((d.site_xpos[sid] - d.site_xpos[flag]) @ axis)  # joint position where they meet
+            out.append(at * ratio)
+        return out[0], out[1]
 
     def _dof_inertia(self, dof: int) -> float:
         """Diagonal of the joint-space inertia (incl. armature) at the current pose [kg*m^2]."""
@@ -293,8 +354,8 @@ class World:
             try:
                 for _ in range(n):
                     t = (self.steps + 1) * dt
-                    for step, qa, da, aid in bind:
-                        ctrl[aid] = step(t, dt, float(qpos[qa]), float(qvel[da]))
+                    for step, qa, da, aid, r in bind:
+                        ctrl[aid] = step(t, dt, float(qpos[qa]) * r, float(qvel[da]) * r)
                     mj_step(m, d)
                     self.steps += 1
                     if ticks:
@@ -341,10 +402,10 @@ class World:
             emu.power_cycle()
             emu.time = 0.0
         for b in self._bound:
-            b.stepper.place(float(self.data.qpos[b.qadr]))
+            b.stepper.place(float(self.data.qpos[b.qadr]) * b.ratio)
 
     def set_joint_positions(self, positions: Mapping[str, float]) -> None:
-        """Place drives' joints at ``positions`` (joint name -> MJCF angle [rad]) at rest.
+        """Place drives' joints at ``positions`` (joint name -> MJCF position: rad, m for a slide) at rest.
 
         For a start state right after :meth:`reset`, while the drives are disabled: sets the joint
         angles, zeroes their velocities, recomputes the kinematics and lets each drive's encoder
@@ -363,7 +424,7 @@ class World:
         self.mujoco.mj_forward(self.model, self.data)
         for b in self._bound:
             if b.name in positions:
-                b.stepper.place(float(self.data.qpos[b.qadr]))
+                b.stepper.place(float(self.data.qpos[b.qadr]) * b.ratio)
 
     def joint_position(self, name: str) -> float:
         """Ground truth joint angle [rad] from the physics (for tests and envs' task terms)."""

@@ -4,7 +4,8 @@ Rule: no threads, no wall clock. Time moves only by the clock the medium is boun
 simulated world's clock) or, for a medium of its own, by the waits of its nodes. Every frame
 occupies the bus for its wire time at the medium's bit rate (:mod:`joints.transports.can_timing`;
 worst-case bit stuffing by default), frames waiting for the bus are arbitrated by identifier
-(the lowest wins, as the dominant bits do on a real bus; frames of one node keep their order),
+(the lowest wins, as the dominant bits do on a real bus; the frames of one python-can node keep
+their order, as its controller's transmit queue does),
 and the medium counts frames, bits and busy time so the bus load can be measured.
 
 Nodes:
@@ -271,7 +272,7 @@ class CanMedium:
                 start = max(self._free, min(p.ready for p in self._pending))
                 if start > until:
                     return
-                winner = min((p for p in self._pending if p.ready <= start), key=lambda p: (p.key, p.seq))
+                winner = min(self._contenders(start), key=lambda p: (p.key, p.seq))
                 self._pending.remove(winner)
                 bits = self._bits(winner.frame)
                 wire = self._wire = (start, start + bits / self.bitrate, winner)
@@ -284,6 +285,24 @@ class CanMedium:
             self._wire = None
             self._free = end
             self._deliver(pend, end)
+
+    def _contenders(self, start: float) -> list[_Pending]:
+        """Frames that compete for the bus at ``start``: a python-can node's oldest ready frame (its
+        controller sends in order, so a SYNC queued after RPDOs goes after them), every ready
+        frame of a peer (in-process devices, each with its own controller)."""
+        heads: dict[int, _Pending] = {}
+        out: list[_Pending] = []
+        for p in self._pending:
+            if p.ready > start:
+                continue
+            if p.sender.peer is not None:
+                out.append(p)
+                continue
+            head = heads.get(id(p.sender))
+            if head is None or p.seq < head.seq:
+                heads[id(p.sender)] = p
+        out.extend(heads.values())
+        return out
 
     def _deliver(self, pend: _Pending, t: float) -> None:
         self._delivering = t

@@ -32,9 +32,11 @@ bits standard (135 bits for 8 bytes) and ``67 + 8n + floor((53 + 8n) / 4)`` exte
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["STUFFING", "frame_bits", "frame_time", "stuff_bits", "unstuffed_bits"]
+__all__ = ["STUFFING", "CycleLoad", "canopen_cycle_load", "frame_bits", "frame_time", "stuff_bits", "unstuffed_bits"]
 
 #: the stuffing models :func:`frame_bits` knows: worst-case bound, exact count, none
 STUFFING = ("worst", "exact", "none")
@@ -118,3 +120,66 @@ def frame_bits(frame: Any, stuffing: str = "worst") -> int:
 def frame_time(frame: Any, bitrate: float, stuffing: str = "worst") -> float:
     """Seconds the frame occupies a bus of ``bitrate`` bit/s."""
     return frame_bits(frame, stuffing) / bitrate
+
+
+@dataclass(frozen=True, slots=True)
+class CycleLoad:
+    """Bus load of one cyclic exchange (:func:`canopen_cycle_load`)."""
+
+    bits_best: int  #: bits per cycle without stuffing
+    bits_worst: int  #: bits per cycle with the worst-case stuffing bound
+    period: float  #: s
+    bitrate: int
+
+    @property
+    def best(self) -> float:
+        """Load without stuffing (1.0 = the whole period)."""
+        return self.bits_best / (self.bitrate * self.period)
+
+    @property
+    def worst(self) -> float:
+        """Load with worst-case stuffing: the bound a schedule must fit."""
+        return self.bits_worst / (self.bitrate * self.period)
+
+    @property
+    def fits(self) -> bool:
+        """Every frame of a cycle is on the wire within the period, whatever the stuffing."""
+        return self.worst <= 1.0
+
+
+class _Frame:
+    """A stand-in frame for the formulas (standard id, data frame of ``size`` bytes)."""
+
+    def __init__(self, cob_id: int, size: int) -> None:
+        self.arbitration_id = cob_id
+        self.is_extended_id = False
+        self.is_remote_frame = False
+        self.data = bytes(size)
+        self.dlc = size
+
+
+def canopen_cycle_load(nodes: int | Sequence[int], *, rpdo_bytes: Sequence[int] = (6,),
+                       tpdo_bytes: Sequence[int] = (6,), sync_period: float = 0.001, bitrate: int = 1_000_000,
+                       sync_bytes: int = 0, extra_frames: Sequence[int] = ()) -> CycleLoad:
+    """The bus load of a CANopen SYNC cycle and whether it fits (worst-case bit stuffing).
+
+    Per cycle: one SYNC (``sync_bytes`` data: 0, or 1 with a counter), and for every node one frame
+    per entry of ``rpdo_bytes`` (host -> node) and of ``tpdo_bytes`` (node -> host), each of that
+    many data bytes (the PDO mapping's length); ``extra_frames`` adds other frames per cycle by
+    data length. ``nodes``: a count or the node ids. eRunner's mapping (RPDO1 controlword + 32-bit
+    target, TPDO1 statusword + position: 6 + 6 bytes) at 1 kHz on 1 Mbit/s: 3 nodes 62-75 %,
+    4 nodes 81-98 %, 5 nodes 100-121 % (without - with worst-case stuffing).
+    """
+    ids = list(range(1, nodes + 1)) if isinstance(nodes, int) else list(nodes)
+    if sync_period <= 0 or bitrate <= 0:
+        raise ValueError("sync_period and bitrate must be > 0")
+    frames = [_Frame(0x080, sync_bytes)]
+    for node in ids:
+        frames += [_Frame(0x200 + node, n) for n in rpdo_bytes]
+        frames += [_Frame(0x180 + node, n) for n in tpdo_bytes]
+    frames += [_Frame(0x7FF, n) for n in extra_frames]
+    for f in frames:
+        if not 0 <= f.dlc <= 8:
+            raise ValueError(f"a classic CAN frame carries 0..8 data bytes, got {f.dlc}")
+    return CycleLoad(sum(frame_bits(f, "none") for f in frames), sum(frame_bits(f, "worst") for f in frames),
+                     sync_period, bitrate)

@@ -2,13 +2,14 @@
 
 Rule: synchronous and deterministic. A write hands the bytes to the peer at once and queues its
 answer; a read returns what is queued or ``b""`` at once (nothing else can arrive in process, so
-an empty read is a timeout that cost no wall-clock time).
+an empty read is a timeout that cost no wall-clock time). A peer that sends frames by itself (an
+:class:`UnsolicitedPeer`, e.g. MKS drives' completion frames) is asked for them on every read.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 from joints.errors import TransportError
 from joints.transports.base import ByteTransport
@@ -18,6 +19,15 @@ class BytePeer(Protocol):
     """What sits on the other end: receives bytes, returns the bytes it sends back."""
 
     def receive(self, data: bytes) -> bytes: ...
+
+
+@runtime_checkable
+class UnsolicitedPeer(Protocol):
+    """A peer that also sends frames nobody asked for (completion frames on the simulated clock)."""
+
+    def take_unsolicited(self) -> bytes:
+        """The bytes it sent by itself since the last call (oldest first)."""
+        ...
 
 
 class LoopbackTransport(ByteTransport):
@@ -55,6 +65,9 @@ class LoopbackTransport(ByteTransport):
     def read(self, timeout: float) -> bytes:
         if self._closed:
             raise TransportError("loopback transport is closed")
+        peer = self._peer
+        if isinstance(peer, UnsolicitedPeer):
+            self._rx += peer.take_unsolicited()
         data = bytes(self._rx)
         self._rx.clear()
         self.rx_bytes += len(data)

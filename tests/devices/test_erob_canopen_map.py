@@ -38,7 +38,7 @@ SHARED = {
     "error_code", "given_position", "actual_position", "max_position_error", "position_reaches_set_precision",
     "time_setting_of_achieving_position", "given_speed", "current_speed", "motor_current", "bus_voltage",
     "target_absolute_position", "min_position_limit_value", "max_position_limit_value", "profile_speed",
-    "profile_acceleration", "profile_deceleration", "position_error", "target_speed",
+    "profile_acceleration", "profile_deceleration", "position_error", "target_speed", "max_speed", "max_motor_current",
 }
 CANOPEN_ONLY = {p.name for p in OTHER_PROTOCOLS if re.match(r"0x[0-9A-F]{4}", p.description)}
 

@@ -43,6 +43,8 @@ assumption to confirm on a real eRob:
 * E8 0x1006 defaults to 1000 us (chapter 3: "通信周期 ... 默认设置为1000 µs"); 0x1005 to 0x80
   (consumer of SYNC 0x080, as eRunner writes it). 0x603F error code holds the eRob error code
   of :mod:`joints.devices.erob.faults` (same quantity as Modbus 0x0060).
+* E10 0x6073 max current is in mA (like E1; CiA 402: per mille of rated current) and 0x6080 max
+  motor speed in count/s: the joint's limits go there (the Modbus max_motor_current / max_speed).
 * E9 Only the objects above exist; vendor id, product code, revision and serial number read 0.
 """
 
@@ -265,6 +267,7 @@ _o("time_setting_of_achieving_position", 0x6068, 0, _U16, _RW, "Position window 
 _o("given_speed", 0x606B, 0, _I32, _RO, "Velocity demand value", pdo=True)
 _o("current_speed", 0x606C, 0, _I32, _RO, "Velocity actual value", pdo=True)
 _o("target_torque", 0x6071, 0, _I16, _RWW, "Target torque", pdo=True)
+_o("max_motor_current", 0x6073, 0, _U16, _RW, "Max current")
 _o("torque_actual_value", 0x6077, 0, _I16, _RO, "Torque actual value", pdo=True)
 _o("motor_current", 0x6078, 0, _I16, _RO, "Current actual value", pdo=True)
 _o("bus_voltage", 0x6079, 0, _U32, _RO, "DC link circuit voltage", pdo=True)
@@ -272,6 +275,7 @@ _o("target_absolute_position", 0x607A, 0, _I32, _RWW, "Target position", pdo=Tru
 _o("software_position_limit_highest_subindex", 0x607D, 0, _U8, _RO, "Highest sub-index supported")
 _o("min_position_limit_value", 0x607D, 1, _I32, _RW, "Min position limit")
 _o("max_position_limit_value", 0x607D, 2, _I32, _RW, "Max position limit")
+_o("max_speed", 0x6080, 0, _U32, _RW, "Max motor speed")
 _o("profile_speed", 0x6081, 0, _U32, _RWW, "Profile velocity", pdo=True)
 _o("profile_acceleration", 0x6083, 0, _U32, _RWW, "Profile acceleration", pdo=True)
 _o("profile_deceleration", 0x6084, 0, _U32, _RWW, "Profile deceleration", pdo=True)

@@ -104,6 +104,11 @@ class MksProfile:
         return self.no_load_speed / _RPM
 
     @property
+    def max_torque(self) -> float:
+        """Largest motor torque [N*m] (the world's actuator range): the holding torque."""
+        return self.holding_torque
+
+    @property
     def armature(self) -> float:
         """Rotor inertia at the joint [kg*m^2] (direct drive)."""
         return self.rotor_inertia

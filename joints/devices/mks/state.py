@@ -57,6 +57,7 @@ __all__ = [
     "Transition",
     "WorkMode",
     "ZeroMode",
+    "acc_for_rate",
     "step",
 ]
 
@@ -360,6 +361,14 @@ def acceleration(acc: int) -> float:
     """Acceleration [rpm/s] of ``acc`` (inf for acc = 0). acc = 236 -> 1000 rpm/s."""
     interval = ramp_interval(acc)
     return math.inf if interval == 0.0 else 1.0 / interval
+
+
+def acc_for_rate(rate: float) -> int:
+    """The acc (1..255) whose ramp comes closest to ``rate`` [speed units per second] (inverse of
+    :func:`acceleration`); rates beyond acc = 255 (20000/s) give 255, below acc = 1 (78.4/s) give 1."""
+    if not rate > 0:
+        raise ValueError(f"acceleration rate must be > 0, got {rate}")
+    return max(1, min(255, round(256 - 1.0 / (rate * 50 * _US))))
 
 
 def ramp_time(from_rpm: float, to_rpm: float, acc: int) -> float:

@@ -1,0 +1,715 @@
+"""ZeroErr eRob over CANopen CiA 402 (eRunner manual v1.7 chapter 5): objects by SDO, motion by PDO.
+
+Rule: parameters travel as objects of :data:`~joints.devices.erob.canopen.EROB_CANOPEN` by SDO
+(:class:`CanopenAccess`); motion is the CiA 402 state machine (:mod:`joints.devices.cia402`) driven
+by RPDO1 = controlword + the mode's target (eRunner's mapping, E5) and read back from TPDO1 =
+statusword + position (+ TPDO2 = velocity + current in the profile modes), all sent on SYNC: a
+state read is one SYNC and that cycle's TPDOs. Same ``Joint`` API and units as the Modbus eRob.
+
+Bring-up (chapter 5's sequence, figs 5-5 .. 5-38): NMT stop, NMT reset communication (wait for
+the boot-up), 0x6060 mode and a read of 0x6061, [cyclic: 0x1005 = 0x80, 0x1006 = period; IP:
+0x60C2], TPDO and RPDO mapping (only the SDOs that change the power-on mapping), heartbeat 0x1017,
+NMT start. A mode change disables first (the drive refuses 0x6060 in OPERATION ENABLED with
+0x08000022) and repeats the bring-up; the joint is enabled again if it was.
+
+Modes (config ``mode``): ``pp`` (the default; ``move_to``: target + new set-point with change
+set immediately, wait for the set-point acknowledge, clear bit 4; target reached = bit 10),
+``pv`` (``set_velocity``), ``pt`` (``set_torque``: 0x6071 in per mille of rated torque), and the
+cyclic ``csp``, ``csv``, ``cst``, ``ip``, driven by :meth:`joints.rig.Rig.cycle` through
+:class:`SyncCycle` (one RPDO per joint and one SYNC per bus per cycle; ``sync_period``).
+``move_to``/``set_velocity``/``set_torque`` switch to PP/PV/PT when the joint is in another mode.
+
+Safety and liveness: the host consumes each node's heartbeat (0x1017 = 100 ms, consumer time
+250 ms, armed at the first heartbeat); a silent node is a fault (:data:`NODE_LOST`). The
+communication watchdog of the joint is life guarding (0x100C guard time x 0x100D factor 4 = the
+watchdog time; heartbeat off meanwhile, CiA 301): the host guards the node at every state read.
+Quick stop = controlword 0x0002; fault reset = rising bit 7; an EMCY is the drive's fault
+(code = the eRob error code, by name). Software position limits go to 0x607D, the speed limit
+to 0x6080 and the current limit to 0x6073 (volatile).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from joints.clock import Clock
+from joints.codecs import canopen as co
+from joints.devices import cia402
+from joints.devices.cia402 import Mode, State
+from joints.devices.erob import faults
+from joints.devices.erob.canopen import (
+    EROB_CANOPEN,
+    ERUNNER_RPDO1,
+    ERUNNER_TPDOS,
+    CanopenObject,
+    PdoConfig,
+    has_index,
+    name_at,
+)
+from joints.devices.erob.params import EROB_PARAMS
+from joints.devices.erob.profiles import ErobProfile
+from joints.devices.faults import DEFINED_BY_JOINTS, HOST_DEFINED, Fault
+from joints.devices.params import ParamMap
+from joints.drivers.access import ParamAccess
+from joints.drivers.base import RawState
+from joints.drivers.erob import CalibrationResult, ErobDriver
+from joints.errors import CommandError, DeviceFault, FrameError, ReplyTimeout, StateError
+
+__all__ = ["HEARTBEAT_MS", "MODES", "NODE_LOST", "CanopenAccess", "ErobCanopenDriver", "SyncCycle"]
+
+#: config ``mode`` -> CiA 402 mode of operation
+MODES: Mapping[str, Mode] = {"pp": Mode.PP, "pv": Mode.PV, "pt": Mode.PT, "csp": Mode.CSP, "csv": Mode.CSV,
+                             "cst": Mode.CST, "ip": Mode.IP}
+HEARTBEAT_MS = 100  #: producer heartbeat time the driver sets (0x1017)
+CONSUMER_FACTOR = 2.5  #: host consumer time = this x the producer time
+LIFE_TIME_FACTOR = 4  #: 0x100D while the watchdog is armed (guard time = watchdog / 4)
+STATE_TIMEOUT = 1.5  #: s for a CiA 402 state change (the brake releases in 0.5 s)
+POLL = 0.005  #: s between two state reads while waiting
+#: host-defined fault: the node stopped answering (heartbeat or node guarding)
+NODE_LOST = HOST_DEFINED | 0x8130
+_CANOPEN_FAULTS = {
+    0x8130: ("life_guard_error", "the drive's life guarding expired: the host stopped guarding it (EMCY 0x8130)",
+             "keep the host talking (the rig does while it waits), then clear_faults() and enable()"),
+    0x8210: ("pdo_length_error", "an RPDO shorter than its mapping was dropped (EMCY 0x8210)",
+             "check the RPDO mapping, then clear_faults()"),
+    0x8250: ("rpdo_timeout", "an RPDO did not arrive within its deadline (EMCY 0x8250)",
+             "send set-points every cycle, then clear_faults()"),
+}
+_WHERE = re.compile(r"(?:0x)?([0-9a-fA-F]{4})(?:[:/.sub]+(0x[0-9a-fA-F]+|\d+))?")
+_CYCLIC_KIND = {Mode.CSP: "position", Mode.IP: "position", Mode.CSV: "velocity", Mode.CST: "torque"}
+
+
+class CanopenAccess(ParamAccess):
+    """Parameters of one eRob node as CANopen objects, by SDO (expedited; segmented above 4 bytes)."""
+
+    protocol = "canopen"
+
+    def __init__(self, link: Any, node: int, cmap: ParamMap[CanopenObject] = EROB_CANOPEN) -> None:
+        if type(node) is not int or not 1 <= node <= co.MAX_NODE:
+            raise CommandError(f"CANopen node id must be 1..{co.MAX_NODE}, got {node!r}")
+        self.link = link
+        self.node = node
+        self.map = cmap
+        self.params = cmap.params
+
+    def resolve(self, key: str | int) -> str:
+        if isinstance(key, int):
+            return name_at(key, 0)
+        if key in self.map:
+            return key
+        m = _WHERE.fullmatch(key.strip())
+        if m is not None:  # "0x6064", "0x607D:1", "607D/2"
+            index = int(m.group(1), 16)
+            sub = 0 if m.group(2) is None else int(m.group(2), 0)
+            if not has_index(index):
+                name_at(index, sub)  # the right RegisterError
+            return name_at(index, sub)
+        self.map.key(key)  # unknown, or not reachable over CANopen
+        return key
+
+    def where(self, name: str) -> str:
+        o = self.map.key(name)
+        return f"0x{o.index:04X}:{o.subindex:02X}"
+
+    def read(self, name: str) -> int:
+        o = self.map.key(name)
+        raw = o.decode(self.link.sdo_upload(self.node, o.index, o.subindex))
+        return round(raw * o.scale) if o.scale != 1.0 else raw
+
+    def encode(self, name: str, value: int) -> tuple[CanopenObject, bytes]:
+        """The object and SDO bytes of ``value`` (checked: nothing is sent on error)."""
+        o = self.map.key(name)
+        self.params[name].check(value)
+        raw = round(value / o.scale) if o.scale != 1.0 else value
+        return o, o.encode(raw)
+
+    def write(self, name: str, value: int, *, idempotent: bool = True) -> None:
+        o, data = self.encode(name, value)
+        self.link.sdo_download(self.node, o.index, o.subindex, data, idempotent=idempotent)
+
+    def write_many(self, values: Mapping[str, int], *, idempotent: bool = True) -> None:
+        encoded = [self.encode(n, v) for n, v in values.items()]  # every value checked first
+        for o, data in encoded:
+            self.link.sdo_download(self.node, o.index, o.subindex, data, idempotent=idempotent)
+
+
+def _power_on_objects(node: int) -> dict[tuple[int, int], int]:
+    """Object values after NMT reset communication (the parameters' defaults, COB-IDs + node)."""
+    return {(o.index, o.subindex): EROB_PARAMS[n].default + (node if o.node_relative else 0)
+            for n, o in EROB_CANOPEN.keys.items() if 0x1400 <= o.index < 0x1C00}
+
+
+class SyncCycle:
+    """The SYNC cycle of one CANopen bus: each cyclic joint's RPDO, one SYNC, that cycle's TPDO1s.
+
+    :meth:`send` waits until the cycle is due (on the rig's clock: lockstep in sim), sends the
+    set-points and the SYNC; :meth:`collect` returns as soon as every joint's TPDO1 of the cycle
+    is in, or at the end of the period: a TPDO that has not come by then is late (:attr:`late`
+    counts them) and the joint's last values stand.
+    """
+
+    def __init__(self, link: Any, period: float) -> None:
+        self.link = link
+        self.period = period
+        self.cycles = 0
+        self.late = 0  #: TPDOs that missed their cycle
+        self.next_due: float | None = None
+        self._grid = 0.0
+        self._n = 0
+        self.sync_time = 0.0
+        self.drivers: list[ErobCanopenDriver] = []
+        self._expect: list[ErobCanopenDriver] = []
+
+    def send(self, targets: Mapping[ErobCanopenDriver, int]) -> None:
+        link = self.link
+        now = link.bus_now()
+        eps = 1e-9
+        if self.next_due is None or now > self.next_due + self.period + eps:
+            self._grid, self._n = now, 0  # first cycle, or the caller fell behind: restart the grid
+        elif now < self.next_due - eps:
+            link.wait_bus(self.next_due)  # TPDOs of earlier cycles still arriving are delivered as such
+        self._n += 1
+        due = self._grid + self._n * self.period  # on a grid: no drift
+        link.poll(0.0)
+        for driver, target in targets.items():
+            driver.cycle_send(target)
+        link.sync()
+        self.sync_time = link.bus_now()
+        self.cycles += 1
+        self.next_due = due
+        self._expect = list(targets)
+
+    def collect(self) -> dict[ErobCanopenDriver, RawState]:
+        link = self.link
+        cycle = self.cycles
+        waiting = {d.tpdo1_cob: d for d in self._expect if d.status_cycle < cycle}
+        deadline = self.next_due if self.next_due is not None else link.bus_now()
+        while waiting:
+            left = deadline - link.bus_now()
+            if left <= 1e-9:
+                break
+            try:
+                msg = link.wait_for(lambda m: isinstance(m, co.Pdo) and m.cob_id in waiting, left)
+            except ReplyTimeout:
+                break
+            waiting.pop(msg.cob_id).on_tpdo(msg)
+        self.late += len(waiting)
+        out: dict[ErobCanopenDriver, RawState] = {}
+        for d in self._expect:
+            lost = d.lost()
+            if lost is not None:
+                raise DeviceFault(d.name, NODE_LOST, lost, hint=d.fault_text(NODE_LOST), name="node_lost")
+            out[d] = d.cycle_state()
+        return out
+
+
+class ErobCanopenDriver(ErobDriver):
+    """One eRob actuator on a CANopen bus (see the module docstring)."""
+
+    start_check_names = ()
+
+    def __init__(
+        self,
+        link: Any,
+        node: int,
+        *,
+        profile: ErobProfile | str | None = None,
+        clock: Clock | None = None,
+        name: str = "",
+        mode: str | Mode | None = None,
+        sync_period: float = 0.001,
+        heartbeat_ms: int = HEARTBEAT_MS,
+        cycle: SyncCycle | None = None,
+    ) -> None:
+        self.link = link
+        self.node = node
+        super().__init__(CanopenAccess(link, node), profile=profile, clock=clock or link.clock,
+                         name=name or f"erob@canopen:{node}")
+        if isinstance(mode, str):
+            try:
+                mode = MODES[mode]
+            except KeyError:
+                raise CommandError(f"{self.name}: mode {mode!r} is not one of {sorted(MODES)}") from None
+        self.mode: Mode = mode or Mode.PP
+        if not sync_period > 0:
+            raise CommandError(f"{self.name}: sync_period must be > 0 s, got {sync_period!r}")
+        self.sync_period = sync_period
+        self.heartbeat_ms = heartbeat_ms
+        self.group = cycle or SyncCycle(link, sync_period)
+        self.group.drivers.append(self)
+        self.tpdo1_cob = 0x180 + node
+        self.tpdo2_cob = 0x280 + node
+        self._up: Mode | None = None
+        self._cw = 0
+        self._target = 0
+        self._rpdo = ERUNNER_RPDO1[self.mode]
+        self._tpdos: tuple[PdoConfig, ...] = ERUNNER_TPDOS
+        self._subs: list[Any] = []
+        self.statusword = 0
+        self.position = 0
+        self.velocity = 0
+        self.current = 0
+        self.status_time = -math.inf
+        self.status_cycle = 0
+        self._prev_position: tuple[float, int] | None = None
+        self.emcy: co.Emcy | None = None
+        self.emcys: list[co.Emcy] = []
+        self._watchdog_ms = 0
+        self._last_guard = -math.inf
+
+    # -- bring-up ---------------------------------------------------------------------------
+    @property
+    def cyclic(self) -> bool:
+        return self.mode.cyclic
+
+    @property
+    def cycle_kind(self) -> str:
+        """What :meth:`joints.rig.Rig.cycle` sends this joint: "position", "velocity" or "torque"."""
+        kind = _CYCLIC_KIND.get(self.mode)
+        if kind is None:
+            raise CommandError(f"{self.name}: mode {self.mode.name} is not cyclic; configure mode = \"csp\", "
+                               "\"csv\", \"cst\" or \"ip\" for Rig.cycle")
+        return kind
+
+    def _unsubscribe(self) -> None:
+        for s in self._subs:
+            s.cancel()
+        self._subs.clear()
+
+    def _subscribe(self) -> None:
+        self._unsubscribe()
+        link = self.link
+        cobs = (self.tpdo1_cob, self.tpdo2_cob)
+        self._subs.append(link.subscribe(lambda m: isinstance(m, co.Pdo) and m.cob_id in cobs and not m.remote,
+                                         self.on_tpdo))
+        self._subs.append(link.subscribe(lambda m: isinstance(m, co.Emcy) and m.node == self.node, self._on_emcy))
+
+    def _pdo_writes(self, configs: Sequence[PdoConfig], known: dict[tuple[int, int], int]) -> None:
+        for cfg in configs:
+            kind = co.Kind[f"{cfg.kind}{cfg.number}"]
+            comm = co.PdoComm(cfg.cob_id(self.node), cfg.transmission_type, cfg.inhibit_time, cfg.event_timer)
+            for index, sub, value, size in co.pdo_configuration_writes(kind, comm, cfg.entries):
+                if known.get((index, sub)) == value:
+                    continue
+                self.link.sdo_download(self.node, index, sub, value.to_bytes(size, "little"))
+                known[(index, sub)] = value
+
+    def bring_up(self, mode: Mode | None = None) -> None:
+        """Configure the node for ``mode`` (chapter 5's sequence) and start it (NMT OPERATIONAL)."""
+        mode = mode or self.mode
+        link, node = self.link, self.node
+        self._unsubscribe()
+        self._up = None
+        link.nmt(co.NmtCommand.STOP, node)
+        link.nmt(co.NmtCommand.RESET_COMMUNICATION, node)
+        link.wait_for(lambda m: isinstance(m, co.BootUp) and m.node == node, max(link.policy.timeout, 0.5))
+        link.monitor(node).reset()
+        self.write_param("modes_of_operation", int(mode))
+        shown = self.read("modes_of_operation_display")
+        if shown != int(mode):
+            raise StateError(f"{self.name}: 0x6061 shows mode {shown} after 0x6060 = {int(mode)}")
+        if mode.cyclic:
+            self._set("cob_id_sync", 0x80, force=True)  # eRunner's "disable cob-id sync" (fig 5-18)
+            self._set("communication_cycle_period", round(self.sync_period * 1e6), force=True)
+        if mode is Mode.IP:
+            ms = round(self.sync_period * 1e3)
+            if 1 <= ms <= 255:
+                self._set_many({"interpolation_time_period_value": ms, "interpolation_time_index": -3})
+            else:
+                self._set_many({"interpolation_time_period_value": round(self.sync_period * 1e4),
+                                "interpolation_time_index": -4})
+        self.mode = mode
+        self._rpdo = ERUNNER_RPDO1[mode]
+        self._tpdos = ERUNNER_TPDOS[:1] if mode.cyclic else ERUNNER_TPDOS
+        known = _power_on_objects(node)
+        self._pdo_writes((*self._tpdos, self._rpdo), known)
+        self._subscribe()
+        self._liveness()
+        link.nmt(co.NmtCommand.START, node)
+        self._up = mode
+        self._cw = 0
+        self.emcy = None
+
+    def _liveness(self) -> None:
+        """Heartbeat + host consumer, or life guarding while the watchdog is armed (never both: CiA 301)."""
+        link, node = self.link, self.node
+        if self._watchdog_ms:
+            guard = max(1, self._watchdog_ms // LIFE_TIME_FACTOR)
+            self.write_param("producer_heartbeat_time", 0)
+            self._set_many({"guard_time": guard, "life_time_factor": LIFE_TIME_FACTOR})
+            link.consume(node, 0.0)
+            link.stop_guarding(node)
+            self._last_guard = -math.inf
+            self._keepalive()
+        else:
+            if self._cache.get("guard_time"):
+                self._set_many({"guard_time": 0, "life_time_factor": 0})
+            link.stop_guarding(node)
+            self.write_param("producer_heartbeat_time", self.heartbeat_ms)
+            link.consume(node, self.heartbeat_ms * 1e-3 * CONSUMER_FACTOR if self.heartbeat_ms else 0.0)
+
+    def _ensure(self, mode: Mode | None = None) -> None:
+        """The node is up in ``mode`` (default: the configured one); a change disables first."""
+        want = mode or (self._up or self.mode)
+        if self._up is want:
+            return
+        was = self._enabled and self._up is not None
+        if was:
+            self.disable()
+        self.bring_up(want)
+        if was:
+            self.enable()
+
+    # -- PDOs -------------------------------------------------------------------------------
+    def on_tpdo(self, msg: co.Pdo) -> None:
+        t = self.link.clock.now()
+        if msg.cob_id == self.tpdo1_cob:
+            try:
+                sw, pos = co.unpack_pdo(self._tpdos[0].entries, msg.data)
+            except FrameError:
+                return
+            if self._prev_position is not None and t > self._prev_position[0] and self.cyclic:
+                self.velocity = round((pos - self._prev_position[1]) / (t - self._prev_position[0]))
+            self._prev_position = (t, pos)
+            self.statusword, self.position, self.status_time = sw, pos, t
+            self.status_cycle = self.group.cycles
+        elif len(self._tpdos) > 1:
+            try:
+                self.velocity, self.current = co.unpack_pdo(self._tpdos[1].entries, msg.data)
+            except FrameError:
+                return
+
+    def _on_emcy(self, msg: co.Emcy) -> None:
+        self.emcys.append(msg)
+        del self.emcys[:-50]
+        self.emcy = msg if msg.error_code else None
+
+    def _control(self, cw: int, target: int | None = None) -> None:
+        """RPDO1: controlword + the mode's target (applied at once, or at the next SYNC in cyclic modes)."""
+        if target is not None:
+            self._target = target
+        self._cw = cw
+        values = [cw, self._target] + [0] * (len(self._rpdo.objects) - 2)
+        self.link.send_pdo(self._rpdo.cob_id(self.node), co.pack_pdo(self._rpdo.entries, values))
+        if self.cyclic:
+            self.link.sync()
+
+    def _snapshot(self) -> None:
+        """One SYNC and this node's TPDOs of it (statusword, position; velocity and current)."""
+        link = self.link
+        link.poll(0.0)
+        link.sync()
+        want = {c for c in (self.tpdo1_cob, self.tpdo2_cob)[:len(self._tpdos)]}
+        deadline = link.clock.now() + link.policy.timeout
+        while want:
+            left = deadline - link.clock.now()
+            try:
+                msg = link.wait_for(lambda m: isinstance(m, co.Pdo) and m.cob_id in want, max(left, 0.0))
+            except ReplyTimeout:
+                raise ReplyTimeout(f"{self.name}: no TPDO from node {self.node} after SYNC within "
+                                   f"{link.policy.timeout * 1e3:.0f} ms; check that the node is OPERATIONAL") from None
+            want.discard(msg.cob_id)
+            self.on_tpdo(msg)
+
+    def lost(self) -> str | None:
+        """Why the node counts as lost (heartbeat consumer, node guarding), or None."""
+        return self.link.lost(self.node)  # type: ignore[no-any-return]
+
+    def _keepalive(self) -> None:
+        if self._watchdog_ms:
+            now = self.clock.now()
+            period = max(1, self._watchdog_ms // LIFE_TIME_FACTOR) * 1e-3
+            if now - self._last_guard >= period * 0.9:
+                self._last_guard = now
+                self.link.guard(self.node, max(self.link.policy.timeout, period))
+
+    # -- state ------------------------------------------------------------------------------
+    def _cia_state(self) -> State:
+        return cia402.state_of(self.statusword)
+
+    def state(self) -> RawState:
+        """One SYNC and this node's TPDOs (guarding the node first while the watchdog is armed)."""
+        self._ensure()
+        self._keepalive()
+        if self.lost() is None:
+            self._snapshot()
+        return self._raw(self.clock.now())
+
+    def cycle_state(self) -> RawState:
+        return self._raw(self.status_time)
+
+    def _raw(self, t: float) -> RawState:
+        sw = self.statusword
+        lost = self.lost()
+        try:
+            st = self._cia_state()
+        except Exception:  # noqa: BLE001 - a statusword that codes no state: reported as not enabled
+            st = State.NOT_READY_TO_SWITCH_ON
+        fault = 0
+        if lost is not None:
+            fault = NODE_LOST
+        elif st in (State.FAULT, State.FAULT_REACTION_ACTIVE):
+            fault = self.emcy.error_code if self.emcy is not None else self.read("error_code") or 0xFF00
+        enabled = st is State.OPERATION_ENABLED and lost is None
+        if not enabled and self._enabled and (fault or st in (State.SWITCH_ON_DISABLED, State.READY_TO_SWITCH_ON)):
+            self._note_enable(False)
+        reached = cia402.target_reached(sw)
+        if self.mode is Mode.PP:
+            moving = enabled and not reached
+        else:
+            moving = enabled and abs(self.velocity) > 200
+        return RawState(position=self.position, velocity=self.velocity, current=self.current,
+                        temperature=math.nan, enabled=enabled, moving=moving, fault=fault, time=t,
+                        extra={"statusword": sw, "mode": int(self.mode), "node": self.node})
+
+    def fault_text(self, code: int) -> str:
+        f = self.fault(code)
+        return f.text if f is not None else ""
+
+    def fault(self, code: int) -> Fault | None:
+        if not code:
+            return None
+        if code == NODE_LOST:
+            return Fault(code, "node_lost", f"node {self.node} went silent (no heartbeat / node-guarding reply: power "
+                         "loss, a cable, or the node reset)", "restore power and wiring, then clear_faults() and "
+                         "enable() (the node is brought up again)", DEFINED_BY_JOINTS)
+        if code in _CANOPEN_FAULTS:
+            name, text, clears = _CANOPEN_FAULTS[code]
+            return Fault(code, name, text, clears, "CiA 301 (EMCY)")
+        return faults.fault(code)
+
+    def check_fault(self) -> None:
+        s = self.state()
+        if s.fault:
+            f = self.fault(s.fault)
+            assert f is not None
+            raise DeviceFault(self.name, s.fault, f.text, hint=f.clears, name=f.name)
+
+    # -- power ------------------------------------------------------------------------------
+    def _wait_state(self, want: State, timeout: float = STATE_TIMEOUT) -> None:
+        deadline = self.clock.now() + timeout
+        while True:
+            self._snapshot()
+            st = self._cia_state()
+            if st is want:
+                return
+            if st is State.FAULT:
+                code = self.emcy.error_code if self.emcy is not None else self.read("error_code")
+                f = self.fault(code)
+                raise DeviceFault(self.name, code, f.text if f else "fault", hint=f.clears if f else "",
+                                  name=f.name if f else "drive_error")
+            if self.clock.now() >= deadline:
+                raise StateError(f"{self.name}: the drive did not reach {want.value} within {timeout} s "
+                                 f"(it reports {st.value}, statusword 0x{self.statusword:04X})")
+            self._pause()
+
+    def _pause(self) -> None:
+        """Wait a moment; the other nodes of the bus stay guarded meanwhile (their life guarding)."""
+        for d in self.group.drivers:
+            d._keepalive()
+        self.clock.sleep(POLL)
+
+    def _hold_target(self) -> int:
+        """The target that keeps the joint where it is in the present mode."""
+        return self.position if self.mode in (Mode.PP, Mode.CSP, Mode.IP) else 0
+
+    def enable(self) -> None:
+        """CiA 402: shutdown, switch on, enable operation (RPDO1), each confirmed by the statusword."""
+        self._ensure()
+        self._snapshot()
+        target = self._hold_target()
+        for word in cia402.path(self._cia_state(), State.OPERATION_ENABLED):
+            self._control(word, target)
+            want = cia402.next_state(self._cia_state(), word)
+            self._wait_state(want)
+        self._control(cia402.COMMAND_WORD[cia402.Command.ENABLE_OPERATION] | self._mode_bits(), target)
+        self._note_enable(True)
+        if self.mode in (Mode.CSP, Mode.CSV, Mode.CST):  # set-points act once the drive follows (bit 12)
+            deadline = self.clock.now() + STATE_TIMEOUT
+            while not self.statusword & cia402.SW_TARGET_FOLLOWED:
+                if self.clock.now() >= deadline:
+                    raise StateError(f"{self.name}: the drive does not follow the target after enable "
+                                     f"(statusword 0x{self.statusword:04X})")
+                self._pause()
+                self._snapshot()
+
+    def _mode_bits(self) -> int:
+        if self.mode is Mode.PP:
+            return cia402.CW_CHANGE_SET_IMMEDIATELY
+        if self.mode is Mode.IP:
+            return cia402.CW_ENABLE_IP
+        return 0
+
+    def disable(self) -> None:
+        """Shutdown (controlword 0x0006, fig 5-9): the drive is off, the brake holds."""
+        if self._up is None:
+            self._note_enable(False)
+            return
+        self._control(cia402.COMMAND_WORD[cia402.Command.SHUTDOWN])
+        self._note_enable(False)
+        if self.lost() is None:
+            self._snapshot()
+            if self._cia_state() is State.OPERATION_ENABLED:
+                self._wait_state(State.READY_TO_SWITCH_ON)
+
+    # -- motion -----------------------------------------------------------------------------
+    def _run(self, mode: Mode) -> None:
+        self._ensure(mode)
+        if not self._enabled:
+            raise StateError(f"{self.name}: the motor is not enabled; call enable() first")
+
+    def move_to(self, position: int, *, speed: int | None = None, acceleration: int | None = None,
+                deceleration: int | None = None) -> None:
+        """PP: profile (0x6081/0x6083/0x6084), target 0x607A + new set-point, acknowledge, clear bit 4."""
+        self._validate(target_absolute_position=position, profile_speed=speed, profile_acceleration=acceleration,
+                       profile_deceleration=deceleration)
+        self._pp(position, speed, acceleration, deceleration, relative=False)
+
+    def move_by(self, delta: int, *, speed: int | None = None, acceleration: int | None = None,
+                deceleration: int | None = None) -> None:
+        """PP relative (controlword bit 6)."""
+        self._validate(target_relative_position=delta, profile_speed=speed, profile_acceleration=acceleration,
+                       profile_deceleration=deceleration)
+        self._pp(delta, speed, acceleration, deceleration, relative=True)
+
+    def _pp(self, target: int, speed: int | None, acc: int | None, dec: int | None, *, relative: bool) -> None:
+        self._run(Mode.PP)
+        self._set_many(self._profile(speed, acc, dec))
+        base = 0x000F | cia402.CW_CHANGE_SET_IMMEDIATELY | (cia402.CW_RELATIVE if relative else 0)
+        if self._cw & cia402.CW_NEW_SETPOINT:
+            self._control(base, target)
+        self._control(base | cia402.CW_NEW_SETPOINT, target)
+        deadline = self.clock.now() + STATE_TIMEOUT
+        while True:
+            self._snapshot()
+            if cia402.setpoint_acknowledged(self.statusword):
+                break
+            if cia402.is_fault(self.statusword) or self.clock.now() >= deadline:
+                self._control(base, target)
+                raise StateError(f"{self.name}: the drive did not acknowledge the set-point (statusword "
+                                 f"0x{self.statusword:04X})")
+            self._pause()
+        self._control(base, target)
+
+    def move_continuous(self, speed: int, *, acceleration: int | None = None, deceleration: int | None = None) -> None:
+        raise CommandError(f"{self.name}: CiA 402 has no continuous position move; use set_velocity (PV)")
+
+    def move_repetitive(self, position: int, *, speed: int | None = None, acceleration: int | None = None,
+                        deceleration: int | None = None, dwell: int | None = None) -> None:
+        raise CommandError(f"{self.name}: CiA 402 has no repetitive move; send the moves with move_to")
+
+    def stop_repetitive(self) -> None:
+        raise CommandError(f"{self.name}: CiA 402 has no repetitive move; use stop()")
+
+    def set_velocity(self, velocity: int, *, acceleration: int | None = None, deceleration: int | None = None) -> None:
+        """PV: ramps 0x6083/0x6084, target velocity 0x60FF (RPDO1)."""
+        self._validate(target_speed=velocity, profile_acceleration=acceleration, profile_deceleration=deceleration)
+        self._run(Mode.PV)
+        self._set_many(self._profile(None, acceleration, deceleration))
+        self._control(0x000F, velocity)
+
+    def _per_mille(self, current_ma: int) -> int:
+        torque = current_ma * 1e-3 * self.profile.torque_constant
+        return max(-32768, min(32767, round(torque / self.profile.rated_torque * 1000)))
+
+    def set_current(self, current: int) -> None:
+        """PT: target torque 0x6071 (per mille of rated torque, from the current through the torque constant)."""
+        self._validate(target_current=current)
+        self._run(Mode.PT)
+        self._control(0x000F, self._per_mille(current))
+
+    def stop(self) -> None:
+        """Halt (bit 8) in the position modes; target 0 in the velocity and torque modes."""
+        if self._up is None or not self._enabled or self.lost() is not None:
+            return
+        if self.mode in (Mode.PP, Mode.IP, Mode.CSP):
+            self._control((self._cw | cia402.CW_HALT) & ~cia402.CW_NEW_SETPOINT)
+        else:
+            self._control(0x000F, 0)
+
+    def emergency_stop(self) -> None:
+        """Quick stop (controlword 0x0002): the quick-stop ramp, then SWITCH ON DISABLED (0x605A = 2)."""
+        if self._up is None:
+            return
+        self._control(cia402.COMMAND_WORD[cia402.Command.QUICK_STOP])
+        self._note_enable(False)
+
+    def clear_errors(self) -> None:
+        """Fault reset (rising controlword bit 7); a lost node is brought up again."""
+        if self.lost() is not None or self._up is None:
+            self.link.monitor(self.node).reset()
+            self.bring_up(self._up or self.mode)
+        self._control(0x0000)
+        self._control(cia402.COMMAND_WORD[cia402.Command.FAULT_RESET])
+        self._control(0x0000)
+        self.emcy = None
+
+    def forget(self) -> None:
+        super().forget()
+        self._up = None
+        self._cw = 0
+        self.emcy = None
+        self.link.monitor(self.node).reset()
+        self.link.consume(self.node, 0.0)
+
+    # -- cyclic (Rig.cycle through SyncCycle) ---------------------------------------------------
+    def cycle_send(self, target: int) -> None:
+        """This cycle's set-point (device units of :attr:`cycle_kind`): RPDO1, applied at the SYNC."""
+        if self._up is None or not self.cyclic:
+            raise StateError(f"{self.name}: not in a cyclic mode (mode {self.mode.name}); enable() it first")
+        self._keepalive()
+        value = self._per_mille(target) if self.mode is Mode.CST else target
+        self._target = value
+        self._cw = (self._cw | 0x000F) & ~cia402.CW_HALT if self._enabled else self._cw
+        values = [self._cw, value] + [0] * (len(self._rpdo.objects) - 2)
+        self.link.send_pdo(self._rpdo.cob_id(self.node), co.pack_pdo(self._rpdo.entries, values))
+
+    # -- host-side contracts ----------------------------------------------------------------
+    def set_communication_timeout(self, milliseconds: int) -> None:
+        """Life guarding: guard time = ``milliseconds`` / 4, life time factor 4 (0 = heartbeat again)."""
+        self._watchdog_ms = int(milliseconds)
+        if self._up is None or self.lost() is not None:
+            return  # applied at the next bring-up (a lost node cannot take it now)
+        self._liveness()
+
+    def communication_timeout(self) -> int:
+        return self._watchdog_ms
+
+    def apply_limits(self, *, position: tuple[int, int] | None = None, velocity: int | None = None,
+                     current: int | None = None) -> None:
+        """0x607D software position limits, 0x6080 max motor speed, 0x6073 max current (volatile)."""
+        self._ensure()
+        if position is not None:
+            self._set_many({"min_position_limit_value": position[0], "max_position_limit_value": position[1]})
+        if velocity is not None:
+            self._set("max_speed", max(1, min(velocity, 0x7FFFFFFF)))
+        if current is not None:
+            self._set("max_motor_current", max(1, min(current, 0xFFFF)))
+
+    def motion_targets(self) -> dict[str, tuple[str, float]]:
+        rad = self.units.position
+        per_mille = self.profile.rated_torque / 1000.0 / self.profile.torque_constant  # A per unit
+        return {"target_absolute_position": ("position", rad), "interpolation_data_record_1": ("position", rad),
+                "profile_speed": ("velocity", rad), "target_speed": ("velocity", rad),
+                "target_torque": ("current", per_mille)}
+
+    def identity(self) -> dict[str, object]:
+        """0x1018 identity and 0x1000 device type (and the supported modes 0x6502)."""
+        out: dict[str, object] = {}
+        for key in ("device_type", "vendor_id", "product_code", "revision_number", "serial_number"):
+            out[key] = f"0x{self.read(key):08X}"
+        bits = self.read("supported_drive_modes")
+        out["modes"] = sorted(m.name.lower() for m in cia402.modes_from_bits(bits))
+        return out
+
+    def calibrate_zero(self, *, multi_turn: bool = False, save: bool = True,
+                       confirm: bool = False) -> CalibrationResult:
+        raise CommandError(f"{self.name}: zero calibration needs the position offset, which the CANopen map does "
+                           "not reach; use Modbus RTU; nothing was sent")
+
+    def save_parameters(self, *, confirm: bool = False) -> None:
+        raise CommandError(f"{self.name}: saving (0x1010) is not in the eRob's CANopen map; save over Modbus RTU or "
+                           "the CAN custom protocol; nothing was sent")

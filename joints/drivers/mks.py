@@ -1,0 +1,531 @@
+"""MKS SERVO42D/57D closed-loop steppers: the procedures of the manual (Parts 5 and 6), by parameter name.
+
+Rule: one driver for both protocols. Every procedure names parameters of
+:data:`~joints.devices.mks.params.MKS_PARAMS`; the native protocol
+(:mod:`joints.drivers.mks_native`) and Modbus-RTU mode (:mod:`joints.drivers.mks_modbus`) supply
+the :class:`~joints.drivers.access.ParamAccess` and what only they have (completion frames, long
+packets, broadcast and group addresses natively; the 0x90 frame over Modbus).
+
+Units (device side, the :class:`~joints.drivers.base.Units` of the joint): position in encoder
+counts (16384 per motor turn, the "axis" of 0xF4/0xF5 and 0x31), velocity in motor rpm, current in
+mA. Pulses (microsteps, 200 x subdivision per turn) are a second position unit of their own
+(0xFD/0xFE, 0x33): :meth:`MksDriver.move_pulses`. Positive is CCW everywhere (0x32 "CCW: speed >
+0", 0x30 "one turn CCW, +0x4000"; the run direction bit 0 = CCW).
+
+Speed and acceleration (6.1): a speed *value* is rpm at 16/32/64 microsteps and ``value x 16 /
+microsteps`` rpm otherwise; the driver converts motor rpm to the value for the subdivision it set.
+acc: the speed value changes by 1 every ``(256 - acc) x 50 us``; acc 0 = no ramp. A requested
+acceleration [rpm/s] becomes the nearest acc (:func:`~joints.devices.mks.state.acc_for_rate`);
+deceleration is the same acc (the drive has one). Speeds above the work mode's maximum (400 / 1500
+/ 3000 rpm) are clamped by the drive.
+
+What the driver sets before motion (``enable``): the work mode (serial commands need SR_*; default
+SR_vFOC), the subdivision it computes speeds with (default 16) and, natively, respond and active on
+(0x8C 1 1: completion frames). Settings the drive cannot report are written once per session and
+remembered (the access keeps an image of what was written).
+
+Safety
+    * The MKS has NO communication watchdog: a speed-mode axis keeps turning if the host dies.
+      Leaving a :class:`~joints.rig.Rig` stops (:meth:`MksDriver.stop`: the running mode's own stop
+      command, speed mode's 0xF6 speed 0 when the mode is unknown) and disables every axis this
+      host enabled; prefer position moves (they end by themselves) where a target is known.
+    * A run command is never sent twice blindly: when its reply is lost the driver reads the motor
+      status (and the position for absolute targets) and sends it again only if the drive did not
+      start it; a relative move whose outcome cannot be told raises
+      :class:`~joints.errors.OutcomeUnknown`.
+    * Dangerous commands (0x80 calibrate, 0x8A baud rate, 0x8B address, 0x8E Modbus on/off, 0x9A
+      0_Mode, 0xFF C8 save speed mode, 0x3F restore defaults, 0x41 restart, 0x92 set zero) need
+      ``confirm=True`` and send nothing without it.
+    * The locked-rotor protection (0x88; the drive releases the shaft) is the one fault the drive
+      reports (0x3E): :data:`LOCKED_ROTOR` by name; ``clear_errors`` releases it (0x3D).
+
+The MKS reports no current and no temperature: states carry current 0 and temperature NaN.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+from joints.clock import Clock, MonotonicClock
+from joints.devices.faults import DEFINED_BY_JOINTS, HOST_DEFINED, Fault
+from joints.devices.mks import state as st
+from joints.devices.mks.profile import MksProfile
+from joints.devices.mks.profile import profile as lookup_profile
+from joints.devices.params import ParamSet
+from joints.drivers.access import ParamAccess
+from joints.drivers.base import JointDriver, RawState, Units
+from joints.errors import CommandError, ConfirmationRequired, MotionTimeout, OutcomeUnknown, PeerProtocolError
+
+__all__ = ["DEFAULT_ACC", "DEFAULT_SPEED", "LOCKED_ROTOR", "RUN_GROUPS", "STATUS_NAMES", "MksAccess", "MksDriver"]
+
+#: the fault the drive reports (0x3E = 1), as a host-defined code (the MKS has no fault codes)
+LOCKED_ROTOR = HOST_DEFINED | 0x3E
+DEFAULT_SPEED = 60  #: rpm, when a move gives none
+DEFAULT_ACC = 236  #: 1000 speed units/s: a stop from a speed above 1000 rpm never uses acc 0 (6.5 note)
+#: what :meth:`MksDriver.state` reads (one transaction each: the MKS has no block read)
+STATUS_NAMES = ("encoder_addition", "real_time_speed", "motor_status", "protection_state", "en_pin_status")
+#: run mode -> (speed, acc, target) parameter names of its command
+RUN_GROUPS: Mapping[str, tuple[str, str, str]] = {
+    "speed": ("speed_mode_speed", "speed_mode_acc", "speed_mode_direction"),
+    "pulses": ("position_mode1_speed", "position_mode1_acc", "position_mode1_pulses"),
+    "abs_pulses": ("position_mode2_speed", "position_mode2_acc", "position_mode2_abs_pulses"),
+    "rel_axis": ("position_mode3_speed", "position_mode3_acc", "position_mode3_rel_axis"),
+    "abs_axis": ("position_mode4_speed", "position_mode4_acc", "position_mode4_abs_axis"),
+}
+_MODE_OF = {name: mode for mode, names in RUN_GROUPS.items() for name in names}
+_MODE_OF["position_mode1_direction"] = "pulses"
+_COUNTS = st.ENCODER_COUNTS_PER_TURN
+_RPM = 2.0 * math.pi / 60.0
+
+
+class MksAccess(ParamAccess):
+    """What both MKS protocols' accesses share: the image of what this host wrote.
+
+    Most MKS settings cannot be read back, and a command that carries several parameters (0x8C,
+    0x90, 0x94, 0x9A, the run commands) sends all of its fields: the ones not given go with the
+    value last written (or the parameter's default). The image records every field sent, also when
+    the reply was lost (the drive may hold them), never when the drive refused them.
+    """
+
+    def __init__(self, params: ParamSet) -> None:
+        self.params = params
+        self.image: dict[str, int] = {}
+
+    def forget(self) -> None:
+        """The drive was power-cycled or restored: nothing written is known any more."""
+        self.image.clear()
+
+    def merged(self, names: Sequence[str], given: Mapping[str, int]) -> dict[str, int]:
+        """Every field of one command: ``given`` values, else the image, else the defaults (range-checked)."""
+        out: dict[str, int] = {}
+        for n in names:
+            value = given[n] if n in given else self.image.get(n, self.params[n].default)
+            out[n] = self.params[n].check(value)
+        return out
+
+    def remember(self, values: Mapping[str, int]) -> None:
+        self.image.update(values)
+
+
+class MksDriver(JointDriver):
+    """One MKS SERVO42D/57D axis, over whichever protocol ``access`` speaks (see the module docstring)."""
+
+    access: MksAccess
+
+    def __init__(
+        self,
+        access: MksAccess,
+        *,
+        device: str = "mks-servo42d",
+        profile: MksProfile | str | None = None,
+        clock: Clock | None = None,
+        name: str = "",
+        work_mode: int = st.WorkMode.SR_vFOC,
+        microsteps: int = 16,
+    ) -> None:
+        self.access = access
+        self.device = device
+        self.profile = lookup_profile(profile or device) if not isinstance(profile, MksProfile) else profile
+        self.clock: Clock = clock or MonotonicClock()
+        self.name = name or device
+        if not st.WorkMode(work_mode).serial:
+            raise CommandError(f"{self.name}: serial commands need an SR_* work mode (3, 4, 5), got "
+                               f"{st.WorkMode(work_mode).name}")
+        self.work_mode = st.WorkMode(work_mode)
+        self.microsteps = int(self.params["microsteps"].check(microsteps))
+        rad = 2.0 * math.pi / _COUNTS
+        self.units = Units(rad, _RPM, 0.001, self.profile.torque_constant)
+        self._enabled = False
+        self._running: str | None = None  #: the run mode started last (None: none known to run)
+        self._last_acc = 0
+        self._last_rpm = 0.0
+        self._sent_at = -math.inf
+        self._sent_count = 0  #: completion frames received when the last run command went out
+        self.completions = 0  #: completion frames received (active mode, native protocol)
+
+    # -- parameter primitives ----------------------------------------------------------------
+    @property
+    def image(self) -> Mapping[str, int]:
+        """What this host wrote (the settings the drive cannot report)."""
+        return self.access.image
+
+    def written(self, name: str) -> int | None:
+        """The value last written to a write-only setting (None if this host has not written it)."""
+        return self.image.get(name)
+
+    def write_param(self, name: str, value: int, *, idempotent: bool = True) -> None:
+        """Write one parameter (its command's other fields go along from the image); keeps the driver's
+        bookkeeping (enable, subdivision, work mode, the running mode)."""
+        mode = _MODE_OF.get(name)
+        self.access.write(name, value, idempotent=idempotent and mode is None)
+        self._noted(name, int(value))
+
+    def _noted(self, name: str, value: int) -> None:
+        if name == "motor_enable":
+            self._enabled = bool(value)
+        elif name == "microsteps":
+            self.microsteps = value
+        elif name == "work_mode":
+            self.work_mode = st.WorkMode(value)
+        elif name == "emergency_stop":
+            self._running = None
+        mode = _MODE_OF.get(name)
+        if mode is not None:
+            speed = self.image.get(RUN_GROUPS[mode][0], 0)
+            self._running = mode if speed else None
+            self._sent_at = self.clock.now()
+            self._sent_count = self.completions
+
+    def _set(self, name: str, value: int) -> None:
+        """Write a setting unless this host already wrote that value."""
+        if self.image.get(name) != value:
+            self.write_param(name, value)
+
+    def _confirm(self, what: str, confirm: bool) -> None:
+        if not confirm:
+            raise ConfirmationRequired(f"{self.name}: {what}; pass confirm=True if you mean it (nothing was sent)")
+
+    def forget(self) -> None:
+        """The drive was power-cycled: drop the image of written settings; count it as disabled."""
+        self.access.forget()
+        self._enabled = False
+        self._running = None
+
+    # -- units --------------------------------------------------------------------------------
+    def speed_value(self, rpm: float) -> int:
+        """The 6.1 speed value for ``rpm`` at this driver's subdivision (0 stops: callers keep moves >= 1)."""
+        return st.speed_value(rpm, self.microsteps)
+
+    def acc_for(self, acceleration: int | None) -> int:
+        """acc for an acceleration [rpm/s] (None: :data:`DEFAULT_ACC`; 0: no ramp)."""
+        if acceleration is None:
+            return DEFAULT_ACC
+        if acceleration <= 0:
+            return 0
+        return st.acc_for_rate(acceleration / st.effective_rpm(1, self.microsteps))
+
+    @property
+    def pulses_per_turn(self) -> int:
+        return st.pulses_per_turn(self.microsteps)
+
+    # -- power ----------------------------------------------------------------------------------
+    @property
+    def is_enabled(self) -> bool:
+        return self._enabled
+
+    def prepare(self) -> None:
+        """Settings the procedures rely on: serial work mode and subdivision (written once)."""
+        self._set("work_mode", int(self.work_mode))
+        self._set("microsteps", self.microsteps)
+
+    def enable(self) -> None:
+        """Serial work mode, subdivision, then 0xF3 enable."""
+        self.prepare()
+        self.write_param("motor_enable", 1)
+
+    def disable(self) -> None:
+        """0xF3 disable: the drive releases the shaft."""
+        self.write_param("motor_enable", 0)
+        self._running = None
+
+    # -- motion -------------------------------------------------------------------------------
+    def _move_values(self, mode: str, target: int, speed: int | None, acceleration: int | None,
+                     target_name: str | None = None) -> dict[str, int]:
+        rpm = float(DEFAULT_SPEED if speed is None else abs(speed))
+        speed_name, acc_name, default_target = RUN_GROUPS[mode]
+        values = {speed_name: max(1, self.speed_value(rpm)), acc_name: self.acc_for(acceleration),
+                  target_name or default_target: target}
+        self._last_rpm, self._last_acc = rpm, values[acc_name]
+        return values
+
+    def move_to(self, position: int, *, speed: int | None = None, acceleration: int | None = None,
+                deceleration: int | None = None) -> None:
+        """Position mode4 (0xF5): to the absolute axis ``position`` [counts]; updates a running 0xF5 move."""
+        self._run("abs_axis", self._move_values("abs_axis", position, speed, acceleration), absolute=position)
+
+    def move_by(self, delta: int, *, speed: int | None = None, acceleration: int | None = None,
+                deceleration: int | None = None) -> None:
+        """Position mode3 (0xF4): by ``delta`` counts relative to the present axis."""
+        self._run("rel_axis", self._move_values("rel_axis", delta, speed, acceleration))
+
+    def move_pulses(self, pulses: int, *, speed: int | None = None, acceleration: int | None = None) -> None:
+        """Position mode1 (0xFD): ``pulses`` microsteps (signed: + CCW) relative to the present position."""
+        values = self._move_values("pulses", abs(pulses), speed, acceleration)
+        values["position_mode1_direction"] = int(st.RunDirection.CCW if pulses >= 0 else st.RunDirection.CW)
+        self._run("pulses", values)
+
+    def move_to_pulses(self, pulses: int, *, speed: int | None = None, acceleration: int | None = None) -> None:
+        """Position mode2 (0xFE): to the absolute pulse position ``pulses``."""
+        self._run("abs_pulses", self._move_values("abs_pulses", pulses, speed, acceleration))
+
+    def set_velocity(self, velocity: int, *, acceleration: int | None = None,
+                     deceleration: int | None = None) -> None:
+        """Speed mode (0xF6): ``velocity`` rpm, + CCW (0 = a decelerated stop with the same acc)."""
+        acc = self.acc_for(acceleration)
+        value = self.speed_value(abs(velocity))
+        if value == 0 and velocity:
+            value = 1  # a tiny non-zero command still runs (the value 0 would be a stop)
+        self._last_rpm, self._last_acc = float(abs(velocity)), acc
+        self._run("speed", {"speed_mode_direction": int(st.RunDirection.CCW if velocity >= 0 else st.RunDirection.CW),
+                            "speed_mode_speed": value, "speed_mode_acc": acc})
+
+    def set_current(self, current: int) -> None:
+        raise CommandError(f"{self.name}: the MKS has no torque/current mode over the serial interface "
+                           "(working current 0x83 is a limit, not a command); use speed or position control")
+
+    def stop(self) -> None:
+        """Decelerated stop of the running mode (its own command with speed 0; speed mode's 0xF6 when the
+        mode is unknown), with the last acc - never acc 0 above 1000 rpm (manual 6.5 note)."""
+        mode = self._running if self._running is not None and self._running in RUN_GROUPS else "speed"
+        acc = self._last_acc or (DEFAULT_ACC if self._last_rpm > 1000 else 0)
+        speed_name, acc_name, target_name = RUN_GROUPS[mode]
+        values = {speed_name: 0, acc_name: acc, target_name: 0}  # the manual's stop frames: dir 0, target 0
+        if mode == "pulses":
+            values["position_mode1_direction"] = 0
+        self.access.write_many(values, idempotent=True)  # a stop may be repeated: it never starts anything
+        self._running = None
+
+    def stop_now(self) -> None:
+        """Immediate stop of the running mode (its stop command with acc 0). The manual advises against it above
+        1000 rpm (6.5-6.9 notes): :meth:`stop` decelerates."""
+        mode = self._running if self._running is not None and self._running in RUN_GROUPS else "speed"
+        speed_name, acc_name, target_name = RUN_GROUPS[mode]
+        values = {speed_name: 0, acc_name: 0, target_name: 0}
+        if mode == "pulses":
+            values["position_mode1_direction"] = 0
+        self.access.write_many(values, idempotent=True)
+        self._running = None
+
+    def emergency_stop(self) -> None:
+        """0xF7: stop at once (not from above 1000 rpm if avoidable: the manual's note)."""
+        self.write_param("emergency_stop", 1, idempotent=False)
+
+    def clear_errors(self) -> None:
+        """0x3D: release the locked-rotor protection."""
+        self.write_param("release_protection", 1, idempotent=False)
+
+    def _command_run(self, values: dict[str, int]) -> None:
+        self.access.write_many(values, idempotent=False)
+        for name, value in values.items():
+            self._noted(name, value)
+
+    def _run(self, mode: str, values: dict[str, int], *, absolute: int | None = None) -> None:
+        """Send a run command; if its reply is lost, find out whether the drive took it before sending again."""
+        for name, value in values.items():
+            self.params[name].check(value)
+        sent_at = self.clock.now()
+        try:
+            self._command_run(values)
+            return
+        except (OutcomeUnknown, PeerProtocolError) as exc:
+            outcome = exc
+        if self._accepted(mode, absolute, sent_at):
+            for name, value in values.items():
+                self._noted(name, value)
+            return
+        if absolute is None and mode != "speed":
+            raise OutcomeUnknown(f"{self.name}: the reply to a relative move was lost and the drive is not moving "
+                                 "now: it may have run already; read the position before sending it again") \
+                from outcome
+        self._command_run(values)  # the drive did not take it: one more time
+
+    def _accepted(self, mode: str, absolute: int | None, since: float) -> bool:
+        """After a lost reply: does the drive run (or has it run) the command?"""
+        status = self.access.read("motor_status")
+        if status not in (st.MotorStatus.STOP, st.MotorStatus.FAIL):
+            return True
+        if self.completed_since(since):
+            return True
+        if absolute is not None:
+            name = "encoder_addition" if mode == "abs_axis" else "number_of_pulses"
+            return abs(self.access.read(name) - absolute) <= 1
+        return False
+
+    def completed_since(self, since: float) -> bool:
+        """Whether a completion frame arrived after ``since`` (protocols without them: False)."""
+        return False
+
+    # -- waiting --------------------------------------------------------------------------------
+    def wait_motion(self, timeout: float = 30.0, *, poll: float = 0.01) -> st.MotorStatus:
+        """Wait until the motor stops (reads 0xF1 every ``poll`` s); returns the status read last."""
+        deadline = self.clock.now() + timeout
+        while True:
+            status = st.MotorStatus(self.access.read("motor_status"))
+            if status is st.MotorStatus.STOP:
+                self._running = None
+                return status
+            if self.clock.now() >= deadline:
+                raise MotionTimeout(f"{self.name}: still running after {timeout} s (status {status.name})")
+            self.clock.sleep(poll)
+
+    # -- status -------------------------------------------------------------------------------
+    def state(self) -> RawState:
+        v = self.access.read_many(STATUS_NAMES)
+        protected = bool(v["protection_state"])
+        enabled = bool(v["en_pin_status"]) and not protected
+        if not enabled:
+            self._enabled = False
+        moving = v["motor_status"] not in (st.MotorStatus.STOP, st.MotorStatus.FAIL)
+        if not moving and self._running != "speed":
+            self._running = None
+        return RawState(position=v["encoder_addition"], velocity=v["real_time_speed"], current=0,
+                        temperature=math.nan, enabled=enabled, moving=moving,
+                        fault=LOCKED_ROTOR if protected else 0, time=self.clock.now(), extra=v)
+
+    def motor_status(self) -> st.MotorStatus:
+        """0xF1 query."""
+        return st.MotorStatus(self.access.read("motor_status"))
+
+    def fault_text(self, code: int) -> str:
+        if code == LOCKED_ROTOR:
+            return ("motor shaft locked-rotor protection: the position error stayed too large (manual 3 #9, 5.2 #9); "
+                    "the drive released the shaft")
+        return f"unknown MKS fault code 0x{code:X}"
+
+    def fault(self, code: int) -> Fault | None:
+        if not code:
+            return None
+        if code == LOCKED_ROTOR:
+            return Fault(code, "locked_rotor_protection", self.fault_text(code),
+                         "remove the blockage, then clear_faults() (0x3D release) and enable() again",
+                         f"0x3E protection state (manual 5.1 #10); code {DEFINED_BY_JOINTS}")
+        return super().fault(code)
+
+    def protection_state(self) -> bool:
+        """0x3E: the locked-rotor protection released the shaft."""
+        return bool(self.access.read("protection_state"))
+
+    def motion_targets(self) -> dict[str, tuple[str, float]]:
+        """Motion set-points among the parameters, for the joint's checks of raw writes (SI per unit,
+        motor side). Pulse targets of 0xFD count in the direction last written; 0xFE's are not listed
+        (their zero is the pulse counter's, not the axis)."""
+        rad = self.units.position
+        per_value = st.effective_rpm(1, self.microsteps) * _RPM
+        pulse = 2.0 * math.pi / self.pulses_per_turn
+        sign = -1.0 if self.image.get("position_mode1_direction") == st.RunDirection.CW else 1.0
+        out = {"position_mode4_abs_axis": ("position", rad), "position_mode3_rel_axis": ("relative", rad),
+               "position_mode1_pulses": ("relative", sign * pulse),
+               "working_current": ("current", 0.001)}
+        for name in ("speed_mode_speed", "position_mode1_speed", "position_mode2_speed", "position_mode3_speed",
+                     "position_mode4_speed", "home_speed"):
+            out[name] = ("velocity", per_value)
+        return out
+
+    # -- limits the drive enforces itself -----------------------------------------------------
+    def apply_limits(self, *, position: tuple[int, int] | None = None, velocity: int | None = None,
+                     current: int | None = None) -> None:
+        """The working current (0x83, mA) is the drive's torque limit; it has no speed or position limit
+        parameters (end-stop switches only), so those stay with the joint's checks."""
+        if current is not None:
+            top = round(self.profile.max_working_current * 1000)
+            self._set("working_current", max(0, min(current, top)))
+
+    # -- settings -------------------------------------------------------------------------------
+    def set_work_mode(self, mode: int) -> None:
+        """0x82 work mode (serial motion needs SR_OPEN 3, SR_CLOSE 4 or SR_vFOC 5)."""
+        self.write_param("work_mode", int(mode))
+
+    def set_working_current(self, milliamps: int) -> None:
+        """0x83 working current Ma [mA] (42D 0-3000, 57D 0-5200)."""
+        self.write_param("working_current", milliamps)
+
+    def set_holding_current(self, code: int) -> None:
+        """0x9B holding current: 0 = 10 % ... 8 = 90 % of Ma (OPEN/CLOSE modes)."""
+        self.write_param("holding_current", code)
+
+    def set_microsteps(self, microsteps: int) -> None:
+        """0x84 subdivision 1-256 (speeds and pulses scale with it: 6.1)."""
+        self.write_param("microsteps", microsteps)
+
+    def set_direction(self, direction: int) -> None:
+        """0x86 direction of the pulse interface (0 CW, 1 CCW); serial commands carry their own."""
+        self.write_param("motor_direction", direction)
+
+    def set_en_level(self, level: int) -> None:
+        """0x85 En pin active level: 0 low, 1 high, 2 always enabled."""
+        self.write_param("en_active_level", level)
+
+    def set_locked_rotor_protection(self, on: bool) -> None:
+        """0x88 locked-rotor protection on/off."""
+        self.write_param("locked_rotor_protection", int(on))
+
+    def release_protection(self) -> None:
+        """0x3D release the locked-rotor protection."""
+        self.clear_errors()
+
+    def set_home(self, *, trigger_level: int = 0, direction: int = 0, speed: int = 60, end_limit: int = 0) -> None:
+        """0x90 home parameters: end-stop level (0 low), home direction (0 CW, 1 CCW), speed [rpm], EndLimit."""
+        self.access.write_many({"home_trigger_level": trigger_level, "home_direction": direction,
+                                "home_speed": self.speed_value(speed), "end_limit": end_limit})
+
+    def go_home(self) -> None:
+        """0x91 go home (limit switch, or 'noLimit' per 0x94); the end comes as a completion / status 1."""
+        self.write_param("go_home", 1, idempotent=False)
+        self._sent_count = self.completions
+        self._running = "home"
+        self._sent_at = self.clock.now()
+
+    def set_limit_remap(self, on: bool) -> None:
+        """0x9E limit port remap (left -> En, right -> Dir; serial modes)."""
+        self.write_param("limit_port_remap", int(on))
+
+    def set_zero(self, *, confirm: bool = False) -> None:
+        """0x92 make the present axis zero (the encoder and pulse positions restart at 0)."""
+        self._confirm("0x92 sets the present axis to zero (every stored position changes meaning)", confirm)
+        self.write_param("set_current_axis_to_zero", 1, idempotent=False)
+
+    def set_zero_mode(self, mode: int, *, set_zero: int = 1, speed: int = 2, direction: int = 0,
+                      confirm: bool = False) -> None:
+        """0x9A 0_Mode: 0 disable, 1 DirMode, 2 NearMode - the motor MOVES at power-on to the zero point."""
+        self._confirm("0x9A 0_Mode makes the motor move by itself at every power-on", confirm)
+        self.access.write_many({"zero_mode": mode, "zero_mode_set_zero": set_zero, "zero_mode_speed": speed,
+                                "zero_mode_direction": direction})
+
+    def save_speed_mode(self, *, confirm: bool = False) -> None:
+        """0xFF C8: save the speed-mode parameters - the motor then RUNS by itself at every power-on."""
+        self._confirm("0xFF C8 saves the speed mode: the motor will run by itself at every power-on", confirm)
+        self.write_param("save_clean_speed_mode_parameter", st.SpeedModeParameter.SAVE, idempotent=False)
+
+    def clean_speed_mode(self) -> None:
+        """0xFF CA: clean the saved speed-mode parameters (no run at power-on)."""
+        self.write_param("save_clean_speed_mode_parameter", st.SpeedModeParameter.CLEAN, idempotent=False)
+
+    def restore_defaults(self, *, confirm: bool = False) -> None:
+        """0x3F restore the default parameters: the drive reboots and must be calibrated again."""
+        self._confirm("0x3F restores the factory parameters (the drive reboots and needs calibrating)", confirm)
+        self.write_param("restore_default_parameters", 1, idempotent=False)
+        self.forget()
+
+    def restart(self, *, confirm: bool = False) -> None:
+        """0x41 restart the drive (it releases the shaft while it reboots)."""
+        self._confirm("0x41 restarts the drive (the shaft is released while it reboots)", confirm)
+        self.write_param("restart_motor", 1, idempotent=False)
+        self.forget()
+
+    def calibrate(self, *, confirm: bool = False) -> None:
+        """0x80 calibrate the encoder: the shaft MOVES; the motor must be unloaded."""
+        self._confirm("0x80 calibration turns the shaft (the motor must be unloaded)", confirm)
+        self.write_param("calibrate", 1, idempotent=False)
+
+    def set_baud_rate(self, code: int, *, confirm: bool = False) -> None:
+        """0x8A baud rate code (1 9600 ... 7 256000): the host loses the drive until it follows."""
+        self._confirm("0x8A changes the drive's baud rate: this bus loses it until its baud rate follows", confirm)
+        self.write_param("baud_rate", code)
+
+    def set_address(self, address: int, *, confirm: bool = False) -> None:
+        """0x8B slave address: the host loses the drive at the old address."""
+        self._confirm("0x8B changes the drive's address: this joint loses it", confirm)
+        self.write_param("slave_address", address)
+
+    def set_modbus(self, on: bool, *, confirm: bool = False) -> None:
+        """0x8E Modbus-RTU on/off: the drive switches protocol (this bus loses it)."""
+        self._confirm("0x8E switches the drive's protocol: this bus loses it", confirm)
+        self.write_param("modbus_rtu", int(on))
+
+    def close(self) -> None:
+        """Nothing to release (subclasses drop their subscriptions)."""
+
+    def describe_running(self) -> str | None:
+        """The run mode this host started last and believes running (None: none)."""
+        return self._running

@@ -1,0 +1,138 @@
+"""MKS SERVO42D/57D in Modbus-RTU mode (manual Part 8): the Part 8 requests as the parameter access.
+
+Rule: the procedures are :class:`~joints.drivers.mks.MksDriver`'s, by the same parameter names as
+the native protocol, so switching a bus between ``mks-serial`` and ``modbus-rtu`` changes nothing
+above the driver. Each parameter lives in one Part 8 request (:data:`MKS_MODBUS`): FC04 reads (one
+per quantity; the blocks are command codes, not a register file), FC06 single settings and
+commands, FC16 multi-field commands sent whole (the other fields from the image of what was
+written). Modbus mode has no completion frames: :meth:`~joints.drivers.mks.MksDriver.wait_motion`
+polls 0xF1. The FC16 0x90 home-parameter request is the manual's own frame (3 registers, 5 bytes,
+ERRATA DOC-MKS-5), sent as is with :meth:`~joints.link.modbus.ModbusLink.write_pdu`. Native-only
+quantities (0x8C respond/active, 0x8D group address, 0x94 'noLimit' homing) raise
+:class:`~joints.errors.RegisterError`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+from joints.clock import Clock
+from joints.codecs import modbus as mb
+from joints.devices.mks import state as st
+from joints.devices.mks.modbus import FC_READ, FC_WRITE_MULTIPLE, FC_WRITE_SINGLE, MKS_MODBUS, ModbusBlock
+from joints.devices.mks.params import model_params
+from joints.devices.mks.profile import MksProfile
+from joints.devices.params import ParamSet
+from joints.drivers.mks import MksAccess, MksDriver
+from joints.errors import CommandError, OutcomeUnknown, PeerProtocolError, RegisterError
+from joints.link.modbus import ModbusLink
+
+__all__ = ["MksModbusAccess", "MksModbusDriver"]
+
+
+class MksModbusAccess(MksAccess):
+    """One drive's parameters as Part 8 requests (see the module docstring)."""
+
+    protocol = "modbus-rtu"
+
+    def __init__(self, link: ModbusLink, slave: int, params: ParamSet) -> None:
+        super().__init__(params)
+        self.link = link
+        self.slave = slave
+        self.map = MKS_MODBUS
+
+    def resolve(self, key: str | int) -> str:
+        if isinstance(key, int):
+            for fc in (FC_READ, FC_WRITE_SINGLE, FC_WRITE_MULTIPLE):
+                block = self.map.find(fc, key)
+                if block is not None:
+                    if len(block.fields) != 1:
+                        raise RegisterError(f"{self.params.device}: 0x{key:04X} carries "
+                                            f"{', '.join(f.name for f in block.fields)}: name the parameter")
+                    return block.fields[0].name
+            raise RegisterError(f"{self.params.device}: no Part 8 request at 0x{key:04X}")
+        self.map.get(key)
+        return key
+
+    def where(self, name: str) -> str:
+        f = self.map.get(name)
+        return f"FC{f.function:02d} 0x{f.address:04X}"
+
+    def read(self, name: str) -> int:
+        return self.read_many((name,))[name]
+
+    def read_many(self, names: Sequence[str]) -> dict[str, int]:
+        """One FC04 per Part 8 read block."""
+        blocks: dict[int, ModbusBlock] = {}
+        for n in names:
+            block = self.map.block_of(n)
+            if block.function != FC_READ:
+                raise RegisterError(f"{self.params.device}: {n} ({self.where(n)}) cannot be read: the drive does not "
+                                    "report it")
+            blocks[block.address] = block
+        out: dict[str, int] = {}
+        for block in blocks.values():
+            words = self.link.read_registers(self.slave, block.address, block.count, input_registers=True)
+            out.update(block.decode_words(words))
+        return {n: out[n] for n in names}
+
+    def write(self, name: str, value: int, *, idempotent: bool = True) -> None:
+        self.write_many({name: value}, idempotent=idempotent)
+
+    def write_many(self, values: Mapping[str, int], *, idempotent: bool = True) -> None:
+        """One request per block, every field of it sent; all values checked before anything is sent."""
+        groups: dict[tuple[int, int], dict[str, int]] = {}
+        for n, v in values.items():
+            block = self.map.block_of(n)
+            if block.function == FC_READ:
+                raise RegisterError(f"{self.params.device}: {n} is read-only")
+            groups.setdefault((block.function, block.address), {})[n] = v
+        planned = []
+        for (fc, address), given in groups.items():
+            block = self.map.block(fc, address)
+            full = self.merged([f.name for f in block.fields], given)
+            block.encode(full)  # range-checked for the wire too
+            planned.append((block, full))
+        for block, full in planned:
+            try:
+                self._send(block, full, idempotent)
+            except (OutcomeUnknown, PeerProtocolError):
+                self.remember(full)
+                raise
+            self.remember(full)
+
+    def _send(self, block: ModbusBlock, values: Mapping[str, int], idempotent: bool) -> None:
+        if block.function == FC_WRITE_SINGLE:
+            (word,) = block.words(values)
+            self.link.write_register(self.slave, block.address, word, idempotent=idempotent)
+        elif block.byte_count % 2:  # the manual's own odd frame (0x90): sent exactly as documented
+            self.link.write_pdu(self.slave, mb.WRITE_MULTIPLE_REGISTERS, block.request_pdu(values),
+                                idempotent=idempotent)
+        else:
+            self.link.write_registers(self.slave, block.address, block.words(values), idempotent=idempotent)
+
+
+class MksModbusDriver(MksDriver):
+    """One MKS axis on a Modbus RTU bus (the drive with 0x8E Modbus on)."""
+
+    access: MksModbusAccess
+
+    def __init__(
+        self,
+        link: ModbusLink,
+        slave: int,
+        *,
+        device: str = "mks-servo42d",
+        profile: MksProfile | str | None = None,
+        clock: Clock | None = None,
+        name: str = "",
+        work_mode: int = st.WorkMode.SR_vFOC,
+        microsteps: int = 16,
+    ) -> None:
+        if not 1 <= slave <= 247:
+            raise CommandError(f"MKS Modbus slave address must be 1..247, got {slave}")
+        self.link = link
+        self.slave = slave
+        super().__init__(MksModbusAccess(link, slave, model_params(device)), device=device, profile=profile,
+                         clock=clock or link.clock, name=name or f"{device}@{slave}", work_mode=work_mode,
+                         microsteps=microsteps)

@@ -1,0 +1,307 @@
+"""MKS SERVO42D/57D over the native RS485 protocol: command codes as the parameter access, completion frames.
+
+Rule: the procedures are :class:`~joints.drivers.mks.MksDriver`'s, by parameter name; this module
+adds what only the native protocol has:
+
+* :class:`MksNativeAccess` - each parameter is a field of one command (:data:`MKS_NATIVE`): a read
+  is that command's query (one per command, several fields from one reply); a write sends the whole
+  command with its other fields from the image of what was written before (reads of write-only
+  settings are refused by the driver: the drive cannot report them).
+* Completion frames (0x8C active = 1): the driver subscribes to its drive's frames, so it knows that
+  a move ended without polling (:attr:`MksNativeDriver.completion`); :meth:`MksNativeDriver.wait_motion`
+  waits for that frame and, when it does not come (lost to a collision on the half-duplex line),
+  finds the end by a status read.
+* Respond and active (0x8C), group addresses (0x8D): the link is told after the drive confirmed
+  them, so it waits for nothing the drive will not send. Broadcast and long packets go out through
+  :meth:`MksNativeDriver.broadcast` / :func:`long_packet` without waiting; the drivers whose drives
+  they start note the motion (leaving the rig stops them).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from joints.clock import Clock
+from joints.codecs import mks
+from joints.devices.mks import state as st
+from joints.devices.mks.native import MKS_NATIVE, fields_of
+from joints.devices.mks.params import model_params
+from joints.devices.mks.profile import MksProfile
+from joints.devices.params import ParamSet
+from joints.drivers.mks import RUN_GROUPS, MksAccess, MksDriver
+from joints.errors import CommandError, MotionTimeout, OutcomeUnknown, PeerProtocolError, RegisterError
+from joints.link.base import Subscription
+from joints.link.mks import MksLink
+
+__all__ = ["MksNativeAccess", "MksNativeDriver", "long_packet"]
+
+class MksNativeAccess(MksAccess):
+    """One drive's parameters as native MKS commands (see the module docstring)."""
+
+    protocol = "mks-serial"
+
+    def __init__(self, link: MksLink, address: int, params: ParamSet) -> None:
+        super().__init__(params)
+        self.link = link
+        self.address = address
+        self.last_reply: Any = None  #: the reply to the last write (a status message), None if there was none
+
+    def resolve(self, key: str | int) -> str:
+        if isinstance(key, int):
+            names = fields_of(key)
+            if len(names) != 1:
+                raise RegisterError(f"{self.params.device}: command 0x{key:02X} " + (
+                    f"carries {', '.join(names)}: name the parameter" if names else "is not a parameter command"))
+            return names[0]
+        MKS_NATIVE.key(key)
+        return key
+
+    def where(self, name: str) -> str:
+        k = MKS_NATIVE.key(name)
+        return f"0x{int(k.command):02X}" + (f" {k.field}" if k.field else "")
+
+    # -- reads ------------------------------------------------------------------------------
+    def _query(self, command: int) -> Any:
+        return self.link.request(mks.REQUEST_TYPES[command](self.address), idempotent=True)
+
+    def read(self, name: str) -> int:
+        return self.read_many((name,))[name]
+
+    def read_many(self, names: Sequence[str]) -> dict[str, int]:
+        """One query per command (0x30 gives carry and value together)."""
+        out: dict[str, int] = {}
+        by_command: dict[int, list[str]] = {}
+        for n in names:
+            if not self.params[n].access.readable:
+                raise RegisterError(f"{self.params.device}: {n} ({self.where(n)}) cannot be read: the drive does not "
+                                    "report it")
+            by_command.setdefault(int(MKS_NATIVE.key(n).command), []).append(n)
+        for command, wanted in by_command.items():
+            reply = self._query(command)
+            if reply is None:
+                raise CommandError(f"{self.params.device}@{self.address}: no reply to a read (broadcast/group address?)")
+            for n in wanted:
+                out[n] = int(getattr(reply, MKS_NATIVE.key(n).field))
+        return out
+
+    # -- writes -----------------------------------------------------------------------------
+    def message(self, values: Mapping[str, int], address: int | None = None) -> tuple[Any, dict[str, int]]:
+        """The request that writes ``values`` (all parameters of ONE command; the others from the image)."""
+        commands = {int(MKS_NATIVE.key(n).command) for n in values}
+        if len(commands) != 1:
+            raise CommandError(f"{self.params.device}: {sorted(values)} belong to {len(commands)} commands, not one")
+        command = commands.pop()
+        for n in values:
+            if not self.params[n].access.writable:
+                raise RegisterError(f"{self.params.device}: {n} is read-only")
+        full = self.merged(fields_of(command), values)
+        kwargs = {MKS_NATIVE.key(n).field: v for n, v in full.items() if MKS_NATIVE.key(n).field}
+        return mks.REQUEST_TYPES[command](self.address if address is None else address, **kwargs), full
+
+    def write(self, name: str, value: int, *, idempotent: bool = True) -> None:
+        self.write_many({name: value}, idempotent=idempotent)
+
+    def write_many(self, values: Mapping[str, int], *, idempotent: bool = True) -> None:
+        """One frame per command; every field of it sent (the others from the image); all checked first."""
+        groups: dict[int, dict[str, int]] = {}
+        for n, v in values.items():
+            groups.setdefault(int(MKS_NATIVE.key(n).command), {})[n] = v
+        planned = [self.message(g) for g in groups.values()]  # every value checked before anything is sent
+        for request, full in planned:
+            try:
+                self.last_reply = self.link.request(request, idempotent=idempotent)
+            except (OutcomeUnknown, PeerProtocolError):
+                self.remember(full)  # the drive may have taken them
+                raise
+            self.remember(full)
+            self._tell_link(full)
+
+    def _tell_link(self, values: Mapping[str, int]) -> None:
+        if "slave_respond" in values:
+            self.link.note_respond(self.address, bool(values["slave_respond"]))
+        if "group_address" in values:
+            self.link.note_group(self.address, values["group_address"])
+
+
+class MksNativeDriver(MksDriver):
+    """One MKS axis on a native RS485 bus."""
+
+    access: MksNativeAccess
+
+    def __init__(
+        self,
+        link: MksLink,
+        address: int,
+        *,
+        device: str = "mks-servo42d",
+        profile: MksProfile | str | None = None,
+        clock: Clock | None = None,
+        name: str = "",
+        work_mode: int = st.WorkMode.SR_vFOC,
+        microsteps: int = 16,
+        active: bool = True,
+    ) -> None:
+        if not 1 <= address <= 255:
+            raise CommandError(f"MKS slave address must be 1..255 (0 is broadcast), got {address}")
+        self.link = link
+        self.address = address
+        self.active = active  #: ask for completion frames (0x8C active = 1)
+        super().__init__(MksNativeAccess(link, address, model_params(device)), device=device, profile=profile,
+                         clock=clock or link.clock, name=name or f"{device}@{address}", work_mode=work_mode,
+                         microsteps=microsteps)
+        #: the last completion frame of this drive (RunReply / CalibrationReply), None before any
+        self.completion: Any = None
+        self.completion_time = -math.inf
+        self.completions = 0
+        self._sub: Subscription[Any] | None = link.subscribe_completions(address, self._on_completion)
+
+    def _on_completion(self, message: Any) -> None:
+        self.completion = message
+        self.completion_time = self.clock.now()
+        self.completions += 1
+        if isinstance(message, mks.RunReply) and message.function in (0xF4, 0xF5, 0xF6, 0xFD, 0xFE, 0x91):
+            self._running = None
+
+    @property
+    def motion_complete(self) -> bool:
+        """A completion frame arrived after the motion this host started last (active mode)."""
+        return self.completions > self._sent_count
+
+    def completed_since(self, since: float) -> bool:
+        return self.completions > self._sent_count
+
+    def prepare(self) -> None:
+        """SR work mode, subdivision, and respond on + active as configured (0x8C)."""
+        super().prepare()
+        if self.image.get("slave_respond") != 1 or self.image.get("slave_active") != int(self.active):
+            self.access.write_many({"slave_respond": 1, "slave_active": int(self.active)})
+
+    def set_respond_active(self, respond: bool, active: bool) -> None:
+        """0x8C: respond off silences the replies to run commands (queries still answer); active on sends
+        completion frames (status 2 / 3) when a motion ends."""
+        self.access.write_many({"slave_respond": int(respond), "slave_active": int(active)})
+        self.active = active
+
+    def set_group_address(self, group: int) -> None:
+        """0x8D: the drive also executes commands sent to ``group`` (and answers none of them)."""
+        self.write_param("group_address", group)
+
+    def set_nolimit_home(self, *, reverse_angle: int = 0x2000, mode: int = 1, current: int | None = None) -> None:
+        """0x94 'noLimit' homing: back off ``reverse_angle`` counts after the stall, hm-Mode (1 no switch),
+        Hm_Ma [mA] (default the model's)."""
+        ma = round(self.profile.default_home_current * 1000) if current is None else current
+        self.access.write_many({"home_reverse_angle": reverse_angle, "home_mode": mode, "home_current": ma})
+
+    def wait_motion(self, timeout: float = 30.0, *, poll: float = 0.01, recover: float = 0.25) -> st.MotorStatus:
+        """Wait for the completion frame of the motion started last (active mode); without it - respond or
+        active off, or the frame lost on the line - the motor status (read every ``recover`` s) tells."""
+        if not self.active or self.link.rule.all_silent or self.address in self.link.rule.silent:
+            return super().wait_motion(timeout, poll=poll)
+        clock = self.clock
+        start = clock.now()
+        deadline = start + timeout
+        next_check = start + recover
+        while True:
+            t0 = clock.now()
+            self.link.poll(0.0)
+            if self.motion_complete:
+                self._running = None
+                return st.MotorStatus.STOP
+            now = clock.now()
+            if now >= next_check:
+                status = st.MotorStatus(self.access.read("motor_status"))
+                if status is st.MotorStatus.STOP:  # the completion frame was lost: the status tells
+                    self._running = None
+                    return status
+                next_check = now + recover
+            if now >= deadline:
+                raise MotionTimeout(f"{self.name}: no completion after {timeout} s")
+            rest = poll - (clock.now() - t0)
+            if rest > 0:
+                self.link.poll(rest)
+                left = poll - (clock.now() - t0)
+                if left > 0:
+                    clock.sleep(left)  # in process the bus waits no time: let the world run
+
+    # -- frames for several drives ---------------------------------------------------------------
+    def plan(self, values: Mapping[str, int], address: int | None = None) -> Any:
+        """The request that would write ``values`` (one command) - for long packets, broadcast, groups."""
+        request, _full = self.access.message(values, address)
+        return request
+
+    def plan_velocity(self, rpm: float, *, acceleration: int | None = None) -> Any:
+        acc = self.acc_for(acceleration)
+        value = self.speed_value(abs(rpm)) or (1 if rpm else 0)
+        return self.plan({"speed_mode_direction": int(st.RunDirection.CCW if rpm >= 0 else st.RunDirection.CW),
+                          "speed_mode_speed": value, "speed_mode_acc": acc})
+
+    def plan_move_to(self, position: int, *, speed: int | None = None, acceleration: int | None = None) -> Any:
+        return self.plan(self._move_values("abs_axis", position, speed, acceleration))
+
+    def plan_move_by(self, delta: int, *, speed: int | None = None, acceleration: int | None = None) -> Any:
+        return self.plan(self._move_values("rel_axis", delta, speed, acceleration))
+
+    def plan_move_pulses(self, pulses: int, *, speed: int | None = None, acceleration: int | None = None) -> Any:
+        values = self._move_values("pulses", abs(pulses), speed, acceleration)
+        values["position_mode1_direction"] = int(st.RunDirection.CCW if pulses >= 0 else st.RunDirection.CW)
+        return self.plan(values)
+
+    def note_sent(self, request: Any) -> None:
+        """A run command for this drive went out without reply (broadcast, group, long packet): remember it."""
+        if request.function not in _RUN_FUNCTION_MODES:
+            return
+        mode = _RUN_FUNCTION_MODES[request.function]
+        _request, full = self.access.message(_fields_of_request(request))
+        self.access.remember(full)
+        speed = full[RUN_GROUPS[mode][0]]
+        self._running = mode if speed else None
+        self._sent_at = self.clock.now()
+        self._sent_count = self.completions
+
+    def broadcast(self, request: Any, drivers: Sequence[MksNativeDriver] = ()) -> None:
+        """Send ``request`` to address 0: every drive executes it, none answers; ``drivers`` note it."""
+        self.link.broadcast(request)
+        for d in drivers:
+            d.note_sent(request)
+
+    def send_group(self, group: int, request: Any, drivers: Sequence[MksNativeDriver] = ()) -> None:
+        """Send ``request`` to a group address; ``drivers`` (the group's) note it."""
+        self.link.send_group(group, request)
+        for d in drivers:
+            d.note_sent(request)
+
+    def close(self) -> None:
+        if self._sub is not None:
+            self._sub.cancel()
+            self._sub = None
+
+
+_RUN_FUNCTION_MODES = {0xF6: "speed", 0xFD: "pulses", 0xFE: "abs_pulses", 0xF4: "rel_axis", 0xF5: "abs_axis"}
+
+
+def _fields_of_request(request: Any) -> dict[str, int]:
+    """Parameter values carried by a request message (its command's fields)."""
+    out: dict[str, int] = {}
+    for name in fields_of(request.function):
+        field = MKS_NATIVE.key(name).field
+        if field:
+            out[name] = int(getattr(request, field))
+    return out
+
+
+def long_packet(items: Sequence[tuple[MksNativeDriver, Any]]) -> None:
+    """Send up to five drivers' commands in ONE 0xFC long packet (5.7): each drive executes its own, none
+    answers, nothing is waited for; each driver notes the motion it started."""
+    if not items:
+        return
+    link = items[0][0].link
+    if any(d.link is not link for d, _ in items):
+        raise CommandError("a long packet goes out on one bus: every driver must share the link")
+    for d, request in items:
+        if request.address != d.address:
+            raise CommandError(f"{d.name}: the planned command is addressed to {request.address}, not {d.address}")
+    link.send_long_packet([request for _, request in items])
+    for d, request in items:
+        d.note_sent(request)

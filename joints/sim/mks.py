@@ -1,0 +1,736 @@
+"""The MKS SERVO42D/57D firmware: a closed-loop stepper drive by parameter name, without a protocol.
+
+Rule: the firmware IS the drive. It holds the parameters of
+:data:`~joints.devices.mks.params.MKS_PARAMS` (by name), executes the commands of the manual's
+Parts 5 and 6 (:meth:`MksFirmware.execute`: all fields of one command at once, the reply status as
+the result), runs the run state machine of :mod:`joints.devices.mks.state`, and every physics
+substep generates its reference and turns it into a motor torque. It never sets a position. The
+native front (:mod:`joints.sim.mks_front`) and the Part 8 Modbus front
+(:mod:`joints.sim.mks_modbus_front`) reach it by the same names. No wall clock: time advances only
+through :meth:`MksFirmware.step`. Everything is motor side (rad, rad/s, N*m); a lead screw is the
+world's business.
+
+The model
+    * Reference generator: the speed *value* changes by 1 every ``(256 - acc) x 50 us`` (acc 0: at
+      once), converted to motor rpm by the subdivision (6.1) and clamped to the work mode's maximum
+      (OPEN 400, CLOSE 1500, vFOC 3000 rpm). Position moves decelerate in time to end exactly on
+      their target (pulses: a whole number of microsteps; axis: a whole encoder count); below the
+      last speed step they creep at 1 rpm. In closed modes a move is complete (status 2, 0xF1
+      stop) once the shaft is within :data:`IN_POSITION` of the target and at rest, or
+      :data:`SETTLE_TIMEOUT` after the reference got there.
+    * Motor: the torque available is the profile's stepper curve, ``min(Kt x I, holding torque)``
+      falling linearly to zero at the back-EMF speed (:meth:`~joints.devices.mks.profile.MksProfile.available_torque`)
+      with I the working current (0x83; in OPEN and CLOSE modes at standstill the holding
+      percentage 0x9B of it). A command faster than the motor can go saturates there: the speed
+      read back (0x32) is the rotor's, never the command.
+    * Closed modes (CLOSE, vFOC): a position servo on the encoder (bandwidth :data:`SERVO_BANDWIDTH`,
+      integral action) drives the rotor to the reference; a lagging rotor catches up (no lost
+      steps). OPEN: the field follows the microstep-quantised reference and pulls the rotor with
+      ``T sin(50 x angle)`` (50 pole pairs of a 1.8 degree motor): a load beyond the available torque
+      makes the rotor slip whole electrical cycles (4 full steps) - lost steps, never corrected.
+      Both are integrated implicitly against the inertia the drive is coupled to, so they stay
+      stable at the world's time step.
+    * Encoder: 16384 counts per turn, floor-quantised; the axis (0x31) is counted from a zero set
+      at power-on (the angle within the turn of the absolute encoder), by 0x92 or by homing.
+    * Locked-rotor protection (0x88 on, closed modes): the shaft is released when the position error
+      stays above the profile's ``stall_error`` for ``stall_time`` (facts: ">180 degrees within
+      300 ms"); 0x3E reports it, OUT_1 drops (57D), 0x3D releases it.
+    * End stops: the world tells the twin where the switches trigger (:meth:`set_end_stops`, motor
+      angles from the MuJoCo geometry). IN_1 is the home / left switch at the low (CW, negative)
+      end, IN_2 the right switch at the high end (the 57D; the 42D with limit remap 0x9E). A
+      switch reads the configured effective level (0x90 HmTrig) while triggered. EndLimit (0x90)
+      stops a motion into a triggered switch at once: completion status 3.
+    * Homing (0x91): limit switch - leave the switch if it is already active, run at HmSpeed in
+      HmDir until IN_1 triggers, stop, that is the axis zero (with EndLimit on the shaft is then
+      released: 5.3 note 2); 'noLimit' (0x94 mode 1) - run with the torque of Hm_Ma until the
+      rotor stalls, back off retValue counts, zero there.
+    * 0_Mode (0x9A): "Set 0" stores the present angle within the turn (flash); at power-on the
+      motor returns to it (DirMode in 0_Dir, NearMode the shorter way, at most one turn); 0x3B
+      reports 0 going, 1 success.
+    * Save/clean speed mode (0xFF): C8 stores the speed-mode fields in flash; at power-on a saved
+      speed mode runs (in a serial work mode).
+    * Settings (0x82-0x9E) are kept in flash like the drive's menu, so they survive a power cycle;
+      0x3F restores the factory defaults (the configured address and protocol included) and
+      reboots, the encoder then needs calibrating (0x80) before motion; 0x41 reboots.
+
+Choices where the manual is silent (documented here, see also :mod:`joints.devices.mks.state`)
+    * The drive is enabled at power-on (the Part 7 examples run without 0xF3); motion and 0xF3 enable
+      need a serial work mode (0xF3 disable always works) and a calibrated encoder; a run command
+      while disabled fails (status 0).
+    * A stop command with any run code (speed 0) stops whatever motion runs.
+    * In speed mode the reference is held at most :data:`SPEED_MODE_LEAD` ahead of a rotor that
+      cannot follow (the protection, when on, still sees the error grow beyond 180 degrees).
+    * A reversal in speed mode, or an 0xF5 update behind a running move, decelerates to standstill
+      first, then runs the new way.
+    * 0_Speed 0..4 = :data:`ZERO_MODE_RPM`; homing runs without ramp; calibration takes
+      :data:`CALIBRATION_TIME` and answers 0 at once, 1 later; a saved speed mode wins over 0_Mode
+      at power-on; 0x3B reads 1 when 0_Mode is off; the locked-rotor protection watches closed
+      modes only (OPEN has no position feedback); save/clean completes :data:`FLASH_TIME` later.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+from joints.devices.mks import state as st
+from joints.devices.mks.native import Command
+from joints.devices.mks.profile import MksProfile
+from joints.devices.params import Access, ParamSet
+from joints.sim.firmware import Firmware
+
+__all__ = ["CALIBRATION_TIME", "FLASH_TIME", "SERVO_BANDWIDTH", "SPEED_MODE_LEAD", "ZERO_MODE_RPM", "Completion",
+           "MksFirmware"]
+
+TAU = 2.0 * math.pi
+RPM = TAU / 60.0
+COUNTS = st.ENCODER_COUNTS_PER_TURN
+POLE_PAIRS = 50  #: 1.8 degree motor: 200 full steps = 50 electrical cycles
+SERVO_BANDWIDTH = 600.0  #: rad/s, closed-loop position servo
+SERVO_DAMPING = 1.0
+SPEED_MODE_LEAD = TAU  #: rad: how far the speed-mode reference may run ahead of the rotor
+HOME_STALL = 0.25  #: rad of error that counts as "blocked" in 'noLimit' homing
+IN_POSITION = 1.5 * TAU / COUNTS  #: rad: a closed-loop move is complete once the shaft is this close ...
+IN_POSITION_SPEED = 0.5 * RPM  #: ... and this slow (rad/s),
+SETTLE_TIMEOUT = 0.3  #: s - or this long after its reference arrived (a load may hold it off)
+CALIBRATION_TIME = 2.0  #: s
+FLASH_TIME = 0.01  #: s from a save/clean reply to its completion
+ZERO_MODE_RPM = (15, 30, 60, 120, 240)  #: 0_Speed 0 (slowest) .. 4 (fastest)
+_RUN_CODES = {int(c): c for c in (Command.SPEED_MODE, Command.POSITION_MODE1_RELATIVE_PULSES,
+                                   Command.POSITION_MODE2_ABSOLUTE_PULSES, Command.POSITION_MODE3_RELATIVE_AXIS,
+                                   Command.POSITION_MODE4_ABSOLUTE_AXIS)}
+#: run command -> the prefix of its parameters
+_PREFIX = {0xF6: "speed_mode", 0xFD: "position_mode1", 0xFE: "position_mode2", 0xF4: "position_mode3",
+           0xF5: "position_mode4"}
+_SET = st.SetStatus
+_RUN = st.RunStatus
+
+
+@dataclass(frozen=True, slots=True)
+class Completion:
+    """A later status the drive sends by itself (the front decides whether it goes on the wire)."""
+
+    time: float
+    function: int  #: the command it ends (0xF6, 0xFD, 0x91, 0x80, 0xFF ...)
+    status: int  #: RunStatus 2/3 (CalibrationStatus 1/2 for 0x80)
+    answered: bool  #: the command came to this drive alone (not broadcast, group or long packet)
+
+
+@dataclass
+class _Motion:
+    """The reference generator's job."""
+
+    kind: str  #: "speed" | "move" | "home" | "zero"
+    function: int  #: the command code that started it (completion frames carry it)
+    answered: bool
+    goal: int = 0  #: speed value to reach (magnitude)
+    acc: int = 0
+    direction: int = 1  #: +1 CCW, -1 CW (speed mode and homing)
+    target: float = 0.0  #: rad (moves)
+    stopping: bool = False
+    phase: str = ""  #: homing: "leave" | "seek" | "back"
+    arrived: float = -1.0  #: when the reference reached the target (the rotor settles into the window)
+
+
+class MksFirmware(Firmware):
+    """One MKS SERVO42D/57D, coupled to one simulated motor shaft (see the module docstring)."""
+
+    q: float  #: shaft angle [rad]
+    qd: float  #: shaft speed [rad/s]
+    r: float  #: reference [rad]
+    enc_zero: float
+    pulse_zero: float
+    zero_status: int
+
+    def __init__(self, profile: MksProfile, params: ParamSet, address: int = 1, *, inertia: float | None = None,
+                 modbus: bool = False, values: Mapping[str, int] | None = None) -> None:
+        factory = {"working_current": round(profile.default_working_current * 1000),
+                   "home_current": round(profile.default_home_current * 1000), "motor_enable": 1}
+        super().__init__(params, values=factory)
+        self.profile = profile
+        #: what the drive's owner set on the menu (flash): address, protocol, then ``values``
+        self.saved = {"slave_address": address, "modbus_rtu": int(modbus), **dict(values or {})}
+        self.values.update(self.saved)
+        self.power_on_values = dict(self.values)
+        self.inertia = inertia if inertia is not None else profile.rotor_inertia  #: kg*m^2 at the shaft
+        self.time = 0.0
+        #: flash beyond the parameters
+        self.calibrated = True
+        self.zero_point: int | None = None  #: 0_Mode zero: counts within the turn
+        self.saved_speed: tuple[int, int, int] | None = None  #: (direction bit, speed value, acc)
+        self.end_stops: tuple[float | None, float | None] = (None, None)  #: trigger angles [rad]
+        #: completion statuses waiting for a front
+        self.completions: deque[Completion] = deque()
+        self._persistent = frozenset(p.name for p in params if p.access is Access.W and p.name != "motor_enable")
+        self.computed.update({
+            "encoder_carry": lambda: self.counts() // COUNTS,
+            "encoder_value": lambda: self.counts() % COUNTS,
+            "encoder_addition": self.counts,
+            "real_time_speed": lambda: round(self.qd / RPM),
+            "number_of_pulses": lambda: round((self.r - self.pulse_zero) / self.rad_per_pulse),
+            "io_status": self.io_status,
+            "angle_error": lambda: round((self.r - self.q) * st.ANGLE_ERROR_PER_TURN / TAU),
+            "en_pin_status": lambda: int(self.enabled),
+            "go_back_to_zero_status": lambda: self.zero_status,
+            "protection_state": lambda: int(self.protected),
+            "motor_status": lambda: int(self.motor_status()),
+        })
+        self._handlers: dict[int, Callable[[Mapping[str, int], bool], int]] = {
+            Command.RELEASE_PROTECTION_STATE: self._release,
+            Command.RESTORE_DEFAULT_PARAMETERS: self._restore,
+            Command.RESTART_MOTOR: self._restart,
+            Command.CALIBRATE_ENCODER: self._calibrate,
+            Command.SET_WORK_MODE: self._work_mode,
+            Command.GO_HOME: self._go_home,
+            Command.SET_CURRENT_AXIS_TO_ZERO: self._set_zero,
+            Command.SET_ZERO_MODE: self._zero_mode,
+            Command.ENABLE_MOTOR: self._enable,
+            Command.EMERGENCY_STOP: self._emergency_stop,
+            Command.SAVE_CLEAN_SPEED_MODE: self._save_clean,
+            **{code: self._run_command for code in _RUN_CODES},
+        }
+        self.q = 0.0
+        self.qd = 0.0
+        self.enc_zero = 0.0  #: rad where the encoder axis counts 0
+        self.pulse_zero = 0.0  #: rad where the pulse position counts 0
+        self._calibrating_answered = True
+        self._reset_state()
+
+    # -- power ----------------------------------------------------------------------------------
+    def _reset_state(self) -> None:
+        v = self.values
+        self.enabled = bool(v["motor_enable"])
+        self.protected = False
+        self.run_state = st.RunState.IDLE
+        self.motion: _Motion | None = None
+        self.speed = 0  #: present speed value of the reference (magnitude)
+        self.ramp_goal = 0  #: the speed value the ramp heads for
+        self.moving_dir = 1
+        self._ramp_t = 0.0
+        self.r = self.q  #: reference [rad]
+        self.v_ref = 0.0  #: rad/s
+        self._integral = 0.0
+        self._stall_since = -1.0
+        self._calibrating_until = -1.0
+        self._reboot_at: float | None = None
+        self.zero_status = int(st.GoBackToZeroStatus.SUCCESS)
+        self._power_on = True  #: the axis zero and the power-on jobs wait for the first shaft angle
+        self.completions.clear()
+        self._cache()
+
+    def power_cycle(self) -> None:
+        """Power off/on: flash survives (settings, 0_Mode zero, saved speed mode), the rest restarts."""
+        super().power_cycle()
+        self._reset_state()
+
+    def _cache(self) -> None:
+        v = self.values
+        self.mode = st.WorkMode(v["work_mode"])
+        self.microsteps = v["microsteps"]
+        self.rad_per_pulse = TAU / st.pulses_per_turn(self.microsteps)
+        self.current = v["working_current"] * 1e-3
+
+    def place(self, q: float) -> None:
+        """The shaft is at ``q`` [rad] and at rest (start state): reference and encoder follow."""
+        self.q, self.qd = q, 0.0
+        if self._power_on:
+            self._powered(q)
+        self.r = q
+        self.v_ref = 0.0
+        self._integral = 0.0
+
+    def _powered(self, q: float) -> None:
+        """The first shaft angle after power-on: the axis counts from the turn the absolute encoder is in."""
+        self._power_on = False
+        self.enc_zero = TAU * math.floor(q / TAU + 1e-12)
+        self.pulse_zero = self.enc_zero
+        self.r = q
+        if self.saved_speed is not None and self.mode.serial and self.calibrated:
+            direction, speed, acc = self.saved_speed
+            self.enabled = True
+            self._start(_Motion("speed", Command.SPEED_MODE, False, goal=self._clamp_value(speed), acc=acc,
+                                direction=1 if direction == st.RunDirection.CCW else -1))
+        elif self.values["zero_mode"] and self.zero_point is not None:
+            self._zero_return()
+
+    def set_end_stops(self, low: float | None, high: float | None) -> None:
+        """Where the end-stop switches trigger [rad, motor side]: IN_1 at or below ``low``, IN_2 at or above ``high``."""
+        self.end_stops = (low, high)
+
+    # -- what the fronts call -----------------------------------------------------------------------
+    def on_write(self, name: str, value: int) -> None:
+        if name in self._persistent:
+            self.saved[name] = value  # the drive keeps its menu settings in flash
+        if name in ("work_mode", "microsteps", "working_current"):
+            self._cache()
+
+    def execute(self, command: int, values: Mapping[str, int], *, answered: bool = True) -> int:
+        """Execute one command with all of its fields; the reply status (0 fail, 1 success / started ...).
+
+        ``answered``: the command was addressed to this drive alone (its completion may be sent).
+        Raises :class:`~joints.errors.ParameterRefused` when a value is unknown, not writable or out of
+        range (the front answers "fail" or a Modbus exception).
+        """
+        if values:
+            self.write_many(list(values.items()))
+        handler = self._handlers.get(command)
+        return handler(values, answered) if handler is not None else int(_SET.SUCCESS)
+
+    # -- commands -----------------------------------------------------------------------------------
+    def _release(self, values: Mapping[str, int], answered: bool) -> int:
+        if self.protected:
+            self.protected = False
+            self._hold()
+        return int(_SET.SUCCESS)
+
+    def _restore(self, values: Mapping[str, int], answered: bool) -> int:
+        self.saved = {}
+        self.zero_point = None
+        self.saved_speed = None
+        self.calibrated = False  # "After restored the parameters ... need to calibrate the motor"
+        self._reboot_at = self.time
+        return int(_SET.SUCCESS)
+
+    def _restart(self, values: Mapping[str, int], answered: bool) -> int:
+        self._reboot_at = self.time
+        return int(_SET.SUCCESS)
+
+    def _calibrate(self, values: Mapping[str, int], answered: bool) -> int:
+        if self.motion is not None:
+            self._complete(Command.CALIBRATE_ENCODER, int(st.CalibrationStatus.FAIL), answered)
+        else:
+            self._calibrating_until = self.time + CALIBRATION_TIME
+            self._calibrating_answered = answered
+        return int(st.CalibrationStatus.CALIBRATING)
+
+    def _work_mode(self, values: Mapping[str, int], answered: bool) -> int:
+        self._end(st.RunEvent.STOP_NOW, quiet=True)
+        self._hold()  # the new mode starts from where the shaft is
+        return int(_SET.SUCCESS)
+
+    def _enable(self, values: Mapping[str, int], answered: bool) -> int:
+        on = bool(values["motor_enable"])
+        if on and not self.mode.serial:  # the pulse interface's En pin rules there; releasing always works
+            self.values["motor_enable"] = int(self.enabled)
+            return int(_SET.FAIL)
+        if on and not self.enabled:
+            self.enabled = True
+            self._hold()
+        elif not on:
+            self.enabled = False
+            self._end(st.RunEvent.EMERGENCY_STOP, quiet=True)
+        return int(_SET.SUCCESS)
+
+    def _emergency_stop(self, values: Mapping[str, int], answered: bool) -> int:
+        self._end(st.RunEvent.EMERGENCY_STOP)
+        self._hold()
+        return int(_SET.SUCCESS)
+
+    def _set_zero(self, values: Mapping[str, int], answered: bool) -> int:
+        self.enc_zero = self.q
+        self.pulse_zero = self.q
+        return int(_SET.SUCCESS)
+
+    def _zero_mode(self, values: Mapping[str, int], answered: bool) -> int:
+        self.zero_point = self.counts() % COUNTS if values["zero_mode_set_zero"] else None
+        return int(_SET.SUCCESS)
+
+    def _save_clean(self, values: Mapping[str, int], answered: bool) -> int:
+        v = self.values
+        if values["save_clean_speed_mode_parameter"] == st.SpeedModeParameter.SAVE:
+            self.saved_speed = (v["speed_mode_direction"], v["speed_mode_speed"], v["speed_mode_acc"])
+        else:
+            self.saved_speed = None
+        self.completions.append(Completion(self.time + FLASH_TIME, Command.SAVE_CLEAN_SPEED_MODE,
+                                           int(_RUN.COMPLETE), answered))
+        return int(_RUN.STARTED)
+
+    def _can_run(self) -> bool:
+        return self.mode.serial and self.enabled and not self.protected and self.calibrated \
+            and self._calibrating_until < 0
+
+    def _go_home(self, values: Mapping[str, int], answered: bool) -> int:
+        if not self._can_run():
+            return self._refuse()
+        v = self.values
+        home = -1 if v["home_direction"] == st.MotorDirection.CW else 1
+        job = _Motion("home", Command.GO_HOME, answered, goal=self._clamp_value(max(1, v["home_speed"])), acc=0)
+        if v["home_mode"] == st.HomeMode.NO_LIMIT:
+            job.phase, job.direction = "seek", home
+        elif self._home_switch():
+            job.phase, job.direction = "leave", -home
+        else:
+            job.phase, job.direction = "seek", home
+        self._start(job)
+        return int(_RUN.STARTED)
+
+    def _run_command(self, values: Mapping[str, int], answered: bool) -> int:
+        code = self._code_of(values)
+        v = self.values
+        prefix = _PREFIX[code]
+        acc = v[f"{prefix}_acc"]
+        speed = v[f"{prefix}_speed"]
+        if speed == 0:  # a stop: decelerating with acc, at once with acc 0 (always accepted)
+            return self._stop(acc, code, answered)
+        if not self._can_run():
+            return self._refuse()
+        goal = self._clamp_value(speed)
+        if code == Command.SPEED_MODE:
+            self._start(_Motion("speed", code, answered, goal=goal, acc=acc,
+                                direction=1 if v["speed_mode_direction"] == st.RunDirection.CCW else -1))
+            return int(_RUN.STARTED)
+        if code == Command.POSITION_MODE1_RELATIVE_PULSES:
+            sign = 1 if v["position_mode1_direction"] == st.RunDirection.CCW else -1
+            target = self._base() + sign * v["position_mode1_pulses"] * self.rad_per_pulse
+        elif code == Command.POSITION_MODE2_ABSOLUTE_PULSES:
+            target = self.pulse_zero + v["position_mode2_abs_pulses"] * self.rad_per_pulse
+        elif code == Command.POSITION_MODE3_RELATIVE_AXIS:
+            target = self._base() + v["position_mode3_rel_axis"] * TAU / COUNTS
+        else:
+            target = self.enc_zero + v["position_mode4_abs_axis"] * TAU / COUNTS
+        self._start(_Motion("move", code, answered, goal=goal, acc=acc, target=target))
+        return int(_RUN.STARTED)
+
+    def _code_of(self, values: Mapping[str, int]) -> int:
+        for name in values:
+            for code, prefix in _PREFIX.items():
+                if name.startswith(prefix):
+                    return code
+        raise ValueError(f"no run command among {sorted(values)}")
+
+    def _base(self) -> float:
+        """Where a relative move starts: the running move's target, else the reference."""
+        m = self.motion
+        return m.target if m is not None and m.kind == "move" and not m.stopping else self.r
+
+    def _refuse(self) -> int:
+        self.run_state = st.step(self.run_state, st.RunEvent.REJECT).state
+        return int(_RUN.FAIL)
+
+    def _stop(self, acc: int, code: int, answered: bool) -> int:
+        """A stop command (speed 0) of run command ``code``: it stops whatever runs; its completion carries
+        ``code``."""
+        m = self.motion
+        if acc == 0 or m is None or self.speed == 0:
+            tr = st.step(self.run_state, st.RunEvent.STOP if m is None and acc else st.RunEvent.STOP_NOW)
+            self.motion = None
+            self.speed = 0
+            self.v_ref = 0.0
+            self.run_state = tr.state
+            if tr.completion is not None:
+                self._complete(code, int(tr.completion), answered)
+            return int(_RUN.STARTED)
+        self.run_state = st.step(self.run_state, st.RunEvent.STOP).state
+        m.stopping = True
+        m.acc = acc
+        m.function, m.answered = code, answered
+        return int(_RUN.STARTED)
+
+    def _start(self, job: _Motion) -> None:
+        """A new job replaces the running one (no completion for the replaced, state.py)."""
+        self.run_state = st.step(self.run_state, st.RunEvent.START).state
+        if self.motion is None or self.speed == 0:
+            self._ramp_t = 0.0
+        self.motion = job
+
+    def _end(self, event: st.RunEvent, *, quiet: bool = False) -> None:
+        """The motion ends (arrival, end limit, e-stop, protection): state machine and completion."""
+        m = self.motion
+        tr = st.step(self.run_state, event)
+        self.run_state = tr.state
+        self.motion = None
+        self.speed = 0
+        self.v_ref = 0.0
+        if m is not None and tr.completion is not None and not quiet:
+            self._complete(m.function, int(tr.completion), m.answered)
+
+    def _complete(self, function: int, status: int, answered: bool) -> None:
+        self.completions.append(Completion(self.time, int(function), status, answered))
+
+    def _hold(self) -> None:
+        self.r = self.q
+        self.v_ref = 0.0
+        self._integral = 0.0
+        self._stall_since = -1.0
+
+    def _clamp_value(self, value: int) -> int:
+        """A speed value limited to the work mode's maximum speed (6.1)."""
+        top = st.speed_value(self.mode.max_speed, self.microsteps)
+        return max(0, min(value, max(top, 1)))
+
+    def _zero_return(self) -> None:
+        v = self.values
+        assert self.zero_point is not None
+        here = self.counts() % COUNTS
+        if v["zero_mode"] == st.ZeroMode.DIR_MODE:
+            ccw = v["zero_mode_direction"] == st.MotorDirection.CCW
+            delta = (self.zero_point - here) % COUNTS if ccw else -((here - self.zero_point) % COUNTS)
+        else:
+            delta = (self.zero_point - here + COUNTS // 2) % COUNTS - COUNTS // 2
+        self.zero_status = int(st.GoBackToZeroStatus.GOING)
+        rpm = ZERO_MODE_RPM[min(max(v["zero_mode_speed"], 0), 4)]
+        self.enabled = True
+        self._start(_Motion("zero", 0x9A, False, goal=self._clamp_value(st.speed_value(rpm, self.microsteps)),
+                            acc=0, target=self.r + delta * TAU / COUNTS))
+
+    # -- status ---------------------------------------------------------------------------------------
+    def counts(self) -> int:
+        """Encoder axis [counts], floor-quantised."""
+        return math.floor((self.q - self.enc_zero) * COUNTS / TAU + 1e-9)
+
+    def _switches(self) -> tuple[bool, bool]:
+        low, high = self.end_stops
+        left = low is not None and self.q <= low
+        right = high is not None and self.q >= high and (
+            self.profile.limit_inputs >= 2 or bool(self.values["limit_port_remap"]))
+        return left, right
+
+    def _home_switch(self) -> bool:
+        return self._switches()[0]
+
+    def io_status(self) -> int:
+        """0x34: IN_1 / IN_2 at their levels (the effective level while triggered), OUT_1 on the 57D."""
+        left, right = self._switches()
+        level = self.values["home_trigger_level"]
+        bits = level if left else 1 - level
+        if self.profile.limit_inputs >= 2 or self.values["limit_port_remap"]:
+            bits |= (level if right else 1 - level) << 1
+        if self.profile.limit_inputs >= 2:  # OUT_1 stall indication: 0 protected, 1 unprotected (57D only)
+            bits |= (0 if self.protected else 1) << 2
+        return bits
+
+    def motor_status(self) -> st.MotorStatus:
+        if self._calibrating_until >= 0:
+            return st.MotorStatus.CALIBRATING
+        m = self.motion
+        if m is None:
+            return st.MotorStatus.STOP
+        if m.kind == "home":
+            return st.MotorStatus.HOMING
+        if m.arrived >= 0:
+            return st.MotorStatus.SPEED_DOWN  # settling on the target
+        if self.speed == self.ramp_goal == 0:
+            return st.MotorStatus.SPEED_UP  # about to start
+        return st.motor_status(self.speed, self.ramp_goal)
+
+    # -- physics side ----------------------------------------------------------------------------------
+    def step(self, t: float, dt: float, q: float, qd: float) -> float:
+        """Run the drive for the substep ending at ``t``; return the motor torque [N*m]."""
+        self.time = t
+        self.q, self.qd = q, qd
+        if self._power_on:
+            self._powered(q)
+        if self._reboot_at is not None and t >= self._reboot_at:
+            self.power_cycle()
+            self._powered(q)
+        if self._calibrating_until >= 0 and t >= self._calibrating_until:
+            self._calibrating_until = -1.0
+            self.calibrated = True
+            self._hold()
+            self._complete(Command.CALIBRATE_ENCODER, int(st.CalibrationStatus.SUCCESS), self._calibrating_answered)
+        if not self.enabled or self.protected:
+            self.r = q  # released: the reference follows the shaft (enable holds where it is)
+            self.v_ref = 0.0
+            self._integral = 0.0
+            return 0.0
+        v_prev = self.v_ref
+        if self.motion is not None:
+            self._generate(dt)
+        torque = self._control(dt, (self.v_ref - v_prev) / dt)
+        self._protect(dt)
+        return torque
+
+    def _rad_s(self, value: int) -> float:
+        return min(st.effective_rpm(value, self.microsteps), float(self.mode.max_speed)) * RPM
+
+    def _ramp(self, goal: int, acc: int, dt: float) -> None:
+        """Move the speed value toward ``goal`` by the 6.1 law."""
+        self.ramp_goal = goal
+        if self.speed == goal:
+            self._ramp_t = 0.0
+            return
+        if acc == 0:
+            self.speed = goal
+            return
+        interval = st.ramp_interval(acc)
+        self._ramp_t += dt
+        n = math.floor(self._ramp_t / interval + 1e-9)
+        if n <= 0:
+            return
+        self._ramp_t -= n * interval
+        self.speed = min(self.speed + n, goal) if goal > self.speed else max(self.speed - n, goal)
+
+    def _generate(self, dt: float) -> None:
+        m = self.motion
+        assert m is not None
+        if m.kind == "speed":
+            self._speed_job(m, dt)
+        elif m.kind == "home":
+            self._home_job(m, dt)
+        else:
+            self._move_job(m, dt)
+        if self.motion is not None:
+            self._end_limits()
+
+    def _speed_job(self, m: _Motion, dt: float) -> None:
+        if m.stopping or (self.speed and m.direction != self.moving_dir):
+            self._ramp(0, m.acc, dt)
+        else:
+            self.moving_dir = m.direction
+            self._ramp(m.goal, m.acc, dt)
+        self.v_ref = self.moving_dir * self._rad_s(self.speed)
+        self.r += self.v_ref * dt
+        lead = self.r - self.q
+        if abs(lead) > SPEED_MODE_LEAD:  # the rotor cannot follow: the reference waits for it
+            self.r = self.q + math.copysign(SPEED_MODE_LEAD, lead)
+        if m.stopping and self.speed == 0:
+            self._end(st.RunEvent.ARRIVED)
+
+    def _move_job(self, m: _Motion, dt: float) -> None:
+        if m.stopping:
+            self._ramp(0, m.acc, dt)
+            self.v_ref = self.moving_dir * self._rad_s(self.speed)
+            self.r += self.v_ref * dt
+            if self.speed == 0:
+                self._end(st.RunEvent.ARRIVED)
+            return
+        if m.arrived < 0:
+            if not self._advance(m, dt):
+                return
+            m.arrived = self.time
+        if (self.mode.closed_loop and self.time - m.arrived < SETTLE_TIMEOUT
+                and (abs(self.r - self.q) > IN_POSITION or abs(self.qd) > IN_POSITION_SPEED)):
+            return  # the reference is there; the shaft settles into the window
+        if m.kind == "zero":
+            self.zero_status = int(st.GoBackToZeroStatus.SUCCESS)
+            self.motion = None
+            self.run_state = st.RunState.COMPLETE
+        else:
+            self._end(st.RunEvent.ARRIVED)
+
+    def _advance(self, m: _Motion, dt: float) -> bool:
+        """One substep of a move toward ``m.target``; True when the reference arrived (exactly)."""
+        remaining = m.target - self.r
+        way = 1 if remaining >= 0 else -1
+        if self.speed and way != self.moving_dir:  # the target moved behind us: stop first
+            self._ramp(0, m.acc, dt)
+        elif m.acc == 0:
+            self.moving_dir = way
+            self.speed = self.ramp_goal = m.goal
+        else:
+            self.moving_dir = way
+            rad_s = self._rad_s(self.speed)
+            brake = rad_s * self.speed * st.ramp_interval(m.acc) * 0.5 + rad_s * dt
+            self._ramp(0 if abs(remaining) <= brake else m.goal, m.acc, dt)
+            if self.speed == 0:
+                self.speed = 1  # creep the last bit at the smallest speed step
+        step = self._rad_s(self.speed) * dt
+        if self.moving_dir == way and step >= abs(remaining):
+            self.r = m.target
+            self.v_ref = 0.0
+            self.speed = self.ramp_goal = 0
+            return True
+        self.v_ref = self.moving_dir * self._rad_s(self.speed)
+        self.r += self.v_ref * dt
+        return False
+
+    def _home_job(self, m: _Motion, dt: float) -> None:
+        if m.phase == "back":
+            if self._advance(m, dt):
+                self._homed(m)
+            return
+        self.speed = self.ramp_goal = m.goal
+        self.moving_dir = m.direction
+        self.v_ref = m.direction * self._rad_s(self.speed)
+        self.r += self.v_ref * dt
+        values = self.values
+        if values["home_mode"] == st.HomeMode.NO_LIMIT:
+            if abs(self.r - self.q) > HOME_STALL:  # blocked: back off retValue from here
+                back = values["home_reverse_angle"] * TAU / COUNTS
+                self.r = self.q
+                self.speed = 0
+                m.phase, m.target = "back", self.q - m.direction * back
+            return
+        switch = self._home_switch()
+        if m.phase == "leave" and not switch:
+            m.phase, m.direction = "seek", -m.direction
+        elif m.phase == "seek" and switch:
+            self.r = self.q
+            self._homed(m)
+
+    def _homed(self, m: _Motion) -> None:
+        self.enc_zero = self.q
+        self.pulse_zero = self.q
+        self.r = self.q
+        self._end(st.RunEvent.ARRIVED)
+        if self.values["end_limit"]:
+            self.enabled = False  # 5.3 note 2: with EndLimit on the shaft is unlocked after go home
+
+    def _end_limits(self) -> None:
+        m = self.motion
+        if m is None or m.kind in ("home", "zero") or not self.values["end_limit"] or self.speed == 0:
+            return
+        left, right = self._switches()
+        if (left and self.moving_dir < 0) or (right and self.moving_dir > 0):
+            self._end(st.RunEvent.END_LIMIT)
+            self._hold()
+
+    # -- the motor ----------------------------------------------------------------------------------
+    def available_torque(self) -> float:
+        current = self.current
+        m = self.motion
+        if m is not None and m.kind == "home" and self.values["home_mode"] == st.HomeMode.NO_LIMIT:
+            current = self.values["home_current"] * 1e-3
+        elif not self.mode.foc and m is None:
+            current *= st.holding_current_percent(self.values["holding_current"]) / 100.0
+        return self.profile.available_torque(self.qd, current)
+
+    def _control(self, dt: float, accel: float) -> float:
+        limit = self.available_torque()
+        J = self.inertia
+        q, qd = self.q, self.qd
+        if self.mode.closed_loop:
+            w = SERVO_BANDWIDTH
+            kp, kd = J * w * w, 2.0 * SERVO_DAMPING * J * w
+            ki = kp * w / 10.0
+            err = self.r - q
+            drive = kp * err + kd * self.v_ref + ki * self._integral + J * accel
+            qd_new = (J * qd / dt + drive) / (J / dt + kp * dt + kd)
+            torque = J * (qd_new - qd) / dt
+            if -limit < torque < limit:
+                self._integral += err * dt
+                return torque
+            return limit if torque > 0 else -limit
+        # OPEN: the field sits on the microstep the reference is at and pulls with T sin(50 x angle)
+        field = self.pulse_zero + round((self.r - self.pulse_zero) / self.rad_per_pulse) * self.rad_per_pulse
+        angle = POLE_PAIRS * (field - q)
+        pull = limit * math.sin(angle)
+        k = POLE_PAIRS * limit * max(math.cos(angle), 0.0)
+        c = self.profile.back_emf_constant ** 2 / self.profile.phase_resistance  # electrical damping
+        qd_new = (J * qd / dt + pull + c * self.v_ref) / (J / dt + k * dt + c)
+        torque = J * (qd_new - qd) / dt
+        return max(-limit, min(limit, torque))
+
+    def _protect(self, dt: float) -> None:
+        if not self.values["locked_rotor_protection"] or not self.mode.closed_loop:
+            self._stall_since = -1.0
+            return
+        if abs(self.r - self.q) > self.profile.stall_error:
+            if self._stall_since < 0:
+                self._stall_since = self.time
+            elif self.time - self._stall_since >= self.profile.stall_time - 1e-9:
+                self.protected = True
+                self._end(st.RunEvent.PROTECTION)
+                self._hold()
+        else:
+            self._stall_since = -1.0
+
+    def take_completions(self, now: float) -> list[Completion]:
+        """Completions due by ``now`` (the front turns them into frames)."""
+        out: list[Completion] = []
+        while self.completions and self.completions[0].time <= now + 1e-12:
+            out.append(self.completions.popleft())
+        return out
+

@@ -1,0 +1,218 @@
+"""MKS native RS485 front: the MKS firmware seen through the 0xFA/0xFB/0xFC protocol.
+
+Rule: the same codec as the host, in device role; the firmware is reached only by parameter name
+(:class:`~joints.sim.mks.MksFirmware`): a read command reads its fields
+(:data:`~joints.devices.mks.native.MKS_NATIVE`), a set or run command executes with all of its
+fields. An :class:`MksDeviceBus` dispatches frames by address, as the drives on one RS485 line
+do (manual Part 4, 5.2 #13 and #16, 5.7):
+
+* the drive whose slave address matches answers (not while it speaks Modbus, 0x8E on);
+* address 0 (broadcast) and a drive's group address (0x8D): every such drive executes, none answers;
+* a long packet (0xFC): each drive executes the first command addressed to it, none answers;
+* respond off (0x8C): a drive executes its run commands silently, queries still answer;
+* completion frames (status 2/3 of run commands and go home with active on; calibrate's 1/2; save/clean's
+  2) are queued on the simulated clock and taken with :meth:`MksDeviceBus.take_unsolicited` - the
+  in-process transport and ``joints sim serve`` deliver them unasked - or, with their times, with
+  :meth:`MksDeviceBus.take_frames` (the timed serial line). The bus lives on the world's clock
+  (a :class:`~joints.sim.world.TimedDeviceBus`): what listens with :meth:`MksDeviceBus.on_tick`
+  (a timed line) runs after every physics substep. A command that reached the
+  drive by broadcast, group or long packet sends no completion either ("slave does not answer").
+
+A value the firmware refuses (unknown, out of range) is answered with status 0, as the drive's
+"set fail" / "run fail". Unknown function codes and corrupt frames get no answer.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from typing import Any
+
+from joints.codecs import mks
+from joints.devices.mks.native import MKS_NATIVE, REPLY_RULES, Command, fields_of
+from joints.errors import FrameError, ParameterRefused
+from joints.sim.mks import MksFirmware
+
+__all__ = ["MksDeviceBus", "MksNativeFront"]
+
+_READS = frozenset(int(c) for c in (
+    Command.READ_ENCODER_VALUE_CARRY, Command.READ_ENCODER_VALUE_ADDITION, Command.READ_REAL_TIME_SPEED,
+    Command.READ_NUMBER_OF_PULSES, Command.READ_IO_PORTS_STATUS, Command.READ_ERROR_OF_ANGLE,
+    Command.READ_EN_PINS_STATUS, Command.READ_GO_BACK_TO_ZERO_STATUS, Command.READ_PROTECTION_STATE,
+    Command.QUERY_MOTOR_STATUS))
+#: reply fields that are flags or enums on the message
+_FLAGS = frozenset(("enabled", "protected"))
+_ENUMS: dict[type, Callable[[int], Any]] = {mks.GoBackToZeroStatusReply: mks.GoBackToZeroStatus,
+                                            mks.MotorStatusReply: mks.MotorStatus}
+_RUN_CODES = frozenset((0xF4, 0xF5, 0xF6, 0xFD, 0xFE))
+
+
+class MksNativeFront:
+    """One MKS drive on a native bus: frames in, firmware calls, reply messages out."""
+
+    def __init__(self, firmware: MksFirmware) -> None:
+        self.firmware = firmware
+        self.frames = 0  #: frames addressed to this drive (broadcast, group and long packets included)
+
+    @property
+    def address(self) -> int:
+        return int(self.firmware.values["slave_address"])
+
+    @property
+    def group(self) -> int:
+        """The group address (0x8D), 0 = none."""
+        return int(self.firmware.values["group_address"])
+
+    @property
+    def speaks(self) -> bool:
+        """The drive speaks the native protocol (0x8E Modbus off)."""
+        return not self.firmware.values["modbus_rtu"]
+
+    def handle(self, request: Any, *, answer: bool = True) -> Any:
+        """Execute ``request``; the reply message (None when the drive stays silent)."""
+        fw = self.firmware
+        self.frames += 1
+        fw.frame_received()
+        if isinstance(request, mks.UnknownRequest):
+            return None
+        code = request.function
+        names = fields_of(code)
+        if code in _READS:
+            values = fw.read_many(names)
+            cls = mks.REPLY_TYPES[code]
+            fields: dict[str, Any] = {}
+            for n, v in zip(names, values):
+                f = MKS_NATIVE.key(n).field
+                fields[f] = bool(v) if f in _FLAGS else _ENUMS[cls](v) if cls in _ENUMS else v
+            return cls(request.address, **fields) if answer else None
+        given = {n: int(getattr(request, MKS_NATIVE.key(n).field)) for n in names if MKS_NATIVE.key(n).field}
+        if not given:
+            given = {n: 1 for n in names}  # a command without data: the parameter's "1"
+        try:
+            status = fw.execute(code, given, answered=answer)
+        except ParameterRefused:
+            status = 0
+        if not answer or (code in _RUN_CODES and not fw.values["slave_respond"]):
+            return None
+        if code == Command.CALIBRATE_ENCODER:
+            return mks.CalibrationReply(request.address, mks.CalibrationStatus(status))
+        if code in mks.RUN_REPLY_FUNCTIONS:
+            return mks.RunReply(request.address, code, mks.RunStatus(status))
+        return mks.SetReply(request.address, code, mks.SetStatus(status))
+
+    def take_completions(self, now: float) -> list[tuple[float, Any]]:
+        """The completion frames due by ``now`` that go on the wire (active on, respond on for run commands),
+        with the time each was sent."""
+        fw = self.firmware
+        out: list[tuple[float, Any]] = []
+        for c in fw.take_completions(now):
+            if not c.answered or not self.speaks:
+                continue
+            rule = REPLY_RULES.get(Command(c.function)) if c.function in _CODES else None
+            if rule is not None:
+                if rule.silenced_by_respond_off and not fw.values["slave_respond"]:
+                    continue
+                if rule.completion_needs_active and not fw.values["slave_active"]:
+                    continue
+            if c.function == Command.CALIBRATE_ENCODER:
+                out.append((c.time, mks.CalibrationReply(self.address, mks.CalibrationStatus(c.status))))
+            else:
+                out.append((c.time, mks.RunReply(self.address, c.function, mks.RunStatus(c.status))))
+        return out
+
+    def __repr__(self) -> str:
+        return f"MksNativeFront({self.firmware!r}, address={self.address})"
+
+
+_CODES = frozenset(int(c) for c in Command)
+
+
+class MksDeviceBus:
+    """All emulated MKS drives on one native RS485 bus: bytes in, reply bytes out, completions queued."""
+
+    def __init__(self, fronts: Iterable[MksNativeFront] = (), *,
+                 trace: Callable[[str, bytes], None] | None = None) -> None:
+        self.fronts: list[MksNativeFront] = []
+        for f in fronts:
+            self.add(f)
+        self._codec = mks.MksCodec(mks.Role.DEVICE)
+        self.trace = trace
+        self.frame_errors = 0
+        self.clock: Any = None
+        self._listeners: list[Callable[[float], None]] = []
+
+    def add(self, front: MksNativeFront) -> None:
+        if any(f.address == front.address for f in self.fronts):
+            raise ValueError(f"two emulated MKS drives at address {front.address}")
+        self.fronts.append(front)
+
+    # -- the world's clock (joints.sim.world.TimedDeviceBus) -----------------------------------------
+    def bind_clock(self, clock: Any) -> None:
+        self.clock = clock
+
+    def tick(self, t: float) -> None:
+        """The world finished the substep ending at ``t``: whatever listens (a timed line) runs up to it."""
+        for listener in self._listeners:
+            listener(t)
+
+    def on_tick(self, callback: Callable[[float], None]) -> None:
+        """Call ``callback(t)`` after every physics substep."""
+        self._listeners.append(callback)
+
+    @property
+    def time(self) -> float:
+        """The drives' clock (the world's simulated time)."""
+        return max((f.firmware.time for f in self.fronts), default=0.0)
+
+    def receive(self, data: bytes) -> bytes:
+        """Feed received bytes; return the bytes the addressed drives send back."""
+        codec = self._codec
+        if data:  # feeding nothing would undo a flush (silence)
+            codec.feed(data)
+        out = bytearray()
+        while True:
+            try:
+                msg = codec.next_message()
+            except FrameError:
+                self.frame_errors += 1  # a drive stays silent on a corrupt frame
+                continue
+            if msg is None:
+                break
+            reply = self.exchange(msg)
+            if reply is not None:
+                out += mks.encode(reply)
+        return bytes(out)
+
+    def silence(self) -> bytes:
+        """The line went quiet: drop an incomplete frame."""
+        self._codec.flush()
+        return self.receive(b"")
+
+    def exchange(self, msg: Any) -> Any:
+        """Message-level dispatch (see the module docstring); the reply message or None."""
+        fronts = [f for f in self.fronts if f.speaks]
+        if isinstance(msg, mks.LongPacket):
+            for f in fronts:
+                cmd = msg.command_for(*((f.address, f.group) if f.group else (f.address,)))
+                if cmd is not None:
+                    f.handle(cmd, answer=False)
+            return None
+        address = msg.address
+        reply = None
+        for f in fronts:
+            if address == mks.BROADCAST or (f.group and f.group == address and f.address != address):
+                f.handle(msg, answer=False)
+            elif f.address == address:
+                reply = f.handle(msg)
+        return reply
+
+    def take_frames(self, now: float | None = None) -> list[tuple[float, bytes]]:
+        """Completion frames the drives sent by ``now`` (default: the drives' time): (time sent, bytes), oldest
+        first."""
+        t = self.time if now is None else now
+        frames = [(at, i, msg) for i, f in enumerate(self.fronts) for at, msg in f.take_completions(t)]
+        frames.sort(key=lambda x: (x[0], x[1]))
+        return [(at, mks.encode(msg)) for at, _i, msg in frames]
+
+    def take_unsolicited(self) -> bytes:
+        """Completion frames the drives sent by now, as bytes (oldest first)."""
+        return b"".join(data for _t, data in self.take_frames())

@@ -1,0 +1,134 @@
+"""MKS Modbus-RTU front (manual Part 8): the MKS firmware seen through its Part 8 requests.
+
+Rule: a slave of a :class:`~joints.sim.modbus_front.ModbusDeviceBus`, reaching the firmware only by
+parameter name through :data:`~joints.devices.mks.modbus.MKS_MODBUS` - the same names as the native
+front, so both fronts drive the same firmware identically. Only while the drive speaks Modbus
+(0x8E on) does it answer.
+
+* FC04 reads exactly the documented blocks (start address and register count of Part 8); another
+  address -> exception 02, another count -> 03. FC03 -> exception 01 (Part 8 reads with FC04).
+* FC06 writes one setting or command, FC16 one multi-field command with all its fields; the reply
+  echoes the request. An unknown address -> 02; a value out of range -> 03; a command the drive
+  cannot execute now (motion while disabled or in a pulse work mode) -> 04 (server device
+  failure: Part 8 documents no failure reply, this is our choice).
+* The 0x90 home-parameter request is accepted EXACTLY as the manual prints it (3 registers, byte
+  count 5, 5 data bytes; ERRATA DOC-MKS-5) and recorded in :attr:`MksModbusFront.quirks`; every
+  other request whose counts disagree gets exception 03 - also when it arrives as raw bytes that
+  a Modbus codec rejects (:meth:`MksModbusFront.malformed`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from joints.codecs import modbus as mb
+from joints.devices.mks.modbus import FC_READ, FC_WRITE_MULTIPLE, FC_WRITE_SINGLE, MKS_MODBUS, ModbusBlock
+from joints.devices.mks.native import Command
+from joints.errors import CommandError, ParameterRefused
+from joints.sim.mks import MksFirmware
+from joints.sim.modbus_front import ILLEGAL_DATA_ADDRESS, ILLEGAL_DATA_VALUE, ILLEGAL_FUNCTION, SERVER_DEVICE_FAILURE
+
+__all__ = ["MksModbusFront"]
+
+
+class _Exception(Exception):
+    def __init__(self, code: int) -> None:
+        super().__init__(code)
+        self.code = code
+
+
+class MksModbusFront:
+    """One MKS drive on a Modbus RTU bus (see the module docstring)."""
+
+    def __init__(self, firmware: MksFirmware) -> None:
+        self.firmware = firmware
+        self.map = MKS_MODBUS
+        #: the non-standard frames accepted as documented quirks: (block title, PDU after the function code)
+        self.quirks: list[tuple[str, bytes]] = []
+
+    @property
+    def address(self) -> int:
+        return int(self.firmware.values["slave_address"])
+
+    @property
+    def speaks(self) -> bool:
+        return bool(self.firmware.values["modbus_rtu"])
+
+    def handle(self, request: Any) -> mb.Reply | None:
+        """Execute a request addressed to this slave; the reply (None while the drive speaks the native protocol)."""
+        if not self.speaks:
+            return None
+        self.firmware.frame_received()
+        try:
+            if isinstance(request, mb.ReadInputRegisters):
+                return mb.ReadRegistersReply(request.slave, request.function, self._read(request.address, request.count))
+            if isinstance(request, mb.WriteSingleRegister):
+                self._write(self._block(FC_WRITE_SINGLE, request.address), request.value.to_bytes(2, "big"))
+                return mb.WriteSingleRegisterReply(request.slave, request.address, request.value)
+            if isinstance(request, mb.WriteMultipleRegisters):
+                block = self._block(FC_WRITE_MULTIPLE, request.address)
+                n = len(request.values)
+                if not block.accepts(n, 2 * n):
+                    raise _Exception(ILLEGAL_DATA_VALUE)
+                self._write(block, b"".join(v.to_bytes(2, "big") for v in request.values))
+                return mb.WriteMultipleRegistersReply(request.slave, request.address, n)
+            if isinstance(request, mb.UnsupportedRequest) and request.function == FC_WRITE_MULTIPLE:
+                return self._raw_write_multiple(request)
+            raise _Exception(ILLEGAL_FUNCTION)
+        except _Exception as exc:
+            return mb.ExceptionReply(request.slave, request.function, exc.code)
+
+    def malformed(self, frame: bytes) -> mb.Reply | None:
+        """A CRC-valid frame a Modbus codec rejected (byte count): the 0x90 quirk, or exception 03."""
+        if len(frame) < 4 or frame[1] != FC_WRITE_MULTIPLE:
+            return None
+        return self.handle(mb.UnsupportedRequest(frame[0], frame[1], bytes(frame[2:-2])))
+
+    # -- internals ----------------------------------------------------------------------------------
+    def _block(self, function: int, address: int) -> ModbusBlock:
+        block = self.map.find(function, address)
+        if block is None:
+            raise _Exception(ILLEGAL_DATA_ADDRESS)
+        return block
+
+    def _read(self, address: int, count: int) -> tuple[int, ...]:
+        block = self._block(FC_READ, address)
+        if count != block.count:
+            raise _Exception(ILLEGAL_DATA_VALUE)
+        names = [f.name for f in block.fields]
+        values = dict(zip(names, self.firmware.read_many(names)))
+        data = bytearray(block.byte_count)
+        for f in block.fields:  # saturate to the field like the drive's status values, never wrap
+            lo, hi = (-(1 << (8 * f.size - 1)), (1 << (8 * f.size - 1)) - 1) if f.signed else (0, (1 << (8 * f.size)) - 1)
+            data[f.offset:f.offset + f.size] = min(max(values[f.name], lo), hi).to_bytes(f.size, "big", signed=f.signed)
+        return tuple(int.from_bytes(data[i:i + 2], "big") for i in range(0, len(data), 2))
+
+    def _write(self, block: ModbusBlock, data: bytes) -> None:
+        try:
+            values = block.decode(data)
+            for f in block.fields:
+                f.check(values[f.name])
+        except CommandError:
+            raise _Exception(ILLEGAL_DATA_VALUE) from None
+        try:
+            status = self.firmware.execute(block.address, values)
+        except ParameterRefused:
+            raise _Exception(ILLEGAL_DATA_VALUE) from None
+        if status == 0 and block.address != Command.CALIBRATE_ENCODER:
+            raise _Exception(SERVER_DEVICE_FAILURE)
+
+    def _raw_write_multiple(self, request: mb.UnsupportedRequest) -> mb.Reply:
+        pdu = request.pdu
+        if len(pdu) < 5:
+            raise _Exception(ILLEGAL_DATA_VALUE)
+        address, count, byte_count = int.from_bytes(pdu[0:2], "big"), int.from_bytes(pdu[2:4], "big"), pdu[4]
+        block = self._block(FC_WRITE_MULTIPLE, address)
+        data = pdu[5:]
+        if not block.quirk or not block.accepts(count, byte_count) or len(data) != byte_count:
+            raise _Exception(ILLEGAL_DATA_VALUE)
+        self._write(block, data)
+        self.quirks.append((block.title, bytes(pdu)))
+        return mb.WriteMultipleRegistersReply(request.slave, address, count)
+
+    def __repr__(self) -> str:
+        return f"MksModbusFront({self.firmware!r}, address={self.address})"

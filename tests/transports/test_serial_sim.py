@@ -1,0 +1,105 @@
+"""The timed half-duplex RS485 line of the sim: wire time at the baud rate, collisions corrupt both frames, and
+the MKS driver survives them (reads retried, the move never sent twice, a lost completion found by a status read)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from joints.clock import ManualClock
+from joints.codecs import mks
+from joints.transports.serial_sim import TimedSerialLine
+
+
+class Echo:
+    """A device that answers every frame with a fixed reply, and can send a frame by itself at a set time."""
+
+    def __init__(self, reply: bytes, own: list[tuple[float, bytes]] | None = None) -> None:
+        self.reply = reply
+        self.own = own or []
+        self.got: list[bytes] = []
+
+    def receive(self, data: bytes) -> bytes:
+        self.got.append(data)
+        return self.reply if data[:1] == b"\xfa" else b""  # garbage gets no answer
+
+    def silence(self) -> bytes:
+        return b""
+
+    def take_frames(self, now: float | None = None) -> list[tuple[float, bytes]]:
+        due = [f for f in self.own if now is None or f[0] <= now]
+        self.own = [f for f in self.own if f not in due]
+        return due
+
+
+def test_frames_take_their_wire_time_and_the_reply_follows_after_the_latency() -> None:
+    clock = ManualClock()
+    request, reply = mks.encode(mks.ReadSpeed(1)), mks.encode(mks.SpeedReply(1, 7))
+    line = TimedSerialLine(Echo(reply), baudrate=38400, clock=clock, latency=0.0005)
+    line.write(request)
+    assert line.read(0.0) == b""  # nothing has arrived yet
+    got = line.read(0.1)
+    assert got == reply
+    expected = (len(request) + len(reply)) * 10 / 38400 + 0.0005
+    assert clock.now() == pytest.approx(expected, abs=1e-9)
+    assert [tx.side for tx in line.log] == ["host", "device"] and line.collisions == 0
+
+
+def test_overlapping_frames_are_corrupted_on_both_sides() -> None:
+    clock = ManualClock()
+    completion = mks.encode(mks.RunReply(1, 0xFD, mks.RunStatus.COMPLETE))
+    device = Echo(mks.encode(mks.SpeedReply(1, 7)), own=[(0.0005, completion)])
+    line = TimedSerialLine(device, baudrate=38400, clock=clock)
+    clock.advance(0.0005)
+    request = mks.encode(mks.ReadSpeed(1))
+    line.write(request)  # the drive started its completion frame at the same moment
+    got = line.read(0.05)
+    assert line.collisions == 1
+    assert got == bytes(b ^ 0xFF for b in completion)  # garbage for the host
+    assert device.got == [bytes(b ^ 0xFF for b in request)]  # garbage for the drive: no reply
+    assert all(tx.corrupted for tx in line.log)
+    assert "COLLISION" in line.trace()
+
+
+def test_reads_wait_on_the_clock_and_return_at_the_deadline() -> None:
+    clock = ManualClock()
+    line = TimedSerialLine(Echo(b""), baudrate=9600, clock=clock)
+    assert line.read(0.02) == b""
+    assert clock.now() == pytest.approx(0.02)
+
+
+def test_mks_driver_survives_collisions_on_the_half_duplex_line(tmp_path: Path) -> None:
+    pytest.importorskip("mujoco")
+    from mkskit import motor_config, motor_model
+
+    from joints.config import parse
+    from joints.link.trace import Trace
+    from joints.rig import build, sim_world
+
+    cfg = parse(motor_config(motor_model(tmp_path), timeout=0.05))
+    world = sim_world(cfg)
+    line = TimedSerialLine(world.buses["rs485"], baudrate=38400, clock=world.clock)
+    rig = build(cfg, transports={"rs485": line}, clock=world.clock, world=world)
+    trace = Trace()
+    rig.trace(trace)
+    try:
+        j = rig.joints["m1"]
+        d = j.driver
+        j.enable()
+        d.move_pulses(3 * 3200, speed=300, acceleration=2000)
+        t0 = rig.time
+        reads = 0
+        while rig.time - t0 < 2.0:  # poll the encoder back to back while it runs (and after)
+            d.read("encoder_addition")
+            reads += 1
+        assert line.collisions >= 1  # the completion frame met a poll on the line
+        assert d.link.retries_used >= 1  # the poll that collided was read again
+        assert not d.motion_complete  # its completion frame was lost ...
+        assert d.wait_motion(5) == 1  # ... and the status read found the end
+        assert abs(d.read("encoder_addition") - 3 * 16384) <= 1
+        moves = [r for r in trace if r.direction == "tx" and r.data[2:3] == b"\xfd"]
+        assert len(moves) == 1  # the motion command went out exactly once
+        assert reads > 300
+    finally:
+        rig.close()
