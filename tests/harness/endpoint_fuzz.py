@@ -6,7 +6,12 @@ drives per bus (addresses 2 and 3) so "another slave's address" is real. How to 
 protocol is one :class:`Adapter` entry in :data:`ADAPTERS`; a protocol without one still gets the
 generic checks (no exception, no hang), and the report says so.
 
-Invariants (Modbus RTU and eRob CAN adapters):
+Adapters: Modbus RTU (eRob, ZLAC and MKS Part 8 fronts), MKS native, eRob CAN, CANopen.
+
+Invariants (each adapter checks those its protocol can state; CANopen: exception, hang,
+reply-to-other-address - one SDO answer per SDO request, from the node asked -, reply-from-absent-node,
+write-outside-frame - the firmware acts only on NMT, SYNC, PDOs and SDOs to a node on the bus -,
+unanswered):
 
 * ``exception`` - the endpoint never raises (a served twin would die);
 * ``hang`` - every call returns within the time limit;
@@ -127,6 +132,9 @@ class Adapter:
     """How to fuzz and judge one protocol's endpoint."""
 
     generic = False
+    #: the fuzzer drove the twins where a probe cannot reach them (every drive moved to one address or
+    #: switched to another protocol): start over from fresh twins
+    stale = False
 
     def __init__(self, ep: Endpoint, rng: random.Random) -> None:
         self.ep = ep
@@ -170,10 +178,8 @@ class ModbusAdapter(Adapter):
         for front in ep.fronts.values():
             if hasattr(front, "malformed"):
                 self._wrap_malformed(front)
-        tables = {a: ep.family.tables[ep.protocol]() for a in ep.fronts}
-        self.registers = sorted({r.address for table in tables.values() for r in table})
-        # a probe per drive: the first register a read always serves
-        self.probes = {a: next(r for r in table if r.access.readable) for a, table in tables.items()}
+        front = next(iter(ep.fronts.values()))  # the front's own map: a register table, or a block map
+        self.registers, self.probe_read = _modbus_shape(getattr(front, "table", None) or front.map)
         self.requests = corpus.serial_corpus("modbus-rtu", "request")
         self.replies = corpus.serial_corpus("modbus-rtu", "response")
 
@@ -314,10 +320,14 @@ class ModbusAdapter(Adapter):
     def probe(self, t: Target) -> None:
         """After silence a valid request to a drive on the bus is answered, alone."""
         mb, rng, ledger = self.mb, self.rng, self.ledger
-        address = rng.choice(list(self.ep.bus.slaves))
-        reg = self.probes.get(address) or next(iter(self.probes.values()))
+        speaking = [a for a, f in self.ep.bus.slaves.items() if getattr(f, "speaks", True)]
+        if not speaking:  # the fuzzer switched every drive to another protocol: nothing can answer
+            self.stale = True
+            return
+        address = rng.choice(speaking)
+        request = self.probe_read(address)
         ledger.clear()
-        out = self.feed(mb.encode(mb.ReadHoldingRegisters(address, reg.address, reg.words))) + self.silence()
+        out = self.feed(mb.encode(request)) + self.silence()
         codec = mb.ModbusRtuCodec(mb.Role.HOST)
         codec.feed(out)
         codec.flush()
@@ -326,8 +336,27 @@ class ModbusAdapter(Adapter):
             rest = codec.next_message()
         except Exception:  # noqa: BLE001
             got, rest = None, "junk"
-        if not t.check("unanswered", isinstance(got, mb.ReadRegistersReply) and got.slave == address and len(got.values) == reg.words and rest is None):
-            t.example("unanswered", f"probe read of 0x{reg.address:04X} at {address}: {out.hex(' ')}")
+        if not t.check("unanswered", isinstance(got, mb.ReadRegistersReply) and got.slave == address
+                       and len(got.values) == request.count and rest is None):
+            t.example("unanswered", f"probe {request!r}: {out.hex(' ')}")
+
+
+def _modbus_shape(table: Any) -> tuple[list[int], Callable[[int], Any]]:
+    """The register addresses a family's Modbus map serves, and a read every drive answers.
+
+    A register table (eRob, ZLAC: FC03 of any register) or a map of fixed request blocks (MKS Part 8:
+    FC04 of documented blocks only).
+    """
+    from joints.codecs import modbus as mb
+
+    blocks = getattr(table, "blocks", None)
+    if blocks is not None:
+        reads = [b for b in blocks if b.function == mb.READ_INPUT_REGISTERS]
+        first = reads[0]
+        return (sorted({b.address for b in blocks}),
+                lambda slave: mb.ReadInputRegisters(slave, first.address, first.count))
+    reg = next(r for r in table if r.access.readable)
+    return sorted({r.address for r in table}), lambda slave: mb.ReadHoldingRegisters(slave, reg.address, reg.words)
 
 
 class ErobCanAdapter(Adapter):
@@ -435,6 +464,236 @@ class ErobCanAdapter(Adapter):
             t.example("unanswered", f"probe read of actual position at {node}: {[_can_text(m) for m in out]}")
 
 
+class MksAdapter(Adapter):
+    """MKS native RS485: bytes in random chunks and silences, like Modbus; broadcast, group and long
+    packets are executed by every drive they address and answered by none."""
+
+    def __init__(self, ep: Endpoint, rng: random.Random) -> None:
+        super().__init__(ep, rng)
+        from joints.codecs import mks
+
+        self.mks = mks
+        self.segment = bytearray()
+        self.silences = 0
+        bus, ledger = ep.bus, self.ledger
+        exchange = bus.exchange
+
+        def recorded(msg: Any) -> Any:
+            speaking = [f for f in bus.fronts if f.speaks]
+            who = ([f.address for f in speaking], [f.group for f in speaking if f.group])
+            ledger.serving_write = not type(msg).__name__.startswith(("Read", "Query"))
+            try:
+                reply = exchange(msg)
+            finally:
+                ledger.serving_write = False
+            ledger.executed.append((msg, reply, (self.silences, bytes(self.segment), who)))
+            if reply is not None:
+                ledger.replies.append(reply)
+            return reply
+
+        bus.exchange = recorded
+        self.requests = corpus.serial_corpus("mks-native", "request")
+        self.replies = corpus.serial_corpus("mks-native", "response")
+
+    def piece(self) -> bytes:
+        rng, mks = self.rng, self.mks
+        r = rng.random()
+        if r < 0.45:
+            frame = corpus.mks_frame(rng, mks.HEAD_LONG if rng.random() < 0.05 else mks.HEAD_DOWNLINK)
+            if rng.random() < 0.7:  # to a drive on the bus
+                frame = mks.with_checksum(frame[:1] + bytes((rng.choice(list(self.ep.fronts)),)) + frame[2:-1])
+            return frame
+        if r < 0.65:
+            return corpus.mutate(rng, rng.choice(self.requests), self.requests, corpus.mks_fix)
+        if r < 0.75:
+            return rng.choice(self.requests)
+        if r < 0.88:
+            return rng.choice(self.replies) if rng.random() < 0.5 else corpus.mks_frame(rng, mks.HEAD_UPLINK)
+        return corpus.random_bytes(rng)
+
+    def feed(self, data: bytes) -> bytes:
+        self.segment += data
+        out: bytes = self.ep.bus.receive(data)
+        return out
+
+    def silence(self) -> bytes:
+        out: bytes = self.ep.bus.silence()
+        self.segment.clear()
+        self.silences += 1
+        return out
+
+    def case(self, t: Target) -> int:
+        rng = self.rng
+        n = rng.randint(1, 4)
+        chunks: list[tuple[bytes, bool]] = []
+        for _ in range(n):
+            frame = self.piece()
+            cuts = sorted({0, len(frame), *(rng.randrange(len(frame) + 1) for _ in range(rng.randint(0, 2)))})
+            for a, b in itertools.pairwise(cuts):
+                chunks.append((frame[a:b], rng.random() < 0.05))
+            if chunks and rng.random() < 0.5:
+                chunks[-1] = (chunks[-1][0], True)
+        self.run_chunks(t, chunks)
+        return n
+
+    def run_chunks(self, t: Target, chunks: Sequence[tuple[bytes, bool]]) -> None:
+        ledger = self.ledger
+        self.silence()
+        ledger.clear()
+        out = bytearray()
+        fed = bytearray()
+        for data, quiet in chunks:
+            fed += data
+            out += self.feed(data)
+            if quiet:
+                out += self.silence()
+        out += self.silence()
+        self.judge(t, bytes(fed), bytes(out))
+        self.probe(t)
+
+    def judge(self, t: Target, fed: bytes, out: bytes) -> None:
+        mks, ledger = self.mks, self.ledger
+        seen: dict[tuple[bytes, int, bytes], int] = {}
+        for msg, reply, (number, segment, (addresses, groups)) in ledger.executed:
+            frame = mks.encode(msg)
+            if not t.check("executed-invalid", frame in segment):
+                t.example("executed-invalid", f"{msg!r} ({frame.hex(' ')}) not in segment {segment.hex(' ')}")
+            key = (frame, number, segment)
+            seen[key] = seen.get(key, 0) + 1
+            if reply is None:
+                continue
+            address = getattr(msg, "address", None)
+            if not t.check("reply-to-broadcast", address not in (None, mks.BROADCAST)
+                           and not isinstance(msg, mks.LongPacket)):
+                t.example("reply-to-broadcast", f"{reply!r} to {msg!r}")
+            if not t.check("reply-to-other-address", reply.address == address and address in addresses
+                           and (address not in groups or address in addresses)):
+                t.example("reply-to-other-address", f"{reply!r} to {msg!r} (drives {addresses}, groups {groups})")
+        for (frame, _n, segment), k in seen.items():
+            if not t.check("executed-twice", k <= _occurrences(segment, frame)):
+                t.example("executed-twice", f"{frame.hex(' ')} executed {k}x in segment {segment.hex(' ')}")
+        _once_per_frame(t, ledger, fed)
+        if not t.check("write-outside-frame", not ledger.outside):
+            t.example("write-outside-frame", "; ".join(ledger.outside[:3]))
+        expected = b"".join(mks.encode(r) for r in ledger.replies)
+        if not t.check("reply-stream", out == expected):
+            t.example("reply-stream", f"out {out.hex(' ')} != replies {expected.hex(' ')} (input {fed.hex(' ')})")
+
+    def probe(self, t: Target) -> None:
+        mks, rng, ledger = self.mks, self.rng, self.ledger
+        speaking = [f for f in self.ep.bus.fronts if f.speaks]
+        addresses = [f.address for f in speaking]
+        groups = {f.group for f in self.ep.bus.fronts if f.group}
+        unique = [a for a in addresses if addresses.count(a) == 1 and a not in groups and a != mks.BROADCAST]
+        if not unique:  # the fuzzer moved every drive onto one address or off the protocol
+            self.stale = True
+            return
+        address = rng.choice(unique)
+        ledger.clear()
+        out = self.feed(mks.encode(mks.ReadEncoderCarry(address))) + self.silence()
+        codec = mks.MksCodec(mks.Role.HOST)
+        codec.feed(out)
+        codec.flush()
+        try:
+            got, rest = codec.next_message(), codec.next_message()
+        except Exception:  # noqa: BLE001
+            got, rest = None, "junk"
+        if not t.check("unanswered", isinstance(got, mks.EncoderCarryReply) and got.address == address
+                       and rest is None):
+            t.example("unanswered", f"probe read of the encoder at {address}: {out.hex(' ')}")
+
+
+class CanopenAdapter(Adapter):
+    """CANopen: NMT, SYNC, SDO requests, guard requests, PDOs and noise, one frame at a time."""
+
+    def __init__(self, ep: Endpoint, rng: random.Random) -> None:
+        super().__init__(ep, rng)
+        from joints.codecs import canopen as co
+        from joints.devices.erob.canopen import EROB_CANOPEN
+
+        self.co = co
+        self.objects = sorted({(k.index, k.subindex) for k in (EROB_CANOPEN.key(n) for n in EROB_CANOPEN)})
+        self.frames = corpus.can_corpus("canopen", "request") + corpus.can_corpus("canopen", "response")
+
+    def frame(self) -> Any:
+        rng = self.rng
+        nodes = list(self.ep.fronts) + [0, 1, 4]
+        r = rng.random()
+        if r < 0.08:
+            return corpus.can_frame(0, bytes((rng.choice((1, 2, 0x80, 0x81, 0x82, 3)), rng.choice(nodes))))
+        if r < 0.12:
+            return corpus.can_frame(0x80, b"" if rng.random() < 0.7 else bytes((rng.randint(0, 255),)))
+        if r < 0.6:
+            node = rng.choice(nodes) or 2
+            index, sub = rng.choice(self.objects) if rng.random() < 0.9 else (rng.randrange(0x10000), 0)
+            command = rng.choice((0x40, 0x40, 0x23, 0x2B, 0x2F, 0x27, 0x22, 0x21, 0x60, 0x70, 0x00, 0x10, 0x80,
+                                  0xA0, 0xC0, rng.randrange(256)))
+            data = bytes((command, index & 0xFF, index >> 8, sub)) + bytes(rng.randrange(256) for _ in range(4))
+            return corpus.can_frame(0x600 + node, data if rng.random() < 0.95 else data[: rng.randint(0, 7)])
+        if r < 0.66:
+            return corpus.can_frame(0x700 + (rng.choice(nodes) or 2), b"\x00", remote=True)
+        if r < 0.78:
+            base = rng.choice((0x200, 0x300, 0x400, 0x500))
+            return corpus.can_frame(base + (rng.choice(nodes) or 2), corpus.random_bytes(rng, 8)[: rng.randint(0, 8)])
+        if r < 0.9:
+            can_id, data = rng.choice(self.frames)
+            return corpus.can_frame(can_id, corpus.mutate(rng, data)[:8] if rng.random() < 0.5 else data)
+        return corpus.can_frame(rng.randrange(0x800), corpus.random_bytes(rng, 8)[: rng.randint(0, 8)],
+                                remote=rng.random() < 0.05, extended=rng.random() < 0.05)
+
+    def case(self, t: Target) -> int:
+        n = self.rng.randint(1, 4)
+        self.run_frames(t, [self.frame() for _ in range(n)])
+        return n
+
+    def run_frames(self, t: Target, frames: Sequence[Any]) -> None:
+        co, ledger = self.co, self.ledger
+        nodes = {f.node for f in self.ep.bus.fronts}
+        for f in frames:
+            ledger.clear()
+            route = co.classify(f)
+            # what may act on the drive: NMT, SYNC, an SDO request to a drive on the bus, a PDO
+            ledger.serving_write = (route.kind in (co.Kind.NMT, co.Kind.SYNC) or route.kind.is_pdo
+                                    or (route.kind is co.Kind.SDO_RX and route.node in nodes))
+            try:
+                out = list(self.ep.bus.on_frame(f))
+            finally:
+                ledger.serving_write = False
+            if not t.check("write-outside-frame", not ledger.outside):
+                t.example("write-outside-frame", f"{'; '.join(ledger.outside[:3])} after {_can_text(f)}")
+            sdo = [m for m in out if co.classify(m).kind is co.Kind.SDO_TX]
+            ok = not sdo or (route.kind is co.Kind.SDO_RX and len(sdo) == 1
+                             and sdo[0].arbitration_id == 0x580 + route.node and route.node in nodes)
+            if not t.check("reply-to-other-address", ok):
+                t.example("reply-to-other-address", f"{[_can_text(m) for m in sdo]} after {_can_text(f)}")
+            for m in out:
+                kind, node = co.classify(m)
+                if kind in (co.Kind.SDO_TX, co.Kind.HEARTBEAT, co.Kind.BOOT_UP, co.Kind.EMCY) and not t.check(
+                        "reply-from-absent-node", node in nodes):
+                    t.example("reply-from-absent-node", f"{_can_text(m)} after {_can_text(f)}")
+        self.probe(t)
+
+    def probe(self, t: Target) -> None:
+        """A drive put into PRE-OPERATIONAL answers an SDO upload of the device type (0x1000).
+
+        (One that has not booted yet - no tick since power-on - is booted by reset communication.)
+        """
+        co, rng = self.co, self.rng
+        front = rng.choice(self.ep.bus.fronts)
+        node = front.node
+        command = (co.NmtCommand.RESET_COMMUNICATION if front.nmt is co.NmtState.INITIALISING
+                   else co.NmtCommand.ENTER_PRE_OPERATIONAL)
+        self.ep.bus.on_frame(co.encode(co.Nmt(command, node)))
+        out = [m for m in self.ep.bus.on_frame(co.encode(co.SdoUploadInitiate(node, 0x1000, 0)))
+               if co.classify(m).kind is co.Kind.SDO_TX]
+        ok = len(out) == 1 and out[0].arbitration_id == 0x580 + node
+        if ok:
+            reply = co.decode(out[0])
+            ok = isinstance(reply, co.SdoUploadInitiateResponse) and reply.index == 0x1000
+        if not t.check("unanswered", ok):
+            t.example("unanswered", f"probe upload of 0x1000 at node {node}: {[_can_text(m) for m in out]}")
+
+
 class GenericAdapter(Adapter):
     """No protocol knowledge: random and mutated bytes or frames; checks no exception and no hang."""
 
@@ -458,6 +717,8 @@ class GenericAdapter(Adapter):
 ADAPTERS: dict[str, Callable[[Endpoint, random.Random], Adapter]] = {
     "modbus-rtu": ModbusAdapter,
     "erob-can": ErobCanAdapter,
+    "mks-serial": MksAdapter,
+    "canopen": CanopenAdapter,
 }
 
 
@@ -506,7 +767,7 @@ def run(report: Report, names: Sequence[str], count: int, seed: int) -> None:
             cases = 0
             adapter: Adapter | None = None
             while t.units < count:
-                if adapter is None or cases % REBUILD == 0:
+                if adapter is None or adapter.stale or cases % REBUILD == 0:
                     adapter = make(build(family, protocol), rng)
                 cases += 1
                 fed = [0]

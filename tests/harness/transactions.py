@@ -34,6 +34,7 @@ Adding a setup is one :class:`Setup` entry in :data:`SETUPS`.
 
 from __future__ import annotations
 
+import bisect
 import random
 import threading
 import time
@@ -61,15 +62,22 @@ class Setup:
 
     family: str
     protocol: str
-    pool: tuple[str, ...]  #: plain settings, readable and writable, contiguous where the protocol has blocks
+    pool: tuple[str, ...]  #: plain settings the harness writes (unique values), contiguous where the protocol has blocks
+    reads: tuple[str, ...] = ()  #: what it reads (default: the pool)
     address: int = 2
     channels: tuple[str | None, ...] = (None,)
     model: str = ""  #: the MJCF model for the served (pty) world
     joints: tuple[str, ...] = ()  #: MJCF joints of the drive's channels, in order
+    device: str = ""  #: the config device name (default: the family's first)
+    nonnegative: bool = False  #: the protocol carries these values unsigned
 
     @property
     def name(self) -> str:
         return f"{self.family}/{self.protocol}"
+
+    @property
+    def read_names(self) -> tuple[str, ...]:
+        return self.reads or self.pool
 
 
 SETUPS: dict[str, Setup] = {s.name: s for s in (
@@ -81,6 +89,14 @@ SETUPS: dict[str, Setup] = {s.name: s for s in (
           address=1, channels=("left", "right"), model="zlac_diffdrive.xml", joints=("left_wheel", "right_wheel")),
     Setup("erob", "erob-can", ("target_absolute_position", "target_relative_position", "profile_speed",
                                "profile_acceleration", "profile_deceleration")),
+    Setup("erob", "canopen", ("target_absolute_position", "profile_speed", "profile_acceleration",
+                              "profile_deceleration"), nonnegative=True),
+    # MKS settings cannot be read back (the drive reports status only): writes of settings, reads of status
+    # (one pool parameter per command: a command re-sends its other fields with their last values)
+    Setup("mks", "mks-serial", ("working_current", "home_speed", "home_reverse_angle"),
+          reads=("encoder_carry", "real_time_speed", "number_of_pulses", "angle_error"), device="mks-servo42d"),
+    Setup("mks", "modbus-rtu", ("working_current", "home_speed"),
+          reads=("encoder_carry", "real_time_speed", "number_of_pulses", "angle_error"), device="mks-servo42d"),
 )}
 
 
@@ -115,10 +131,13 @@ class Truth:
     """What the twin's firmware really did (filled by the wrappers in :meth:`install`)."""
 
     clock: Clock
-    pool: tuple[str, ...]
+    pool: tuple[str, ...]  #: written with unique values; take fresh values after every read
     ranges: dict[str, tuple[int, int]]
+    reads: tuple[str, ...] = ()  #: also recorded when served
     served: dict[tuple[str, int], float] = field(default_factory=dict)  #: (name, value) -> when served last
-    executed: Counter[tuple[str, int]] = field(default_factory=Counter)  #: accepted writes of pool parameters
+    #: when each (name, value) of a pool parameter was written by an accepted write (values recur over
+    #: a long run: each execution belongs to the latest call that wrote that value before it)
+    executed: dict[tuple[str, int], list[float]] = field(default_factory=dict)
     counter: int = 0
     lock: threading.Lock = field(default_factory=threading.Lock)
 
@@ -131,11 +150,12 @@ class Truth:
 
     def install(self, fw: Any) -> None:
         pool, served = set(self.pool), self.served
+        watched_names = pool | set(self.reads)
         reader, write_many = fw.reader, fw.write_many
 
         def wrapped_reader(names: Sequence[str]) -> Callable[[], list[int]]:
             read = reader(names)
-            watched = [(i, n) for i, n in enumerate(names) if n in pool]
+            watched = [(i, n) for i, n in enumerate(names) if n in watched_names]
 
             def serve() -> list[int]:
                 values: list[int] = read()
@@ -155,7 +175,7 @@ class Truth:
             with self.lock:
                 for n, v in items:
                     if n in pool:
-                        self.executed[(n, v)] += 1
+                        self.executed.setdefault((n, v), []).append(self.clock.now())
 
         fw.reader = wrapped_reader
         fw.write_many = wrapped_write_many
@@ -177,21 +197,26 @@ class Bench:
     settle: Callable[[], None] = lambda: None  #: let everything in flight arrive
 
 
+def _family(setup: Setup) -> Any:
+    return registry.FAMILIES[setup.family]
+
+
 def _drive_configs(setup: Setup, bus: str) -> list[JointConfig]:
-    family = registry.family(setup.family)
-    return [JointConfig(name=f"{setup.family}{ch or ''}", device=family.devices[0], bus=bus, address=setup.address,
-                        channel=ch) for ch in setup.channels]
+    family = _family(setup)
+    return [JointConfig(name=f"{setup.family}{ch or ''}", device=setup.device or family.devices[0], bus=bus,
+                        address=setup.address, channel=ch) for ch in setup.channels]
 
 
-def _ranges(setup: Setup) -> dict[str, tuple[int, int]]:
-    params = registry.family(setup.family).params()
+def _ranges(setup: Setup, params: Any = None) -> dict[str, tuple[int, int]]:
+    """Values the harness writes: in each parameter's range (the driver's own set: a model may narrow it)."""
+    params = params or _family(setup).params()
     out = {}
     for name in setup.pool:
         p = params[name]
         lo, hi = p.type_range
         lo = lo if p.minimum is None else max(lo, p.minimum)
         hi = hi if p.maximum is None else min(hi, p.maximum)
-        out[name] = (max(lo, -(1 << 30)), min(hi, 1 << 30))
+        out[name] = (max(lo, 0 if setup.nonnegative else -(1 << 30)), min(hi, 1 << 30))
     return out
 
 
@@ -205,7 +230,7 @@ def _bound(cfg: BusConfig, faults: tuple[Faults, Faults]) -> float:
 def in_process(setup: Setup, seed: int, rate: float, *, echo: bool = False, timeout: float = 0.05,
                retries: int = 2, max_delay: float | None = None, can_duplicates: bool = False) -> Bench:
     """The setup on an in-process device bus, the line on an injected clock."""
-    family = registry.family(setup.family)
+    family = _family(setup)
     proto = registry.protocol(setup.protocol)
     clock = ManualClock(1000.0)
     cfg = BusConfig(name="bus", protocol=setup.protocol, timeout=timeout, retries=retries, echo=echo)
@@ -215,8 +240,10 @@ def in_process(setup: Setup, seed: int, rate: float, *, echo: bool = False, time
     specs = [_spec(setup, family, c) for c in _drive_configs(setup, "bus")]
     twin, _steppers = family.build_twin(specs, {s.name: 0.01 for s in specs})
     device_bus.add(family.front(setup.protocol, twin, setup.address))
-    truth = Truth(clock, setup.pool, _ranges(setup))
+    truth = Truth(clock, setup.pool, _ranges(setup), setup.read_names)
     truth.install(twin)
+    if hasattr(device_bus, "tick"):
+        device_bus.tick(clock.now())  # the drives boot (a CANopen node sends its boot-up, then answers)
     faults = fault_profile(proto.medium, rate, 0.95 * timeout if max_delay is None else max_delay, echo,
                            can_duplicates)
     inner = proto.sim_transport(device_bus)
@@ -229,6 +256,7 @@ def in_process(setup: Setup, seed: int, rate: float, *, echo: bool = False, time
     link = proto.link(cfg, line, clock, None)
     shared: dict[Any, Any] = {}
     access = family.driver(_drive_configs(setup, "bus")[0], link, clock, shared, setup.protocol).access
+    truth.ranges.update(_ranges(setup, access.params))
 
     def settle() -> None:
         wait = line.read if isinstance(line, FaultyTransport) else line.recv
@@ -243,7 +271,7 @@ def in_process(setup: Setup, seed: int, rate: float, *, echo: bool = False, time
 def _spec(setup: Setup, family: Any, cfg: JointConfig, mjcf: str = "j") -> Any:
     from joints.sim.world import DriveSpec
 
-    return DriveSpec(bus=cfg.bus, name=cfg.name, mjcf_joint=mjcf, address=cfg.address, profile=family.profile(None),
+    return DriveSpec(bus=cfg.bus, name=cfg.name, mjcf_joint=mjcf, address=cfg.address, profile=family.config_profile(cfg),
                      device=cfg.device, maker=family, protocol=setup.protocol, channel=cfg.channel)
 
 
@@ -256,7 +284,7 @@ def served(setup: Setup, seed: int, rate: float, *, echo: bool = False, timeout:
 
     if registry.protocol(setup.protocol).medium != "serial" or not setup.model:
         raise ValueError(f"{setup.name} cannot be served on a pty")
-    family = registry.family(setup.family)
+    family = _family(setup)
     proto = registry.protocol(setup.protocol)
     cfgs = _drive_configs(setup, "rs485")
     specs = [_spec(setup, family, c, mjcf) for c, mjcf in zip(cfgs, setup.joints)]
@@ -264,7 +292,7 @@ def served(setup: Setup, seed: int, rate: float, *, echo: bool = False, timeout:
     world = World(setup.model, specs, buses={"rs485": BusSpec("rs485", setup.protocol,
                                                               lambda: proto.device_bus(bus_cfg), proto.sim_transport)})
     clock = MonotonicClock()
-    truth = Truth(clock, setup.pool, _ranges(setup))
+    truth = Truth(clock, setup.pool, _ranges(setup), setup.read_names)
     truth.install(world.drives[specs[0].name])
     stop = threading.Event()
     ready: dict[str, Any] = {}
@@ -286,6 +314,7 @@ def served(setup: Setup, seed: int, rate: float, *, echo: bool = False, timeout:
     line = FaultyTransport(SerialTransport(port, 115200), tx=faults[0], rx=faults[1], seed=seed, clock=clock)
     link = proto.link(cfg, line, clock, None)
     access = family.driver(cfgs[0], link, clock, {}, setup.protocol).access
+    truth.ranges.update(_ranges(setup, access.params))
 
     def close() -> None:
         stop.set()
@@ -311,27 +340,28 @@ class Call:
     idempotent: bool
     retries: int = 0
     outcome: str = ""
+    start: float = 0.0  #: on the line's clock
 
 
 def run_bench(bench: Bench, t: Target, count: int, rng: random.Random) -> None:
     setup, access, link, line, clock, truth = bench.setup, bench.access, bench.link, bench.line, bench.clock, bench.truth
-    pool = setup.pool
+    pool, reads = setup.pool, setup.read_names
     calls: list[Call] = []
     for number in range(count):
         line.tag = number
         kind = rng.choice(("read", "read", "read-block", "write", "write", "write-block"))
         idempotent = rng.random() < 0.5
         if kind == "read":
-            names: tuple[str, ...] = (rng.choice(pool),)
+            names: tuple[str, ...] = (rng.choice(reads),)
         elif kind == "read-block":
-            names = pool
+            names = reads
         else:
             chosen = pool if kind == "write-block" else (rng.choice(pool),)
             with truth.lock:
                 items = {n: truth.fresh(n) for n in chosen}
         call = Call(number, kind, items if kind.startswith("write") else {}, idempotent)
         retries0 = link.retries_used
-        start = clock.now()
+        start = call.start = clock.now()
         wall = time.monotonic()
         result: dict[str, int] | None = None
         error: BaseException | None = None
@@ -374,7 +404,7 @@ def run_bench(bench: Bench, t: Target, count: int, rng: random.Random) -> None:
             t.example("write-not-outcome-unknown", f"call {number}: {error!r}")
         if error is None:
             with truth.lock:
-                missing = [k for k in call.items.items() if truth.executed[k] == 0]
+                missing = [k for k in call.items.items() if not any(w >= start for w in truth.executed.get(k, ()))]
             if not t.check("write-lost-but-ok", not missing):
                 t.example("write-lost-but-ok", f"call {number}: {missing} reported written, never executed")
         elif isinstance(error, DeviceRejected):
@@ -386,7 +416,7 @@ def run_bench(bench: Bench, t: Target, count: int, rng: random.Random) -> None:
 def _judge_read(t: Target, truth: Truth, number: int, result: dict[str, int], start: float) -> None:
     with truth.lock:
         for name, value in result.items():
-            if name not in truth.ranges:
+            if name not in truth.ranges and name not in truth.reads:
                 continue
             when = truth.served.get((name, value))
             if not t.check("wrong-value", when is not None):
@@ -399,21 +429,34 @@ def _judge_read(t: Target, truth: Truth, number: int, result: dict[str, int], st
 
 
 def _judge_executions(t: Target, bench: Bench, calls: list[Call]) -> None:
+    """Every execution of a written value belongs to the latest call that wrote it before; none to nobody."""
     truth, line = bench.truth, bench.line
     duplicated: Counter[object] = Counter(r.tag for r in line.log if r.direction == "tx" and r.kind == "duplicate")
-    requested: set[tuple[str, int]] = set()
+    writers: dict[tuple[str, int], list[Call]] = {}
+    for call in calls:
+        for item in call.items.items():
+            writers.setdefault(item, []).append(call)
+    counts: Counter[tuple[int, tuple[str, int]]] = Counter()
+    invalid: list[tuple[str, int]] = []
     with truth.lock:
-        for call in calls:
-            allowed = (1 + call.retries) * (1 + duplicated[call.number])
-            for item in call.items.items():
-                requested.add(item)
-                n = truth.executed[item]
-                if not t.check("executed-twice", n <= allowed):
-                    t.example("executed-twice", f"call {call.number}: {item} executed {n}x, sent at most {allowed}x "
-                                                f"({'' if call.idempotent else 'not '}idempotent, {call.outcome})")
-        invalid = [k for k in truth.executed if k not in requested]
+        executed = {k: list(v) for k, v in truth.executed.items()}
+    for item, times in executed.items():
+        starts = sorted((c.start, c.number) for c in writers.get(item, ()))
+        for when in times:
+            owner = bisect.bisect_right(starts, (when, float("inf"))) - 1
+            if owner < 0:
+                invalid.append(item)
+            else:
+                counts[(starts[owner][1], item)] += 1
+    for call in calls:
+        allowed = (1 + call.retries) * (1 + duplicated[call.number])
+        for item in call.items.items():
+            n = counts[(call.number, item)]
+            if not t.check("executed-twice", n <= allowed):
+                t.example("executed-twice", f"call {call.number}: {item} executed {n}x, sent at most {allowed}x "
+                                            f"({'' if call.idempotent else 'not '}idempotent, {call.outcome})")
     if not t.check("executed-invalid", not invalid):
-        t.example("executed-invalid", f"executed but never written: {invalid[:5]}")
+        t.example("executed-invalid", f"executed before anybody wrote it: {invalid[:5]}")
 
 
 @contextmanager
