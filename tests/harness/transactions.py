@@ -69,6 +69,7 @@ class Setup:
     model: str = ""  #: the MJCF model for the served (pty) world
     joints: tuple[str, ...] = ()  #: MJCF joints of the drive's channels, in order
     device: str = ""  #: the config device name (default: the family's first)
+    lead: float | None = None  #: m per motor turn, for a drive on a slide joint (the served world)
     nonnegative: bool = False  #: the protocol carries these values unsigned
 
     @property
@@ -94,9 +95,11 @@ SETUPS: dict[str, Setup] = {s.name: s for s in (
     # MKS settings cannot be read back (the drive reports status only): writes of settings, reads of status
     # (one pool parameter per command: a command re-sends its other fields with their last values)
     Setup("mks", "mks-serial", ("working_current", "home_speed", "home_reverse_angle"),
-          reads=("encoder_carry", "real_time_speed", "number_of_pulses", "angle_error"), device="mks-servo42d"),
+          reads=("encoder_carry", "real_time_speed", "number_of_pulses", "angle_error"), device="mks-servo42d",
+          model="mks_linear_axis.xml", joints=("carriage",), lead=0.008),
     Setup("mks", "modbus-rtu", ("working_current", "home_speed"),
-          reads=("encoder_carry", "real_time_speed", "number_of_pulses", "angle_error"), device="mks-servo42d"),
+          reads=("encoder_carry", "real_time_speed", "number_of_pulses", "angle_error"), device="mks-servo42d",
+          model="mks_linear_axis.xml", joints=("carriage",), lead=0.008),
 )}
 
 
@@ -272,7 +275,7 @@ def _spec(setup: Setup, family: Any, cfg: JointConfig, mjcf: str = "j") -> Any:
     from joints.sim.world import DriveSpec
 
     return DriveSpec(bus=cfg.bus, name=cfg.name, mjcf_joint=mjcf, address=cfg.address, profile=family.config_profile(cfg),
-                     device=cfg.device, maker=family, protocol=setup.protocol, channel=cfg.channel)
+                     device=cfg.device, maker=family, protocol=setup.protocol, channel=cfg.channel, lead=setup.lead)
 
 
 def served(setup: Setup, seed: int, rate: float, *, echo: bool = False, timeout: float = 0.1, retries: int = 2,
@@ -473,6 +476,9 @@ def run(report: Report, names: Sequence[str], count: int, seed: int, *, rate: fl
     for name in names:
         setup = SETUPS[name]
         if (pty or echo) and registry.protocol(setup.protocol).medium != "serial":
+            continue
+        if pty and not setup.model:
+            report.uncovered.append(f"transactions {name}: no served world (Setup.model) for a pty run")
             continue
         if can_duplicates and registry.protocol(setup.protocol).medium != "can":
             continue
