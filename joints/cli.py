@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 from joints import registry
 from joints.errors import ConfigError, JointsError
@@ -56,7 +56,9 @@ def cmd_scan(args: argparse.Namespace) -> int:
 
     The bus is a serial port (``--port``), a CAN channel (``--interface``/``--channel``) or a bus
     of a config (``--config``/``--bus``; twins in sim). Drives that report what they are (eRob
-    over CAN: model, serial number, versions) say so on their line.
+    over CAN: model, serial number, versions) say so on their line. A protocol with a scan of its
+    own (CANopen: heartbeats and boot-ups heard for ``--listen`` s, then an SDO probe) finds any
+    node of the protocol, whatever its device family.
     """
     from joints.clock import MonotonicClock
     from joints.config import BusConfig, JointConfig
@@ -89,7 +91,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
     # CAN replies name their node in the identifier: a late one can never be taken for another node's
     link.policy = RetryPolicy(timeout=args.timeout, retries=0, late=0.0 if proto.medium == "can" else None)
     found = 0
-    try:
+
+    def probe() -> Iterator[dict[str, object]]:
         for addr in addresses:
             if not lo <= addr <= hi:
                 continue
@@ -104,6 +107,12 @@ def cmd_scan(args: argparse.Namespace) -> int:
                     record.update(driver.identity())
                 except JointsError as exc:
                     record["identity"] = f"failed: {exc}"
+            yield record
+
+    try:
+        records = probe() if proto.scan is None else \
+            proto.scan(link, [a for a in addresses if lo <= a <= hi], args.listen)
+        for record in records:
             found += 1
             print(json.dumps(record), flush=True)
     finally:
@@ -112,7 +121,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
         else:
             link.close()
     if not found:
-        print(f"no {args.device} answered on {where} ({cfg.protocol}) at addresses {addresses.start}-"
+        what = f"{cfg.protocol} node" if proto.scan is not None else args.device
+        print(f"no {what} answered on {where} ({cfg.protocol}) at addresses {addresses.start}-"
               f"{addresses.stop - 1}", file=sys.stderr)
         return 1
     return 0
@@ -244,6 +254,34 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_sim_eds(args: argparse.Namespace) -> int:
+    """Write the EDS of the emulated drive at node NODE of CONFIG (to ``-o FILE``, else to stdout)."""
+    from pathlib import Path
+
+    from joints.config import load
+
+    cfg = load(args.config, backend="sim")
+    found = []
+    for name, j in cfg.joints.items():
+        protocol = cfg.buses[j.bus].protocol
+        make = registry.family(j.device, key=f"joints.{name}.device").eds.get(protocol)
+        if make is not None and j.address == args.node:
+            found.append((name, make))
+    if len(found) != 1:
+        nodes = sorted({j.address for n, j in cfg.joints.items()
+                        if registry.family(j.device).eds.get(cfg.buses[j.bus].protocol) is not None})
+        what = "no joint" if not found else f"{len(found)} joints ({', '.join(n for n, _ in found)})"
+        raise ConfigError(f"{what} at node {args.node} on a bus with an EDS (CANopen)", file=cfg.source,
+                          key="joints", allowed=nodes)
+    text = found[0][1](args.node)
+    if args.output is None:
+        sys.stdout.write(text)
+    else:
+        Path(args.output).write_text(text, encoding="utf-8")
+        print(f"{args.output}: EDS of joint {found[0][0]} (node {args.node})", file=sys.stderr)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="joints", description=(__doc__ or "joints").splitlines()[0])
     p.add_argument("--version", action="version", version=f"joints {__import__('joints').__version__}")
@@ -265,6 +303,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--range", type=_parse_range, default=None,
                    help="addresses, e.g. 1-32 (default: 1-32 serial, the protocol's whole range on CAN: 1-127)")
     s.add_argument("--timeout", type=float, default=0.05)
+    s.add_argument("--listen", type=float, default=0.3,
+                   help="CANopen: seconds to listen for heartbeats/boot-ups before the SDO probe")
     s.set_defaults(func=cmd_scan)
 
     for name, func, helptext in (("state", cmd_state, "print the state of every joint (JSON lines)"),
@@ -286,6 +326,11 @@ def build_parser() -> argparse.ArgumentParser:
                                       "buses on python-can channels (one JSON line per bus)")
     sv.add_argument("config")
     sv.set_defaults(func=cmd_sim_serve)
+    ed = sim.add_parser("eds", help="write the CANopen EDS of the emulated drive at NODE of CONFIG")
+    ed.add_argument("config")
+    ed.add_argument("node", type=int)
+    ed.add_argument("-o", "--output", help="the .eds file to write (default: stdout)")
+    ed.set_defaults(func=cmd_sim_eds)
 
     r = sub.add_parser("registers", help="list a device's register table (its map on one protocol)")
     r.add_argument("--device", choices=registry.devices(), default="erob")

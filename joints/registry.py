@@ -10,7 +10,7 @@ pyserial, MuJoCo) are imported only when an entry is used.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -42,6 +42,9 @@ class BusProtocol:
     device_bus: Callable[[BusConfig], Any]  #: sim: the emulated side of the bus (fronts attach with .add)
     sim_transport: Callable[[Any], Any]  #: sim: an in-process transport to a device bus
     direct: bool = False  #: the sim may skip bytes (message objects straight to the device bus)
+    #: ``joints scan`` of any node of the protocol: (link, addresses, listen [s]) -> a record per node found;
+    #: None: the scan probes each address with the device family's driver
+    scan: Callable[[Any, Sequence[int], float], Iterable[dict[str, object]]] | None = None
 
 
 @dataclass(frozen=True)
@@ -71,6 +74,9 @@ class DeviceFamily:
     scan_param: str = "error_code"
     #: protocol -> the operating modes a joint may name (joint key ``mode``; the first is the default)
     modes: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+    #: protocol -> the electronic data sheet of the family's twin on it for a node id (CANopen: an EDS,
+    #: CiA 306; ``joints sim eds``)
+    eds: Mapping[str, Callable[[int], str]] = field(default_factory=dict)
 
     @property
     def protocols(self) -> tuple[str, ...]:
@@ -190,6 +196,7 @@ def _canopen_link(cfg: BusConfig, transport: Any, clock: Clock, peer: Any) -> Li
     link = CanopenLink(transport, policy=RetryPolicy(timeout=cfg.timeout, retries=cfg.retries), clock=clock,
                        name=cfg.name, bus_clock=sim)
     link.sync_period = cfg.sync_period
+    link.bitrate = cfg.bitrate
     return link
 
 
@@ -197,6 +204,12 @@ def _canopen_device_bus(cfg: BusConfig) -> Any:
     from joints.sim.erob_canopen import ErobCanopenBus
 
     return ErobCanopenBus(name=cfg.name, bitrate=cfg.bitrate)
+
+
+def _canopen_scan(link: Any, addresses: Sequence[int], listen: float) -> Iterable[dict[str, object]]:
+    from joints.drivers.canopen_scan import scan
+
+    return scan(link, addresses, listen=listen)
 
 
 def _lockstep_can(device_bus: Any) -> Any:
@@ -243,7 +256,7 @@ PROTOCOLS: dict[str, BusProtocol] = {
         name="canopen", medium="can", addresses=(1, 127),
         description="CANopen CiA 301/402 (SDO 0x600/0x580+node, PDOs, SYNC, NMT, heartbeat)",
         link=_canopen_link, open_transport=_can_transport, device_bus=_canopen_device_bus,
-        sim_transport=_lockstep_can,
+        sim_transport=_lockstep_can, scan=_canopen_scan,
     ),
 }
 
@@ -299,6 +312,12 @@ def _erob_canopen_front(twin: Any, address: int) -> Any:
     from joints.sim.erob_canopen import CanopenFront
 
     return CanopenFront(twin, address)
+
+
+def _erob_eds(node: int) -> str:
+    from joints.sim.erob_canopen import eds_text
+
+    return eds_text(node)
 
 
 def _erob_can_table() -> Any:
@@ -453,6 +472,7 @@ FAMILIES: dict[str, DeviceFamily] = {
         tables={"modbus-rtu": _erob_modbus_table, "erob-can": _erob_can_table, "canopen": _erob_canopen_table},
         twin=_erob_twin,
         fronts={"modbus-rtu": _erob_modbus_front, "erob-can": _erob_can_front, "canopen": _erob_canopen_front},
+        eds={"canopen": _erob_eds},
         watchdog_ms=1000,  # off at power-on (0x0002 = 0): armed while enabled, restored on disable
         modes={"canopen": ("pp", "pv", "pt", "csp", "csv", "cst", "ip")},
     ),

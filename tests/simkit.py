@@ -2,12 +2,20 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import contextlib
+import json
+import select
+import subprocess
+import sys
+from collections.abc import Iterator, Sequence
+from pathlib import Path
 from typing import Any
 
 from joints import registry
 from joints.config import BusConfig
 from joints.sim.world import BusSpec, DriveSpec, World
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def bus_spec(name: str = "rs485", protocol: str = "modbus-rtu", **settings: Any) -> BusSpec:
@@ -31,3 +39,24 @@ def world(model: str, drives: Sequence[DriveSpec], *, timestep: float = 0.001) -
 def erob_world(model: str, names: Sequence[str], profile: Any, *, timestep: float = 0.001) -> World:
     """eRob joints ``names`` at Modbus addresses 1, 2, ... on bus "rs485"."""
     return world(model, [drive(n, i + 1, profile) for i, n in enumerate(names)], timestep=timestep)
+
+
+@contextlib.contextmanager
+def served_can(config: Path, startup: float = 30.0) -> Iterator[dict[str, Any]]:
+    """`joints sim serve CONFIG` in another process; yield what it printed for its first bus (interface,
+    channel, udp_port). The server must print within ``startup`` seconds and exit with 0 on SIGTERM."""
+    proc = subprocess.Popen([sys.executable, "-m", "joints", "sim", "serve", str(config)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        ready, _, _ = select.select([proc.stdout], [], [], startup)
+        assert ready, f"joints sim serve printed nothing within {startup:.0f} s"
+        assert proc.stdout is not None
+        yield json.loads(proc.stdout.readline())
+    finally:
+        proc.terminate()
+        try:
+            rc = proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            raise
+        assert rc == 0, proc.stderr.read() if proc.stderr else rc

@@ -43,8 +43,8 @@ class RawState:
 
     position: int
     velocity: int
-    current: int
-    temperature: float
+    current: float  #: NaN where the protocol does not report it
+    temperature: float  #: NaN where the protocol does not report it
     enabled: bool
     moving: bool
     fault: int  #: device error code, 0 = none

@@ -19,6 +19,16 @@ cyclic ``csp``, ``csv``, ``cst``, ``ip``, driven by :meth:`joints.rig.Rig.cycle`
 :class:`SyncCycle` (one RPDO per joint and one SYNC per bus per cycle; ``sync_period``).
 ``move_to``/``set_velocity``/``set_torque`` switch to PP/PV/PT when the joint is in another mode.
 
+What a state (:class:`~joints.drivers.base.RawState`) contains. Profile modes (``state()``: one
+SYNC, that cycle's TPDO1 + TPDO2): statusword, position, velocity 0x606C and current 0x6078 as
+the drive measured them at the SYNC. Cyclic modes (``Rig.cycle``: the cycle's TPDO1 only, to keep
+the bus load down): statusword and position at the SYNC; velocity = the position difference of
+the last two cycles over their time; current 0x6078 from TPDO1 when the bus has room for 8-byte
+TPDOs (:meth:`SyncCycle.feedback_tpdo`: every cyclic joint of the bus at the SYNC period fits
+with worst-case stuffing; e.g. up to 3 joints at 1 kHz on 1 Mbit/s), else NaN. The temperature
+is NaN in every mode: the eRob has no temperature object on CANopen (E11 of
+:mod:`joints.devices.erob.canopen`).
+
 Safety and liveness: the host consumes each node's heartbeat (0x1017 = 100 ms, consumer time
 250 ms, armed at the first heartbeat); a silent node is a fault (:data:`NODE_LOST`). The
 communication watchdog of the joint is life guarding (0x100C guard time x 0x100D factor 4 = the
@@ -41,6 +51,7 @@ from joints.devices import cia402
 from joints.devices.cia402 import Mode, State
 from joints.devices.erob import faults
 from joints.devices.erob.canopen import (
+    CYCLIC_TPDO1_CURRENT,
     EROB_CANOPEN,
     ERUNNER_RPDO1,
     ERUNNER_TPDOS,
@@ -151,9 +162,11 @@ class SyncCycle:
     counts them) and the joint's last values stand.
     """
 
-    def __init__(self, link: Any, period: float) -> None:
+    def __init__(self, link: Any, period: float, *, current: bool | None = None) -> None:
         self.link = link
         self.period = period
+        #: the motor current in the cyclic TPDO1: None = where the bus has room, True/False = always/never
+        self.current = current
         self.cycles = 0
         self.late = 0  #: TPDOs that missed their cycle
         self.next_due: float | None = None
@@ -162,6 +175,18 @@ class SyncCycle:
         self.sync_time = 0.0
         self.drivers: list[ErobCanopenDriver] = []
         self._expect: list[ErobCanopenDriver] = []
+
+    def feedback_tpdo(self) -> PdoConfig:
+        """The cyclic joints' TPDO1: with the motor current if the cycle still fits the bus with it
+        (every cyclic joint of the bus, worst-case bit stuffing:
+        :meth:`~joints.link.canopen.CanopenLink.cycle_load`), else eRunner's statusword + position."""
+        if self.current is not None:
+            return CYCLIC_TPDO1_CURRENT if self.current else ERUNNER_TPDOS[0]
+        cyclic = [d for d in self.drivers if d.mode.cyclic]
+        load = self.link.cycle_load([d.node for d in cyclic] or [1],
+                                    rpdo_bytes=(max((ERUNNER_RPDO1[d.mode].size for d in cyclic), default=6),),
+                                    tpdo_bytes=(CYCLIC_TPDO1_CURRENT.size,), period=self.period)
+        return CYCLIC_TPDO1_CURRENT if load.fits else ERUNNER_TPDOS[0]
 
     def send(self, targets: Mapping[ErobCanopenDriver, int]) -> None:
         link = self.link
@@ -323,7 +348,7 @@ class ErobCanopenDriver(ErobDriver):
                                 "interpolation_time_index": -4})
         self.mode = mode
         self._rpdo = ERUNNER_RPDO1[mode]
-        self._tpdos = ERUNNER_TPDOS[:1] if mode.cyclic else ERUNNER_TPDOS
+        self._tpdos = (self.group.feedback_tpdo(),) if mode.cyclic else ERUNNER_TPDOS
         known = _power_on_objects(node)
         self._pdo_writes((*self._tpdos, self._rpdo), known)
         self._subscribe()
@@ -368,9 +393,11 @@ class ErobCanopenDriver(ErobDriver):
         t = self.link.clock.now()
         if msg.cob_id == self.tpdo1_cob:
             try:
-                sw, pos = co.unpack_pdo(self._tpdos[0].entries, msg.data)
+                sw, pos, *current = co.unpack_pdo(self._tpdos[0].entries, msg.data)
             except FrameError:
                 return
+            if current:
+                self.current = current[0]
             if self._prev_position is not None and t > self._prev_position[0] and self.cyclic:
                 self.velocity = round((pos - self._prev_position[1]) / (t - self._prev_position[0]))
             self._prev_position = (t, pos)
@@ -461,9 +488,15 @@ class ErobCanopenDriver(ErobDriver):
             moving = enabled and not reached
         else:
             moving = enabled and abs(self.velocity) > 200
-        return RawState(position=self.position, velocity=self.velocity, current=self.current,
+        return RawState(position=self.position, velocity=self.velocity,
+                        current=self.current if self.reports_current else math.nan,
                         temperature=math.nan, enabled=enabled, moving=moving, fault=fault, time=t,
                         extra={"statusword": sw, "mode": int(self.mode), "node": self.node})
+
+    @property
+    def reports_current(self) -> bool:
+        """Whether the TPDOs in use carry the motor current (0x6078)."""
+        return any("motor_current" in p.objects for p in self._tpdos)
 
     def fault_text(self, code: int) -> str:
         f = self.fault(code)
@@ -527,7 +560,7 @@ class ErobCanopenDriver(ErobDriver):
             self._wait_state(want)
         self._control(cia402.COMMAND_WORD[cia402.Command.ENABLE_OPERATION] | self._mode_bits(), target)
         self._note_enable(True)
-        if self.mode in (Mode.CSP, Mode.CSV, Mode.CST):  # set-points act once the drive follows (bit 12)
+        if self.mode.cyclic:  # set-points act once the drive follows them (bit 12; IP: interpolation active)
             deadline = self.clock.now() + STATE_TIMEOUT
             while not self.statusword & cia402.SW_TARGET_FOLLOWED:
                 if self.clock.now() >= deadline:

@@ -22,7 +22,7 @@ Node monitoring (:class:`NodeMonitor`), evaluated on the link's clock whenever t
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,6 +33,7 @@ from joints.codecs import canopen as co
 from joints.errors import EncodeError, FrameError, OutcomeUnknown, PeerProtocolError, ReplyTimeout, UnexpectedReply
 from joints.link.base import FrameFraming, Link, RetryPolicy, Rule
 from joints.link.trace import TraceRecord
+from joints.transports.can_timing import CycleLoad, canopen_cycle_load
 
 __all__ = ["CanopenLink", "CanopenRule", "NodeMonitor", "decode_host"]
 
@@ -193,6 +194,8 @@ class CanopenLink(Link[Any]):
         self.sdo_transfers = 0
         #: the bus's SYNC period from its config (s; None: the joints' or the default 1 ms)
         self.sync_period: float | None = None
+        #: the bus's bit rate (bit/s; from its config) for bus-load decisions
+        self.bitrate = 1_000_000
         self.subscribe(lambda m: isinstance(m, (co.Heartbeat, co.BootUp)), self._error_control)
 
     def _decode(self, frame: can.Message) -> co.Message:
@@ -278,6 +281,12 @@ class CanopenLink(Link[Any]):
             for m in self.monitors.values():
                 if node in (0, m.node):
                     m.guarding.reset()
+
+    def cycle_load(self, nodes: Sequence[int], *, rpdo_bytes: Sequence[int], tpdo_bytes: Sequence[int],
+                   period: float) -> CycleLoad:
+        """The load of a SYNC cycle of ``nodes`` on this bus (its bit rate; worst-case stuffing bounds ``fits``)."""
+        return canopen_cycle_load(list(nodes), rpdo_bytes=rpdo_bytes, tpdo_bytes=tpdo_bytes, sync_period=period,
+                                  bitrate=self.bitrate)
 
     def sync(self, counter: int | None = None) -> None:
         self.send(co.Sync(counter))

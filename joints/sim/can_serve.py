@@ -19,7 +19,12 @@ A client joins with ``can.Bus(interface=..., channel=..., port=udp_port)`` (the 
 ``sim serve`` prints has the three values; a hardware config takes them as the bus keys
 ``interface``, ``channel`` and ``udp_port``). udp_multicast returns every frame to its sender and
 drops bursts above roughly 8000 frames/s, so the serve side filters its own frames and paces what
-it sends (:data:`MAX_FRAMES_PER_S`).
+it sends (:data:`MAX_FRAMES_PER_S`). Our own hardware transport filters the echoes too; any other
+python-can program (the canopen package as a master) joins with :func:`client_bus`, which wraps
+the bus in :class:`~joints.transports.can_echo.EchoFreeBus`.
+
+Frames the twins send by themselves (boot-ups, heartbeats, event TPDOs, EMCY) travel on the device
+bus's timed medium; :class:`CanEndpoint` taps the medium and forwards them, paced with the answers.
 """
 
 from __future__ import annotations
@@ -28,13 +33,14 @@ import ipaddress
 import os
 import socket
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from joints.errors import ConfigError, TransportError
 
-__all__ = ["MAX_FRAMES_PER_S", "CanEndpoint", "ServedCan", "plan"]
+__all__ = ["MAX_FRAMES_PER_S", "CanEndpoint", "ServedCan", "client_bus", "plan"]
 
 #: frames per second the serve side sends at most on one bus (udp_multicast drops bursts above ~8k/s)
 MAX_FRAMES_PER_S = 4000
@@ -121,6 +127,23 @@ def plan(bus: str, interface: str | None, channel: str | int | None, udp_port: i
         "on a physical bus next to (or instead of) real drives. Remove interface/channel (served on an "
         "interface-local udp_multicast group) or name a vcan device (interface = \"socketcan\", channel = "
         "\"vcan0\")", key=f"{key}.interface")
+
+
+def client_bus(line: Mapping[str, Any]) -> Any:
+    """A python-can bus joined to a served CAN bus, from the JSON line ``sim serve`` printed for it.
+
+    On udp_multicast the bus is wrapped so that its own frames never come back to it (a real
+    controller's behaviour; see :mod:`joints.transports.can_echo`).
+    """
+    from joints.transports.can import python_can
+
+    can = python_can()
+    interface, channel, port = line["interface"], line["channel"], line.get("udp_port")
+    if interface != "udp_multicast":
+        return can.Bus(interface=interface, channel=channel)
+    from joints.transports.can_echo import EchoFreeBus
+
+    return EchoFreeBus(can.Bus(interface=interface, channel=channel, port=port, hop_limit=0))
 
 
 class CanEndpoint:

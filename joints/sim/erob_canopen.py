@@ -13,7 +13,12 @@ What the node does (CiA 301 / 402 where chapter 5 is silent; each is an assumpti
 real eRob, also listed in the README):
 
 * NMT: boot-up (0x700+node, data 00) after power-on and after NMT reset node / reset
-  communication, then PRE-OPERATIONAL. Reset communication restores 0x1000-0x1FFF to their
+  communication, then PRE-OPERATIONAL. The boot-up follows a reset command by
+  :data:`BOOT_TIME_COMMUNICATION` (1 ms, as eRunner's monitor shows it) / :data:`BOOT_TIME_NODE`
+  of simulated time, not in the same instant (the node's state changes at the command: frames in
+  the meantime are treated as after the boot-up). A master that starts waiting for the boot-up
+  only after sending the command (canopen's ``wait_for_bootup``) can miss it, here as on a real
+  eRob. Reset communication restores 0x1000-0x1FFF to their
   power-on values; reset node also the application (a firmware power cycle). SDO, SYNC and EMCY
   work in PRE-OPERATIONAL and OPERATIONAL, PDOs only in OPERATIONAL, only NMT and node guarding in
   STOPPED. NMT stop or a reset while the drive is enabled switches it off (brake holds).
@@ -23,7 +28,8 @@ real eRob, also listed in the README):
   an object that cannot be mapped 0x06040041, more than 64 bits 0x06040042.
 * CiA 402: OPERATION ENABLED is reported at once; the holding brake releases in the firmware's
   500 ms and set-points written meanwhile act when it has (a PP set-point is acknowledged at once
-  and started then); in CSP/CSV/CST statusword bit 12 ("drive follows the target") is set from then. Quick stop (option code 0x605A = 2)
+  and started then); in CSP/CSV/CST statusword bit 12 ("drive follows the target") and in IP bit
+  12 ("ip mode active", with controlword bit 4) are set from then. Quick stop (option code 0x605A = 2)
   decelerates within the emergency-stop time, then SWITCH ON DISABLED. A firmware fault is
   FAULT with an EMCY carrying the eRob error code (0x603F) and an error register by CiA 301 class;
   fault reset (rising bit 7) clears it and sends EMCY 0x0000. Halt (bit 8) decelerates with the
@@ -75,6 +81,10 @@ from joints.transports.can_sim import CanMedium, ClockLike
 __all__ = ["LIFE_GUARD_ERROR", "CanopenFront", "ErobCanopenBus", "eds_text", "object_dictionary", "write_eds"]
 
 LIFE_GUARD_ERROR = 0x8130  #: EMCY / fault code of a life-guarding timeout (CiA 301)
+#: s from an NMT reset command to the node's boot-up: reset communication as eRunner's monitor shows
+#: it (figs 5-18, 5-23, 5-27: the boot-up within 1 ms), reset node (not shown) an assumption
+BOOT_TIME_COMMUNICATION = 0.001
+BOOT_TIME_NODE = 0.05
 PDO_LENGTH_ERROR = 0x8210  #: EMCY of an RPDO shorter than its mapping
 _A = co.SdoAbortCode
 _POSITION, _SPEED, _TORQUE = int(OperationMode.POSITION), int(OperationMode.SPEED), int(OperationMode.TORQUE)
@@ -141,6 +151,8 @@ class CanopenFront:
         self.frames_in = 0
         self.emcy_sent: list[co.Emcy] = []
         self._outbox: list[can.Message] = []
+        #: answers due later than at once: (delay after the frame that caused them [s], frame)
+        self.later: list[tuple[float, can.Message]] = []
         self._node_relative()
         self._reset(power_on=True)
 
@@ -268,10 +280,12 @@ class CanopenFront:
         if command is co.NmtCommand.RESET_NODE:
             self.firmware.power_cycle()
             self._reset(power_on=True)
-            return [self._booted()]
+            self.later.append((BOOT_TIME_NODE, self._booted()))
+            return []
         if command is co.NmtCommand.RESET_COMMUNICATION:
             self._reset_communication()
-            return [self._booted()]
+            self.later.append((BOOT_TIME_COMMUNICATION, self._booted()))
+            return []
         if self.nmt is co.NmtState.INITIALISING:
             return []
         new = co.nmt_transition(self.nmt, command)
@@ -553,7 +567,7 @@ class CanopenFront:
                 reached = abs(v - target) <= max(100, abs(target) // 100) and abs(fw.v_ref - target) < 1
                 bit12 = abs(v) < 100 if mode is Mode.PV else not self.enabling
             elif mode is Mode.IP:
-                bit12 = bool(self.controlword & cia402.CW_ENABLE_IP)
+                bit12 = bool(self.controlword & cia402.CW_ENABLE_IP) and not self.enabling  # interpolating
                 reached = not fw.gen.active and abs(fw.v_ref) < 1
             elif mode in (Mode.CSP, Mode.CST):
                 bit12 = not self.halted and not self.enabling  # following the target (brake released)
@@ -781,18 +795,28 @@ class ErobCanopenBus:
         if kind in (co.Kind.NMT, co.Kind.SYNC, co.Kind.TIME):
             out: list[can.Message] = []
             for f in self.fronts:
-                out.extend(f.on_frame(frame, route))
+                out.extend(self._answers(f, frame, route))
             return out
         if kind in (co.Kind.SDO_RX, co.Kind.GUARD_REQUEST):
             front = self.front(route.node)
-            return () if front is None else front.on_frame(frame, route)
+            return () if front is None else self._answers(front, frame, route)
         if kind.is_pdo:
             out = []
             for f in self.fronts:  # PDOs are routed by COB-ID: any front may have mapped it
                 if f.nmt is co.NmtState.OPERATIONAL:
-                    out.extend(f.on_frame(frame, route))
+                    out.extend(self._answers(f, frame, route))
             return out
         return ()
+
+    def _answers(self, front: CanopenFront, frame: can.Message, route: co.Route) -> list[can.Message]:
+        """The front's answers now; those it gives later (a boot-up) go on the medium at their time."""
+        out = front.on_frame(frame, route)
+        if front.later:
+            now = self.medium.time()
+            for delay, answer in front.later:
+                self.medium.send_at(self._node, answer, now + delay)
+            front.later.clear()
+        return out
 
     # -- the world's clock (joints.sim.world.TimedDeviceBus) ------------------------------------
     def bind_clock(self, clock: ClockLike) -> None:

@@ -10,6 +10,7 @@ in-process bus is a python-can bus too, so the same wrapper serves every case.
 from __future__ import annotations
 
 import abc
+import threading
 import time
 from collections import deque
 from types import TracebackType
@@ -53,6 +54,48 @@ class FrameTransport(abc.ABC):
         self.close()
 
 
+class EchoFilter:
+    """Recognises the echoes of frames one sender sent (udp_multicast returns each frame to its sender, unmarked).
+
+    :meth:`sent` before the frame goes out (an echo can come back before ``send`` returns in another
+    thread), :meth:`is_echo` for each received frame: a frame equal to one sent and not yet seen
+    back is taken for its echo. Echoes come back in order, so older unmatched frames were lost on
+    the way back and are forgotten. Thread-safe (a receiving thread and a sending one).
+    """
+
+    #: sent frames remembered (older ones were lost on the way back)
+    WINDOW = 256
+
+    def __init__(self, window: int = WINDOW) -> None:
+        self._sent: deque[tuple[int, bool, bytes]] = deque(maxlen=window)
+        self._lock = threading.Lock()
+        self.dropped = 0  #: echoes recognised
+
+    def sent(self, frame: Any) -> None:
+        with self._lock:
+            self._sent.append(_key(frame))
+
+    def unsent(self, frame: Any) -> None:
+        """The frame did not go out after all (its send failed): no echo is coming."""
+        key = _key(frame)
+        with self._lock:
+            for i in range(len(self._sent) - 1, -1, -1):
+                if self._sent[i] == key:
+                    del self._sent[i]
+                    return
+
+    def is_echo(self, frame: Any) -> bool:
+        key = _key(frame)
+        with self._lock:
+            sent = self._sent
+            if not sent or key not in sent:
+                return False
+            while sent.popleft() != key:
+                pass
+            self.dropped += 1
+            return True
+
+
 class PythonCanTransport(FrameTransport):
     """Any python-can bus (socketcan, pcan, kvaser, slcan, virtual, udp_multicast, the sim's lockstep bus).
 
@@ -62,16 +105,17 @@ class PythonCanTransport(FrameTransport):
     seen back is taken for that echo and dropped (a real controller never echoes).
     """
 
-    #: sent frames remembered for echo filtering (older ones were lost on the way back)
-    ECHO_WINDOW = 256
-
     def __init__(self, bus: Any, *, ignore_own: bool = True, echoes: bool = False) -> None:
         self.bus = bus
         self.ignore_own = ignore_own
         self.echoes = echoes
-        self._sent: deque[tuple[int, bool, bytes]] = deque(maxlen=self.ECHO_WINDOW)
-        self.echoes_dropped = 0
+        self._echo = EchoFilter()
         self._closed = False
+
+    @property
+    def echoes_dropped(self) -> int:
+        """Echoes of our own frames recognised and dropped."""
+        return self._echo.dropped
 
     @classmethod
     def open(cls, interface: str, channel: str | int | None, bitrate: int | None = None, **kwargs: Any) -> PythonCanTransport:
@@ -102,12 +146,14 @@ class PythonCanTransport(FrameTransport):
     def send(self, frame: Any) -> None:
         if self._closed:
             raise TransportError(f"{self.name} is closed")
+        if self.echoes:
+            self._echo.sent(frame)
         try:
             self.bus.send(frame)
         except Exception as exc:
+            if self.echoes:
+                self._echo.unsent(frame)
             raise TransportError(f"send on {self.name} failed: {exc}") from exc
-        if self.echoes:
-            self._sent.append(_key(frame))
 
     def recv(self, timeout: float) -> Any | None:
         if self._closed:
@@ -119,22 +165,12 @@ class PythonCanTransport(FrameTransport):
                 if frame is None:
                     return None
                 if ((self.ignore_own and getattr(frame, "is_rx", True) is False)
-                        or (self._sent and self._is_echo(frame))):
+                        or (self.echoes and self._echo.is_echo(frame))):
                     timeout = deadline - time.monotonic()  # our own frame came back: wait out the rest
                     continue
                 return frame
         except Exception as exc:
             raise TransportError(f"receive on {self.name} failed: {exc}") from exc
-
-    def _is_echo(self, frame: Any) -> bool:
-        key = _key(frame)
-        sent = self._sent
-        if key not in sent:
-            return False
-        while sent.popleft() != key:  # echoes come back in order: older unmatched ones were lost
-            pass
-        self.echoes_dropped += 1
-        return True
 
     def close(self) -> None:
         if not self._closed:

@@ -356,6 +356,13 @@ class CanMedium:
         self._enqueue(frame, node, max(at, self.now))
         self._run(self.now)
 
+    def time(self) -> float:
+        """The medium's present time: the end of the frame being delivered (a peer answering it), else now."""
+        if self._delivering is not None:
+            return self._delivering
+        self._sync()
+        return self.now
+
     def receive(self, node: _Node, timeout: float | None) -> can.Message | None:
         """The next frame delivered to ``node`` within ``timeout`` s of simulated time (None: none came)."""
         self._sync()

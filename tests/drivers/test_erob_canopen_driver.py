@@ -122,14 +122,16 @@ def test_csp_1khz_three_joint_arm_tracks_within_a_tenth_of_a_degree(capsys: pyte
     assert 0.6 < load.load < 1.0
 
 
-def timed_bus_late(nodes: int, cycles: int = 200) -> tuple[int, float]:
-    """Drivers in CSP on a bus of their own (no physics needed): late TPDOs and the measured load."""
+def timed_bus_late(nodes: int, cycles: int = 200, *, current: bool | None = False) -> tuple[int, float]:
+    """Drivers in CSP on a bus of their own (no physics needed): late TPDOs and the measured load.
+
+    ``current``: the motor current in TPDO1 (False: eRunner's 6-byte TPDO1, the worked example)."""
     device = ErobCanopenBus()
     for n in range(1, nodes + 1):
         device.add(CanopenFront(ErobFirmware(profile("eRob80H100"), n), n))
     bus = LockstepCanBus(medium=device.medium)
     link = CanopenLink(PythonCanTransport(bus), clock=device.medium.clock, bus_clock=True)
-    cycle = SyncCycle(link, 0.001)
+    cycle = SyncCycle(link, 0.001, current=current)
     drivers = [ErobCanopenDriver(link, n, mode="csp", heartbeat_ms=0, cycle=cycle) for n in range(1, nodes + 1)]
     device.tick(0.001)
     for d in drivers:

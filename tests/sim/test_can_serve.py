@@ -6,10 +6,8 @@ fixed sleep - with generous upper bounds.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
-import select
 import subprocess
 import sys
 import time
@@ -25,8 +23,7 @@ pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="udp_multicast s
 
 import joints
 from joints.cli import main
-
-ROOT = Path(__file__).resolve().parents[2]
+from simkit import ROOT, served_can
 
 SIM = """
 backend = "sim"
@@ -58,31 +55,11 @@ limits = {{ position = [-3.1, 3.1], velocity = 2.0, torque = 30.0 }}
 """
 
 
-@contextlib.contextmanager
-def served(config: Path, startup: float = 30.0) -> Iterator[dict[str, Any]]:
-    proc = subprocess.Popen([sys.executable, "-m", "joints", "sim", "serve", str(config)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, cwd=ROOT)
-    try:
-        ready, _, _ = select.select([proc.stdout], [], [], startup)
-        assert ready, f"joints sim serve printed nothing within {startup:.0f} s"
-        assert proc.stdout is not None
-        line = json.loads(proc.stdout.readline())
-        yield line
-    finally:
-        proc.terminate()
-        try:
-            rc = proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            raise
-        assert rc == 0, proc.stderr.read() if proc.stderr else rc
-
-
 @pytest.fixture
 def hardware_config(tmp_path: Path) -> Iterator[tuple[Path, dict[str, Any]]]:
     sim = tmp_path / "sim.toml"
     sim.write_text(SIM)
-    with served(sim) as line:
+    with served_can(sim) as line:
         assert line["bus"] == "can" and line["interface"] == "udp_multicast"
         assert line["channel"].startswith("ff01:") and isinstance(line["udp_port"], int)
         hw = tmp_path / "hw.toml"

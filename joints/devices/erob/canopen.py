@@ -46,6 +46,12 @@ assumption to confirm on a real eRob:
 * E10 0x6073 max current is in mA (like E1; CiA 402: per mille of rated current) and 0x6080 max
   motor speed in count/s: the joint's limits go there (the Modbus max_motor_current / max_speed).
 * E9 Only the objects above exist; vendor id, product code, revision and serial number read 0.
+* E11 No object reports a temperature: chapter 5 shows none, and ZeroErr's EDS for its eDriver
+  CANopen slave lists only CiA 301/402 objects (no manufacturer area). The power-stage temperature
+  is read over Modbus RTU or the CAN custom protocol.
+* E12 Our cyclic feedback (:data:`CYCLIC_TPDO1_CURRENT`): TPDO1 = statusword + position + current
+  actual value 0x6078 (8 bytes, every SYNC) where the bus has room for it, eRunner's 6-byte TPDO1
+  otherwise (the host's choice, not the drive's).
 """
 
 from __future__ import annotations
@@ -60,6 +66,7 @@ from joints.devices.params import Access, ParamMap, check_value
 from joints.errors import FrameError, RegisterError
 
 __all__ = [
+    "CYCLIC_TPDO1_CURRENT",
     "EROB_CANOPEN",
     "ERUNNER_RPDO1",
     "ERUNNER_TPDOS",
@@ -405,6 +412,10 @@ ERUNNER_TPDOS: tuple[PdoConfig, ...] = (
     PdoConfig("TPDO", 1, ("statusword", "actual_position"), 1),
     PdoConfig("TPDO", 2, ("current_speed", "motor_current"), 1),
 )
+
+
+#: the cyclic modes' TPDO1 with the motor current (E12): 8 bytes, on every SYNC
+CYCLIC_TPDO1_CURRENT = PdoConfig("TPDO", 1, ("statusword", "actual_position", "motor_current"), 1)
 
 
 def power_on_pdo(kind: str, number: int) -> PdoConfig:
