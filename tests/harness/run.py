@@ -60,6 +60,8 @@ def run(args: argparse.Namespace) -> Report:
             transactions.run(report, setups, n, args.seed, rate=args.rate, echo=True)
         if args.can_duplicates:
             transactions.run(report, setups, n, args.seed, rate=args.rate, can_duplicates=True)
+        if args.flips:
+            transactions.run(report, setups, n, args.seed, rate=args.rate, flips=args.flips)
         if args.pty:
             transactions.run(report, setups, args.pty, args.seed, rate=args.rate, pty=True)
     return report
@@ -79,6 +81,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--can-duplicates", action="store_true",
                         help="also run CAN setups with requests duplicated (shows a protocol limit: violations "
                              "expected on eRob CAN)")
+    parser.add_argument("--flips", type=int, default=0, metavar="N",
+                        help="also run every setup with corruptions of up to N bits (beyond what a protocol's check "
+                             "always catches: violations expected on MKS native for N >= 2)")
     parser.add_argument("--list", action="store_true", help="print the targets and exit")
     parser.add_argument("--atheris", metavar="TARGET", help="fuzz one codec/endpoint target with atheris")
     args = parser.parse_args(argv)

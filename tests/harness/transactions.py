@@ -70,6 +70,7 @@ class Setup:
     joints: tuple[str, ...] = ()  #: MJCF joints of the drive's channels, in order
     device: str = ""  #: the config device name (default: the family's first)
     lead: float | None = None  #: m per motor turn, for a drive on a slide joint (the served world)
+    max_flips: int = 3  #: bits one corruption flips: what the protocol's frame check always detects
     nonnegative: bool = False  #: the protocol carries these values unsigned
 
     @property
@@ -96,7 +97,7 @@ SETUPS: dict[str, Setup] = {s.name: s for s in (
     # (one pool parameter per command: a command re-sends its other fields with their last values)
     Setup("mks", "mks-serial", ("working_current", "home_speed", "home_reverse_angle"),
           reads=("encoder_carry", "real_time_speed", "number_of_pulses", "angle_error"), device="mks-servo42d",
-          model="mks_linear_axis.xml", joints=("carriage",), lead=0.008),
+          model="mks_linear_axis.xml", joints=("carriage",), lead=0.008, max_flips=1),
     Setup("mks", "modbus-rtu", ("working_current", "home_speed"),
           reads=("encoder_carry", "real_time_speed", "number_of_pulses", "angle_error"), device="mks-servo42d",
           model="mks_linear_axis.xml", joints=("carriage",), lead=0.008),
@@ -104,7 +105,7 @@ SETUPS: dict[str, Setup] = {s.name: s for s in (
 
 
 def fault_profile(medium: str, rate: float, max_delay: float, echo: bool,
-                  can_duplicates: bool = False) -> tuple[Faults, Faults]:
+                  can_duplicates: bool = False, max_flips: int = 3) -> tuple[Faults, Faults]:
     """(tx, rx) faults: each unit faulted with probability ``rate``, by kinds the medium can suffer.
 
     A serial line loses, garbles, splits and delays bytes (and an adapter may echo); it never
@@ -115,14 +116,19 @@ def fault_profile(medium: str, rate: float, max_delay: float, echo: bool,
     the custom protocol's replies carry nothing that tells the second answer from the answer to the
     next request (joints/link/erob_can.py). That is the protocol's limit, not the link's, so
     requests are duplicated only when asked (``run.py --can-duplicates`` shows what it costs).
+
+    Corruption flips at most ``max_flips`` bits of a frame: as many as its check is sure to catch
+    (CRC-16 of Modbus RTU: 3; the checksum-8 of MKS native: 1 - two flipped top bits add 256 and
+    pass it, so a garbled MKS reply can be taken as a valid one; ``run.py --flips`` shows it).
     """
     if medium == "can":
         tx_kinds = ("drop", "delay", "reorder", "duplicate") if can_duplicates else ("drop", "delay", "reorder")
         return (Faults.rate(rate, tx_kinds, max_delay=max_delay),
                 Faults.rate(rate, ("drop", "duplicate", "delay", "reorder"), max_delay=max_delay))
     tx = Faults.rate(rate, ("drop", "corrupt", "split", "delay", "reorder"), max_delay=max_delay,
-                     echo=1.0 if echo else 0.0)
-    rx = Faults.rate(rate, ("drop", "corrupt", "split", "duplicate", "delay", "reorder"), max_delay=max_delay)
+                     echo=1.0 if echo else 0.0, max_flips=max_flips)
+    rx = Faults.rate(rate, ("drop", "corrupt", "split", "duplicate", "delay", "reorder"), max_delay=max_delay,
+                     max_flips=max_flips)
     return tx, rx
 
 
@@ -231,7 +237,8 @@ def _bound(cfg: BusConfig, faults: tuple[Faults, Faults]) -> float:
 
 
 def in_process(setup: Setup, seed: int, rate: float, *, echo: bool = False, timeout: float = 0.05,
-               retries: int = 2, max_delay: float | None = None, can_duplicates: bool = False) -> Bench:
+               retries: int = 2, max_delay: float | None = None, can_duplicates: bool = False,
+               flips: int | None = None) -> Bench:
     """The setup on an in-process device bus, the line on an injected clock."""
     family = _family(setup)
     proto = registry.protocol(setup.protocol)
@@ -248,7 +255,7 @@ def in_process(setup: Setup, seed: int, rate: float, *, echo: bool = False, time
     if hasattr(device_bus, "tick"):
         device_bus.tick(clock.now())  # the drives boot (a CANopen node sends its boot-up, then answers)
     faults = fault_profile(proto.medium, rate, 0.95 * timeout if max_delay is None else max_delay, echo,
-                           can_duplicates)
+                           can_duplicates, flips or setup.max_flips)
     inner = proto.sim_transport(device_bus)
     line: FaultyTransport | FaultyFrameTransport
     if proto.medium == "can":  # the lockstep CAN bus lets time pass on the clock it is bound to
@@ -279,7 +286,7 @@ def _spec(setup: Setup, family: Any, cfg: JointConfig, mjcf: str = "j") -> Any:
 
 
 def served(setup: Setup, seed: int, rate: float, *, echo: bool = False, timeout: float = 0.1, retries: int = 2,
-           max_delay: float | None = None, can_duplicates: bool = False) -> Bench:
+           max_delay: float | None = None, can_duplicates: bool = False, flips: int | None = None) -> Bench:
     """The setup in a real world served on a pty (``joints sim serve``'s loop, in a thread), on the wall clock."""
     from joints.sim.serve import serve
     from joints.sim.world import BusSpec, World
@@ -313,7 +320,8 @@ def served(setup: Setup, seed: int, rate: float, *, echo: bool = False, timeout:
     port = ready["rs485"]
     port = port["port"] if isinstance(port, dict) else port
     cfg = BusConfig(name="rs485", protocol=setup.protocol, port=port, timeout=timeout, retries=retries, echo=echo)
-    faults = fault_profile(proto.medium, rate, 0.95 * timeout if max_delay is None else max_delay, echo)
+    faults = fault_profile(proto.medium, rate, 0.95 * timeout if max_delay is None else max_delay, echo,
+                           max_flips=flips or setup.max_flips)
     line = FaultyTransport(SerialTransport(port, 115200), tx=faults[0], rx=faults[1], seed=seed, clock=clock)
     link = proto.link(cfg, line, clock, None)
     access = family.driver(cfgs[0], link, clock, {}, setup.protocol).access
@@ -472,7 +480,7 @@ def _bench(make: Callable[..., Bench], *args: Any, **kwargs: Any) -> Iterator[Be
 
 
 def run(report: Report, names: Sequence[str], count: int, seed: int, *, rate: float = 0.1, pty: bool = False,
-        echo: bool = False, can_duplicates: bool = False) -> None:
+        echo: bool = False, can_duplicates: bool = False, flips: int | None = None) -> None:
     for name in names:
         setup = SETUPS[name]
         if (pty or echo) and registry.protocol(setup.protocol).medium != "serial":
@@ -483,11 +491,12 @@ def run(report: Report, names: Sequence[str], count: int, seed: int, *, rate: fl
         if can_duplicates and registry.protocol(setup.protocol).medium != "can":
             continue
         mode = ("pty" if pty else "in process") + (", adapter echo" if echo else "") + (
-            ", requests duplicated" if can_duplicates else "")
+            ", requests duplicated" if can_duplicates else "") + (f", {flips}-bit corruption" if flips else "")
         t = report.target(f"transactions {name} ({mode})", "transactions", "calls")
         rng = random.Random(f"{seed}/transactions/{name}/{pty}/{echo}")
         maker = served if pty else in_process
-        with report.timed(t), _bench(maker, setup, seed, rate, echo=echo, can_duplicates=can_duplicates) as bench:
+        with report.timed(t), _bench(maker, setup, seed, rate, echo=echo, can_duplicates=can_duplicates,
+                                     flips=flips) as bench:
             run_bench(bench, t, count, rng)
             t.notes[f"line: {bench.line.summary()}"] += 1
             t.notes["link retries"] += bench.link.retries_used
