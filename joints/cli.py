@@ -254,6 +254,67 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_identify(args: argparse.Namespace) -> int:
+    """System identification of one joint; writes its profile overlay (joints.s2r.identify)."""
+    from pathlib import Path
+
+    from joints.s2r.identify import Excitation, identify, write_overlay
+
+    exc = Excitation(mode=args.mode, duration=args.duration, amplitude=args.amplitude, f_min=args.f_min,
+                     f_max=args.f_max)
+
+    def progress(fraction: float, text: str) -> None:
+        bar = "#" * round(30 * fraction)
+        print(f"\ridentify [{bar:<30}] {fraction:4.0%}  {text}", end="", file=sys.stderr, flush=True)
+
+    with _open(args) as rig:
+        j = _joint(rig, args.joint)
+        print(f"identifying joint {args.joint} ({rig.backend}): {exc.mode} multi-sine {exc.f_min:g}-{exc.f_max:g} Hz "
+              f"for {exc.duration:g} s inside limits {j.limits}", file=sys.stderr)
+        ident = identify(rig, args.joint, exc, known_inertia=args.inertia, progress=progress)
+        print(file=sys.stderr)
+        profile = j.driver.profile
+        device = rig.config.joints[args.joint].device
+    out = Path(args.output) if args.output else Path(rig.config.base_dir) / f"{args.joint}.profile.toml"
+    write_overlay(out, profile, ident, device=device, config=rig.config.source)
+    print(ident)
+    print(f"wrote {out}; use it with  profile_overlay = \"{out.name}\"  under [joints.{args.joint}]")
+    return 0
+
+
+def _perturbations(items: Sequence[str]) -> dict[str, dict[str, float]]:
+    """``JOINT:key=value,key=value`` -> {joint: {key: value}} (``joints replay --perturb``)."""
+    out: dict[str, dict[str, float]] = {}
+    for item in items:
+        joint, _, rest = item.partition(":")
+        try:
+            out[joint] = {k.strip(): float(v) for k, v in (kv.split("=", 1) for kv in rest.split(",") if kv)}
+        except ValueError:
+            raise ConfigError(f"expected JOINT:key=value,... got {item!r}", key="--perturb",
+                              allowed=("armature", "coulomb_friction", "viscous_friction", "torque_constant",
+                                       "command_delay")) from None
+        if not joint or not out[joint]:
+            raise ConfigError(f"expected JOINT:key=value,... got {item!r}", key="--perturb")
+    return out
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    """Replay a recording against fresh twins of its configuration; exit 1 when the replies differ."""
+    from joints.s2r.record import replay
+
+    report = replay(args.recording, perturb=_perturbations(args.perturb or ()))
+    print(report)
+    for d in report.differences[:args.show]:
+        print(f"frame {d.index} t {d.t:.6f} {d.bus}: {d.request}")
+        for q, (a, b) in d.quantities.items():
+            print(f"    {q}: recorded {a} replayed {b}")
+    if args.report:
+        from pathlib import Path
+
+        Path(args.report).write_text(json.dumps(report.to_json(), indent=1) + "\n", encoding="utf-8")
+    return 0 if report.identical else 1
+
+
 def cmd_sim_eds(args: argparse.Namespace) -> int:
     """Write the EDS of the emulated drive at node NODE of CONFIG (to ``-o FILE``, else to stdout)."""
     from pathlib import Path
@@ -331,6 +392,31 @@ def build_parser() -> argparse.ArgumentParser:
     ed.add_argument("node", type=int)
     ed.add_argument("-o", "--output", help="the .eds file to write (default: stdout)")
     ed.set_defaults(func=cmd_sim_eds)
+
+    ident = sub.add_parser("identify", help="identify a joint's inertia, friction, torque constant and delay (a "
+                                            "safe excitation inside its limits) and write its profile overlay")
+    ident.add_argument("config")
+    ident.add_argument("joint")
+    ident.add_argument("--backend", choices=("sim", "hardware"))
+    ident.add_argument("--mode", choices=("torque", "speed"), default="torque",
+                       help="torque (default: needs gravity on the joint) or speed (the drive's loop holds it)")
+    ident.add_argument("--duration", type=float, default=20.0, help="seconds of excitation")
+    ident.add_argument("--amplitude", type=float, help="peak N*m (torque) or rad/s (speed); default half the limit")
+    ident.add_argument("--f-min", type=float, default=0.2, dest="f_min", help="Hz")
+    ident.add_argument("--f-max", type=float, default=3.0, dest="f_max", help="Hz")
+    ident.add_argument("--inertia", type=float, help="the joint's whole inertia [kg*m^2] when it has no gravity torque")
+    ident.add_argument("--output", help="overlay file (default: <joint>.profile.toml next to the config)")
+    ident.set_defaults(func=cmd_identify)
+
+    rp = sub.add_parser("replay", help="replay a recorded run against fresh twins of its configuration and diff "
+                                       "the replies (exit 1 if they differ)")
+    rp.add_argument("recording", help="the .jsonl file a joints.s2r.record.Recorder wrote")
+    rp.add_argument("--perturb", action="append", metavar="JOINT:key=value,...",
+                    help="perturb a twin first (World.perturb: armature, coulomb_friction, viscous_friction, "
+                         "torque_constant factors; command_delay in s)")
+    rp.add_argument("--report", help="write the whole report (every differing frame) as JSON")
+    rp.add_argument("--show", type=int, default=5, help="differing frames to print (default 5)")
+    rp.set_defaults(func=cmd_replay)
 
     r = sub.add_parser("registers", help="list a device's register table (its map on one protocol)")
     r.add_argument("--device", choices=registry.devices(), default="erob")

@@ -3,6 +3,15 @@
 Rule: validate everything up front; every error names the file, the key and what is allowed.
 In ``backend = "sim"`` the hardware-only keys (port, CAN interface) are read but ignored, so one
 file serves both backends. ``JOINTS_BACKEND=sim|hardware`` overrides the file.
+
+Mixed rigs: a bus may name its own ``backend`` (``[buses.NAME] backend = "hardware"``); the bus
+key wins over the file's top-level ``backend``, and ``JOINTS_BACKEND`` (or the ``backend``
+argument of :func:`load` / ``joints.open``) still forces every bus. :attr:`RigConfig.backend` is
+then ``"mixed"`` when the buses differ.
+
+Identified profiles: a joint's ``profile_overlay`` names a TOML file (relative to the config
+file) whose ``[profile]`` table holds device-profile overrides, as ``joints identify`` writes
+them; keys of the joint's inline ``profile`` table win over the file's.
 """
 
 from __future__ import annotations
@@ -11,7 +20,7 @@ import math
 import os
 import sys
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -56,6 +65,7 @@ class BusConfig:
     bitrate: int = 1_000_000
     udp_port: int | None = None  #: CAN over udp_multicast: the port (`joints sim serve` prints it)
     sync_period: float | None = None  #: CANopen: s between two SYNCs of the bus (cyclic modes; default 1 ms)
+    backend: str = "sim"  #: "sim" | "hardware": this bus's (the file's top-level backend unless it names one)
 
 
 @dataclass(frozen=True)
@@ -76,17 +86,30 @@ class JointConfig:
     lead: float | None = None  #: m of travel per motor turn: a linear joint (positions in m, forces in N)
     mode: str | None = None  #: operating mode where the protocol has several (CANopen: pp, pv, pt, csp, csv, cst, ip)
     sync_period: float | None = None  #: CANopen: s between two SYNCs (the bus's; set it on the bus or here)
+    profile_overlay: str | None = None  #: the identified-profile file whose ``[profile]`` was merged into ``profile``
+    firmware: str | None = None  #: the drive's firmware profile (its quirks: joints.devices.quirks); None: default
 
 
 @dataclass(frozen=True)
 class RigConfig:
-    backend: str
+    backend: str  #: "sim" | "hardware" | "mixed" (buses of both)
     buses: Mapping[str, BusConfig]
     joints: Mapping[str, JointConfig]
     sim: SimConfig = field(default_factory=SimConfig)
     on_exit: str = "disable"
     source: str = "<dict>"
     base_dir: Path = field(default_factory=Path.cwd)
+
+    def bus_backend(self, bus: str) -> str:
+        """The backend of one bus ("sim" | "hardware")."""
+        return self.buses[bus].backend
+
+    def with_backend(self, backend: str) -> RigConfig:
+        """The same config with every bus forced to ``backend`` (what ``JOINTS_BACKEND`` does)."""
+        if backend not in BACKENDS:
+            raise ConfigError(f"{backend!r} is not a backend", key="backend", allowed=BACKENDS)
+        buses = {n: replace(b, backend=backend) for n, b in self.buses.items()}
+        return replace(self, backend=backend, buses=buses)
 
 
 class _Reader:
@@ -181,6 +204,7 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
     if chosen not in BACKENDS:
         where = "backend argument" if backend else ("JOINTS_BACKEND" if env else "backend")
         raise r.err(where, f"{chosen!r} is not a backend", BACKENDS)
+    forced = bool(backend or env)  #: every bus takes ``chosen``, whatever its own key says
 
     s = r.table(data, "sim")
     r.known(s, "sim", ("model", "timestep", "realtime", "direct"))
@@ -204,13 +228,15 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
             raise r.err(key, "expected a table")
         r.known(b, key, _BUS_KEYS)
         protocol = r.choice(b, f"{key}.protocol", PROTOCOLS)
+        own = r.choice(b, f"{key}.backend", BACKENDS, chosen)
+        bus_backend = chosen if forced else own
         port = b.get("port")
         if port is not None and not isinstance(port, str):
             raise r.err(f"{key}.port", f"expected a port name string, got {port!r}")
         echo = b.get("echo", False)
         if not isinstance(echo, bool):
             raise r.err(f"{key}.echo", f"expected true or false, got {echo!r}")
-        if chosen == "hardware" and protocol in ("modbus-rtu", "mks-serial") and not port:
+        if bus_backend == "hardware" and protocol in ("modbus-rtu", "mks-serial") and not port:
             raise r.err(f"{key}.port", "is required for backend = \"hardware\" (e.g. \"/dev/ttyUSB0\")")
         interface = b.get("interface")
         if interface is not None and (not isinstance(interface, str) or not interface):
@@ -223,7 +249,7 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
         if udp_port is not None and interface not in (None, "udp_multicast"):
             raise r.err(f"{key}.udp_port", f"only for interface = \"udp_multicast\" (this bus: {interface!r})")
         medium = registry.PROTOCOLS[protocol].medium if protocol in registry.PROTOCOLS else None
-        if chosen == "hardware" and medium == "can" and interface is None:
+        if bus_backend == "hardware" and medium == "can" and interface is None:
             raise r.err(f"{key}.interface", "is required for a CAN bus with backend = \"hardware\"",
                         ("socketcan", "pcan", "kvaser", "slcan", "udp_multicast", "..."))
         buses[name] = BusConfig(
@@ -241,6 +267,7 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
             bitrate=r.number(b, f"{key}.bitrate", 1_000_000, integer=True, positive=True),
             udp_port=udp_port,
             sync_period=_sync_period(r, b, f"{key}.sync_period", protocol),
+            backend=bus_backend,
         )
 
     joints: dict[str, JointConfig] = {}
@@ -275,12 +302,26 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
         profile = j.get("profile", {})
         if not isinstance(profile, Mapping):
             raise r.err(f"{key}.profile", "expected a table of device-profile overrides")
+        overlay = j.get("profile_overlay")
+        if overlay is not None:
+            if not isinstance(overlay, str) or not overlay:
+                raise r.err(f"{key}.profile_overlay", f"expected the path of a profile overlay file, got {overlay!r}")
+            overlay = str((base_dir or Path.cwd()) / overlay)
+            profile = {**read_overlay(overlay, r.source), **profile}
         direction = j.get("direction", 1)
         if isinstance(direction, bool) or direction not in (1, -1):
             raise r.err(f"{key}.direction", f"{direction!r} is not allowed", (1, -1))
         model = j.get("model")
         if model is not None and not isinstance(model, str):
             raise r.err(f"{key}.model", f"expected a model name string, got {model!r}")
+        firmware = j.get("firmware")
+        if firmware is not None:
+            if not isinstance(firmware, str):
+                raise r.err(f"{key}.firmware", f"expected a firmware profile name, got {firmware!r}")
+            try:
+                fam.firmware_profile(firmware)
+            except ConfigError as exc:
+                raise r.err(f"{key}.firmware", exc.message, exc.allowed) from None
         modes = fam.modes.get(protocol, ())
         mode = j.get("mode")
         if mode is not None and not modes:
@@ -314,11 +355,14 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
             lead=r.number(j, f"{key}.lead", None, positive=True),
             mode=None if mode is None else str(mode),
             sync_period=sync_period,
+            profile_overlay=overlay,
+            firmware=firmware,
         )
     if not joints:
         raise r.err("joints", "no joints defined; add a [joints.<name>] table")
+    kinds = {b.backend for b in buses.values()}
     return RigConfig(
-        backend=chosen,
+        backend=kinds.pop() if len(kinds) == 1 else ("mixed" if kinds else chosen),
         buses=buses,
         joints=joints,
         sim=sim,
@@ -334,6 +378,22 @@ def _sync_period(r: _Reader, data: Mapping[str, Any], key: str, protocol: str) -
     if value is not None and not any(protocol in f.modes for f in registry.FAMILIES.values()):
         raise r.err(key, f"only for a protocol with cyclic modes (this bus: {protocol!r})")
     return None if value is None else float(value)
+
+
+def read_overlay(path: str | os.PathLike[str], source: str | None = None) -> dict[str, Any]:
+    """The ``[profile]`` table of a profile overlay file (``joints identify`` writes them)."""
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"profile overlay not found: {p}", file=source, key="profile_overlay") from None
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise ConfigError(f"cannot read the profile overlay {p}: {exc}", file=source, key="profile_overlay") from exc
+    table = data.get("profile")
+    if not isinstance(table, Mapping):
+        raise ConfigError(f"{p} has no [profile] table of device-profile overrides", file=source,
+                          key="profile_overlay")
+    return dict(table)
 
 
 def load(path: str | os.PathLike[str], *, backend: str | None = None) -> RigConfig:

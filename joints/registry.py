@@ -103,6 +103,19 @@ class DeviceFamily:
             raise ConfigError(exc.message, key=key, allowed=exc.allowed) from exc
         return prof
 
+    def firmware_profile(self, firmware: str | None = None) -> Any:
+        """The firmware profile (its quirks, :mod:`joints.devices.quirks`) a joint's ``firmware`` key names."""
+        from joints.devices.quirks import firmware_profile
+
+        return firmware_profile(self.name, firmware)
+
+    def quirks(self, cfg: JointConfig) -> frozenset[str]:
+        """The quirks of a configured joint's firmware (its driver works around them, its twin has them)."""
+        try:
+            return frozenset(self.firmware_profile(cfg.firmware).quirks)
+        except ConfigError as exc:
+            raise ConfigError(exc.message, key=f"joints.{cfg.name}.firmware", allowed=exc.allowed) from exc
+
     def driver(self, cfg: JointConfig, link: Any, clock: Clock, shared: dict[Any, Any], protocol: str) -> JointDriver:
         try:
             make = self.drivers[protocol]
@@ -372,8 +385,13 @@ def _zlac_modbus_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[
 
     key = ("zlac8015d", cfg.bus, cfg.address)
     drive = shared.get(key)
+    quirks = FAMILIES["zlac8015d"].quirks(cfg)
     if drive is None:
-        drive = shared[key] = ZlacDrive(link, cfg.address, clock=clock, name=f"zlac8015d@{cfg.bus}:{cfg.address}")
+        drive = shared[key] = ZlacDrive(link, cfg.address, clock=clock, name=f"zlac8015d@{cfg.bus}:{cfg.address}",
+                                        quirks=quirks)
+    elif drive.quirks != quirks:
+        raise ConfigError("both channels of one drive run one firmware: give them the same firmware key",
+                          key=f"joints.{cfg.name}.firmware")
     return ZlacChannelDriver(drive, cfg.channel or "", profile=FAMILIES["zlac8015d"].config_profile(cfg),
                              name=cfg.name)
 
@@ -392,6 +410,7 @@ def _zlac_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> tuple[Any,
         specs[0].profile, specs[0].address,
         inertia_left=inertia[by_channel["left"].name] if "left" in by_channel else None,
         inertia_right=inertia[by_channel["right"].name] if "right" in by_channel else None,
+        quirks=frozenset(FAMILIES["zlac8015d"].firmware_profile(specs[0].extra.get("firmware")).quirks),
     )
     return twin, {"left": twin.left, "right": twin.right}
 

@@ -14,7 +14,6 @@ Rules:
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import logging
 import math
@@ -249,8 +248,8 @@ class Rig:
         Drivers forget what they wrote (the drives lost it) and joints count as disabled.
         On hardware this raises: a real robot cannot be reset by software.
         """
-        if self.world is None:
-            raise JointsError("reset() is only available with backend = \"sim\"")
+        if self.world is None or self.backend != "sim":
+            raise JointsError("reset() is only available with backend = \"sim\" (a mixed rig has real joints)")
         self.world.reset()
         for j in self.joints.values():
             j.driver_reset()
@@ -384,7 +383,7 @@ def open(config: str | os.PathLike[str] | Mapping[str, Any] | RigConfig, *, back
     if isinstance(config, RigConfig):
         if backend is not None and backend not in ("sim", "hardware"):
             raise ConfigError(f"{backend!r} is not a backend", key="backend", allowed=("sim", "hardware"))
-        cfg = config if backend is None else dataclasses.replace(config, backend=backend)
+        cfg = config if backend is None else config.with_backend(backend)
     elif isinstance(config, Mapping):
         cfg = parse(config, backend=backend)
     else:
@@ -392,6 +391,8 @@ def open(config: str | os.PathLike[str] | Mapping[str, Any] | RigConfig, *, back
     try:
         if cfg.backend == "sim":
             return open_sim(cfg)
+        if cfg.backend == "mixed":
+            return open_mixed(cfg)
         return build(cfg)
     except ConfigError as exc:
         if exc.file is None:
@@ -400,21 +401,33 @@ def open(config: str | os.PathLike[str] | Mapping[str, Any] | RigConfig, *, back
 
 
 def sim_world(cfg: RigConfig) -> Any:
-    """The simulated world for a config: its model with one twin per drive, on one device bus per bus."""
+    """The simulated world for a config: its model with one twin per drive, on one device bus per bus.
+
+    A mixed config's hardware buses get no twins: their joints are the world's measured
+    (kinematic) joints instead.
+    """
     from joints.sim.world import BusSpec, DriveSpec, World
 
     try:
         buses = {}
         for name, b in cfg.buses.items():
+            if b.backend != "sim":
+                continue
             proto = registry.protocol(b.protocol, key=f"buses.{name}.protocol")
             buses[name] = BusSpec(name, b.protocol, functools.partial(proto.device_bus, b), proto.sim_transport)
         drives = []
+        kinematic = {}
         for name, j in cfg.joints.items():
+            if j.bus not in buses:
+                kinematic[name] = j.mjcf_joint or name
+                continue
             fam = registry.family(j.device, key=f"joints.{name}.device")
             drives.append(DriveSpec(bus=j.bus, name=name, mjcf_joint=j.mjcf_joint or name, address=j.address,
                                     profile=fam.config_profile(j), device=j.device, channel=j.channel,
-                                    protocol=cfg.buses[j.bus].protocol, maker=fam, lead=j.lead))
-        return World(cfg.sim.model, drives, buses=buses, timestep=cfg.sim.timestep, base_dir=cfg.base_dir)
+                                    protocol=cfg.buses[j.bus].protocol, maker=fam, lead=j.lead,
+                                    extra={"firmware": j.firmware} if j.firmware is not None else {}))
+        return World(cfg.sim.model, drives, buses=buses, timestep=cfg.sim.timestep, base_dir=cfg.base_dir,
+                     **({"kinematic": kinematic} if kinematic else {}))
     except ConfigError as exc:  # `joints sim serve` comes here directly: name the file too
         if exc.file is None:
             raise _in_file(exc, cfg.source) from exc
@@ -433,3 +446,47 @@ def open_sim(cfg: RigConfig) -> Rig:
     peers = ({name: world.buses[name] for name in cfg.buses
               if registry.protocol(cfg.buses[name].protocol).direct} if cfg.sim.direct else None)
     return build(cfg, transports=transports, clock=clock, world=world, peers=peers)
+
+
+#: s between two reads of a mixed rig's real joints while it sleeps (the world's measured joints)
+MIXED_REFRESH = 0.005
+
+
+def open_mixed(cfg: RigConfig) -> Rig:
+    """A rig with hardware and simulated buses (see :class:`joints.sim.pacing.MixedClock`).
+
+    The simulated buses are in-process twins in one world; the hardware buses' joints are the
+    world's measured joints: whenever the rig sleeps the world catches up with the wall clock and
+    the real joints' measured positions and velocities drive their MuJoCo joints (kinematically),
+    so the simulated joints feel them through the model. The real joints do not feel the
+    simulated ones (no force goes back to hardware).
+    """
+    from joints.sim.pacing import MixedClock
+
+    world = sim_world(cfg)
+    clock = MixedClock(world, period=MIXED_REFRESH)
+    sim_buses = [name for name, b in cfg.buses.items() if b.backend == "sim"]
+    transports = {name: world.transport(name) for name in sim_buses}
+    peers = ({name: world.buses[name] for name in sim_buses
+              if registry.protocol(cfg.buses[name].protocol).direct} if cfg.sim.direct else None)
+    rig = build(cfg, transports=transports, clock=clock, world=world, peers=peers)
+    measured = [(name, rig.joints[name]) for name in world.kinematic]
+    last = [-math.inf]
+
+    def refresh() -> None:
+        now = clock.now()
+        if now - last[0] < MIXED_REFRESH:
+            return
+        last[0] = now
+        for name, j in measured:
+            s = j.last_state
+            if s is None or now - s.time > MIXED_REFRESH:
+                try:
+                    s = j.state()
+                except JointsError as exc:  # the next command or state read reports it
+                    log.warning("mixed rig: reading joint %s for the simulation failed: %s", name, exc)
+                    continue
+            world.set_measured(name, (s.position - j.offset) * j.direction, s.velocity * j.direction, s.time)
+
+    clock.refresh = refresh
+    return rig

@@ -89,7 +89,7 @@ def test_load_good_hardware_config(tmp_path: Path) -> None:
     assert cfg.on_exit == "disable"
     assert cfg.sim.model == "erob_stand.xml" and cfg.sim.timestep == 0.002 and cfg.sim.realtime is False
     assert cfg.buses["rs485"] == BusConfig(name="rs485", protocol="modbus-rtu", port="/dev/ttyUSB0",
-                                           baudrate=115200, timeout=0.05, retries=1)
+                                           baudrate=115200, timeout=0.05, retries=1, backend="hardware")
     sh = cfg.joints["shoulder"]
     assert isinstance(sh, JointConfig)
     assert (sh.device, sh.bus, sh.address, sh.model) == ("erob", "rs485", 2, "eRob80H100")

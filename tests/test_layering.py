@@ -40,8 +40,11 @@ ALLOWED: dict[str, frozenset[str]] = {
     "sim": frozenset({"devices", "codecs", "transports", "clock", "errors"}),
     "rig": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
                       "registry", "config", "sim", "exits"}),
+    # sim-to-real (identify, shadow, record/replay): the public rig/joint API plus the twins it builds
+    "s2r": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
+                      "registry", "config", "sim", "rig", "exits"}),
     "cli": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
-                      "registry", "config", "sim", "rig", "exits", API}),
+                      "registry", "config", "sim", "rig", "exits", "s2r", API}),
 }
 #: the package entry points import whatever they re-export
 EXEMPT = {"joints", "joints.__main__"}

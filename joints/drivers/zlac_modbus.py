@@ -9,7 +9,8 @@ Synchronous commands are one FC16 (both target velocities at 0x2088-0x2089, both
 
 Units used towards :class:`~joints.joint.Joint`: position in encoder counts (4096/rev), velocity
 in 0.1 r/min (the feedback unit; commands are rounded to the register's 1 r/min), current in mA
-(feedback 0.1 A is scaled to mA). 0x200F follows the manual's EXAMPLES (1 = synchronous,
+(feedback 0.1 A is scaled to mA). 0x200F follows the drive's firmware profile
+(:mod:`joints.devices.quirks`): by default the manual's EXAMPLES (1 = synchronous,
 0 = asynchronous; the register table says the opposite, ERRATA DOC-ZLAC-1).
 """
 
@@ -22,6 +23,7 @@ from typing import Any
 
 from joints.clock import Clock, MonotonicClock
 from joints.devices.faults import Fault
+from joints.devices.quirks import firmware_profile
 from joints.devices.zlac import faults as zf
 from joints.devices.zlac import registers as zr
 from joints.drivers.access import ModbusAccess
@@ -59,9 +61,12 @@ class ZlacDrive:
     table = zr.ZLAC8015D
     channels = SIDES
 
-    def __init__(self, link: ModbusLink, slave: int, *, clock: Clock | None = None, name: str = "") -> None:
+    def __init__(self, link: ModbusLink, slave: int, *, clock: Clock | None = None, name: str = "",
+                 quirks: frozenset[str] | None = None) -> None:
         if not 1 <= slave <= 127:
             raise CommandError(f"ZLAC8015D RS485 node id must be 1..127, got {slave}")
+        #: the drive's firmware quirks (joints.devices.quirks); default: the family's default firmware
+        self.quirks = quirks if quirks is not None else firmware_profile("zlac8015d").quirks
         self.link = link
         self.slave = slave
         self.clock: Clock = clock or link.clock or MonotonicClock()
@@ -120,7 +125,7 @@ class ZlacDrive:
         st.channel_mode[side] = int(mode)
 
     def set_sync(self, synchronous: bool) -> None:
-        value = int(zr.SyncMode.SYNCHRONOUS if synchronous else zr.SyncMode.ASYNCHRONOUS)
+        value = zr.sync_flag(synchronous, self.quirks)  # the firmware's meaning of 0x200F (DOC-ZLAC-1)
         if self.state.sync != value:
             self.set("synchronous_asynchronous_control_status", value, force=True)
             self.state.sync = value

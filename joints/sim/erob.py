@@ -181,6 +181,12 @@ class ErobFirmware(Firmware):
     are tuned for (default: the profile's rotor inertia at the output).
     """
 
+    #: motion commands: the drive acts on them ``command_delay`` (the profile's) after they arrive
+    DELAYED = frozenset((
+        "target_current", "target_speed", "start_operating", "stop_operating", "emergency_stop",
+        "stop_repetitive_motion",
+    ))
+
     def __init__(
         self,
         profile: ErobProfile,
@@ -196,6 +202,7 @@ class ErobFirmware(Firmware):
         self.ambient = ambient
         self.inertia = inertia if inertia is not None else profile.armature  #: J the drive tunes for
         self.kt = profile.torque_constant
+        self.command_delay = profile.command_delay
         self.time = 0.0
         self.computed.update({
             "actual_position": self.counts,
@@ -637,8 +644,11 @@ class ErobFirmware(Firmware):
         else:
             mag = abs(target)
             if self.ki:
-                # keep the limiter's integral where it would take over smoothly (anti-windup)
-                self.integ = min(self.integ, (abs(target) - self.kv * e) / self.ki)
+                # keep the limiter's integral where it would take over smoothly (anti-windup), but
+                # never below 0 while the proportional part alone allows more than the target: a cap
+                # held exactly at the target clipped every rise of the command (a joint accelerating
+                # lowers e), by ~20 % of the accelerating torque every other substep
+                self.integ = min(self.integ, max(0.0, (abs(target) - self.kv * e) / self.ki))
         i = sgn * mag
         lim = self._current_limit(dt, i)
         return max(-lim, min(lim, i))

@@ -18,6 +18,14 @@ reaches it through the same calls, by parameter NAME:
   to its power-on value; :attr:`Firmware.power_on_values` keeps what was in force at power-on
   (a node id or baud rate written later takes effect only after the next power cycle).
 
+Command-to-motion delay (:attr:`Firmware.command_delay`, s; 0 by default): a drive acts on a
+motion command some time after the frame carrying it arrived. A write that names one of the
+firmware's :attr:`Firmware.DELAYED` parameters is validated at once (a refusal is answered at
+once) but stored and acted on only :attr:`Firmware.command_delay` seconds later, when the world
+calls :meth:`Firmware.tick` at or after that time; every write arriving while one is pending
+queues behind it, so the drive acts on writes in their order. A read of a parameter whose write
+is still pending returns its old value. Settings writes and reads are never delayed.
+
 Refusals are :class:`~joints.errors.ParameterRefused` with a protocol-neutral
 :class:`~joints.errors.Refusal`; the front maps the reason to its protocol's answer.
 
@@ -42,6 +50,9 @@ WRITE_LOG_LIMIT = 100_000
 
 class Firmware:
     """The parameter store of one drive, by name; subclasses add the drive's behaviour."""
+
+    #: parameters whose writes take effect :attr:`command_delay` after they arrive (motion commands)
+    DELAYED: frozenset[str] = frozenset()
 
     def __init__(self, params: ParamSet, *, values: Mapping[str, int] | None = None) -> None:
         self.params = params
@@ -70,6 +81,10 @@ class Firmware:
         self.computed: dict[str, Callable[[], int]] = {}
         #: every accepted write as (name, value), in order (tests, traces)
         self.write_log: list[tuple[str, int]] = []
+        #: s between a motion command's arrival and the drive acting on it (see the module docstring)
+        self.command_delay = 0.0
+        #: accepted writes waiting for their time: (due [s], [(name, value)]), oldest first
+        self.pending: list[tuple[float, list[tuple[str, int]]]] = []
 
     # -- the drive's own access (no access rules) --------------------------------------------
     def _saturate(self, name: str, value: int) -> int:
@@ -163,6 +178,19 @@ class Firmware:
                     raise ParameterRefused(Refusal.OUT_OF_RANGE, name, str(exc)) from exc
             self.check_write(name, value)
             checked.append((name, value))
+        if self.pending or (self.command_delay > 0 and any(name in self.DELAYED for name, _ in checked)):
+            self.pending.append((float(getattr(self, "time", 0.0)) + self.command_delay, checked))
+            return
+        self._store(checked)
+
+    def tick(self, t: float) -> None:
+        """Simulated time reached ``t``: act on the pending writes that are due (see :attr:`command_delay`)."""
+        pending = self.pending
+        while pending and pending[0][0] <= t + 1e-9:
+            self._store(pending.pop(0)[1])
+
+    def _store(self, checked: list[tuple[str, int]]) -> None:
+        """Store, log and act on validated writes."""
         values = self.values
         for name, value in checked:
             values[name] = value
@@ -178,6 +206,7 @@ class Firmware:
 
     def power_cycle(self) -> None:
         """Power off/on: saved settings survive, every other parameter returns to its default."""
+        self.pending.clear()  # writes the drive had not acted on yet are lost with the power
         values = self.values  # updated in place: subclasses may hold a reference
         values.update(self.defaults)
         values.update(self.saved)

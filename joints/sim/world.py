@@ -6,6 +6,11 @@ substeps, at the caller's rate, on the simulated clock (lockstep). Actuator and 
 (armature = reflected rotor inertia, damping, friction loss, torque range) come from the device
 profile, not from the XML. Nothing here reads the wall clock.
 
+Measured joints (a mixed rig's real joints, ``kinematic``): the latest measurement of position
+and velocity is written into the joint after every substep (extrapolated at the measured velocity
+for at most :data:`KINEMATIC_HORIZON`), so the emulated joints feel the real ones through the
+model - their motion, not the forces the emulated ones exert back on them.
+
 Joints: a hinge is driven directly (joint angle = motor angle). A slide is driven through a lead
 screw: its drive's ``lead`` [m per motor turn] gives the ratio r = 2 pi / lead [rad per m]; the
 motor torque becomes the force r x torque on the slide (the actuator's gear), the rotor inertia
@@ -27,6 +32,9 @@ from typing import Any, Protocol, runtime_checkable
 
 from joints.clock import ManualClock
 from joints.errors import ConfigError, MissingDependencyError
+
+#: s a measured joint's last measurement is extrapolated at its velocity (then it is held)
+KINEMATIC_HORIZON = 0.05
 
 
 def _mujoco() -> Any:
@@ -215,7 +223,8 @@ class World:
     """MuJoCo model + data + emulated drives + the simulated clock."""
 
     def __init__(self, model: str | Path, drives: Sequence[DriveSpec], *, buses: Mapping[str, BusSpec],
-                 timestep: float = 0.001, base_dir: Path | None = None) -> None:
+                 timestep: float = 0.001, base_dir: Path | None = None,
+                 kinematic: Mapping[str, str] | None = None) -> None:
         mj = _mujoco()
         self.mujoco = mj
         self.path = resolve_model(model, base_dir)
@@ -288,7 +297,12 @@ class World:
         timed = [bus for bus in self.buses.values() if isinstance(bus, TimedDeviceBus)]
         for bus in timed:
             bus.bind_clock(self.clock)
-        self._ticks = [bus.tick for bus in timed]
+        self._bus_ticks = [bus.tick for bus in timed]
+        #: what else runs after every substep (drives acting on delayed commands, kinematic joints)
+        self._extra_ticks: list[Callable[[float], None]] = []
+        self._ticks: list[Callable[[float], None]] = []
+        self._nominal_delay = {id(e): float(getattr(e, "command_delay", 0.0)) for e in self._emulators()}
+        self._update_ticks()
         self.joints: dict[str, SimJoint] = {b.name: SimJoint(b.name, b.mjcf_joint, b.qadr, b.dadr, b.aid)
                                             for b in self._bound}
         m = self.model
@@ -297,6 +311,52 @@ class World:
         self._nominal_gains: dict[str, dict[str, int]] = {}
         #: one caller steps the physics at a time (two threads sleeping on one rig must not share MjData)
         self.lock = threading.RLock()
+        #: joints that follow measurements (a mixed rig's real joints): name -> (qpos address, dof address)
+        self.kinematic: dict[str, tuple[int, int]] = {}
+        self._measured: dict[str, tuple[float, float, float]] = {}
+        for name, mjcf in (kinematic or {}).items():
+            jid = mj.mj_name2id(self.model, mj.mjtObj.mjOBJ_JOINT, mjcf)
+            if jid < 0:
+                raise ConfigError(f"joint {name!r}: MJCF joint {mjcf!r} is not in {self.path.name}",
+                                  key=f"joints.{name}.mjcf_joint", allowed=joint_names)
+            if name in self.joints:
+                raise ConfigError(f"joint {name!r} is both emulated and measured", key=f"joints.{name}")
+            self.kinematic[name] = (int(self.model.jnt_qposadr[jid]), int(self.model.jnt_dofadr[jid]))
+        if self.kinematic:
+            self._extra_ticks.append(self._drive_kinematic)
+            self._update_ticks()
+
+    # -- joints driven by measurements (mixed rigs) -------------------------------------------
+    def set_measured(self, name: str, q: float, qd: float, t: float) -> None:
+        """A measured joint's position [rad] and velocity [rad/s] (MJCF frame) at time ``t`` [s]."""
+        if name not in self.kinematic:
+            raise KeyError(f"no measured joint {name!r} (have {sorted(self.kinematic)})")
+        if not (math.isfinite(q) and math.isfinite(qd) and math.isfinite(t)):
+            raise ValueError(f"joint {name}: measurement must be finite, got {q!r}, {qd!r} at {t!r}")
+        self._measured[name] = (float(q), float(qd), float(t))
+
+    def _drive_kinematic(self, t: float) -> None:
+        """Every substep: measured joints to their latest measurement, extrapolated at its velocity
+        for at most :data:`KINEMATIC_HORIZON` (then held)."""
+        qpos, qvel = self.data.qpos, self.data.qvel
+        for name, (qa, da) in self.kinematic.items():
+            m = self._measured.get(name)
+            if m is None:
+                continue
+            q, qd, tm = m
+            age = t - tm
+            if age > KINEMATIC_HORIZON:
+                qpos[qa] = q + qd * KINEMATIC_HORIZON
+                qvel[da] = 0.0
+            else:
+                qpos[qa] = q + qd * max(age, 0.0)
+                qvel[da] = qd
+
+    def _update_ticks(self) -> None:
+        """Who is called after every substep: timed buses, drives with a command delay, extra ticks."""
+        delayed = [e.tick for e in self._emulators()
+                   if getattr(e, "command_delay", 0.0) > 0 or getattr(e, "pending", None)]
+        self._ticks = [*self._bus_ticks, *delayed, *self._extra_ticks]
 
     def _switches(self, joint: str, qadr: int, ratio: float) -> tuple[float | None, float | None]:
         """Motor angles where the ``<joint>_switch_flag`` site reaches ``<joint>_switch_low`` / ``_high``
@@ -431,6 +491,8 @@ class World:
         for b in self._bound:
             if b.name == name:
                 return float(self.data.qpos[b.qadr])
+        if name in self.kinematic:  # a measured joint (mixed rig)
+            return float(self.data.qpos[self.kinematic[name][0]])
         raise KeyError(name)
 
     def joint_velocity(self, name: str) -> float:
@@ -438,6 +500,8 @@ class World:
         for b in self._bound:
             if b.name == name:
                 return float(self.data.qvel[b.dadr])
+        if name in self.kinematic:
+            return float(self.data.qvel[self.kinematic[name][1]])
         raise KeyError(name)
 
     # -- the public sim API (envs and tests use only this) ----------------------------------------
@@ -450,15 +514,17 @@ class World:
 
     def perturb(self, name: str, *, armature: float = 1.0, coulomb_friction: float = 1.0,
                 viscous_friction: float = 1.0, torque_constant: float = 1.0,
-                gains: Mapping[str, float] | None = None) -> None:
+                gains: Mapping[str, float] | None = None, command_delay: float = 0.0) -> None:
         """Scale one joint's physics and its drive's loop gains by factors of their nominal values.
 
         ``armature`` (reflected rotor inertia), ``coulomb_friction`` (MuJoCo frictionloss),
         ``viscous_friction`` (damping) and ``torque_constant`` (the motor's true torque per ampere;
         the drive still converts with the nominal constant, as a real drive whose constant is off
         does) change the model; ``gains`` (``"position"``, ``"speed"``, ``"integral"``) scale the
-        twin's loop-gain parameters as a write of them would. Factors act on the nominal values,
-        so calls do not compound; :meth:`restore` undoes every perturbation.
+        twin's loop-gain parameters as a write of them would; ``command_delay`` [s] is added to
+        the drive's command-to-motion delay (:attr:`joints.sim.firmware.Firmware.command_delay`).
+        Factors and the delay act on the nominal values, so calls do not compound; :meth:`restore`
+        undoes every perturbation.
         """
         j = self.joint(name)
         m, nom = self.model, self._nominal
@@ -466,6 +532,18 @@ class World:
                         ("viscous_friction", viscous_friction), ("torque_constant", torque_constant)):
             if isinstance(f, bool) or not isinstance(f, (int, float)) or not math.isfinite(f) or f <= 0:
                 raise ValueError(f"perturb {name}: {what} must be a factor > 0, got {f!r}")
+        if isinstance(command_delay, bool) or not isinstance(command_delay, (int, float)) \
+                or not math.isfinite(command_delay):
+            raise ValueError(f"perturb {name}: command_delay must be a finite number of seconds, got {command_delay!r}")
+        emu = next(b.emulator for b in self._bound if b.name == name)
+        delay = self._nominal_delay.get(id(emu), 0.0) + float(command_delay)
+        if delay < 0:
+            raise ValueError(f"perturb {name}: the command delay would be {delay} s (< 0)")
+        if delay != getattr(emu, "command_delay", 0.0):
+            if not getattr(emu, "DELAYED", None):
+                raise ValueError(f"perturb {name}: this twin has no command delay (no delayed motion commands)")
+            emu.command_delay = delay
+            self._update_ticks()
         m.dof_armature[j.dof] = nom["armature"][j.dof] * armature
         m.dof_frictionloss[j.dof] = nom["frictionloss"][j.dof] * coulomb_friction
         m.dof_damping[j.dof] = nom["damping"][j.dof] * viscous_friction
@@ -495,6 +573,13 @@ class World:
             names = b.emulator.gain_params(b.channel)
             b.emulator.write_many([(names[k], v) for k, v in gains.items()])
         self._nominal_gains.clear()
+        for emu in self._emulators():
+            nominal = self._nominal_delay.get(id(emu), 0.0)
+            if getattr(emu, "command_delay", 0.0) != nominal:
+                emu.command_delay = nominal
+                if not nominal:
+                    emu.tick(math.inf)  # what was waiting is acted on now
+        self._update_ticks()
 
     def close(self) -> None:
         """Nothing to release for an in-process world (kept for symmetry with served worlds)."""

@@ -34,9 +34,10 @@ Semantics taken from the manual
   written meanwhile are stored but not executed.
 * Clear faults 0x06 (lines 744-777) clears both error-code registers 0x20A5/0x20A6; the drive is
   then disabled and needs 0x08. A fault whose cause persists (over-temperature) comes back.
-* Synchronous/asynchronous 0x200F follows the EXAMPLES (ERRATA DOC-ZLAC-1): 0 = asynchronous
+* Synchronous/asynchronous 0x200F follows the firmware profile (:mod:`joints.devices.quirks`,
+  joint key ``firmware``): by default the EXAMPLES (ERRATA DOC-ZLAC-1): 0 = asynchronous
   (lines 457-462: each wheel started with 0x11/0x12), 1 = synchronous (line 566: both started
-  with 0x10).
+  with 0x10); the ``register-table`` firmware takes the table's 0 = synchronous, 1 = asynchronous.
 * Acceleration / deceleration time 0x2080-0x2083 (lines 318-329, 416-426, 1080-1091): the manual
   gives only "Acceleration time", unit ms, range 0-32767 ms, default 500, in the velocity-mode
   table next to the target velocity and in the position-mode table next to the target speed. No
@@ -156,6 +157,7 @@ from __future__ import annotations
 import math
 
 from joints.devices.motion import Arrival, move_step, ramp
+from joints.devices.quirks import firmware_profile
 from joints.devices.registers import Access
 from joints.devices.zlac.profile import HubMotorProfile
 from joints.devices.zlac.registers import (
@@ -164,7 +166,7 @@ from joints.devices.zlac.registers import (
     ControlWord,
     Fault,
     QuickStopBehaviour,
-    SyncMode,
+    is_synchronous,
 )
 from joints.devices.zlac.state import ENERGISED, DriveState, Event, command
 from joints.devices.zlac.state import step as transition
@@ -563,8 +565,11 @@ class ZlacFirmware(Firmware):
         inertia_right: float | None = None,
         ambient: float = 25.0,
         ramp_reference_rpm: float | None = None,
+        quirks: frozenset[str] | None = None,
     ) -> None:
         super().__init__(ZLAC8015D.params, values=power_on_defaults(profile, address))
+        #: the firmware's quirks (joints.devices.quirks); default: the family's default firmware
+        self.quirks = quirks if quirks is not None else firmware_profile("zlac8015d").quirks
         self.profile = profile
         self.ambient = float(ambient)
         self.ramp_reference = ramp_reference_rpm * RPM if ramp_reference_rpm else None
@@ -775,15 +780,15 @@ class ZlacFirmware(Firmware):
         if self.mode not in (ControlMode.RELATIVE_POSITION, ControlMode.ABSOLUTE_POSITION):
             self._ignore(f"{word.name} outside the position modes (control mode {self.mode})")
             return
-        sync = self.sync == SyncMode.SYNCHRONOUS
+        sync = is_synchronous(self.sync, self.quirks)  # DOC-ZLAC-1: the meaning depends on the firmware
         if word is ControlWord.START_SYNC:
             if not sync:
-                self._ignore("START_SYNC in asynchronous control (0x200F = 0)")
+                self._ignore(f"START_SYNC in asynchronous control (0x200F = {self.sync})")
                 return
             targets: tuple[ZlacChannel, ...] = self.channels
         else:
             if sync:
-                self._ignore(f"{word.name} in synchronous control (0x200F = 1)")
+                self._ignore(f"{word.name} in synchronous control (0x200F = {self.sync})")
                 return
             targets = (self.left,) if word is ControlWord.START_LEFT else (self.right,)
         absolute = self.mode == ControlMode.ABSOLUTE_POSITION

@@ -110,7 +110,9 @@ def test_cst_cycle_torque_accelerates_both_ways_and_the_state_reports_the_curren
         down = [rig.cycle({"joint1": -10.0})["joint1"] for _ in range(300)]
         # viscous + Coulomb friction bound the speed: (10 - 4.5) / 9.57 rad/s
         assert up[-1].velocity == pytest.approx(5.5 / 9.57, rel=0.1) and down[-1].velocity < -0.4
-        assert all(a.velocity < b.velocity for a, b in zip(up[::25], up[25::25]))  # speeding up all along
+        # speeding up all along (near the bound within the velocity's resolution: not slower)
+        assert all(a.velocity <= b.velocity for a, b in zip(up[::25], up[25::25]))
+        assert all(a.velocity < b.velocity for a, b in zip(up[:200:25], up[25:200:25]))
         assert up[-1].torque == pytest.approx(10.0, rel=0.03) and down[-1].torque == pytest.approx(-10.0, rel=0.03)
         fw = front_of(rig).firmware
         assert up[-1].raw is not None and math.isnan(up[-1].temperature)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 
@@ -30,6 +31,17 @@ def test_stand_axis_is_vertical_so_gravity_exerts_no_torque() -> None:
         d.qpos[0] = q
         mujoco.mj_forward(m, d)
         assert abs(d.qfrc_bias[0]) < 1e-9
+
+
+def test_pendulum_stand_has_the_documented_gravity_torque() -> None:
+    """models/erob_pendulum.xml (identification stand): horizontal axis, G(q) = 16.9 N*m sin(q), no actuator."""
+    m = mujoco.MjModel.from_xml_path(str(resolve_model("erob_pendulum.xml")))
+    d = mujoco.MjData(m)
+    assert m.nu == 0 and m.njnt == 1
+    for q in (0.3, -0.8, 1.2):
+        d.qpos[0] = q
+        mujoco.mj_forward(m, d)
+        assert d.qfrc_bias[0] == pytest.approx((0.6 * 0.2 + 4.0 * 0.4) * 9.81 * math.sin(q), rel=1e-3)
 
 
 def test_arm_feels_gravity() -> None:

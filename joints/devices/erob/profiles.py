@@ -31,6 +31,9 @@ Conventions
     * ``peak_torque`` is the repeated start/stop peak (the force limit for control);
       ``max_torque`` is the momentary maximum, for collision/gear-damage checks only.
     * Friction model: ``tau_f = coulomb_friction * sign(w) + viscous_friction * w`` at the output.
+    * ``command_delay`` is the time from a motion command's arrival at the drive to the drive
+      acting on it (the twin reproduces it: :attr:`joints.sim.firmware.Firmware.command_delay`);
+      0 unless identified (``joints identify`` writes it into a profile overlay).
 
 Friction where nothing was measured (EST)
     Measured anchors: eRob70H100 (ZeroErr's own no-load current table, ZE-fric, converted with
@@ -83,9 +86,11 @@ _FLOAT_FIELDS = (
     "rotor_inertia",
     "coulomb_friction",
     "viscous_friction",
+    "command_delay",
 )
-# Friction may be switched off (0) for an ideal simulation; everything else must be > 0.
-_NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction")
+# Friction may be switched off (0) for an ideal simulation, the delay is 0 unless identified;
+# everything else must be > 0.
+_NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction", "command_delay")
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,6 +111,8 @@ class ErobProfile:
     rotor_inertia: float  #: kg*m^2, motor side (J_in), no brake
     coulomb_friction: float  #: N*m at the output
     viscous_friction: float  #: N*m*s/rad at the output
+    #: s from a motion command's arrival to the drive acting on it (the twin's; ``joints identify``)
+    command_delay: float = 0.0
     sources: Mapping[str, str] = field(default_factory=_empty_sources, compare=False, hash=False)
 
     def __post_init__(self) -> None:
@@ -351,6 +358,8 @@ def _build(size: int, ratio: int) -> ErobProfile:
         "rotor_inertia": j_in_src,
         "coulomb_friction": coulomb_src,
         "viscous_friction": viscous_src,
+        "command_delay": ("EST: 0 - the twin acts on a command at its next substep; a real drive's delay comes "
+                          "from `joints identify` (profile overlay)"),
     }
     return ErobProfile(
         model=model,

@@ -82,6 +82,7 @@ from __future__ import annotations
 import enum
 import re
 
+from joints.devices.quirks import ZLAC_SYNC_FLAG_AS_EXAMPLES
 from joints.devices.registers import Access, Register, RegisterTable, snake_name
 
 __all__ = [
@@ -101,7 +102,9 @@ __all__ = [
     "QuickStopBehaviour",
     "SyncMode",
     "describe",
+    "is_synchronous",
     "split_left_right",
+    "sync_flag",
 ]
 
 #: Encoder lines per motor revolution (default of 0x2030/0x2060).
@@ -152,6 +155,20 @@ class SyncMode(enum.IntEnum):
 
     ASYNCHRONOUS = 0
     SYNCHRONOUS = 1
+
+
+def sync_flag(synchronous: bool, quirks: frozenset[str]) -> int:
+    """The 0x200F value for synchronous / asynchronous control on a firmware with ``quirks``
+    (:mod:`joints.devices.quirks`: with ``zlac-sync-flag-as-examples`` the examples' values
+    (:class:`SyncMode`), without it the register table's: 0 = synchronous, 1 = asynchronous)."""
+    if ZLAC_SYNC_FLAG_AS_EXAMPLES in quirks:
+        return int(SyncMode.SYNCHRONOUS if synchronous else SyncMode.ASYNCHRONOUS)
+    return 0 if synchronous else 1
+
+
+def is_synchronous(flag: int, quirks: frozenset[str]) -> bool:
+    """Whether a 0x200F value means synchronous control on a firmware with ``quirks`` (see :func:`sync_flag`)."""
+    return flag == sync_flag(True, quirks)
 
 
 class QuickStopBehaviour(enum.IntEnum):

@@ -1,0 +1,84 @@
+"""Firmware quirks: where a device's real firmware deviates from its manual, per firmware version, as data.
+
+Rule: data only, shared. A :class:`Quirk` names one deviation (a manual erratum the real firmware
+shows, see tests/data/ERRATA.md), what the driver does about it (the workaround) and what the twin
+does (the reproduction); a :class:`FirmwareProfile` is the set of quirks one firmware version has.
+A joint chooses its firmware with the config key ``firmware`` (default: the family's
+:data:`DEFAULT_FIRMWARE`); the driver and the twin of that joint read the same set, so a workaround
+is exercised against the behaviour it works around. Code asks ``QUIRK in profile.quirks``; nothing
+compares firmware names.
+
+Known quirks
+
+``zlac-sync-flag-as-examples`` (ZLAC8015D, ERRATA DOC-ZLAC-1): register 0x200F "synchronous/
+asynchronous control" - the chapter-4 table says 0 = synchronous, 1 = asynchronous; the firmware
+the manual's section 3.2 examples were captured on (and the widely used community drivers) takes
+0 = asynchronous, 1 = synchronous. With the quirk the driver writes 1 for synchronous control and
+the twin starts both wheels on START_SYNC only when 0x200F = 1; without it both follow the table.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+
+from joints.errors import ConfigError
+
+__all__ = ["DEFAULT_FIRMWARE", "FIRMWARES", "QUIRKS", "ZLAC_SYNC_FLAG_AS_EXAMPLES", "FirmwareProfile", "Quirk",
+           "firmware_profile"]
+
+
+@dataclass(frozen=True)
+class Quirk:
+    """One deviation of a firmware from its manual."""
+
+    name: str
+    family: str  #: device family (registry name)
+    errata: str  #: the ERRATA id it corresponds to
+    behaviour: str  #: what the firmware does (the twin reproduces this)
+    workaround: str  #: what the driver does about it
+
+
+@dataclass(frozen=True)
+class FirmwareProfile:
+    """The quirks of one firmware version of one device family."""
+
+    family: str
+    firmware: str  #: the config's ``firmware`` value
+    quirks: frozenset[str]
+    description: str
+
+
+ZLAC_SYNC_FLAG_AS_EXAMPLES = "zlac-sync-flag-as-examples"
+
+QUIRKS: Mapping[str, Quirk] = MappingProxyType({q.name: q for q in (
+    Quirk(ZLAC_SYNC_FLAG_AS_EXAMPLES, "zlac8015d", "DOC-ZLAC-1",
+          "0x200F: 0 = asynchronous, 1 = synchronous (the section 3.2 examples; the register table says the opposite)",
+          "write 1 for synchronous and 0 for asynchronous control"),
+)})
+
+FIRMWARES: Mapping[tuple[str, str], FirmwareProfile] = MappingProxyType({(p.family, p.firmware): p for p in (
+    FirmwareProfile("zlac8015d", "examples", frozenset({ZLAC_SYNC_FLAG_AS_EXAMPLES}),
+                    "the firmware of the manual's section 3.2 examples and of the community drivers"),
+    FirmwareProfile("zlac8015d", "register-table", frozenset(),
+                    "a firmware that follows the chapter-4 register table for 0x200F (choose it if wheels "
+                    "started with Start(Synchronous) stay still with the default)"),
+)})
+
+#: family -> the firmware a joint has when its config names none
+DEFAULT_FIRMWARE: Mapping[str, str] = MappingProxyType({"zlac8015d": "examples"})
+
+
+def firmware_profile(family: str, firmware: str | None = None) -> FirmwareProfile:
+    """The firmware profile ``firmware`` of ``family`` (None: the family's default; a family with no
+    known quirks has an empty default profile). Raises :class:`ConfigError` listing the known ones."""
+    known = sorted(f for fam, f in FIRMWARES if fam == family)
+    name = firmware if firmware is not None else DEFAULT_FIRMWARE.get(family)
+    if name is None:
+        return FirmwareProfile(family, "default", frozenset(), "no known quirks")
+    found = FIRMWARES.get((family, name))
+    if found is None:
+        raise ConfigError(f"no firmware profile {name!r} for {family}", key="firmware",
+                          allowed=known or ("(none: this family has no known quirks)",))
+    return found
