@@ -27,6 +27,25 @@ action mode    a in [-1, 1] means
 "torque"       torque command ``a * limits.torque`` [N*m] (``joint.set_torque``)
 =============  =========================================================================
 
+Safety: any action keeps the drives inside their limits, by construction rather than by luck
+(:meth:`JointsEnv.safe_command` is what is sent):
+
+* position targets lie within the joint's position limits; the drive's own profile (the config's
+  ``motion``) moves there, and a new target while moving is followed without a setpoint jump;
+* velocity commands are capped, per joint and per step, at the fastest speed that the drive's
+  ramp (``motion.acceleration``) reaches from the present speed during one period and still
+  stops from before the position limit (5 mrad short of it; :func:`braking_speed`), so the whole
+  range stays reachable (the joint slows down as it nears a limit and stops there);
+* a task may add its own rule (:meth:`JointsEnv._shield`; the arm keeps its links off the floor and
+  its base); torque commands are sent as they are (within the torque limit).
+
+The shipped configs fit the physics: profile speeds and velocity limits the drives sustain within
+their continuous current, accelerations within the torque limit, torque limits below the drives'
+stall-detection current (see the comments in ``joints/configs/*.toml``). A drive that faults
+anyway ends the episode (``terminated``; ``info["fault"]`` names the joint, the fault and its
+text), the env stops the other joints, and ``reset()`` clears it (sim: power cycle; hardware:
+clear the fault, enable again).
+
 Observation (float64) starts with the joint terms, then the task's terms:
 ``[position_1..n [rad], velocity_1..n [rad/s], torque_1..n [N*m], task...]``. Bounds per joint:
 position within its limits widened by 0.5 rad, velocity within +-2x its velocity limit, torque
@@ -60,6 +79,48 @@ ENABLE_SETTLE = 0.5
 LIMIT_MARGIN = 0.05
 #: rad the observation's position bounds extend beyond the limits
 OBS_POSITION_MARGIN = 0.5
+#: rad short of a position limit where velocity actions brake to (the joint lags the drive's speed
+#: ramp and carries on ~2 mrad past where the ramp stops: it stops ~3 mrad inside the limit)
+LIMIT_INSET = 0.005
+
+
+def braking_speed(distance: np.ndarray, acceleration: np.ndarray, period: float,
+                  speed: np.ndarray | float = 0.0) -> np.ndarray:
+    """Fastest speed command ``v`` >= 0 towards a stop ``distance`` [rad] away that a joint moving
+    at ``speed`` [rad/s] towards it may get for one ``period`` [s] and still stop in time: the
+    drive ramps from ``speed`` to ``v`` with ``acceleration`` [rad/s^2] during the period, then
+    brakes with it. ``inf`` where any command is safe (the distance exceeds the run-out of a
+    whole period of acceleration), 0 where none is (the joint is too fast already: brake).
+
+    The distance covered, ``D(v)``, grows with ``v``; with ``a`` the acceleration, ``u`` the speed
+    (>= 0; moving away counts as standing) and ``t = dt``:
+
+    * ``v >= u`` (ramp up, done within the period): ``D = v t + u v / a - u^2 / (2a)``;
+    * ``u - a t <= v < u`` (ramp down within the period): ``D = v^2 / a + v (t - u / a) + u^2 / (2a)``;
+    * beyond those the period ends mid-ramp and ``D`` no longer depends on ``v``.
+    """
+    a = np.asarray(acceleration, dtype=np.float64)
+    d = np.asarray(distance, dtype=np.float64)
+    u = np.maximum(np.asarray(speed, dtype=np.float64), 0.0)
+    t = period
+    at = a * t
+    d_up = (2.0 * u + at) * 0.5 * t + (u + at) ** 2 / (2.0 * a)  # a whole period of ramping up
+    d_hold = u * t + u * u / (2.0 * a)  # v = u
+    lo = np.maximum(u - at, 0.0)  # the lowest speed reachable in the period
+    d_lo = lo * t + (u - lo) ** 2 / (2.0 * a) + lo * lo / (2.0 * a)
+    up = (d + u * u / (2.0 * a)) / (t + u / a)  # D(v) = d on the ramp-up branch
+    b = t - u / a
+    disc = np.maximum(b * b - 4.0 / a * (u * u / (2.0 * a) - d), 0.0)
+    down = np.maximum((np.sqrt(disc) - b) * a / 2.0, 0.0)  # D(v) = d on the ramp-down branch
+    out: np.ndarray = np.where(d >= d_up, np.inf, np.where(d >= d_hold, up, np.where(d >= d_lo, down, 0.0)))
+    return out
+
+
+def fault_info(name: str, state: joints.JointState) -> dict[str, Any]:
+    """``info["fault"]`` of a faulted joint: its name, the fault's name, code, text and what clears it."""
+    f = state.fault
+    assert f is not None
+    return {"joint": name, "name": f.name, "code": f.code, "text": f.text, "clears": f.clears}
 
 
 class RigEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -232,6 +293,11 @@ class JointsEnv(RigEnv):
             assert lim.position is not None and lim.velocity is not None and lim.torque is not None
             lo.append(lim.position[0]); hi.append(lim.position[1])
             vlim.append(lim.velocity); tlim.append(lim.torque)
+        #: (n,) the drives' own profile for position actions [rad/s, rad/s^2] (config ``motion``);
+        #: velocity actions ramp with ``profile_acceleration`` both ways
+        self.profile_velocity = np.array([j.motion.velocity for j in self.joints], dtype=np.float64)
+        self.profile_acceleration = np.array([j.motion.acceleration for j in self.joints], dtype=np.float64)
+        self.profile_deceleration = np.array([j.motion.deceleration for j in self.joints], dtype=np.float64)
         self.position_limits = np.array([lo, hi], dtype=np.float64).T  #: (n, 2) rad
         self.velocity_limits = np.array(vlim, dtype=np.float64)  #: (n,) rad/s
         self.torque_limits = np.array(tlim, dtype=np.float64)  #: (n,) N*m
@@ -269,6 +335,7 @@ class JointsEnv(RigEnv):
         self._queue: deque[np.ndarray] = deque()
         self._prev_action = np.zeros(n)
         self._states: list[joints.JointState] = []
+        self._sent = np.zeros(n)  # the SI command of the last step (after safe_command)
         self._tick = 0
         self._t0 = 0.0
         self._noise = np.zeros(n)
@@ -335,6 +402,74 @@ class JointsEnv(RigEnv):
         clipped: np.ndarray = np.clip(a, -1.0, 1.0).astype(np.float32)
         return clipped
 
+    # -- safety ---------------------------------------------------------------------------
+    def safe_command(self, command: Sequence[float] | np.ndarray) -> np.ndarray:
+        """The SI command the env sends for ``command`` (rad | rad/s | N*m per the action mode) in
+        the present state (the joint states of the last observation).
+
+        Position targets are clipped to the position limits; a velocity is capped towards each
+        limit at the :func:`braking_speed` of the present speed and the distance left to
+        :data:`LIMIT_INSET` short of it (the drive's ramp stops the joint there); torque is clipped
+        to the torque limit. Then the task's rule (:meth:`_shield`) applies. Without a state yet
+        (before ``reset``) only the limits apply.
+        """
+        c: np.ndarray = np.asarray(command, dtype=np.float64).reshape(-1).copy()
+        if c.shape != (len(self.joints),) or not np.all(np.isfinite(c)):
+            raise ValueError(f"command must be one finite value per joint, got {command!r}")
+        if self.action_mode == "position":
+            np.clip(c, self.position_limits[:, 0], self.position_limits[:, 1], out=c)
+        elif self.action_mode == "velocity":
+            np.clip(c, -self.velocity_limits, self.velocity_limits, out=c)
+        else:
+            np.clip(c, -self.torque_limits, self.torque_limits, out=c)
+            return c
+        if not self._states:
+            return c
+        p = np.array([s.position for s in self._states])
+        if self.action_mode == "velocity":
+            a, dt = self.profile_acceleration, self.control_period
+            v = np.array([s.velocity for s in self._states])
+            lo, hi = self.position_limits[:, 0] + LIMIT_INSET, self.position_limits[:, 1] - LIMIT_INSET
+            np.clip(c, -braking_speed(p - lo, a, dt, -v), braking_speed(hi - p, a, dt, v), out=c)
+        return self._shield(c)
+
+    def _shield(self, command: np.ndarray) -> np.ndarray:
+        """The task's own safety rule on a position or velocity command (SI, within the limits);
+        default: none. See :meth:`_reach` and :meth:`_stop_command` for the motion it may predict."""
+        return command
+
+    def _stop_command(self, i: int) -> float:
+        """The command that stops joint ``i`` as soon as the drive can: the target where its
+        profile stops it (position mode, within the limits) or zero speed (velocity mode)."""
+        if self.action_mode == "velocity":
+            return 0.0
+        s = self._states[i]
+        stop = s.position + s.velocity * abs(s.velocity) / (2.0 * self.profile_deceleration[i])
+        return float(np.clip(stop, *self.position_limits[i]))
+
+    def _reach(self, command: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per joint, the lowest and highest position [rad] it can pass through if ``command``
+        (position or velocity, SI) is held for one period and the joint is then stopped with the
+        drive's deceleration - a conservative envelope of the drive's own profile."""
+        p = np.array([s.position for s in self._states])
+        v = np.array([s.velocity for s in self._states])
+        dt = self.control_period
+        if self.action_mode == "velocity":
+            acc = dec = self.profile_acceleration
+            step = acc * dt
+            v1 = np.where(np.abs(command - v) <= step, command, v + np.copysign(step, command - v))
+            p1 = p + 0.5 * (v + v1) * dt
+            ends = [p1, p1 + v1 * np.abs(v1) / (2.0 * dec)]
+        else:
+            acc, dec = self.profile_acceleration, self.profile_deceleration
+            u = np.minimum(np.maximum(self.profile_velocity, np.abs(v)), np.abs(v) + acc * dt)
+            travel = u * dt + u * u / (2.0 * dec)
+            d = command - p
+            ends = [p + np.copysign(np.minimum(travel, np.abs(d)), d)]
+        stop_now = p + v * np.abs(v) / (2.0 * dec)
+        pts = np.stack([p, stop_now, *ends])
+        return pts.min(axis=0), pts.max(axis=0)
+
     def _to_model(self, i: int, position: float) -> float:
         """Joint position (user frame) -> MJCF joint angle: ``(position - offset) * direction``."""
         j = self.joints[i]
@@ -364,6 +499,7 @@ class JointsEnv(RigEnv):
             self._reset_hardware(start)
         neutral = self.action_of(start) if self.action_mode == "position" else np.zeros(len(self.joints), np.float32)
         self._prev_action = neutral.astype(np.float64)
+        self._sent = start.copy() if self.action_mode == "position" else np.zeros(len(self.joints))
         latency = self.randomization_sample["latency"] if self.randomization_sample else 0
         self._queue = deque(neutral.astype(np.float64) for _ in range(latency))
         self._tick = 0
@@ -401,7 +537,11 @@ class JointsEnv(RigEnv):
         info.update(terms)
         violation = bool((positions < self._lo_stop).any() or (positions > self._hi_stop).any())
         info["limit_violation"] = violation
-        terminated = violation or any(s.fault for s in states)
+        info["command"] = self._sent.copy()
+        faulted = [(n, s) for n, s in zip(self.joint_names, states) if s.fault is not None]
+        if faulted:
+            info["fault"] = fault_info(*faulted[0])
+        terminated = violation or bool(faulted)
         if terminated:
             self._safe_stop()
         if self.render_mode == "human":
@@ -434,7 +574,8 @@ class JointsEnv(RigEnv):
         }
 
     def _command(self, action: np.ndarray) -> None:
-        cmd = self.command_of(action).tolist()
+        self._sent = self.safe_command(self.command_of(action))
+        cmd = self._sent.tolist()
         mode = self.action_mode
         for j, c in zip(self.joints, cmd):
             if not j.enabled:  # faulted/disabled drive: the episode has ended; never command it

@@ -34,7 +34,7 @@ from gymnasium import spaces
 
 import joints
 from envs import configs
-from envs.base import RigEnv
+from envs.base import RigEnv, fault_info
 from envs.randomization import GAINS, DomainRandomization
 from envs.render import CameraSpec, SceneRenderer
 from joints.errors import MotionTimeout
@@ -167,8 +167,10 @@ class DiffDriveGoalEnv(RigEnv):
     ``info`` also holds ``distance`` [m], ``heading_error`` [rad], ``is_success`` (distance <
     ``success_distance`` = 0.1 m and |heading error| < ``success_heading`` = 0.2 rad),
     ``pose_estimate`` and ``goal`` (x, y, heading in the episode frame), ``wheel_velocities``
-    [rad/s], ``time`` [s], ``faults`` (wheel -> drive error code, 0 = none). In sim also
-    ``true_pose`` (the chassis site ``base`` from the physics, same frame) and ``true_distance``.
+    [rad/s], ``time`` [s], ``faults`` (wheel -> the drive's fault by name, None = none) and, when
+    a wheel reports a fault, ``fault`` (``joint``, ``name``, ``code``, ``text``, ``clears`` of the
+    first). In sim also ``true_pose`` (the chassis site ``base`` from the physics, same frame) and
+    ``true_distance``.
 
     ## Starting State
     Sim: physics and the emulated drive at power-on (``rig.reset``): the base stands at the world
@@ -182,9 +184,12 @@ class DiffDriveGoalEnv(RigEnv):
 
     ## Episode End
     - Termination: success (when ``terminate_on_success``, the default); a drive fault on either
-      wheel; the estimate leaving the square ``|x|, |y| <= arena``; on hardware, a gap between
+      wheel (``info["fault"]``; ``reset()`` clears it: sim power cycle, hardware clear + enable); the
+      estimate leaving the square ``|x|, |y| <= arena``; on hardware, a gap between
       steps longer than the drive's communication-offline time (the drive has quick-stopped;
       ``info["watchdog"]``). The env then commands zero speed (the drive ramps down).
+      Wheel-speed actions never fault the drive by design: every speed within the velocity limit,
+      ramped with ``motion.acceleration``, is one the wheels follow.
     - Truncation: 400 steps (20 s at the default control period), by the registered
       ``max_episode_steps``.
 
@@ -466,8 +471,10 @@ class DiffDriveGoalEnv(RigEnv):
         out_of_arena = abs(x) > self.arena or abs(y) > self.arena
         info["out_of_arena"] = out_of_arena
         info["watchdog"] = watchdog
-        fault = any(s.fault for s in states.values())
-        terminated = fault or out_of_arena or watchdog or (success and self.terminate_on_success)
+        faulted = [n for n in self.wheel_names if states[n].fault is not None]
+        if faulted:
+            info["fault"] = fault_info(faulted[0], states[faulted[0]])
+        terminated = bool(faulted) or out_of_arena or watchdog or (success and self.terminate_on_success)
         if terminated:
             self._safe_stop()
         if self.render_mode == "human":

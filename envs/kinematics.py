@@ -10,6 +10,15 @@ z up):
   lowers the arm: rotation about +y takes +x towards -z);
 * ``link3`` 0.30 along ``link2``'s x turns about y (``joint3``, elbow pitch);
 * the ``ee`` site is 0.25 along ``link3``'s x.
+
+Collision geometry of erob_arm3 (for :func:`erob_arm3_clearance`): the floor (z = 0); ``base`` a
+cylinder of radius 0.07 from z = 0 to 0.20 and ``link1`` one of radius 0.05 from z = 0.22 to
+0.34, both about the yaw axis; ``link2`` (upper arm) a capsule of radius 0.035 from the shoulder to
+the elbow; ``link3`` a cylinder of radius 0.045 across the elbow and a capsule of radius 0.03 from
+the elbow to ``ee``. MuJoCo skips parent-child pairs, so the pairs that can touch are the floor,
+base and link1 against the forearm, and the floor and base against the upper arm. Joint1 turns
+everything about the axis of the two cylinders, so distances are taken in the arm's vertical
+plane (x: along the arm from the yaw axis, z: up), where each cylinder is a rectangle.
 """
 
 from __future__ import annotations
@@ -24,6 +33,12 @@ ARM3_SHOULDER_HEIGHT = 0.10 + 0.12 + 0.14  #: height of joint2's axis above the 
 ARM3_UPPER = 0.30  #: joint2 -> joint3
 ARM3_FORE = 0.25  #: joint3 -> ee site
 ARM3_REACH = ARM3_UPPER + ARM3_FORE
+#: erob_arm3 obstacles in the arm's plane: (half width |x|, z low, z high) [m] of ``base`` and ``link1``
+ARM3_COLUMNS = ((0.07, 0.0, 0.20), (0.05, 0.22, 0.34))
+ARM3_UPPER_RADIUS = 0.035  #: m, link2 capsule
+ARM3_ELBOW_RADIUS = 0.045  #: m, link3 cylinder across the elbow
+ARM3_FORE_RADIUS = 0.03  #: m, link3 capsule
+_SAMPLES = 16  #: points per arm segment (the segments are at most 0.30 m: 2 cm apart)
 
 
 def erob_arm3_ee(q: Sequence[float] | np.ndarray) -> np.ndarray:
@@ -37,3 +52,44 @@ def erob_arm3_ee(q: Sequence[float] | np.ndarray) -> np.ndarray:
 def erob_stand_tip(q: float) -> np.ndarray:
     """Position [m] of the ``tip`` site of erob_stand for the joint angle ``q`` [rad]."""
     return np.array([0.3 * math.cos(q), 0.3 * math.sin(q), 0.2 + 0.13 + 0.05])
+
+
+def _column_distance(x: np.ndarray, z: np.ndarray, half: float, z0: float, z1: float) -> np.ndarray:
+    """Distance [m] of points (x, z) of the arm's plane from the rectangle |x| <= half, z0 <= z <= z1."""
+    dx = np.maximum(np.abs(x) - half, 0.0)
+    dz = np.maximum(np.maximum(z0 - z, z - z1), 0.0)
+    out: np.ndarray = np.hypot(dx, dz)
+    return out
+
+
+def erob_arm3_clearance(q2: np.ndarray | float, q3: np.ndarray | float) -> np.ndarray:
+    """Smallest gap [m] between the moving links of erob_arm3 and the floor, ``base`` and ``link1``
+    for shoulder / elbow angles ``q2``, ``q3`` [rad] (model frame; any broadcastable shapes);
+    negative where they overlap. Joint1 does not change it.
+
+    The links are sampled every 2 cm along their axes, so the gap may read up to ~1.5 mm too large
+    where a column's corner meets a link between two samples.
+    """
+    b2, b3 = np.broadcast_arrays(np.asarray(q2, dtype=np.float64), np.asarray(q3, dtype=np.float64))
+    a2, a3 = b2[..., None], b3[..., None]
+    s = np.linspace(0.0, 1.0, _SAMPLES)
+    # upper arm: shoulder (0, h) -> elbow
+    ux = s * ARM3_UPPER * np.cos(a2)
+    uz = ARM3_SHOULDER_HEIGHT - s * ARM3_UPPER * np.sin(a2)
+    ex, ez = ux[..., -1:], uz[..., -1:]
+    # forearm: elbow -> ee
+    fx = ex + s * ARM3_FORE * np.cos(a2 + a3)
+    fz = ez - s * ARM3_FORE * np.sin(a2 + a3)
+    base, link1 = ARM3_COLUMNS
+    gaps = [
+        uz.min(axis=-1) - ARM3_UPPER_RADIUS,  # upper arm - floor
+        _column_distance(ux, uz, *base).min(axis=-1) - ARM3_UPPER_RADIUS,
+        ez[..., 0] - ARM3_ELBOW_RADIUS,  # elbow - floor
+        _column_distance(ex, ez, *base)[..., 0] - ARM3_ELBOW_RADIUS,
+        _column_distance(ex, ez, *link1)[..., 0] - ARM3_ELBOW_RADIUS,
+        fz.min(axis=-1) - ARM3_FORE_RADIUS,  # forearm - floor
+        _column_distance(fx, fz, *base).min(axis=-1) - ARM3_FORE_RADIUS,
+        _column_distance(fx, fz, *link1).min(axis=-1) - ARM3_FORE_RADIUS,
+    ]
+    out: np.ndarray = np.minimum.reduce(gaps)
+    return out

@@ -19,7 +19,7 @@ import numpy as np
 from gymnasium import spaces
 
 import joints
-from envs.base import RigEnv
+from envs.base import RigEnv, braking_speed, fault_info
 from envs.configs import config_path
 from envs.render import CameraSpec, SceneRenderer
 from joints.errors import MotionTimeout
@@ -27,6 +27,11 @@ from joints.errors import MotionTimeout
 ACTION_MODES = ("velocity", "position")
 #: m the carriage may pass its position limits before the episode ends as a limit violation
 LIMIT_MARGIN = 0.005
+#: m short of a position limit where velocity actions brake to (the carriage lags the drive's ramp a little)
+LIMIT_INSET = 0.001
+#: the deceleration velocity actions count on, as a share of ``motion.acceleration``: the drive's acc
+#: is quantised (0.4 m/s^2 on the shipped axis ramps at 0.38 m/s^2) and its speed in whole rpm
+BRAKING_SHARE = 0.8
 
 
 class MksAxisPositionEnv(RigEnv):
@@ -50,6 +55,11 @@ class MksAxisPositionEnv(RigEnv):
     The MKS has no torque mode over its serial interface. ``env.unwrapped.command_of(a)`` /
     ``action_of(si)`` convert. The default config: position [-0.06, 0.06] m, velocity 0.08 m/s.
 
+    No action can fault the drive or leave the limits: position targets lie within the limits,
+    and a speed towards a limit is capped at the speed from which the drive's ramp
+    (``motion.acceleration``) stops the carriage there after one more period
+    (:meth:`safe_command`; the whole travel stays reachable). ``info["command"]`` is what was sent.
+
     ## Observation Space
     ``Box(float64, (4,))``: carriage position [m] (limits +- 10 mm), velocity [m/s] (+- 2 x the velocity
     limit), goal [m] (the limits), goal - position [m] (+- the travel). From the drive's encoder through
@@ -58,8 +68,9 @@ class MksAxisPositionEnv(RigEnv):
     ## Rewards
     ``reward = reward_distance + reward_action_rate``: ``-|goal - position| / 0.01`` (per cm) and
     ``-action_rate_weight * (a_t - a_{t-1})^2``. ``info``: ``distance`` [m], ``is_success``
-    (``distance < success_tolerance`` and speed below 5 mm/s), ``time`` [s], ``fault`` (the drive's
-    fault by name or None), ``limit_violation``.
+    (``distance < success_tolerance`` and speed below 5 mm/s), ``time`` [s], ``faults`` (joint -> the
+    drive's fault by name, None = none), ``limit_violation``, ``command`` and, when the drive reports a
+    fault, ``fault`` (``joint``, ``name``, ``code``, ``text``, ``clears``).
 
     ## Starting State
     Sim: physics and the twin at power-on, the carriage at rest at a position uniform in
@@ -69,8 +80,9 @@ class MksAxisPositionEnv(RigEnv):
     ``reset(options={"start": x, "goal": g})`` fixes either.
 
     ## Episode End
-    - Termination: the drive reports a fault (locked-rotor protection), or the carriage passes its
-      position limits by more than 5 mm (the env then stops it).
+    - Termination: the drive reports a fault (locked-rotor protection; ``info["fault"]``, cleared by
+      ``reset()``: sim power cycle, hardware clear + enable), or the carriage passes its position
+      limits by more than 5 mm (no action drives it there; the env then stops it).
     - Truncation: 200 steps (10 s at the default control period), by the registered ``max_episode_steps``.
 
     ## Arguments
@@ -200,6 +212,24 @@ class MksAxisPositionEnv(RigEnv):
             a = 2.0 * (command - self.lo) / (self.hi - self.lo) - 1.0
         return np.array([np.clip(a, -1.0, 1.0)], dtype=np.float32)
 
+    def safe_command(self, command: float) -> float:
+        """The SI command the env sends for ``command`` (m or m/s) in the present state: a target
+        within the position limits; a speed within the velocity limit and, towards a limit, no
+        faster than the drive's ramp (:data:`BRAKING_SHARE` of it) can stop from
+        :data:`LIMIT_INSET` short of it after one more period (:func:`envs.base.braking_speed`)."""
+        if not math.isfinite(command):
+            raise ValueError(f"command must be finite, got {command!r}")
+        if self.action_mode == "position":
+            return min(max(command, self.lo), self.hi)
+        v = min(max(command, -self.velocity_limit), self.velocity_limit)
+        if self._state is None:
+            return v
+        x, speed = self._state.position, self._state.velocity
+        a, dt = np.array([BRAKING_SHARE * self.joint.motion.acceleration]), self.control_period
+        up = float(braking_speed(np.array([self.hi - LIMIT_INSET - x]), a, dt, speed)[0])
+        down = float(braking_speed(np.array([x - self.lo - LIMIT_INSET]), a, dt, -speed)[0])
+        return min(max(v, -down), up)
+
     def pd_action(self, obs: np.ndarray, *, kp: float = 4.0, kd: float = 0.0) -> np.ndarray:
         """A scripted baseline: in velocity mode ``v = kp x (goal - x) - kd x v`` [m/s]; in position mode the goal."""
         if self.action_mode == "position":
@@ -241,7 +271,7 @@ class MksAxisPositionEnv(RigEnv):
         if not np.isfinite(a).all():
             raise ValueError(f"action must be finite, got {a.tolist()}")
         a = a.clip(-1.0, 1.0)
-        command = self.command_of(a)
+        command = self.safe_command(self.command_of(a))
         if self.joint.enabled:  # a faulted drive ended the episode: never command it
             if self.action_mode == "velocity":
                 self.joint.set_velocity(command)
@@ -256,7 +286,8 @@ class MksAxisPositionEnv(RigEnv):
         self._prev_action = float(a[0])
         info = self._info(s)
         violation = not (self.lo - LIMIT_MARGIN <= s.position <= self.hi + LIMIT_MARGIN)
-        info.update({"reward_distance": r_dist, "reward_action_rate": r_rate, "limit_violation": violation})
+        info.update({"reward_distance": r_dist, "reward_action_rate": r_rate, "limit_violation": violation,
+                     "command": command})
         terminated = violation or s.fault is not None
         if terminated and self.joint.enabled:
             try:
@@ -318,9 +349,12 @@ class MksAxisPositionEnv(RigEnv):
 
     def _info(self, s: joints.JointState) -> dict[str, Any]:
         distance = abs(self.goal - s.position)
-        return {"time": float(self.rig.time - self._t0), "distance": distance,
+        info = {"time": float(self.rig.time - self._t0), "distance": distance,
                 "is_success": distance < self.success_tolerance and abs(s.velocity) < 0.005,
-                "fault": s.fault.name if s.fault else None}
+                "faults": {self.joint_name: s.fault.name if s.fault else None}}
+        if s.fault is not None:
+            info["fault"] = fault_info(self.joint_name, s)
+        return info
 
     # -- rendering -----------------------------------------------------------------------------
     def _scene(self) -> tuple[Any, Any]:

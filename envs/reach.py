@@ -10,7 +10,7 @@ import numpy as np
 
 import joints
 from envs.base import JointsEnv
-from envs.kinematics import ARM3_REACH, ARM3_SHOULDER_HEIGHT, erob_arm3_ee, erob_stand_tip
+from envs.kinematics import ARM3_REACH, ARM3_SHOULDER_HEIGHT, erob_arm3_clearance, erob_arm3_ee, erob_stand_tip
 from envs.render import CameraSpec
 
 
@@ -47,8 +47,14 @@ class ErobReachEnv(JointsEnv):
     | ``"torque"`` | torque ``a x limits.torque`` | N*m |
 
     ``env.unwrapped.command_of(a)`` / ``action_of(si)`` convert. The default config has limits
-    position [-3, 3] rad, velocity 3 rad/s, torque 40 N*m. The drive holds the command for the
-    control period (zero-order hold, ``dt`` = 20 ms by default).
+    position [-3, 3] rad, velocity 2 rad/s, torque 35 N*m (what the drive sustains on this stand
+    without tripping a protection) and the profile 2 rad/s, 10 rad/s^2. The drive holds the
+    command for the control period (zero-order hold, ``dt`` = 20 ms by default).
+
+    No action can fault the drive: position targets are reached with the drive's own profile (a
+    new target while moving included), velocity commands are capped near a position limit at the
+    speed the drive's ramp can stop from on the limit (:meth:`envs.JointsEnv.safe_command`; the
+    whole range stays reachable; ``info["command"]`` is what was sent).
 
     ## Observation Space
     ``Box(float64, (5,))``:
@@ -56,8 +62,8 @@ class ErobReachEnv(JointsEnv):
     | index | observation | unit | bounds (default config) |
     |---|---|---|---|
     | 0 | joint position | rad | [-3.5, 3.5] (limits +- 0.5) |
-    | 1 | joint velocity | rad/s | [-6, 6] (+- 2 x velocity limit) |
-    | 2 | joint torque (drive's estimate from its current) | N*m | [-80, 80] (+- 2 x torque limit) |
+    | 1 | joint velocity | rad/s | [-4, 4] (+- 2 x velocity limit) |
+    | 2 | joint torque (drive's estimate from its current) | N*m | [-70, 70] (+- 2 x torque limit) |
     | 3 | target angle | rad | position limits |
     | 4 | target - position | rad | +- (hi - lo) |
 
@@ -70,8 +76,9 @@ class ErobReachEnv(JointsEnv):
     - ``reward_action_rate = -action_rate_weight * sum((a_t - a_{t-1})^2)``: smooth commands.
 
     ``info`` also holds ``distance`` [rad], ``is_success`` (``distance < success_tolerance``),
-    ``time`` [s] (sim: simulated seconds since reset), ``faults`` (joint -> drive error code,
-    0 = none) and ``limit_violation``.
+    ``time`` [s] (sim: simulated seconds since reset), ``faults`` (joint -> the drive's fault by
+    name, None = none), ``limit_violation``, ``command`` (the SI command sent this step) and, when
+    a drive reports a fault, ``fault`` (``joint``, ``name``, ``code``, ``text``, ``clears``).
 
     ## Starting State
     Sim: physics and the emulated drive at power-on, the joint at rest at an angle uniform in
@@ -82,8 +89,9 @@ class ErobReachEnv(JointsEnv):
     fixes either.
 
     ## Episode End
-    - Termination: the drive reports a fault, or the joint passes its position limits by more
-      than 0.05 rad (the env then stops the joint).
+    - Termination: the drive reports a fault (``info["fault"]``; ``reset()`` clears it: sim power
+      cycle, hardware clear + enable), or the joint passes its position limits by more than
+      0.05 rad (torque actions only can drive it there; the env then stops the joint).
     - Truncation: 250 steps (5 s at the default control period), by the registered
       ``max_episode_steps``.
     The env does not end an episode on success: hold the target.
@@ -192,8 +200,11 @@ class ErobArmReachEnv(JointsEnv):
     ``action_mode`` as in :class:`ErobReachEnv`: ``"position"`` (default; target angle over the
     position limits, drive's own profile), ``"velocity"`` (``a x limits.velocity`` rad/s) or
     ``"torque"`` (``a x limits.torque`` N*m; the agent must then carry the arm against gravity).
-    Default limits: position joint1 [-3, 3], joint2 [-1.6, 1.2], joint3 [-2.4, 2.4] rad; velocity
-    3 rad/s; torque 40, 40, 20 N*m.
+    Default limits: position joint1 [-3, 3], joint2 [-1.6, 0.8], joint3 [-2.4, 2.4] rad; velocity
+    2, 1.2, 3 rad/s; torque 35, 35, 20 N*m (what the drives sustain on this arm without tripping a
+    protection, see the shipped config). Position and velocity commands are also kept from driving
+    a link into the floor or the base (:meth:`ErobArmReachEnv._shield`, 2 cm of clearance); every
+    other pose within the limits stays reachable.
 
     ## Observation Space
     ``Box(float64, (18,))``:
@@ -214,18 +225,21 @@ class ErobArmReachEnv(JointsEnv):
     ## Rewards
     ``reward = reward_distance + reward_action_rate``: ``-||target - ee||`` [m] and
     ``-action_rate_weight * sum((a_t - a_{t-1})^2)``. ``info`` also holds ``distance`` [m],
-    ``is_success`` (``distance < success_tolerance``), ``time``, ``faults``, ``limit_violation``.
+    ``is_success`` (``distance < success_tolerance``), ``time``, ``faults``, ``limit_violation``,
+    ``command``, and ``fault`` when a drive reports one (as in :class:`ErobReachEnv`).
 
     ## Starting State
     Sim: physics and the drives at power-on, the joints at rest at angles uniform in
     ``start_ranges`` (seeded), enabled and held for the drives' 500 ms (the brakes hold the arm
     meanwhile). Hardware: enable, move to the drawn pose with a safe profile, wait for standstill.
     The target is the ``ee`` position of joint angles drawn uniformly in ``target_ranges``,
-    redrawn until it is at least 0.10 m above the floor and 0.15 m from the base axis (so it is
+    redrawn until it is at least 0.10 m above the floor and 0.15 m from the base axis and the pose
+    keeps the arm's clearance (so it is
     reachable). ``reset(options={"start": [q1, q2, q3], "target": [x, y, z]})`` fixes either.
 
     ## Episode End
-    - Termination: a drive fault, or a joint past its position limits by more than 0.05 rad.
+    - Termination: a drive fault (``info["fault"]``; cleared by ``reset()``), or a joint past its
+      position limits by more than 0.05 rad (torque actions only).
     - Truncation: 250 steps (5 s at the default control period).
 
     ## Arguments
@@ -246,6 +260,10 @@ class ErobArmReachEnv(JointsEnv):
     MODEL_JOINTS = ("joint1", "joint2", "joint3")
     MIN_HEIGHT = 0.10  #: m, lowest target
     MIN_RADIUS = 0.15  #: m, closest target to the base axis
+    #: m the links keep from the floor, the base and link1 (:meth:`_shield`)
+    CLEARANCE = 0.02
+    #: rad between the shoulder/elbow poses at which the clearance is checked (<= 9 mm of gap)
+    GRID = 0.02
 
     def __init__(
         self,
@@ -311,7 +329,8 @@ class ErobArmReachEnv(JointsEnv):
         for _ in range(1000):
             q = self._to_model_all(np.array([self.np_random.uniform(*r) for r in self.target_ranges]))
             p = erob_arm3_ee(q)
-            if p[2] >= self.MIN_HEIGHT and math.hypot(p[0], p[1]) >= self.MIN_RADIUS:
+            if p[2] >= self.MIN_HEIGHT and math.hypot(p[0], p[1]) >= self.MIN_RADIUS \
+                    and float(erob_arm3_clearance(q[1], q[2])) >= self.CLEARANCE:
                 self.target = p
                 return
         raise ValueError("target_ranges give no reachable target above the floor; widen them")
@@ -330,6 +349,40 @@ class ErobArmReachEnv(JointsEnv):
 
     def _markers(self) -> list[tuple[np.ndarray, tuple[float, float, float, float]]]:
         return [(self.target, (0.1, 0.9, 0.2, 0.6))]
+
+    # -- safety -----------------------------------------------------------------------------
+    def clearance(self, lo: np.ndarray, hi: np.ndarray) -> float:
+        """Smallest gap [m] between the arm and the floor / its base over every pose with joint2,
+        joint3 (user frame, rad) anywhere in ``[lo, hi]`` (per joint; joint1 does not matter):
+        :func:`~envs.kinematics.erob_arm3_clearance` on a grid of :attr:`GRID` rad."""
+        axes = []
+        for i in (1, 2):
+            j = self.joints[i]
+            n = max(2, math.ceil((hi[i] - lo[i]) / self.GRID) + 1)
+            axes.append((np.linspace(lo[i], hi[i], n) - j.offset) * j.direction)  # user -> model frame
+        return float(erob_arm3_clearance(axes[0][:, None], axes[1][None, :]).min())
+
+    def _shield(self, command: np.ndarray) -> np.ndarray:
+        """Keep the arm :attr:`CLEARANCE` off the floor and its base: the shoulder and elbow commands
+        go out as asked if every pose they can lead to within the next period - and while stopping
+        after it - keeps the gap (:meth:`~envs.base.JointsEnv._reach`); else the shoulder, or the
+        elbow, or both are stopped instead (the first of these that keeps it: a joint that moves
+        away from the obstacle goes on while the other waits). Torque commands are not predicted
+        and go out as they are.
+
+        Poses in contact are not reachable anyway; the 2 cm cover the grid and the joints' tracking
+        of their profiles. Every other pose in the position limits stays reachable.
+        """
+        if self.action_mode == "torque":
+            return command
+        c: np.ndarray = command
+        for hold in ((), (1,), (2,), (1, 2)):
+            c = command.copy()
+            for i in hold:
+                c[i] = self._stop_command(i)
+            if self.clearance(*self._reach(c)) >= self.CLEARANCE:
+                return c
+        return c  # nothing keeps it (the arm is there already): stop both
 
     def _task_terms(self, positions: np.ndarray) -> np.ndarray:
         self._ee = self.end_effector(None if self.sim else positions)

@@ -51,8 +51,10 @@ def reach(env: gym.Env[Any, Any], *, target: float, start: float = 0.0, seed: in
         if there >= hold:
             return True, k, obs
         if terminated or truncated:
-            if info["faults"]["joint1"]:
-                print(f"drive fault 0x{info['faults']['joint1']:04X}", file=sys.stderr)
+            fault = info.get("fault")
+            if fault:
+                print(f"drive fault on {fault['joint']}: {fault['name']} (0x{fault['code']:04X}) {fault['text']}; "
+                      f"{fault['clears']}", file=sys.stderr)
             break
     return False, k, obs
 

@@ -74,6 +74,16 @@ class DeviceFamily:
     scan_param: str = "error_code"
     #: protocol -> the operating modes a joint may name (joint key ``mode``; the first is the default)
     modes: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+    #: identity and line settings (address, node id, baud rate, protocol switch): ``joints params load``/``diff``
+    #: leave them out unless asked (``--include-identity --confirm``)
+    identity_params: tuple[str, ...] = ()
+    #: run-time set-points, control words and save triggers: dumped as read, never loaded (they act)
+    live_params: tuple[str, ...] = ()
+    #: the parameters that select the drive's operating mode (one-shot commands restore what they found)
+    mode_params: tuple[str, ...] = ()
+    #: the key parameters ``joints info`` shows (limits, gains, mode, watchdog, line settings), where the
+    #: joint's protocol reaches and can read them
+    info_params: tuple[str, ...] = ()
     #: protocol -> the electronic data sheet of the family's twin on it for a node id (CANopen: an EDS,
     #: CiA 306; ``joints sim eds``)
     eds: Mapping[str, Callable[[int], str]] = field(default_factory=dict)
@@ -494,6 +504,18 @@ FAMILIES: dict[str, DeviceFamily] = {
         eds={"canopen": _erob_eds},
         watchdog_ms=1000,  # off at power-on (0x0002 = 0): armed while enabled, restored on disable
         modes={"canopen": ("pp", "pv", "pt", "csp", "csv", "cst", "ip")},
+        identity_params=("modbus_address", "modbus_baud_rate", "can_address", "can_baud_rate"),
+        live_params=("target_absolute_position", "target_relative_position", "target_current", "target_speed",
+                     "target_torque", "controlword", "modes_of_operation", "interpolation_data_record_1",
+                     "analog_quantity_value", "use_bus_to_tune_pid"),
+        mode_params=("operation_mode", "motion_mode", "modes_of_operation"),
+        info_params=("modbus_address", "modbus_baud_rate", "can_address", "can_baud_rate",
+                     "modbus_communication_timeout_duration", "producer_heartbeat_time", "operation_mode",
+                     "motion_mode", "modes_of_operation_display", "control_source", "position_loop_gain",
+                     "speed_loop_gain", "speed_loop_integral", "min_position_limit_value", "max_position_limit_value",
+                     "max_speed", "max_acceleration", "continuous_current", "peak_current", "max_motor_current",
+                     "max_position_error", "profile_speed", "profile_acceleration", "profile_deceleration",
+                     "bus_voltage", "error_code"),
     ),
     "zlac8015d": DeviceFamily(
         name="zlac8015d", devices=("zlac8015d",),
@@ -504,6 +526,17 @@ FAMILIES: dict[str, DeviceFamily] = {
         channels=("left", "right"), addresses={"modbus-rtu": (1, 127)},
         twin=_zlac_twin, fronts={"modbus-rtu": _zlac_modbus_front},
         watchdog_ms=1000,  # the drive's own default offline time (0x2000)
+        scan_param="software_version",  # 0x20A0: the eRob map has no such register (scan tells them apart)
+        identity_params=("rs485_node_id", "rs485_baud_rate", "can_node_id", "can_baud_rate"),
+        live_params=("control_word", "target_velocity_left", "target_velocity_right", "target_position_left",
+                     "target_position_right", "target_torque_left", "target_torque_right", "clear_feedback_position",
+                     "in_absolute_position_control_reset_the_zero_point", "whether_store_rw_register_to_eeprom"),
+        mode_params=("control_mode", "synchronous_asynchronous_control_status"),
+        info_params=("software_version", "rs485_node_id", "rs485_baud_rate", "communication_offline_time",
+                     "control_mode", "synchronous_asynchronous_control_status", "maximum_motor_speed",
+                     "rated_current_left", "maximum_current_left", "rated_current_right", "maximum_current_right",
+                     "pl_kp_left", "vl_kp_left", "vl_ki_left", "pl_kp_right", "vl_kp_right", "vl_ki_right",
+                     "dc_voltage", "motor_temperature", "error_code_left", "error_code_right"),
     ),
     "mks": DeviceFamily(
         name="mks", devices=("mks-servo42d", "mks-servo57d"),
@@ -515,6 +548,12 @@ FAMILIES: dict[str, DeviceFamily] = {
         twin=_mks_twin, fronts={"mks-serial": _mks_native_front, "modbus-rtu": _mks_modbus_front},
         device_models={"mks-servo42d": "SERVO42D", "mks-servo57d": "SERVO57D"},
         scan_param="motor_status",  # 0xF1: the MKS reports no error code
+        identity_params=("slave_address", "baud_rate", "modbus_rtu", "group_address", "slave_respond",
+                         "slave_active"),
+        live_params=("motor_enable",),
+        mode_params=("work_mode",),  # write-only: a one-shot cannot read it back
+        info_params=("en_pin_status", "protection_state", "motor_status", "go_back_to_zero_status", "io_status",
+                     "work_mode", "working_current", "microsteps", "baud_rate", "slave_address"),
     ),
 }
 
@@ -538,6 +577,16 @@ def protocols() -> tuple[str, ...]:
 def pairs() -> list[str]:
     """"device on protocol" for every pair that has a driver."""
     return sorted(f"{d} on {p}" for f in FAMILIES.values() for d in f.devices for p in f.drivers)
+
+
+def families(protocol: str) -> tuple[DeviceFamily, ...]:
+    """The families with a driver for ``protocol``, in registry order.
+
+    ``joints scan`` probes a bus address with each family's :attr:`DeviceFamily.scan_param` in
+    this order and takes the first that answers, so an earlier family's probe must be refused by
+    the later families' drives (eRob FC03 0x0060, then ZLAC FC03 0x20A0, then MKS FC04 0xF1).
+    """
+    return tuple(f for f in FAMILIES.values() if protocol in f.drivers)
 
 
 def family(device: str, *, key: str = "device") -> DeviceFamily:

@@ -8,9 +8,11 @@ import os
 import select
 import subprocess
 import sys
+import time
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
-from typing import ContextManager
+from typing import Any, ContextManager
 
 import pytest
 
@@ -54,3 +56,76 @@ def _serve(config: Path, *, bus: str = "rs485", startup: float = 30.0) -> Iterat
 def sim_server() -> Callable[..., ContextManager[str]]:
     """``with sim_server(config_path) as port:`` - a served emulated bus in another process."""
     return _serve
+
+
+@dataclass
+class Served:
+    """A `joints sim serve` process: where each bus is, and a hardware config that points there."""
+
+    proc: subprocess.Popen[str]
+    lines: dict[str, dict[str, Any]]
+    hardware: Path  #: the served config as a hardware config (`--hardware-config`)
+    buffer: bytearray
+
+    def port(self, bus: str) -> str:
+        return str(self.lines[bus]["port"])
+
+    def line(self, timeout: float) -> dict[str, Any]:
+        """The next JSON line the server prints (read from the pipe itself: no hidden buffering)."""
+        assert self.proc.stdout is not None
+        fd = self.proc.stdout.fileno()
+        end = time.monotonic() + timeout
+        while b"\n" not in self.buffer:
+            ready, _, _ = select.select([fd], [], [], max(0.0, end - time.monotonic()))
+            assert ready, f"joints sim serve printed nothing within {timeout:.0f} s"
+            chunk = os.read(fd, 65536)
+            assert chunk, f"joints sim serve ended: {self.proc.stderr.read() if self.proc.stderr else ''}"
+            self.buffer += chunk
+        text, _, rest = bytes(self.buffer).partition(b"\n")
+        self.buffer[:] = rest
+        answer: dict[str, Any] = json.loads(text)
+        return answer
+
+    def command(self, text: str, timeout: float = 10.0) -> dict[str, Any]:
+        """Send a control command (the server runs with --control) and return its JSON answer."""
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(text + "\n")
+        self.proc.stdin.flush()
+        return self.line(timeout)
+
+
+@contextlib.contextmanager
+def _serve_all(config: Path, *args: str, startup: float = 30.0) -> Iterator[Served]:
+    """Serve every bus of ``config`` (serial on ptys, CAN on udp_multicast) with ``--control``."""
+    if sys.platform == "win32":
+        pytest.skip("serving needs POSIX")
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover
+        import tomli as tomllib
+    n_buses = len(tomllib.loads(config.read_text(encoding="utf-8")).get("buses", {}))
+    hardware = config.with_name(config.stem + ".served.toml")
+    proc = subprocess.Popen([sys.executable, "-m", "joints", "sim", "serve", str(config), "--control",
+                             "--hardware-config", str(hardware), *args],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        served = Served(proc, {}, hardware, bytearray())
+        while len(served.lines) < n_buses:
+            line = served.line(startup)
+            served.lines[line["bus"]] = line
+        yield served
+    finally:
+        proc.terminate()
+        try:
+            rc = proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            raise
+        assert rc == 0, proc.stderr.read() if proc.stderr else rc
+
+
+@pytest.fixture(scope="session")
+def sim_served() -> Callable[..., ContextManager[Served]]:
+    """``with sim_served(config_path) as served:`` - every bus of a config served in another process
+    (``served.lines``, ``served.hardware``: a hardware config for the served buses, ``served.command``)."""
+    return _serve_all

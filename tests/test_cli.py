@@ -14,7 +14,7 @@ import pytest
 import joints
 from joints.cli import main
 from joints.clock import ManualClock
-from joints.config import load
+from joints.config import RigConfig, load
 from joints.devices.erob.params import EROB_PARAMS
 from joints.devices.erob.registers import EROB_MODBUS
 from joints.rig import Rig, build
@@ -65,9 +65,9 @@ def test_no_command_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None
     assert "usage" in capsys.readouterr().err
 
 
-def test_state_with_missing_port_returns_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_state_with_missing_port_is_a_bus_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     port = str(tmp_path / "ttyNOPE0")
-    assert main(["state", str(hardware_toml(tmp_path, port))]) == 2
+    assert main(["state", str(hardware_toml(tmp_path, port))]) == 1  # exit 1: device or bus error
     captured = capsys.readouterr()
     assert captured.out == ""
     err = captured.err
@@ -117,7 +117,7 @@ def loopback(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[Path, Dri
     drive = Drive(2)
 
     def fake_open(config: Any, *, backend: str | None = None) -> Rig:
-        cfg = load(config, backend=backend)
+        cfg = config if isinstance(config, RigConfig) else load(config, backend=backend)
         return build(cfg, transports={"rs485": LoopbackTransport(ModbusDeviceBus([ModbusFront(drive, EROB_MODBUS, drive.address)]))}, clock=ManualClock())
 
     monkeypatch.setattr(joints, "open", fake_open)
@@ -214,7 +214,7 @@ def test_monitor_prints_and_exports_frames(tmp_path, capsys) -> None:  # type: i
     printed = capsys.readouterr().out
     assert "02 03 00 60 00 19 84 2D" in printed and "ReadHoldingRegisters" in printed
     rows = out.read_text().splitlines()
-    assert rows[0] == "time,direction,bus,data,meaning" and len(rows) == 1 + 6  # 3 polls x (tx, rx)
+    assert rows[0] == "time,direction,bus,ident,node,data,meaning" and len(rows) == 1 + 6  # 3 polls x (tx, rx)
 
 
 def test_send_custom_frame_adds_crc_and_refuses_unconfirmed_writes(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]

@@ -38,22 +38,30 @@ address = 127
 def test_scan_finds_every_twin_with_its_model(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     cfg = tmp_path / "arm.toml"
     cfg.write_text(CONFIG)
-    assert main(["scan", "--config", str(cfg), "--bus", "can"]) == 0  # the whole range 1..127
-    found = {f["address"]: f for f in map(json.loads, capsys.readouterr().out.splitlines())}
+    assert main(["scan", "--config", str(cfg), "--bus", "can", "--json"]) == 0  # the whole range 1..127
+    found = {f["address"]: f for f in json.loads(capsys.readouterr().out)}
     assert sorted(found) == [3, 17, 127]
     assert found[3]["model"] == "eRob80H100I-BM-18CN"
-    assert found[17]["model"] == "eRob110H160T-FHS-18ET" and found[17]["serial_number"].startswith("110")
+    assert found[17]["model"] == "eRob110H160T-FHS-18ET" and found[17]["serial"].startswith("110")
     assert found[127]["model"].startswith("eRob70H50")
     for f in found.values():
-        assert f["error_code"] == 0 and f["firmware_version"] and "_" in f["hardware_version"]
-        assert f["module_version"].startswith("MC")
+        assert set(f) == {"bus", "protocol", "device", "address", "model", "serial", "firmware", "details"}
+        assert f["device"] == "erob" and f["protocol"] == "erob-can" and f["bus"] == "can" and f["firmware"]
+
+
+def test_scan_table_shows_versions(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cfg = tmp_path / "arm.toml"
+    cfg.write_text(CONFIG)
+    assert main(["scan", "--config", str(cfg), "--range", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "eRob80H100I-BM-18CN" in out and "module_version=MC" in out and "hardware_version=" in out
 
 
 def test_scan_of_an_empty_range_says_so(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     cfg = tmp_path / "arm.toml"
     cfg.write_text(CONFIG)
     assert main(["scan", "--config", str(cfg), "--bus", "can", "--range", "4-6"]) == 1
-    assert "no erob answered" in capsys.readouterr().err
+    assert "nothing answered on can (erob-can, addresses 4-6)" in capsys.readouterr().err
 
 
 def test_scan_needs_a_bus(capsys: pytest.CaptureFixture[str]) -> None:

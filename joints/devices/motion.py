@@ -16,14 +16,18 @@ period ``dt``. Every function returns new values and changes nothing.
   ``v_new^2 = 2*dec*(|s| - (v + v_new)/2*dt)`` (the continuous ``sqrt(2*dec*|s|)`` runs ahead of
   the curve and ends the move early with a speed jump), capped at the cruise speed and reached
   with the acceleration / deceleration; positions integrate trapezoidally. When the move arrives
-  the generator snaps to the goal at rest. Two arrival rules exist because the two twins were
-  calibrated with them (kept so their trajectories stay identical):
+  the generator snaps to the goal at rest. A goal that moved closer than the stopping distance
+  (a new target while moving) is never "arrived at" at speed: the move decelerates past it and
+  comes back, so the speed changes by at most one slope step per period (plus the final snap
+  from a speed one period could stop) whatever the goal does - a drive's speed supervision never
+  sees a jump its own profile made. Two arrival rules exist because the two twins were calibrated
+  with them (kept so their trajectories stay identical; a move from rest arrives as before):
 
   - :attr:`Arrival.ON_STEP` (eRob): after stepping, the step would reach or pass the goal, or the
-    goal is closer than ``window`` and the new speed could stop within one period;
+    goal is closer than ``window``, and the new speed could stop within one period;
   - :attr:`Arrival.BEFORE_STEP` (ZLAC): before stepping, the goal is closer than ``window`` and
     the present speed could stop within one period; after stepping, the step reaches the goal
-    without reversing.
+    without reversing at a speed that could stop within one period.
 """
 
 from __future__ import annotations
@@ -88,10 +92,14 @@ def move_step(p: float, v: float, goal: float, cruise: float, acc: float, dec: f
     step = acc * dt if abs(speed) > abs(v) and v * v_des >= 0.0 else h  # speeding up: the acceleration
     new_v = v_des if abs(dv) <= step else v + copysign(step, dv)
     ds = 0.5 * (v + new_v) * dt
+    # a step that reaches the goal arrives only at a speed one period can stop; faster (the goal
+    # moved closer than the stopping distance) the setpoint runs past it, decelerating, and
+    # comes back: a new goal never makes the setpoint speed jump
+    stoppable = abs(new_v) <= h
     if before:
-        if abs(ds) >= dist and new_v * direction >= 0.0:
+        if abs(ds) >= dist and new_v * direction >= 0.0 and stoppable:
             return goal, 0.0, True
-    elif abs(ds) >= dist or (dist < window and abs(new_v) <= h):
+    elif (abs(ds) >= dist or dist < window) and stoppable:
         return goal, 0.0, True
     return p + ds, new_v, False
 

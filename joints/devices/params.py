@@ -202,3 +202,15 @@ class ParamMap(Generic[K]):
 
     def param(self, name: str) -> Param:
         return self.params.get(name)
+
+    def access(self, name: str) -> Access:
+        """The access this protocol gives to ``name`` (a map may narrow the parameter's)."""
+        return self.param(name).access
+
+    def unit(self, name: str) -> str:
+        """The unit of ``name`` on this protocol (a map may differ from the parameter's)."""
+        return self.param(name).unit
+
+    def where(self, name: str) -> str:
+        """Where ``name`` lives on this protocol, for people."""
+        return str(self.key(name))

@@ -89,6 +89,39 @@ class Identity(Protocol):
 
 
 @runtime_checkable
+class PassiveState(Protocol):
+    """A driver that can read the drive's state without changing anything on it.
+
+    For tools that only look (``joints state``/``watch``/``info``): where :meth:`JointDriver.state`
+    configures the drive first (CANopen: NMT, PDO mapping, mode of operation), this reads only.
+    """
+
+    def observe(self) -> RawState:
+        """The state as the drive reports it, with no side effect on the drive."""
+        ...
+
+
+@runtime_checkable
+class PulseMoves(Protocol):
+    """A drive with a second position unit of its own (MKS: microstep pulses, position modes 1 and 2)."""
+
+    def move_pulses(self, pulses: int, *, speed: int | None = None, acceleration: int | None = None) -> None:
+        """Relative move by ``pulses`` (signed)."""
+        ...
+
+    def move_to_pulses(self, pulses: int, *, speed: int | None = None, acceleration: int | None = None) -> None:
+        """Absolute move to the pulse position ``pulses``."""
+        ...
+
+
+@runtime_checkable
+class SaveParameters(Protocol):
+    """A drive whose settings are volatile until a save command stores them (persistent: needs confirmation)."""
+
+    def save_parameters(self, *, confirm: bool = False) -> None: ...
+
+
+@runtime_checkable
 class CycleGroup(Protocol):
     """The cyclic exchange of one bus (CANopen: every joint's RPDO, one SYNC, that cycle's TPDOs)."""
 

@@ -465,6 +465,27 @@ class ErobCanopenDriver(ErobDriver):
             self._snapshot()
         return self._raw(self.clock.now())
 
+    def observe(self) -> RawState:
+        """The state by SDO reads only - no NMT, no bring-up, no PDO or mode change (for tools that only look).
+
+        Works whatever mode and NMT state (PRE-OPERATIONAL or OPERATIONAL) the node is in; the
+        host's own view (:attr:`statusword`, PDO values) is left untouched.
+        """
+        v = self.access.read_many(("statusword", "actual_position", "current_speed", "motor_current"))
+        sw = v["statusword"]
+        try:
+            st = cia402.state_of(sw)
+        except Exception:  # noqa: BLE001 - a statusword that codes no state: reported as not enabled
+            st = State.NOT_READY_TO_SWITCH_ON
+        fault = 0
+        if st in (State.FAULT, State.FAULT_REACTION_ACTIVE):
+            fault = self.read("error_code") or 0xFF00
+        enabled = st is State.OPERATION_ENABLED
+        moving = enabled and (not cia402.target_reached(sw) or abs(v["current_speed"]) > 200)
+        return RawState(position=v["actual_position"], velocity=v["current_speed"], current=v["motor_current"],
+                        temperature=math.nan, enabled=enabled, moving=moving, fault=fault, time=self.clock.now(),
+                        extra={"statusword": sw, "node": self.node})
+
     def cycle_state(self) -> RawState:
         return self._raw(self.status_time)
 

@@ -73,6 +73,8 @@ class ZlacDrive:
         self.name = name or f"zlac8015d@{slave}"
         self.state = _DriveState()
         self.offline = False  #: the drive quick-stopped because the host went silent (until enabled again)
+        self.commanded = False  #: this host has written the control word since it opened the drive
+        self.adopted = False  #: found enabled by another program (its mode is read before changing it)
         self.access = ModbusAccess(link, slave, self.table)
         self._cache: dict[str, int] = {}
 
@@ -99,7 +101,9 @@ class ZlacDrive:
         self._cache.update(values)
 
     def control(self, word: zr.ControlWord) -> None:
-        """Write the control word (commands are never retried)."""
+        """Write the control word (commands are never retried). From then on this host knows the state
+        it put the drive in; before, "enabled" is taken from the drive's status."""
+        self.commanded = True
         self.write_param("control_word", int(word), idempotent=False)
         self._cache.pop("control_word", None)
 
@@ -107,12 +111,17 @@ class ZlacDrive:
         self._cache.clear()
         self.state = _DriveState()
         self.offline = False
+        self.commanded = False
+        self.adopted = False
 
     # -- mode ownership --
     def require_mode(self, side: str, mode: zr.ControlMode) -> None:
         """Put the drive in ``mode`` for ``side`` unless the sibling is enabled in another mode."""
         other = "right" if side == "left" else "left"
         st = self.state
+        if st.mode is None and self.adopted:  # enabled by another program: the mode is the drive's
+            st.mode = self.access.read("control_mode")
+            self._cache["control_mode"] = st.mode
         if other in st.enabled and st.mode is not None and st.mode != int(mode):
             raise StateError(
                 f"{self.name}: the control mode belongs to the drive - the {other} wheel is enabled in "
@@ -272,6 +281,10 @@ class ZlacChannelDriver(JointDriver):
         """Both wheels share one drive: one status read (Rig.read_states), one velocity FC16."""
         return self.drive
 
+    def identity(self) -> dict[str, object]:
+        """The software version (0x20A0), the one identity register of the drive (no model, no serial number)."""
+        return {"firmware_version": f"0x{self.access.read('software_version'):04X}"}
+
     def write_param(self, name: str, value: int) -> None:
         self.drive.write_param(name, value)
 
@@ -394,6 +407,11 @@ class ZlacChannelDriver(JointDriver):
         if v["error_code_left"] or v["error_code_right"]:
             # a fault switches BOTH motors off (one state machine): the drive disabled itself
             self.drive.state.enabled.clear()
+        elif not self.drive.commanded and self.drive.energised(v) and not self.drive.state.enabled:
+            # this host has sent no control word yet and the drive is on (enabled by another program
+            # or process): it is enabled - both motors, one state machine - in the drive's mode
+            self.drive.state.enabled.update(SIDES)
+            self.drive.adopted = True
         elif self.drive.state.enabled and v["software_connected_status"] == 0:
             self.drive.state.enabled.clear()  # offline trip: the drive quick-stopped on its own
             self.drive.offline = True

@@ -123,6 +123,29 @@ class Rule(abc.ABC, Generic[M]):
         """The wire bytes of a received message, for the trace."""
         return b""
 
+    def frame_id(self, message: Any) -> int | None:
+        """The CAN identifier of a message's frame, for the trace (None on byte streams)."""
+        return None
+
+    def address(self, message: Any) -> int | None:
+        """The node / slave address a message is for or from, for the trace (None: broadcast, none)."""
+        return None
+
+    def is_read(self, request: Any) -> bool:
+        """Whether ``request`` only reads (changes nothing on the drive): raw-frame tools send it unconfirmed."""
+        return False
+
+    def complete(self, data: bytes) -> bytes:
+        """A raw host frame typed without its checksum/CRC gets it appended; one ending in a valid one is kept."""
+        return data
+
+    def parse_request(self, frame: Any) -> Any:
+        """The request in a raw host frame (bytes with their checksum, or a CAN frame), for raw-frame tools.
+
+        Raises :class:`~joints.errors.FrameError` for a frame that is not a request of this protocol.
+        """
+        raise FrameError(f"{self.protocol or type(self).__name__}: raw frames cannot be parsed")
+
     def timeout_text(self, request: Any) -> str:
         """What to check when ``request`` got no reply."""
         return "check wiring, address, bit rate and that the device is powered"
@@ -215,7 +238,8 @@ class Link(Generic[M]):
             self._drain()
             self.transactions += 1
             if self.trace is not None:
-                self._record("tx", self._bytes(frame), self.rule.describe(message))
+                self._record("tx", self._bytes(frame), self.rule.describe(message), self._ident(frame),
+                             self.rule.address(message))
             self.framing.write(message, frame)
 
     # -- unsolicited frames -----------------------------------------------------------------
@@ -264,7 +288,8 @@ class Link(Generic[M]):
         self._drain()
         self.transactions += 1
         if self.trace is not None:
-            self._record("tx", self._bytes(frame), rule.describe(request))
+            self._record("tx", self._bytes(frame), rule.describe(request), self._ident(frame),
+                         rule.address(request))
         rule.before_send(framing, request, frame)
         framing.write(request, frame)
         if not rule.expects_reply(request):
@@ -340,8 +365,10 @@ class Link(Generic[M]):
 
     def _trace_rx(self, msg: M, note: str) -> None:
         if self.trace is not None:
-            text = self.rule.describe(msg)
-            self._record("rx", self.rule.frame_bytes(msg), f"{note}: {text}" if note else text)
+            rule = self.rule
+            text = rule.describe(msg)
+            self._record("rx", rule.frame_bytes(msg), f"{note}: {text}" if note else text, rule.frame_id(msg),
+                         rule.address(msg))
 
     @staticmethod
     def _bytes(frame: Any) -> bytes:
@@ -350,10 +377,16 @@ class Link(Generic[M]):
         data = getattr(frame, "data", b"")
         return bytes(data)
 
-    def _record(self, direction: str, data: bytes, meaning: str) -> None:
+    @staticmethod
+    def _ident(frame: Any) -> int | None:
+        ident = getattr(frame, "arbitration_id", None)
+        return ident if isinstance(ident, int) else None
+
+    def _record(self, direction: str, data: bytes, meaning: str, ident: int | None = None,
+                node: int | None = None) -> None:
         if self.trace is not None:
             try:
-                self.trace(TraceRecord(self.clock.now(), direction, self.name, data, meaning))
+                self.trace(TraceRecord(self.clock.now(), direction, self.name, data, meaning, ident, node))
             except Exception:  # noqa: BLE001, S110 - tracing must not break the bus
                 pass
 

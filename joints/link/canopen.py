@@ -116,9 +116,30 @@ class CanopenRule(Rule[Any]):
 
     def frame_bytes(self, message: Any) -> bytes:
         try:
-            return bytes(co.encode(message).data)
+            return bytes(self.encode(message).data)
         except EncodeError:
             return b""
+
+    def frame_id(self, message: Any) -> int | None:
+        try:
+            return int(self.encode(message).arbitration_id)
+        except EncodeError:
+            return None
+
+    def address(self, message: Any) -> int | None:
+        try:
+            _kind, node = co.classify(self.encode(message))
+        except EncodeError:
+            return None
+        return node or None
+
+    def is_read(self, request: Any) -> bool:
+        frame = self.encode(request)
+        return (co.classify(frame).kind is co.Kind.SDO_RX and len(frame.data) > 0
+                and frame.data[0] >> 5 in (2, 3))  # upload initiate / segment request
+
+    def parse_request(self, frame: Any) -> Any:
+        return co.decode(frame)
 
     def timeout_text(self, request: Any) -> str:
         node = co.classify(self.encode(request)).node

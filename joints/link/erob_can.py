@@ -131,6 +131,21 @@ class ErobCanRule(Rule[Any]):
             return bytes(message.frame.data)
         return bytes(ec.encode(message).data)
 
+    def frame_id(self, message: Any) -> int | None:
+        if isinstance(message, OtherFrame):
+            return int(message.frame.arbitration_id)
+        return int(ec.encode(message).arbitration_id)
+
+    def address(self, message: Any) -> int | None:
+        node = getattr(message, "node", None)
+        return node if isinstance(node, int) else None
+
+    def is_read(self, request: Any) -> bool:
+        return isinstance(request, ec.Read)
+
+    def parse_request(self, frame: Any) -> Any:
+        return ec.decode(frame, ec.Role.DEVICE)
+
     def timeout_text(self, request: Any) -> str:
         return (f"node {request.node} did not answer on 0x{ec.REPLY_BASE + request.node:03X}: check the node id, "
                 "that the bus runs at 1 Mbit/s, termination (120 ohm at both ends), wiring and power")

@@ -30,7 +30,7 @@ from typing import Any
 
 from joints.clock import Clock, MonotonicClock
 from joints.codecs import mks
-from joints.errors import DeviceRejected, EncodeError
+from joints.errors import DeviceRejected, EncodeError, FrameError
 from joints.link.base import Framing, Link, RetryPolicy, Rule, StreamFraming, Subscription
 from joints.link.trace import TraceRecord
 from joints.transports.base import ByteTransport
@@ -96,6 +96,25 @@ class MksRule(Rule[Any]):
 
     def frame_bytes(self, message: Any) -> bytes:
         return mks.encode(message)
+
+    def address(self, message: Any) -> int | None:
+        address = getattr(message, "address", None)
+        return address if isinstance(address, int) and address != BROADCAST else None
+
+    def is_read(self, request: Any) -> bool:
+        return isinstance(request, _READS)
+
+    def complete(self, data: bytes) -> bytes:
+        return data if len(data) > 2 and mks.checksum_ok(data) else mks.with_checksum(data)
+
+    def parse_request(self, frame: Any) -> Any:
+        codec = mks.MksCodec(mks.Role.DEVICE)
+        codec.feed(bytes(frame))
+        codec.flush()
+        msg = codec.next_message()
+        if msg is None or codec.buffered:
+            raise FrameError(f"not one MKS request: {bytes(frame).hex(' ').upper()}", data=bytes(frame))
+        return msg
 
     def timeout_text(self, request: Any) -> str:
         return (f"slave {request.address} did not answer: check wiring, slave address, baud rate, that the drive "

@@ -17,7 +17,8 @@ from typing import Any, Protocol
 
 from joints.clock import Clock
 from joints.codecs import modbus as mb
-from joints.errors import DeviceRejected, EncodeError, UnexpectedReply
+from joints.codecs.crc import append_crc, crc_ok
+from joints.errors import DeviceRejected, EncodeError, FrameError, UnexpectedReply
 from joints.link.base import DirectFraming, Framing, Link, RetryPolicy, Rule, StreamFraming
 from joints.link.trace import TraceRecord
 from joints.transports.base import ByteTransport
@@ -63,6 +64,25 @@ class ModbusRule(Rule[Any]):
 
     def frame_bytes(self, message: Any) -> bytes:
         return mb.encode(message)
+
+    def address(self, message: Any) -> int | None:
+        slave = getattr(message, "slave", None)
+        return slave if isinstance(slave, int) and slave != BROADCAST else None
+
+    def is_read(self, request: Any) -> bool:
+        return isinstance(request, _READS)
+
+    def complete(self, data: bytes) -> bytes:
+        return data if len(data) > 2 and crc_ok(data) else append_crc(data)
+
+    def parse_request(self, frame: Any) -> Any:
+        codec = mb.ModbusRtuCodec(mb.Role.DEVICE)
+        codec.feed(bytes(frame))
+        codec.flush()
+        msg = codec.next_message()
+        if msg is None or codec.buffered:
+            raise FrameError(f"not one Modbus RTU request: {bytes(frame).hex(' ').upper()}", data=bytes(frame))
+        return msg
 
     def timeout_text(self, request: Any) -> str:
         return (f"slave {request.slave} did not answer: check wiring, slave address, baud rate and that the "

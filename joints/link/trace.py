@@ -20,6 +20,8 @@ class TraceRecord:
     bus: str
     data: bytes
     meaning: str = ""  #: decoded message or error text
+    ident: int | None = None  #: the CAN identifier (None on byte streams)
+    node: int | None = None  #: the node / slave address the frame is for or from (None: broadcast, unknown)
 
     def as_dict(self) -> dict[str, object]:
         d = asdict(self)
@@ -28,7 +30,8 @@ class TraceRecord:
 
     def __str__(self) -> str:
         arrow = "->" if self.direction == "tx" else "<-"
-        return f"{self.time:12.6f} {self.bus} {arrow} {self.data.hex(' ').upper():<40} {self.meaning}"
+        ident = "" if self.ident is None else f"{self.ident:03X} "
+        return f"{self.time:12.6f} {self.bus} {arrow} {ident}{self.data.hex(' ').upper():<40} {self.meaning}"
 
 
 class Trace:
@@ -61,7 +64,7 @@ class Trace:
         rows = [r.as_dict() for r in self.records]
         if path.suffix == ".csv":
             with path.open("w", newline="") as fh:
-                w = csv.DictWriter(fh, fieldnames=["time", "direction", "bus", "data", "meaning"])
+                w = csv.DictWriter(fh, fieldnames=["time", "direction", "bus", "ident", "node", "data", "meaning"])
                 w.writeheader()
                 w.writerows(rows)
         else:

@@ -33,14 +33,17 @@ import ipaddress
 import os
 import socket
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from joints.errors import ConfigError, TransportError
 
-__all__ = ["MAX_FRAMES_PER_S", "CanEndpoint", "ServedCan", "client_bus", "plan"]
+__all__ = ["MAX_FRAMES_PER_S", "CanEndpoint", "FrameLog", "ServedCan", "client_bus", "plan"]
+
+#: (bus, "rx" (from a client) | "tx" (the twins), data, CAN id or None) - ``sim serve --verbose``
+FrameLog = Callable[[str, str, bytes, "int | None"], None]
 
 #: frames per second the serve side sends at most on one bus (udp_multicast drops bursts above ~8k/s)
 MAX_FRAMES_PER_S = 4000
@@ -149,7 +152,8 @@ def client_bus(line: Mapping[str, Any]) -> Any:
 class CanEndpoint:
     """A served CAN bus: frames in to the device bus, its answers out, paced (no threads)."""
 
-    def __init__(self, spec: ServedCan, device_bus: Any, *, max_rate: float = MAX_FRAMES_PER_S) -> None:
+    def __init__(self, spec: ServedCan, device_bus: Any, *, max_rate: float = MAX_FRAMES_PER_S,
+                 log: FrameLog | None = None, name: str = "can") -> None:
         from joints.transports.can import PythonCanTransport, python_can
 
         can = self._can = python_can()
@@ -172,6 +176,8 @@ class CanEndpoint:
         self.next_send = 0.0
         self.frames_in = 0
         self.frames_out = 0
+        self.log = log
+        self.name = name  #: the bus's name in the config (for the frame log)
 
     def fileno(self) -> int:
         return int(self.transport.bus.fileno())
@@ -180,6 +186,8 @@ class CanEndpoint:
         """Every frame waiting: the device bus answers (queued to be sent, paced)."""
         while (frame := self.transport.recv(0.0)) is not None:
             self.frames_in += 1
+            if self.log is not None:
+                self.log(self.name, "rx", bytes(frame.data), int(frame.arbitration_id))
             self.out.extend(self.device_bus.on_frame(frame))
         self.collect()
 
@@ -195,7 +203,10 @@ class CanEndpoint:
         """Send what the pacing allows at wall time ``now``; the time of the next send, if any wait."""
         self.collect()
         while self.out and now >= self.next_send:
-            self.transport.send(self.out.popleft())
+            frame = self.out.popleft()
+            if self.log is not None:
+                self.log(self.name, "tx", bytes(frame.data), int(frame.arbitration_id))
+            self.transport.send(frame)
             self.frames_out += 1
             self.next_send = max(self.next_send, now) + self.spacing
         return self.next_send if self.out else None

@@ -9,6 +9,12 @@ MKS native) are pseudo-terminals; frames the drives send by themselves (MKS comp
 CAN buses are python-can channels another process can open
 (:mod:`joints.sim.can_serve`: udp_multicast by default, a vcan device where the config names one;
 never a real bus). Stops cleanly on SIGINT/SIGTERM or when ``stop`` is set.
+
+Options: ``realtime_factor`` runs the physics that many times faster (or slower) than the wall
+clock; ``log`` gets every frame in and out (bus, direction, bytes, CAN id); ``tick`` is called in
+the serving thread once per loop (power-cycling a twin, a viewer's sync: anything that touches the
+world runs there, between physics steps); ``links`` puts a symlink per serial bus to its
+pseudo-terminal (a stable port name for configs).
 """
 
 from __future__ import annotations
@@ -19,9 +25,11 @@ import signal
 import threading
 import time
 from collections.abc import Callable, Mapping
+from pathlib import Path
 from typing import Any, TextIO
 
-from joints.sim.can_serve import CanEndpoint, ServedCan
+from joints.errors import TransportError
+from joints.sim.can_serve import CanEndpoint, FrameLog, ServedCan
 from joints.transports.loopback import UnsolicitedPeer
 from joints.transports.pty import PtyEndpoint
 
@@ -56,41 +64,68 @@ def serve(
     stop: threading.Event | None = None,
     on_ready: Callable[[dict[str, dict[str, Any]]], None] | None = None,
     install_signals: bool = True,
+    realtime_factor: float = 1.0,
+    log: FrameLog | None = None,
+    tick: Callable[[], None] | None = None,
+    links: Mapping[str, str] | None = None,
 ) -> None:
     """Expose serial ``buses`` of ``world`` on ptys and ``can_buses`` on their channels; run in real time until stopped.
 
     ``out`` gets one JSON line per bus (``{"bus", "port"}`` for a pty; ``{"bus", "interface",
     "channel", "udp_port"}`` for CAN); ``on_ready`` gets the same objects by bus name.
     """
+    if not realtime_factor > 0:
+        raise ValueError(f"realtime_factor must be > 0, got {realtime_factor}")
     stop = stop or threading.Event()
     endpoints: dict[str, PtyEndpoint] = {}
     cans: dict[str, CanEndpoint] = {}
+    made_links: list[Path] = []
+    previous: dict[int, Any] = {}
     try:
         for name in buses:
             endpoints[name] = PtyEndpoint()
+            if links and name in links:
+                made_links.append(_symlink(Path(links[name]), endpoints[name].port))
         for name, spec in (can_buses or {}).items():
-            cans[name] = CanEndpoint(spec, world.buses[name])
+            cans[name] = CanEndpoint(spec, world.buses[name], log=log, name=name)
         if install_signals and threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
-                signal.signal(sig, lambda *_: stop.set())
-        lines: dict[str, dict[str, Any]] = {name: {"bus": name, "port": ep.port} for name, ep in endpoints.items()}
+                previous[sig] = signal.signal(sig, lambda *_: stop.set())
+        lines: dict[str, dict[str, Any]] = {
+            name: {"bus": name, "port": str(links[name]) if links and name in links else ep.port}
+            for name, ep in endpoints.items()}
         lines.update({name: ep.spec.line(name) for name, ep in cans.items()})
+        if on_ready is not None:  # first: what it prepares (a config file) exists once the lines are out
+            on_ready(lines)
         if out is not None:
             for line in lines.values():
                 out.write(json.dumps(line) + "\n")
             out.flush()
-        if on_ready is not None:
-            on_ready(lines)
-        _run(world, endpoints, cans, stop)
+        _run(world, endpoints, cans, stop, realtime_factor, log, tick)
     finally:
         for ep in endpoints.values():
             ep.close()
         for can_ep in cans.values():
             can_ep.close()
+        for link in made_links:
+            link.unlink(missing_ok=True)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def _symlink(path: Path, target: str) -> Path:
+    """``path`` -> the pty (replacing a stale link, never a regular file)."""
+    if path.is_symlink():
+        path.unlink()
+    elif path.exists():
+        raise TransportError(f"cannot bind the served port to {path}: the file exists and is not a symlink")
+    path.symlink_to(target)
+    return path
 
 
 def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, CanEndpoint],
-         stop: threading.Event) -> None:
+         stop: threading.Event, factor: float = 1.0, log: FrameLog | None = None,
+         tick: Callable[[], None] | None = None) -> None:
     by_fd: dict[int, tuple[str, Any]] = {ep.master: (name, ep) for name, ep in endpoints.items()}
     by_fd.update({ep.fileno(): (name, ep) for name, ep in cans.items()})
     last_rx = {name: 0.0 for name in endpoints}
@@ -101,7 +136,11 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
     next_send: float | None = None
     slices = _Slices()
     while not stop.is_set():
-        sim_behind = (time.monotonic() - t0_wall) - (world.time - t0_sim)
+        if tick is not None:
+            tick()
+            if world.time < t0_sim:  # the world was reset: time starts again
+                t0_wall, t0_sim = time.monotonic(), world.time
+        sim_behind = (time.monotonic() - t0_wall) * factor - (world.time - t0_sim)
         timeout = max(0.0, dt - sim_behind) if sim_behind < dt else 0.0
         if next_send is not None:
             timeout = min(timeout, max(0.0, next_send - time.monotonic()))
@@ -114,8 +153,12 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
                 continue
             data = ep.read()
             if data:
+                if log is not None:
+                    log(name, "rx", data, None)
                 reply = world.buses[name].receive(data)
                 if reply:
+                    if log is not None:
+                        log(name, "tx", reply, None)
                     ep.write(reply)
                 last_rx[name] = now
                 pending[name] = True
@@ -123,6 +166,8 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
             if pending[name] and now - last_rx[name] > IDLE_FLUSH:
                 reply = world.buses[name].silence()
                 if reply:
+                    if log is not None:
+                        log(name, "tx", reply, None)
                     ep.write(reply)
                 pending[name] = False
         next_send = None
@@ -130,7 +175,7 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
             due = can_ep.send_due(now)
             if due is not None:
                 next_send = due if next_send is None else min(next_send, due)
-        behind = (now - t0_wall) - (world.time - t0_sim)
+        behind = (now - t0_wall) * factor - (world.time - t0_sim)
         if behind >= dt:
             # catch up in slices of about SERVICE_PERIOD of wall clock: a request that arrives
             # meanwhile waits for one slice at most, never for a backlog of physics
@@ -143,4 +188,6 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
                 if isinstance(bus, UnsolicitedPeer):
                     data = bus.take_unsolicited()
                     if data:
+                        if log is not None:
+                            log(name, "tx", data, None)
                         ep.write(data)

@@ -135,3 +135,40 @@ def test_every_move_from_rest_arrives_without_overshoot(goal: float, cruise: flo
     sign = 1.0 if goal > 0 else -1.0
     assert all(sign * p <= sign * goal + 1e-9 for p, _ in trace)
     assert all(abs(v) <= cruise * (1 + 1e-12) for _, v in trace)
+
+
+def _assert_speed_steps(trace: list[tuple[float, float]], slope_step: float) -> None:
+    """Speed changes by at most one slope step per period; the final snap to rest by at most two
+    (the move arrives at a speed one more period could stop)."""
+    steps = [abs(b[1] - a[1]) for a, b in itertools.pairwise(trace)]
+    assert max(steps[:-1], default=0.0) <= slope_step * (1 + 1e-9)
+    assert steps[-1] <= 2 * slope_step * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("arrival", list(Arrival))
+@pytest.mark.parametrize("new_goal", [950.0, 900.0, 800.0, 700.0])
+def test_goal_moved_inside_the_stopping_distance_overshoots_without_a_speed_jump(arrival: Arrival,
+                                                                                 new_goal: float) -> None:
+    """A new goal closer than the stopping distance (a target changed mid-move): the setpoint
+    decelerates past it and comes back; its speed never changes by more than one slope step
+    (it used to snap to the goal at rest: a jump of the whole cruise speed in one period)."""
+    cruise, acc, dec = 2000.0, 4000.0, 4000.0  # stopping distance from cruise: 500
+    p, v = 0.0, 0.0
+    while p < 600.0:  # cruising towards 10000
+        p, v, _ = move_step(p, v, 10000.0, cruise, acc, dec, DT, 1.0, arrival)
+    assert v == pytest.approx(cruise)
+    trace = run_move(new_goal, cruise, acc, dec, arrival, p=p, v=v)
+    assert trace[-1] == (new_goal, 0.0)
+    _assert_speed_steps(trace, dec * DT)
+    stop_at = p + v * v / (2 * dec)
+    assert max(q for q, _ in trace) == pytest.approx(stop_at, abs=cruise * DT)  # overshoot: where it could stop
+    assert min(v for _, v in trace) < 0.0  # and back
+
+
+@settings(max_examples=60, deadline=None)
+@given(goal=st.floats(-5000.0, 5000.0), v0=st.floats(-3000.0, 3000.0), arrival=st.sampled_from(list(Arrival)))
+def test_any_goal_from_any_speed_arrives_with_bounded_speed_steps(goal: float, v0: float, arrival: Arrival) -> None:
+    cruise, acc, dec = 3000.0, 5000.0, 8000.0
+    trace = run_move(goal, cruise, acc, dec, arrival, v=v0)
+    assert trace[-1] == (goal, 0.0)
+    _assert_speed_steps(trace, max(acc, dec) * DT)

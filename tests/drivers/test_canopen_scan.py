@@ -69,17 +69,19 @@ def test_scan_finds_nodes_by_sdo_and_a_stopped_one_by_its_heartbeat(tmp_path: Pa
 
 
 def test_cli_scan_of_a_canopen_sim_config(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["scan", "--config", str(config(tmp_path)), "--bus", "can"]) == 0  # the whole range 1..127
-    found = {f["address"]: f for f in map(json.loads, capsys.readouterr().out.splitlines())}
+    assert main(["scan", "--config", str(config(tmp_path)), "--bus", "can", "--json"]) == 0  # the whole range
+    found = {f["address"]: f for f in json.loads(capsys.readouterr().out)}
     assert sorted(found) == [3, 5, 127]
     for f in found.values():
-        assert f["profile"] == 402 and f["state"] == "SWITCH ON DISABLED" and "pp" in f["modes"]
-        assert f["nmt"] == "PRE_OPERATIONAL (boot-up)"  # heard powering on while the scan listened
+        d = f["details"]
+        assert f["device"] is None and f["protocol"] == "canopen"  # any CANopen node: the bus does not say its make
+        assert d["profile"] == 402 and d["state"] == "SWITCH ON DISABLED" and "pp" in d["modes"]
+        assert d["nmt"] == "PRE_OPERATIONAL (boot-up)"  # heard powering on while the scan listened
 
 
 def test_cli_scan_of_an_empty_canopen_range_says_so(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["scan", "--config", str(config(tmp_path)), "--bus", "can", "--range", "6-9"]) == 1
-    assert "no canopen node answered" in capsys.readouterr().err
+    assert "nothing answered on can (canopen, addresses 6-9)" in capsys.readouterr().err
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="udp_multicast serving is tested on POSIX")
@@ -89,8 +91,9 @@ def test_cli_scan_finds_the_nodes_of_a_served_config(tmp_path: Path, capsys: pyt
     with served_can(config(tmp_path)) as line:
         rc = main(["scan", "--interface", line["interface"], "--channel", line["channel"], "--udp-port",
                    str(line["udp_port"]), "--protocol", "canopen", "--range", "1-6", "--timeout", "0.2",
-                   "--listen", "0.1"])
+                   "--listen", "0.1", "--json"])
     assert rc == 0
-    found = [json.loads(x) for x in capsys.readouterr().out.splitlines()]
+    found = json.loads(capsys.readouterr().out)
     assert [f["address"] for f in found] == [3, 5]
-    assert all(f["device_type"] == "0x00020192" and f["state"] == "SWITCH ON DISABLED" for f in found)
+    assert all(f["details"]["device_type"] == "0x00020192" and f["details"]["state"] == "SWITCH ON DISABLED"
+               for f in found)

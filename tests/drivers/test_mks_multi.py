@@ -104,9 +104,12 @@ def test_scan_finds_mks_drives_on_both_protocols(tmp_path: Path, protocol: str,
         lines += [f"[joints.{name}]", 'device = "mks-servo42d"', 'bus = "rs485"', f"address = {j['address']}",
                   f'mjcf_joint = "{j["mjcf_joint"]}"']
     toml.write_text("\n".join(lines) + "\n")
-    assert main(["scan", "--config", str(toml), "--bus", "rs485", "--device", "mks-servo42d", "--range", "1-4"]) == 0
-    found = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
-    assert found == [{"address": 1, "motor_status": 1}, {"address": 2, "motor_status": 1}]
+    assert main(["scan", "--config", str(toml), "--bus", "rs485", "--device", "mks-servo42d", "--range", "1-4",
+                 "--json"]) == 0
+    found = json.loads(capsys.readouterr().out)
+    # the bus cannot tell a SERVO42D from a 57D, and the MKS reports no model, serial or version
+    assert found == [{"bus": "rs485", "protocol": protocol, "device": "mks", "address": a, "model": None,
+                      "serial": None, "firmware": None, "details": {}} for a in (1, 2)]
 
 
 def test_registers_lists_both_mks_maps(capsys: pytest.CaptureFixture[str]) -> None:

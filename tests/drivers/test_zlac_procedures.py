@@ -148,3 +148,19 @@ def test_dangerous_writes_need_confirmation() -> None:
     with pytest.raises(ConfirmationRequired):
         left.write("rs485_baud_rate", 2)
     assert len(trace) == 0
+
+
+def test_a_drive_enabled_by_another_program_is_enabled_in_its_mode() -> None:
+    """"Enabled" is what the drive says: a second host (another process) that sent nothing yet finds the
+    drive on, in the mode the first one chose, and commands it without switching the mode."""
+    d, left, right, _trace, slave = _rig()
+    vel_init(d, left, right)
+    bus = ModbusDeviceBus([ModbusFront(slave, ZLAC8015D, 1)])
+    other = ZlacDrive(ModbusLink(LoopbackTransport(bus), clock=ManualClock()), 1)
+    o_left, o_right = (ZlacChannelDriver(other, side, profile=_Profile()) for side in ("left", "right"))
+    assert not o_left.is_enabled  # nothing read yet
+    s = o_left.state_from(other.read_status(), 0.0)
+    assert s.enabled and o_left.is_enabled and o_right.is_enabled
+    o_left.set_velocity(500)  # same mode: accepted; the drive's mode register is read, not overwritten
+    assert other.state.mode == ControlMode.VELOCITY
+    assert ("control_mode", int(ControlMode.VELOCITY)) not in slave.write_log[-3:]

@@ -271,9 +271,13 @@ def test_drive_fault_terminates_and_reset_recovers(env: DiffDriveGoalEnv) -> Non
         if term:
             break
     assert term and info["faults"] == {"left_wheel": "velocity_following_error", "right_wheel": None}  # velocity following error
+    assert info["fault"]["joint"] == "left_wheel" and info["fault"]["name"] == "velocity_following_error"
+    assert info["fault"]["text"] and info["fault"]["clears"]
     env.step(np.array([1.0, 1.0], np.float32))  # stepping on after the end commands no faulted drive
     _obs, info = env.reset(seed=0)  # sim: power cycle, the fault is gone
-    assert info["faults"] == {"left_wheel": None, "right_wheel": None}
+    assert info["faults"] == {"left_wheel": None, "right_wheel": None} and "fault" not in info
+    _obs, _r, term, _t, info = env.step(np.array([1.0, 1.0], np.float32))
+    assert not term and "fault" not in info
 
 
 def test_leaving_the_arena_terminates_and_stops() -> None:

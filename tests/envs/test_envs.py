@@ -145,8 +145,8 @@ def test_spaces_units_and_dt() -> None:
     try:
         assert env.dt == 0.05 and env.metadata["render_fps"] == 20
         assert env.action_space.shape == (1,) and env.action_space.dtype == np.float32
-        assert np.array_equal(env.observation_space.low, [-3.5, -6.0, -80.0, -3.0, -6.0])
-        assert np.array_equal(env.observation_space.high, [3.5, 6.0, 80.0, 3.0, 6.0])
+        assert np.array_equal(env.observation_space.low, [-3.5, -4.0, -70.0, -3.0, -6.0])
+        assert np.array_equal(env.observation_space.high, [3.5, 4.0, 70.0, 3.0, 6.0])
         assert env.command_of([1.0]) == pytest.approx([3.0]) and env.command_of([-1.0]) == pytest.approx([-3.0])
         assert env.action_of(env.command_of([0.25])) == pytest.approx([0.25])
         _, info0 = env.reset(seed=0)
@@ -154,11 +154,12 @@ def test_spaces_units_and_dt() -> None:
         assert info["time"] - info0["time"] == pytest.approx(0.05)
         assert env.substeps == 50
         assert {"reward_distance", "reward_action_rate", "distance", "is_success", "faults", "time",
-                "limit_violation"} <= set(info)
+                "limit_violation", "command"} <= set(info)
+        assert "fault" not in info  # only when a drive reports one
         arm = ErobArmReachEnv(action_mode="torque")
         try:
             assert arm.observation_space.shape == (18,) and arm.action_space.shape == (3,)
-            assert arm.command_of([1, 1, 1]) == pytest.approx([40.0, 40.0, 20.0])
+            assert arm.command_of([1, 1, 1]) == pytest.approx([35.0, 35.0, 20.0])
         finally:
             arm.close()
     finally:
@@ -214,9 +215,14 @@ def test_drive_fault_terminates_with_its_code() -> None:
             if term:
                 break
         assert term and info["faults"]["joint1"] == "following_error"
+        fault = info["fault"]
+        assert fault["joint"] == "joint1" and fault["name"] == "following_error" and fault["code"] == 0x8611
+        assert "max_position_error" in fault["text"] and fault["clears"]
         env.step(env.action_of([2.0]))  # stepping on after the end commands no faulted drive
         _obs, info = env.reset(seed=0)  # a reset power-cycles the drive: the fault is gone
-        assert info["faults"]["joint1"] is None
+        assert info["faults"]["joint1"] is None and "fault" not in info
+        _obs, _r, term, _t, info = env.step(env.action_of([2.0]))
+        assert not term and "fault" not in info
     finally:
         env.close()
 
@@ -464,10 +470,12 @@ def test_hardware_reset_moves_with_a_safe_profile_and_recovers_from_faults() -> 
             _obs, _r, term, _t, info = env.step(np.array([1.0], np.float32))
             if term:
                 break
-        assert term and info["faults"]["joint1"] == "speed_error"
+        assert term and info["faults"]["joint1"] == "speed_error" and info["fault"]["code"] == 0x8400
         j.write("max_speed_error", 84000)
-        obs, info = env.reset(seed=0, options={"start": [-0.4], "target": 0.0})
+        obs, info = env.reset(seed=0, options={"start": [-0.4], "target": 0.0})  # clear_faults + enable
         assert info["faults"]["joint1"] is None and abs(obs[0] + 0.4) <= env.reset_tolerance
+        _obs, _r, term, _t, info = env.step(np.array([0.5], np.float32))
+        assert not term and "fault" not in info and j.state().enabled
     finally:
         env.close()
 

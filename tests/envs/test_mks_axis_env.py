@@ -100,16 +100,29 @@ def test_pd_policy_reaches_the_goal_in_sim(mode: str) -> None:
         env.close()
 
 
-def test_leaving_the_limits_terminates_and_stops_the_axis() -> None:
+def test_full_speed_towards_the_end_stops_inside_the_limits() -> None:
+    """Velocity actions slow down near a limit so the drive's ramp stops the carriage inside it."""
     env = gym.make(ENV_ID)
     try:
+        for sign in (1.0, -1.0):
+            env.reset(seed=0, options={"start": -sign * 0.05, "goal": 0.0})
+            for _ in range(60):
+                obs, _r, term, _t, info = env.step(np.array([sign], dtype=np.float32))  # full speed toward the end
+                assert not term and -0.06 <= obs[0] <= 0.06
+            assert abs(obs[0] - sign * 0.06) < 0.002 and abs(obs[1]) < 1e-3 and abs(info["command"]) < 1e-3
+    finally:
+        env.close()
+
+
+def test_leaving_the_limits_terminates_and_stops_the_axis() -> None:
+    env = gym.make(ENV_ID)
+    u = env.unwrapped
+    try:
         env.reset(seed=0, options={"start": 0.05, "goal": 0.0})
-        for _ in range(40):
-            obs, _r, term, _t, info = env.step(np.array([1.0], dtype=np.float32))  # full speed toward the end
-            if term:
-                break
-        assert term and info["limit_violation"]
-        u = env.unwrapped
+        env.step(np.array([0.0], dtype=np.float32))
+        u.rig.sim.set_joint_positions({"carriage": 0.068})  # pushed past the limit from outside
+        _obs, _r, term, _t, info = env.step(np.array([1.0], dtype=np.float32))
+        assert term and info["limit_violation"] and "fault" not in info
         u.rig.sleep(1.0)
         assert abs(u.joint.state().velocity) < 1e-3
     finally:

@@ -338,7 +338,8 @@ def test_trace_records_and_exports(bus: ModbusDeviceBus, clock: ManualClock, tmp
     jsonl_path = trace.export(tmp_path / "trace.jsonl")
     lines = [json.loads(line) for line in jsonl_path.read_text().splitlines()]
     assert len(lines) == 4
-    assert set(lines[0]) == {"time", "direction", "bus", "data", "meaning"}
+    assert set(lines[0]) == {"time", "direction", "bus", "ident", "node", "data", "meaning"}
+    assert lines[0]["node"] == SLAVE and lines[0]["ident"] is None
     assert lines[1]["data"] == records[1].data.hex(" ").upper()
     assert bytes.fromhex(lines[1]["data"]) == records[1].data
 

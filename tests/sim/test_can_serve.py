@@ -92,12 +92,12 @@ def test_scan_finds_the_served_node_with_its_model(hardware_config: tuple[Path, 
                                                    capsys: pytest.CaptureFixture[str]) -> None:
     _hw, line = hardware_config
     rc = main(["scan", "--interface", line["interface"], "--channel", line["channel"], "--udp-port",
-               str(line["udp_port"]), "--range", "3-7", "--timeout", "0.2"])
+               str(line["udp_port"]), "--range", "3-7", "--timeout", "0.2", "--json"])
     assert rc == 0
-    found = [json.loads(x) for x in capsys.readouterr().out.splitlines()]
+    found = json.loads(capsys.readouterr().out)
     assert [f["address"] for f in found] == [5]
-    assert found[0]["model"] == "eRob90H120I-BHM-18CT" and found[0]["serial_number"].startswith("090")
-    assert found[0]["error_code"] == 0
+    assert found[0]["model"] == "eRob90H120I-BHM-18CT" and found[0]["serial"].startswith("090")
+    assert found[0]["device"] == "erob" and found[0]["protocol"] == "erob-can" and found[0]["firmware"]
 
 
 def test_serve_refuses_a_physical_interface(tmp_path: Path) -> None:

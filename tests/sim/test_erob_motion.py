@@ -412,3 +412,28 @@ def test_motion_comes_from_torque_not_from_written_positions(bench: Bench) -> No
     assert np.max(np.abs(ctrl)) > 5.0
     assert np.allclose(ctrl, np.array(amps) * 1e-3 * PROFILE.torque_constant, atol=1e-9)
     assert bench.pos() == pytest.approx(100_000, abs=100)
+
+
+def test_new_target_inside_the_stopping_distance_overshoots_and_returns_without_a_fault(bench: Bench) -> None:
+    """A move retargeted while cruising to a point it cannot stop at: the drive's own profile runs past
+    it and comes back (a real drive's setpoint never jumps). The profile used to snap to the new
+    target at rest, a setpoint speed jump that tripped the drive's speed error (0x8400)."""
+    drv = bench.drv["joint1"]
+    drv.enable()
+    speed, accel = 150_000, 300_000  # stopping distance 37500 counts
+    drv.move_to(400_000, speed=speed, acceleration=accel, deceleration=accel)
+    while bench.pos() < 100_000:
+        bench.world.advance(0.002)
+    here = bench.pos()
+    assert bench.vel() == pytest.approx(speed, rel=0.02)
+    target = round(here + 10_000)
+    drv.move_to(target, speed=speed, acceleration=accel, deceleration=accel)
+    peak = here
+    for _ in range(1000):
+        bench.world.advance(0.002)
+        peak = max(peak, bench.pos())
+        assert drv.read("error_code") == 0
+    assert peak == pytest.approx(here + speed**2 / (2 * accel), abs=3000)  # ran on to where it could stop
+    state = drv.state()
+    assert state.fault == 0 and state.extra["status_of_achieving_position"] == AchieveStatus.TARGET_REACHED
+    assert abs(bench.pos() - target) <= drv.read("position_reaches_set_precision")

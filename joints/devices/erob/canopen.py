@@ -165,6 +165,9 @@ class CanopenObject:
     def __repr__(self) -> str:
         return f"CanopenObject(0x{self.index:04X}:{self.subindex:02X} {self.name!r}, {self.datatype.name})"
 
+    def __str__(self) -> str:
+        return f"0x{self.index:04X}:{self.subindex:02X}"
+
     @property
     def bits(self) -> int:
         return self.datatype.bits
