@@ -11,6 +11,10 @@ Importing ``envs`` registers, under the ``joints/`` namespace:
 * ``joints/MksAxisPosition-v0`` - the carriage of a lead-screw axis on an MKS SERVO42D
   (models/mks_linear_axis.xml) to a goal position, in metres (:class:`envs.mks_axis.MksAxisPositionEnv`).
 
+Each id also has a ``vector_entry_point``: ``gym.make_vec(id, num_envs=N)`` (or
+``envs.make_vector_env(id, N, ...)``) runs N rigs in this process, stepped together
+(:class:`envs.vector.JointsVectorEnv`).
+
 >>> import gymnasium as gym, envs
 >>> env = gym.make("joints/ErobReach-v0", action_mode="torque")          # doctest: +SKIP
 >>> env = gym.make("joints/ErobReach-v0", config="stand.toml", backend="hardware")  # doctest: +SKIP
@@ -33,10 +37,12 @@ from gymnasium.envs.registration import register, registry
 from envs.base import ACTION_MODES, JointsEnv
 from envs.configs import SHIPPED, config_path, default_config
 from envs.diffdrive import DiffDriveGoalEnv
+from envs.factory import make_env
 from envs.kinematics import erob_arm3_ee
 from envs.mks_axis import MksAxisPositionEnv
 from envs.randomization import DomainRandomization
 from envs.reach import ErobArmReachEnv, ErobReachEnv
+from envs.vector import JointsVectorEnv, make_vector_env, vector_entry_point
 
 #: id -> (entry point, max_episode_steps): the joint-space envs (JointsEnv: one action per joint, action_mode)
 ENV_IDS = {
@@ -57,7 +63,8 @@ def register_envs() -> None:
     """Register the ``joints/`` ids with gymnasium (idempotent; done on ``import envs``)."""
     for env_id, (entry_point, steps) in {**ENV_IDS, **BASE_ENV_IDS, **AXIS_ENV_IDS}.items():
         if env_id not in registry:
-            register(id=env_id, entry_point=entry_point, max_episode_steps=steps)
+            register(id=env_id, entry_point=entry_point, max_episode_steps=steps,
+                     vector_entry_point=vector_entry_point(entry_point))
 
 
 register_envs()
@@ -73,9 +80,12 @@ __all__ = [
     "ErobArmReachEnv",
     "ErobReachEnv",
     "JointsEnv",
+    "JointsVectorEnv",
     "MksAxisPositionEnv",
     "config_path",
     "default_config",
     "erob_arm3_ee",
+    "make_env",
+    "make_vector_env",
     "register_envs",
 ]

@@ -134,6 +134,7 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
     sim: bool
     control_period: float
     overruns: int
+    _tick: int
     width: int
     height: int
     _t0: float
@@ -170,6 +171,29 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
     def _check_open(self) -> None:
         if self._closed:
             raise RuntimeError("the env is closed")
+
+    #: step is begin_step (check the action, send its commands), a wait for the next tick,
+    #: finish_step (read, observe, reward): a batched env (envs.vector) waits for all its rigs at once
+    batchable = False
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        token = self.begin_step(action)
+        self._wait_until(self.tick_time())
+        return self.finish_step(token)
+
+    def tick_time(self) -> float:
+        """Rig time of the tick the last action waits for."""
+        return self._t0 + self._tick * self.control_period
+
+    def begin_step(self, action: np.ndarray) -> Any:
+        """The first half of :meth:`step`: check ``action`` and send its commands (returns what
+        :meth:`finish_step` needs)."""
+        raise NotImplementedError
+
+    def finish_step(self, token: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """The second half of :meth:`step`, once the rig's clock reached :meth:`tick_time`: read the
+        joints, observe, reward."""
+        raise NotImplementedError
 
     def _wait_until(self, t: float) -> None:
         remaining = t - self.rig.time
@@ -327,6 +351,7 @@ class JointsEnv(RigEnv):
         self._obs_dim = int(low.shape[0])
         self._lo_stop = self.position_limits[:, 0] - LIMIT_MARGIN
         self._hi_stop = self.position_limits[:, 1] + LIMIT_MARGIN
+        self._lo_list, self._hi_list = self._lo_stop.tolist(), self._hi_stop.tolist()
 
         self._mjcf_joints = [rig.config.joints[nm].mjcf_joint or nm for nm in self.joint_names]
 
@@ -339,6 +364,7 @@ class JointsEnv(RigEnv):
         self._tick = 0
         self._t0 = 0.0
         self._noise = np.zeros(n)
+        self._noisy = False  #: any joint's encoder noise above 0
         self._noise_rng: np.random.Generator | None = None
         self.randomization_sample: dict[str, Any] | None = None
         self.overruns = 0  #: hardware: steps whose tick had passed before the commands were sent
@@ -513,13 +539,17 @@ class JointsEnv(RigEnv):
             self.render()
         return obs, info
 
-    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+    batchable = True
+
+    def begin_step(self, action: np.ndarray) -> np.ndarray:
         self._check_open()
         a = np.asarray(action, dtype=np.float64)
         if a.shape != self.action_space.shape:
             raise ValueError(f"action shape {a.shape} != {self.action_space.shape}")
-        if not np.isfinite(a).all():
-            raise ValueError(f"action must be finite, got {a.tolist()}")
+        values = a.tolist()
+        for v in values:
+            if v - v != 0.0:  # NaN or infinite
+                raise ValueError(f"action must be finite, got {values}")
         a = a.clip(-1.0, 1.0)
         if self._queue:  # bus latency (domain randomisation): the action waits its turn
             self._queue.append(a)
@@ -527,15 +557,21 @@ class JointsEnv(RigEnv):
         else:
             self._command(a)
         self._tick += 1
-        self._wait_until(self._t0 + self._tick * self.control_period)
+        return a
+
+    def finish_step(self, a: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         states = self._read()
-        positions = np.array([s.position for s in states])
+        listed = [s.position for s in states]
+        positions = np.array(listed)
         obs = self._observation(states, positions)
         reward, terms = self._reward(positions, a)
         self._prev_action = a
         info = self._info(states)
         info.update(terms)
-        violation = bool((positions < self._lo_stop).any() or (positions > self._hi_stop).any())
+        violation = False
+        for p, lo, hi in zip(listed, self._lo_list, self._hi_list):
+            if p < lo or p > hi:
+                violation = True
         info["limit_violation"] = violation
         info["command"] = self._sent.copy()
         faulted = [(n, s) for n, s in zip(self.joint_names, states) if s.fault is not None]
@@ -558,10 +594,9 @@ class JointsEnv(RigEnv):
             pos = np.array([s.position for s in states])
         obs = np.empty(self._obs_dim)
         obs[:n] = pos
-        if self._noise_rng is not None and self._noise.any():
+        if self._noise_rng is not None and self._noisy:
             obs[:n] += self._noise_rng.normal(0.0, 1.0, n) * self._noise
-        obs[n:2 * n] = [s.velocity for s in states]
-        obs[2 * n:3 * n] = [s.torque for s in states]
+        obs[n:3 * n] = [s.velocity for s in states] + [s.torque for s in states]
         obs[3 * n:] = self._task_terms(pos)
         np.maximum(obs, self._obs_low, out=obs)
         np.minimum(obs, self._obs_high, out=obs)
@@ -632,6 +667,7 @@ class JointsEnv(RigEnv):
         sim.restore()
         self.randomization_sample = None
         self._noise = np.zeros(len(self.joints))
+        self._noisy = False
         self._noise_rng = None
         if self.randomization is None:
             return
@@ -642,6 +678,7 @@ class JointsEnv(RigEnv):
             sim.perturb(nm, armature=f["armature"], coulomb_friction=f["friction"], viscous_friction=f["friction"],
                         torque_constant=f["torque_constant"], gains={g: f[field] for field, g in GAINS.items()})
             self._noise[i] = f["encoder_noise"]
+        self._noisy = bool(self._noise.any())
         self._noise_rng = np.random.default_rng(int(self.np_random.integers(2**63)))
 
     # -- hardware reset ---------------------------------------------------------------------

@@ -438,7 +438,9 @@ class DiffDriveGoalEnv(RigEnv):
             self.render()
         return obs, info
 
-    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+    batchable = True
+
+    def begin_step(self, action: np.ndarray) -> tuple[np.ndarray, bool]:
         self._check_open()
         a = np.asarray(action, dtype=np.float64)
         if a.shape != self.action_space.shape:
@@ -453,7 +455,10 @@ class DiffDriveGoalEnv(RigEnv):
         else:
             self._command(a)
         self._tick += 1
-        self._wait_until(self._t0 + self._tick * self.control_period)
+        return a, watchdog
+
+    def finish_step(self, token: tuple[np.ndarray, bool]) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        a, watchdog = token
         states = self._read()
         self.odometry.update(*self._angles)
         d, e = self._goal_terms()

@@ -16,7 +16,7 @@ from joints.errors import (
     ReplyTimeout,
 )
 from joints.joint import Joint, JointState, Limits, Motion
-from joints.rig import Rig, open
+from joints.rig import Rig, open, sleep_together
 
 __version__ = "0.1.0"
 
@@ -34,4 +34,5 @@ __all__ = [
     "Rig",
     "__version__",
     "open",
+    "sleep_together",
 ]

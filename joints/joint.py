@@ -25,6 +25,7 @@ import math
 import numbers
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from joints.clock import Clock
 from joints.devices.faults import Fault
@@ -108,6 +109,10 @@ class Joint:
         self.last_state: JointState | None = None
         #: clock time of the last frame exchanged with the drive through this joint
         self.last_contact = -math.inf
+        #: move_to profiles already checked: (velocity, acceleration, deceleration) arguments ->
+        #: (what they were checked against, their device units)
+        self._profiles: dict[tuple[float | None, float | None, float | None],
+                             tuple[tuple[Any, ...], tuple[int, int, int]]] = {}
         #: how this joint waits (the rig's sleep: it keeps every drive of the rig fed meanwhile)
         self.sleep: Callable[[float], None] = clock.sleep
 
@@ -133,6 +138,8 @@ class Joint:
 
     # -- checks -----------------------------------------------------------------------------
     def _finite(self, what: str, value: float) -> float:
+        if type(value) is float and value - value == 0.0:  # the common case: a finite float
+            return value
         # numbers.Real also admits numpy scalars (np.float32 from a gymnasium action is no float)
         if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
             raise CommandError(f"joint {self.name}: {what} must be a finite number, got {value!r}")
@@ -261,23 +268,28 @@ class Joint:
     ) -> None:
         """Move to ``position`` [rad] with the drive's own trapezoidal profile."""
         position = self._finite("position", position)
-        v = self._finite("velocity", self.motion.velocity if velocity is None else velocity)
-        a = self._finite("acceleration", self.motion.acceleration if acceleration is None else acceleration)
-        d = self._finite("deceleration", self.motion.deceleration if deceleration is None else deceleration)
-        self._check_position(position)
-        if v <= 0:
-            raise CommandError(f"joint {self.name}: profile velocity must be > 0 {self._u[1]}, got {v}")
-        self._check_velocity(v, "profile velocity")
-        self._check_accel(a, "acceleration")
-        self._check_accel(d, "deceleration")
+        profile = (velocity, acceleration, deceleration)
+        known = self._profiles.get(profile)
+        if known is None or known[0] != (self.motion, self.limits, self.units, self.direction):
+            v = self._finite("velocity", self.motion.velocity if velocity is None else velocity)
+            a = self._finite("acceleration", self.motion.acceleration if acceleration is None else acceleration)
+            d = self._finite("deceleration", self.motion.deceleration if deceleration is None else deceleration)
+            self._check_position(position)
+            if v <= 0:
+                raise CommandError(f"joint {self.name}: profile velocity must be > 0 {self._u[1]}, got {v}")
+            self._check_velocity(v, "profile velocity")
+            self._check_accel(a, "acceleration")
+            self._check_accel(d, "deceleration")
+            known = ((self.motion, self.limits, self.units, self.direction),
+                     (abs(self._to_vel(v)), self._to_acc(a), self._to_acc(d)))
+            if len(self._profiles) < 64:  # a checked profile is reused as it is (device units)
+                self._profiles[profile] = known
+        else:  # the profile was checked before: only the position is new
+            self._check_position(position)
         self._refuse_if_faulted("move_to")
         self._require_enabled()
-        self.driver.move_to(
-            self._to_pos(position),
-            speed=abs(self._to_vel(v)),
-            acceleration=self._to_acc(a),
-            deceleration=self._to_acc(d),
-        )
+        speed, acc, dec = known[1]
+        self.driver.move_to(self._to_pos(position), speed=speed, acceleration=acc, deceleration=dec)
         self._contact()
 
     def move_by(self, delta: float, **kw: float) -> None:

@@ -18,11 +18,11 @@ import functools
 import logging
 import math
 import os
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, TypeGuard
 
 from joints import exits, registry
 from joints.clock import Clock, MonotonicClock
@@ -86,6 +86,9 @@ class Rig:
             j.sleep = self.sleep  # a joint's waits keep the other drives fed too
         self._closed = False
         self._shut: set[str] = set()
+        self._order: list[tuple[str, Joint]] | None = None
+        self._channels: dict[str, GroupedChannel | None] = {}
+        self._sync_groups: dict[int, tuple[DriveGroup, bool]] = {}
         exits.register(self)
 
     @property
@@ -156,20 +159,34 @@ class Rig:
         wanted = set(self.joints) if names is None else {self.joints[n].name for n in names}
         out: dict[str, JointState] = {}
         groups: dict[int, tuple[Mapping[str, int], float]] = {}
-        for bus in self.buses:
-            for name, j in self.joints.items():
-                if name not in wanted or self.config.joints[name].bus != bus:
-                    continue
-                driver = j.driver
-                if not isinstance(driver, GroupedChannel):
-                    out[name] = j.state()
-                    continue
-                group: DriveGroup = driver.group
-                if id(group) not in groups:
-                    groups[id(group)] = (group.read_status(), self.clock.now())
-                block, t = groups[id(group)]
-                out[name] = j.to_si(driver.state_from(block, t))
+        for name, j in self._bus_order():
+            if name not in wanted:
+                continue
+            driver = self._grouped(name)
+            if driver is None:
+                out[name] = j.state()
+                continue
+            group: DriveGroup = driver.group
+            if id(group) not in groups:
+                groups[id(group)] = (group.read_status(), self.clock.now())
+            block, t = groups[id(group)]
+            out[name] = j.to_si(driver.state_from(block, t))
         return {name: out[name] for name in self.joints if name in out}
+
+    def _bus_order(self) -> list[tuple[str, Joint]]:
+        """The joints bus by bus (the order read_states talks to them)."""
+        order = self._order
+        if order is None:
+            order = self._order = [(name, j) for bus in self.buses for name, j in self.joints.items()
+                                   if self.config.joints[name].bus == bus]
+        return order
+
+    def _grouped(self, name: str) -> GroupedChannel | None:
+        """The joint's driver if it is a channel of a multi-channel drive (checked once per joint)."""
+        if name not in self._channels:
+            driver = self.joints[name].driver
+            self._channels[name] = driver if isinstance(driver, GroupedChannel) else None
+        return self._channels[name]
 
     def set_velocities(self, velocities: Mapping[str, float]) -> None:
         """Set several joints' velocities [rad/s] at once; every command is checked first.
@@ -183,12 +200,13 @@ class Rig:
             if name in done:
                 continue
             driver = self.joints[name].driver
-            if isinstance(driver, GroupedChannel) and isinstance(driver.group, SyncVelocityGroup):
-                group = driver.group
+            grouped = self._grouped(name)
+            if grouped is not None and self._sync(grouped.group):
+                group = grouped.group
                 members: dict[str, GroupedChannel] = {}
                 for n in checked:
-                    d = self.joints[n].driver
-                    if isinstance(d, GroupedChannel) and d.group is group:
+                    d = self._grouped(n)
+                    if d is not None and d.group is group:
                         members[n] = d
                 if {d.channel for d in members.values()} == set(group.channels):
                     group.set_channel_velocities({d.channel: checked[n] for n, d in members.items()})
@@ -196,6 +214,13 @@ class Rig:
                     continue
             driver.set_velocity(v, acceleration=acc, deceleration=acc)
             done.add(name)
+
+    def _sync(self, group: DriveGroup) -> TypeGuard[SyncVelocityGroup]:
+        """Whether a drive takes its channels' velocities in one command (checked once per drive)."""
+        known = self._sync_groups.get(id(group))
+        if known is None or known[0] is not group:
+            known = self._sync_groups[id(group)] = (group, isinstance(group, SyncVelocityGroup))
+        return known[1]
 
     def cycle(self, targets: Mapping[str, float]) -> dict[str, JointState]:
         """One control cycle of cyclic joints (CANopen csp/csv/cst/ip): set-points in, that cycle's feedback out.
@@ -334,6 +359,37 @@ class Rig:
         return f"Rig(backend={self.backend!r}, joints={list(self.joints)})"
 
 
+def sleep_together(rigs: Sequence[Rig], seconds: float | Sequence[float]) -> None:
+    """:meth:`Rig.sleep` of several rigs (``seconds`` each, or one time for all), at once.
+
+    Simulated rigs advance together: their worlds join one stepping group and one compiled call
+    runs every drive's loops and every world's physics (N rigs of a batched env in one process,
+    each with its own model). The result is that of sleeping each rig in turn. A rig that must
+    talk to a drive during the sleep (a watchdog keep-alive falls due) or runs on hardware sleeps
+    on its own.
+    """
+    from joints.sim.world import advance_together
+
+    times = [seconds] * len(rigs) if isinstance(seconds, (int, float)) else list(seconds)
+    if len(times) != len(rigs):
+        raise ValueError(f"{len(rigs)} rigs but {len(times)} times")
+    worlds: list[Any] = []
+    spans: list[float] = []
+    for rig, t in zip(rigs, times):
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t) or t < 0:
+            raise ValueError(f"cannot sleep {t!r} s (need a finite time >= 0)")
+        now = rig.clock.now()
+        end = now + t
+        due, _names = rig._keepalive_due()
+        if rig.world is None or (due is not None and due < end):
+            rig.sleep(t)
+        elif end > now:  # as Rig.sleep: the clock sleeps end - now
+            worlds.append(rig.world)
+            spans.append(end - now)
+    if worlds:
+        advance_together(worlds, spans)
+
+
 def _in_file(exc: ConfigError, source: str) -> ConfigError:
     """The same error, naming the config file (errors from below the config know only the key)."""
     return ConfigError(exc.message, file=source, key=exc.key, allowed=exc.allowed)
@@ -427,7 +483,7 @@ def sim_world(cfg: RigConfig) -> Any:
                                     protocol=cfg.buses[j.bus].protocol, maker=fam, lead=j.lead,
                                     extra={"firmware": j.firmware} if j.firmware is not None else {}))
         return World(cfg.sim.model, drives, buses=buses, timestep=cfg.sim.timestep, base_dir=cfg.base_dir,
-                     **({"kinematic": kinematic} if kinematic else {}))
+                     kinematic=kinematic or None)
     except ConfigError as exc:  # `joints sim serve` comes here directly: name the file too
         if exc.file is None:
             raise _in_file(exc, cfg.source) from exc

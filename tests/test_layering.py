@@ -44,7 +44,10 @@ ALLOWED: dict[str, frozenset[str]] = {
     "s2r": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
                       "registry", "config", "sim", "rig", "exits"}),
     "cli": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
-                      "registry", "config", "sim", "rig", "exits", "s2r", API}),
+                      "registry", "config", "sim", "rig", "exits", "s2r", "bench", API}),
+    # `joints bench`: measures every layer against its reference (issue 23)
+    "bench": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
+                        "registry", "config", "sim", "rig", "exits", API}),
 }
 #: the package entry points import whatever they re-export
 EXEMPT = {"joints", "joints.__main__"}

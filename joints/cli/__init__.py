@@ -33,6 +33,7 @@ COMMANDS: tuple[str, ...] = (
     "plot",  # trace / monitor log -> PNG
     "s2r",  # identify (replay of recordings: monitor's replay)
     "sim",  # sim serve, sim view
+    "bench",  # speed ratios, bus planner
 )
 
 

@@ -286,12 +286,71 @@ def _fast_write_multiple(m: WriteMultipleRegisters) -> bytes | None:
     return body + crc16_modbus(body).to_bytes(2, "little")
 
 
+#: FC03/FC04 reply bodies (slave, function, byte count, values) by value count
+_REPLY_READ = [struct.Struct(f">BBB{n}H") for n in range(MAX_READ + 1)]
+
+
+def _fast_read_reply(m: ReadRegistersReply) -> bytes | None:
+    s, fc, values = m.slave, m.function, m.values
+    n = len(values)
+    if type(s) is not int or type(fc) is not int or not (0 <= s <= 0xFF and 0 <= fc <= 0xFF and n <= MAX_READ):
+        return None
+    for v in values:
+        if type(v) is not int:
+            return None
+    try:
+        body = _REPLY_READ[n].pack(s, fc, 2 * n, *values)
+    except struct.error:  # a value out of range
+        return None
+    return body + crc16_modbus(body).to_bytes(2, "little")
+
+
 _FAST_ENCODERS: dict[type, Callable[[Any], bytes | None]] = {
     ReadHoldingRegisters: _fast_read,
     ReadInputRegisters: _fast_read,
     WriteSingleRegister: _fast_write_single,
     WriteMultipleRegisters: _fast_write_multiple,
+    ReadRegistersReply: _fast_read_reply,
 }
+
+
+def _plain_read(m: ReadHoldingRegisters | ReadInputRegisters) -> bool:
+    s, a, c = m.slave, m.address, m.count
+    return (type(s) is int and type(a) is int and type(c) is int
+            and 0 <= s <= 0xFF and 0 <= a <= 0xFFFF and 1 <= c <= MAX_READ)
+
+
+def _plain_write_single(m: WriteSingleRegister) -> bool:
+    s, a, v = m.slave, m.address, m.value
+    return (type(s) is int and type(a) is int and type(v) is int
+            and 0 <= s <= 0xFF and 0 <= a <= 0xFFFF and 0 <= v <= 0xFFFF)
+
+
+def _plain_write_multiple(m: WriteMultipleRegisters) -> bool:
+    s, a, values = m.slave, m.address, m.values
+    if not (type(s) is int and type(a) is int and 0 <= s <= 0xFF and 0 <= a <= 0xFFFF
+            and 1 <= len(values) <= MAX_WRITE):
+        return False
+    for v in values:
+        if type(v) is not int or not 0 <= v <= 0xFFFF:
+            return False
+    return True
+
+
+_PLAIN: dict[type, Callable[[Any], bool]] = {
+    ReadHoldingRegisters: _plain_read,
+    ReadInputRegisters: _plain_read,
+    WriteSingleRegister: _plain_write_single,
+    WriteMultipleRegisters: _plain_write_multiple,
+}
+
+
+def check(message: Message) -> None:
+    """Raise the :class:`~joints.errors.EncodeError` :func:`encode` would raise, without building
+    the frame (a message that passes would encode)."""
+    plain = _PLAIN.get(type(message))
+    if plain is None or not plain(message):
+        encode(message)
 
 
 def encode(message: Message) -> bytes:
@@ -398,6 +457,10 @@ def _decode_request(frame: bytes) -> Request | UnsupportedRequest:
 #: count, an FC06 reply the written value, so a host writing the same registers again and again
 #: gets the same frames back; messages are frozen, so sharing them is safe.
 _WRITE_REPLIES: dict[bytes, Reply] = {}
+#: Interned 8-byte requests (FC03, FC04, FC06; valid CRC only) by their bytes: a host polling a
+#: block sends the same frame again and again (device role).
+_REQUESTS: dict[bytes, Request | UnsupportedRequest] = {}
+_FIXED_REQUEST_FCS = frozenset((READ_HOLDING_REGISTERS, READ_INPUT_REGISTERS, WRITE_SINGLE_REGISTER))
 
 
 class ModbusRtuCodec:
@@ -486,6 +549,13 @@ class ModbusRtuCodec:
                         return reply
                 length = self._host_length(buf)
             else:
+                if len(buf) >= 8 and buf[1] in _FIXED_REQUEST_FCS:
+                    # Hot path, same result as the general one below: a read or FC06 request is
+                    # always 8 bytes; a host polling the same block sends the same frame again
+                    known_request = _REQUESTS.get(bytes(buf[:8]))
+                    if known_request is not None:
+                        del buf[:8]
+                        return known_request
                 length = _request_length(buf)
                 if length == 0 and buf[1] in _EXCEPTION_FCS:  # a function code this stack does not know
                     length = _unknown_request_length(buf)
@@ -543,7 +613,12 @@ class ModbusRtuCodec:
                 reply = _decode_reply(frame, self._expected)
                 self._check_against_expected(reply, frame)
                 return reply
-            return _decode_request(frame)
+            request = _decode_request(frame)
+            if length == 8 and frame[1] in _FIXED_REQUEST_FCS:
+                if len(_REQUESTS) >= 512:
+                    _REQUESTS.clear()
+                _REQUESTS[frame] = request
+            return request
         return None
 
     def _next_valid_offset(self, buf: bytearray) -> int:

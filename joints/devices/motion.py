@@ -45,7 +45,7 @@ class Arrival(enum.Enum):
     BEFORE_STEP = "before step"
 
 
-def ramp(v: float, target: float, acc: float, dec: float, dt: float, *, pause_at_zero: bool = False) -> float:
+def ramp(v: float, target: float, acc: float, dec: float, dt: float, pause_at_zero: bool = False) -> float:
     """The speed one period ``dt`` later, ramping from ``v`` towards ``target``.
 
     ``acc`` / ``dec`` are slopes (speed per second, > 0; ``math.inf`` = a step); the target is reached

@@ -7,6 +7,7 @@ Hi word first on the wire (unless the table says otherwise). Names are the manua
 from __future__ import annotations
 
 import re
+import struct
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -103,6 +104,22 @@ class Register:
         return raw
 
 
+def _packed_plan(plan: Sequence[tuple[str, int, int, bool, bool]],
+                 count: int) -> tuple[tuple[str, ...], struct.Struct, struct.Struct] | None:
+    """A block decoded in one struct call: the words packed big-endian, unpacked by register type
+    (gaps skipped); None if a register has its low word first."""
+    if any(low_first for *_, low_first in plan):
+        return None
+    fmt, at = ">", 0
+    for _name, i, n, signed, _low in sorted(plan, key=lambda p: p[1]):
+        code = ("h" if signed else "H") if n == 1 else ("i" if signed else "I")
+        fmt += "xx" * (i - at) + code
+        at = i + n
+    fmt += "xx" * (count - at)
+    names = tuple(name for name, *_ in sorted(plan, key=lambda p: p[1]))
+    return names, struct.Struct(f">{count}H"), struct.Struct(fmt)
+
+
 @dataclass(frozen=True)
 class RegisterTable:
     """An immutable, indexed collection of registers of one device family."""
@@ -113,6 +130,9 @@ class RegisterTable:
     _by_address: Mapping[int, Register] = field(init=False, repr=False, compare=False)
     _word_owner: Mapping[int, Register] = field(init=False, repr=False, compare=False)
     _plans: dict[tuple[int, int], tuple[tuple[str, int, int, bool, bool], ...]] = field(
+        init=False, repr=False, compare=False, default_factory=dict)
+    #: per block shape: (names, words packer, values unpacker), None where a pair is low word first
+    _packed: dict[tuple[int, int], tuple[tuple[str, ...], struct.Struct, struct.Struct] | None] = field(
         init=False, repr=False, compare=False, default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -191,6 +211,14 @@ class RegisterTable:
                 if reg.address >= start and reg.address + reg.words <= end
             )
             self._plans[(start, len(words))] = plan
+            self._packed[(start, len(words))] = _packed_plan(plan, len(words))
+        packed = self._packed[(start, len(words))]
+        if packed is not None:  # one struct call each way (words out of 0..0xFFFF: the loop below)
+            names, as_words, as_values = packed
+            try:
+                return dict(zip(names, as_values.unpack(as_words.pack(*words))))
+            except struct.error:
+                pass
         out: dict[str, int] = {}
         for name, i, n, signed, low_first in plan:
             if n == 1:

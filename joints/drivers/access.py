@@ -64,6 +64,7 @@ class ModbusAccess(ParamAccess):
         self.table = table
         self.params = params or table.params
         self._plans: dict[tuple[str, ...], tuple[tuple[int, int], ...]] = {}
+        self._registers: dict[str, Register] = {r.name: r for r in table}  #: by name (the hot path)
 
     def resolve(self, key: str | int) -> str:
         if isinstance(key, str) and key in self.params and key not in self.table:
@@ -85,10 +86,12 @@ class ModbusAccess(ParamAccess):
         return self.table.decode_block(start, self.link.read_registers(self.slave, start, count))
 
     def read_many(self, names: Sequence[str]) -> dict[str, int]:
-        key = tuple(names)
+        key = names if type(names) is tuple else tuple(names)
         plan = self._plans.get(key)
         if plan is None:
             plan = self._plans[key] = self._plan(names)
+        if len(plan) == 1:  # one block: its decoded registers as they come
+            return self.read_block(*plan[0])
         out: dict[str, int] = {}
         for start, count in plan:
             out.update(self.read_block(start, count))
@@ -107,7 +110,9 @@ class ModbusAccess(ParamAccess):
         return tuple(blocks)
 
     def write(self, name: str, value: int, *, idempotent: bool = True) -> None:
-        reg = self.table[name]
+        reg = self._registers.get(name) if type(name) is str else None
+        if reg is None:
+            reg = self.table[name]
         words = reg.to_words(value)
         if len(words) == 1:
             self.link.write_register(self.slave, reg.address, words[0], idempotent=idempotent)

@@ -115,8 +115,9 @@ class ErobDriver(JointDriver):
 
     def _validate(self, **values: int | None) -> None:
         """Range-check every value of a command before its first write (nothing sent on error)."""
+        cache = self._cache
         for name, value in values.items():
-            if value is not None:
+            if value is not None and cache.get(name) != value:  # what the drive holds was checked
                 self.params[name].check(value)
 
     def forget(self) -> None:

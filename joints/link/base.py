@@ -96,6 +96,11 @@ class Rule(abc.ABC, Generic[M]):
     def encode(self, message: Any) -> Any:
         """The frame for ``message``; raises :class:`~joints.errors.EncodeError` before anything is sent."""
 
+    def check(self, message: Any) -> None:
+        """Raise what :meth:`encode` would raise for ``message``, without building the frame (the
+        direct path, which carries no bytes)."""
+        self.encode(message)
+
     @abc.abstractmethod
     def expects_reply(self, request: Any) -> bool:
         """Whether ``request`` gets a reply (broadcasts and send-only frames do not)."""
@@ -193,6 +198,8 @@ class Link(Generic[M]):
         self.retries_used = 0
         self.callback_errors = 0
         self.late_discarded = 0  #: frames discarded as late replies after a failed attempt
+        #: requests go to an in-process peer as objects (no frame is built unless traced)
+        self._direct: DirectFraming[M] | None = framing if isinstance(framing, DirectFraming) else None
 
     @property
     def transport(self) -> Any:
@@ -210,7 +217,11 @@ class Link(Generic[M]):
         :class:`~joints.errors.OutcomeUnknown` (see :func:`outcome_unknown`): the drive may have
         executed it. A refusal (:class:`~joints.errors.DeviceRejected`) is an answer.
         """
-        frame = self.rule.encode(request)  # raises EncodeError before anything is sent
+        if self._direct is not None and self.trace is None:  # no bytes to carry or to trace: checks only
+            self.rule.check(request)  # raises EncodeError before anything is sent
+            frame = None
+        else:
+            frame = self.rule.encode(request)  # raises EncodeError before anything is sent
         attempts = 1 + (self.policy.retries if idempotent else 0)
         with self._lock:
             last: Exception | None = None
@@ -285,13 +296,23 @@ class Link(Generic[M]):
     # -- internals --------------------------------------------------------------------------
     def _once(self, request: Any, frame: Any) -> M | None:
         rule, framing = self.rule, self.framing
-        self._drain()
+        direct = self._direct if self.trace is None else None
+        if direct is None or direct.pending():
+            self._drain()
         self.transactions += 1
         if self.trace is not None:
+            if frame is None:  # tracing started after the request was checked
+                frame = rule.encode(request)
             self._record("tx", self._bytes(frame), rule.describe(request), self._ident(frame),
                          rule.address(request))
         rule.before_send(framing, request, frame)
-        framing.write(request, frame)
+        if direct is not None:  # the peer answers at once: a matching reply needs no waiting
+            reply = direct.exchange(request)
+            if reply is not None and rule.expects_reply(request) and rule.is_reply(request, reply):
+                return reply
+            direct.put(reply)  # what the byte path would receive next
+        else:
+            framing.write(request, frame)
         if not rule.expects_reply(request):
             return None
         timeout = self.policy.timeout
@@ -440,9 +461,21 @@ class DirectFraming(Framing[M]):
         self._queue: deque[M] = deque()
 
     def write(self, message: Any, frame: Any) -> None:
-        reply = self.peer.exchange(message)
+        self.put(self.peer.exchange(message))
+
+    def exchange(self, message: Any) -> M | None:
+        """The peer's reply to ``message`` (None: it stays silent), not queued."""
+        reply: M | None = self.peer.exchange(message)
+        return reply
+
+    def put(self, reply: M | None) -> None:
+        """Queue ``reply`` to be received (None: nothing)."""
         if reply is not None:
             self._queue.append(reply)
+
+    def pending(self) -> bool:
+        """Replies are waiting to be received."""
+        return bool(self._queue)
 
     def receive(self, deadline: float, *, settle: bool = True) -> M | FrameError | None:
         return self._queue.popleft() if self._queue else None

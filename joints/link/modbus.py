@@ -45,6 +45,11 @@ class ModbusRule(Rule[Any]):
             raise EncodeError(f"a read cannot be broadcast (slave 0 never answers): {_describe(message)}")
         return frame
 
+    def check(self, message: Any) -> None:
+        mb.check(message)
+        if message.slave == BROADCAST and isinstance(message, _READS):
+            raise EncodeError(f"a read cannot be broadcast (slave 0 never answers): {_describe(message)}")
+
     def expects_reply(self, request: Any) -> bool:
         return request.slave != BROADCAST  # type: ignore[no-any-return]
 

@@ -40,7 +40,8 @@ Conventions the manuals leave open (documented firmware choices):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from typing import Any
 
 from joints.devices.erob import faults
 from joints.devices.erob.params import EROB_PARAMS
@@ -54,8 +55,17 @@ from joints.devices.erob.registers import (
 )
 from joints.devices.erob.state import ENABLE_DELAY, ENABLED, DriveState, Event
 from joints.devices.erob.state import step as transition
-from joints.devices.motion import Arrival, move_step, ramp
 from joints.errors import ParameterRefused, Refusal
+from joints.sim import erob_kernel as K
+from joints.sim.erob_kernel import (
+    COUNTS_PER_RAD,
+    FOLLOWING_ERROR,
+    OVER_TEMPERATURE,
+    POSITION_LIMIT,
+    SPEED_ERROR,
+    STALL,
+    SUPERVISION_PERIOD,
+)
 from joints.sim.firmware import Firmware
 
 __all__ = [
@@ -72,7 +82,6 @@ __all__ = [
     "power_on_defaults",
 ]
 
-COUNTS_PER_RAD = COUNTS_PER_REV / (2.0 * math.pi)
 ESTOP_TIME = 0.04  #: s, emergency stop decelerates within this (manual: < 50 ms)
 #: parameters whose values _cache_settings() turns into loop constants (a write to any other
 #: parameter, e.g. a target, does not need the recomputation)
@@ -84,13 +93,7 @@ _CACHED_SETTINGS = frozenset((
 ))
 _TORQUE = int(OperationMode.TORQUE)
 _SPEED = int(OperationMode.SPEED)
-SUPERVISION_PERIOD = 0.002  #: s between the drive's slow tasks (stall, thermal, settle timer)
-
-FOLLOWING_ERROR = 0x8611
-SPEED_ERROR = 0x8400
-STALL = 0x7121
-POSITION_LIMIT = 0x8612
-OVER_TEMPERATURE = 0x4310
+__all__ += ["SUPERVISION_PERIOD"]
 
 EMULATOR_FAULTS = {
     FOLLOWING_ERROR: "position following error above max_position_error (0x00B9)",
@@ -157,29 +160,74 @@ def power_on_defaults(profile: ErobProfile, address: int) -> dict[str, int]:
 #: only the CAN custom protocol reaches (node id, jerk, ...) included.
 _SETTINGS = tuple(p.name for p in EROB_PARAMS if p.access.value == "R/W")
 _POSITION = int(OperationMode.POSITION)
-_READY, _ENABLING, _REFUSED_ON = DriveState.READY, DriveState.ENABLING, DriveState.REFUSED_ON
-ARRIVAL_WINDOW = 1.0  #: counts: a move closer than this at a speed one period can stop has arrived
-_ON_STEP = Arrival.ON_STEP
+ARRIVAL_WINDOW = K.ARRIVAL_WINDOW
+_STATUS_INDEX = {name: i for i, name in enumerate(K.STATUS_NAMES)}
 
 
-@dataclass
-class _Profile:
-    """State of the trapezoidal profile generator (counts, count/s)."""
+def _column(k: int, doc: str = "") -> property:
+    """A float attribute that is column ``k`` of the firmware's row."""
 
-    active: bool = False
-    target: float = 0.0
-    continuous: bool = False  #: run at profile speed until stopped
-    stopping: bool = False  #: decelerating to standstill (stop command)
-    rate: float = 0.0  #: deceleration override (emergency stop)
+    def get(self: ErobFirmware) -> float:
+        return float(self._get(k))
 
+    def put(self: ErobFirmware, value: float) -> None:
+        self._row[k] = float(value)
+
+    return property(get, put, doc=doc)
+
+
+def _flag(k: int, doc: str = "") -> property:
+    """A bool attribute held as 0.0 / 1.0 in column ``k``."""
+
+    def get(self: ErobFirmware) -> bool:
+        return bool(self._get(k) != 0.0)
+
+    def put(self: ErobFirmware, value: bool) -> None:
+        self._row[k] = 1.0 if value else 0.0
+
+    return property(get, put, doc=doc)
+
+
+class _Generator:
+    """The profile generator's state (columns of the firmware's row), as attributes."""
+
+    __slots__ = ("_fw",)
+
+    def __init__(self, fw: ErobFirmware) -> None:
+        self._fw = fw
+
+    @property
+    def active(self) -> bool:
+        return bool(self._fw._get(K.G_ACTIVE) != 0.0)
+
+    @property
+    def target(self) -> float:
+        return float(self._fw._get(K.G_TARGET))
+
+    @property
+    def continuous(self) -> bool:
+        return bool(self._fw._get(K.G_CONTINUOUS) != 0.0)
+
+    @property
+    def stopping(self) -> bool:
+        return bool(self._fw._get(K.G_STOPPING) != 0.0)
+
+    @property
+    def rate(self) -> float:
+        return float(self._fw._get(K.G_RATE))
 
 
 class ErobFirmware(Firmware):
     """One eRob's firmware, coupled to one simulated joint.
 
     ``address`` is the power-on value of ``modbus_address``; ``inertia`` the J the drive's gains
-    are tuned for (default: the profile's rotor inertia at the output).
+    are tuned for (default: the profile's rotor inertia at the output). The per-substep loops
+    are :func:`joints.sim.erob_kernel.step` on the firmware's row (:attr:`KERNEL` rows of
+    :data:`~joints.sim.erob_kernel.WIDTH` floats), which a world adopts into its table.
     """
+
+    #: the kernel rows this twin steps (see :mod:`joints.sim.stepping`)
+    KERNEL = "erob"
 
     #: motion commands: the drive acts on them ``command_delay`` (the profile's) after they arrive
     DELAYED = frozenset((
@@ -197,28 +245,32 @@ class ErobFirmware(Firmware):
         ambient: float = 30.0,
     ) -> None:
         super().__init__(EROB_PARAMS, values=power_on_defaults(profile, address))
+        self._bind_row([0.0] * K.WIDTH)
         self.profile = profile
         self.multi_turn = multi_turn
         self.ambient = ambient
         self.inertia = inertia if inertia is not None else profile.armature  #: J the drive tunes for
         self.kt = profile.torque_constant
         self.command_delay = profile.command_delay
-        self.time = 0.0
+        self.gen = _Generator(self)
         self.computed.update({
             "actual_position": self.counts,
-            "given_position": lambda: round(self.p_ref) + self.offset,
-            "position_error": lambda: round(self.p_ref - self.pos),
-            "given_speed": lambda: round(self.v_cmd if self.state in ENABLED else 0.0),
-            "current_speed": lambda: round(self.vel),
-            "speed_error": lambda: round((self.v_cmd - self.vel) if self.state in ENABLED else 0.0),
-            "given_current": lambda: round(self.i_cmd),
-            "motor_current": lambda: round(self.i_out),
-            "part_of_power_temperature": lambda: round(self.temperature),
-            "torque_sensor_value": lambda: round(self.i_out * self.kt),
-            "error_code": lambda: self.fault,
+            "given_position": lambda: round(self._get(K.P_REF)) + self.offset,
+            "position_error": lambda: round(self._get(K.P_REF) - self._get(K.POS)),
+            "given_speed": lambda: round(self._get(K.V_CMD) if K.is_enabled(self._get(K.STATE)) else 0.0),
+            "current_speed": lambda: round(self._get(K.VEL)),
+            "speed_error": lambda: round((self._get(K.V_CMD) - self._get(K.VEL))
+                                         if K.is_enabled(self._get(K.STATE)) else 0.0),
+            "given_current": lambda: round(self._get(K.I_CMD)),
+            "motor_current": lambda: round(self._get(K.I_OUT)),
+            "part_of_power_temperature": lambda: round(self._get(K.TEMPERATURE)),
+            "torque_sensor_value": lambda: round(self._get(K.I_OUT) * self.kt),
+            "error_code": lambda: int(self._get(K.FAULT_CODE)),
             "motion_status": self._motion_status,
-            "status_of_achieving_position": lambda: int(self._achieve(self._moving())),
+            "status_of_achieving_position": lambda: self._k.achieve(self._row, self._k.moving(self._row)),
         })
+        #: the status functions as made here (the one-call status read stands in for these only)
+        self._own_computed = dict(self.computed)
         self._commands = {
             "enable_the_motor": self._enable_command,
             "start_operating": self._start,
@@ -232,37 +284,120 @@ class ErobFirmware(Firmware):
         }
         self._reset_state()
 
+    # -- the row --------------------------------------------------------------------------------
+    def _bind_row(self, row: Any) -> None:
+        #: the working state (a row of the world's table once a world adopted it)
+        self._row: Any = row
+        if isinstance(row, list):
+            self._get: Callable[[int], float] = row.__getitem__  #: column -> float
+            self._k: Any = K.PY_OPS  #: the kernel helpers as Python
+        else:  # a numpy row: Python floats out, the helpers compiled
+            self._get = row.item
+            self._k = K.compiled_ops()
+
+    def kernel_rows(self) -> list[list[float]]:
+        """The twin's rows as they stand (one: the drive)."""
+        return [[float(x) for x in self._row]]
+
+    def adopt(self, table: Any, first: int) -> None:
+        """Run on row ``first`` of ``table`` from now on (its present state copied there)."""
+        values = self.kernel_rows()[0]
+        row = table[first]
+        for k, x in enumerate(values):
+            row[k] = x
+        self._bind_row(row)
+
+    def kernel_row(self, channel: str | None) -> int:
+        """Which of the twin's rows steps ``channel``'s joint."""
+        return 0
+
+    time = _column(K.TIME, "drive time [s]: the end of the last substep")
+    pos = _column(K.POS, "encoder [count], before the offset")
+    vel = _column(K.VEL, "speed [count/s]")
+    p_ref = _column(K.P_REF)
+    v_ref = _column(K.V_REF)
+    v_cmd = _column(K.V_CMD)
+    i_cmd = _column(K.I_CMD, "mA")
+    i_out = _column(K.I_OUT, "mA")
+    integ = _column(K.INTEG)
+    mode_speed_target = _column(K.MODE_SPEED_TARGET)
+    repeat_home = _column(K.REPEAT_HOME)
+    repeat_leg_to_target = _flag(K.REPEAT_LEG_TO_TARGET)
+    repeat_stop = _flag(K.REPEAT_STOP)
+    dwell_until = _column(K.DWELL_UNTIL)
+    in_window_since = _column(K.IN_WINDOW_SINCE)
+    peak_since = _column(K.PEAK_SINCE)
+    stall_since = _column(K.STALL_SINCE)
+    temperature = _column(K.TEMPERATURE, "power stage [degC]")
+    brake_released = _flag(K.BRAKE_RELEASED, "released by command while the motor is off: nothing holds the joint")
+    last_frame = _column(K.LAST_FRAME)
+    started = _flag(K.STARTED)
+    #: a set-point stream drives the position reference (CiA 402 CSP/IP over CANopen): between
+    #: set-points the reference moves on at v_ref (linear interpolation); set by a protocol front
+    streaming = _flag(K.STREAMING)
+    enabled_at = _column(K.ENABLED_AT)
+    watchdog = _column(K.WATCHDOG, "s, 0 = off")
+    kp = _column(K.KP)
+    kv = _column(K.KV)
+    ki = _column(K.KI)
+    vmax = _column(K.VMAX)
+
+    @property
+    def state(self) -> DriveState:
+        return K.STATES[int(self._get(K.STATE))]
+
+    @state.setter
+    def state(self, value: DriveState) -> None:
+        self._row[K.STATE] = float(K.STATES.index(value))
+
+    @property
+    def fault(self) -> int:
+        """The latched error code (0x0027 or a fault), 0 = none."""
+        return int(self._get(K.FAULT_CODE))
+
+    @fault.setter
+    def fault(self, value: int) -> None:
+        self._row[K.FAULT_CODE] = float(value)
+
+    @property
+    def mode(self) -> int:
+        """The operation mode in force (0x0040)."""
+        return int(self._get(K.MODE))
+
+    @property
+    def offset(self) -> int:
+        """The position offset in force (0x0052)."""
+        return int(self._get(K.OFFSET))
+
+    @property
+    def brake_hold(self) -> float | None:
+        """Where the brake holds [count]; None: where the joint is when it engages."""
+        at = float(self._get(K.BRAKE_HOLD))
+        return None if math.isnan(at) else at
+
+    @brake_hold.setter
+    def brake_hold(self, value: float | None) -> None:
+        self._row[K.BRAKE_HOLD] = math.nan if value is None else float(value)
+
     # -- power-on state ---------------------------------------------------------------------
     def _reset_state(self) -> None:
-        self.state = DriveState.MOTOR_OFF
-        self.enabled_at = -1.0
-        self.fault = 0  #: the latched error code (0x0027 or a fault), 0 = none
-        self.pos = 0.0  # counts (encoder, before offset)
-        self.vel = 0.0  # count/s
-        self.p_ref = 0.0  # counts (setpoint, before offset)
-        self.v_ref = 0.0  # count/s
-        self.v_cmd = 0.0
-        self.i_cmd = 0.0  # mA
-        self.i_out = 0.0  # mA
-        self.integ = 0.0
-        self.mode_speed_target = 0.0
-        self.gen = _Profile()
-        self.repeat_home = 0.0
-        self.repeat_leg_to_target = True
-        self.repeat_stop = False
-        self.dwell_until = -1.0
-        self.in_window_since = -1.0
-        self.peak_since = -1.0
-        self.stall_since = -1.0
-        self.temperature = self.ambient
-        self.brake_hold: float | None = None
-        self.brake_released = False  #: released by command while the motor is off: nothing holds the joint
-        self.last_frame = -1.0
-        self.started = False
-        #: a set-point stream drives the position reference (CiA 402 CSP/IP over CANopen): between
-        #: set-points the reference moves on at v_ref (linear interpolation); set by a protocol front
-        self.streaming = False
-        self._sup = 0.0
+        s = self._row
+        for k in range(K.WIDTH):
+            s[k] = 0.0
+        s[K.STATE] = K.MOTOR_OFF
+        s[K.ENABLED_AT] = -1.0
+        self._k.gen_clear(s)
+        s[K.REPEAT_LEG_TO_TARGET] = 1.0
+        s[K.DWELL_UNTIL] = -1.0
+        s[K.IN_WINDOW_SINCE] = -1.0
+        s[K.PEAK_SINCE] = -1.0
+        s[K.STALL_SINCE] = -1.0
+        s[K.TEMPERATURE] = float(self.ambient)
+        s[K.BRAKE_HOLD] = math.nan
+        s[K.LAST_FRAME] = -1.0
+        s[K.KT] = float(self.kt)
+        s[K.RATED_CURRENT] = float(self.profile.rated_current)
+        s[K.AMBIENT] = float(self.ambient)
         self._cache_settings()
 
     def power_cycle(self) -> None:
@@ -271,46 +406,65 @@ class ErobFirmware(Firmware):
         super().power_cycle()
         self._reset_state()
         # absolute encoder: a single-turn module keeps only the angle within one turn
-        self.pos = pos if self.multi_turn else pos % COUNTS_PER_REV
-        self.p_ref = self.pos
+        s = self._row
+        s[K.POS] = pos if self.multi_turn else pos % COUNTS_PER_REV
+        s[K.P_REF] = s[K.POS]
 
     @property
     def enabled(self) -> bool:
         """The motor is enabled (brake released or releasing)."""
-        return self.state in ENABLED
+        return K.is_enabled(self._get(K.STATE))
 
-    # -- typed helpers ----------------------------------------------------------------------
+    # -- settings -----------------------------------------------------------------------------
     def _cache_settings(self) -> None:
         g = self.values
-        self.mode = g["operation_mode"]
-        self.watchdog = g["modbus_communication_timeout_duration"] * 1e-3  # s, 0 = off
-        self.max_position_error = g["max_position_error"]
-        self.max_speed_error = g["max_speed_error"]
-        self.offset = g["position_offset"]
-        self.kp = g["position_loop_gain"] / 10.0
+        s = self._row
+        s[K.MODE] = float(g["operation_mode"])
+        s[K.WATCHDOG] = g["modbus_communication_timeout_duration"] * 1e-3  # s, 0 = off
+        s[K.MAX_POSITION_ERROR] = float(g["max_position_error"])
+        s[K.MAX_SPEED_ERROR] = float(g["max_speed_error"])
+        s[K.OFFSET] = float(g["position_offset"])
+        s[K.KP] = g["position_loop_gain"] / 10.0
         bw = float(g["speed_loop_gain"])
         ti = g["speed_loop_integral"] * 1e-4
         # torque per (count/s) of speed error -> current per (count/s) in mA
-        self.kv = self.inertia * bw / COUNTS_PER_RAD / self.kt * 1000.0
-        self.ki = self.kv / ti if ti > 0 else 0.0
-        self.kff = self.inertia / COUNTS_PER_RAD / self.kt * 1000.0  # mA per count/s^2
-        self.i_cont = float(g["continuous_current"])
-        self.i_peak = float(max(g["peak_current"], 1))
-        self.i_max = float(max(g["max_motor_current"], 1))
-        self.peak_time = g["peak_current_time"] * 1e-3
-        self.i_lim = min(self.i_peak, self.i_max)
+        kv = self.inertia * bw / COUNTS_PER_RAD / self.kt * 1000.0
+        s[K.KV] = kv
+        s[K.KI] = kv / ti if ti > 0 else 0.0
+        s[K.KFF] = self.inertia / COUNTS_PER_RAD / self.kt * 1000.0  # mA per count/s^2
+        s[K.I_CONT] = float(g["continuous_current"])
+        i_peak = float(max(g["peak_current"], 1))
+        i_max = float(max(g["max_motor_current"], 1))
+        s[K.I_PEAK] = i_peak
+        s[K.I_MAX] = i_max
+        s[K.PEAK_TIME] = g["peak_current_time"] * 1e-3
+        s[K.I_LIM] = min(i_peak, i_max)
         # holding brake: ~100 Hz stiffness against the drive's own inertia, damping ratio 0.7,
         # slipping above twice the rated torque
-        self.brake_k = self.inertia * 400.0**2 / 4
-        self.brake_c = 2.0 * 0.7 * math.sqrt(self.brake_k * self.inertia)
-        self.brake_hold_torque = 2.0 * self.profile.rated_torque
-        self.vmax = float(max(g["max_speed"], 1))
-        self.amax = float(max(g["max_acceleration"], 1))
+        brake_k = self.inertia * 400.0**2 / 4
+        s[K.BRAKE_K] = brake_k
+        s[K.BRAKE_C] = 2.0 * 0.7 * math.sqrt(brake_k * self.inertia)
+        s[K.BRAKE_HOLD_TORQUE] = 2.0 * self.profile.rated_torque
+        vmax = float(max(g["max_speed"], 1))
+        amax = float(max(g["max_acceleration"], 1))
+        s[K.VMAX] = vmax
+        s[K.AMAX] = amax
         # profile parameters as floats for the per-substep loops (refreshed on every settings write)
-        self.acc = float(g["profile_acceleration"]) or self.amax
-        self.dec = float(g["profile_deceleration"]) or self.amax
-        self.speed = float(g["profile_speed"])
-        self.vprof = min(abs(self.speed), self.vmax)
+        s[K.ACC] = float(g["profile_acceleration"]) or amax
+        s[K.DEC] = float(g["profile_deceleration"]) or amax
+        speed = float(g["profile_speed"])
+        s[K.SPEED] = speed
+        s[K.VPROF] = min(abs(speed), vmax)
+        for name, k in K.PARAMS.items():
+            s[k] = float(g[name])
+
+    def set(self, name: str, value: int) -> None:
+        super().set(name, value)
+        k = K.PARAMS.get(name)
+        if k is not None:
+            self._row[k] = float(self.values[name])
+        elif name in _CACHED_SETTINGS or name == "operation_mode":
+            self._cache_settings()
 
     def gain_params(self, channel: str | None = None) -> dict[str, str]:
         """The loop-gain parameters (for domain randomisation: joints.sim.world.World.perturb)."""
@@ -318,23 +472,57 @@ class ErobFirmware(Firmware):
 
     def place(self, q: float) -> None:
         """The joint is at ``q`` [rad] and at rest (start state, reset): encoder, setpoint and brake follow."""
-        self.pos = self.p_ref = q * COUNTS_PER_RAD
-        self.vel = self.v_ref = 0.0
-        self.brake_hold = self.pos
+        s = self._row
+        s[K.POS] = s[K.P_REF] = q * COUNTS_PER_RAD
+        s[K.VEL] = s[K.V_REF] = 0.0
+        s[K.BRAKE_HOLD] = s[K.POS]
+
+    def reader(self, names: Sequence[str]) -> Callable[[], list[int]]:
+        """A prepared read (:meth:`Firmware.reader`); a block with the status values computes them
+        all in one kernel call (:func:`joints.sim.erob_kernel.status`, the same values)."""
+        generic = super().reader(names)
+        names = tuple(names)
+        index = _STATUS_INDEX
+        own = self._own_computed
+        if "status_of_achieving_position" not in names or any(
+                n in self.computed and (n not in index or self.computed[n] is not own.get(n)) for n in names):
+            return generic  # other computed values, or ones replaced since (tests count calls)
+        types = self._type_range
+        entries = tuple((index.get(n, -1), n, *types[n]) for n in names)
+        values = self.values
+        repetitive = int(MotionMode.REPETITIVE)
+
+        def read() -> list[int]:
+            self.on_read(names)
+            st = self._k.status(self._row, values["motion_mode"] == repetitive)
+            out: list[int] = []
+            for i, name, lo, hi in entries:
+                if i < 0:
+                    out.append(values[name])
+                    continue
+                v = st[i]
+                out.append(lo if v < lo else min(v, hi))  # saturate, never wrap
+            return out
+
+        return read
 
     def counts(self) -> int:
         """Actual position value: encoder counts + position offset."""
-        return round(self.pos) + self.offset
+        return round(self._get(K.POS)) + self.offset
 
     # -- what the fronts call ---------------------------------------------------------------
     def frame_received(self) -> None:
-        self.last_frame = self.time
+        s = self._row
+        s[K.LAST_FRAME] = s[K.TIME]
 
     def check_write(self, name: str, value: int) -> None:
-        if name == "torque_control_mode_max_speed" and self.state in ENABLED:
+        if name == "torque_control_mode_max_speed" and self.enabled:
             raise ParameterRefused(Refusal.STATE, name, "torque-mode max speed only while disabled")
 
     def on_write(self, name: str, value: int) -> None:
+        k = K.PARAMS.get(name)
+        if k is not None:
+            self._row[k] = float(value)
         command = self._commands.get(name)
         if command is not None:
             command(value)
@@ -347,21 +535,15 @@ class ErobFirmware(Firmware):
             if self.mode == _TORQUE and value:
                 self._ready_or_refuse()
         elif name == "operation_mode":
-            self.mode = value
+            self._row[K.MODE] = float(value)
             self._change_mode()
 
     # -- state machine ----------------------------------------------------------------------
     def _ready(self) -> bool:
-        state = self.state
-        if state is _READY:
-            return True
-        if state is _ENABLING and self.time >= self.enabled_at + ENABLE_DELAY - 1e-9:
-            self.state = _READY  # transition(ENABLING, BRAKE_RELEASED)
-            return True
-        return False
+        return bool(self._k.ready(self._row))
 
     def _ready_or_refuse(self) -> bool:
-        if self._ready():
+        if self._k.ready(self._row):
             return True
         # Not enabled / brake not released yet: no motion, the error is visible.
         self.state = transition(self.state, Event.MOTION) or self.state
@@ -369,19 +551,14 @@ class ErobFirmware(Firmware):
         return False
 
     def _raise_fault(self, code: int) -> None:
-        new = transition(self.state, Event.PROTECTION)
-        if new is None:  # an error is latched already
-            return
-        self.fault = code
-        self.state = new
-        self._motor_off()
+        self._k.raise_fault(self._row, float(code))
 
     def _enable_command(self, value: int) -> None:
         if value:
             self._enable()
         else:
             self.state = transition(self.state, Event.DISABLE) or self.state
-            self._motor_off()
+            self._k.motor_off(self._row)
 
     def _enable(self) -> None:
         state = self.state
@@ -390,17 +567,18 @@ class ErobFirmware(Firmware):
             return  # a faulted drive does not enable until errors are cleared
         self.state = new
         if state not in ENABLED:
-            self.enabled_at = self.time
-            self.p_ref = self.pos
-            self.v_ref = 0.0
-            self.integ = 0.0
-            self.gen = _Profile()
-            self.brake_hold = None
-            self.brake_released = False
+            s = self._row
+            s[K.ENABLED_AT] = s[K.TIME]
+            s[K.P_REF] = s[K.POS]
+            s[K.V_REF] = 0.0
+            s[K.INTEG] = 0.0
+            self._k.gen_clear(s)
+            s[K.BRAKE_HOLD] = math.nan
+            s[K.BRAKE_RELEASED] = 0.0
 
     def ready(self) -> bool:
         """The motor is on and its brake released: motion commands act now (for protocol fronts)."""
-        return self._ready()
+        return bool(self._k.ready(self._row))
 
     def trip(self, code: int) -> None:
         """A protection a protocol front supervises (CANopen life guarding) trips with ``code``."""
@@ -409,20 +587,12 @@ class ErobFirmware(Firmware):
     def _release_brake(self, value: int) -> None:
         """Release the holding brake of a motor that is off (CAN 0x014F): the joint moves freely until
         the next enable or disable hands the brake back to the drive."""
-        if self.state not in ENABLED:
-            self.brake_released = True
+        if not self.enabled:
+            self._row[K.BRAKE_RELEASED] = 1.0
 
     def _motor_off(self) -> None:
         """Disable / fault: the loops stop and the brake engages where the joint is."""
-        self.gen = _Profile()
-        self.v_ref = 0.0
-        self.streaming = False
-        self.mode_speed_target = 0.0
-        self.i_cmd = self.i_out = 0.0
-        self.integ = 0.0
-        self.started = False
-        self.brake_hold = self.pos
-        self.brake_released = False
+        self._k.motor_off(self._row)
 
     def _clear_errors(self, value: int) -> None:
         if value:
@@ -431,19 +601,16 @@ class ErobFirmware(Firmware):
 
     # -- commands ---------------------------------------------------------------------------
     def _change_mode(self) -> None:
-        self.gen = _Profile()
-        self.integ = 0.0
-        self.p_ref = self.pos
-        self.v_ref = self.vel if self.state in ENABLED else 0.0
-        self.mode_speed_target = 0.0
-        self.started = False
+        s = self._row
+        self._k.gen_clear(s)
+        s[K.INTEG] = 0.0
+        s[K.P_REF] = s[K.POS]
+        s[K.V_REF] = s[K.VEL] if K.is_enabled(s[K.STATE]) else 0.0
+        s[K.MODE_SPEED_TARGET] = 0.0
+        s[K.STARTED] = 0.0
 
     def _clamp_target(self, target: float) -> float:
-        lo = self.values["min_position_limit_value"] - self.offset
-        hi = self.values["max_position_limit_value"] - self.offset
-        if lo < hi:
-            return min(max(target, lo), hi)
-        return target
+        return float(self._k.clamp_target(self._row, target))
 
     def _start(self, value: int) -> None:
         v = self.values
@@ -451,323 +618,91 @@ class ErobFirmware(Firmware):
             return
         if not self._ready_or_refuse():
             return
+        s = self._row
         motion = v["motion_mode"]
-        g = self.gen
-        g.stopping = False
-        g.rate = 0.0
-        self.started = True
-        self.in_window_since = -1.0
+        s[K.G_STOPPING] = 0.0
+        s[K.G_RATE] = 0.0
+        s[K.STARTED] = 1.0
+        s[K.IN_WINDOW_SINCE] = -1.0
         if motion == MotionMode.CONTINUOUS:
-            g.active, g.continuous = True, True
+            s[K.G_ACTIVE], s[K.G_CONTINUOUS] = 1.0, 1.0
         elif motion == MotionMode.ABSOLUTE:
             rel = v["target_relative_position"]
             if rel:
-                g.target = self._clamp_target(self.p_ref + rel)
+                s[K.G_TARGET] = self._k.clamp_target(s, s[K.P_REF] + rel)
             else:
-                g.target = self._clamp_target(v["target_absolute_position"] - self.offset)
-            g.active, g.continuous = True, False
+                s[K.G_TARGET] = self._k.clamp_target(s, float(v["target_absolute_position"] - self.offset))
+            s[K.G_ACTIVE], s[K.G_CONTINUOUS] = 1.0, 0.0
         elif motion == MotionMode.REPETITIVE:
-            self.repeat_home = self.p_ref
-            self.repeat_leg_to_target = True
-            self.repeat_stop = False
-            g.target = self._clamp_target(v["target_absolute_position"] - self.offset)
-            g.active, g.continuous = True, False
+            s[K.REPEAT_HOME] = s[K.P_REF]
+            s[K.REPEAT_LEG_TO_TARGET] = 1.0
+            s[K.REPEAT_STOP] = 0.0
+            s[K.G_TARGET] = self._k.clamp_target(s, float(v["target_absolute_position"] - self.offset))
+            s[K.G_ACTIVE], s[K.G_CONTINUOUS] = 1.0, 0.0
         else:  # the parameter's range (0-2) keeps other values out
-            self.started = False
+            s[K.STARTED] = 0.0
 
     def _stop(self, decel: float) -> None:
-        g = self.gen
+        s = self._row
         mode = self.mode
         if mode == _TORQUE:
             # no speed profile in torque mode: the current command goes to zero
-            self.values["target_current"] = 0
+            self._own("target_current", 0)
             return
         if mode == _SPEED:
-            self.mode_speed_target = 0.0
-            self.values["target_speed"] = 0
-        if g.active or self.v_ref:
-            g.active, g.continuous, g.stopping = True, False, True
-            g.rate = float(decel)
-        self.repeat_stop = True
+            s[K.MODE_SPEED_TARGET] = 0.0
+            self._own("target_speed", 0)
+        if s[K.G_ACTIVE] != 0.0 or s[K.V_REF]:
+            s[K.G_ACTIVE], s[K.G_CONTINUOUS], s[K.G_STOPPING] = 1.0, 0.0, 1.0
+            s[K.G_RATE] = float(decel)
+        s[K.REPEAT_STOP] = 1.0
+
+    def _own(self, name: str, value: int) -> None:
+        """The drive changes one of its own parameters (and the loops see it)."""
+        self.values[name] = value
+        k = K.PARAMS.get(name)
+        if k is not None:
+            self._row[k] = float(value)
 
     def _emergency_stop(self, value: int) -> None:
-        self._stop(max(abs(self.v_ref) / ESTOP_TIME, float(self.values["profile_deceleration"])))
-        self.mode_speed_target = 0.0
-        self.values["target_current"] = 0
+        s = self._row
+        self._stop(max(abs(s[K.V_REF]) / ESTOP_TIME, float(self.values["profile_deceleration"])))
+        s[K.MODE_SPEED_TARGET] = 0.0
+        self._own("target_current", 0)
 
     def _stop_repetitive(self, value: int) -> None:
-        self.repeat_stop = True
+        self._row[K.REPEAT_STOP] = 1.0
 
     def _reset_output_encoder(self, value: int) -> None:
-        self.pos = self.pos % COUNTS_PER_REV
-        self.p_ref = self.pos
+        s = self._row
+        s[K.POS] = s[K.POS] % COUNTS_PER_REV
+        s[K.P_REF] = s[K.POS]
 
     def _speed_command(self, value: int) -> None:
         if value and not self._ready_or_refuse():
             return
+        s = self._row
         if value:
-            self.gen = _Profile()  # a new speed command ends a stop ramp in progress
-        self.mode_speed_target = float(max(-self.vmax, min(self.vmax, value)))
+            self._k.gen_clear(s)  # a new speed command ends a stop ramp in progress
+        vmax = s[K.VMAX]
+        s[K.MODE_SPEED_TARGET] = float(max(-vmax, min(vmax, value)))
 
     # -- physics side -----------------------------------------------------------------------
     def step(self, t: float, dt: float, q: float, qd: float) -> float:
         """Run the drive's loops for the substep ending at ``t`` (length ``dt``) with the joint at
-        ``q`` [rad], ``qd`` [rad/s]; return the motor torque at the output [N*m].
-
-        Control loops run every substep; supervision (stall, temperature, the settle timer of
-        0x007A) every :data:`SUPERVISION_PERIOD` of drive time; the communication watchdog every
-        substep.
-        """
-        self.time = t
-        self.pos = q * COUNTS_PER_RAD
-        self.vel = qd * COUNTS_PER_RAD
-        wd = self.watchdog
-        if wd and self.last_frame >= 0 and t - self.last_frame > wd:
-            if self.fault != faults.RS485_TIMEOUT:  # the watchdog's code replaces a latched one
-                self.fault = faults.RS485_TIMEOUT
-                self.state = transition(self.state, Event.WATCHDOG) or DriveState.FAULT
-                self._motor_off()
-            self.last_frame = -1.0
-        self._sup += dt
-        if self._sup >= SUPERVISION_PERIOD - 1e-12:
-            self._supervise(self._sup)
-            self._sup = 0.0
-        state = self.state
-        if state is not _READY:
-            if state is _ENABLING and t >= self.enabled_at + ENABLE_DELAY - 1e-9:
-                self.state = _READY  # transition(ENABLING, BRAKE_RELEASED)
-            else:
-                if state is _ENABLING or state is _REFUSED_ON:
-                    self.p_ref = self.pos  # brake still releasing (or start refused): hold here
-                return self._brake_torque(q, qd)
-        mode = self.mode
-        if mode == _TORQUE:
-            i = self._torque_loop(dt)
-        else:
-            v_prev = self.v_ref
-            pos, vel = self.pos, self.vel
-            if mode == _SPEED:
-                self._speed_ramp(dt)
-                v_ref = v_cmd = self.v_ref
-            else:
-                self._profile_step(dt)
-                v_ref = self.v_ref
-                err = self.p_ref - pos
-                v_cmd = v_ref + self.kp * err
-                lim = self.max_position_error
-                if lim and abs(err) > lim:
-                    self._raise_fault(FOLLOWING_ERROR)
-                    return self._brake_torque(q, qd)
-            vmax = self.vmax
-            if v_cmd > vmax:
-                v_cmd = vmax
-            elif v_cmd < -vmax:
-                v_cmd = -vmax
-            self.v_cmd = v_cmd
-            e = v_cmd - vel
-            slim = self.max_speed_error
-            if slim and abs(v_ref - vel) > slim:
-                self._raise_fault(SPEED_ERROR)
-                return self._brake_torque(q, qd)
-            # PI speed loop plus acceleration feedforward (the current the profile's own
-            # acceleration needs, J x a / kt): without it the integral has to carry every ramp
-            # and the joint overshoots when a ramp ends (an emergency stop bounced back ~8 %)
-            i = self.kv * e + self.ki * self.integ + self.kff * (v_ref - v_prev) / dt
-            if -self.i_cont <= i <= self.i_cont:  # common case: within the continuous current
-                self.peak_since = -1.0
-                lim_i = self.i_lim
-            else:
-                lim_i = self._current_limit(dt, i)
-            if -lim_i < i < lim_i:
-                self.integ += e * dt  # anti-windup: integrate only while unsaturated
-            elif i > lim_i:
-                i = lim_i
-            else:
-                i = -lim_i
-        self.i_cmd = i
-        self.i_out = i
-        return i * 1e-3 * self.kt
-
-    def _supervise(self, period: float) -> None:
-        """The drive's slow tasks: settle timer, stall and thermal protection."""
-        state = self.state
-        on = state is _READY or state is _ENABLING or state is _REFUSED_ON  # in ENABLED (no enum hash per substep)
-        if on and self.started and self.mode == _POSITION:
-            self._achieve(self._moving())  # the settle timer of 0x007A runs on the drive
-        self._stall(period)
-        self._thermal(period, self.i_out if on else 0.0)
-
-    def _brake_torque(self, q: float, qd: float) -> float:
-        """Holding brake: a stiff spring-damper to where it engaged, limited to the rated torque x 2."""
-        self.v_ref = 0.0
-        self.i_cmd = self.i_out = 0.0
-        if self.brake_released:
-            return 0.0
-        at = self.brake_hold
-        if at is None:
-            at = self.brake_hold = self.pos
-        tau = -self.brake_k * (self.pos - at) / COUNTS_PER_RAD - self.brake_c * qd
-        hold = self.brake_hold_torque
-        if tau > hold:
-            return hold
-        if tau < -hold:
-            return -hold
-        return tau
-
-    def _current_limit(self, dt: float, i: float) -> float:
-        peak = min(self.i_peak, self.i_max)
-        if abs(i) > self.i_cont and self.peak_time > 0:
-            if self.peak_since < 0:
-                self.peak_since = self.time
-            if self.time - self.peak_since > self.peak_time:
-                return self.i_cont
-        else:
-            self.peak_since = -1.0
-        return peak
-
-    def _torque_loop(self, dt: float) -> float:
-        """Current = target current, capped by a PI speed limiter at the torque-mode max speed."""
-        v = self.values
-        target = float(v["target_current"])
-        vlim = min(float(v["torque_control_mode_max_speed"]) or self.vmax, self.vmax)
-        self.v_ref = self.vel
-        self.p_ref = self.pos
-        if target == 0.0:
-            self.integ = 0.0
-            return 0.0
-        sgn = 1.0 if target > 0 else -1.0
-        e = vlim - sgn * self.vel  # > 0 while below the limit in the commanded direction
-        cap = self.kv * e + self.ki * self.integ  # magnitude the speed limiter allows
-        if abs(target) >= cap:
-            mag = cap
-            self.integ += e * dt
-        else:
-            mag = abs(target)
-            if self.ki:
-                # keep the limiter's integral where it would take over smoothly (anti-windup), but
-                # never below 0 while the proportional part alone allows more than the target: a cap
-                # held exactly at the target clipped every rise of the command (a joint accelerating
-                # lowers e), by ~20 % of the accelerating torque every other substep
-                self.integ = min(self.integ, max(0.0, (abs(target) - self.kv * e) / self.ki))
-        i = sgn * mag
-        lim = self._current_limit(dt, i)
-        return max(-lim, min(lim, i))
-
-    def _speed_ramp(self, dt: float) -> None:
-        g = self.gen
-        v = self.v_ref
-        if g.stopping:  # Stop Operating / Emergency Stop: to standstill with the stop's deceleration
-            new_v = ramp(v, 0.0, self.acc, g.rate or self.dec, dt)
-        else:
-            new_v = ramp(v, self.mode_speed_target, self.acc, self.dec, dt)
-        self.p_ref += 0.5 * (v + new_v) * dt
-        self.v_ref = new_v
-        if g.stopping and new_v == 0.0:
-            self.gen = _Profile()
-
-    def _profile_step(self, dt: float) -> None:
-        g = self.gen
-        if not g.active:
-            if self.streaming:
-                self.p_ref += self.v_ref * dt  # between two streamed set-points
-                return
-            if self.dwell_until >= 0 and self.time >= self.dwell_until:
-                self.dwell_until = -1.0
-                self._next_repetitive_leg()
-            return
-        v = self.v_ref
-        decel = g.rate or self.dec
-        if g.stopping:
-            new_v = ramp(v, 0.0, self.acc, decel, dt)
-            self.p_ref += 0.5 * (v + new_v) * dt
-            self.v_ref = new_v
-            if new_v == 0.0:
-                g.active = False
-                g.stopping = False
-                self.started = False
-                self.dwell_until = -1.0
-            return
-        if g.continuous:
-            target_v = math.copysign(self.vprof, self.speed) if self.speed else 0.0
-            # the acceleration whenever the target is faster than the present speed, even on a
-            # reversal (speed mode decelerates to the reversal): kept as calibrated
-            rate = self.acc if abs(target_v) > abs(v) else decel
-            new_v = ramp(v, target_v, rate, rate, dt)
-            self.p_ref += 0.5 * (v + new_v) * dt
-            self.v_ref = new_v
-            return
-        self.p_ref, self.v_ref, arrived = move_step(self.p_ref, v, g.target, self.vprof, self.acc, decel, dt,
-                                                    ARRIVAL_WINDOW, _ON_STEP)
-        if arrived:
-            self._leg_done()
-
-    def _leg_done(self) -> None:
-        g = self.gen
-        g.active = False
-        repetitive = self.values["motion_mode"] == MotionMode.REPETITIVE
-        if repetitive and self.started and not self.repeat_stop:
-            self.dwell_until = self.time + self.values["dwell_time"] * 5e-5
-        else:
-            self.started = not repetitive and self.started
-
-    def _next_repetitive_leg(self) -> None:
-        if self.repeat_stop:
-            return
-        self.repeat_leg_to_target = not self.repeat_leg_to_target
-        g = self.gen
-        g.target = (
-            self._clamp_target(self.values["target_absolute_position"] - self.offset)
-            if self.repeat_leg_to_target
-            else self.repeat_home
-        )
-        g.active, g.continuous, g.stopping = True, False, False
-
-    def _stall(self, dt: float) -> None:
-        v = self.values
-        sc, ss, st = v["struck_current"], v["struck_speed"], v["struck_time"]
-        if sc and st and abs(self.i_out) > sc and abs(self.vel) < ss:
-            if self.stall_since < 0:
-                self.stall_since = self.time
-            elif self.time - self.stall_since > st * 5e-5:
-                self.stall_since = -1.0
-                self._raise_fault(STALL)
-        else:
-            self.stall_since = -1.0
-
-    def _thermal(self, dt: float, i_ma: float) -> None:
-        # first-order model: rated current gives +40 K at steady state, time constant 300 s
-        rise = 40.0 * (i_ma * 1e-3 / self.profile.rated_current) ** 2
-        self.temperature += (self.ambient + rise - self.temperature) * dt / 300.0
-        lim = self.values["power_temperature_protection_value"]
-        if lim and self.temperature > lim:
-            self._raise_fault(OVER_TEMPERATURE)
+        ``q`` [rad], ``qd`` [rad/s]; return the motor torque at the output [N*m]
+        (:func:`joints.sim.erob_kernel.step` on this drive's row; a world steps all rows at once)."""
+        return float(self._k.step(self._row, t, dt, q, qd))
 
     # -- status values (computed when read) -------------------------------------------------
     def _motion_status(self) -> int:
-        if self.repeat_stop and self.values["motion_mode"] == MotionMode.REPETITIVE and self.gen.active:
+        s = self._row
+        if s[K.REPEAT_STOP] != 0.0 and self.values["motion_mode"] == MotionMode.REPETITIVE and s[K.G_ACTIVE] != 0.0:
             return int(MotionStatus.STOP_REPETITIVE)
-        return int(MotionStatus.MOVING if self._moving() else MotionStatus.STOP)
+        return int(MotionStatus.MOVING if self._k.moving(s) else MotionStatus.STOP)
 
     def _moving(self) -> bool:
-        if self.gen.active or self.dwell_until >= 0:
-            return True
-        state = self.state
-        return (state is _READY or state is _ENABLING or state is _REFUSED_ON) and abs(self.v_ref) > 0.5
+        return bool(self._k.moving(self._row))
 
     def _achieve(self, moving: bool) -> AchieveStatus:
-        if not self._ready():
-            return AchieveStatus.MOTOR_OFF
-        if self.mode != _POSITION or not self.started:
-            return AchieveStatus.OPERATION if moving else AchieveStatus.MOTOR_ON
-        if moving:
-            self.in_window_since = -1.0
-            return AchieveStatus.OPERATION
-        window = self.values["position_reaches_set_precision"]
-        if abs(self.gen.target - self.pos) <= window:
-            if self.in_window_since < 0:
-                self.in_window_since = self.time
-            if self.time - self.in_window_since >= self.values["time_setting_of_achieving_position"] * 5e-5:
-                return AchieveStatus.TARGET_REACHED
-            return AchieveStatus.WAIT_TIME
-        self.in_window_since = -1.0
-        return AchieveStatus.WAIT_TIME
+        return AchieveStatus(self._k.achieve(self._row, moving))

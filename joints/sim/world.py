@@ -22,6 +22,8 @@ has end-stop inputs (:class:`EndStops`) the motor angles where the flag reaches 
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import math
 import threading
 from collections.abc import Callable, Mapping, Sequence
@@ -32,6 +34,7 @@ from typing import Any, Protocol, runtime_checkable
 
 from joints.clock import ManualClock
 from joints.errors import ConfigError, MissingDependencyError
+from joints.sim import kernel, stepping
 
 #: s a measured joint's last measurement is extrapolated at its velocity (then it is held)
 KINEMATIC_HORIZON = 0.05
@@ -66,6 +69,9 @@ def resolve_model(name: str | Path, base_dir: Path | None = None) -> Path:
             return c
     shipped = sorted({f.name for d in model_dirs() if d.is_dir() for f in d.glob("*.xml")})
     raise ConfigError(f"model {str(name)!r} not found", key="sim.model", allowed=shipped)
+
+
+log = logging.getLogger("joints.sim")
 
 
 class JointProfile(Protocol):
@@ -224,8 +230,10 @@ class World:
 
     def __init__(self, model: str | Path, drives: Sequence[DriveSpec], *, buses: Mapping[str, BusSpec],
                  timestep: float = 0.001, base_dir: Path | None = None,
-                 kinematic: Mapping[str, str] | None = None) -> None:
+                 kinematic: Mapping[str, str] | None = None, jit: bool | None = None) -> None:
         mj = _mujoco()
+        #: the drives' loops run compiled (numba; :mod:`joints.sim.kernel`) - default: when installed
+        self.compiled = kernel.default_mode() if jit is None else bool(jit and kernel.AVAILABLE)
         self.mujoco = mj
         self.path = resolve_model(model, base_dir)
         spec = mj.MjSpec.from_file(str(self.path))
@@ -293,7 +301,10 @@ class World:
             if isinstance(stepper, EndStops):
                 stepper.set_end_stops(*self._switches(d.mjcf_joint, qa, r))
             stepper.place(float(self.data.qpos[qa]) * r)
+        #: per joint, what steps it: (step function, qpos address, dof address, actuator, motor rad
+        #: per joint unit)
         self._bind = [(b.stepper.step, b.qadr, b.dadr, b.aid, b.ratio) for b in self._bound]
+        self._bind_seen = list(self._bind)
         timed = [bus for bus in self.buses.values() if isinstance(bus, TimedDeviceBus)]
         for bus in timed:
             bus.bind_clock(self.clock)
@@ -301,6 +312,7 @@ class World:
         #: what else runs after every substep (drives acting on delayed commands, kinematic joints)
         self._extra_ticks: list[Callable[[float], None]] = []
         self._ticks: list[Callable[[float], None]] = []
+        self._unfused = False
         self._nominal_delay = {id(e): float(getattr(e, "command_delay", 0.0)) for e in self._emulators()}
         self._update_ticks()
         self.joints: dict[str, SimJoint] = {b.name: SimJoint(b.name, b.mjcf_joint, b.qadr, b.dadr, b.aid)
@@ -322,6 +334,10 @@ class World:
             if name in self.joints:
                 raise ConfigError(f"joint {name!r} is both emulated and measured", key=f"joints.{name}")
             self.kinematic[name] = (int(self.model.jnt_qposadr[jid]), int(self.model.jnt_dofadr[jid]))
+        #: the table of the drives' kernel rows this world is stepped with (shared with the worlds
+        #: it is batched with: :func:`advance_together`), and this world's index in it
+        self.group = stepping.Group([self], self.compiled)
+        self.group_index = 0
         if self.kinematic:
             self._extra_ticks.append(self._drive_kinematic)
             self._update_ticks()
@@ -357,6 +373,38 @@ class World:
         delayed = [e.tick for e in self._emulators()
                    if getattr(e, "command_delay", 0.0) > 0 or getattr(e, "pending", None)]
         self._ticks = [*self._bus_ticks, *delayed, *self._extra_ticks]
+        group = getattr(self, "group", None)
+        if group is not None:  # who can run N substeps in one call changed
+            group.replan()
+
+    # -- how the drives are stepped ---------------------------------------------------------------
+    def kernel_joints(self) -> list[_Bound]:
+        """The joints whose twin runs its loops as kernel rows (:mod:`joints.sim.stepping`)."""
+        return [b for b in self._bound if getattr(b.emulator, "KERNEL", None) in stepping.KINDS]
+
+    def kernel_stepped(self, b: _Bound) -> bool:
+        """Whether joint ``b`` is stepped by its kernel row (not by a function put in its place)."""
+        i = self._bound.index(b)
+        return bool(self._bind[i][0] == b.stepper.step)
+
+    def arena_crowded(self, fraction: float) -> bool:
+        """Whether MuJoCo's arena was ever more than ``fraction`` full (many contacts/constraints)."""
+        return bool(self.data.maxuse_arena > fraction * self.model.narena)
+
+    def leave_fused_path(self) -> None:
+        """Step substep by substep from now on (see :data:`joints.sim.stepping.ARENA_GUARD`)."""
+        if not self._unfused:
+            self._unfused = True
+            log.warning("world %s: MuJoCo's arena is over %d%% full; stepping without the fused compiled call "
+                        "from now on (an arena overflow then raises mujoco.FatalError; raise <size memory=...>)",
+                        self.path.name, round(100 * stepping.ARENA_GUARD))
+
+    def fusable(self) -> bool:
+        """Whether N substeps can run in one compiled call: every drive a kernel row, no timed bus, an arena
+        with room (the compiled call cannot turn MuJoCo's fatal errors into exceptions)."""
+        return not self._unfused and not self._ticks and all(self.kernel_stepped(b) for b in self._bound
+                                       if getattr(b.emulator, "KERNEL", None) in stepping.KINDS) \
+            and len(self.kernel_joints()) == len(self._bound)
 
     def _switches(self, joint: str, qadr: int, ratio: float) -> tuple[float | None, float | None]:
         """Motor angles where the ``<joint>_switch_flag`` site reaches ``<joint>_switch_low`` / ``_high``
@@ -405,26 +453,47 @@ class World:
         Timed device buses (a CAN medium) are ticked after every substep, with the clock at its end.
         """
         with self.lock:
-            mj_step = self.mujoco.mj_step
-            m, d = self.model, self.data
-            qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
-            dt = self.timestep
-            bind = self._bind
-            ticks = self._ticks
             try:
-                for _ in range(n):
-                    t = (self.steps + 1) * dt
-                    for step, qa, da, aid, r in bind:
-                        ctrl[aid] = step(t, dt, float(qpos[qa]) * r, float(qvel[da]) * r)
-                    mj_step(m, d)
-                    self.steps += 1
-                    if ticks:
-                        self.clock.set(t)
-                        for tick in ticks:
-                            tick(t)
+                self._step(n)
             finally:  # an interrupted step leaves the clock where the physics is
                 self._target = max(self._target, self.time)
                 self.clock.set(self.time)
+
+    def _step_prepare(self) -> None:
+        """Before stepping: a joint whose stepping was replaced (tests) leaves its kernel row."""
+        if self._bind != self._bind_seen:
+            self._bind_seen = list(self._bind)
+            self.group.replan()
+
+    def _step(self, n: int) -> None:
+        group = self.group
+        self._step_prepare()
+        if n <= 0:
+            return
+        if group.compiled and group.fusable[self.group_index]:
+            group.run([self.group_index], n)
+            return
+        mj_step = self.mujoco.mj_step
+        m, d = self.model, self.data
+        qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
+        dt = self.timestep
+        python = [self._bind[i] for i, b in enumerate(self._bound) if b not in self.kernel_joints()
+                  or not self.kernel_stepped(b)]
+        kernel_rows = len(python) < len(self._bound)
+        ticks = self._ticks
+        me = [self.group_index]
+        for _ in range(n):
+            t = (self.steps + 1) * dt
+            if kernel_rows:
+                group.substep(me)
+            for step, qa, da, aid, r in python:
+                ctrl[aid] = step(t, dt, float(qpos[qa]) * r, float(qvel[da]) * r)
+            mj_step(m, d)
+            self.steps += 1
+            if ticks:
+                self.clock.set(t)
+                for tick in ticks:
+                    tick(t)
 
     def advance(self, seconds: float) -> None:
         """Advance simulated time by ``seconds`` (rounded up to whole substeps, no drift).
@@ -435,14 +504,18 @@ class World:
         if seconds <= 0:
             return
         with self.lock:
-            self._target += seconds
-            n = math.ceil((self._target - self.time) / self.timestep - 1e-9)
+            n = self._due(seconds)
             try:
                 if n > 0:
                     self.step(n)
             except BaseException:
                 self._target = self.time
                 raise
+
+    def _due(self, seconds: float) -> int:
+        """Book ``seconds`` more on the world's target time: the substeps that are now due."""
+        self._target += seconds
+        return math.ceil((self._target - self.time) / self.timestep - 1e-9)
 
     def _emulators(self) -> list[Any]:
         seen: dict[int, Any] = {}
@@ -583,3 +656,59 @@ class World:
 
     def close(self) -> None:
         """Nothing to release for an in-process world (kept for symmetry with served worlds)."""
+
+
+def join(worlds: Sequence[World]) -> stepping.Group:
+    """One stepping group holding ``worlds`` (their drives' rows in one table), made once and kept:
+    a group that already holds them all (and maybe more: the other rigs of a batch) steps any of them."""
+    group = worlds[0].group
+    if all(w.group is group for w in worlds):
+        return group
+    group = stepping.Group(worlds, all(w.compiled for w in worlds))
+    for i, w in enumerate(worlds):
+        w.group, w.group_index = group, i
+    return group
+
+
+def advance_together(worlds: Sequence[World], seconds: Sequence[float]) -> None:
+    """Advance each world by its ``seconds`` as :meth:`World.advance` does, stepping them together.
+
+    The worlds (separate models: N rigs of a batched env) join one stepping group; while all of
+    them still have substeps due, one compiled call runs the loops of every drive and every
+    world's physics for as many substeps as they share. A world that cannot run fused (a timed
+    bus, a twin stepping in Python) advances on its own. The results are those of advancing each
+    world alone.
+    """
+    if len(worlds) != len(seconds):
+        raise ValueError(f"{len(worlds)} worlds but {len(seconds)} times")
+    if len({id(w) for w in worlds}) != len(worlds):
+        raise ValueError("a world appears twice")
+    with contextlib.ExitStack() as stack:
+        for w in sorted(worlds, key=id):  # one order for every caller: no lock-order deadlock
+            stack.enter_context(w.lock)
+        group = join(worlds)
+        due = [w._due(s) if s > 0 else 0 for w, s in zip(worlds, seconds)]
+        try:
+            together = [i for i, w in enumerate(worlds) if group.compiled and group.fusable[w.group_index]]
+            for i, w in enumerate(worlds):
+                if i not in together and due[i] > 0:
+                    w.step(due[i])
+                    due[i] = 0
+            while True:
+                left = [i for i in together if due[i] > 0]
+                if not left:
+                    break
+                n = min(due[i] for i in left)
+                for i in left:
+                    worlds[i]._step_prepare()
+                group.run([worlds[i].group_index for i in left], n)
+                for i in left:
+                    due[i] -= n
+        except BaseException:
+            for w in worlds:
+                w._target = w.time
+            raise
+        finally:
+            for w in worlds:
+                w._target = max(w._target, w.time)
+                w.clock.set(w.time)

@@ -155,8 +155,9 @@ Firmware conventions (the manual leaves these open)
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
+from typing import Any
 
-from joints.devices.motion import Arrival, move_step, ramp
 from joints.devices.quirks import firmware_profile
 from joints.devices.registers import Access
 from joints.devices.zlac.profile import HubMotorProfile
@@ -171,6 +172,7 @@ from joints.devices.zlac.registers import (
 from joints.devices.zlac.state import ENERGISED, DriveState, Event, command
 from joints.devices.zlac.state import step as transition
 from joints.errors import ParameterRefused, Refusal
+from joints.sim import zlac_kernel as Z
 from joints.sim.firmware import Firmware
 
 __all__ = [
@@ -186,10 +188,8 @@ RPM = TWO_PI / 60.0  #: rad/s per r/min
 MIN_RAMP_TIME = 1e-3  #: s; a ramp time of 0 ms is taken as 1 ms
 ABSOLUTE_TARGET_LIMIT = 0x3FFFFFFF  #: absolute-mode target position range (lines 432, 439)
 
-THERMAL_RISE = 60.0  #: K above ambient at the motor's rated current (EST)
-THERMAL_TAU = 600.0  #: s, winding time constant (EST)
-
-_BEFORE_STEP = Arrival.BEFORE_STEP
+THERMAL_RISE = Z.THERMAL_RISE
+THERMAL_TAU = Z.THERMAL_TAU
 
 #: 120-degree hall code of each 60-degree electrical sector.
 _HALL_SEQUENCE = (1, 3, 2, 6, 4, 5)
@@ -209,6 +209,14 @@ _NOT_STORED = frozenset({
     "target_torque_right",
 })
 _SETTINGS = tuple(r.name for r in ZLAC8015D if r.access is Access.RW and r.name not in _NOT_STORED)
+#: writes that act (or read loop constants) rather than only store a setting: loop settings written
+#: before them in the same block are turned into loop constants first
+_ACTING = frozenset({
+    "control_word", "control_mode", "target_velocity_left", "target_velocity_right", "target_position_left",
+    "target_position_right", "target_torque_left", "target_torque_right", "clear_feedback_position",
+    "in_absolute_position_control_reset_the_zero_point", "whether_store_rw_register_to_eeprom",
+    "register_parameter_settings", "maximum_motor_speed",
+})
 
 
 def power_on_defaults(profile: HubMotorProfile, address: int) -> dict[str, int]:
@@ -235,15 +243,41 @@ def _ramp_seconds(ms: int) -> float:
     return max(ms * 1e-3, MIN_RAMP_TIME)
 
 
+def _column(k: int, doc: str = "") -> property:
+    """A float attribute that is column ``k`` of the channel's row."""
+
+    def get(self: ZlacChannel) -> float:
+        return float(self._get(k))
+
+    def put(self: ZlacChannel, value: float) -> None:
+        self._row[k] = float(value)
+
+    return property(get, put, doc=doc)
+
+
+def _flag(k: int, doc: str = "") -> property:
+    def get(self: ZlacChannel) -> bool:
+        return bool(self._get(k) != 0.0)
+
+    def put(self: ZlacChannel, value: bool) -> None:
+        self._row[k] = 1.0 if value else 0.0
+
+    return property(get, put, doc=doc)
+
+
 class ZlacChannel:
-    """One motor channel of the drive: its loops, motor model and protections."""
+    """One motor channel of the drive: its loops, motor model and protections.
+
+    Its working state is row ``first + 1 + side`` of the drive's table (the loops are
+    :func:`joints.sim.zlac_kernel.step`); the attributes below are columns of that row.
+    """
 
     def __init__(self, drive: ZlacFirmware, side: str, inertia: float) -> None:
         if inertia <= 0 or not math.isfinite(inertia):
             raise ValueError(f"{side} channel: inertia must be positive and finite, got {inertia!r}")
         self.drive = drive
         self.side = side
-        self.inertia = float(inertia)  #: J [kg*m^2] the velocity-loop gains are scaled with (tuned for)
+        self.index = 0 if side == "left" else 1  #: 0 left, 1 right
         self.reg = {key: f"{key}_{side}" for key in (
             "encoder_line", "hall_offset_angle", "overload_factor", "rated_current", "maximum_current",
             "overload_protection_time", "position_following_error_threshold", "vl_kp", "vl_ki", "vl_kf",
@@ -252,93 +286,147 @@ class ZlacChannel:
             "target_position", "target_speed", "target_torque", "error_code", "actual_motor_position",
             "actual_velocity", "actual_torque", "initial_velocity_velocity_mode",
         )}
+        self._bind(drive._table, drive._first)
+        self.inertia = float(inertia)  #: J [kg*m^2] the velocity-loop gains are scaled with (tuned for)
         self.kt = drive.profile.torque_constant
         self.temperature = drive.ambient
         self.v_start = RPM  #: initial velocity [rad/s] (cached from 0x2043/0x2073)
         self.reset_power()
 
+    def _bind(self, table: Any, first: int) -> None:
+        self._row: Any = table[first + 1 + self.index]
+        self._get: Callable[[int], float] = self._row.__getitem__ if isinstance(self._row, list) else self._row.item
+
+    fresh = _flag(Z.FRESH, "the next step latches the encoder origin and the loops at q")
+    q = _column(Z.Q, "wheel angle [rad] seen at the last step")
+    qd = _column(Z.QD, "wheel speed [rad/s] seen at the last step")
+    origin = _column(Z.ORIGIN, "raw angle [rad] where the position counter reads 0")
+    overload_time = _column(Z.OVERLOAD_TIME)
+    i_out = _column(Z.I_OUT, "motor current [A]")
+    temperature = _column(Z.TEMPERATURE, "winding [degC]")
+    v_ref = _column(Z.V_REF, "speed command of the ramp / profile [rad/s]")
+    v_target = _column(Z.V_TARGET, "velocity-mode ramp target [rad/s]")
+    acc_slope = _column(Z.ACC_SLOPE)
+    dec_slope = _column(Z.DEC_SLOPE)
+    p_ref = _column(Z.P_REF, "position command [rad]")
+    goal = _column(Z.GOAL, "end point of the present / last move [rad]")
+    moving = _flag(Z.MOVING, "a position move is in progress")
+    cruise = _column(Z.CRUISE)
+    p_acc = _column(Z.P_ACC)
+    p_dec = _column(Z.P_DEC)
+    integ = _column(Z.INTEG, "velocity-loop integral of the speed error [rad]")
+    lag = _column(Z.LAG, "integral of (speed command - speed) [rad], velocity following error")
+    i_ref = _column(Z.I_REF, "torque-mode current command after the slope [A]")
+    qs_slope = _column(Z.QS_SLOPE)
+    cpr = _column(Z.CPR)
+    counts_per_rad = _column(Z.COUNTS_PER_RAD)
+    arrival_window = _column(Z.ARRIVAL_WINDOW, "half a count [rad]")
+    acc_time = _column(Z.ACC_TIME)
+    dec_time = _column(Z.DEC_TIME)
+    qs_time = _column(Z.QS_TIME)
+    torque_rate = _column(Z.TORQUE_RATE, "A/s")
+    rated = _column(Z.RATED)
+    peak = _column(Z.PEAK)
+    overload_limit = _column(Z.OVERLOAD_LIMIT)
+    follow_limit = _column(Z.FOLLOW_LIMIT)
+    wv = _column(Z.WV)
+    wi = _column(Z.WI)
+    kfv = _column(Z.KFV)
+    kpp = _column(Z.KPP)
+    kfp = _column(Z.KFP)
+    hall_offset = _column(Z.HALL_OFFSET)
+    temp_limit = _column(Z.TEMP_LIMIT)
+    target_speed = _column(Z.TARGET_SPEED)
+    v_start = _column(Z.V_START, "initial velocity [rad/s] (cached from 0x2043/0x2073)")
+    inertia = _column(Z.INERTIA, "J [kg*m^2] the velocity-loop gains are scaled with (tuned for)")
+    kt = _column(Z.KT)
+
+    @property
+    def fault(self) -> int:
+        """Fault bits (error code register)."""
+        return int(self._get(Z.FAULT_BITS))
+
+    @fault.setter
+    def fault(self, value: int) -> None:
+        self._row[Z.FAULT_BITS] = float(value)
+
+    @property
+    def poles(self) -> int:
+        return int(self._get(Z.POLES))
+
     # -- state ----------------------------------------------------------------------------
     def reset_power(self) -> None:
         """Power-on state (the physical angle is latched at the next step)."""
-        self.fresh = True  #: the next step latches the encoder origin and the loops at q
-        self.q = 0.0  #: wheel angle [rad] seen at the last step
-        self.qd = 0.0  #: wheel speed [rad/s] seen at the last step
-        self.origin = 0.0  #: raw angle [rad] where the position counter reads 0
-        self.fault = 0  #: Fault bits (error code register)
-        self.overload_time = 0.0
-        self.i_out = 0.0  #: motor current [A]
+        s = self._row
+        s[Z.FRESH] = 1.0
+        s[Z.Q] = 0.0
+        s[Z.QD] = 0.0
+        s[Z.ORIGIN] = 0.0
+        s[Z.FAULT_BITS] = 0.0
+        s[Z.OVERLOAD_TIME] = 0.0
+        s[Z.I_OUT] = 0.0
         # the winding starts at ambient (as the eRob firmware's power cycle): a World.reset must
         # not carry heat from one episode into the next
-        self.temperature = self.drive.ambient
+        s[Z.TEMPERATURE] = self.drive.ambient
         self.reset_loops()
 
     def reset_loops(self) -> None:
         """Loops and generators to rest at the present state (enable, mode change, power off)."""
-        # the speed command starts at the measured speed; below the initial velocity
-        # (0x2043/0x2073, default 1 r/min) that is standstill
-        v0 = self.qd if abs(self.qd) >= self.v_start else 0.0
-        self.v_ref = v0  #: speed command of the ramp / profile [rad/s]
-        self.v_target = v0  #: velocity-mode ramp target [rad/s]
-        self.acc_slope = math.inf
-        self.dec_slope = math.inf
-        self.p_ref = self.q  #: position command [rad]
-        self.goal = self.q  #: end point of the present / last move [rad]
-        self.moving = False  #: a position move is in progress
-        self.cruise = 0.0
-        self.p_acc = math.inf
-        self.p_dec = math.inf
-        self.integ = 0.0  #: velocity-loop integral of the speed error [rad]
-        self.lag = 0.0  #: integral of (speed command - speed) [rad], velocity following error
-        self.i_ref = 0.0  #: torque-mode current command after the slope [A]
-        self.qs_slope = math.inf
+        self.drive._k.reset_loops(self._row)
 
     # -- settings cache --------------------------------------------------------------------
     def cache(self) -> None:
         v = self.drive.values
         r = self.reg
-        self.cpr = 4 * max(v[r["encoder_line"]], 1)
-        self.counts_per_rad = self.cpr / TWO_PI
-        self.arrival_window = 0.5 / self.counts_per_rad  #: half a count [rad]
-        self.acc_time = _ramp_seconds(v[r["acceleration_time"]])
-        self.dec_time = _ramp_seconds(v[r["deceleration_time"]])
-        self.qs_time = _ramp_seconds(v[r["deceleration_time_of_quick_stop"]])
-        self.torque_rate = v[r["torque_rate"]] * 1e-3  # A/s
-        self.rated = v[r["rated_current"]] * 0.1
+        s = self._row
+        cpr = 4 * max(v[r["encoder_line"]], 1)
+        counts_per_rad = cpr / TWO_PI
+        s[Z.CPR] = float(cpr)
+        s[Z.COUNTS_PER_RAD] = counts_per_rad
+        s[Z.ARRIVAL_WINDOW] = 0.5 / counts_per_rad  #: half a count [rad]
+        s[Z.ACC_TIME] = _ramp_seconds(v[r["acceleration_time"]])
+        s[Z.DEC_TIME] = _ramp_seconds(v[r["deceleration_time"]])
+        s[Z.QS_TIME] = _ramp_seconds(v[r["deceleration_time_of_quick_stop"]])
+        s[Z.TORQUE_RATE] = v[r["torque_rate"]] * 1e-3  # A/s
+        rated = v[r["rated_current"]] * 0.1
+        s[Z.RATED] = rated
         i_max = v[r["maximum_current"]] * 0.1
         factor = v[r["overload_factor"]]
-        self.peak = min(i_max, self.rated * factor / 100.0) if factor else i_max
-        self.overload_limit = v[r["overload_protection_time"]] * 0.01
-        self.follow_limit = v[r["position_following_error_threshold"]] * 10 / self.counts_per_rad
-        self.wv = v[r["vl_kp"]] * 0.1
-        self.wi = v[r["vl_ki"]] * 0.1
-        self.kfv = v[r["vl_kf"]] * 1e-3
-        self.kpp = v[r["pl_kp"]] * 0.1
-        self.kfp = v[r["pl_kf"]] * 1e-2
-        self.poles = v[r["poles_of_motor"]]
-        self.hall_offset = math.radians(v[r["hall_offset_angle"]])
-        self.temp_limit = v[r["over_temperature_threshold"]] * 0.1
-        self.target_speed = v[r["target_speed"]] * RPM
-        self.v_start = v[r["initial_velocity_velocity_mode"]] * RPM
+        s[Z.PEAK] = min(i_max, rated * factor / 100.0) if factor else i_max
+        s[Z.OVERLOAD_LIMIT] = v[r["overload_protection_time"]] * 0.01
+        s[Z.FOLLOW_LIMIT] = v[r["position_following_error_threshold"]] * 10 / counts_per_rad
+        s[Z.WV] = v[r["vl_kp"]] * 0.1
+        s[Z.WI] = v[r["vl_ki"]] * 0.1
+        s[Z.KFV] = v[r["vl_kf"]] * 1e-3
+        s[Z.KPP] = v[r["pl_kp"]] * 0.1
+        s[Z.KFP] = v[r["pl_kf"]] * 1e-2
+        s[Z.POLES] = float(v[r["poles_of_motor"]])
+        s[Z.HALL_OFFSET] = math.radians(v[r["hall_offset_angle"]])
+        s[Z.TEMP_LIMIT] = v[r["over_temperature_threshold"]] * 0.1
+        s[Z.TARGET_SPEED] = v[r["target_speed"]] * RPM
+        s[Z.V_START] = v[r["initial_velocity_velocity_mode"]] * RPM
+        s[Z.TARGET_TORQUE] = float(v[r["target_torque"]])
 
     # -- conversions -----------------------------------------------------------------------
     def counts(self) -> int:
         """Actual position value [counts]."""
-        return round((self.q - self.origin) * self.counts_per_rad)
+        get = self._get
+        return round((get(Z.Q) - get(Z.ORIGIN)) * get(Z.COUNTS_PER_RAD))
 
     def rpm(self) -> float:
-        return self.qd / RPM
+        return float(self._get(Z.QD)) / RPM
 
     def velocity_status(self) -> int:
         """Actual velocity value [0.1 r/min]."""
-        return round(self.qd / RPM * 10)
+        return round(self._get(Z.QD) / RPM * 10)
 
     def current_status(self) -> int:
         """Actual torque (current) value [0.1 A]."""
-        return round(self.i_out * 10)
+        return round(self._get(Z.I_OUT) * 10)
 
     def error_status(self) -> int:
         """Error code value (:class:`~joints.devices.zlac.registers.Fault` bits)."""
-        return self.fault
+        return int(self._get(Z.FAULT_BITS))
 
     # -- commands (from the drive) ---------------------------------------------------------
     def set_velocity_target(self, rpm: int) -> None:
@@ -381,19 +469,11 @@ class ZlacChannel:
 
     def begin_quick_stop(self, option: int, was_running: bool) -> None:
         """Enter quick stop: ramp the speed command to 0 per 0x2011."""
-        start = self.v_ref if was_running and self.drive.mode != ControlMode.TORQUE else self.qd
-        self.moving = False
-        self.v_ref = start
-        if option == QuickStopBehaviour.QUICK_STOP_WITHOUT_DECELERATION:
-            self.qs_slope = math.inf
-        else:
-            t = self.dec_time if option == QuickStopBehaviour.STOP else self.qs_time
-            ref = self.drive.ramp_reference
-            self.qs_slope = (ref if ref is not None else abs(start)) / t
+        self.drive._k.begin_quick_stop(self.drive._drow, self._row, float(option), was_running)
 
     def clear_position(self) -> None:
         """0x2005 / 0x2006: the present position reads 0 and is the zero of absolute targets."""
-        self.origin = self.q
+        self._row[Z.ORIGIN] = self._row[Z.Q]
 
     def place(self, q: float) -> None:
         """The wheel is at ``q`` [rad] and at rest (start state, reset): the encoder sees it, the
@@ -408,141 +488,13 @@ class ZlacChannel:
     # -- physics side ----------------------------------------------------------------------
     def step(self, t: float, dt: float, q: float, qd: float) -> float:
         """Run this channel's loops for the substep ending at ``t`` (length ``dt``) with the wheel
-        at ``q`` [rad], ``qd`` [rad/s]; return the motor torque at the wheel [N*m]."""
+        at ``q`` [rad], ``qd`` [rad/s]; return the motor torque at the wheel [N*m]
+        (:func:`joints.sim.zlac_kernel.step`; a world steps all rows at once)."""
         drive = self.drive
-        drive.tick(t)
-        if self.fresh:
-            # first substep after power-on: the counter starts at 0 here; commands that came
-            # before it were taken relative to the unknown angle (0), shift them to the real one
-            self.fresh = False
-            delta = q - self.q
-            self.origin = q
-            self.p_ref += delta
-            self.goal += delta
-        self.q = q
-        self.qd = qd
-        state = drive.state
-        if state is DriveState.DISABLED or state is DriveState.FAULT or dt <= 0.0:
-            return self._off(dt)
-        mode = drive.mode
-        if state is DriveState.QUICK_STOP:
-            v_prev = self.v_ref
-            self.v_ref = ramp(v_prev, 0.0, math.inf, self.qs_slope, dt, pause_at_zero=True)
-            if not self._track_lag(dt):
-                return self._off(dt)
-            i = self._speed_loop(self.v_ref, (self.v_ref - v_prev) / dt, dt)
-        elif mode == ControlMode.VELOCITY:
-            v_prev = self.v_ref
-            self._ramp(dt)
-            if not self._track_lag(dt):
-                return self._off(dt)
-            i = self._speed_loop(self.v_ref, self.kfv * (self.v_ref - v_prev) / dt, dt)
-        elif mode == ControlMode.RELATIVE_POSITION or mode == ControlMode.ABSOLUTE_POSITION:
-            v_prev = self.v_ref
-            if self.moving:
-                self._profile(dt)
-            err = self.p_ref - q
-            if abs(err) > self.follow_limit:
-                drive.raise_fault(self, Fault.POSITION_FOLLOWING_ERROR)
-                return self._off(dt)
-            v_cmd = self.kfp * self.v_ref + self.kpp * err
-            i = self._speed_loop(v_cmd, self.kfv * self.kfp * (self.v_ref - v_prev) / dt, dt)
-        elif mode == ControlMode.TORQUE:
-            i = self._torque(dt)
-        else:  # control mode 0 "undefined": energised, no command
-            i = 0.0
-        self.i_out = i
-        if not self._protect(dt, i):
-            return self._off(dt)
-        return i * self.kt
-
-    def _off(self, dt: float) -> float:
-        self.i_out = 0.0
-        self.overload_time = 0.0
-        self.reset_loops()
-        self._thermal(dt, 0.0)
-        return 0.0
-
-    def _ramp(self, dt: float) -> None:
-        self.v_ref = ramp(self.v_ref, self.v_target, self.acc_slope, self.dec_slope, dt, pause_at_zero=True)
-
-    def _profile(self, dt: float) -> None:
-        """Trapezoidal move from ``p_ref`` to ``goal`` (discrete-time exact stopping)."""
-        self.p_ref, self.v_ref, arrived = move_step(self.p_ref, self.v_ref, self.goal, self.cruise, self.p_acc,
-                                                    self.p_dec, dt, self.arrival_window, _BEFORE_STEP)
-        self.moving = not arrived
-
-    def _track_lag(self, dt: float) -> bool:
-        self.lag += (self.v_ref - self.qd) * dt
-        if abs(self.lag) > self.follow_limit:
-            self.drive.raise_fault(self, Fault.VELOCITY_FOLLOWING_ERROR)
-            return False
-        return True
-
-    def _limits(self) -> tuple[float, float]:
-        """(positive, negative) current magnitude limits [A] at the present speed."""
-        peak = self.peak
-        p = self.drive.profile
-        emf = p.back_emf_constant * abs(self.qd)
-        volt = max(0.0, (p.bus_voltage - emf) / p.phase_resistance)
-        if self.qd > 0.0:
-            return min(peak, volt), peak
-        if self.qd < 0.0:
-            return peak, min(peak, volt)
-        return peak, peak
-
-    def _speed_loop(self, v_cmd: float, a_ff: float, dt: float) -> float:
-        """PI velocity loop + acceleration feed-forward -> current [A], limited, anti-windup."""
-        e = v_cmd - self.qd
-        j = self.inertia
-        i = j * (self.wv * e + self.wv * self.wi * self.integ + a_ff) / self.kt
-        hi, lo = self._limits()
-        if i > hi:
-            i = hi
-        elif i < -lo:
-            i = -lo
-        else:
-            self.integ += e * dt  # integrate only while unsaturated
-        return i
-
-    def _torque(self, dt: float) -> float:
-        target = self.drive.values[self.reg["target_torque"]] * 1e-3
-        if self.torque_rate > 0.0:
-            step = self.torque_rate * dt
-            d = target - self.i_ref
-            self.i_ref = target if abs(d) <= step else self.i_ref + math.copysign(step, d)
-        else:
-            self.i_ref = target
-        i = self.i_ref
-        if i != 0.0:
-            sgn = 1.0 if i > 0 else -1.0
-            cap = self.inertia * self.wv * (self.drive.vmax - sgn * self.qd) / self.kt
-            i = sgn * min(abs(i), max(0.0, cap))
-        hi, lo = self._limits()
-        return max(-lo, min(hi, i))
-
-    def _protect(self, dt: float, i: float) -> bool:
-        if self.overload_limit > 0.0 and abs(i) > self.rated:
-            self.overload_time += dt
-            if self.overload_time > self.overload_limit + 1e-9:
-                self.drive.raise_fault(self, Fault.OVER_LOAD)
-                return False
-        else:
-            self.overload_time = 0.0
-        return self._thermal(dt, i)
-
-    def _thermal(self, dt: float, i: float) -> bool:
-        if dt > 0.0:
-            amb = self.drive.ambient
-            rise = THERMAL_RISE * (i / self.drive.profile.motor_rated_current) ** 2
-            self.temperature += (amb + rise - self.temperature) * min(1.0, dt / THERMAL_TAU)
-        if self.temp_limit > 0.0 and self.temperature > self.temp_limit:
-            self.drive.raise_fault(self, Fault.MOTOR_OVER_TEMPERATURE)
-            return False
-        return True
+        return float(drive._k.step(drive._table, drive._first, self.index, t, dt, q, qd))
 
     def hall(self) -> int:
-        angle = (self.q * self.poles + self.hall_offset) % TWO_PI
+        angle = (self._get(Z.Q) * self.poles + self._get(Z.HALL_OFFSET)) % TWO_PI
         return _HALL_SEQUENCE[min(5, int(angle / (TWO_PI / 6)))]
 
     @property
@@ -568,11 +520,21 @@ class ZlacFirmware(Firmware):
         quirks: frozenset[str] | None = None,
     ) -> None:
         super().__init__(ZLAC8015D.params, values=power_on_defaults(profile, address))
+        self._batch = False  #: inside write_many
+        self._stale = False  #: settings written whose loop constants are not computed yet
         #: the firmware's quirks (joints.devices.quirks); default: the family's default firmware
         self.quirks = quirks if quirks is not None else firmware_profile("zlac8015d").quirks
         self.profile = profile
         self.ambient = float(ambient)
         self.ramp_reference = ramp_reference_rpm * RPM if ramp_reference_rpm else None
+        self._bind_rows([[0.0] * Z.WIDTH for _ in range(3)], 0)
+        d = self._drow
+        d[Z.D_AMBIENT] = self.ambient
+        d[Z.D_RAMP_REF] = math.nan if self.ramp_reference is None else self.ramp_reference
+        d[Z.D_BACK_EMF] = float(profile.back_emf_constant)
+        d[Z.D_BUS_VOLTAGE] = float(profile.bus_voltage)
+        d[Z.D_PHASE_R] = float(profile.phase_resistance)
+        d[Z.D_MOTOR_RATED] = float(profile.motor_rated_current)
         self.time = 0.0
         #: (time, text) of commands that were acknowledged but did nothing
         self.ignored: list[tuple[float, str]] = []
@@ -591,14 +553,104 @@ class ZlacFirmware(Firmware):
         self.computed["motor_state"] = lambda: _pack(int(left.energised), int(right.energised))
         self.computed["hall_state"] = lambda: _pack(left.hall(), right.hall())
         self.computed["motor_temperature"] = lambda: _pack(round(left.temperature), round(right.temperature))
+        self.computed["software_connected_status"] = lambda: int(self._dget(Z.D_CONNECTED))
         self._power_on()
+
+    # -- the rows ----------------------------------------------------------------------------------
+    #: the kernel rows this twin steps (see :mod:`joints.sim.stepping`): drive, left, right
+    KERNEL = "zlac"
+
+    def _bind_rows(self, table: Any, first: int) -> None:
+        self._table: Any = table
+        self._first = first
+        self._drow: Any = table[first]
+        if isinstance(self._drow, list):
+            self._dget: Callable[[int], float] = self._drow.__getitem__
+            self._k: Any = Z.PY_OPS
+        else:  # numpy rows: Python floats out, the helpers compiled
+            self._dget = self._drow.item
+            self._k = Z.compiled_ops()
+        for ch in getattr(self, "channels", ()):
+            ch._bind(table, first)
+
+    def kernel_rows(self) -> list[list[float]]:
+        """The twin's rows as they stand: the drive, the left channel, the right channel."""
+        return [[float(x) for x in self._table[self._first + k]] for k in range(3)]
+
+    def adopt(self, table: Any, first: int) -> None:
+        """Run on rows ``first`` .. ``first + 2`` of ``table`` from now on (their state copied there)."""
+        for k, values in enumerate(self.kernel_rows()):
+            row = table[first + k]
+            for i, x in enumerate(values):
+                row[i] = x
+        self._bind_rows(table, first)
+
+    def kernel_row(self, channel: str | None) -> int:
+        """Which of the twin's rows steps ``channel``'s joint."""
+        return 1 + self.channel(channel or "left").index
+
+    @property
+    def state(self) -> DriveState:
+        return Z.STATES[int(self._dget(Z.D_STATE))]
+
+    @state.setter
+    def state(self, value: DriveState) -> None:
+        self._drow[Z.D_STATE] = float(Z.STATES.index(value))
+
+    @property
+    def time(self) -> float:
+        return float(self._dget(Z.D_TIME))
+
+    @time.setter
+    def time(self, value: float) -> None:
+        self._drow[Z.D_TIME] = float(value)
+
+    @property
+    def last_frame(self) -> float:
+        """Time of the last received frame (-1: none since power-on)."""
+        return float(self._dget(Z.D_LAST_FRAME))
+
+    @last_frame.setter
+    def last_frame(self, value: float) -> None:
+        self._drow[Z.D_LAST_FRAME] = float(value)
+
+    @property
+    def offline(self) -> bool:
+        """The offline watchdog tripped (until the next enable)."""
+        return bool(self._dget(Z.D_OFFLINE) != 0.0)
+
+    @offline.setter
+    def offline(self, value: bool) -> None:
+        self._drow[Z.D_OFFLINE] = 1.0 if value else 0.0
+
+    @property
+    def vmax(self) -> float:
+        return float(self._dget(Z.D_VMAX))
+
+    @property
+    def watchdog(self) -> float:
+        return float(self._dget(Z.D_WATCHDOG))
+
+    @property
+    def mode(self) -> int:
+        return int(self._dget(Z.D_MODE))
+
+    @property
+    def sync(self) -> int:
+        return int(self._dget(Z.D_SYNC))
+
+    @property
+    def quick_stop_option(self) -> int:
+        return int(self._dget(Z.D_QS_OPTION))
 
     # -- power -------------------------------------------------------------------------------
     def _power_on(self) -> None:
         self.state = DriveState.DISABLED
-        self.last_frame = -1.0  #: time of the last received frame (-1: none since power-on)
-        self.offline = False  #: the offline watchdog tripped (until the next enable)
-        self._ticked = -math.inf
+        self.last_frame = -1.0
+        self.offline = False
+        d = self._drow
+        d[Z.D_TICKED] = -math.inf
+        d[Z.D_CONNECTED] = 0.0
         self._cache()
         for ch in self.channels:
             ch.reset_power()
@@ -630,29 +682,45 @@ class ZlacFirmware(Firmware):
 
     # -- settings cache ----------------------------------------------------------------------
     def _cache(self) -> None:
+        self._stale = False
         v = self.values
-        self.vmax = max(v["maximum_motor_speed"], 1) * RPM
-        self.watchdog = v["communication_offline_time"] * 1e-3
-        self.mode = v["control_mode"]
-        self.sync = v["synchronous_asynchronous_control_status"]
+        d = self._drow
+        d[Z.D_VMAX] = max(v["maximum_motor_speed"], 1) * RPM
+        d[Z.D_WATCHDOG] = v["communication_offline_time"] * 1e-3
+        d[Z.D_MODE] = float(v["control_mode"])
+        d[Z.D_SYNC] = float(v["synchronous_asynchronous_control_status"])
         option = v["quick_stop_control"]
         default = int(QuickStopBehaviour.QUICK_STOP_WITH_DECELERATION)
-        self.quick_stop_option = option if option in (5, 6, 7) else default
+        d[Z.D_QS_OPTION] = float(option if option in (5, 6, 7) else default)
         for ch in getattr(self, "channels", ()):
             ch.cache()
 
     # -- what the fronts call ------------------------------------------------------------------
     def frame_received(self) -> None:
-        self.last_frame = self.time
-        if not self.offline:
-            self.values["software_connected_status"] = 1
+        d = self._drow
+        d[Z.D_LAST_FRAME] = d[Z.D_TIME]
+        if d[Z.D_OFFLINE] == 0.0:
+            d[Z.D_CONNECTED] = 1.0
 
     def check_write(self, name: str, value: int) -> None:
         if (name == "target_position_left" or name == "target_position_right") and (
                 self.mode == ControlMode.ABSOLUTE_POSITION and abs(value) > ABSOLUTE_TARGET_LIMIT):
             raise ParameterRefused(Refusal.OUT_OF_RANGE, name, f"absolute target {value} outside +-0x3FFFFFFF")
 
+    def write_many(self, items: Sequence[tuple[str, int]]) -> None:
+        """As :meth:`Firmware.write_many`; loop settings written in one block are turned into loop
+        constants once, before anything that uses them (a later command of the block, a substep)."""
+        self._batch = True
+        try:
+            super().write_many(items)
+        finally:
+            self._batch = False
+            if self._stale:
+                self._cache()
+
     def on_write(self, name: str, value: int) -> None:
+        if self._stale and name in _ACTING:  # settings written earlier in this block: in force first
+            self._cache()
         if name == "control_word":
             self._command(value)
             return
@@ -665,7 +733,10 @@ class ZlacFirmware(Firmware):
             if self.state is DriveState.ENABLED and self.mode == ControlMode.VELOCITY:
                 ch.set_velocity_target(value)
             return
-        if name in ("target_position_left", "target_position_right", "target_torque_left", "target_torque_right"):
+        if name in ("target_torque_left", "target_torque_right"):
+            (self.left if name.endswith("left") else self.right)._row[Z.TARGET_TORQUE] = float(value)
+            return
+        if name in ("target_position_left", "target_position_right"):
             return
         v = self.values
         if name == "clear_feedback_position":
@@ -700,7 +771,10 @@ class ZlacFirmware(Firmware):
                 for ch in self.channels:  # a lower cap clamps the present targets
                     ch.set_velocity_target(v[ch.reg["target_velocity"]])
             return
-        self._cache()
+        if self._batch:
+            self._stale = True
+        else:
+            self._cache()
 
     def _sides(self, value: int, *, both_for_one: bool) -> tuple[ZlacChannel, ...]:
         if value == 1:
@@ -756,17 +830,14 @@ class ZlacFirmware(Firmware):
         self.state = new
         self.offline = False
         if self.last_frame >= 0.0:
-            self.values["software_connected_status"] = 1
+            self._drow[Z.D_CONNECTED] = 1.0
         for ch in self.channels:
             ch.reset_loops()
             if self.mode == ControlMode.VELOCITY:
                 ch.set_velocity_target(self.values[ch.reg["target_velocity"]])
 
     def _quick_stop(self) -> None:
-        was = self.state is DriveState.ENABLED
-        self.state = DriveState.QUICK_STOP
-        for ch in self.channels:
-            ch.begin_quick_stop(self.quick_stop_option, was)
+        self._k.quick_stop(self._table, self._first)
 
     def _mode_changed(self) -> None:
         if self.state is not DriveState.ENABLED:
@@ -801,23 +872,14 @@ class ZlacFirmware(Firmware):
         ch.fault |= int(bit)
         self.state = transition(self.state, Event.FAULT) or DriveState.FAULT
 
+    def set(self, name: str, value: int) -> None:
+        super().set(name, value)
+        self._cache()
+
     # -- physics side --------------------------------------------------------------------------
     def tick(self, t: float) -> None:
         """Drive-level work once per substep (the first channel step with a new ``t``)."""
-        if t == self._ticked:  # the other channel of the same substep (time may restart on a reset)
-            return
-        self._ticked = t
-        self.time = t
-        wd = self.watchdog
-        if (
-            wd > 0.0
-            and self.last_frame >= 0.0
-            and self.state is DriveState.ENABLED
-            and t - self.last_frame > wd + 1e-9
-        ):
-            self.offline = True
-            self.values["software_connected_status"] = 0
-            self._quick_stop()  # transition(ENABLED, Event.OFFLINE)
+        self._k.tick(self._table, self._first, t)
 
     def step_both(
         self, t: float, dt: float, q_left: float, qd_left: float, q_right: float, qd_right: float

@@ -36,7 +36,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["STUFFING", "CycleLoad", "canopen_cycle_load", "frame_bits", "frame_time", "stuff_bits", "unstuffed_bits"]
+__all__ = ["STUFFING", "CycleLoad", "canopen_cycle_load", "cycle_load", "frame_bits", "frame_time", "stuff_bits",
+           "unstuffed_bits"]
 
 #: the stuffing models :func:`frame_bits` knows: worst-case bound, exact count, none
 STUFFING = ("worst", "exact", "none")
@@ -124,7 +125,8 @@ def frame_time(frame: Any, bitrate: float, stuffing: str = "worst") -> float:
 
 @dataclass(frozen=True, slots=True)
 class CycleLoad:
-    """Bus load of one cyclic exchange (:func:`canopen_cycle_load`)."""
+    """Bus load of one cyclic exchange (:func:`cycle_load`, :func:`canopen_cycle_load`; a serial bus's
+    :func:`joints.transports.serial_timing.cycle_load`): bit times per cycle on a bus of ``bitrate``."""
 
     bits_best: int  #: bits per cycle without stuffing
     bits_worst: int  #: bits per cycle with the worst-case stuffing bound
@@ -145,6 +147,11 @@ class CycleLoad:
     def fits(self) -> bool:
         """Every frame of a cycle is on the wire within the period, whatever the stuffing."""
         return self.worst <= 1.0
+
+    @property
+    def max_rate(self) -> float:
+        """The highest cycle rate [Hz] at which the cycle still fits (worst case)."""
+        return self.bitrate / self.bits_worst if self.bits_worst else float("inf")
 
 
 class _Frame:
@@ -171,15 +178,24 @@ def canopen_cycle_load(nodes: int | Sequence[int], *, rpdo_bytes: Sequence[int] 
     4 nodes 81-98 %, 5 nodes 100-121 % (without - with worst-case stuffing).
     """
     ids = list(range(1, nodes + 1)) if isinstance(nodes, int) else list(nodes)
-    if sync_period <= 0 or bitrate <= 0:
-        raise ValueError("sync_period and bitrate must be > 0")
     frames = [_Frame(0x080, sync_bytes)]
     for node in ids:
         frames += [_Frame(0x200 + node, n) for n in rpdo_bytes]
         frames += [_Frame(0x180 + node, n) for n in tpdo_bytes]
     frames += [_Frame(0x7FF, n) for n in extra_frames]
-    for f in frames:
-        if not 0 <= f.dlc <= 8:
-            raise ValueError(f"a classic CAN frame carries 0..8 data bytes, got {f.dlc}")
-    return CycleLoad(sum(frame_bits(f, "none") for f in frames), sum(frame_bits(f, "worst") for f in frames),
-                     sync_period, bitrate)
+    return cycle_load(frames, period=sync_period, bitrate=bitrate)
+
+
+def cycle_load(frames: Sequence[Any | int], *, period: float, bitrate: int) -> CycleLoad:
+    """The bus load of the ``frames`` sent every ``period`` s on a bus of ``bitrate`` bit/s, and whether
+    they fit: python-can frames, or data lengths (standard-id data frames of that many bytes). The one
+    capacity formula of the CAN buses: CANopen's SYNC cycle (:func:`canopen_cycle_load`), the eRob CAN
+    protocol's request/reply pairs and ``joints bench``'s bus planner use it."""
+    if period <= 0 or bitrate <= 0:
+        raise ValueError("the period and the bitrate must be > 0")
+    made = [_Frame(0x7FF, f) if isinstance(f, int) else f for f in frames]
+    for f in made:
+        if not f.is_remote_frame and not 0 <= len(f.data) <= 8:
+            raise ValueError(f"a classic CAN frame carries 0..8 data bytes, got {len(f.data)}")
+    return CycleLoad(sum(frame_bits(f, "none") for f in made), sum(frame_bits(f, "worst") for f in made),
+                     period, bitrate)

@@ -303,3 +303,25 @@ def test_enums() -> None:
     assert (baud.minimum, baud.maximum) == (min(BaudRate), max(BaudRate))
     assert (EROB_MODBUS["operation_mode"].minimum, EROB_MODBUS["operation_mode"].maximum) == (
         min(OperationMode), max(OperationMode))
+
+
+def test_block_decode_in_one_struct_call_equals_register_by_register() -> None:
+    """decode_block's struct path gives what the register-by-register path gives (any words)."""
+    import random
+
+    from joints.devices.erob.registers import EROB_MODBUS, STATUS_BLOCK_START, STATUS_BLOCK_WORDS
+
+    rng = random.Random(4)
+    table = EROB_MODBUS
+    for _ in range(200):
+        words = [rng.randrange(0x10000) for _ in range(STATUS_BLOCK_WORDS)]
+        fast = table.decode_block(STATUS_BLOCK_START, words)
+        assert table._packed[(STATUS_BLOCK_START, STATUS_BLOCK_WORDS)] is not None
+        slow = {}
+        for reg in table:
+            i = reg.address - STATUS_BLOCK_START
+            if 0 <= i and i + reg.words <= STATUS_BLOCK_WORDS:
+                slow[reg.name] = reg.from_words(words[i:i + reg.words])
+        assert fast == slow and list(fast) == list(slow)
+    # words out of 16 bits take the checked path (masked), as before
+    assert table.decode_block(STATUS_BLOCK_START, [0x1FFFF] * STATUS_BLOCK_WORDS)["error_code"] == 0xFFFF

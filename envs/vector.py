@@ -1,0 +1,280 @@
+"""Batched rigs: N copies of a ``joints/`` env in one process, behind gymnasium's vector API.
+
+Rule: the batched env is N single envs (each its own rig, MuJoCo model and data - so domain
+randomisation still differs per rig - and its own ``np_random``) that act, then wait for their
+next control tick TOGETHER (:func:`joints.sleep_together`: every drive of every rig and every
+rig's physics run in one compiled call), then observe. Everything else is the single env's own
+code, so the results are those of gymnasium's ``SyncVectorEnv`` over ``gym.make(id)`` envs with
+the same seeds: spaces, observations, rewards, terminations, truncations (the registered
+``max_episode_steps``, as ``TimeLimit``), infos and autoreset as gymnasium 1.x defines it
+(:class:`gymnasium.vector.AutoresetMode`: ``NEXT_STEP`` by default, ``SAME_STEP``, ``DISABLED``).
+
+>>> import gymnasium as gym, envs
+>>> vec = gym.make_vec("joints/ErobReach-v0", num_envs=16, vectorization_mode="vector_entry_point")  # doctest: +SKIP
+>>> vec = envs.make_vector_env("joints/ErobReach-v0", num_envs=16, domain_randomization=True)  # doctest: +SKIP
+
+An env type that cannot split its step (no ``batchable`` act / outcome) is stepped one by one.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+import joints
+
+__all__ = ["JointsVectorEnv", "make_vector_env", "vector_entry_point"]
+
+
+def _load(entry_point: str | Callable[..., gym.Env[Any, Any]]) -> Callable[..., gym.Env[Any, Any]]:
+    if callable(entry_point):
+        return entry_point
+    module, _, name = entry_point.partition(":")
+    made: Callable[..., gym.Env[Any, Any]] = getattr(importlib.import_module(module), name)
+    return made
+
+
+class JointsVectorEnv(VectorEnv[Any, Any, Any]):
+    """``num_envs`` rigs of one env type in this process, stepped together (see the module docstring).
+
+    Args:
+        env: the single env's class (or ``"module:Class"``), made ``num_envs`` times with ``kwargs``.
+        num_envs: rigs.
+        max_episode_steps: truncation after this many steps of an episode (``None``: never).
+        autoreset_mode: gymnasium's :class:`~gymnasium.vector.AutoresetMode`.
+        kwargs: the single env's arguments (config, action_mode, domain_randomization ...).
+    """
+
+    metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"]}  # noqa: RUF012
+
+    def __init__(self, env: str | Callable[..., gym.Env[Any, Any]], num_envs: int, *,
+                 max_episode_steps: int | None = None,
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, **kwargs: Any) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
+            raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
+        if max_episode_steps is not None and (not isinstance(max_episode_steps, int) or max_episode_steps < 1):
+            raise ValueError(f"max_episode_steps must be an integer >= 1 or None, got {max_episode_steps!r}")
+        self.autoreset_mode = AutoresetMode(autoreset_mode)
+        self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}
+        make = _load(env)
+        self.envs: list[Any] = []
+        try:
+            for _ in range(num_envs):
+                self.envs.append(make(**kwargs))
+        except BaseException:
+            for e in self.envs:
+                e.close()
+            raise
+        first = self.envs[0]
+        self.num_envs = num_envs
+        self.max_episode_steps = max_episode_steps
+        self.render_mode = first.render_mode
+        self.single_observation_space = first.observation_space
+        self.single_action_space = first.action_space
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        for e in self.envs[1:]:
+            if e.observation_space != self.single_observation_space or e.action_space != self.single_action_space:
+                raise ValueError("the rigs of a batched env must have the same spaces")
+        self._elapsed = np.zeros(num_envs, dtype=np.int64)
+        self._autoreset = np.zeros(num_envs, dtype=np.bool_)
+        self._has_reset = False
+        self.closed = False
+
+    # -- what a batch shares -------------------------------------------------------------------
+    @property
+    def models(self) -> list[Any]:
+        """Each rig's MuJoCo model (sim)."""
+        return [e.model for e in self.envs]
+
+    @property
+    def dt(self) -> float:
+        """Seconds per step (every rig's control period)."""
+        return float(self.envs[0].dt)
+
+    # -- gymnasium vector API ------------------------------------------------------------------
+    def reset(self, *, seed: int | Sequence[int | None] | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """As ``SyncVectorEnv.reset``: seeds ``seed + i`` (or one per rig), ``options["reset_mask"]``."""
+        seeds: list[int | None]
+        if seed is None:
+            seeds = [None] * self.num_envs
+        elif isinstance(seed, int):
+            seeds = [seed + i for i in range(self.num_envs)]
+        else:
+            seeds = list(seed)
+        if len(seeds) != self.num_envs:
+            raise ValueError(f"If seeds are passed as a list the length must match num_envs={self.num_envs} "
+                             f"but got length={len(seeds)}.")
+        options = dict(options) if options is not None else None
+        mask = np.ones(self.num_envs, dtype=np.bool_)
+        if options is not None and "reset_mask" in options:
+            mask = options.pop("reset_mask")
+            if not isinstance(mask, np.ndarray) or mask.shape != (self.num_envs,) or mask.dtype != np.bool_ \
+                    or not mask.any():
+                raise ValueError(f"options['reset_mask'] must be a bool array of shape ({self.num_envs},) with a "
+                                 f"True value, got {mask!r}")
+        elif not hasattr(self, "_obs"):
+            self._obs: np.ndarray = np.zeros((self.num_envs, *self.single_observation_space.shape),  # type: ignore[misc]
+                                             dtype=self.single_observation_space.dtype)
+        if not hasattr(self, "_obs"):
+            raise gym.error.ResetNeeded("reset the whole batch before a masked reset")
+        infos: dict[str, Any] = {}
+        for i, env in enumerate(self.envs):
+            if mask[i]:
+                self._obs[i], info = env.reset(seed=seeds[i], options=options)
+                self._elapsed[i] = 0
+                self._autoreset[i] = False
+                infos = self._add_info(infos, info, i)
+        self._has_reset = True
+        return self._obs.copy(), infos
+
+    def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """As ``SyncVectorEnv.step`` over ``TimeLimit`` envs; every rig that steps waits for its tick
+        together with the others."""
+        if not self._has_reset:
+            raise gym.error.ResetNeeded("Cannot call env.step() before calling env.reset()")
+        actions = np.asarray(actions)
+        n = self.num_envs
+        if actions.shape[:1] != (n,):
+            raise ValueError(f"actions of shape {actions.shape}: expected {n} rows")
+        rewards = np.zeros(n, dtype=np.float64)
+        terminated = np.zeros(n, dtype=np.bool_)
+        truncated = np.zeros(n, dtype=np.bool_)
+        infos_of: list[dict[str, Any]] = [{} for _ in range(n)]
+        finals: dict[int, tuple[Any, dict[str, Any]]] = {}
+        acting: list[tuple[int, Any]] = []
+        for i, env in enumerate(self.envs):
+            if self.autoreset_mode is AutoresetMode.NEXT_STEP and self._autoreset[i]:
+                self._obs[i], infos_of[i] = env.reset()
+                self._elapsed[i] = 0
+            elif self.autoreset_mode is AutoresetMode.DISABLED and self._autoreset[i]:
+                raise gym.error.ResetNeeded(f"rig {i} ended its episode: reset it (autoreset is disabled)")
+            elif env.batchable:
+                acting.append((i, env.begin_step(actions[i])))
+            else:  # an env that cannot split its step: on its own
+                acting.append((i, None))
+                obs, rewards[i], terminated[i], truncated[i], infos_of[i] = env.step(actions[i])
+                self._obs[i] = obs
+        rigs: list[joints.Rig] = []
+        spans: list[float] = []
+        for i, token in acting:
+            env = self.envs[i]
+            if token is None or not env.batchable:
+                continue
+            remaining = env.tick_time() - env.rig.time  # as RigEnv._wait_until
+            if remaining > 0:
+                rigs.append(env.rig)
+                spans.append(remaining)
+            elif remaining < -1e-9:
+                env.overruns += 1
+        if rigs:
+            joints.sleep_together(rigs, spans)
+        for i, token in acting:
+            env = self.envs[i]
+            if env.batchable:
+                obs, rewards[i], terminated[i], truncated[i], infos_of[i] = env.finish_step(token)
+                self._obs[i] = obs
+            self._elapsed[i] += 1
+            if self.max_episode_steps is not None and self._elapsed[i] >= self.max_episode_steps:
+                truncated[i] = True
+            if self.autoreset_mode is AutoresetMode.SAME_STEP and (terminated[i] or truncated[i]):
+                finals[i] = (self._obs[i].copy(), infos_of[i])
+                self._obs[i], infos_of[i] = env.reset()
+                self._elapsed[i] = 0
+        infos: dict[str, Any] = {}
+        for i in range(n):
+            if i in finals:
+                infos = self._add_info(infos, {"final_obs": finals[i][0], "final_info": finals[i][1]}, i)
+            infos = self._add_info(infos, infos_of[i], i)
+        self._autoreset = np.logical_or(terminated, truncated)
+        return self._obs.copy(), rewards, terminated, truncated, infos
+
+    def _add_info(self, vector_infos: dict[str, Any], env_info: dict[str, Any], env_num: int) -> dict[str, Any]:
+        """``VectorEnv._add_info`` (the same arrays, masks and key order), without allocating a
+        mask it then throws away for every key of every rig."""
+        n = self.num_envs
+        for key, value in env_info.items():
+            if key == "final_obs":
+                array = vector_infos.get("final_obs")
+                if array is None:
+                    array = np.full(n, fill_value=None, dtype=object)
+                array[env_num] = value
+            elif isinstance(value, dict):
+                array = self._add_info(vector_infos.get(key, {}), value, env_num)
+            else:
+                array = vector_infos.get(key) if key in vector_infos else None
+                if array is None:
+                    kind = type(value)
+                    if kind in (int, float, bool) or issubclass(kind, np.number):
+                        array = np.zeros(n, dtype=kind)
+                    elif isinstance(value, np.ndarray):
+                        array = np.zeros((n, *value.shape), dtype=value.dtype)
+                    else:
+                        array = np.full(n, fill_value=None, dtype=object)
+                array[env_num] = value
+            mask_key = "_" + key
+            mask = vector_infos.get(mask_key)
+            if mask is None:
+                mask = np.zeros(n, dtype=np.bool_)
+            mask[env_num] = True
+            vector_infos[key], vector_infos[mask_key] = array, mask
+        return vector_infos
+
+    def render(self) -> tuple[Any, ...]:
+        return tuple(e.render() for e in self.envs)
+
+    def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
+        """Call a method (or get an attribute) of every rig's env."""
+        out = []
+        for e in self.envs:
+            attr = getattr(e, name)
+            out.append(attr(*args, **kwargs) if callable(attr) else attr)
+        return tuple(out)
+
+    def get_attr(self, name: str) -> tuple[Any, ...]:
+        return tuple(getattr(e, name) for e in self.envs)
+
+    def set_attr(self, name: str, values: Any) -> None:
+        if not isinstance(values, (list, tuple)):
+            values = [values] * self.num_envs
+        for e, v in zip(self.envs, values):
+            setattr(e, name, v)
+
+    def close_extras(self, **kwargs: Any) -> None:
+        errors = []
+        for e in self.envs:
+            try:
+                e.close()
+            except Exception as exc:  # noqa: BLE001 - close the others, then report
+                errors.append(exc)
+        if errors:
+            raise errors[0]
+
+
+class vector_entry_point:
+    """The ``vector_entry_point`` of a registered id whose single env is ``env`` (``"module:Class"``);
+    picklable (a spec may travel to a worker process)."""
+
+    def __init__(self, env: str) -> None:
+        self.env = env
+
+    def __call__(self, num_envs: int = 1, **kwargs: Any) -> JointsVectorEnv:
+        return JointsVectorEnv(self.env, num_envs, **kwargs)
+
+    def __repr__(self) -> str:
+        return f"vector_entry_point({self.env!r})"
+
+
+def make_vector_env(env_id: str, num_envs: int, **kwargs: Any) -> JointsVectorEnv:
+    """``gym.make_vec(env_id, num_envs, vectorization_mode="vector_entry_point", **kwargs)``: N rigs of
+    a ``joints/`` env batched in this process."""
+    vec = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
+    out: JointsVectorEnv = vec.unwrapped  # type: ignore[assignment]
+    return out

@@ -1,0 +1,458 @@
+"""``joints bench``: every speed ratio of issue 23, each against a reference measured in the same run.
+
+Rule: ratios, never absolute times (machines and their load vary from run to run); every
+reference is timed interleaved with what it is compared to, best of ``repeats``, the process
+pinned to one core. The method of the env rows (the issue's): ``gym.make(id)`` with its defaults
+(wrappers included), uniform random actions over the whole action space from a fixed seed,
+resets not timed; the reference is ``raw_steps`` raw ``mujoco.mj_step`` calls on the same model
+and a fresh ``MjData``. Real-time factors (simulated seconds per wall second) are printed beside
+the ratios, for users, not as goals.
+
+The envs are reached through gymnasium by id (``"envs:joints/ErobReach-v0"`` imports the module
+that registers them): the ``joints`` package never imports ``envs``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import platform
+import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ["ENV_ROWS", "Row", "pin_one_core", "run"]
+
+#: the env rows: (gymnasium id, goal of substeps/s / raw mj_step/s)
+ENV_ROWS = (("joints/ErobReach-v0", 0.6), ("joints/ErobArmReach-v0", 0.5), ("joints/DiffDriveGoal-v0", 0.5))
+WORLD_GOAL = 0.8
+CODEC_GOAL = 3.0
+BATCH_GOAL = 0.6
+BATCH_RIGS = 16
+ENV_MODULE = "envs"  #: the module that registers the ``joints/`` env ids
+
+
+@dataclass
+class Row:
+    """One line of the table: a measured ratio against its goal (None: not measured)."""
+
+    measure: str
+    ratio: float | None
+    goal: float
+    detail: str = ""
+
+    @property
+    def met(self) -> bool | None:
+        return None if self.ratio is None else self.ratio >= self.goal
+
+    def cells(self) -> tuple[str, str, str, str]:
+        ratio = "—" if self.ratio is None else f"{self.ratio:.2f}"
+        met = {None: "?", True: "met", False: "NOT met"}[self.met]
+        return self.measure, ratio, f">= {self.goal:g}", met
+
+
+def pin_one_core() -> tuple[int | None, set[int] | None]:
+    """Pin this process to one core (the lowest it may run on): (the core, the cores it had), or
+    (None, None) where the platform cannot."""
+    if not hasattr(os, "sched_setaffinity"):
+        return None, None
+    before = set(os.sched_getaffinity(0))
+    cpu = min(before)
+    os.sched_setaffinity(0, {cpu})
+    return cpu, before
+
+
+def _best(fns: Sequence[Callable[[], float]], repeats: int) -> list[float]:
+    """Best (smallest) of ``repeats`` timings of each ``fn`` (which returns the seconds it measured),
+    interleaved so that a burst of load hits every side of a ratio alike."""
+    best = [math.inf] * len(fns)
+    for _ in range(repeats):
+        for i, fn in enumerate(fns):
+            best[i] = min(best[i], fn())
+    return best
+
+
+def _raw(model: Any, steps: int) -> Callable[[], float]:
+    """``steps`` raw mj_step calls on ``model`` with a fresh MjData: the seconds they took."""
+    import mujoco
+
+    def timed() -> float:
+        data = mujoco.MjData(model)
+        step = mujoco.mj_step
+        t = time.perf_counter()
+        for _ in range(steps):
+            step(model, data)
+        return time.perf_counter() - t
+
+    return timed
+
+
+def _raw_many(models: Sequence[Any], steps: int) -> Callable[[], float]:
+    """``steps`` raw mj_step calls spread evenly over ``models`` (fresh MjData each): seconds."""
+    import mujoco
+
+    rounds = max(1, steps // len(models))
+
+    def timed() -> float:
+        pairs = [(m, mujoco.MjData(m)) for m in models]
+        step = mujoco.mj_step
+        t = time.perf_counter()
+        for _ in range(rounds):
+            for m, d in pairs:
+                step(m, d)
+        return time.perf_counter() - t
+
+    return timed
+
+
+def _env_block(env: Any, steps: int, seed: int) -> Callable[[], float]:
+    """``steps`` env.step calls with uniform random actions from ``seed`` (resets untimed): seconds."""
+    import numpy as np
+
+    space = env.action_space
+    rng = np.random.default_rng(seed)
+    actions = rng.uniform(space.low, space.high, (steps, *space.shape)).astype(space.dtype)
+    env.reset(seed=seed)
+
+    def timed() -> float:
+        total = 0.0
+        step = env.step
+        for a in actions:
+            t = time.perf_counter()
+            _obs, _r, terminated, truncated, _info = step(a)
+            total += time.perf_counter() - t
+            if np.any(terminated) or np.any(truncated):
+                env.reset()
+        return total
+
+    return timed
+
+
+def env_rows(*, steps: int, raw_steps: int, repeats: int, seed: int = 0) -> Iterator[Row]:
+    """Env substeps/s over raw mj_step/s on the same model, per registered env."""
+    import gymnasium as gym
+
+    for env_id, goal in ENV_ROWS:
+        env = gym.make(f"{ENV_MODULE}:{env_id}")
+        try:
+            u: Any = env.unwrapped
+            substeps = round(u.dt / u.model.opt.timestep)
+            t_env, t_raw = _best([_env_block(env, steps, seed), _raw(u.model, raw_steps)], repeats)
+            sub_s = steps * substeps / t_env
+            raw_s = raw_steps / t_raw
+            rtf = steps * u.dt / t_env
+            yield Row(f"`{env_id}`: env substeps/s ÷ raw `mj_step`/s", sub_s / raw_s, goal,
+                      f"{sub_s:,.0f} substeps/s vs raw {raw_s:,.0f}/s; {steps / t_env:,.0f} env steps/s, "
+                      f"real-time factor {rtf:.0f}x")
+        finally:
+            env.close()
+
+
+def batched_row(*, steps: int, raw_steps: int, repeats: int, rigs: int = BATCH_RIGS, seed: int = 0) -> Row:
+    """N rigs stepped by one batched env (gymnasium's vector entry point) against raw mj_step of N models."""
+    import gymnasium as gym
+
+    env_id = ENV_ROWS[0][0]
+    name = f"{rigs} rigs batched in one process (`{env_id}`), substeps/s ÷ raw `mj_step`/s of {rigs} models"
+    try:
+        vec = gym.make_vec(f"{ENV_MODULE}:{env_id}", num_envs=rigs, vectorization_mode="vector_entry_point")
+    except (gym.error.Error, ValueError, TypeError, AttributeError) as exc:
+        return Row(name, None, BATCH_GOAL, f"no batched env: {exc}")
+    try:
+        u: Any = vec.unwrapped
+        models = list(u.models)
+        substeps = round(u.dt / models[0].opt.timestep)
+        blocks = max(1, steps // rigs)
+        t_env, t_raw = _best([_env_block(vec, blocks, seed), _raw_many(models, raw_steps)], repeats)
+        sub_s = blocks * rigs * substeps / t_env
+        raw_s = max(1, raw_steps // rigs) * rigs / t_raw
+        rtf = blocks * rigs * u.dt / t_env
+        return Row(name, sub_s / raw_s, BATCH_GOAL,
+                   f"{sub_s:,.0f} substeps/s vs raw {raw_s:,.0f}/s; real-time factor {rtf:.0f}x (all rigs)")
+    finally:
+        vec.close()
+
+
+#: the states of the world row: name -> how to put a joint there (after enable and its 500 ms)
+WORLD_STATES = ("disabled", "holding", "speed", "profile absolute")
+
+
+def _erob_rig() -> Any:
+    import joints
+
+    cfg = {
+        "backend": "sim",
+        "sim": {"model": "erob_stand.xml", "timestep": 0.001, "direct": True},
+        "buses": {"rs485": {"protocol": "modbus-rtu", "port": "sim"}},
+        "joints": {"joint1": {"device": "erob", "model": "eRob80H100", "bus": "rs485", "address": 1,
+                              "limits": {"position": [-1000.0, 1000.0], "velocity": 5.0, "torque": 40.0}}},
+    }
+    return joints.open(cfg)
+
+
+def _into(rig: Any, state: str) -> None:
+    rig.reset()
+    j = rig.joints["joint1"]
+    if state == "disabled":
+        return
+    j.enable()
+    rig.sleep(0.6)
+    if state == "speed":
+        j.set_velocity(2.0, acceleration=20.0)
+        rig.sleep(0.5)
+    elif state == "profile absolute":
+        j.move_to(900.0, velocity=2.0, acceleration=20.0, deceleration=20.0)  # moves for 450 s
+        rig.sleep(0.5)
+
+
+def world_row(*, raw_steps: int, repeats: int) -> Row:
+    """World.step of one eRob in each state over raw mj_step on the same model."""
+    rig = _erob_rig()
+    try:
+        world = rig.sim
+        ratios: list[float] = []
+        rates: list[str] = []
+        for state in WORLD_STATES:
+            def timed(state: str = state) -> float:
+                _into(rig, state)
+                t = time.perf_counter()
+                world.step(raw_steps)
+                return time.perf_counter() - t
+
+            t_world, t_raw = _best([timed, _raw(world.model, raw_steps)], repeats)
+            ratios.append(t_raw / t_world)
+            rates.append(f"{raw_steps / t_world:,.0f}")
+        raw_s = raw_steps / t_raw
+        return Row("world ratio, one eRob, " + " / ".join(WORLD_STATES), min(ratios), WORLD_GOAL,
+                   " / ".join(f"{r:.2f}" for r in ratios) + f" (substeps/s {' / '.join(rates)}; raw {raw_s:,.0f})")
+    finally:
+        rig.close()
+
+
+def _codec_benches() -> tuple[list[Callable[[int], None]], str]:
+    """FC03 of the eRob status block (25 registers from 0x0060): joints' codec and pymodbus', as
+    ``fn(n)`` loops - host role (encode the request, decode the reply) and device role (decode the
+    request, encode the reply); the frames are checked equal before anything is timed."""
+    import pymodbus
+    from pymodbus.framer import FramerRTU
+    from pymodbus.pdu import DecodePDU
+    from pymodbus.pdu.register_message import ReadHoldingRegistersRequest, ReadHoldingRegistersResponse
+
+    from joints.codecs import modbus as mb
+
+    slave, start, count = 2, 0x0060, 25
+    values = tuple((0x1111 * (i + 1)) & 0xFFFF for i in range(count))
+    request = mb.encode(mb.ReadHoldingRegisters(slave, start, count))
+    reply = mb.encode(mb.ReadRegistersReply(slave, mb.READ_HOLDING_REGISTERS, values))
+    client, server = FramerRTU(DecodePDU(False)), FramerRTU(DecodePDU(True))
+    assert client.buildFrame(ReadHoldingRegistersRequest(address=start, count=count, dev_id=slave)) == request
+    assert tuple(client.handleFrame(reply, slave, 0)[1].registers) == values  # type: ignore[union-attr]
+    pdu = server.handleFrame(request, slave, 0)[1]
+    assert (pdu.address, pdu.count) == (start, count)  # type: ignore[union-attr]
+    assert server.buildFrame(ReadHoldingRegistersResponse(registers=list(values), dev_id=slave)) == reply
+
+    def joints_host(n: int) -> None:
+        codec = mb.ModbusRtuCodec(mb.Role.HOST)
+        encode, req_cls, expect, feed, next_message = (mb.encode, mb.ReadHoldingRegisters, codec.expect_reply_to,
+                                                       codec.feed, codec.next_message)
+        for _ in range(n):
+            req = req_cls(slave, start, count)
+            encode(req)
+            expect(req)
+            feed(reply)
+            _ = next_message().values  # type: ignore[union-attr]
+
+    def pymodbus_host(n: int) -> None:
+        framer = FramerRTU(DecodePDU(False))
+        build, handle = framer.buildFrame, framer.handleFrame
+        for _ in range(n):
+            build(ReadHoldingRegistersRequest(address=start, count=count, dev_id=slave))
+            _ = handle(reply, slave, 0)[1].registers  # type: ignore[union-attr]
+
+    def joints_device(n: int) -> None:
+        codec = mb.ModbusRtuCodec(mb.Role.DEVICE)
+        encode, reply_cls, feed, next_message = mb.encode, mb.ReadRegistersReply, codec.feed, codec.next_message
+        fc = mb.READ_HOLDING_REGISTERS
+        for _ in range(n):
+            feed(request)
+            req = next_message()
+            encode(reply_cls(req.slave, fc, values))  # type: ignore[union-attr]
+
+    def pymodbus_device(n: int) -> None:
+        framer = FramerRTU(DecodePDU(True))
+        build, handle = framer.buildFrame, framer.handleFrame
+        for _ in range(n):
+            req = handle(request, slave, 0)[1]
+            build(ReadHoldingRegistersResponse(registers=list(values), dev_id=req.dev_id))  # type: ignore[union-attr]
+
+    return [joints_host, pymodbus_host, joints_device, pymodbus_device], str(pymodbus.__version__)
+
+
+def _per_call(fns: Sequence[Callable[[int], None]], repeats: int, min_time: float) -> list[float]:
+    """Best-of-``repeats`` seconds per iteration of each ``fn(n)`` (n grown until a run lasts ``min_time``)."""
+    def sized(fn: Callable[[int], None]) -> Callable[[], float]:
+        n = 1
+        while True:
+            t = time.perf_counter()
+            fn(n)
+            if time.perf_counter() - t >= min_time:
+                break
+            n *= 2
+
+        def timed() -> float:
+            t = time.perf_counter()
+            fn(n)
+            return (time.perf_counter() - t) / n
+
+        return timed
+
+    return _best([sized(fn) for fn in fns], repeats)
+
+
+def codec_row(*, repeats: int, min_time: float) -> Row:
+    """The Modbus RTU codec against pymodbus', FC03 of the eRob status block, host and device roles."""
+    name = "Modbus codec vs pymodbus, FC03 host / device"
+    try:
+        fns, version = _codec_benches()
+    except ImportError:
+        return Row(name, None, CODEC_GOAL, "pymodbus not installed")
+    jh, ph, jd, pd = _per_call(fns, repeats, min_time)
+    host, device = ph / jh, pd / jd
+    return Row(name, min(host, device), CODEC_GOAL,
+               f"{host:.1f}x / {device:.1f}x faster than pymodbus {version} "
+               f"({jh * 1e6:.1f} / {jd * 1e6:.1f} us per FC03)")
+
+
+# -- the bus planner ------------------------------------------------------------------------------
+
+#: control rate the planner checks when none is given [Hz] (the envs' 20 ms period)
+PLAN_RATE = 50.0
+
+
+@dataclass
+class BusPlan:
+    """One bus of a config: its traffic per control cycle and what fits."""
+
+    bus: str
+    protocol: str
+    line: str  #: "115200 baud 8N1" / "1000000 bit/s"
+    joints: int
+    frames: int  #: frames per cycle (requests and replies)
+    data_bytes: int  #: bytes of those frames (serial: whole RTU frames; CAN: data fields)
+    load: Any  #: :class:`joints.transports.can_timing.CycleLoad` at the checked rate
+
+    def text(self, rate: float) -> str:
+        load = self.load
+        cycle = load.bits_worst / load.bitrate
+        fit = int(load.period // (cycle / self.joints)) if self.joints else 0
+        verdict = "fits" if load.fits else "does NOT fit"
+        return (f"bus {self.bus} ({self.protocol}, {self.line}): {self.joints} joint(s), {self.frames} frames / "
+                f"{self.data_bytes} bytes per control cycle -> {cycle * 1e3:.2f} ms on the wire; at {rate:g} Hz "
+                f"{load.worst:.0%} of the bus ({verdict}); these joints fit up to {load.max_rate:,.0f} Hz; at "
+                f"{rate:g} Hz up to {fit} joint(s) like these fit")
+
+
+def _cycle(rig: Any) -> None:
+    """One control cycle of every joint as the envs run it: a command, then every joint's state."""
+    from joints.drivers.capabilities import GroupedChannel, SyncVelocityGroup
+
+    velocities = {}
+    for name, j in rig.joints.items():
+        d = j.driver
+        if isinstance(d, GroupedChannel) and isinstance(d.group, SyncVelocityGroup):
+            velocities[name] = 0.0  # wheels: both targets in one command (as the diffdrive env)
+        else:
+            s = j.last_state or j.state()
+            j.move_to(s.position)
+    if velocities:
+        rig.set_velocities(velocities)
+    rig.read_states()
+
+
+def plan(config: Any, rate: float | None = None) -> list[BusPlan]:
+    """The traffic of one control cycle per bus of ``config``, from the frames the drivers really send
+    (run on the config's twins), timed with the wire-time model of each medium: Modbus RTU characters
+    and t3.5 (:mod:`joints.transports.serial_timing`), CAN frames with worst-case bit stuffing
+    (:func:`joints.transports.can_timing.cycle_load`)."""
+    import joints
+    from joints import registry
+    from joints.link.trace import TraceRecord
+    from joints.transports import can_timing, serial_timing
+
+    rate = rate or PLAN_RATE
+    if not rate > 0:
+        raise ValueError(f"the control rate must be > 0 Hz, got {rate!r}")
+    with joints.open(config, backend="sim") as rig:
+        for j in rig.joints.values():
+            j.enable()
+        rig.sleep(0.6)
+        _cycle(rig)  # the first cycle also configures modes and profiles: not counted
+        records: list[TraceRecord] = []
+        rig.trace(records.append)
+        _cycle(rig)
+        rig.trace(None)
+        out = []
+        for name, b in rig.config.buses.items():
+            mine = [r for r in records if r.bus == rig.buses[name].link.name]
+            n = sum(1 for c in rig.config.joints.values() if c.bus == name)
+            proto = registry.protocol(b.protocol)
+            sizes = [len(r.data) for r in mine]
+            if proto.medium == "can":
+                load = can_timing.cycle_load(sizes, period=1.0 / rate, bitrate=b.bitrate)
+                line = f"{b.bitrate} bit/s"
+            else:
+                rtu = b.protocol == "modbus-rtu"  # frames delimited by the t3.5 silence
+                load = serial_timing.cycle_load(sizes, period=1.0 / rate, baudrate=b.baudrate, parity=b.parity,
+                                                stopbits=b.stopbits, silence=rtu)
+                line = f"{b.baudrate} baud 8{b.parity}{b.stopbits}" + (", t3.5" if rtu else "")
+            out.append(BusPlan(name, b.protocol, line, n, len(mine), sum(sizes), load))
+        return out
+
+
+def run(*, quick: bool = False, config: str | None = None, rate: float | None = None, speed: bool = True,
+        out: Callable[[str], None] = print) -> list[Row]:
+    """Run every benchmark and (``config``) the bus planner; print, and return the rows.
+    ``quick``: tiny sizes (tests); ``speed=False``: the planner only."""
+    if not speed:
+        if config is not None:
+            _print_plan(config, rate, out)
+        return []
+    core, cores = pin_one_core()
+    try:
+        return _run(quick, config, rate, out, core)
+    finally:
+        if cores is not None:
+            os.sched_setaffinity(0, cores)
+
+
+def _run(quick: bool, config: str | None, rate: float | None, out: Callable[[str], None],
+         core: int | None) -> list[Row]:
+    steps, raw_steps, repeats, min_time = (20, 500, 1, 0.01) if quick else (500, 20000, 5, 0.2)
+    out(f"Python {platform.python_version()} on {platform.machine()}; pinned to core {core}; best of {repeats}; "
+        f"raw reference {raw_steps} mj_step on a fresh MjData")
+    rows = list(env_rows(steps=steps, raw_steps=raw_steps, repeats=repeats))
+    rows.append(world_row(raw_steps=raw_steps, repeats=repeats))
+    rows.append(codec_row(repeats=repeats, min_time=min_time))
+    rows.append(batched_row(steps=steps * 4, raw_steps=raw_steps, repeats=repeats))
+    out(table(rows))
+    if config is not None:
+        _print_plan(config, rate, out)
+    return rows
+
+
+def _print_plan(config: Any, rate: float | None, out: Callable[[str], None]) -> None:
+    r = rate or PLAN_RATE
+    out(f"\nBus planner for {config} (one control cycle = a command and a state read per joint, as measured on "
+        f"its twins; wire time with worst-case CAN stuffing, Modbus t3.5; drive turnaround not included):")
+    for p in plan(config, r):
+        out("- " + p.text(r))
+
+
+def table(rows: Sequence[Row]) -> str:
+    """The rows as the issue's markdown table, details below."""
+    lines = ["| measure | ratio | goal | |", "|---|---|---|---|"]
+    lines += ["| " + " | ".join(r.cells()) + " |" for r in rows]
+    lines.append("")
+    lines += [f"- {r.measure}: {r.detail}" for r in rows if r.detail]
+    return "\n".join(lines)

@@ -1,0 +1,224 @@
+"""Stepping worlds: every drive of one or more worlds, and their physics, in as few calls as possible.
+
+Rule: one table holds the rows of every kernel-backed twin (:mod:`joints.sim.kernel`) of a group
+of worlds (one world, or the N rigs of a batched env). :func:`step_row` is the one dispatch from
+a row to its drive's loops. Compiled, :func:`run` runs N substeps of the active worlds - every
+row's loops, then MuJoCo's ``mj_step`` of each world - without returning to Python, reading the
+joints from and writing the torques into the worlds' ``MjData`` by address. Without a compiler
+(or for a world whose drives are not all kernel rows, or that ticks a timed CAN bus after every
+substep) the world steps substep by substep from Python: :func:`substep` runs the same rows
+through the same :func:`step_row`. Every path gives the same bits.
+
+Rows are stepped in the order of the worlds' joints (as a world has always stepped its drives);
+each stepped row's kind, MuJoCo addresses, world and the rows its loops reach besides its own
+are in :attr:`Group.adr` (columns :data:`KIND` ... :data:`C`); each world's addresses and
+step count in :attr:`Group.worlds_table` (columns :data:`ACTIVE` ... :data:`NU`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from joints.sim import erob_kernel, kernel, zlac_kernel
+from joints.sim.kernel import jitable
+
+__all__ = ["CHUNK", "KINDS", "Group", "step_row", "substep"]
+
+#: kernel kinds: a twin's ``KERNEL`` name -> code in the adr table
+KINDS = {"erob": 1, "zlac": 2}
+EROB, ZLAC = 1, 2
+#: columns of :attr:`Group.adr`
+KIND, QPOS, DOF, ACT, WORLD, A, B, C = range(8)
+ADR_WIDTH = 8
+#: columns of :attr:`Group.worlds_table`
+ACTIVE, STEPS, MODEL, DATA, QPOS_AT, NQ, QVEL_AT, NV, CTRL_AT, NU = range(10)
+WORLD_WIDTH = 10
+#: substeps per compiled call at most (a KeyboardInterrupt lands between calls)
+CHUNK = 50
+#: a world whose MuJoCo arena was ever this full leaves the fused path for good: inside the compiled call
+#: an mju_error (arena overflow with many contacts) would end the process; the per-substep path raises
+#: mujoco.FatalError instead, which the rig's exit handling survives
+ARENA_GUARD = 0.25
+
+
+@jitable
+def step_row(table: Any, adr: Any, i: int, t: float, dt: float, q: float, qd: float) -> float:
+    """The loops of row ``i`` (its kind's kernel) for the substep ending at ``t``: the torque."""
+    a = adr[i]
+    kind = a[KIND]
+    if kind == EROB:
+        return erob_kernel.step(table[i], t, dt, q, qd)
+    if kind == ZLAC:  # a channel row; A: the drive's first row
+        first = a[A]
+        return zlac_kernel.step(table, first, i - first - 1, t, dt, q, qd)
+    return 0.0
+
+
+def substep(table: Any, adr: Any, ratio: Sequence[float], order: Any, active: Sequence[int], steps: Sequence[int],
+            dts: Sequence[float], qpos: Sequence[Any], qvel: Sequence[Any], ctrl: Sequence[Any]) -> None:
+    """One substep of the rows in ``order`` whose world is active (Python: the worlds' arrays)."""
+    for i in order:
+        a = adr[i]
+        w = a[WORLD]
+        if not active[w]:
+            continue
+        dt = dts[w]
+        t = (steps[w] + 1) * dt
+        r = ratio[i]
+        ctrl[w][a[ACT]] = step_row(table, adr, i, t, dt, float(qpos[w][a[QPOS]]) * r, float(qvel[w][a[DOF]]) * r)
+
+
+def _run(n: int, physics: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any, worlds: Any,
+         dts: Any) -> None:
+    """``n`` substeps of the active worlds: every row's loops, then (``physics``) each world's
+    ``mj_step`` (compiled only: the worlds' arrays are reached by address)."""
+    doubles, call = kernel.doubles, kernel.call
+    for k in range(n):
+        for j in range(len(order)):
+            i = order[j]
+            a = adr[i]
+            w = a[WORLD]
+            row = worlds[w]
+            if row[ACTIVE] == 0:
+                continue
+            dt = dts[w]
+            t = (row[STEPS] + k + 1) * dt
+            r = ratio[i]
+            q = doubles(row[QPOS_AT], row[NQ])[a[QPOS]] * r
+            qd = doubles(row[QVEL_AT], row[NV])[a[DOF]] * r
+            doubles(row[CTRL_AT], row[NU])[a[ACT]] = step_row(table, adr, i, t, dt, q, qd)
+        if physics:
+            for w in range(len(worlds)):
+                row = worlds[w]
+                if row[ACTIVE] != 0:
+                    call(mj_step, row[MODEL], row[DATA])
+
+
+_run_compiled = kernel.compiled(_run) if kernel.AVAILABLE else None
+_WARM: list[bool] = []
+
+
+def _warm() -> None:
+    """Every compiled kernel ready once per process (see :func:`joints.sim.erob_kernel.warm`)."""
+    if not _WARM:
+        erob_kernel.warm()
+        zlac_kernel.warm()
+        _WARM.append(True)
+
+
+class Group:
+    """The kernel rows of some worlds in one table, stepped together or world by world."""
+
+    def __init__(self, worlds: Sequence[Any], compiled: bool) -> None:
+        import numpy as np
+
+        self.worlds = list(worlds)
+        self.compiled = compiled and _run_compiled is not None
+        rows: list[list[float]] = []
+        adr: list[list[int]] = []
+        ratio: list[float] = []
+        self._owners: list[tuple[Any, int]] = []  #: (twin, first row)
+        self._row_of: dict[tuple[int, str], int] = {}  #: (world index, joint name) -> row
+        for w, world in enumerate(self.worlds):
+            seen: dict[int, int] = {}
+            for b in world.kernel_joints():
+                twin = b.emulator
+                first = seen.get(id(twin))
+                if first is None:
+                    first = seen[id(twin)] = len(rows)
+                    for r in twin.kernel_rows():
+                        rows.append(r)
+                        adr.append([0] * ADR_WIDTH)
+                        ratio.append(1.0)
+                    self._owners.append((twin, first))
+                i = first + twin.kernel_row(b.channel)
+                adr[i] = [KINDS[twin.KERNEL], b.qadr, b.dadr, b.aid, w, first, 0, 0]
+                ratio[i] = b.ratio  # motor rad per joint unit (a slide on a lead screw)
+                self._row_of[(w, b.name)] = i
+        width = max([len(r) for r in rows], default=1)
+        self.table = kernel.rows([r + [0.0] * (width - len(r)) for r in rows] or [[0.0]], self.compiled)
+        self.adr = kernel.rows(adr or [[0] * ADR_WIDTH], self.compiled, integer=True)
+        self.ratio: Any = np.array(ratio or [1.0]) if self.compiled else (ratio or [1.0])
+        for twin, first in self._owners:
+            twin.adopt(self.table, first)
+        self.dts = [w.timestep for w in self.worlds]
+        self.mj_step = kernel.mj_step_address() if self.compiled else None
+        if self.compiled:
+            table = []
+            for world in self.worlds:
+                m, d = world.model, world.data
+                table.append([0, 0, m._address, d._address, d.qpos.ctypes.data, m.nq, d.qvel.ctypes.data, m.nv,
+                              d.ctrl.ctypes.data, m.nu])
+            self.worlds_table = np.array(table, dtype=np.int64).reshape(len(self.worlds), WORLD_WIDTH)
+            self.dts_array = np.array(self.dts)
+        self.order: Any = None
+        self.fusable: list[bool] = []
+        self._active: tuple[int, ...] = ()  #: the worlds whose ACTIVE flag is set in worlds_table
+        self.replan()
+        if self.compiled:
+            _warm()
+            _run_compiled(0, 0, 0, self.table, self.adr, self.ratio, self.order,  # type: ignore[misc]
+                          self.worlds_table, self.dts_array)  # compiled now, not in the first (paced) step
+
+    def replan(self) -> None:
+        """Which rows step, in joint order (a world's joints stepped in Python are left out), and
+        which worlds can run N substeps in one call."""
+        import numpy as np
+
+        order = [self._row_of[(w, b.name)] for w, world in enumerate(self.worlds) for b in world.kernel_joints()
+                 if world.kernel_stepped(b)]
+        self.order = np.array(order, dtype=np.int64) if self.compiled else order
+        self.fusable = [self.mj_step is not None and w.fusable() for w in self.worlds]
+
+    def run(self, worlds: Sequence[int], n: int) -> None:
+        """``n`` substeps of ``worlds`` (indices, all fusable) in compiled calls of at most
+        :data:`CHUNK` substeps; each world's ``steps`` counts up after every call."""
+        table = self.worlds_table
+        all_worlds = self.worlds
+        active = tuple(worlds)
+        if active != self._active:  # the active worlds' flags (kept while the same worlds run)
+            table[:, ACTIVE] = 0
+            for w in active:
+                table[w, ACTIVE] = 1
+            self._active = active
+        while n > 0:
+            m = min(n, CHUNK)
+            for w in active:
+                table[w, STEPS] = all_worlds[w].steps
+            _run_compiled(m, 1, self.mj_step or 0, self.table, self.adr, self.ratio, self.order,  # type: ignore[misc]
+                          table, self.dts_array)
+            for w in active:
+                all_worlds[w].steps += m
+            n -= m
+            crowded = [w for w in active if all_worlds[w].arena_crowded(ARENA_GUARD)]
+            if crowded:
+                for w in crowded:
+                    all_worlds[w].leave_fused_path()
+                self.replan()
+                for w in crowded:  # the rest of their substeps one by one, where errors raise
+                    all_worlds[w].step(n)
+                active = tuple(w for w in active if w not in crowded)
+                if not active:
+                    return
+
+    def substep(self, worlds: Sequence[int]) -> None:
+        """The kernel loops of ``worlds`` for their next substep (torques into ``ctrl``; no physics)."""
+        if self.compiled:
+            table = self.worlds_table
+            table[:, ACTIVE] = 0
+            self._active = ()
+            for w in worlds:
+                table[w, ACTIVE] = 1
+                table[w, STEPS] = self.worlds[w].steps
+            _run_compiled(1, 0, 0, self.table, self.adr, self.ratio, self.order, table,  # type: ignore[misc]
+                          self.dts_array)
+            return
+        active = [0] * len(self.worlds)
+        steps = [0] * len(self.worlds)
+        for w in worlds:
+            active[w] = 1
+            steps[w] = self.worlds[w].steps
+        substep(self.table, self.adr, self.ratio, self.order, active, steps, self.dts,
+                [w.data.qpos for w in self.worlds], [w.data.qvel for w in self.worlds],
+                [w.data.ctrl for w in self.worlds])

@@ -1,0 +1,106 @@
+"""`joints bench`: every row of issue 23's table, the bus planner and its wire-time models, and the
+bus path's transaction counts (timings themselves are never asserted)."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mujoco")
+gym = pytest.importorskip("gymnasium")
+
+import envs
+import joints
+from joints import bench
+from joints.cli import main
+from joints.transports import can_timing, serial_timing
+
+
+def test_serial_wire_time() -> None:
+    assert serial_timing.char_bits("N", 1) == 10 and serial_timing.char_bits("E", 1) == 11
+    assert serial_timing.char_bits("N", 2) == 11
+    assert serial_timing.t35_bits(9600, "E") == 3.5 * 11  # 3.5 characters up to 19200 baud
+    assert serial_timing.t35_bits(115200) == pytest.approx(1.75e-3 * 115200)  # then 1.75 ms
+    # FC03 of the eRob status block: request 8 bytes, reply 55 bytes, a t3.5 after each
+    load = serial_timing.cycle_load([8, 55], period=0.01, baudrate=115200)
+    assert load.bits_worst == int(np.ceil(63 * 10 + 2 * 201.6))
+    assert load.worst == pytest.approx(load.bits_worst / 1152.0)
+    assert serial_timing.cycle_load([8, 55], period=0.01, baudrate=115200, silence=False).bits_worst == 630
+    with pytest.raises(ValueError):
+        serial_timing.cycle_load([8], period=0.0, baudrate=9600)
+
+
+def test_one_can_capacity_function() -> None:
+    """CANopen's SYNC cycle is the general cycle load of its frames (one formula for both)."""
+    co = can_timing.canopen_cycle_load(3, sync_period=0.001)
+    frames = [0] + [6] * 6  # SYNC, then RPDO + TPDO of 6 bytes per node
+    general = can_timing.cycle_load(frames, period=0.001, bitrate=1_000_000)
+    assert (co.bits_best, co.bits_worst) == (general.bits_best, general.bits_worst)
+    assert co.best == pytest.approx(0.62, abs=0.01) and co.worst == pytest.approx(0.75, abs=0.01)
+    assert general.max_rate == pytest.approx(1_000_000 / general.bits_worst)
+    with pytest.raises(ValueError):
+        can_timing.cycle_load([9], period=0.001, bitrate=1_000_000)
+
+
+def test_planner_counts_the_frames_the_drivers_send() -> None:
+    with envs.config_path("erob_reach") as path:
+        (p,) = bench.plan(path, 50.0)
+    # target (FC16: 13 + 8 bytes), start (FC06: 8 + 8), status (FC03: 8 + 55): 3 transactions
+    assert (p.protocol, p.joints, p.frames, p.data_bytes) == ("modbus-rtu", 1, 6, 100)
+    assert p.load.bits_worst == int(np.ceil(1000 + 6 * 1.75e-3 * 115200))
+    assert "fits" in p.text(50.0)
+    with envs.config_path("erob_arm_reach") as path:
+        (arm,) = bench.plan(path, 50.0)
+    assert arm.frames == 18 and not arm.load.fits  # 3 joints x 3 transactions do not fit 20 ms at 115200
+
+
+def test_planner_on_a_can_bus() -> None:
+    cfg = {"backend": "sim", "sim": {"model": "erob_arm3.xml"},
+           "buses": {"can": {"protocol": "erob-can", "bitrate": 1_000_000}},
+           "joints": {f"joint{i}": {"device": "erob", "bus": "can", "address": i,
+                                    "limits": {"position": [-3.0, 3.0], "velocity": 2.0, "torque": 40.0}}
+                      for i in (1, 2, 3)}}
+    (p,) = bench.plan(cfg, 500.0)
+    assert p.protocol == "erob-can" and p.joints == 3 and p.frames > 0 and p.frames % 2 == 0
+    assert p.load.bitrate == 1_000_000 and p.load.bits_worst > p.load.bits_best
+    assert p.load.period == pytest.approx(0.002)
+
+
+def test_bench_command_prints_every_row_of_the_table(capsys: pytest.CaptureFixture[str]) -> None:
+    with envs.config_path("zlac_diffdrive") as path:
+        assert main(["bench", "--quick", "--config", str(path)]) == 0
+    out = capsys.readouterr().out
+    for row in ("`joints/ErobReach-v0`", "`joints/ErobArmReach-v0`", "`joints/DiffDriveGoal-v0`",
+                "world ratio, one eRob, disabled / holding / speed / profile absolute",
+                "Modbus codec vs pymodbus, FC03 host / device", "16 rigs batched in one process"):
+        assert row in out
+    assert "—" not in out.split("Bus planner")[0]  # every row measured
+    assert "Bus planner" in out and "bus rs485 (modbus-rtu" in out
+
+
+@pytest.mark.parametrize("direct", [True, False])
+def test_erob_position_step_is_three_transactions(direct: bool) -> None:
+    """Target (0x0043), start (0x00F1), status read (one FC03 of the adjacent block): 3, both paths."""
+    cfg = copy.deepcopy(envs.default_config("erob_reach"))
+    cfg["sim"]["direct"] = direct
+    env = gym.make("joints/ErobReach-v0", config=cfg)
+    try:
+        env.reset(seed=0)
+        link = env.unwrapped.rig.buses["rs485"].link
+        before = link.transactions
+        rng = np.random.default_rng(0)
+        for _ in range(10):
+            env.step(rng.uniform(-1, 1, (1,)).astype(np.float32))
+        assert link.transactions - before == 30
+    finally:
+        env.close()
+
+
+def test_sleep_together_argument_checks() -> None:
+    with envs.config_path("erob_reach") as path, joints.open(path) as rig:
+        with pytest.raises(ValueError, match="finite"):
+            joints.sleep_together([rig], [-1.0])
+        joints.sleep_together([rig], 0.01)
+        assert rig.time == pytest.approx(0.01)
