@@ -318,6 +318,7 @@ class Other:
     cob_id: int
     data: bytes
     remote: bool = False
+    extended: bool = False  #: a 29-bit identifier (not CANopen, which uses 11-bit ones: CiA 301 7.3.3)
 
 
 # SDO, client -> server (COB-ID 0x600 + node)
@@ -598,11 +599,12 @@ def _check_mux(index: int, subindex: int) -> None:
         raise EncodeError(f"object 0x{index:X}:{subindex:X} out of range (index 16 bits, subindex 8 bits)")
 
 
-def _frame(cob: int, data: bytes | bytearray = b"", *, remote: bool = False, dlc: int | None = None) -> can.Message:
+def _frame(cob: int, data: bytes | bytearray = b"", *, remote: bool = False, dlc: int | None = None,
+           extended: bool = False) -> can.Message:
     if remote:
-        return can.Message(arbitration_id=cob, is_extended_id=False, is_remote_frame=True,
+        return can.Message(arbitration_id=cob, is_extended_id=extended, is_remote_frame=True,
                            dlc=0 if dlc is None else dlc)
-    return can.Message(arbitration_id=cob, is_extended_id=False, data=bytes(data))
+    return can.Message(arbitration_id=cob, is_extended_id=extended, data=bytes(data))
 
 
 def _sdo_frame(cob: int, command: int, index: int, subindex: int, tail: bytes) -> can.Message:
@@ -642,11 +644,12 @@ def encode(message: Message) -> can.Message:
         return _frame(EMCY_BASE + m.node, m.error_code.to_bytes(2, "little") + bytes((m.error_register,))
                       + m.manufacturer.ljust(5, b"\x00"))
     if isinstance(m, Pdo | Other):
-        if not 0 <= m.cob_id <= 0x7FF or len(m.data) > 8:
+        extended = isinstance(m, Other) and m.extended
+        if not 0 <= m.cob_id <= (0x1FFFFFFF if extended else 0x7FF) or len(m.data) > 8:
             raise EncodeError(f"frame out of range: COB-ID 0x{m.cob_id:X}, {len(m.data)} bytes")
         if m.remote:
-            return _frame(m.cob_id, remote=True, dlc=len(m.data))
-        return _frame(m.cob_id, m.data)
+            return _frame(m.cob_id, remote=True, dlc=len(m.data), extended=extended)
+        return _frame(m.cob_id, m.data, extended=extended)
     return _encode_sdo(m)
 
 
@@ -703,8 +706,10 @@ def decode(frame: can.Message) -> Message:
                          "(a classic CAN frame carries at most 8)", data=data)
     kind, node = classify(frame)
     if frame.is_remote_frame and kind is not Kind.GUARD_REQUEST:
-        if kind.is_pdo or kind is Kind.UNKNOWN or kind is Kind.TIME:
-            return (Pdo if kind.is_pdo else Other)(frame.arbitration_id, bytes(frame.dlc), remote=True)
+        if kind.is_pdo:
+            return Pdo(frame.arbitration_id, bytes(frame.dlc), remote=True)
+        if kind is Kind.UNKNOWN or kind is Kind.TIME:
+            return Other(frame.arbitration_id, bytes(frame.dlc), remote=True, extended=frame.is_extended_id)
         raise FrameError(f"remote frame on {kind.value} COB-ID 0x{frame.arbitration_id:X}")
     if kind.is_pdo:
         return Pdo(frame.arbitration_id, data)
@@ -743,7 +748,7 @@ def decode(frame: can.Message) -> Message:
         if len(data) < 3:
             raise FrameError(f"EMCY of node {node} with {len(data)} bytes (expected 8)", data=data)
         return Emcy(node, int.from_bytes(data[:2], "little"), data[2], data[3:].ljust(5, b"\x00"))
-    return Other(frame.arbitration_id, data)
+    return Other(frame.arbitration_id, data, extended=frame.is_extended_id)
 
 
 def _decode_sdo(node: int, data: bytes, *, from_client: bool) -> Message:

@@ -63,6 +63,22 @@ def append_crc(data: bytes | bytearray) -> bytes:
     return bytes(data) + crc16_modbus(data).to_bytes(2, "little")
 
 
+def crc16_valid_prefix(data: bytes | bytearray, shortest: int, longest: int) -> int:
+    """The length of the shortest prefix of ``data`` (``shortest`` .. ``longest`` bytes) that ends in
+    its own CRC (the CRC of a prefix with its CRC appended is 0), or 0 if there is none.
+
+    One byte-wise pass: the running CRC of every prefix comes for the price of the longest.
+    """
+    table = _TABLE
+    crc = 0xFFFF
+    end = min(len(data), longest)
+    for i in range(end):
+        crc = (crc >> 8) ^ table[(crc ^ data[i]) & 0xFF]
+        if crc == 0 and i + 1 >= shortest:
+            return i + 1
+    return 0
+
+
 def crc_ok(frame: bytes | bytearray | memoryview) -> bool:
     """True if the last two bytes are the (low-first) CRC of the rest. CRC of a good frame is 0."""
     return len(frame) >= 3 and crc16_modbus(frame) == 0

@@ -1197,9 +1197,10 @@ class MksCodec:
 
     # -- input --
     def feed(self, data: bytes | bytearray) -> None:
-        """Append received bytes."""
-        self._buf += data
-        self._silent = False
+        """Append received bytes (nothing received leaves a silent line silent)."""
+        if data:
+            self._buf += data
+            self._silent = False
 
     def flush(self) -> None:
         """The line went silent: an incomplete frame at the head will never complete."""

@@ -7,11 +7,21 @@ whose CRC fails raises :class:`~joints.errors.ChecksumError` after its first byt
 the caller may keep calling ``next_message()``. ``flush()`` tells the codec the line went silent
 (t3.5): an incomplete head is garbage then.
 
-Host role decodes replies; ``expect_reply_to(request)`` lets it check a reply's byte count
-against the request (a reply whose byte-count field disagrees with the frame raises
-:class:`~joints.errors.ByteCountError`). ``expect_echo(frame)`` skips an RS485 adapter's local echo.
+Host role decodes replies (exception replies to every public or user-defined function code, so a
+host hears "illegal function" for a code the server lacks); ``expect_reply_to(request)`` lets it
+check a reply's byte count against the request (a reply whose byte-count field disagrees with the
+frame raises :class:`~joints.errors.ByteCountError`). ``expect_echo(frame)`` skips an RS485 adapter's local echo.
 Device role decodes requests; unsupported-but-well-framed function codes come out as
-:class:`UnsupportedRequest` so a server can answer "illegal function".
+:class:`UnsupportedRequest` so a server can answer "illegal function". A function code the
+codec knows no shape for (a public or user-defined code other than 01-06, 15, 16) has no length
+field: such a request is delimited by its CRC, the shortest prefix of 4-256 bytes that ends in
+its own CRC (an RTU slave delimits frames by the t3.5 silence; the CRC finds the same end without
+waiting for it, and a chance match costs an exception reply, never an action). Unassigned
+function codes are garbage in both roles.
+
+A header announcing a frame longer than 256 bytes (the RTU maximum, Modbus over serial line
+2.5.1.1) is garbage at once: nothing is waited for. ``feed(b"")`` is no news: a line that went
+silent stays silent until bytes arrive.
 """
 
 from __future__ import annotations
@@ -22,7 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from joints.codecs.crc import crc16_modbus
+from joints.codecs.crc import crc16_modbus, crc16_valid_prefix
 from joints.errors import ByteCountError, ChecksumError, EncodeError, FrameError
 
 READ_HOLDING_REGISTERS = 0x03
@@ -356,7 +366,12 @@ def encode(message: Message) -> bytes:
 # --- decoding --------------------------------------------------------------------------------
 
 
-_EXCEPTION_FCS = frozenset((1, 2, 3, 4, 5, 6, 15, 16, 0x17))
+#: the function codes that exist: the public codes the Modbus application protocol assigns
+#: (v1.1b3, 5.1) and the user-defined ranges 65-72 and 100-110. A device frames a request with one
+#: it does not implement (a server answers 01), a host decodes exception replies to any of them;
+#: any other code is garbage.
+_EXCEPTION_FCS = frozenset((1, 2, 3, 4, 5, 6, 7, 8, 11, 12, 15, 16, 17, 20, 21, 22, 23, 24, 43,
+                            *range(65, 73), *range(100, 111)))
 _BYTE_COUNT_REPLY_FCS = frozenset((READ_HOLDING_REGISTERS, READ_INPUT_REGISTERS, 1, 2))
 _FIXED_REPLY_FCS = frozenset((WRITE_SINGLE_REGISTER, WRITE_MULTIPLE_REGISTERS, 5, 15))
 
@@ -388,6 +403,16 @@ def _request_length(buf: bytearray) -> int | None:
             return None
         return 9 + buf[6]
     return 0
+
+
+def _unknown_request_length(buf: bytearray) -> int | None:
+    """A request whose function code this stack does not know has no length field: it is delimited
+    by its CRC (the shortest prefix of 4 .. 256 bytes ending in its own CRC). None: no such prefix
+    yet (more may arrive; at silence the head is garbage); 0: none in 256 bytes (garbage)."""
+    n = crc16_valid_prefix(buf, 4, MAX_FRAME)
+    if n:
+        return n
+    return 0 if len(buf) >= MAX_FRAME else None
 
 
 def _decode_reply(frame: bytes, expected: Request | None) -> Reply:
@@ -451,9 +476,10 @@ class ModbusRtuCodec:
 
     # -- input --
     def feed(self, data: bytes | bytearray) -> None:
-        """Append received bytes."""
-        self._buf += data
-        self._silent = False
+        """Append received bytes (nothing received leaves a silent line silent)."""
+        if data:
+            self._buf += data
+            self._silent = False
 
     def flush(self) -> None:
         """The line went silent: an incomplete frame at the head will never complete."""
@@ -531,6 +557,19 @@ class ModbusRtuCodec:
                         del buf[:8]
                         return known_request
                 length = _request_length(buf)
+                if length == 0 and buf[1] in _EXCEPTION_FCS:  # a function code this stack does not know
+                    length = _unknown_request_length(buf)
+                    if length is None and not self._silent:
+                        # no end yet: garbage if a valid frame is already buffered behind it
+                        skip = self._next_valid_offset(buf)
+                        if skip:
+                            del buf[:skip]
+                            self.discarded += skip
+                            continue
+            if length is not None and length > MAX_FRAME:  # can never be a frame: nothing to wait for
+                del buf[0]
+                self.discarded += 1
+                continue
             if length is None or (length and len(buf) < length):
                 if not self._silent:
                     return None

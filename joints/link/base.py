@@ -39,6 +39,25 @@ class RetryPolicy:
     late: float | None = None
 
 
+_UNKNOWN: dict[type[Exception], type[OutcomeUnknown]] = {ReplyTimeout: OutcomeUnknown}
+
+
+def outcome_unknown(cause: Exception, message: str) -> OutcomeUnknown:
+    """The error for a write with no intact answer: an :class:`~joints.errors.OutcomeUnknown` that is
+    also of ``cause``'s type (a corrupt reply stays a :class:`~joints.errors.ChecksumError`, a wrong
+    one an :class:`~joints.errors.UnexpectedReply`), so callers catching either see it."""
+    kind = type(cause)
+    cls = _UNKNOWN.get(kind)
+    if cls is None:
+        cls = OutcomeUnknown if issubclass(kind, OutcomeUnknown) else type(
+            f"OutcomeUnknown{kind.__name__}", (OutcomeUnknown, kind), {"__module__": __name__})
+        _UNKNOWN[kind] = cls
+    error = cls(message)
+    for name, value in vars(cause).items():  # the cause's fields (a frame error's bytes ...)
+        setattr(error, name, value)
+    return error
+
+
 class Framing(abc.ABC, Generic[M]):
     """How messages cross one transport: frames out, decoded messages (or framing errors) in."""
 
@@ -193,8 +212,10 @@ class Link(Generic[M]):
         Only ``idempotent`` requests are sent again after a timeout, a corrupt reply or a reply
         that does not answer them, so a lost reply to a command can never execute it twice.
         After each failed attempt the link waits out late replies (:attr:`RetryPolicy.late`)
-        and discards them, so a late reply never answers a later request. A write whose reply
-        never came raises :class:`~joints.errors.OutcomeUnknown`: the drive may have executed it.
+        and discards them, so a late reply never answers a later request. A write with no intact
+        answer - none came, or it came corrupt, or something else came - raises
+        :class:`~joints.errors.OutcomeUnknown` (see :func:`outcome_unknown`): the drive may have
+        executed it. A refusal (:class:`~joints.errors.DeviceRejected`) is an answer.
         """
         if self._direct is not None and self.trace is None:  # no bytes to carry or to trace: checks only
             self.rule.check(request)  # raises EncodeError before anything is sent
@@ -214,10 +235,9 @@ class Link(Generic[M]):
                     self._discard_late()
             assert last is not None
             tried = f" (after {attempts} attempts)" if attempts > 1 else ""
-            if isinstance(last, ReplyTimeout) and self.rule.is_write(request):
-                raise OutcomeUnknown(
-                    f"{last}{tried}; the write's outcome is unknown: the drive may have executed it - read back "
-                    "what matters before sending it again") from last
+            if self.rule.is_write(request):  # no intact answer: the drive may have executed it
+                raise outcome_unknown(last, f"{last}{tried}; the write's outcome is unknown: the drive may have "
+                                            "executed it - read back what matters before sending it again") from last
             if tried and isinstance(last, ReplyTimeout):
                 raise ReplyTimeout(f"{last}{tried}") from last
             raise last

@@ -18,7 +18,8 @@ register reads and writes into firmware reads and writes through a
 A bus holds any :class:`ModbusSlave` (a family whose device is not a flat register file brings its
 own front, e.g. :mod:`joints.sim.mks_modbus_front`). A CRC-valid frame whose byte count breaks the
 Modbus rules is offered to its slave (:meth:`ModbusSlave.malformed`): a :class:`ModbusFront`
-stays silent, as before; a drive whose manual documents such a frame answers it.
+answers exception 03 (an FC16 whose byte count disagrees with its register count), as the Modbus
+application protocol requires; a drive whose manual documents such a frame answers it its way.
 
 Every frame addressed to a front (and every broadcast it executes) is reported to the firmware
 (:meth:`~joints.sim.firmware.Firmware.frame_received`) before it is served. No register image is
@@ -30,9 +31,10 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable, Iterable, Mapping
-from typing import Protocol
+from typing import Any, Protocol
 
 from joints.codecs import modbus as mb
+from joints.codecs.crc import crc_ok
 from joints.devices.registers import Access, Register, RegisterTable
 from joints.errors import ByteCountError, FrameError, ParameterRefused, Refusal
 from joints.sim.firmware import Firmware
@@ -255,6 +257,12 @@ class ModbusFront:
                 out[reg.address], out[reg.address + 1] = (lo, hi) if reg.low_word_first else (hi, lo)
         return out
 
+    def malformed(self, frame: bytes) -> mb.Reply | None:
+        """A CRC-valid frame for this slave whose byte count the codec rejects (an FC16 whose byte
+        count disagrees with its register count): a frame received, answered with exception 03."""
+        self.firmware.frame_received()
+        return mb.ExceptionReply(frame[0], frame[1], ILLEGAL_DATA_VALUE)
+
     def handle(self, request: mb.Request | mb.UnsupportedRequest) -> mb.Reply:
         """Execute a request addressed to this slave and build the reply."""
         self.firmware.frame_received()
@@ -271,10 +279,6 @@ class ModbusFront:
         except ModbusException as exc:
             return mb.ExceptionReply(request.slave, request.function, exc.code)
 
-    def malformed(self, frame: bytes) -> mb.Reply | None:
-        """A register-table drive stays silent on a frame with a wrong byte count."""
-        return None
-
     def __repr__(self) -> str:
         return f"ModbusFront({self.firmware!r}, {self.table.device!r}, address={self.address})"
 
@@ -284,10 +288,21 @@ _REQUESTS = (*_READS, mb.WriteSingleRegister, mb.WriteMultipleRegisters, mb.Unsu
 
 
 class ModbusDeviceBus:
-    """All emulated slaves on one RS485 bus: bytes in, reply bytes out (a loopback/pty peer)."""
+    """All emulated slaves on one RS485 bus: bytes in, reply bytes out (a loopback/pty peer).
+
+    As a real RTU slave: a frame cut by silence (:meth:`silence`, t3.5) is garbage even if its rest
+    arrives later; a corrupt frame gets no answer; a CRC-valid frame for a slave on the bus with an
+    unknown function code gets exception 01, an FC16 whose byte count disagrees with its register
+    count exception 03; broadcasts and frames for other addresses are never answered. A front
+    whose address comes from a parameter (``node_id``) moves to its new address at the next power
+    cycle (two fronts on one address: the one added first answers).
+    """
 
     def __init__(self, slaves: Iterable[ModbusSlave] = (), *, trace: Callable[[str, bytes], None] | None = None) -> None:
-        self.slaves: dict[int, ModbusSlave] = {}
+        self._fronts: list[ModbusSlave] = []
+        self._slaves: dict[int, ModbusSlave] = {}
+        #: fronts whose address comes from a parameter, with the power-on values it was taken from
+        self._watch: list[tuple[Any, object]] = []
         for s in slaves:
             self.add(s)
         self._codec = mb.ModbusRtuCodec(mb.Role.DEVICE)
@@ -298,20 +313,45 @@ class ModbusDeviceBus:
         address = slave.address
         if address in self.slaves:
             raise ValueError(f"two emulated slaves at address {address}")
-        self.slaves[address] = slave
+        self._fronts.append(slave)
+        self._refresh()
+
+    def _refresh(self) -> None:
+        by_address: dict[int, ModbusSlave] = {}
+        for front in self._fronts:
+            by_address.setdefault(front.address, front)
+        self._slaves = by_address
+        fronts: list[Any] = self._fronts  # a ModbusFront's address may come from its firmware
+        self._watch = [(f, f.firmware.power_on_values) for f in fronts if getattr(f, "node_id", None)]
+
+    @property
+    def slaves(self) -> dict[int, ModbusSlave]:
+        """The fronts by the address each answers on now (a power cycle may have moved one)."""
+        for front, seen in self._watch:
+            if front.firmware.power_on_values is not seen:
+                self._refresh()
+                break
+        return self._slaves
 
     def receive(self, data: bytes) -> bytes:
         """Feed received bytes; return the bytes the addressed slaves send back."""
+        self._codec.feed(data)
+        return self._serve()
+
+    def silence(self) -> bytes:
+        """The line went quiet (t3.5): an incomplete frame is garbage now; returns any replies."""
+        self._codec.flush()
+        return self._serve()
+
+    def _serve(self) -> bytes:
         codec = self._codec
-        if data:  # feeding nothing would undo a flush (silence)
-            codec.feed(data)
         out = bytearray()
         while True:
             try:
                 msg = codec.next_message()
-            except ByteCountError as exc:  # well framed, CRC valid, counts inconsistent: the slave decides
-                slave = self.slaves.get(exc.data[0]) if exc.data else None
-                answer = slave.malformed(exc.data) if slave is not None else None
+            except ByteCountError as exc:
+                # well framed, CRC valid, counts inconsistent: the addressed slave decides (03 from a ModbusFront)
+                answer = self._malformed(exc.data)
                 if answer is None:
                     self.frame_errors += 1
                 else:
@@ -328,10 +368,11 @@ class ModbusDeviceBus:
                     out += mb.encode(reply)
         return bytes(out)
 
-    def silence(self) -> bytes:
-        """The line went quiet (t3.5): drop incomplete garbage."""
-        self._codec.flush()
-        return self.receive(b"")
+    def _malformed(self, frame: bytes) -> mb.Reply | None:
+        if len(frame) < 4 or frame[0] == 0 or not crc_ok(frame):
+            return None  # broadcast or corrupt: silence
+        slave = self.slaves.get(frame[0])
+        return None if slave is None else slave.malformed(frame)
 
     def exchange(self, msg: mb.Request | mb.UnsupportedRequest) -> mb.Reply | None:
         """Message-level twin of :meth:`receive` (the sim's direct path: no bytes, no CRC).

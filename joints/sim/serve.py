@@ -1,8 +1,10 @@
 """Serve a simulated world in real time: each serial bus on a pseudo-terminal, each CAN bus on a python-can channel.
 
 Rule: the world runs on the wall clock here (and only here); the emulated drives answer whatever
-arrives between physics substeps, exactly as in process. Serial buses (Modbus RTU, MKS native) are
-pseudo-terminals; frames the drives send by themselves (MKS completion frames: an
+arrives between physics substeps, exactly as in process. A request is executed and answered as
+soon as it is read, and the ports are read after at most :data:`SERVICE_PERIOD` of physics, so
+no request waits behind a simulation that runs slower than real time. Serial buses (Modbus RTU,
+MKS native) are pseudo-terminals; frames the drives send by themselves (MKS completion frames: an
 :class:`~joints.transports.loopback.UnsolicitedPeer`) go out as soon as the physics produced them.
 CAN buses are python-can channels another process can open
 (:mod:`joints.sim.can_serve`: udp_multicast by default, a vcan device where the config names one;
@@ -32,6 +34,25 @@ from joints.transports.loopback import UnsolicitedPeer
 from joints.transports.pty import PtyEndpoint
 
 IDLE_FLUSH = 0.005  #: s of silence after which a partial frame is dropped (t3.5, generously)
+#: s of wall clock spent on physics at most between two looks at the ports: the longest a request
+#: waits before it is executed and answered (a drive answers within a few ms)
+SERVICE_PERIOD = 0.001
+
+
+class _Slices:
+    """How many substeps fit into :data:`SERVICE_PERIOD` (their cost measured as the world runs)."""
+
+    def __init__(self) -> None:
+        self.cost: float | None = None  #: s of wall clock per substep (moving average)
+
+    def size(self, wanted: int) -> int:
+        if self.cost is None:
+            return 1
+        return max(1, min(wanted, int(SERVICE_PERIOD / self.cost)))
+
+    def measured(self, steps: int, seconds: float) -> None:
+        cost = seconds / steps
+        self.cost = cost if self.cost is None else 0.8 * self.cost + 0.2 * cost
 
 
 def serve(
@@ -113,6 +134,7 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
     t0_sim = world.time
     dt = world.timestep
     next_send: float | None = None
+    slices = _Slices()
     while not stop.is_set():
         if tick is not None:
             tick()
@@ -155,8 +177,12 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
                 next_send = due if next_send is None else min(next_send, due)
         behind = (now - t0_wall) * factor - (world.time - t0_sim)
         if behind >= dt:
-            # catch up, but never more than 50 ms of physics in one go (stay responsive)
-            world.step(min(int(behind / dt), max(1, int(0.05 / dt))))
+            # catch up in slices of about SERVICE_PERIOD of wall clock: a request that arrives
+            # meanwhile waits for one slice at most, never for a backlog of physics
+            n = slices.size(min(int(behind / dt), max(1, int(0.05 / dt))))
+            started = time.monotonic()
+            world.step(n)
+            slices.measured(n, time.monotonic() - started)
             for name, ep in endpoints.items():
                 bus = world.buses[name]
                 if isinstance(bus, UnsolicitedPeer):

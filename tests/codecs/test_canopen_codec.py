@@ -654,3 +654,17 @@ def test_pdo_configuration_writes_go_out_as_expedited_sdos() -> None:
     assert commands == [0x23, 0x2F, 0x2F, 0x23, 0x23, 0x2F, 0x23]
     assert od.values[(0x1600, 2)] == (0x60FF0020).to_bytes(4, "little")
     assert od.values[(0x1400, 1)] == (0x202).to_bytes(4, "little")
+
+
+def test_a_frame_with_an_extended_id_re_encodes_as_itself() -> None:
+    """Found by the reliability harness: an extended frame 0x00000702 decoded to an ``Other`` that
+    re-encoded as the standard frame 0x702 (a heartbeat of node 2); bigger ids did not encode at all."""
+    for cob in (0x702, 0x0E266F9A):
+        f = can.Message(arbitration_id=cob, is_extended_id=True, data=b"\x05")
+        msg = co.decode(f)
+        assert msg == co.Other(cob, b"\x05", extended=True)
+        again = co.encode(msg)
+        assert (again.arbitration_id, again.is_extended_id, bytes(again.data)) == (cob, True, b"\x05")
+    rtr = can.Message(arbitration_id=0x1234567, is_extended_id=True, is_remote_frame=True, dlc=2)
+    again = co.encode(co.decode(rtr))
+    assert (again.arbitration_id, again.is_extended_id, again.is_remote_frame, again.dlc) == (0x1234567, True, True, 2)

@@ -222,13 +222,13 @@ def test_device_role_unsupported_request_fc01() -> None:
     assert mb.encode(msg) == frame
 
 
-def test_device_role_unknown_function_code_is_garbage() -> None:
+def test_device_role_unknown_function_code_is_framed_by_its_crc() -> None:
     codec = mb.ModbusRtuCodec(mb.Role.DEVICE)
-    codec.feed(append_crc(h("01 2B 0E 01 00")))  # FC43 encapsulated interface: not framed
+    codec.feed(append_crc(h("01 2B 0E 01 00")))  # FC43 encapsulated interface: a server answers exception 01
     codec.flush()
     msgs, _ = drain(codec)
-    assert msgs == []
-    assert codec.buffered == 0 and codec.discarded == 7
+    assert msgs == [mb.UnsupportedRequest(1, 0x2B, h("0E 01 00"))]
+    assert codec.buffered == 0 and codec.discarded == 0
 
 
 def test_host_role_does_not_decode_requests_as_replies_of_other_kinds() -> None:

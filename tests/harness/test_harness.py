@@ -1,0 +1,134 @@
+"""The reliability harness in CI: a seeded slice of every target with zero violations, and proof that
+the harness sees the failures it is there for (each planted bug below is one issue 18 found).
+
+The full run is ``python tests/harness/run.py --count 1000000 --seed S`` (see the README of the
+harness in tests/harness/__init__.py); this slice takes a few seconds.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+
+from harness import codec_fuzz, endpoint_fuzz, transactions
+from harness.report import Report
+from harness.run import all_targets, main
+from joints.codecs import modbus as mb
+from joints.link.base import Link
+from joints.sim.modbus_front import ModbusDeviceBus
+
+SEED = 20240618
+FRAMES = 3000
+CALLS = 1000
+
+
+def violations(report: Report) -> dict[str, dict[str, int]]:
+    return {name: dict(t.violations) for name, t in report.targets.items() if t.total_violations}
+
+
+def test_every_codec_in_both_roles_survives_a_fuzzed_slice() -> None:
+    report = Report(SEED)
+    codec_fuzz.run(report, list(codec_fuzz.targets()), FRAMES, SEED)
+    assert violations(report) == {}, "\n".join(report.lines())
+    assert len(report.targets) == len(codec_fuzz.targets()) >= 9
+    for t in report.targets.values():
+        assert t.units >= FRAMES
+        assert t.checks["exception"] >= FRAMES and t.checks["hang"] > 0
+        assert t.checks["reencode"] + t.checks["reply-shape"] + t.checks["step-type"] > 0
+
+
+def test_every_twin_endpoint_of_the_registry_survives_a_fuzzed_slice() -> None:
+    names = [n for n, _f, _p in endpoint_fuzz.endpoints()]
+    assert {"erob/modbus-rtu", "zlac8015d/modbus-rtu", "erob/erob-can", "erob/canopen", "mks/mks-serial",
+            "mks/modbus-rtu"} <= set(names)
+    report = Report(SEED)
+    endpoint_fuzz.run(report, names, FRAMES, SEED)
+    assert violations(report) == {}, "\n".join(report.lines())
+    for name, t in report.targets.items():
+        assert t.units >= FRAMES
+        assert t.checks["unanswered"] > 100 and t.checks["reply-to-other-address"] > 100, name
+    assert not report.uncovered  # every protocol of the registry has a fuzz adapter
+    modbus = report.targets["endpoint erob/modbus-rtu"]
+    assert modbus.checks["reply-to-broadcast"] > 100 and modbus.checks["ack-without-write"] > 10
+
+
+def test_transactions_under_ten_percent_faults_keep_every_invariant() -> None:
+    report = Report(SEED)
+    transactions.run(report, list(transactions.SETUPS), CALLS, SEED)
+    transactions.run(report, list(transactions.SETUPS), CALLS // 2, SEED, echo=True)
+    assert violations(report) == {}, "\n".join(report.lines())
+    for name, t in report.targets.items():
+        assert t.units >= CALLS // 2, name
+        assert t.checks["wrong-value"] > CALLS // 4 and t.checks["write-lost-but-ok"] > CALLS // 10, name
+        assert t.checks["write-not-outcome-unknown"] > 0, name  # the line did lose answers to writes
+        assert t.checks["executed-twice"] > 0, name
+
+
+def test_the_command_runs_and_exits_zero(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--count", "300", "--transactions", "200", "--seed", "1", "--target", "codec:modbus*",
+                 "--target", "endpoint:zlac*", "--target", "transactions:erob/modbus-rtu"]) == 0
+    out = capsys.readouterr().out
+    assert "TOTAL VIOLATIONS: 0" in out and "codec modbus-rtu/device" in out
+    assert "endpoint zlac8015d/modbus-rtu" in out and "transactions erob/modbus-rtu" in out
+    assert main(["--list"]) == 0 and capsys.readouterr().out.split() == all_targets()
+
+
+# --- the harness has teeth: planted bugs are found ---------------------------------------------------
+
+
+@pytest.fixture
+def undo(monkeypatch: pytest.MonkeyPatch) -> Iterator[pytest.MonkeyPatch]:
+    yield monkeypatch
+
+
+def test_it_sees_a_twin_that_answers_broadcasts(undo: pytest.MonkeyPatch) -> None:
+    exchange = ModbusDeviceBus.exchange
+
+    def answers_everything(self: ModbusDeviceBus, msg: mb.Request | mb.UnsupportedRequest) -> mb.Reply | None:
+        if msg.slave == 0 and self.slaves:
+            return next(iter(self.slaves.values())).handle(msg)
+        return exchange(self, msg)
+
+    undo.setattr(ModbusDeviceBus, "exchange", answers_everything)
+    report = Report(SEED)
+    endpoint_fuzz.run(report, ["erob/modbus-rtu"], 1000, SEED)
+    assert report.targets["endpoint erob/modbus-rtu"].violations["reply-to-broadcast"] > 0
+
+
+def test_it_sees_a_silence_that_does_not_resynchronise(undo: pytest.MonkeyPatch) -> None:
+    """The bug issue 18 found: ``feed(b"")`` after ``flush()`` cleared the silence again."""
+    feed = mb.ModbusRtuCodec.feed
+
+    def old_feed(self: mb.ModbusRtuCodec, data: bytes | bytearray) -> None:
+        feed(self, data)
+        self._silent = False  # the old behaviour, planted
+
+    def old_silence(self: ModbusDeviceBus) -> bytes:
+        self._codec.flush()
+        return self.receive(b"")
+
+    undo.setattr(mb.ModbusRtuCodec, "feed", old_feed)
+    undo.setattr(ModbusDeviceBus, "silence", old_silence)
+    report = Report(SEED)
+    endpoint_fuzz.run(report, ["erob/modbus-rtu"], 3000, SEED)
+    t = report.targets["endpoint erob/modbus-rtu"]
+    assert t.violations["executed-invalid"] + t.violations["unanswered"] > 0
+
+
+def test_it_sees_a_link_that_takes_late_replies(undo: pytest.MonkeyPatch) -> None:
+    undo.setattr(Link, "_discard_late", lambda self: self.framing.discard())  # no late window
+    report = Report(SEED)
+    transactions.run(report, ["erob/modbus-rtu"], 2000, SEED)
+    t = report.targets["transactions erob/modbus-rtu (in process)"]
+    assert t.violations["wrong-value"] + t.violations["late-reply-accepted"] > 0
+
+
+def test_it_sees_a_timed_out_write_reported_as_a_plain_failure(undo: pytest.MonkeyPatch) -> None:
+    from joints.link.modbus import ModbusRule
+
+    undo.setattr(ModbusRule, "is_write", lambda self, request: False)
+    report = Report(SEED)
+    transactions.run(report, ["zlac8015d/modbus-rtu"], 1000, SEED)
+    assert report.targets["transactions zlac8015d/modbus-rtu (in process)"].violations[
+        "write-not-outcome-unknown"] > 0
