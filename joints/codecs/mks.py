@@ -92,6 +92,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any, ClassVar
 
+from joints.codecs.echo import echo_length
 from joints.codecs.modbus import Role
 from joints.errors import ChecksumError, EncodeError, FrameError
 
@@ -1267,17 +1268,13 @@ class MksCodec:
         buf = self._buf
         while buf:
             if self._echo is not None:
-                echo = self._echo
-                k = min(len(echo), len(buf))
-                if buf[:k] == echo[:k]:
-                    if k < len(echo):
-                        if not self._silent:
-                            return None
-                    else:
-                        del buf[:k]
-                        self._echo = None
-                        continue
+                skip = echo_length(buf, self._echo, self._silent)
+                if skip is None:
+                    return None
                 self._echo = None
+                if skip:
+                    del buf[:skip]
+                    continue
             length = self._length(buf)
             if length == 0:
                 del buf[0]

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from joints.codecs.crc import crc16_modbus, crc16_valid_prefix
+from joints.codecs.echo import echo_length
 from joints.errors import ByteCountError, ChecksumError, EncodeError, FrameError
 
 READ_HOLDING_REGISTERS = 0x03
@@ -518,17 +519,13 @@ class ModbusRtuCodec:
         buf = self._buf
         while buf:
             if self._echo is not None:
-                echo = self._echo
-                k = min(len(echo), len(buf))
-                if buf[:k] == echo[:k]:
-                    if k < len(echo):
-                        if not self._silent:
-                            return None
-                    else:
-                        del buf[:k]
-                        self._echo = None
-                        continue
+                skip = echo_length(buf, self._echo, self._silent)
+                if skip is None:
+                    return None
                 self._echo = None
+                if skip:
+                    del buf[:skip]
+                    continue
             if self.role is Role.HOST:
                 if len(buf) >= 8 and (buf[1] == WRITE_SINGLE_REGISTER or buf[1] == WRITE_MULTIPLE_REGISTERS):
                     # Hot path, same result as the general one below: a write reply is always
