@@ -162,11 +162,13 @@ def test_sigterm_to_a_process_whose_axis_runs_in_speed_mode_leaves_the_axis_stop
             assert time.monotonic() < deadline, "the axis keeps turning"
         while d.motor_status() != 1:
             assert time.monotonic() < deadline, "the axis is not reported stopped"
-        # the speed register counts whole rpm (273 counts/s): let the holding loop settle first
-        first = d.read("encoder_addition")
-        while abs((now := d.read("encoder_addition")) - first) > 1:
-            first = now
-            assert time.monotonic() < deadline, "the axis does not settle"
+        # disabled on the way out, the shaft coasts to rest below the speed register's 1 rpm
+        # (273 counts/s): at rest = no count change for 0.1 s, then it must stay there
+        first, since = d.read("encoder_addition"), time.monotonic()
+        while time.monotonic() - since < 0.1:
+            assert time.monotonic() < deadline, "the axis does not come to rest"
+            if abs((now := d.read("encoder_addition")) - first) > 1:
+                first, since = now, time.monotonic()
         t0 = time.monotonic()
         while time.monotonic() - t0 < 0.3:
             assert abs(d.read("encoder_addition") - first) <= 2  # and stays where it stopped
