@@ -21,7 +21,7 @@ from joints.drivers.access import ModbusAccess
 from joints.link.modbus import ModbusLink
 from joints.transports.serial import SerialTransport
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 DEVICES = {
     "erob": ("erob_stand.xml", 'device = "erob"\naddress = 2\nmjcf_joint = "joint1"\n', EROB_MODBUS, 2,
