@@ -93,3 +93,53 @@ def erob_arm3_clearance(q2: np.ndarray | float, q3: np.ndarray | float) -> np.nd
     ]
     out: np.ndarray = np.minimum.reduce(gaps)
     return out
+
+
+def _point_column(x: float, z: float, half: float, z0: float, z1: float) -> float:
+    return math.hypot(max(abs(x) - half, 0.0), max(z0 - z, z - z1, 0.0))
+
+
+def _point_segment(x: float, z: float, px: float, pz: float, dx: float, dz: float) -> float:
+    n = dx * dx + dz * dz
+    t = 0.0 if n == 0.0 else min(1.0, max(0.0, ((x - px) * dx + (z - pz) * dz) / n))
+    return math.hypot(x - px - t * dx, z - pz - t * dz)
+
+
+def _segment_column(px: float, pz: float, qx: float, qz: float, half: float, z0: float, z1: float) -> float:
+    """Exact distance [m] of the segment P-Q of the arm's plane from the rectangle |x| <= half, z0 <= z <= z1."""
+    dx, dz = qx - px, qz - pz
+    t0, t1 = 0.0, 1.0  # Liang-Barsky: the part of the segment inside the rectangle
+    for p, q in ((-dx, px + half), (dx, half - px), (-dz, pz - z0), (dz, z1 - pz)):
+        if p == 0.0:
+            if q < 0.0:
+                break
+        elif p < 0.0:
+            t0 = max(t0, q / p)
+        else:
+            t1 = min(t1, q / p)
+        if t0 > t1:
+            break
+    else:
+        return 0.0  # they meet
+    corners = ((-half, z0), (half, z0), (-half, z1), (half, z1))
+    return min(_point_column(px, pz, half, z0, z1), _point_column(qx, qz, half, z0, z1),
+               *(_point_segment(cx, cz, px, pz, dx, dz) for cx, cz in corners))
+
+
+def erob_arm3_clearance_bound(q2: float, q3: float) -> float:
+    """A lower bound [m] of :func:`erob_arm3_clearance` at one pose: the same pairs, with exact
+    distances of the links' axes instead of samples along them (0 where an axis meets an obstacle,
+    so never above the true gap); scalar and numpy-free, for the env's per-step safety check."""
+    h, base, link1 = ARM3_SHOULDER_HEIGHT, ARM3_COLUMNS[0], ARM3_COLUMNS[1]
+    ex, ez = ARM3_UPPER * math.cos(q2), h - ARM3_UPPER * math.sin(q2)
+    fx, fz = ex + ARM3_FORE * math.cos(q2 + q3), ez - ARM3_FORE * math.sin(q2 + q3)
+    return min(
+        min(h, ez) - ARM3_UPPER_RADIUS,  # upper arm - floor
+        _segment_column(0.0, h, ex, ez, *base) - ARM3_UPPER_RADIUS,
+        ez - ARM3_ELBOW_RADIUS,  # elbow - floor
+        _point_column(ex, ez, *base) - ARM3_ELBOW_RADIUS,
+        _point_column(ex, ez, *link1) - ARM3_ELBOW_RADIUS,
+        min(ez, fz) - ARM3_FORE_RADIUS,  # forearm - floor
+        _segment_column(ex, ez, fx, fz, *base) - ARM3_FORE_RADIUS,
+        _segment_column(ex, ez, fx, fz, *link1) - ARM3_FORE_RADIUS,
+    )

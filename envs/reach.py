@@ -10,7 +10,15 @@ import numpy as np
 
 import joints
 from envs.base import JointsEnv
-from envs.kinematics import ARM3_REACH, ARM3_SHOULDER_HEIGHT, erob_arm3_clearance, erob_arm3_ee, erob_stand_tip
+from envs.kinematics import (
+    ARM3_FORE,
+    ARM3_REACH,
+    ARM3_SHOULDER_HEIGHT,
+    erob_arm3_clearance,
+    erob_arm3_clearance_bound,
+    erob_arm3_ee,
+    erob_stand_tip,
+)
 from envs.render import CameraSpec
 
 
@@ -362,6 +370,21 @@ class ErobArmReachEnv(JointsEnv):
             axes.append((np.linspace(lo[i], hi[i], n) - j.offset) * j.direction)  # user -> model frame
         return float(erob_arm3_clearance(axes[0][:, None], axes[1][None, :]).min())
 
+    def keeps_clearance(self, lo: np.ndarray, hi: np.ndarray) -> bool:
+        """Whether every pose with joint2, joint3 (user frame, rad) in ``[lo, hi]`` keeps
+        :attr:`CLEARANCE`; the same answer as ``clearance(lo, hi) >= CLEARANCE``, usually without
+        its grid: around the box's centre a link point moves at most ``ARM3_REACH * |dq2| +
+        ARM3_FORE * |dq3|``, so the exact gap at the centre (a lower bound of the grid's sampled
+        one) minus that is a lower bound over the whole box; only where it cannot tell is the grid
+        evaluated."""
+        j2, j3 = self.joints[1], self.joints[2]
+        q2 = ((lo[1] + hi[1]) / 2 - j2.offset) * j2.direction  # user -> model frame
+        q3 = ((lo[2] + hi[2]) / 2 - j3.offset) * j3.direction
+        moved = ARM3_REACH * abs(hi[1] - lo[1]) / 2 + ARM3_FORE * abs(hi[2] - lo[2]) / 2
+        if erob_arm3_clearance_bound(float(q2), float(q3)) - moved - 1e-9 >= self.CLEARANCE:
+            return True
+        return self.clearance(lo, hi) >= self.CLEARANCE
+
     def _shield(self, command: np.ndarray) -> np.ndarray:
         """Keep the arm :attr:`CLEARANCE` off the floor and its base: the shoulder and elbow commands
         go out as asked if every pose they can lead to within the next period - and while stopping
@@ -380,7 +403,7 @@ class ErobArmReachEnv(JointsEnv):
             c = command.copy()
             for i in hold:
                 c[i] = self._stop_command(i)
-            if self.clearance(*self._reach(c)) >= self.CLEARANCE:
+            if self.keeps_clearance(*self._reach(c)):
                 return c
         return c  # nothing keeps it (the arm is there already): stop both
 

@@ -28,7 +28,7 @@ mujoco = pytest.importorskip("mujoco")
 import envs
 from envs import ACTION_MODES, ErobArmReachEnv, ErobReachEnv, JointsEnv
 from envs.base import braking_speed
-from envs.kinematics import erob_arm3_clearance, erob_arm3_ee
+from envs.kinematics import erob_arm3_clearance, erob_arm3_clearance_bound, erob_arm3_ee
 from joints.devices.erob.profiles import profile
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -185,6 +185,42 @@ def test_arm_clearance_matches_mujoco_distances() -> None:
                 assert 0.0 - 1e-9 <= gap - exact <= 0.002, (q, gap, exact)
             assert (gap < 0) == (data.ncon > 0) or abs(gap) < 0.002, (q, gap, data.ncon)
         assert near > 300
+    finally:
+        env.close()
+
+
+def test_exact_clearance_bound_is_below_the_sampled_gap_and_tight() -> None:
+    """The per-step bound never reads more than the sampled gap (else the shield's shortcut could
+    pass a box the grid refuses), and at most the sampling's ~1.5 mm less where there is a gap."""
+    rng = np.random.default_rng(1)
+    q = rng.uniform(-3.2, 3.2, size=(20000, 2))
+    sampled = erob_arm3_clearance(q[:, 0], q[:, 1])
+    bound = np.array([erob_arm3_clearance_bound(a, b) for a, b in q])
+    assert np.all(bound <= sampled + 1e-12)
+    assert np.all(sampled[sampled > 0] - bound[sampled > 0] <= 0.0015)
+    assert np.all(bound[sampled <= 0] <= 0)
+
+
+def test_shield_shortcut_answers_as_the_grid() -> None:
+    """keeps_clearance == (clearance over the grid >= CLEARANCE) for random boxes of one control
+    period's reach and more, near and far from the floor and base; both ways of answering used."""
+    env = ErobArmReachEnv()
+    try:
+        rng = np.random.default_rng(2)
+        lo_lim = np.array([j.limits.position[0] for j in env.joints])
+        hi_lim = np.array([j.limits.position[1] for j in env.joints])
+        grid_needed = agree = 0
+        for _ in range(3000):
+            mid = rng.uniform(lo_lim, hi_lim)
+            half = rng.uniform(0.0, 0.3, size=3) * rng.choice([0.1, 1.0])
+            lo, hi = mid - half, mid + half
+            want = env.clearance(lo, hi) >= env.CLEARANCE
+            j2, j3 = env.joints[1], env.joints[2]
+            centre = erob_arm3_clearance_bound((mid[1] - j2.offset) * j2.direction, (mid[2] - j3.offset) * j3.direction)
+            grid_needed += centre - 0.55 * half[1] - 0.25 * half[2] - 1e-9 < env.CLEARANCE
+            agree += env.keeps_clearance(lo, hi) == want
+        assert agree == 3000
+        assert 300 < grid_needed < 2700  # neither answer path left untried
     finally:
         env.close()
 
