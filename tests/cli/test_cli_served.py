@@ -19,6 +19,7 @@ import pytest
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="serving needs POSIX ptys")
 
+import joints
 from joints.cli import main
 
 MOVERS = ["a", "l", "m", "n", "c", "o"]  # one joint of every family x protocol
@@ -163,6 +164,33 @@ def test_enable_holds_with_the_watchdog_off_then_disable(served: Any, capsys: py
     rc, _, err = run(capsys, "disable", served.hardware, "a")
     assert rc == 0, err
     assert state(served, capsys, "a")["enabled"] is False
+
+
+@pytest.mark.parametrize("joint", MOVERS)
+def test_stop_from_a_fresh_process_stops_a_joint_another_program_left_running(
+        served: Any, joint: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Another program set the joint running and went away (``on_exit = "none"``, no watchdog):
+    ``joints stop`` must stop it, with nothing of its own set up on that drive."""
+    text = served.hardware.read_text(encoding="utf-8").replace(f"[joints.{joint}]\n",
+                                                               f"[joints.{joint}]\nwatchdog_ms = 0\n")
+    other = tmp_path / "other.toml"
+    other.write_text('on_exit = "none"\n' + text, encoding="utf-8")
+    with joints.open(other) as rig:
+        j = rig.joints[joint]
+        j.enable()
+        j.set_velocity(0.4)
+        deadline = time.monotonic() + 10
+        while abs(j.state().velocity) < 0.3:
+            assert time.monotonic() < deadline, "the joint did not start"
+    assert abs(state(served, capsys, joint)["velocity"]) > 0.3  # still running: the other program left it so
+    try:
+        rc, _, err = run(capsys, "stop", served.hardware, joint)
+        assert rc == 0, err
+        deadline = time.monotonic() + 10
+        while abs(state(served, capsys, joint)["velocity"]) > 0.02:
+            assert time.monotonic() < deadline, f"joints stop left {joint} running"
+    finally:
+        run(capsys, "disable", served.hardware, joint)
 
 
 def test_stop_and_clear_every_joint(served: Any, capsys: pytest.CaptureFixture[str]) -> None:
