@@ -49,8 +49,8 @@ def test_state_in_metres_metres_per_second_and_newton() -> None:
 def test_commands_convert_through_the_lead() -> None:
     joint, fw = linear(Limits(position=(-0.1, 0.1), velocity=0.05, torque=5000.0))
     fw.set("status_of_achieving_position", 1)
-    joint.driver._enabled = True  # noqa: SLF001 - skip the enable procedure's 500 ms here
-    joint.driver._enabled_at = -10.0  # noqa: SLF001
+    joint.driver._enabled = True
+    joint.driver._enabled_at = -10.0
     joint.move_to(0.02)
     assert fw.get("target_absolute_position") == round(0.02 / M_PER_COUNT)
     assert fw.get("profile_speed") == round(0.01 / M_PER_COUNT)

@@ -78,7 +78,7 @@ def wait_still(rig: Rig, j: Joint, timeout: float = STOP_TIMEOUT) -> None:
     """Poll until the joint stands still (at most ``timeout`` s)."""
     end = rig.time + timeout
     while rig.time < end:
-        if not j.state().moving:
+        if not observe(j).moving:
             return
         rig.sleep(POLL)
 
@@ -341,7 +341,7 @@ def cmd_disable(args: argparse.Namespace) -> int:
     with open_rig(args) as rig:
         for name in args.joints:
             j = joint(rig, name)
-            j.state()
+            observe(j)  # what the drive says (a CANopen node is not brought up: stopped by SDO)
             j.stop()
             wait_still(rig, j)
             j.disable()
@@ -352,7 +352,7 @@ def cmd_stop(args: argparse.Namespace) -> int:
     with open_rig(args) as rig:
         for name in args.joints:
             j = joint(rig, name)
-            j.state()
+            observe(j)
             if args.now:
                 j.emergency_stop()
             else:

@@ -67,7 +67,7 @@ from joints.devices.params import ParamMap
 from joints.drivers.access import ParamAccess
 from joints.drivers.base import RawState
 from joints.drivers.erob import CalibrationResult, ErobDriver
-from joints.errors import CommandError, DeviceFault, FrameError, ReplyTimeout, StateError
+from joints.errors import CommandError, DeviceFault, FrameError, PeerProtocolError, ReplyTimeout, StateError
 
 __all__ = ["HEARTBEAT_MS", "MODES", "NODE_LOST", "CanopenAccess", "ErobCanopenDriver", "SyncCycle"]
 
@@ -597,9 +597,25 @@ class ErobCanopenDriver(ErobDriver):
             return cia402.CW_ENABLE_IP
         return 0
 
+    def _sdo_control(self, word: int, *, when: tuple[State, ...] | None = None) -> None:
+        """A controlword by SDO, for a node this host has not brought up (another master may have
+        left it running: it has no mapping of ours, and an SDO works in PRE-OPERATIONAL and
+        OPERATIONAL alike); only ``when`` the drive reports one of those states (None: always)."""
+        if when is not None:
+            try:
+                now = cia402.state_of(self.read("statusword"))
+            except PeerProtocolError:  # a statusword that codes no state: nothing runs
+                return
+            if now not in when:
+                return
+        self.write_param("controlword", word, idempotent=False)
+
     def disable(self) -> None:
-        """Shutdown (controlword 0x0006, fig 5-9): the drive is off, the brake holds."""
+        """Shutdown (controlword 0x0006, fig 5-9): the drive is off, the brake holds. A node this
+        host has not brought up gets it by SDO if it is switched on."""
         if self._up is None:
+            self._sdo_control(cia402.COMMAND_WORD[cia402.Command.SHUTDOWN],
+                              when=(State.SWITCHED_ON, State.OPERATION_ENABLED))
             self._note_enable(False)
             return
         self._control(cia402.COMMAND_WORD[cia402.Command.SHUTDOWN])
@@ -676,8 +692,13 @@ class ErobCanopenDriver(ErobDriver):
         self._control(0x000F, self._per_mille(current))
 
     def stop(self) -> None:
-        """Halt (bit 8) in the position modes; target 0 in the velocity and torque modes."""
-        if self._up is None or not self._enabled or self.lost() is not None:
+        """Halt (bit 8) in the position modes; target 0 in the velocity and torque modes. A node
+        this host has not brought up is halted by SDO (controlword 0x010F) if it is enabled."""
+        if self._up is None:
+            self._sdo_control(cia402.COMMAND_WORD[cia402.Command.ENABLE_OPERATION] | cia402.CW_HALT,
+                              when=(State.OPERATION_ENABLED,))
+            return
+        if not self._enabled or self.lost() is not None:
             return
         if self.mode in (Mode.PP, Mode.IP, Mode.CSP):
             self._control((self._cw | cia402.CW_HALT) & ~cia402.CW_NEW_SETPOINT)
@@ -685,14 +706,23 @@ class ErobCanopenDriver(ErobDriver):
             self._control(0x000F, 0)
 
     def emergency_stop(self) -> None:
-        """Quick stop (controlword 0x0002): the quick-stop ramp, then SWITCH ON DISABLED (0x605A = 2)."""
+        """Quick stop (controlword 0x0002): the quick-stop ramp, then SWITCH ON DISABLED (0x605A = 2).
+        A node this host has not brought up gets it by SDO (it never enables a drive, whatever its state)."""
         if self._up is None:
+            self._sdo_control(cia402.COMMAND_WORD[cia402.Command.QUICK_STOP])
+            self._note_enable(False)
             return
         self._control(cia402.COMMAND_WORD[cia402.Command.QUICK_STOP])
         self._note_enable(False)
 
     def clear_errors(self) -> None:
-        """Fault reset (rising controlword bit 7); a lost node is brought up again."""
+        """Fault reset (rising controlword bit 7); a lost node is brought up again. A node this host
+        has not brought up gets the reset by SDO (its NMT state and mapping left alone)."""
+        if self._up is None and self.lost() is None:
+            for word in (0x0000, cia402.COMMAND_WORD[cia402.Command.FAULT_RESET], 0x0000):
+                self._sdo_control(word)
+            self.emcy = None
+            return
         if self.lost() is not None or self._up is None:
             self.link.monitor(self.node).reset()
             self.bring_up(self._up or self.mode)

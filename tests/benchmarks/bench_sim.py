@@ -48,7 +48,7 @@ def _best(fn) -> float:  # type: ignore[no-untyped-def]
 
 def bench(model: str, names: list[str]) -> None:
     w = _world(model, names)
-    m, d = w.model, w.data
+    m = w.model
     raw_d = mujoco.MjData(m)
 
     def raw() -> None:

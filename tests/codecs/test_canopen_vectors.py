@@ -15,13 +15,13 @@ from typing import Any
 
 import can
 import pytest
-from testdata import sequences, vectors
 
 from joints.codecs import canopen as co
 from joints.devices import cia402
 from joints.devices.cia402 import Mode
 from joints.devices.erob.canopen import EROB_CANOPEN, ERUNNER_RPDO1, mode_change_allowed, name_at
 from joints.errors import DeviceRejected, FrameError
+from testdata import sequences, vectors
 
 VECTORS = vectors("canopen", "erob")
 SEQUENCES = [s for s in sequences("erob-erunner-can-canopen") if s["id"].startswith("seq-erob-canopen")]

@@ -15,7 +15,6 @@ from itertools import chain
 from typing import Any
 
 import pytest
-from testdata import by_id, records, sequences
 
 from joints.codecs import mks
 from joints.codecs import modbus as mb
@@ -23,6 +22,7 @@ from joints.codecs.crc import crc_ok
 from joints.devices.mks.modbus import FC_READ, FC_WRITE_MULTIPLE, FC_WRITE_SINGLE, MKS_MODBUS
 from joints.devices.mks.params import MKS_PARAMS
 from joints.errors import ByteCountError, ChecksumError, FrameError
+from testdata import by_id, records, sequences
 
 RECORDS = records()
 BY_ID = by_id()

@@ -5,7 +5,6 @@ from __future__ import annotations
 import re
 
 import pytest
-from testdata import manual, vectors
 
 from joints.devices import cia402
 from joints.devices.cia402 import Mode, State
@@ -28,6 +27,7 @@ from joints.devices.erob.params import EROB_PARAMS, OTHER_PROTOCOLS
 from joints.devices.erob.registers import EROB_MODBUS
 from joints.devices.params import TYPES
 from joints.errors import CommandError, FrameError, RegisterError
+from testdata import manual, vectors
 
 CHAPTER5 = manual("erob-erunner-can-canopen-manual-v1.7-zh.txt").split("5. CANopen 协议控制")[2].split(
     "6. 自定义数据收发")[0]

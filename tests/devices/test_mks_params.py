@@ -6,7 +6,6 @@ import dataclasses
 import re
 
 import pytest
-from testdata import manual
 
 from joints.codecs import mks as codec
 from joints.devices.mks import native, state
@@ -15,6 +14,7 @@ from joints.devices.mks.native import MKS_NATIVE, REPLY_RULES, Command, NativeKe
 from joints.devices.mks.params import DANGEROUS, MKS_PARAMS, model_params
 from joints.devices.params import TYPES, Access
 from joints.errors import CommandError, RegisterError
+from testdata import manual
 
 MANUAL = manual("mks-servo42d-57d-rs485-manual-v1.0.5.txt")
 PARTS_5_6 = MANUAL[MANUAL.index("Part5. Serial command description"):MANUAL.index("Part7. Serial example")]

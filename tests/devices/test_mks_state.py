@@ -5,11 +5,11 @@ from __future__ import annotations
 import enum
 
 import pytest
-from testdata import by_id
 
 from joints.codecs import mks as codec
 from joints.devices.mks import state
 from joints.devices.mks.state import RunEvent, RunState, RunStatus, WorkMode, step
+from testdata import by_id
 
 
 def test_work_modes_and_their_maximum_speeds() -> None:

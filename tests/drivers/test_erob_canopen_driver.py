@@ -199,3 +199,41 @@ def test_abort_is_device_rejected_with_code_and_text() -> None:
         assert "object does not exist" in str(err.value)
         assert j.read("0x6502") == 0x3CD
         assert j.read("supported_drive_modes") == 0x3CD
+
+
+@pytest.mark.parametrize("how", ["stop", "emergency_stop", "disable"])
+def test_a_running_node_this_host_did_not_bring_up_is_stopped_by_sdo(how: str) -> None:
+    """A host that never brought the node up (a fresh process; another master left the joint
+    running) still stops it: the controlword goes by SDO, no NMT and no mapping of its own."""
+    with joints.open(one_joint("canopen")) as rig:
+        j = rig.joints["joint1"]
+        j.enable()
+        j.set_velocity(1.0)
+        rig.sleep(1.2)  # the eRob starts 500 ms after enable, then ramps
+        d = j.driver
+        other = ErobCanopenDriver(d.link, d.node, profile=d.profile)  # its host never brought node 2 up
+        running = j.to_si(other.observe())
+        assert running.enabled and running.velocity > 0.9
+        getattr(other, how)()
+        rig.sleep(1.0)
+        after = j.to_si(other.observe())
+        assert abs(after.velocity) < 0.01, (how, after)
+        assert after.enabled is (how == "stop")  # halted, still enabled; the others switch it off
+        assert other._up is None  # no bring-up happened: the host that runs the node keeps its mapping
+
+
+def test_a_fault_on_a_node_this_host_did_not_bring_up_is_cleared_by_sdo() -> None:
+    with joints.open(one_joint("canopen")) as rig:
+        j = rig.joints["joint1"]
+        j.enable()
+        rig.sleep(0.6)
+        rig.world.drives["joint1"].trip(0x8130)  # life guarding, as the CANopen front trips it
+        rig.sleep(0.1)
+        d = j.driver
+        other = ErobCanopenDriver(d.link, d.node, profile=d.profile)  # its host never brought node 2 up
+        assert j.to_si(other.observe()).fault is not None
+        other.clear_errors()
+        rig.sleep(0.1)
+        cleared = j.to_si(other.observe())
+        assert cleared.fault is None and not cleared.enabled
+        assert other._up is None  # by SDO: no bring-up

@@ -7,7 +7,6 @@ from collections.abc import Callable
 from typing import Any
 
 import pytest
-from testdata import by_id
 
 from joints.clock import ManualClock
 from joints.codecs import mks
@@ -22,6 +21,7 @@ from joints.link import RetryPolicy
 from joints.link.mks import MksLink
 from joints.link.modbus import ModbusLink
 from joints.transports.loopback import LoopbackTransport
+from testdata import by_id
 
 ADDRESS = 1
 

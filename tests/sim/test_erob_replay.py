@@ -102,9 +102,8 @@ def test_sequence_replays_against_emulator(seq: dict) -> None:
             continue
         send = bytes.fromhex(step["send_hex"])
         req = _decode(send, mb.Role.DEVICE)
-        if isinstance(req, mb.WriteMultipleRegisters | mb.WriteSingleRegister):
-            if req.address == 0x00F1:
-                rp.start_pos = rp.emu.counts()
+        if isinstance(req, mb.WriteMultipleRegisters | mb.WriteSingleRegister) and req.address == 0x00F1:
+            rp.start_pos = rp.emu.counts()
         reply = rp.send(send)
         assert reply, f"step {step['step']}: no reply to {send.hex(' ')}"
         msg = _decode(reply, mb.Role.HOST, req if isinstance(req, mb.ReadHoldingRegisters) else None)

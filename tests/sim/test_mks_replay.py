@@ -13,13 +13,13 @@ import pytest
 pytest.importorskip("mujoco")
 
 from mkskit import open_motor
-from testdata import by_id, sequences, vectors
 
 from joints.codecs import mks
 from joints.codecs import modbus as mb
 from joints.codecs.crc import append_crc
 from joints.devices.mks.modbus import MKS_MODBUS
 from joints.devices.mks.state import WorkMode
+from testdata import by_id, sequences, vectors
 
 RECORDS = by_id()
 NATIVE = vectors("mks-native", "mks-servo42d57d")
