@@ -149,7 +149,67 @@ class Adapter:
         raise NotImplementedError
 
 
-class ModbusAdapter(Adapter):
+class StreamAdapter(Adapter):
+    """A byte-stream endpoint (RS485): frames cut into random chunks, silences between and inside
+    them; subclasses draw the pieces (:meth:`piece`), judge what came out and probe liveness."""
+
+    def __init__(self, ep: Endpoint, rng: random.Random) -> None:
+        super().__init__(ep, rng)
+        self.segment = bytearray()  #: bytes fed since the last silence
+        self.silences = 0  #: numbers the segments
+
+    def piece(self) -> bytes:
+        raise NotImplementedError
+
+    def judge(self, t: Target, fed: bytes, out: bytes) -> None:
+        raise NotImplementedError
+
+    def probe(self, t: Target) -> None:
+        raise NotImplementedError
+
+    def feed(self, data: bytes) -> bytes:
+        self.segment += data
+        out: bytes = self.ep.bus.receive(data)
+        return out
+
+    def silence(self) -> bytes:
+        out: bytes = self.ep.bus.silence()
+        self.segment.clear()
+        self.silences += 1
+        return out
+
+    def case(self, t: Target) -> int:
+        rng = self.rng
+        n = rng.randint(1, 4)
+        chunks: list[tuple[bytes, bool]] = []  #: (bytes, silence after them)
+        for _ in range(n):
+            frame = self.piece()
+            cuts = sorted({0, len(frame), *(rng.randrange(len(frame) + 1) for _ in range(rng.randint(0, 2)))})
+            for a, b in itertools.pairwise(cuts):
+                chunks.append((frame[a:b], rng.random() < 0.05))  # a gap inside a frame: garbage before it
+            if chunks and rng.random() < 0.5:
+                chunks[-1] = (chunks[-1][0], True)
+        self.run_chunks(t, chunks)
+        return n
+
+    def run_chunks(self, t: Target, chunks: Sequence[tuple[bytes, bool]]) -> None:
+        """Feed ``chunks`` (each followed by a silence where flagged), judge, then probe."""
+        ledger = self.ledger
+        self.silence()
+        ledger.clear()
+        out = bytearray()
+        fed = bytearray()
+        for data, quiet in chunks:
+            fed += data
+            out += self.feed(data)
+            if quiet:
+                out += self.silence()
+        out += self.silence()
+        self.judge(t, bytes(fed), bytes(out))
+        self.probe(t)
+
+
+class ModbusAdapter(StreamAdapter):
     """Modbus RTU: bytes in random chunks, silences between and inside frames."""
 
     def __init__(self, ep: Endpoint, rng: random.Random) -> None:
@@ -157,8 +217,6 @@ class ModbusAdapter(Adapter):
         from joints.codecs import modbus as mb
 
         self.mb = mb
-        self.segment = bytearray()  #: bytes fed since the last silence
-        self.silences = 0  #: numbers the segments
         bus, ledger = ep.bus, self.ledger
         exchange = bus.exchange
         writes = (mb.WriteSingleRegister, mb.WriteMultipleRegisters)
@@ -212,46 +270,6 @@ class ModbusAdapter(Adapter):
             return rng.choice(self.replies) if rng.random() < 0.5 else corpus.modbus_reply(rng)
         return corpus.random_bytes(rng)
 
-    def feed(self, data: bytes) -> bytes:
-        self.segment += data
-        out: bytes = self.ep.bus.receive(data)
-        return out
-
-    def silence(self) -> bytes:
-        out: bytes = self.ep.bus.silence()
-        self.segment.clear()
-        self.silences += 1
-        return out
-
-    def case(self, t: Target) -> int:
-        rng = self.rng
-        n = rng.randint(1, 4)
-        chunks: list[tuple[bytes, bool]] = []  #: (bytes, silence after them)
-        for _ in range(n):
-            frame = self.piece()
-            cuts = sorted({0, len(frame), *(rng.randrange(len(frame) + 1) for _ in range(rng.randint(0, 2)))})
-            for a, b in itertools.pairwise(cuts):
-                chunks.append((frame[a:b], rng.random() < 0.05))  # a gap inside a frame: garbage before it
-            if chunks and rng.random() < 0.5:
-                chunks[-1] = (chunks[-1][0], True)
-        self.run_chunks(t, chunks)
-        return n
-
-    def run_chunks(self, t: Target, chunks: Sequence[tuple[bytes, bool]]) -> None:
-        """Feed ``chunks`` (each followed by a silence where flagged), judge, then probe."""
-        ledger = self.ledger
-        self.silence()
-        ledger.clear()
-        out = bytearray()
-        fed = bytearray()
-        for data, quiet in chunks:
-            fed += data
-            out += self.feed(data)
-            if quiet:
-                out += self.silence()
-        out += self.silence()
-        self.judge(t, bytes(fed), bytes(out))
-        self.probe(t)
 
     def judge(self, t: Target, fed: bytes, out: bytes) -> None:
         mb, ledger = self.mb, self.ledger
@@ -464,7 +482,7 @@ class ErobCanAdapter(Adapter):
             t.example("unanswered", f"probe read of actual position at {node}: {[_can_text(m) for m in out]}")
 
 
-class MksAdapter(Adapter):
+class MksAdapter(StreamAdapter):
     """MKS native RS485: bytes in random chunks and silences, like Modbus; broadcast, group and long
     packets are executed by every drive they address and answered by none."""
 
@@ -473,8 +491,6 @@ class MksAdapter(Adapter):
         from joints.codecs import mks
 
         self.mks = mks
-        self.segment = bytearray()
-        self.silences = 0
         bus, ledger = ep.bus, self.ledger
         exchange = bus.exchange
 
@@ -511,45 +527,6 @@ class MksAdapter(Adapter):
             return rng.choice(self.replies) if rng.random() < 0.5 else corpus.mks_frame(rng, mks.HEAD_UPLINK)
         return corpus.random_bytes(rng)
 
-    def feed(self, data: bytes) -> bytes:
-        self.segment += data
-        out: bytes = self.ep.bus.receive(data)
-        return out
-
-    def silence(self) -> bytes:
-        out: bytes = self.ep.bus.silence()
-        self.segment.clear()
-        self.silences += 1
-        return out
-
-    def case(self, t: Target) -> int:
-        rng = self.rng
-        n = rng.randint(1, 4)
-        chunks: list[tuple[bytes, bool]] = []
-        for _ in range(n):
-            frame = self.piece()
-            cuts = sorted({0, len(frame), *(rng.randrange(len(frame) + 1) for _ in range(rng.randint(0, 2)))})
-            for a, b in itertools.pairwise(cuts):
-                chunks.append((frame[a:b], rng.random() < 0.05))
-            if chunks and rng.random() < 0.5:
-                chunks[-1] = (chunks[-1][0], True)
-        self.run_chunks(t, chunks)
-        return n
-
-    def run_chunks(self, t: Target, chunks: Sequence[tuple[bytes, bool]]) -> None:
-        ledger = self.ledger
-        self.silence()
-        ledger.clear()
-        out = bytearray()
-        fed = bytearray()
-        for data, quiet in chunks:
-            fed += data
-            out += self.feed(data)
-            if quiet:
-                out += self.silence()
-        out += self.silence()
-        self.judge(t, bytes(fed), bytes(out))
-        self.probe(t)
 
     def judge(self, t: Target, fed: bytes, out: bytes) -> None:
         mks, ledger = self.mks, self.ledger
