@@ -322,8 +322,11 @@ class JointsEnv(RigEnv):
         self.profile_velocity = np.array([j.motion.velocity for j in self.joints], dtype=np.float64)
         self.profile_acceleration = np.array([j.motion.acceleration for j in self.joints], dtype=np.float64)
         self.profile_deceleration = np.array([j.motion.deceleration for j in self.joints], dtype=np.float64)
+        self._nominal_motion = [j.motion for j in self.joints]  #: the config's profiles (domain randomisation derates)
         self.position_limits = np.array([lo, hi], dtype=np.float64).T  #: (n, 2) rad
         self.velocity_limits = np.array(vlim, dtype=np.float64)  #: (n,) rad/s
+        #: (n,) rad/s: the speed velocity actions may ask this episode (the limit; less under domain randomisation)
+        self.speed_cap = self.velocity_limits.copy()
         self.torque_limits = np.array(tlim, dtype=np.float64)  #: (n,) N*m
         if self.sim:
             steps = self.control_period / rig.sim.timestep
@@ -445,7 +448,7 @@ class JointsEnv(RigEnv):
         if self.action_mode == "position":
             np.clip(c, self.position_limits[:, 0], self.position_limits[:, 1], out=c)
         elif self.action_mode == "velocity":
-            np.clip(c, -self.velocity_limits, self.velocity_limits, out=c)
+            np.clip(c, -self.speed_cap, self.speed_cap, out=c)
         else:
             np.clip(c, -self.torque_limits, self.torque_limits, out=c)
             return c
@@ -662,9 +665,30 @@ class JointsEnv(RigEnv):
         rig.sleep(ENABLE_SETTLE)
         self._hold(start)
 
+    def _derate(self, i: int, scale: float) -> None:
+        """Joint ``i``'s profile (position moves, velocity ramps) and top speed for this episode:
+        the config's times ``scale`` (at most 1).
+
+        Domain randomisation gives a twin up to twice the friction and 1.2 times the armature the
+        shipped profiles were sized for, and 10 % less torque per ampere: the drive then cannot
+        follow them and trips (following error, speed error), as such a drive would. The env knows
+        its draw, so it asks of the joint what that plant can do: profile speed, ramps and speed
+        cap times torque constant / max(friction, armature) factors."""
+        m = self._nominal_motion[i]
+        s = min(1.0, scale)
+        self.speed_cap[i] = self.velocity_limits[i] * s
+        j = self.joints[i]
+        j.motion = joints.Motion(velocity=m.velocity * s, acceleration=m.acceleration * s,
+                                 deceleration=m.deceleration * s)
+        self.profile_velocity[i] = j.motion.velocity
+        self.profile_acceleration[i] = j.motion.acceleration
+        self.profile_deceleration[i] = j.motion.deceleration
+
     def _randomize(self) -> None:
         sim = self.rig.sim
         sim.restore()
+        for i in range(len(self.joints)):
+            self._derate(i, 1.0)
         self.randomization_sample = None
         self._noise = np.zeros(len(self.joints))
         self._noisy = False
@@ -678,6 +702,8 @@ class JointsEnv(RigEnv):
             sim.perturb(nm, armature=f["armature"], coulomb_friction=f["friction"], viscous_friction=f["friction"],
                         torque_constant=f["torque_constant"], gains={g: f[field] for field, g in GAINS.items()})
             self._noise[i] = f["encoder_noise"]
+            if self.action_mode != "torque":
+                self._derate(i, f["torque_constant"] / max(1.0, f["friction"], f["armature"]))
         self._noisy = bool(self._noise.any())
         self._noise_rng = np.random.default_rng(int(self.np_random.integers(2**63)))
 

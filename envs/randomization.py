@@ -29,7 +29,9 @@ Coulomb and viscous friction, torque constant, loop gains): the loop gains are w
 twin's gain parameters (whatever the drive calls them: eRob 0x0030-0x0032, ZLAC Pl Kp / Vl Kp /
 Vl Ki) as a write of them would, after the drives' power-on reset; friction, armature and the
 torque constant change the MuJoCo model - the drive keeps tuning its loops for the nominal
-inertia, as a real drive whose load was mis-estimated does.
+inertia, as a real drive whose load was mis-estimated does. The eRob envs then derate the episode's
+position profile, velocity ramps and speed cap to what the drawn plant can follow
+(:meth:`envs.base.JointsEnv._derate`), so a draw never makes an action trip a drive.
 """
 
 from __future__ import annotations

@@ -373,3 +373,50 @@ def test_axis_reaches_goals_at_both_ends(mode: str, start: float, goal: float) -
         assert info["is_success"], obs
     finally:
         env.close()
+
+
+# -- domain randomisation: the env asks of a randomised twin what it can do -------------------
+
+WORST = {"friction": (2.0, 2.0), "armature": (1.2, 1.2), "torque_constant": (0.9, 0.9),
+         "position_loop_gain": (1.0, 1.0), "speed_loop_gain": (1.0, 1.0), "speed_loop_integral": (1.0, 1.0),
+         "encoder_noise": (0.0, 0.0), "latency": (0, 0)}
+
+
+@pytest.mark.parametrize("env_id", ["joints/ErobReach-v0", "joints/ErobArmReach-v0"])
+@pytest.mark.parametrize("mode", ["position", "velocity"])
+def test_the_heaviest_randomised_twin_never_faults_at_full_speed(env_id: str, mode: str) -> None:
+    """Twice the friction, 1.2 x the armature and 0.9 x the torque per ampere the shipped profiles
+    were sized for: held full-range actions tripped the drives' following or speed error (found
+    with bench_env_faults --domain-randomization) until the env derated its profile and speed cap
+    by the draw."""
+    from envs.randomization import DomainRandomization
+
+    env = gym.make(env_id, action_mode=mode, domain_randomization=DomainRandomization(**WORST))
+    u = env.unwrapped
+    try:
+        for seed in range(3):
+            act = _policies(env.action_space, seed)["hold"]
+            env.reset(seed=seed)
+            scale = 0.9 / 2.0
+            assert u.speed_cap == pytest.approx(u.velocity_limits * scale)
+            assert u.profile_acceleration == pytest.approx([j.acceleration * scale for j in u._nominal_motion])
+            for k in range(250):
+                _obs, _r, term, trunc, info = env.step(act(k))
+                assert "fault" not in info, (seed, k, info["fault"])
+                if term or trunc:
+                    break
+    finally:
+        env.close()
+
+
+def test_nominal_draws_keep_the_shipped_profiles() -> None:
+    from envs.randomization import DomainRandomization
+
+    nominal = {**WORST, "friction": (1.0, 1.0), "armature": (1.0, 1.0), "torque_constant": (1.0, 1.0)}
+    env = ErobReachEnv(action_mode="position", domain_randomization=DomainRandomization(**nominal))
+    try:
+        env.reset(seed=0)
+        assert env.speed_cap == pytest.approx(env.velocity_limits)
+        assert env.joints[0].motion == env._nominal_motion[0]
+    finally:
+        env.close()
