@@ -61,8 +61,8 @@ def read_all(rig: Rig, names: Sequence[str] | None = None) -> dict[str, JointSta
 def state_dict(name: str, s: JointState) -> dict[str, object]:
     fault = None if s.fault is None else {"code": s.fault.code, "name": s.fault.name, "text": s.fault.text,
                                           "clears": s.fault.clears}
-    return {"joint": name, "position": s.position, "velocity": s.velocity, "torque": s.torque,
-            "current": s.current, "temperature": finite(s.temperature), "enabled": s.enabled, "moving": s.moving,
+    return {"joint": name, "position": s.position, "velocity": s.velocity, "torque": finite(s.torque),
+            "current": finite(s.current), "temperature": finite(s.temperature), "enabled": s.enabled, "moving": s.moving,
             "fault": fault, "time": s.time}
 
 

@@ -369,7 +369,7 @@ class MksDriver(JointDriver):
         moving = v["motor_status"] not in (st.MotorStatus.STOP, st.MotorStatus.FAIL)
         if not moving and self._running != "speed":
             self._running = None
-        return RawState(position=v["encoder_addition"], velocity=v["real_time_speed"], current=0,
+        return RawState(position=v["encoder_addition"], velocity=v["real_time_speed"], current=math.nan,
                         temperature=math.nan, enabled=enabled, moving=moving,
                         fault=LOCKED_ROTOR if protected else 0, time=self.clock.now(), extra=v)
 

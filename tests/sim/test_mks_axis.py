@@ -174,3 +174,16 @@ def test_the_device_picks_the_profile_and_a_contradicting_model_is_refused() -> 
     with joints.open(cfg) as rig:
         assert rig.joints["carriage"].driver.profile.holding_torque == 2.5
         assert rig.world.drives["carriage"].profile.holding_torque == 2.5
+
+
+@pytest.mark.parametrize("protocol", ["mks-serial", "modbus-rtu"])
+def test_current_torque_and_temperature_are_not_reported(protocol: str) -> None:
+    """Neither MKS protocol reads the motor current or a temperature: the state says so (NaN), never 0."""
+    with joints.open(axis_config(protocol=protocol)) as rig:
+        j = rig.joints["carriage"]
+        j.enable()
+        j.set_velocity(0.01)
+        rig.sleep(0.3)
+        s = j.state()
+        assert s.velocity > 0.005
+        assert math.isnan(s.current) and math.isnan(s.torque) and math.isnan(s.temperature)
