@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -25,6 +26,14 @@ COUNTS = 16384
 def _at(rig, t: float) -> None:  # type: ignore[no-untyped-def]
     rig.sleep(t - rig.time)
 
+
+
+def block(world: Any, damping: float = 1e4) -> float:
+    """Block the motor's shaft with a damping no motor torque can turn (or set it back); the one before."""
+    dof = world.joint("m1").dof
+    before = float(world.model.dof_damping[dof])
+    world.model.dof_damping[dof] = damping
+    return before
 
 def test_speed_0_to_600rpm_with_acc_236_reaches_speed_at_0_6s(tmp_path: Path) -> None:
     """SERVO42D, SR_vFOC, 16 microsteps, 24 V, no load: (256 - 236) x 50 us per rpm = 1000 rpm/s."""
@@ -154,7 +163,7 @@ def test_locked_rotor_protection_trips_after_the_error_stays_above_180_degrees(t
         d.set_locked_rotor_protection(True)
         j.enable()
         d.set_velocity(200, acceleration=0)
-        w.data.qfrc_applied[w.joint("m1").dof] = -2.0  # a blocked shaft
+        free = block(w)
         tripped_at = None
         error_big_at = None
         for _ in range(100):
@@ -169,7 +178,7 @@ def test_locked_rotor_protection_trips_after_the_error_stays_above_180_degrees(t
         s = j.state()
         assert s.fault is not None and s.fault.name == "locked_rotor_protection" and not s.enabled
         assert d.motor_status() is MotorStatus.STOP
-        w.data.qfrc_applied[w.joint("m1").dof] = 0.0
+        block(w, free)
         j.clear_faults()  # 0x3D release
         s = j.state()
         assert s.fault is None and s.enabled
@@ -178,11 +187,21 @@ def test_locked_rotor_protection_trips_after_the_error_stays_above_180_degrees(t
 def test_protection_off_never_trips(tmp_path: Path) -> None:
     with open_motor(tmp_path) as rig:
         j = rig.joints["m1"]
+        d = j.driver
+        w = rig.world
+        fw = w.drives["m1"]
+        d.set_locked_rotor_protection(False)
         j.enable()
-        j.driver.set_velocity(200, acceleration=0)
-        rig.world.data.qfrc_applied[rig.world.joint("m1").dof] = -2.0
-        rig.sleep(1.0)
-        assert j.state().fault is None
+        d.set_velocity(200, acceleration=0)
+        block(w)
+        worst = 0.0
+        for _ in range(100):  # 1 s: several times the stall time with the error past half a turn
+            rig.sleep(0.01)
+            worst = max(worst, abs(fw.r - fw.q))
+            assert abs(w.data.qvel[w.joint("m1").dof]) < 0.01  # stalled, not pushed around
+        assert worst > math.pi
+        s = j.state()
+        assert s.fault is None and s.enabled and not d.protection_state()
 
 
 def test_working_current_sets_the_torque_and_the_speed_the_motor_reaches(tmp_path: Path) -> None:
