@@ -39,6 +39,15 @@ def state(served: Any, capsys: pytest.CaptureFixture[str], joint: str) -> dict[s
     return result
 
 
+def world_passes(served: Any, seconds: float) -> None:
+    """Wait until the served world's own clock has advanced ``seconds`` (however fast it runs here)."""
+    t0 = served.command("status")["time"]
+    deadline = time.monotonic() + 20 + 10 * seconds
+    while served.command("status")["time"] - t0 < seconds:
+        assert time.monotonic() < deadline, "the served world does not advance"
+        time.sleep(0.02)  # poll interval
+
+
 def test_hardware_config_points_at_the_served_buses(served: Any) -> None:
     from joints.config import load
 
@@ -141,7 +150,7 @@ def test_jog_runs_then_stops(served: Any, joint: str, capsys: pytest.CaptureFixt
     result = json.loads(out)
     assert result["position"] - start["position"] > 0.05
     assert not result["moving"] and result["enabled"] is (joint in NOT_DISABLED)
-    time.sleep(0.3)
+    world_passes(served, 0.3)
     later = state(served, capsys, joint)
     assert later["position"] == pytest.approx(result["position"], abs=0.02)  # stopped: not left in speed mode
 
@@ -159,7 +168,7 @@ def test_enable_holds_with_the_watchdog_off_then_disable(served: Any, capsys: py
     assert rc == 0 and "watchdog OFF" in err and "joints disable" in err
     rc, out, _ = run(capsys, "read", served.hardware, "a", "modbus_communication_timeout_duration")
     assert json.loads(out)["value"] == 0
-    time.sleep(0.8)  # longer than the 500 ms the watchdog had: nothing fed it, it holds all the same
+    world_passes(served, 1.0)  # twice the 500 ms the watchdog had: nothing fed it, it holds all the same
     assert state(served, capsys, "a")["enabled"] is True
     rc, _, err = run(capsys, "disable", served.hardware, "a")
     assert rc == 0, err
@@ -194,9 +203,14 @@ def test_stop_from_a_fresh_process_stops_a_joint_another_program_left_running(
 
 
 def test_stop_and_clear_every_joint(served: Any, capsys: pytest.CaptureFixture[str]) -> None:
+    """Both commands accept a joint of every family and protocol at once and leave each standing, unfaulted
+    (stopping a running joint: the test above; clear refuses a fault that stays: cmd_clear's check)."""
     assert run(capsys, "stop", served.hardware, *MOVERS)[0] == 0
     rc, _, err = run(capsys, "clear", served.hardware, *MOVERS)
     assert rc == 0, err
+    for joint in MOVERS:
+        s = state(served, capsys, joint)
+        assert s["fault"] is None and abs(s["velocity"]) < 0.02, (joint, s)
 
 
 def _frames(out: str) -> list[tuple[int, bytes]]:

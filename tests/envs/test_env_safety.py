@@ -245,12 +245,25 @@ def test_arm_commanded_into_the_floor_stops_short_of_it(mode: str) -> None:
         env.close()
 
 
-def test_arm_targets_keep_the_clearance() -> None:
+def test_arm_targets_keep_the_clearance(monkeypatch: pytest.MonkeyPatch) -> None:
+    import envs.reach
+
+    poses: list[np.ndarray] = []
+
+    def ee(q: Any) -> np.ndarray:  # the pose each candidate target comes from
+        poses.append(np.array(q, dtype=np.float64))
+        return erob_arm3_ee(q)
+
+    monkeypatch.setattr(envs.reach, "erob_arm3_ee", ee)
     env = ErobArmReachEnv(target_ranges=((-2.0, 2.0), (-1.6, 0.8), (-2.4, 2.4)))
     try:
         for seed in range(40):
+            poses.clear()
             env.reset(seed=seed)
+            q = next(p for p in reversed(poses) if np.allclose(erob_arm3_ee(p), env.target))
             assert env.target[2] >= env.MIN_HEIGHT
+            assert math.hypot(env.target[0], env.target[1]) >= env.MIN_RADIUS
+            assert erob_arm3_clearance(q[1], q[2]) >= env.CLEARANCE
     finally:
         env.close()
 

@@ -91,14 +91,16 @@ def test_a_read_is_never_outcome_unknown() -> None:
 def test_under_ten_percent_faults_reads_are_never_stale() -> None:
     link, line, fw, _clock = setup(rx=Faults.rate(0.1, max_delay=0.0125), tx=Faults.rate(0.1, max_delay=0.0125),
                                    seed=7)
-    wrong = 0
+    wrong = ok = 0
     for i in range(1500):
         fw.set("profile_speed", i)
         try:
             wrong += link.read_registers(SLAVE, 0x0047, 2) != (0, i)
+            ok += 1
         except ReplyTimeout:
             pass
         except ChecksumError:
             pass
     assert wrong == 0
+    assert ok > 1000  # most reads got through (retries): the zero above counts real answers
     assert sum(line.counts.values()) > 250  # the line really was faulty
