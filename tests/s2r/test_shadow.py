@@ -42,8 +42,7 @@ def poll(rig: joints.Rig, j: joints.Joint, seconds: float) -> None:
 def workload(rig: joints.Rig, chirp: float = 4.0) -> None:
     """Two position moves (the drive's loop: currents show the physics), then a torque chirp (motion shows it)."""
     j = rig.joints["joint1"]
-    j.enable()
-    rig.sleep(0.6)
+    j.enable()  # the driver waits the manual's 500 ms before the first move itself
     j.move_to(0.4, velocity=1.0, acceleration=4.0, deceleration=4.0)
     poll(rig, j, 1.5)
     j.move_to(-0.3, velocity=1.0, acceleration=4.0, deceleration=4.0)

@@ -51,13 +51,15 @@ cfg = {{"backend": "hardware",
 how = {how!r}
 if how == "never-closed":
     rig = joints.open(cfg)
-    rig.joints["joint1"].enable(); rig.sleep(0.6); rig.joints["joint1"].set_velocity(1.0); rig.sleep(0.5)
+    rig.joints["joint1"].enable(); rig.joints["joint1"].set_velocity(1.0)
+    rig.joints["joint1"].wait(timeout=10, until=lambda s: s.velocity > 0.95)
     print("ready", rig.joints["joint1"].state().velocity, flush=True)
     sys.stdin.readline()
     sys.exit(0)  # leaves without rig.close(): the atexit hook closes it
 with joints.open(cfg) as rig:
     j = rig.joints["joint1"]
-    j.enable(); rig.sleep(0.6); j.set_velocity(1.0); rig.sleep(0.5)
+    j.enable(); j.set_velocity(1.0)  # the driver waits the manual's 500 ms after enable itself
+    j.wait(timeout=10, until=lambda s: s.velocity > 0.95)  # running at speed
     print("ready", j.state().velocity, flush=True)
     if how == "exception":
         sys.stdin.readline()
