@@ -45,7 +45,8 @@ The MKS reports no current and no temperature: states carry current 0 and temper
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import TypeVar
 
 from joints.clock import Clock, MonotonicClock
 from joints.devices.faults import DEFINED_BY_JOINTS, HOST_DEFINED, Fault
@@ -79,6 +80,8 @@ _COUNTS = st.ENCODER_COUNTS_PER_TURN
 _RPM = 2.0 * math.pi / 60.0
 
 
+T = TypeVar("T")
+
 class MksAccess(ParamAccess):
     """What both MKS protocols' accesses share: the image of what this host wrote.
 
@@ -106,6 +109,23 @@ class MksAccess(ParamAccess):
 
     def remember(self, values: Mapping[str, int]) -> None:
         self.image.update(values)
+
+    def sent(self, values: Mapping[str, int], send: Callable[[], T]) -> T:
+        """Run ``send`` (one frame carrying ``values``) and keep ``values`` in the image if the drive
+        took them or may have (no intact answer), never if it refused them."""
+        try:
+            out = send()
+        except (OutcomeUnknown, PeerProtocolError):
+            self.remember(values)  # the drive may have taken them
+            raise
+        self.remember(values)
+        return out
+
+    def read(self, name: str) -> int:
+        return self.read_many((name,))[name]
+
+    def write(self, name: str, value: int, *, idempotent: bool = True) -> None:
+        self.write_many({name: value}, idempotent=idempotent)
 
 
 class MksDriver(JointDriver):

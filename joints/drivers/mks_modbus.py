@@ -15,6 +15,7 @@ quantities (0x8C respond/active, 0x8D group address, 0x94 'noLimit' homing) rais
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from functools import partial
 
 from joints.clock import Clock
 from joints.codecs import modbus as mb
@@ -24,7 +25,7 @@ from joints.devices.mks.params import model_params
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import ParamSet
 from joints.drivers.mks import MksAccess, MksDriver
-from joints.errors import CommandError, OutcomeUnknown, PeerProtocolError, RegisterError
+from joints.errors import CommandError, RegisterError
 from joints.link.modbus import ModbusLink
 
 __all__ = ["MksModbusAccess", "MksModbusDriver"]
@@ -58,9 +59,6 @@ class MksModbusAccess(MksAccess):
         f = self.map.get(name)
         return f"FC{f.function:02d} 0x{f.address:04X}"
 
-    def read(self, name: str) -> int:
-        return self.read_many((name,))[name]
-
     def read_many(self, names: Sequence[str]) -> dict[str, int]:
         """One FC04 per Part 8 read block."""
         blocks: dict[int, ModbusBlock] = {}
@@ -75,9 +73,6 @@ class MksModbusAccess(MksAccess):
             words = self.link.read_registers(self.slave, block.address, block.count, input_registers=True)
             out.update(block.decode_words(words))
         return {n: out[n] for n in names}
-
-    def write(self, name: str, value: int, *, idempotent: bool = True) -> None:
-        self.write_many({name: value}, idempotent=idempotent)
 
     def write_many(self, values: Mapping[str, int], *, idempotent: bool = True) -> None:
         """One request per block, every field of it sent; all values checked before anything is sent."""
@@ -94,12 +89,7 @@ class MksModbusAccess(MksAccess):
             block.encode(full)  # range-checked for the wire too
             planned.append((block, full))
         for block, full in planned:
-            try:
-                self._send(block, full, idempotent)
-            except (OutcomeUnknown, PeerProtocolError):
-                self.remember(full)
-                raise
-            self.remember(full)
+            self.sent(full, partial(self._send, block, full, idempotent))
 
     def _send(self, block: ModbusBlock, values: Mapping[str, int], idempotent: bool) -> None:
         if block.function == FC_WRITE_SINGLE:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from functools import partial
 from typing import Any
 
 from joints.clock import Clock
@@ -31,7 +32,7 @@ from joints.devices.mks.params import model_params
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import ParamSet
 from joints.drivers.mks import RUN_GROUPS, MksAccess, MksDriver
-from joints.errors import CommandError, MotionTimeout, OutcomeUnknown, PeerProtocolError, RegisterError
+from joints.errors import CommandError, MotionTimeout, RegisterError
 from joints.link.base import Subscription
 from joints.link.mks import MksLink
 
@@ -66,9 +67,6 @@ class MksNativeAccess(MksAccess):
     def _query(self, command: int) -> Any:
         return self.link.request(mks.REQUEST_TYPES[command](self.address), idempotent=True)
 
-    def read(self, name: str) -> int:
-        return self.read_many((name,))[name]
-
     def read_many(self, names: Sequence[str]) -> dict[str, int]:
         """One query per command (0x30 gives carry and value together)."""
         out: dict[str, int] = {}
@@ -100,9 +98,6 @@ class MksNativeAccess(MksAccess):
         kwargs = {MKS_NATIVE.key(n).field: v for n, v in full.items() if MKS_NATIVE.key(n).field}
         return mks.REQUEST_TYPES[command](self.address if address is None else address, **kwargs), full
 
-    def write(self, name: str, value: int, *, idempotent: bool = True) -> None:
-        self.write_many({name: value}, idempotent=idempotent)
-
     def write_many(self, values: Mapping[str, int], *, idempotent: bool = True) -> None:
         """One frame per command; every field of it sent (the others from the image); all checked first."""
         groups: dict[int, dict[str, int]] = {}
@@ -110,12 +105,7 @@ class MksNativeAccess(MksAccess):
             groups.setdefault(int(MKS_NATIVE.key(n).command), {})[n] = v
         planned = [self.message(g) for g in groups.values()]  # every value checked before anything is sent
         for request, full in planned:
-            try:
-                self.last_reply = self.link.request(request, idempotent=idempotent)
-            except (OutcomeUnknown, PeerProtocolError):
-                self.remember(full)  # the drive may have taken them
-                raise
-            self.remember(full)
+            self.last_reply = self.sent(full, partial(self.link.request, request, idempotent=idempotent))
             self._tell_link(full)
 
     def _tell_link(self, values: Mapping[str, int]) -> None:
