@@ -500,3 +500,15 @@ class FrameFraming(Framing[M]):
             return self.decode(frame)
         except FrameError as exc:
             return exc
+
+
+def parse_one(codec: Any, frame: Any, what: str) -> Any:
+    """The one request ``frame`` holds, decoded by a fresh stream ``codec`` (a whole frame, nothing
+    left over); :class:`~joints.errors.FrameError` otherwise. For rules that replay raw frames."""
+    data = bytes(frame)
+    codec.feed(data)
+    codec.flush()
+    msg = codec.next_message()
+    if msg is None or codec.buffered:
+        raise FrameError(f"not one {what} request: {data.hex(' ').upper()}", data=data)
+    return msg

@@ -30,8 +30,8 @@ from typing import Any
 
 from joints.clock import Clock, MonotonicClock
 from joints.codecs import mks
-from joints.errors import DeviceRejected, EncodeError, FrameError
-from joints.link.base import Framing, Link, RetryPolicy, Rule, StreamFraming, Subscription
+from joints.errors import DeviceRejected, EncodeError
+from joints.link.base import Framing, Link, RetryPolicy, Rule, StreamFraming, Subscription, parse_one
 from joints.link.trace import TraceRecord
 from joints.transports.base import ByteTransport
 
@@ -108,13 +108,7 @@ class MksRule(Rule[Any]):
         return data if len(data) > 2 and mks.checksum_ok(data) else mks.with_checksum(data)
 
     def parse_request(self, frame: Any) -> Any:
-        codec = mks.MksCodec(mks.Role.DEVICE)
-        codec.feed(bytes(frame))
-        codec.flush()
-        msg = codec.next_message()
-        if msg is None or codec.buffered:
-            raise FrameError(f"not one MKS request: {bytes(frame).hex(' ').upper()}", data=bytes(frame))
-        return msg
+        return parse_one(mks.MksCodec(mks.Role.DEVICE), frame, "MKS")
 
     def timeout_text(self, request: Any) -> str:
         return (f"slave {request.address} did not answer: check wiring, slave address, baud rate, that the drive "

@@ -18,8 +18,8 @@ from typing import Any, Protocol
 from joints.clock import Clock
 from joints.codecs import modbus as mb
 from joints.codecs.crc import append_crc, crc_ok
-from joints.errors import DeviceRejected, EncodeError, FrameError, UnexpectedReply
-from joints.link.base import DirectFraming, Framing, Link, RetryPolicy, Rule, StreamFraming
+from joints.errors import DeviceRejected, EncodeError, UnexpectedReply
+from joints.link.base import DirectFraming, Framing, Link, RetryPolicy, Rule, StreamFraming, parse_one
 from joints.link.trace import TraceRecord
 from joints.transports.base import ByteTransport
 
@@ -81,13 +81,7 @@ class ModbusRule(Rule[Any]):
         return data if len(data) > 2 and crc_ok(data) else append_crc(data)
 
     def parse_request(self, frame: Any) -> Any:
-        codec = mb.ModbusRtuCodec(mb.Role.DEVICE)
-        codec.feed(bytes(frame))
-        codec.flush()
-        msg = codec.next_message()
-        if msg is None or codec.buffered:
-            raise FrameError(f"not one Modbus RTU request: {bytes(frame).hex(' ').upper()}", data=bytes(frame))
-        return msg
+        return parse_one(mb.ModbusRtuCodec(mb.Role.DEVICE), frame, "Modbus RTU")
 
     def timeout_text(self, request: Any) -> str:
         return (f"slave {request.slave} did not answer: check wiring, slave address, baud rate and that the "
