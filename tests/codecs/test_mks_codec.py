@@ -13,6 +13,7 @@ from itertools import pairwise
 from typing import Any
 
 import pytest
+from codeckit import h
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -28,9 +29,6 @@ u16 = st.integers(0, 0xFFFF)
 u32 = st.integers(0, 0xFFFFFFFF)
 i32 = st.integers(-(1 << 31), (1 << 31) - 1)
 
-
-def h(text: str) -> bytes:
-    return bytes.fromhex(text)
 
 
 def decode_all(role: Role, data: bytes, *, flush: bool = True) -> list[Any]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+from codeckit import drain, h
 
 from joints.codecs import modbus as mb
 from joints.codecs.crc import append_crc, crc16_modbus, crc_ok
@@ -15,27 +16,6 @@ from joints.errors import (
     PeerProtocolError,
     RequestError,
 )
-
-
-def h(text: str) -> bytes:
-    return bytes.fromhex(text)
-
-
-def drain(codec: mb.ModbusRtuCodec) -> tuple[list[mb.Message], list[FrameError]]:
-    """Every message and every frame error the codec can produce from its buffer now."""
-    msgs: list[mb.Message] = []
-    errors: list[FrameError] = []
-    for _ in range(10_000):
-        try:
-            msg = codec.next_message()
-        except FrameError as exc:
-            errors.append(exc)
-            continue
-        if msg is None:
-            return msgs, errors
-        msgs.append(msg)
-    raise AssertionError("codec does not make progress")
-
 
 # ------------------------------------------------------------------------------------- CRC
 

@@ -9,29 +9,10 @@
 from __future__ import annotations
 
 import pytest
+from codeckit import drain, h
 
 from joints.codecs import modbus as mb
 from joints.codecs.crc import append_crc
-from joints.errors import FrameError
-
-
-def h(text: str) -> bytes:
-    return bytes.fromhex(text)
-
-
-def drain(codec: mb.ModbusRtuCodec) -> tuple[list[mb.Message], list[FrameError]]:
-    msgs: list[mb.Message] = []
-    errors: list[FrameError] = []
-    for _ in range(1000):
-        try:
-            msg = codec.next_message()
-        except FrameError as exc:
-            errors.append(exc)
-            continue
-        if msg is None:
-            return msgs, errors
-        msgs.append(msg)
-    raise AssertionError("no progress")
 
 
 @pytest.mark.parametrize("role", list(mb.Role))

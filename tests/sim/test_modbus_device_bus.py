@@ -10,6 +10,7 @@ Each test here failed before the fix it names:
 
 from __future__ import annotations
 
+from codeckit import h
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -22,9 +23,6 @@ from joints.sim.modbus_front import ILLEGAL_DATA_VALUE, ILLEGAL_FUNCTION, Modbus
 
 ADDR = 2
 
-
-def h(text: str) -> bytes:
-    return bytes.fromhex(text)
 
 
 def replies(data: bytes) -> list[mb.Message]:
