@@ -11,9 +11,9 @@ wall clock).
 from __future__ import annotations
 
 import math
-import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager as ContextManager
 from pathlib import Path
 from typing import Any
 
@@ -398,15 +398,9 @@ def test_render_rgb_array_sim_and_hardware_twin(gl_unavailable: str) -> None:
 # -- hardware backend against `joints sim serve` -----------------------------------------------
 
 @pytest.fixture
-def served(tmp_path: Path, sim_server) -> Iterator[str]:  # type: ignore[no-untyped-def]
+def served(serve_shipped: Callable[[str], ContextManager[str]]) -> Iterator[str]:
     """``joints sim serve`` of the shipped diff-drive config in another process; yields the pty port."""
-    pytest.importorskip("serial")
-    if sys.platform == "win32":
-        pytest.skip("pseudo-terminals need POSIX")
-    cfg = tmp_path / "served.toml"
-    with envs.diffdrive.config_path() as p:
-        cfg.write_text(p.read_text())
-    with sim_server(cfg) as port:
+    with serve_shipped(envs.diffdrive.CONFIG_NAME) as port:
         yield port
 
 

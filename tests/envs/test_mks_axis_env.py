@@ -3,10 +3,9 @@ goal in sim and - unchanged - through the hardware backend against `joints sim s
 
 from __future__ import annotations
 
-import sys
 import time
-from collections.abc import Iterator
-from pathlib import Path
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager as ContextManager
 from typing import Any
 
 import numpy as np
@@ -130,15 +129,9 @@ def test_leaving_the_limits_terminates_and_stops_the_axis() -> None:
 
 
 @pytest.fixture
-def served(tmp_path: Path, sim_server) -> Iterator[str]:  # type: ignore[no-untyped-def]
+def served(serve_shipped: Callable[[str], ContextManager[str]]) -> Iterator[str]:
     """``joints sim serve`` of the shipped MksAxisPosition config in another process; yields the pty port."""
-    pytest.importorskip("serial")
-    if sys.platform == "win32":
-        pytest.skip("pseudo-terminals need POSIX")
-    cfg = tmp_path / "served.toml"
-    with envs.config_path("mks_axis") as p:
-        cfg.write_text(p.read_text())
-    with sim_server(cfg) as port:
+    with serve_shipped("mks_axis") as port:
         yield port
 
 

@@ -5,9 +5,9 @@ pseudo-terminal, the real serial transport, the wall clock)."""
 from __future__ import annotations
 
 import importlib.util
-import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager as ContextManager
 from pathlib import Path
 from types import ModuleType
 
@@ -43,15 +43,9 @@ def test_pd_policy_reaches_target_in_sim(pd: ModuleType) -> None:
 
 
 @pytest.fixture
-def served(tmp_path: Path, sim_server) -> Iterator[str]:  # type: ignore[no-untyped-def]
+def served(serve_shipped: Callable[[str], ContextManager[str]]) -> Iterator[str]:
     """``joints sim serve`` of the shipped ErobReach config in another process; yields the pty port."""
-    pytest.importorskip("serial")
-    if sys.platform == "win32":
-        pytest.skip("pseudo-terminals need POSIX")
-    cfg = tmp_path / "served.toml"
-    with envs.config_path("erob_reach") as p:
-        cfg.write_text(p.read_text())
-    with sim_server(cfg) as port:
+    with serve_shipped("erob_reach") as port:
         yield port
 
 
