@@ -63,7 +63,7 @@ def pin_one_core() -> tuple[int | None, set[int] | None]:
     return cpu, before
 
 
-def _best(fns: Sequence[Callable[[], float]], repeats: int) -> list[float]:
+def best_of(fns: Sequence[Callable[[], float]], repeats: int) -> list[float]:
     """Best (smallest) of ``repeats`` timings of each ``fn`` (which returns the seconds it measured),
     interleaved so that a burst of load hits every side of a ratio alike."""
     best = [math.inf] * len(fns)
@@ -138,7 +138,7 @@ def env_rows(*, steps: int, raw_steps: int, repeats: int, seed: int = 0) -> Iter
         try:
             u: Any = env.unwrapped
             substeps = round(u.dt / u.model.opt.timestep)
-            t_env, t_raw = _best([_env_block(env, steps, seed), _raw(u.model, raw_steps)], repeats)
+            t_env, t_raw = best_of([_env_block(env, steps, seed), _raw(u.model, raw_steps)], repeats)
             sub_s = steps * substeps / t_env
             raw_s = raw_steps / t_raw
             rtf = steps * u.dt / t_env
@@ -164,7 +164,7 @@ def batched_row(*, steps: int, raw_steps: int, repeats: int, rigs: int = BATCH_R
         models = list(u.models)
         substeps = round(u.dt / models[0].opt.timestep)
         blocks = max(1, steps // rigs)
-        t_env, t_raw = _best([_env_block(vec, blocks, seed), _raw_many(models, raw_steps)], repeats)
+        t_env, t_raw = best_of([_env_block(vec, blocks, seed), _raw_many(models, raw_steps)], repeats)
         sub_s = blocks * rigs * substeps / t_env
         raw_s = max(1, raw_steps // rigs) * rigs / t_raw
         rtf = blocks * rigs * u.dt / t_env
@@ -220,7 +220,7 @@ def world_row(*, raw_steps: int, repeats: int) -> Row:
                 world.step(raw_steps)
                 return time.perf_counter() - t
 
-            t_world, t_raw = _best([timed, _raw(world.model, raw_steps)], repeats)
+            t_world, t_raw = best_of([timed, _raw(world.model, raw_steps)], repeats)
             ratios.append(t_raw / t_world)
             rates.append(f"{raw_steps / t_world:,.0f}")
         raw_s = raw_steps / t_raw
@@ -307,7 +307,7 @@ def _per_call(fns: Sequence[Callable[[int], None]], repeats: int, min_time: floa
 
         return timed
 
-    return _best([sized(fn) for fn in fns], repeats)
+    return best_of([sized(fn) for fn in fns], repeats)
 
 
 def codec_row(*, repeats: int, min_time: float) -> Row:
