@@ -133,6 +133,10 @@ class Joint:
     def _to_vel(self, rad_s: float) -> int:
         return round(rad_s * self.direction / (self.units.velocity * self.scale))
 
+    def _to_current(self, torque: float) -> int:
+        """Joint torque [N*m; N with a lead] -> the driver's current units (through the torque constant)."""
+        return round(torque * self.scale * self.direction / self.units.torque_constant / self.units.current)
+
     def _to_acc(self, rad_s2: float) -> int:
         return max(1, round(abs(rad_s2) / (self.units.velocity * self.scale)))
 
@@ -320,8 +324,7 @@ class Joint:
         self._check_torque(torque)
         self._refuse_if_faulted("set_torque")
         self._require_enabled()
-        amps = torque * self.scale * self.direction / self.units.torque_constant
-        self.driver.set_current(round(amps / self.units.current))
+        self.driver.set_current(self._to_current(torque))
         self._contact()
 
     def cycle_target(self, value: float, kind: str) -> int:
@@ -338,7 +341,7 @@ class Joint:
             out = self._to_vel(value)
         elif kind == "torque":
             self._check_torque(value)
-            out = round(value * self.direction / self.units.torque_constant / self.units.current)
+            out = self._to_current(value)
         else:
             raise CommandError(f"joint {self.name}: unknown set-point kind {kind!r}")
         self._contact()

@@ -64,6 +64,14 @@ def test_commands_convert_through_the_lead() -> None:
         joint.set_torque(6000.0)
 
 
+def test_cyclic_set_points_convert_through_the_lead_like_the_commands() -> None:
+    joint, _fw = linear(Limits(position=(-0.1, 0.1), velocity=0.05, torque=5000.0))
+    assert joint.cycle_target(0.02, "position") == round(0.02 / M_PER_COUNT)
+    assert joint.cycle_target(0.01, "velocity") == round(0.01 / M_PER_COUNT)
+    # N -> motor torque 1000 x lead / 2 pi -> mA, as set_torque (it was sent without the lead: 1257x too much)
+    assert joint.cycle_target(1000.0, "torque") == round(1000.0 * LEAD / (2 * math.pi) / KT * 1000)
+
+
 def test_lead_must_be_a_positive_number() -> None:
     driver = linear()[0].driver
     for bad in (-0.01, 0.0, math.nan):
