@@ -454,8 +454,8 @@ class JointsEnv(RigEnv):
             return c
         if not self._states:
             return c
-        p = np.array([s.position for s in self._states])
         if self.action_mode == "velocity":
+            p = np.array([s.position for s in self._states])
             a, dt = self.profile_acceleration, self.control_period
             v = np.array([s.velocity for s in self._states])
             lo, hi = self.position_limits[:, 0] + LIMIT_INSET, self.position_limits[:, 1] - LIMIT_INSET

@@ -168,6 +168,10 @@ class RegisterTable:
 
     def get(self, key: str | int | Register) -> Register:
         """Look a register up by name, by (start) address, or pass a Register through."""
+        if type(key) is str:  # the hot path (drivers by name): one dict lookup
+            reg = self._by_name.get(key)
+            if reg is not None:
+                return reg
         if isinstance(key, Register):
             return key
         if isinstance(key, str):

@@ -13,7 +13,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from joints.devices.params import Param, ParamSet
-from joints.devices.registers import Register, RegisterTable
+from joints.devices.registers import RegisterTable
 from joints.errors import CommandError, RegisterError
 
 
@@ -64,7 +64,6 @@ class ModbusAccess(ParamAccess):
         self.table = table
         self.params = params or table.params
         self._plans: dict[tuple[str, ...], tuple[tuple[int, int], ...]] = {}
-        self._registers: dict[str, Register] = {r.name: r for r in table}  #: by name (the hot path)
 
     def resolve(self, key: str | int) -> str:
         if isinstance(key, str) and key in self.params and key not in self.table:
@@ -73,9 +72,6 @@ class ModbusAccess(ParamAccess):
 
     def where(self, name: str) -> str:
         return f"0x{self.table[name].address:04X}"  # a 32-bit pair is addressed at its Hi word
-
-    def register(self, name: str) -> Register:
-        return self.table[name]
 
     def read(self, name: str) -> int:
         reg = self.table[name]
@@ -110,9 +106,7 @@ class ModbusAccess(ParamAccess):
         return tuple(blocks)
 
     def write(self, name: str, value: int, *, idempotent: bool = True) -> None:
-        reg = self._registers.get(name) if type(name) is str else None
-        if reg is None:
-            reg = self.table[name]
+        reg = self.table.get(name)
         words = reg.to_words(value)
         if len(words) == 1:
             self.link.write_register(self.slave, reg.address, words[0], idempotent=idempotent)

@@ -539,9 +539,6 @@ class ErobFirmware(Firmware):
             self._change_mode()
 
     # -- state machine ----------------------------------------------------------------------
-    def _ready(self) -> bool:
-        return bool(self._k.ready(self._row))
-
     def _ready_or_refuse(self) -> bool:
         if self._k.ready(self._row):
             return True
@@ -589,10 +586,6 @@ class ErobFirmware(Firmware):
         the next enable or disable hands the brake back to the drive."""
         if not self.enabled:
             self._row[K.BRAKE_RELEASED] = 1.0
-
-    def _motor_off(self) -> None:
-        """Disable / fault: the loops stop and the brake engages where the joint is."""
-        self._k.motor_off(self._row)
 
     def _clear_errors(self, value: int) -> None:
         if value:
@@ -701,8 +694,3 @@ class ErobFirmware(Firmware):
             return int(MotionStatus.STOP_REPETITIVE)
         return int(MotionStatus.MOVING if self._k.moving(s) else MotionStatus.STOP)
 
-    def _moving(self) -> bool:
-        return bool(self._k.moving(self._row))
-
-    def _achieve(self, moving: bool) -> AchieveStatus:
-        return AchieveStatus(self._k.achieve(self._row, moving))
