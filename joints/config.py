@@ -39,6 +39,8 @@ PROTOCOLS = registry.protocols() + registry.PLANNED_PROTOCOLS
 DEVICES = registry.devices() + registry.PLANNED_DEVICES
 PARITIES = ("N", "E", "O")
 ON_EXIT = ("disable", "stop", "none")
+#: a simulated bus's timing: frames take their wire time (+ turnaround, adapter latency), or none
+TIMINGS = ("wire", "ideal")
 
 
 @dataclass(frozen=True)
@@ -66,6 +68,8 @@ class BusConfig:
     udp_port: int | None = None  #: CAN over udp_multicast: the port (`joints sim serve` prints it)
     sync_period: float | None = None  #: CANopen: s between two SYNCs of the bus (cyclic modes; default 1 ms)
     backend: str = "sim"  #: "sim" | "hardware": this bus's (the file's top-level backend unless it names one)
+    timing: str = "wire"  #: sim: "wire" (frames take their wire time, turnaround and adapter latency) | "ideal" (none)
+    adapter_latency: float | None = None  #: s per transaction of the host's adapter; None: the medium's default
 
 
 @dataclass(frozen=True)
@@ -268,6 +272,8 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
             udp_port=udp_port,
             sync_period=_sync_period(r, b, f"{key}.sync_period", protocol),
             backend=bus_backend,
+            timing=r.choice(b, f"{key}.timing", TIMINGS, "wire"),
+            adapter_latency=r.number(b, f"{key}.adapter_latency", None, minimum=0.0, maximum=1.0),
         )
 
     joints: dict[str, JointConfig] = {}
