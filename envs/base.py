@@ -138,7 +138,7 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
     width: int
     height: int
     _t0: float
-    _closed: bool
+    _closed: bool = True  #: until ``_start`` opened the rig (close() of an env whose setup failed does nothing)
     _renderer: SceneRenderer | None
     #: how the renderer looks at the model
     camera = CameraSpec()
@@ -157,7 +157,7 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
         return self._renderer.render(self.rig.time - self._t0, self._markers())
 
     def close(self) -> None:
-        if getattr(self, "_closed", True):
+        if self._closed:
             return
         self._closed = True
         try:

@@ -84,6 +84,8 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
                 raise ValueError("the rigs of a batched env must have the same spaces")
         self._elapsed = np.zeros(num_envs, dtype=np.int64)
         self._autoreset = np.zeros(num_envs, dtype=np.bool_)
+        self._obs: np.ndarray = np.zeros((num_envs, *self.single_observation_space.shape),  # type: ignore[misc]
+                                         dtype=self.single_observation_space.dtype)
         self._has_reset = False
         self.closed = False
 
@@ -120,11 +122,8 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
                     or not mask.any():
                 raise ValueError(f"options['reset_mask'] must be a bool array of shape ({self.num_envs},) with a "
                                  f"True value, got {mask!r}")
-        elif not hasattr(self, "_obs"):
-            self._obs: np.ndarray = np.zeros((self.num_envs, *self.single_observation_space.shape),  # type: ignore[misc]
-                                             dtype=self.single_observation_space.dtype)
-        if not hasattr(self, "_obs"):
-            raise gym.error.ResetNeeded("reset the whole batch before a masked reset")
+            if not self._has_reset:
+                raise gym.error.ResetNeeded("reset the whole batch before a masked reset")
         infos: dict[str, Any] = {}
         for i, env in enumerate(self.envs):
             if mask[i]:

@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+from joints.configtypes import Limits, Motion
 from joints.errors import (
     ConfigError,
     ConfirmationRequired,
@@ -15,7 +16,7 @@ from joints.errors import (
     ProtocolError,
     ReplyTimeout,
 )
-from joints.joint import Joint, JointState, Limits, Motion
+from joints.joint import Joint, JointState
 from joints.rig import Rig, open, sleep_together
 
 __version__ = "0.1.0"

@@ -402,7 +402,7 @@ def plan(config: Any, rate: float | None = None) -> list[BusPlan]:
                 load = can_timing.cycle_load(sizes, period=1.0 / rate, bitrate=b.bitrate)
                 line = f"{b.bitrate} bit/s"
             else:
-                rtu = b.protocol == "modbus-rtu"  # frames delimited by the t3.5 silence
+                rtu = proto.silence  # frames delimited by the t3.5 silence
                 load = serial_timing.cycle_load(sizes, period=1.0 / rate, baudrate=b.baudrate, parity=b.parity,
                                                 stopbits=b.stopbits, silence=rtu)
                 line = f"{b.baudrate} baud 8{b.parity}{b.stopbits}" + (", t3.5" if rtu else "")

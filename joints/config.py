@@ -20,20 +20,21 @@ import math
 import os
 import sys
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from joints import registry
+from joints.configtypes import BACKENDS, BusConfig, JointConfig, Limits, Motion, RigConfig, SimConfig
 from joints.errors import ConfigError
-from joints.joint import Limits, Motion
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
 
-BACKENDS = ("sim", "hardware")
+__all__ = ["BACKENDS", "BusConfig", "JointConfig", "Limits", "Motion", "RigConfig", "SimConfig", "load", "parse",
+           "read_overlay"]
+
 #: protocol and device names a config may use (the registry's, plus those planned but not built yet)
 PROTOCOLS = registry.protocols() + registry.PLANNED_PROTOCOLS
 DEVICES = registry.devices() + registry.PLANNED_DEVICES
@@ -41,79 +42,6 @@ PARITIES = ("N", "E", "O")
 ON_EXIT = ("disable", "stop", "none")
 #: a simulated bus's timing: frames take their wire time (+ turnaround, adapter latency), or none
 TIMINGS = ("wire", "ideal")
-
-
-@dataclass(frozen=True)
-class SimConfig:
-    model: str = "erob_stand.xml"
-    timestep: float = 0.001
-    realtime: bool = False
-    direct: bool = False  #: in-process direct path (message objects, no bytes); identical results
-
-
-@dataclass(frozen=True)
-class BusConfig:
-    name: str
-    protocol: str
-    port: str | None = None
-    baudrate: int = 115200
-    parity: str = "N"
-    stopbits: int = 1
-    timeout: float = 0.1  #: s, reply timeout
-    retries: int = 2
-    echo: bool = False  #: the RS485 adapter echoes what it sends
-    interface: str | None = None  #: CAN: python-can interface
-    channel: str | int | None = None  #: CAN: channel
-    bitrate: int = 1_000_000
-    udp_port: int | None = None  #: CAN over udp_multicast: the port (`joints sim serve` prints it)
-    sync_period: float | None = None  #: CANopen: s between two SYNCs of the bus (cyclic modes; default 1 ms)
-    backend: str = "sim"  #: "sim" | "hardware": this bus's (the file's top-level backend unless it names one)
-    timing: str = "wire"  #: sim: "wire" (frames take their wire time, turnaround and adapter latency) | "ideal" (none)
-    adapter_latency: float | None = None  #: s per transaction of the host's adapter; None: the medium's default
-
-
-@dataclass(frozen=True)
-class JointConfig:
-    name: str
-    device: str
-    bus: str
-    address: int
-    model: str | None = None  #: device variant (eRob: "eRob80H100")
-    channel: str | None = None
-    mjcf_joint: str | None = None
-    limits: Limits = field(default_factory=Limits)
-    motion: Motion = field(default_factory=Motion)
-    profile: Mapping[str, float] = field(default_factory=dict)  #: device-profile overrides
-    watchdog_ms: int | None = None
-    offset: float = 0.0
-    direction: int = 1
-    lead: float | None = None  #: m of travel per motor turn: a linear joint (positions in m, forces in N)
-    mode: str | None = None  #: operating mode where the protocol has several (CANopen: pp, pv, pt, csp, csv, cst, ip)
-    sync_period: float | None = None  #: CANopen: s between two SYNCs (the bus's; set it on the bus or here)
-    profile_overlay: str | None = None  #: the identified-profile file whose ``[profile]`` was merged into ``profile``
-    firmware: str | None = None  #: the drive's firmware profile (its quirks: joints.devices.quirks); None: default
-
-
-@dataclass(frozen=True)
-class RigConfig:
-    backend: str  #: "sim" | "hardware" | "mixed" (buses of both)
-    buses: Mapping[str, BusConfig]
-    joints: Mapping[str, JointConfig]
-    sim: SimConfig = field(default_factory=SimConfig)
-    on_exit: str = "disable"
-    source: str = "<dict>"
-    base_dir: Path = field(default_factory=Path.cwd)
-
-    def bus_backend(self, bus: str) -> str:
-        """The backend of one bus ("sim" | "hardware")."""
-        return self.buses[bus].backend
-
-    def with_backend(self, backend: str) -> RigConfig:
-        """The same config with every bus forced to ``backend`` (what ``JOINTS_BACKEND`` does)."""
-        if backend not in BACKENDS:
-            raise ConfigError(f"{backend!r} is not a backend", key="backend", allowed=BACKENDS)
-        buses = {n: replace(b, backend=backend) for n, b in self.buses.items()}
-        return replace(self, backend=backend, buses=buses)
 
 
 class _Reader:
@@ -197,175 +125,13 @@ def _motion(r: _Reader, data: Mapping[str, Any], key: str) -> Motion:
 
 def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | None = None,
           backend: str | None = None) -> RigConfig:
-    """Validate a config mapping (the parsed TOML)."""
+    """Validate a config mapping (the parsed TOML), one section after the other."""
     r = _Reader(source)
     r.known(data, "", _TOP_KEYS)
-    env = os.environ.get("JOINTS_BACKEND")
-    in_file = data.get("backend", "sim")
-    if in_file not in BACKENDS:
-        raise r.err("backend", f"{in_file!r} is not a backend", BACKENDS)
-    chosen = backend or env or in_file
-    if chosen not in BACKENDS:
-        where = "backend argument" if backend else ("JOINTS_BACKEND" if env else "backend")
-        raise r.err(where, f"{chosen!r} is not a backend", BACKENDS)
-    forced = bool(backend or env)  #: every bus takes ``chosen``, whatever its own key says
-
-    s = r.table(data, "sim")
-    r.known(s, "sim", ("model", "timestep", "realtime", "direct"))
-    direct = s.get("direct", False)
-    if not isinstance(direct, bool):
-        raise r.err("sim.direct", f"expected true or false, got {direct!r}")
-    realtime = s.get("realtime", False)
-    if not isinstance(realtime, bool):
-        raise r.err("sim.realtime", f"expected true or false, got {realtime!r}")
-    sim = SimConfig(
-        model=str(s.get("model", SimConfig.model)),
-        timestep=r.number(s, "sim.timestep", SimConfig.timestep, positive=True, maximum=0.01),
-        realtime=realtime,
-        direct=direct,
-    )
-
-    buses: dict[str, BusConfig] = {}
-    for name, b in r.table(data, "buses").items():
-        key = f"buses.{name}"
-        if not isinstance(b, Mapping):
-            raise r.err(key, "expected a table")
-        r.known(b, key, _BUS_KEYS)
-        protocol = r.choice(b, f"{key}.protocol", PROTOCOLS)
-        own = r.choice(b, f"{key}.backend", BACKENDS, chosen)
-        bus_backend = chosen if forced else own
-        port = b.get("port")
-        if port is not None and not isinstance(port, str):
-            raise r.err(f"{key}.port", f"expected a port name string, got {port!r}")
-        echo = b.get("echo", False)
-        if not isinstance(echo, bool):
-            raise r.err(f"{key}.echo", f"expected true or false, got {echo!r}")
-        if bus_backend == "hardware" and protocol in ("modbus-rtu", "mks-serial") and not port:
-            raise r.err(f"{key}.port", "is required for backend = \"hardware\" (e.g. \"/dev/ttyUSB0\")")
-        interface = b.get("interface")
-        if interface is not None and (not isinstance(interface, str) or not interface):
-            raise r.err(f"{key}.interface", f"expected a python-can interface name, got {interface!r}",
-                        ("socketcan", "pcan", "kvaser", "slcan", "udp_multicast", "virtual", "..."))
-        channel = b.get("channel")
-        if channel is not None and (isinstance(channel, bool) or not isinstance(channel, (str, int))):
-            raise r.err(f"{key}.channel", f"expected a channel name or number, got {channel!r}")
-        udp_port = r.number(b, f"{key}.udp_port", None, integer=True, minimum=1, maximum=65535)
-        if udp_port is not None and interface not in (None, "udp_multicast"):
-            raise r.err(f"{key}.udp_port", f"only for interface = \"udp_multicast\" (this bus: {interface!r})")
-        medium = registry.PROTOCOLS[protocol].medium if protocol in registry.PROTOCOLS else None
-        if bus_backend == "hardware" and medium == "can" and interface is None:
-            raise r.err(f"{key}.interface", "is required for a CAN bus with backend = \"hardware\"",
-                        ("socketcan", "pcan", "kvaser", "slcan", "udp_multicast", "..."))
-        buses[name] = BusConfig(
-            name=name,
-            protocol=protocol,
-            port=None if port is None else str(port),
-            baudrate=r.number(b, f"{key}.baudrate", 115200, integer=True, positive=True),
-            parity=r.choice(b, f"{key}.parity", PARITIES, "N"),
-            stopbits=r.number(b, f"{key}.stopbits", 1, integer=True, minimum=1, maximum=2),
-            timeout=r.number(b, f"{key}.timeout", 0.1, positive=True),
-            retries=r.number(b, f"{key}.retries", 2, integer=True, minimum=0, maximum=10),
-            echo=echo,
-            interface=interface,
-            channel=channel,
-            bitrate=r.number(b, f"{key}.bitrate", 1_000_000, integer=True, positive=True),
-            udp_port=udp_port,
-            sync_period=_sync_period(r, b, f"{key}.sync_period", protocol),
-            backend=bus_backend,
-            timing=r.choice(b, f"{key}.timing", TIMINGS, "wire"),
-            adapter_latency=r.number(b, f"{key}.adapter_latency", None, minimum=0.0, maximum=1.0),
-        )
-
-    joints: dict[str, JointConfig] = {}
-    seen: dict[tuple[str, int, str | None], str] = {}
-    for name, j in r.table(data, "joints").items():
-        key = f"joints.{name}"
-        if not isinstance(j, Mapping):
-            raise r.err(key, "expected a table")
-        r.known(j, key, _JOINT_KEYS)
-        device = r.choice(j, f"{key}.device", DEVICES)
-        bus = j.get("bus")
-        if not isinstance(bus, str) or bus not in buses:
-            raise r.err(f"{key}.bus", f"{bus!r} is not a bus defined under [buses]", sorted(buses))
-        protocol = buses[str(bus)].protocol
-        fam = registry.FAMILIES.get(next((f for f, e in registry.FAMILIES.items() if device in e.devices), ""))
-        if fam is None or protocol not in fam.drivers:
-            raise r.err(f"{key}.device", f"device {device!r} on protocol {protocol!r} is not supported yet",
-                        registry.pairs())
-        lo, hi = fam.address_range(protocol)
-        address = r.number(j, f"{key}.address", None, integer=True, minimum=lo, maximum=hi)
-        if address is None:
-            raise r.err(f"{key}.address", f"is required ({protocol}: {lo}..{hi})")
-        channel = j.get("channel")
-        if fam.channels and channel not in fam.channels:
-            raise r.err(f"{key}.channel", f"{channel!r}: a {device} joint must name its motor", fam.channels)
-        ident = (str(bus), address, channel if fam.channels else None)
-        if ident in seen:
-            raise r.err(f"{key}.address", f"address {address} on bus {bus!r} is already used by joint {seen[ident]!r}")
-        if not fam.channels and channel is not None:
-            raise r.err(f"{key}.channel", f"a {device} has one motor per address; remove the key")
-        seen[ident] = name
-        profile = j.get("profile", {})
-        if not isinstance(profile, Mapping):
-            raise r.err(f"{key}.profile", "expected a table of device-profile overrides")
-        overlay = j.get("profile_overlay")
-        if overlay is not None:
-            if not isinstance(overlay, str) or not overlay:
-                raise r.err(f"{key}.profile_overlay", f"expected the path of a profile overlay file, got {overlay!r}")
-            overlay = str((base_dir or Path.cwd()) / overlay)
-            profile = {**read_overlay(overlay, r.source), **profile}
-        direction = j.get("direction", 1)
-        if isinstance(direction, bool) or direction not in (1, -1):
-            raise r.err(f"{key}.direction", f"{direction!r} is not allowed", (1, -1))
-        model = j.get("model")
-        if model is not None and not isinstance(model, str):
-            raise r.err(f"{key}.model", f"expected a model name string, got {model!r}")
-        firmware = j.get("firmware")
-        if firmware is not None:
-            if not isinstance(firmware, str):
-                raise r.err(f"{key}.firmware", f"expected a firmware profile name, got {firmware!r}")
-            try:
-                fam.firmware_profile(firmware)
-            except ConfigError as exc:
-                raise r.err(f"{key}.firmware", exc.message, exc.allowed) from None
-        modes = fam.modes.get(protocol, ())
-        mode = j.get("mode")
-        if mode is not None and not modes:
-            raise r.err(f"{key}.mode", f"protocol {protocol!r} has no operating modes to choose; remove the key")
-        if mode is not None and mode not in modes:
-            raise r.err(f"{key}.mode", f"{mode!r} is not allowed", modes)
-        sync_period = _sync_period(r, j, f"{key}.sync_period", protocol)
-        bus_sync = buses[str(bus)].sync_period
-        if sync_period is not None and bus_sync is not None and not math.isclose(sync_period, bus_sync):
-            raise r.err(f"{key}.sync_period", f"{sync_period} s differs from the bus's sync_period {bus_sync} s "
-                        "(one SYNC per bus)")
-        for other in joints.values():
-            if (other.bus == bus and sync_period is not None and other.sync_period is not None
-                    and not math.isclose(other.sync_period, sync_period)):
-                raise r.err(f"{key}.sync_period", f"{sync_period} s differs from joint {other.name!r} on the same "
-                            f"bus ({other.sync_period} s; one SYNC per bus)")
-        joints[name] = JointConfig(
-            name=name,
-            device=device,
-            bus=str(bus),
-            address=address,
-            model=model,
-            channel=None if channel is None else str(channel),
-            mjcf_joint=str(j.get("mjcf_joint", name)),
-            limits=_limits(r, r.table(j, f"{key}.limits"), f"{key}.limits"),
-            motion=_motion(r, r.table(j, f"{key}.motion"), f"{key}.motion"),
-            profile=dict(profile),
-            watchdog_ms=r.number(j, f"{key}.watchdog_ms", None, integer=True, minimum=0, maximum=4000),
-            offset=r.number(j, f"{key}.offset", 0.0),
-            direction=int(direction),
-            lead=r.number(j, f"{key}.lead", None, positive=True),
-            mode=None if mode is None else str(mode),
-            sync_period=sync_period,
-            profile_overlay=overlay,
-            firmware=firmware,
-        )
-    if not joints:
-        raise r.err("joints", "no joints defined; add a [joints.<name>] table")
+    chosen, forced = _backend(r, data, backend)
+    sim = _sim(r, r.table(data, "sim"))
+    buses = _buses(r, r.table(data, "buses"), chosen, forced)
+    joints = _joints(r, r.table(data, "joints"), buses, base_dir)
     kinds = {b.backend for b in buses.values()}
     return RigConfig(
         backend=kinds.pop() if len(kinds) == 1 else ("mixed" if kinds else chosen),
@@ -378,10 +144,220 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
     )
 
 
+def _backend(r: _Reader, data: Mapping[str, Any], backend: str | None) -> tuple[str, bool]:
+    """The top-level backend (the argument, then ``JOINTS_BACKEND``, then the file) and whether it is
+    forced on every bus (argument or environment)."""
+    env = os.environ.get("JOINTS_BACKEND")
+    in_file = data.get("backend", "sim")
+    if in_file not in BACKENDS:
+        raise r.err("backend", f"{in_file!r} is not a backend", BACKENDS)
+    chosen = backend or env or in_file
+    if chosen not in BACKENDS:
+        where = "backend argument" if backend else ("JOINTS_BACKEND" if env else "backend")
+        raise r.err(where, f"{chosen!r} is not a backend", BACKENDS)
+    return str(chosen), bool(backend or env)
+
+
+def _sim(r: _Reader, s: Mapping[str, Any]) -> SimConfig:
+    """``[sim]``."""
+    r.known(s, "sim", ("model", "timestep", "realtime", "direct"))
+    direct = s.get("direct", False)
+    if not isinstance(direct, bool):
+        raise r.err("sim.direct", f"expected true or false, got {direct!r}")
+    realtime = s.get("realtime", False)
+    if not isinstance(realtime, bool):
+        raise r.err("sim.realtime", f"expected true or false, got {realtime!r}")
+    return SimConfig(
+        model=str(s.get("model", SimConfig.model)),
+        timestep=r.number(s, "sim.timestep", SimConfig.timestep, positive=True, maximum=0.01),
+        realtime=realtime,
+        direct=direct,
+    )
+
+
+def _buses(r: _Reader, table: Mapping[str, Any], chosen: str, forced: bool) -> dict[str, BusConfig]:
+    """``[buses.NAME]``: each bus with its own backend unless ``forced``."""
+    buses: dict[str, BusConfig] = {}
+    for name, b in table.items():
+        key = f"buses.{name}"
+        if not isinstance(b, Mapping):
+            raise r.err(key, "expected a table")
+        buses[name] = _bus(r, name, b, chosen, forced)
+    return buses
+
+
+def _bus(r: _Reader, name: str, b: Mapping[str, Any], chosen: str, forced: bool) -> BusConfig:
+    key = f"buses.{name}"
+    r.known(b, key, _BUS_KEYS)
+    protocol = r.choice(b, f"{key}.protocol", PROTOCOLS)
+    entry = _protocol(protocol)
+    own = r.choice(b, f"{key}.backend", BACKENDS, chosen)
+    bus_backend = chosen if forced else own
+    port = b.get("port")
+    if port is not None and not isinstance(port, str):
+        raise r.err(f"{key}.port", f"expected a port name string, got {port!r}")
+    echo = b.get("echo", False)
+    if not isinstance(echo, bool):
+        raise r.err(f"{key}.echo", f"expected true or false, got {echo!r}")
+    medium = None if entry is None else entry.medium
+    if bus_backend == "hardware" and medium == "serial" and not port:
+        raise r.err(f"{key}.port", "is required for backend = \"hardware\" (e.g. \"/dev/ttyUSB0\")")
+    interface = b.get("interface")
+    if interface is not None and (not isinstance(interface, str) or not interface):
+        raise r.err(f"{key}.interface", f"expected a python-can interface name, got {interface!r}",
+                    ("socketcan", "pcan", "kvaser", "slcan", "udp_multicast", "virtual", "..."))
+    channel = b.get("channel")
+    if channel is not None and (isinstance(channel, bool) or not isinstance(channel, (str, int))):
+        raise r.err(f"{key}.channel", f"expected a channel name or number, got {channel!r}")
+    udp_port = r.number(b, f"{key}.udp_port", None, integer=True, minimum=1, maximum=65535)
+    if udp_port is not None and interface not in (None, "udp_multicast"):
+        raise r.err(f"{key}.udp_port", f"only for interface = \"udp_multicast\" (this bus: {interface!r})")
+    if bus_backend == "hardware" and medium == "can" and interface is None:
+        raise r.err(f"{key}.interface", "is required for a CAN bus with backend = \"hardware\"",
+                    ("socketcan", "pcan", "kvaser", "slcan", "udp_multicast", "..."))
+    return BusConfig(
+        name=name,
+        protocol=protocol,
+        port=None if port is None else str(port),
+        baudrate=r.number(b, f"{key}.baudrate", 115200, integer=True, positive=True),
+        parity=r.choice(b, f"{key}.parity", PARITIES, "N"),
+        stopbits=r.number(b, f"{key}.stopbits", 1, integer=True, minimum=1, maximum=2),
+        timeout=r.number(b, f"{key}.timeout", 0.1, positive=True),
+        retries=r.number(b, f"{key}.retries", 2, integer=True, minimum=0, maximum=10),
+        echo=echo,
+        interface=interface,
+        channel=channel,
+        bitrate=r.number(b, f"{key}.bitrate", 1_000_000, integer=True, positive=True),
+        udp_port=udp_port,
+        sync_period=_sync_period(r, b, f"{key}.sync_period", protocol),
+        backend=bus_backend,
+        timing=r.choice(b, f"{key}.timing", TIMINGS, "wire"),
+        adapter_latency=r.number(b, f"{key}.adapter_latency", None, minimum=0.0, maximum=1.0),
+    )
+
+
+def _joints(r: _Reader, table: Mapping[str, Any], buses: Mapping[str, BusConfig],
+            base_dir: Path | None) -> dict[str, JointConfig]:
+    """``[joints.NAME]``: each joint on a bus above, one address (and channel) per joint."""
+    joints: dict[str, JointConfig] = {}
+    for name, j in table.items():
+        if not isinstance(j, Mapping):
+            raise r.err(f"joints.{name}", "expected a table")
+        joints[name] = _joint(r, name, j, buses, joints, base_dir)
+    if not joints:
+        raise r.err("joints", "no joints defined; add a [joints.<name>] table")
+    return joints
+
+
+def _joint(r: _Reader, name: str, j: Mapping[str, Any], buses: Mapping[str, BusConfig],
+           others: Mapping[str, JointConfig], base_dir: Path | None) -> JointConfig:
+    """One joint; ``others``: the joints before it (one address per joint, one SYNC period per bus)."""
+    key = f"joints.{name}"
+    r.known(j, key, _JOINT_KEYS)
+    device = r.choice(j, f"{key}.device", DEVICES)
+    bus = j.get("bus")
+    if not isinstance(bus, str) or bus not in buses:
+        raise r.err(f"{key}.bus", f"{bus!r} is not a bus defined under [buses]", sorted(buses))
+    protocol = buses[bus].protocol
+    fam = _family(device)
+    if fam is None or protocol not in fam.protocols:
+        raise r.err(f"{key}.device", f"device {device!r} on protocol {protocol!r} is not supported yet",
+                    registry.pairs())
+    lo, hi = fam.address_range(protocol)
+    address = r.number(j, f"{key}.address", None, integer=True, minimum=lo, maximum=hi)
+    if address is None:
+        raise r.err(f"{key}.address", f"is required ({protocol}: {lo}..{hi})")
+    channel = j.get("channel")
+    if fam.channels and channel not in fam.channels:
+        raise r.err(f"{key}.channel", f"{channel!r}: a {device} joint must name its motor", fam.channels)
+    ident = (bus, address, channel if fam.channels else None)
+    for other in others.values():
+        if (other.bus, other.address, other.channel) == ident:
+            raise r.err(f"{key}.address", f"address {address} on bus {bus!r} is already used by joint {other.name!r}")
+    if not fam.channels and channel is not None:
+        raise r.err(f"{key}.channel", f"a {device} has one motor per address; remove the key")
+    profile = j.get("profile", {})
+    if not isinstance(profile, Mapping):
+        raise r.err(f"{key}.profile", "expected a table of device-profile overrides")
+    overlay = j.get("profile_overlay")
+    if overlay is not None:
+        if not isinstance(overlay, str) or not overlay:
+            raise r.err(f"{key}.profile_overlay", f"expected the path of a profile overlay file, got {overlay!r}")
+        overlay = str((base_dir or Path.cwd()) / overlay)
+        profile = {**read_overlay(overlay, r.source), **profile}
+    direction = j.get("direction", 1)
+    if isinstance(direction, bool) or direction not in (1, -1):
+        raise r.err(f"{key}.direction", f"{direction!r} is not allowed", (1, -1))
+    model = j.get("model")
+    if model is not None and not isinstance(model, str):
+        raise r.err(f"{key}.model", f"expected a model name string, got {model!r}")
+    firmware = j.get("firmware")
+    if firmware is not None:
+        if not isinstance(firmware, str):
+            raise r.err(f"{key}.firmware", f"expected a firmware profile name, got {firmware!r}")
+        try:
+            fam.firmware_profile(firmware)
+        except ConfigError as exc:
+            raise r.err(f"{key}.firmware", exc.message, exc.allowed) from None
+    modes = fam.modes.get(protocol, ())
+    mode = j.get("mode")
+    if mode is not None and not modes:
+        raise r.err(f"{key}.mode", f"protocol {protocol!r} has no operating modes to choose; remove the key")
+    if mode is not None and mode not in modes:
+        raise r.err(f"{key}.mode", f"{mode!r} is not allowed", modes)
+    sync_period = _sync_period(r, j, f"{key}.sync_period", protocol)
+    bus_sync = buses[bus].sync_period
+    if sync_period is not None and bus_sync is not None and not math.isclose(sync_period, bus_sync):
+        raise r.err(f"{key}.sync_period", f"{sync_period} s differs from the bus's sync_period {bus_sync} s "
+                    "(one SYNC per bus)")
+    for other in others.values():
+        if (other.bus == bus and sync_period is not None and other.sync_period is not None
+                and not math.isclose(other.sync_period, sync_period)):
+            raise r.err(f"{key}.sync_period", f"{sync_period} s differs from joint {other.name!r} on the same "
+                        f"bus ({other.sync_period} s; one SYNC per bus)")
+    return JointConfig(
+        name=name,
+        device=device,
+        bus=bus,
+        address=address,
+        model=model,
+        channel=None if channel is None else str(channel),
+        mjcf_joint=str(j.get("mjcf_joint", name)),
+        limits=_limits(r, r.table(j, f"{key}.limits"), f"{key}.limits"),
+        motion=_motion(r, r.table(j, f"{key}.motion"), f"{key}.motion"),
+        profile=dict(profile),
+        watchdog_ms=r.number(j, f"{key}.watchdog_ms", None, integer=True, minimum=0, maximum=4000),
+        offset=r.number(j, f"{key}.offset", 0.0),
+        direction=int(direction),
+        lead=r.number(j, f"{key}.lead", None, positive=True),
+        mode=None if mode is None else str(mode),
+        sync_period=sync_period,
+        profile_overlay=overlay,
+        firmware=firmware,
+    )
+
+
+def _protocol(name: str) -> registry.BusProtocol | None:
+    """The registry's entry of a protocol (None: planned, not built yet)."""
+    try:
+        return registry.protocol(name)
+    except ConfigError:
+        return None
+
+
+def _family(device: str) -> registry.DeviceFamily | None:
+    """The registry's family of a device (None: planned, not built yet)."""
+    try:
+        return registry.family(device)
+    except ConfigError:
+        return None
+
+
 def _sync_period(r: _Reader, data: Mapping[str, Any], key: str, protocol: str) -> float | None:
-    """A SYNC period [s] (protocols with cyclic modes, i.e. CANopen; 100 us .. 1 s)."""
+    """A SYNC period [s] (protocols with a SYNC, i.e. CANopen's cyclic modes; 100 us .. 1 s)."""
     value = r.number(data, key, None, minimum=1e-4, maximum=1.0)
-    if value is not None and not any(protocol in f.modes for f in registry.FAMILIES.values()):
+    entry = _protocol(protocol)
+    if value is not None and not (entry is not None and entry.sync):
         raise r.err(key, f"only for a protocol with cyclic modes (this bus: {protocol!r})")
     return None if value is None else float(value)
 

@@ -28,29 +28,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from joints.clock import Clock
+from joints.configtypes import Limits, Motion
 from joints.devices.faults import Fault
 from joints.drivers.base import JointDriver, RawState, Units
 from joints.drivers.capabilities import CommunicationWatchdog, DriveLimits, MotionTargets
 from joints.errors import CommandError, DeviceFault, LimitError, MotionTimeout, StateError
 
-
-@dataclass(frozen=True, slots=True)
-class Limits:
-    """User limits of a joint (SI). ``None`` means: only the device's own limits apply."""
-
-    position: tuple[float, float] | None = None  #: [rad, rad]
-    velocity: float | None = None  #: rad/s (magnitude)
-    torque: float | None = None  #: N*m (magnitude)
-    acceleration: float | None = None  #: rad/s^2 (magnitude)
-
-
-@dataclass(frozen=True, slots=True)
-class Motion:
-    """Default profile for position moves (SI)."""
-
-    velocity: float = 0.5  #: rad/s
-    acceleration: float = 2.0  #: rad/s^2
-    deceleration: float = 2.0  #: rad/s^2
+__all__ = ["Joint", "JointState", "Limits", "Motion"]  # Limits, Motion: joints.configtypes, still importable here
 
 
 @dataclass(frozen=True, slots=True)

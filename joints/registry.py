@@ -18,7 +18,7 @@ from joints.errors import ConfigError
 
 if TYPE_CHECKING:
     from joints.clock import Clock
-    from joints.config import BusConfig, JointConfig
+    from joints.configtypes import BusConfig, JointConfig
     from joints.devices.params import ParamSet
     from joints.drivers.base import JointDriver
     from joints.link.base import Link
@@ -45,6 +45,11 @@ class BusProtocol:
     #: ``joints scan`` of any node of the protocol: (link, addresses, listen [s]) -> a record per node found;
     #: None: the scan probes each address with the device family's driver
     scan: Callable[[Any, Sequence[int], float], Iterable[dict[str, object]]] | None = None
+    silence: bool = False  #: serial frames end with a 3.5-character silence (Modbus RTU's t3.5)
+    sync: bool = False  #: the bus has a SYNC for cyclic modes (bus and joint key ``sync_period``)
+    #: replay and plots: (address -> (joint, its family's map on this protocol), a request frame, its reply
+    #: frames; frames have ``data``, ``can_id``, ``extended``) -> {"joint.parameter": value}, or None: not named
+    values: Callable[[Mapping[int, tuple[str, Any]], Any, Sequence[Any]], dict[str, Any] | None] | None = None
 
 
 @dataclass(frozen=True)
@@ -256,18 +261,30 @@ def _mks_device_bus(cfg: BusConfig) -> Any:
     return MksDeviceBus()
 
 
+def _modbus_values(tables: Mapping[int, tuple[str, Any]], request: Any, replies: Sequence[Any]) -> dict[str, Any] | None:
+    from joints.drivers.exchange import modbus_values
+
+    return modbus_values(tables, request, replies)
+
+
+def _erob_can_values(tables: Mapping[int, tuple[str, Any]], request: Any, replies: Sequence[Any]) -> dict[str, Any] | None:
+    from joints.drivers.exchange import erob_can_values
+
+    return erob_can_values(tables, request, replies)
+
+
 PROTOCOLS: dict[str, BusProtocol] = {
     "modbus-rtu": BusProtocol(
         name="modbus-rtu", medium="serial", addresses=(1, 247),
         description="Modbus RTU over RS485 (FC03/04/06/16)",
         link=_modbus_link, open_transport=_serial_transport, device_bus=_modbus_device_bus,
-        sim_transport=_byte_loopback, direct=True,
+        sim_transport=_byte_loopback, direct=True, silence=True, values=_modbus_values,
     ),
     "erob-can": BusProtocol(
         name="erob-can", medium="can", addresses=(1, 127),
         description="ZeroErr eRob CAN custom protocol (requests 0x640+node, replies 0x5C0+node; 1 Mbit/s)",
         link=_erob_can_link, open_transport=_can_transport, device_bus=_erob_can_device_bus,
-        sim_transport=_lockstep_can,
+        sim_transport=_lockstep_can, values=_erob_can_values,
     ),
     "mks-serial": BusProtocol(
         name="mks-serial", medium="serial", addresses=(1, 255),
@@ -279,7 +296,7 @@ PROTOCOLS: dict[str, BusProtocol] = {
         name="canopen", medium="can", addresses=(1, 127),
         description="CANopen CiA 301/402 (SDO 0x600/0x580+node, PDOs, SYNC, NMT, heartbeat)",
         link=_canopen_link, open_transport=_can_transport, device_bus=_canopen_device_bus,
-        sim_transport=_lockstep_can, scan=_canopen_scan,
+        sim_transport=_lockstep_can, scan=_canopen_scan, sync=True,
     ),
 }
 
@@ -572,6 +589,12 @@ def devices() -> tuple[str, ...]:
 
 def protocols() -> tuple[str, ...]:
     return tuple(PROTOCOLS)
+
+
+def default_protocol(medium: str) -> str:
+    """The protocol assumed on a bare port (``medium`` "serial") or CAN interface ("can"): the first of
+    that medium in registry order."""
+    return next(p.name for p in PROTOCOLS.values() if p.medium == medium)
 
 
 def pairs() -> list[str]:

@@ -27,27 +27,30 @@ ALLOWED: dict[str, frozenset[str]] = {
     "errors": frozenset(),
     "clock": frozenset(),
     "exits": frozenset(),  # leaving safely: signals and atexit close open rigs
+    # the config's types (BusConfig, JointConfig, Limits, Motion ...): a leaf the parser, registry and joint share
+    "configtypes": frozenset({"errors"}),
     "codecs": frozenset({"errors"}),
     "devices": frozenset({"errors"}),
     "transports": frozenset({"errors"}),
     "link": frozenset({"codecs", "transports", "clock", "errors"}),
     "drivers": frozenset({"link", "devices", "codecs", "clock", "errors"}),
-    "joint": frozenset({"drivers", "devices", "clock", "errors"}),
+    "joint": frozenset({"drivers", "devices", "clock", "errors", "configtypes"}),
     # the one list of device families and protocols: it names every driver, link and twin
-    "registry": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "sim"}),
-    "config": frozenset({"joint", "errors", "registry"}),
+    "registry": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "sim",
+                           "configtypes"}),
+    "config": frozenset({"configtypes", "errors", "registry"}),
     # emulated drives: device semantics + transports to be served on; never the host side
     "sim": frozenset({"devices", "codecs", "transports", "clock", "errors"}),
     "rig": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
-                      "registry", "config", "sim", "exits"}),
+                      "registry", "config", "configtypes", "sim", "exits"}),
     # sim-to-real (identify, shadow, record/replay): the public rig/joint API plus the twins it builds
     "s2r": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
-                      "registry", "config", "sim", "rig", "exits"}),
+                      "registry", "config", "configtypes", "sim", "rig", "exits"}),
     "cli": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
-                      "registry", "config", "sim", "rig", "exits", "s2r", "bench", API}),
+                      "registry", "config", "configtypes", "sim", "rig", "exits", "s2r", "bench", API}),
     # `joints bench`: measures every layer against its reference (issue 23)
     "bench": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",
-                        "registry", "config", "sim", "rig", "exits", API}),
+                        "registry", "config", "configtypes", "sim", "rig", "exits", API}),
 }
 #: the package entry points import whatever they re-export
 EXEMPT = {"joints", "joints.__main__"}
@@ -214,7 +217,9 @@ def test_checker_resolves_relative_imports_in_a_package_init() -> None:
                                              ("codecs", "transports"), ("devices", "codecs"),
                                              ("joint", "link"), ("config", "drivers"), ("rig", "cli"),
                                              ("drivers", "joint"), ("link", "drivers"), ("clock", "errors"),
-                                             ("drivers", "registry"), ("sim", "registry"), ("drivers", "config")])
+                                             ("drivers", "registry"), ("sim", "registry"), ("drivers", "config"),
+                                             ("configtypes", "registry"), ("configtypes", "config"),
+                                             ("registry", "config"), ("joint", "config")])
 def test_rules_forbid(layer: str, forbidden: str) -> None:
     assert forbidden not in ALLOWED[layer]
 
@@ -252,19 +257,78 @@ def _device_names() -> set[str]:
     return set(registry.devices()) | set(registry.PLANNED_DEVICES)
 
 
-def test_no_comparison_against_a_device_name_outside_the_registry() -> None:
-    names = _device_names()
+def name_tests(tree: ast.AST, names: set[str]) -> list[tuple[int, str]]:
+    """Where ``tree`` compares with one of ``names`` (``==``, ``!=``, ``in``, a ``match`` case), picks by one
+    (``x["name"]``, ``x.get("name")``) or chooses one (``"name" if c else ...``): special-casing a device or
+    protocol by its name."""
+    found: list[tuple[int, str]] = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Compare):
+            found += [(node.lineno, c.value) for c in ast.walk(node)
+                      if isinstance(c, ast.Constant) and isinstance(c.value, str) and c.value in names]
+        elif isinstance(node, ast.MatchValue):
+            if isinstance(node.value, ast.Constant) and node.value.value in names:
+                found.append((node.lineno, node.value.value))
+        elif isinstance(node, ast.Subscript):
+            if isinstance(node.slice, ast.Constant) and node.slice.value in names:
+                found.append((node.lineno, node.slice.value))
+        elif isinstance(node, ast.IfExp):
+            found += [(node.lineno, c.value) for c in (node.body, node.orelse)
+                      if isinstance(c, ast.Constant) and isinstance(c.value, str) and c.value in names]
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "get"
+              and node.args and isinstance(node.args[0], ast.Constant) and node.args[0].value in names):
+            found.append((node.lineno, node.args[0].value))
+    return found
+
+
+def _name_offenders(names: set[str], homes: tuple[str, ...]) -> list[str]:
     offenders: list[str] = []
     for path in [*modules(), *sorted((ROOT / "envs").rglob("*.py"))]:
         rel = path.relative_to(ROOT).as_posix()
-        if rel.startswith(DEVICE_HOMES):
+        if rel.startswith(homes):
             continue
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-            if isinstance(node, ast.Compare):
-                for c in ast.walk(node):
-                    if isinstance(c, ast.Constant) and c.value in names:
-                        offenders.append(f"{rel}:{node.lineno}: compares with {c.value!r}")
+        for line, name in name_tests(ast.parse(path.read_text(encoding="utf-8")), names):
+            offenders.append(f"{rel}:{line}: compares with {name!r}")
+    return offenders
+
+
+def test_no_comparison_against_a_device_name_outside_the_registry() -> None:
+    offenders = _name_offenders(_device_names(), DEVICE_HOMES)
     assert not offenders, "device names compared outside the registry:\n" + "\n".join(offenders)
+
+
+def _protocol_names() -> set[str]:
+    from joints import registry
+
+    return set(registry.protocols()) | set(registry.PLANNED_PROTOCOLS)
+
+
+def test_no_comparison_against_a_protocol_name_outside_the_registry() -> None:
+    """A protocol's differences are attributes of its registry entry (medium, silence, sync, values ...)."""
+    offenders = _name_offenders(_protocol_names(), ("joints/registry.py",))
+    assert not offenders, ("protocol names compared outside the registry (ask registry.protocol(name) for the "
+                           "attribute instead):\n" + "\n".join(offenders))
+
+
+@pytest.mark.parametrize("source", [
+    'if bus.protocol == "canopen":\n    pass\n',
+    'x = protocol in ("modbus-rtu", "mks-serial")\n',
+    'x = "erob-can" != p\n',
+    'match p:\n    case "canopen":\n        pass\n',
+    'x = fam.tables.get("modbus-rtu")\n',
+    'x = fam.drivers["mks-serial"]\n',
+    'x = a or ("modbus-rtu" if port else "erob-can")\n',
+])
+def test_the_name_check_sees_every_way_to_special_case_a_protocol(source: str) -> None:
+    assert name_tests(ast.parse(source), _protocol_names())
+
+
+def test_the_name_check_lets_definitions_and_other_strings_pass() -> None:
+    source = ('protocol = "modbus-rtu"\n'  # a link's or driver's own protocol
+              'PARAMS = ParamMap("canopen", params, keys)\n'
+              'if bus.protocol == other:\n    pass\n'
+              'x = cfg["buses"].get("rs485")\n')
+    assert name_tests(ast.parse(source), _protocol_names()) == []
 
 
 def test_no_capability_probing_by_attribute_name() -> None:
@@ -283,3 +347,25 @@ def test_no_capability_probing_by_attribute_name() -> None:
                     and node.args and isinstance(node.args[0], ast.Attribute) and "driver" in ast.unparse(node.args[0])):
                 offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}")
     assert not offenders, f"attribute probing where a capability protocol belongs: {offenders}"
+
+
+def self_probes(tree: ast.AST) -> list[int]:
+    """Lines where an object asks whether it has one of its own attributes (``hasattr(self, "_x")``,
+    ``getattr(self, "_x", default)``) instead of initialising it; ``getattr(self, f.name)`` of a field
+    loop names no attribute and passes."""
+    return [node.lineno for node in ast.walk(tree)
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in ("getattr", "hasattr")
+            and len(node.args) >= 2 and isinstance(node.args[0], ast.Name) and node.args[0].id == "self"
+            and isinstance(node.args[1], ast.Constant)]
+
+
+def test_envs_initialise_their_attributes_instead_of_probing_them() -> None:
+    offenders = [f"{path.relative_to(ROOT)}:{line}" for path in sorted((ROOT / "envs").rglob("*.py"))
+                 for line in self_probes(ast.parse(path.read_text(encoding="utf-8")))]
+    assert not offenders, f"an env probes its own attributes (initialise them instead): {offenders}"
+
+
+def test_the_self_probe_check_sees_both_forms() -> None:
+    tree = ast.parse('if getattr(self, "_closed", True):\n    pass\nif not hasattr(self, "_obs"):\n    pass\n'
+                     "x = [getattr(self, f.name) for f in fields(self)]\ny = getattr(env, 'x')\n")
+    assert self_probes(tree) == [1, 3]

@@ -145,9 +145,10 @@ def map_rows(device: str, protocol: str) -> Iterator[MapRow]:
 
 
 def default_protocol(device: str) -> str:
-    """The protocol ``registers`` lists when none is named: Modbus RTU where the device has it."""
+    """The protocol ``registers`` lists when none is named: the device's first in the registry's order
+    (Modbus RTU where the device has it)."""
     fam = registry.family(device, key="--device")
-    return "modbus-rtu" if "modbus-rtu" in fam.tables else next(iter(fam.tables))
+    return next(p for p in registry.protocols() if p in fam.tables)
 
 
 def cmd_registers(args: argparse.Namespace) -> int:

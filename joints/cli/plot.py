@@ -114,8 +114,6 @@ def _decode_modbus(records: list[Any], config: str, params: list[str]) -> Series
     tables: dict[tuple[str, int], tuple[str, RegisterTable]] = {}
     for name, jc in cfg.joints.items():
         protocol = cfg.buses[jc.bus].protocol
-        if protocol != "modbus-rtu":
-            continue
         table = registry.family(jc.device).tables.get(protocol)
         made = table() if table is not None else None
         if isinstance(made, RegisterTable):

@@ -208,7 +208,7 @@ def _raw_config(args: argparse.Namespace) -> Any:
     if (args.port is None) == (args.interface is None):
         raise ConfigError("name either a serial port (--port) or a CAN interface (--interface, --channel), "
                           "or a config (--config)", key="scan")
-    protocol = args.protocol or ("modbus-rtu" if args.port is not None else "erob-can")
+    protocol = args.protocol or registry.default_protocol("serial" if args.port is not None else "can")
     medium = registry.protocol(protocol, key="--protocol").medium
     if (medium == "can") != (args.interface is not None):
         raise ConfigError(f"{protocol} is a {medium} protocol: use "

@@ -49,7 +49,8 @@ from typing import Any
 
 from joints import registry
 from joints.config import RigConfig, parse
-from joints.errors import ConfigError, JointsError
+from joints.errors import ConfigError
+from joints.link.base import DirectFraming
 
 __all__ = [
     "Frame",
@@ -180,7 +181,7 @@ class Recorder:
         self._taps: list[tuple[Any, Any, Any]] = []
         for name, bus in rig.buses.items():
             framing = bus.link.framing
-            if type(framing).__name__ == "DirectFraming":
+            if isinstance(framing, DirectFraming):
                 raise ConfigError(f"bus {name!r} takes the sim's direct path, which carries no frames: set "
                                   "[sim] direct = false to record", file=cfg.source, key="sim.direct")
             tap = _Tap(bus.transport, name, self.frames.append, rig.clock.now)
@@ -375,40 +376,12 @@ class ReplayReport:
 
 
 def _quantities(protocol: str, bus_joints: Mapping[int, tuple[str, Any]], request: Frame, frames: list[Frame]) -> dict[str, Any]:
-    """The quantities the replies of one exchange carry, by name where the protocol allows."""
+    """The quantities the replies of one exchange carry, by name where the protocol allows, else by byte."""
+    name = registry.protocol(protocol).values
+    named = name(bus_joints, request, frames) if name is not None else None
+    if named is not None:
+        return named
     out: dict[str, Any] = {}
-    if protocol == "modbus-rtu" and request.can_id is None:
-        from joints.codecs import modbus as mb
-
-        dev = mb.ModbusRtuCodec(mb.Role.DEVICE)
-        dev.feed(request.data)
-        dev.flush()
-        host = mb.ModbusRtuCodec(mb.Role.HOST)
-        host.feed(b"".join(f.data for f in frames))
-        host.flush()
-        try:
-            req = dev.next_message()
-            rep = host.next_message()
-        except JointsError:
-            req = rep = None
-        if isinstance(req, (mb.ReadHoldingRegisters, mb.ReadInputRegisters)) and isinstance(rep, mb.ReadRegistersReply):
-            joint, table = bus_joints.get(req.slave, (str(req.slave), None))
-            prefix = f"{joint}."
-            if table is not None:
-                for name, value in table.decode_block(req.address, rep.values).items():
-                    out[prefix + name] = value
-                return out
-            for i, v in enumerate(rep.values):
-                out[f"{prefix}0x{req.address + i:04X}"] = v
-            return out
-        if rep is not None:
-            for fld in fields(rep):
-                out[f"{getattr(rep, 'slave', '?')}.{type(rep).__name__}.{fld.name}"] = getattr(rep, fld.name)
-            return out
-    if protocol == "erob-can" and request.can_id is not None and len(frames) == 1 and frames[0].can_id is not None:
-        named = _erob_can_value(bus_joints, request, frames[0])
-        if named is not None:
-            return named
     for n, fr in enumerate(frames):
         where = f"{fr.can_id:03X}" if fr.can_id is not None else f"rx{n}"
         for i, b in enumerate(fr.data):
@@ -417,40 +390,15 @@ def _quantities(protocol: str, bus_joints: Mapping[int, tuple[str, Any]], reques
     return out
 
 
-def _erob_can_value(bus_joints: Mapping[int, tuple[str, Any]], request: Frame, reply: Frame) -> dict[str, Any] | None:
-    """eRob CAN custom protocol: a read and its value, as {joint.parameter: value}."""
-    import can
-
-    from joints.codecs import erob_can as ec
-    from joints.devices.erob.can import EROB_CAN
-
-    def frame(f: Frame) -> can.Message:
-        return can.Message(arbitration_id=f.can_id or 0, is_extended_id=f.extended, data=f.data)
-
-    try:
-        req = ec.decode(frame(request), ec.Role.DEVICE)
-        rep = ec.decode(frame(reply), ec.Role.HOST)
-        if not (isinstance(req, ec.Read) and isinstance(rep, ec.ValueReply)):
-            return None
-        name = EROB_CAN.at(req.index, req.subindex)
-        value = EROB_CAN.from_wire(name, rep.value)
-    except (JointsError, KeyError, ValueError):
-        return None
-    joint = bus_joints.get(req.node, (str(req.node), None))[0]
-    return {f"{joint}.{name}": value}
-
-
 def _tables(cfg: RigConfig, bus: str) -> dict[int, tuple[str, Any]]:
-    """Modbus slave -> (its joint, the register table of its device family), for naming quantities."""
+    """Bus address -> (its joint, its device family's parameter map on the bus's protocol), for naming quantities."""
     out: dict[int, tuple[str, Any]] = {}
+    protocol = cfg.buses[bus].protocol
     for name, j in cfg.joints.items():
         if j.bus != bus:
             continue
-        fam = registry.family(j.device)
-        make = fam.tables.get("modbus-rtu")
-        table = make() if make is not None else None
-        out[j.address] = (name if j.channel is None else f"{name}@{j.address}",
-                          table if hasattr(table, "decode_block") else None)
+        make = registry.family(j.device).tables.get(protocol)
+        out[j.address] = (name if j.channel is None else f"{name}@{j.address}", make() if make is not None else None)
     return out
 
 

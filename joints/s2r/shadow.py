@@ -27,6 +27,7 @@ from typing import Any
 
 from joints.config import RigConfig
 from joints.errors import ConfigError, JointsError
+from joints.link.base import DirectFraming
 
 __all__ = ["QUANTITIES", "Sample", "Shadow"]
 
@@ -81,7 +82,7 @@ class Shadow:
             if name not in self._feed:
                 continue
             framing = bus.link.framing
-            if type(framing).__name__ == "DirectFraming":
+            if isinstance(framing, DirectFraming):
                 raise ConfigError(f"bus {name!r} takes the sim's direct path, which carries no frames to shadow",
                                   key="sim.direct")
             tap = _Tap(bus.transport, name, self._on_frame, rig.clock.now)
