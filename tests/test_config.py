@@ -463,3 +463,39 @@ def test_config_error_is_a_value_error_with_fields() -> None:
     err = config_error(data)
     assert isinstance(err, ValueError)
     assert (err.file, err.key, err.allowed) == ("rig.toml", "joints.shoulder.direction", (1, -1))
+
+
+# --- the config's types and the registry's answers ------------------------------------------------
+
+
+def test_config_types_are_the_leaf_modules_and_stay_importable_where_they_were() -> None:
+    import joints
+    from joints import config, configtypes, joint
+
+    assert config.BusConfig is configtypes.BusConfig and config.JointConfig is configtypes.JointConfig
+    assert config.RigConfig is configtypes.RigConfig and config.SimConfig is configtypes.SimConfig
+    assert joint.Limits is configtypes.Limits is joints.Limits and joint.Motion is configtypes.Motion is joints.Motion
+    cfg = parse(good())
+    assert isinstance(cfg, configtypes.RigConfig) and isinstance(cfg.joints["shoulder"].limits, configtypes.Limits)
+
+
+@pytest.mark.parametrize("protocol", ["modbus-rtu", "mks-serial"])
+def test_every_serial_protocol_needs_a_port_on_hardware(protocol: str) -> None:
+    """The registry's medium decides, not a list of names: both serial protocols need the port."""
+    data = good()
+    data["buses"]["rs485"] = {"protocol": protocol}
+    data["joints"] = {"axis": {"device": "mks-servo42d", "bus": "rs485", "address": 1}}
+    assert "[buses.rs485.port] is required" in str(config_error(data))
+    data["backend"] = "sim"
+    assert parse(data).buses["rs485"].port is None
+
+
+@pytest.mark.parametrize("protocol,allowed", [("canopen", True), ("erob-can", False), ("modbus-rtu", False)])
+def test_sync_period_only_where_the_protocol_has_a_sync(protocol: str, allowed: bool) -> None:
+    data = {"backend": "sim", "buses": {"b": {"protocol": protocol, "sync_period": 0.002}},
+            "joints": {"j": {"device": "erob", "bus": "b", "address": 1}}}
+    if allowed:
+        assert parse(data).buses["b"].sync_period == 0.002
+    else:
+        msg = str(config_error(data))
+        assert "[buses.b.sync_period]" in msg and "only for a protocol with cyclic modes" in msg
