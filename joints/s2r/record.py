@@ -377,8 +377,8 @@ class ReplayReport:
 
 def _quantities(protocol: str, bus_joints: Mapping[int, tuple[str, Any]], request: Frame, frames: list[Frame]) -> dict[str, Any]:
     """The quantities the replies of one exchange carry, by name where the protocol allows, else by byte."""
-    name = registry.protocol(protocol).values
-    named = name(bus_joints, request, frames) if name is not None else None
+    values = registry.protocol(protocol).values
+    named = values(bus_joints, request, frames) if values is not None else None
     if named is not None:
         return named
     out: dict[str, Any] = {}
