@@ -1,6 +1,8 @@
 """Configuration: one TOML file (or dict) describes the buses, joints and simulation.
 
 Rule: validate everything up front; every error names the file, the key and what is allowed.
+:func:`parse` reads one section at a time (backend, ``[sim]``, ``[buses.*]``, ``[joints.*]``) into
+the types of :mod:`joints.configtypes` and asks the registry what each protocol and device allows.
 In ``backend = "sim"`` the hardware-only keys (port, CAN interface) are read but ignored, so one
 file serves both backends. ``JOINTS_BACKEND=sim|hardware`` overrides the file.
 
