@@ -56,14 +56,15 @@ assumption to confirm on a real eRob:
 
 from __future__ import annotations
 
-import enum
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+from joints.devices.canopen import CanopenObject, DataType, ObjectAccess
 from joints.devices.cia402 import Mode, State, modes_from_bits
-from joints.devices.erob.params import EROB_PARAMS
-from joints.devices.params import Access, ParamMap, check_value
-from joints.errors import FrameError, RegisterError
+from joints.devices.erob.od import OBJECT_NAMES
+from joints.devices.erob.params import CANOPEN_ENTRIES, EROB_PARAMS
+from joints.devices.params import Access, ParamMap
+from joints.errors import RegisterError
 
 __all__ = [
     "CYCLIC_TPDO1_CURRENT",
@@ -84,221 +85,21 @@ __all__ = [
 ]
 
 
-class DataType(enum.IntEnum):
-    """CiA 301 data type codes (the ``DataType`` of an EDS entry) of the types the eRob map uses."""
-
-    BOOLEAN = 0x0001
-    INTEGER8 = 0x0002
-    INTEGER16 = 0x0003
-    INTEGER32 = 0x0004
-    UNSIGNED8 = 0x0005
-    UNSIGNED16 = 0x0006
-    UNSIGNED32 = 0x0007
-
-    @property
-    def bits(self) -> int:
-        return _BITS[self]
-
-    @property
-    def size(self) -> int:
-        """Bytes on the wire (SDO)."""
-        return max(1, _BITS[self] // 8)
-
-    @property
-    def signed(self) -> bool:
-        return self in (DataType.INTEGER8, DataType.INTEGER16, DataType.INTEGER32)
-
-    @property
-    def param_type(self) -> str:
-        """The :data:`~joints.devices.params.TYPES` name of the same range."""
-        return _PARAM_TYPE[self]
+#: CANopen unit and scale where they differ from the parameter's (E3)
+_SCALED: dict[str, tuple[str, float]] = {"time_setting_of_achieving_position": ("ms", 20.0)}
 
 
-_BITS = {DataType.BOOLEAN: 1, DataType.INTEGER8: 8, DataType.INTEGER16: 16, DataType.INTEGER32: 32,
-         DataType.UNSIGNED8: 8, DataType.UNSIGNED16: 16, DataType.UNSIGNED32: 32}
-_PARAM_TYPE = {DataType.BOOLEAN: "bool", DataType.INTEGER8: "int8", DataType.INTEGER16: "int16",
-               DataType.INTEGER32: "int32", DataType.UNSIGNED8: "uint8", DataType.UNSIGNED16: "uint16",
-               DataType.UNSIGNED32: "uint32"}
+def _objects() -> dict[str, CanopenObject]:
+    out = {}
+    for e in CANOPEN_ENTRIES:
+        unit, scale = _SCALED.get(e.name, ("", 1.0))
+        default = round(EROB_PARAMS[e.name].default / scale)
+        out[e.name] = CanopenObject(e.index, e.subindex, DataType(e.datatype), ObjectAccess(e.access), e.entry_name,
+                                    e.pdo_mappable, e.node_relative, unit, scale, default)
+    return out
 
 
-class ObjectAccess(enum.Enum):
-    """EDS ``AccessType`` values."""
-
-    RO = "ro"
-    WO = "wo"
-    RW = "rw"
-    RWR = "rwr"  #: read-write, mapped to a TPDO
-    RWW = "rww"  #: read-write, mapped to an RPDO
-    CONST = "const"
-
-    @property
-    def readable(self) -> bool:
-        return self is not ObjectAccess.WO
-
-    @property
-    def writable(self) -> bool:
-        return self not in (ObjectAccess.RO, ObjectAccess.CONST)
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class CanopenObject:
-    """One object-dictionary entry; equal (and hashed) by (index, subindex)."""
-
-    index: int
-    subindex: int
-    datatype: DataType
-    access: ObjectAccess
-    name: str  #: the CiA 301/402 object name (EDS ParameterName)
-    pdo_mappable: bool = False
-    node_relative: bool = False  #: the default is the parameter's default + node id (COB-IDs)
-    unit: str = ""  #: unit on CANopen when it differs from the parameter's
-    scale: float = 1.0  #: value in the parameter's unit = raw x scale
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, CanopenObject):
-            return NotImplemented
-        return (self.index, self.subindex) == (other.index, other.subindex)
-
-    def __hash__(self) -> int:
-        return hash((self.index, self.subindex))
-
-    def __repr__(self) -> str:
-        return f"CanopenObject(0x{self.index:04X}:{self.subindex:02X} {self.name!r}, {self.datatype.name})"
-
-    def __str__(self) -> str:
-        return f"0x{self.index:04X}:{self.subindex:02X}"
-
-    @property
-    def bits(self) -> int:
-        return self.datatype.bits
-
-    @property
-    def size(self) -> int:
-        return self.datatype.size
-
-    @property
-    def signed(self) -> bool:
-        return self.datatype.signed
-
-    def encode(self, value: object) -> bytes:
-        """The SDO bytes of ``value`` (little-endian); :class:`~joints.errors.CommandError` if out of range."""
-        v = check_value(self.name, self.datatype.param_type, value, where=f" (0x{self.index:04X}:{self.subindex:02X})")
-        return v.to_bytes(self.size, "little", signed=self.signed)
-
-    def decode(self, data: bytes) -> int:
-        """The value in SDO/PDO bytes; :class:`~joints.errors.FrameError` if the length is not the type's."""
-        if len(data) != self.size:
-            raise FrameError(f"0x{self.index:04X}:{self.subindex:02X} ({self.datatype.name}) takes {self.size} "
-                             f"bytes, got {len(data)}", data=bytes(data))
-        return int.from_bytes(data, "little", signed=self.signed)
-
-    @property
-    def mapping_entry(self) -> tuple[int, int, int, bool]:
-        """(index, subindex, bits, signed): a PDO mapping entry for the codec."""
-        return self.index, self.subindex, self.bits, self.signed
-
-    def default(self, node: int) -> int:
-        """Power-on value on node ``node`` (from the parameter; COB-IDs + node id)."""
-        value = EROB_PARAMS[name_at(self.index, self.subindex)].default
-        return value + node if self.node_relative else value
-
-
-_I8, _I16, _I32 = DataType.INTEGER8, DataType.INTEGER16, DataType.INTEGER32
-_U8, _U16, _U32 = DataType.UNSIGNED8, DataType.UNSIGNED16, DataType.UNSIGNED32
-_RO, _RW, _RWW, _RWR = ObjectAccess.RO, ObjectAccess.RW, ObjectAccess.RWW, ObjectAccess.RWR
-
-#: names of the objects that have sub-indexes (EDS RECORD/ARRAY ParameterName)
-OBJECT_NAMES: dict[int, str] = {
-    0x1018: "Identity object",
-    0x607D: "Software position limit",
-    0x60C1: "Interpolation data record",
-    0x60C2: "Interpolation time period",
-}
-
-_KEYS: dict[str, CanopenObject] = {}
-
-
-def _o(name: str, index: int, subindex: int, datatype: DataType, access: ObjectAccess, object_name: str, *,
-       pdo: bool = False, node_relative: bool = False, unit: str = "", scale: float = 1.0) -> None:
-    _KEYS[name] = CanopenObject(index, subindex, datatype, access, object_name, pdo, node_relative, unit, scale)
-
-
-# communication profile (CiA 301)
-_o("device_type", 0x1000, 0, _U32, _RO, "Device type")
-_o("error_register", 0x1001, 0, _U8, _RO, "Error register", pdo=True)
-_o("cob_id_sync", 0x1005, 0, _U32, _RW, "COB-ID SYNC message")
-_o("communication_cycle_period", 0x1006, 0, _U32, _RW, "Communication cycle period")
-_o("guard_time", 0x100C, 0, _U16, _RW, "Guard time")
-_o("life_time_factor", 0x100D, 0, _U8, _RW, "Life time factor")
-_o("cob_id_emcy", 0x1014, 0, _U32, _RW, "COB-ID EMCY", node_relative=True)
-_o("producer_heartbeat_time", 0x1017, 0, _U16, _RW, "Producer heartbeat time")
-_o("identity_highest_subindex", 0x1018, 0, _U8, _RO, "Highest sub-index supported")
-_o("vendor_id", 0x1018, 1, _U32, _RO, "Vendor-ID")
-_o("product_code", 0x1018, 2, _U32, _RO, "Product code")
-_o("revision_number", 0x1018, 3, _U32, _RO, "Revision number")
-_o("serial_number", 0x1018, 4, _U32, _RO, "Serial number")
-for _n in range(1, 5):
-    _c, _m = 0x1400 + _n - 1, 0x1600 + _n - 1
-    OBJECT_NAMES[_c] = f"RPDO{_n} communication parameter"
-    OBJECT_NAMES[_m] = f"RPDO{_n} mapping parameter"
-    _o(f"rpdo{_n}_highest_subindex", _c, 0, _U8, _RO, "Highest sub-index supported")
-    _o(f"rpdo{_n}_cob_id", _c, 1, _U32, _RW, "COB-ID used by RPDO", node_relative=True)
-    _o(f"rpdo{_n}_transmission_type", _c, 2, _U8, _RW, "Transmission type")
-    _o(f"rpdo{_n}_event_timer", _c, 5, _U16, _RW, "Event-timer")
-    _o(f"rpdo{_n}_mapped_objects", _m, 0, _U8, _RW, "Number of mapped application objects in PDO")
-    for _i in range(1, 9):
-        _o(f"rpdo{_n}_mapping_{_i}", _m, _i, _U32, _RW, f"Application object {_i}")
-for _n in range(1, 5):
-    _c, _m = 0x1800 + _n - 1, 0x1A00 + _n - 1
-    OBJECT_NAMES[_c] = f"TPDO{_n} communication parameter"
-    OBJECT_NAMES[_m] = f"TPDO{_n} mapping parameter"
-    _o(f"tpdo{_n}_highest_subindex", _c, 0, _U8, _RO, "Highest sub-index supported")
-    _o(f"tpdo{_n}_cob_id", _c, 1, _U32, _RW, "COB-ID used by TPDO", node_relative=True)
-    _o(f"tpdo{_n}_transmission_type", _c, 2, _U8, _RW, "Transmission type")
-    _o(f"tpdo{_n}_inhibit_time", _c, 3, _U16, _RW, "Inhibit time")
-    _o(f"tpdo{_n}_event_timer", _c, 5, _U16, _RW, "Event timer")
-    _o(f"tpdo{_n}_sync_start_value", _c, 6, _U8, _RW, "SYNC start value")
-    _o(f"tpdo{_n}_mapped_objects", _m, 0, _U8, _RW, "Number of mapped application objects in PDO")
-    for _i in range(1, 9):
-        _o(f"tpdo{_n}_mapping_{_i}", _m, _i, _U32, _RW, f"Application object {_i}")
-
-# device profile (CiA 402); names from the Modbus table where the quantity is the same
-_o("error_code", 0x603F, 0, _U16, _RO, "Error code", pdo=True)
-_o("controlword", 0x6040, 0, _U16, _RWW, "Controlword", pdo=True)
-_o("statusword", 0x6041, 0, _U16, _RO, "Statusword", pdo=True)
-_o("quick_stop_option_code", 0x605A, 0, _I16, _RW, "Quick stop option code")
-_o("modes_of_operation", 0x6060, 0, _I8, _RWW, "Modes of operation", pdo=True)
-_o("modes_of_operation_display", 0x6061, 0, _I8, _RO, "Modes of operation display", pdo=True)
-_o("given_position", 0x6062, 0, _I32, _RO, "Position demand value", pdo=True)
-_o("actual_position", 0x6064, 0, _I32, _RO, "Position actual value", pdo=True)
-_o("max_position_error", 0x6065, 0, _U32, _RW, "Following error window")
-_o("position_reaches_set_precision", 0x6067, 0, _U32, _RW, "Position window")
-_o("time_setting_of_achieving_position", 0x6068, 0, _U16, _RW, "Position window time", unit="ms", scale=20.0)
-_o("given_speed", 0x606B, 0, _I32, _RO, "Velocity demand value", pdo=True)
-_o("current_speed", 0x606C, 0, _I32, _RO, "Velocity actual value", pdo=True)
-_o("target_torque", 0x6071, 0, _I16, _RWW, "Target torque", pdo=True)
-_o("max_motor_current", 0x6073, 0, _U16, _RW, "Max current")
-_o("torque_actual_value", 0x6077, 0, _I16, _RO, "Torque actual value", pdo=True)
-_o("motor_current", 0x6078, 0, _I16, _RO, "Current actual value", pdo=True)
-_o("bus_voltage", 0x6079, 0, _U32, _RO, "DC link circuit voltage", pdo=True)
-_o("target_absolute_position", 0x607A, 0, _I32, _RWW, "Target position", pdo=True)
-_o("software_position_limit_highest_subindex", 0x607D, 0, _U8, _RO, "Highest sub-index supported")
-_o("min_position_limit_value", 0x607D, 1, _I32, _RW, "Min position limit")
-_o("max_position_limit_value", 0x607D, 2, _I32, _RW, "Max position limit")
-_o("max_speed", 0x6080, 0, _U32, _RW, "Max motor speed")
-_o("profile_speed", 0x6081, 0, _U32, _RWW, "Profile velocity", pdo=True)
-_o("profile_acceleration", 0x6083, 0, _U32, _RWW, "Profile acceleration", pdo=True)
-_o("profile_deceleration", 0x6084, 0, _U32, _RWW, "Profile deceleration", pdo=True)
-_o("quick_stop_deceleration", 0x6085, 0, _U32, _RW, "Quick stop deceleration")
-_o("interpolation_sub_mode_select", 0x60C0, 0, _I16, _RW, "Interpolation sub mode select")
-_o("interpolation_data_record_highest_subindex", 0x60C1, 0, _U8, _RO, "Highest sub-index supported")
-_o("interpolation_data_record_1", 0x60C1, 1, _I32, _RWW, "1st set-point", pdo=True)
-_o("interpolation_time_period_highest_subindex", 0x60C2, 0, _U8, _RO, "Highest sub-index supported")
-_o("interpolation_time_period_value", 0x60C2, 1, _U8, _RW, "Interpolation time period value")
-_o("interpolation_time_index", 0x60C2, 2, _I8, _RW, "Interpolation time index")
-_o("position_error", 0x60F4, 0, _I32, _RO, "Following error actual value", pdo=True)
-_o("target_speed", 0x60FF, 0, _I32, _RWW, "Target velocity", pdo=True)
-_o("supported_drive_modes", 0x6502, 0, _U32, _RO, "Supported drive modes")
+_KEYS = _objects()
 
 EROB_CANOPEN: ParamMap[CanopenObject] = ParamMap("canopen", EROB_PARAMS, dict(_KEYS))
 """Parameter name -> CANopen object, for every eRob parameter CANopen reaches."""
