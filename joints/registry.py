@@ -338,9 +338,11 @@ def _erob_canopen_front(twin: Any, address: int) -> Any:
 
 
 def _erob_eds(node: int) -> str:
-    from joints.sim.erob_canopen import eds_text
+    from joints.devices.erob.eds import eds_text
+    from joints.devices.erob.profiles import DEFAULT_MODEL, PROFILES
+    from joints.sim.erob import power_on_defaults
 
-    return eds_text(node)
+    return eds_text(node, power_on_defaults(PROFILES[DEFAULT_MODEL], node))
 
 
 def _erob_can_table() -> Any:

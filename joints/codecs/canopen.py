@@ -1150,6 +1150,7 @@ def _mux_of(frame: can.Message) -> tuple[int, int]:
 # --- PDO ---------------------------------------------------------------------------------------------
 
 PDO_INVALID = 1 << 31  #: COB-ID bit 31: PDO does not exist / is not valid
+SYNC_PRODUCER = 1 << 30  #: 0x1005 bit 30: the node produces SYNC (CiA 301)
 PDO_NO_RTR = 1 << 30  #: COB-ID bit 30: no RTR allowed on this PDO
 MAX_PDO_BITS = 64
 

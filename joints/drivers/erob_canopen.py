@@ -34,8 +34,8 @@ Safety and liveness: the host consumes each node's heartbeat (0x1017 = 100 ms, c
 communication watchdog of the joint is life guarding (0x100C guard time x 0x100D factor 4 = the
 watchdog time; heartbeat off meanwhile, CiA 301): the host guards the node at every state read.
 Quick stop = controlword 0x0002; fault reset = rising bit 7; an EMCY is the drive's fault
-(code = the eRob error code, by name). Software position limits go to 0x607D, the speed limit
-to 0x6080 and the current limit to 0x6073 (volatile).
+(code = the eRob error code, by name). Software position limits go to 0x607D and the speed limit
+to 0x6080 (volatile); a torque limit is refused (no max current object in ZeroErr's EDS).
 """
 
 from __future__ import annotations
@@ -764,14 +764,17 @@ class ErobCanopenDriver(ErobDriver):
 
     def apply_limits(self, *, position: tuple[int, int] | None = None, velocity: int | None = None,
                      current: int | None = None) -> None:
-        """0x607D software position limits, 0x6080 max motor speed, 0x6073 max current (volatile)."""
+        """0x607D software position limits, 0x6080 max motor speed (volatile). A current (torque) limit is
+        refused before anything is sent: ZeroErr's EDS has no max current object (0x6073, 0x6072)."""
+        if current is not None:
+            raise CommandError(f"{self.name}: a torque limit cannot be applied over CANopen (ZeroErr's EDS has no "
+                               "0x6072/0x6073); set max_motor_current over Modbus RTU or the CAN custom protocol, "
+                               "or drop limits.torque from this joint; nothing was sent")
         self._ensure()
         if position is not None:
             self._set_many({"min_position_limit_value": position[0], "max_position_limit_value": position[1]})
         if velocity is not None:
             self._set("max_speed", max(1, min(velocity, 0x7FFFFFFF)))
-        if current is not None:
-            self._set("max_motor_current", max(1, min(current, 0xFFFF)))
 
     def motion_targets(self) -> dict[str, tuple[str, float]]:
         rad = self.units.position
@@ -783,7 +786,7 @@ class ErobCanopenDriver(ErobDriver):
     def identity(self) -> dict[str, object]:
         """0x1018 identity and 0x1000 device type (and the supported modes 0x6502)."""
         out: dict[str, object] = {}
-        for key in ("device_type", "vendor_id", "product_code", "revision_number", "serial_number"):
+        for key in ("device_type", "vendor_id", "product_code", "revision_number"):
             out[key] = f"0x{self.read(key):08X}"
         bits = self.read("supported_drive_modes")
         out["modes"] = sorted(m.name.lower() for m in cia402.modes_from_bits(bits))

@@ -335,6 +335,7 @@ class ErobFirmware(Firmware):
     #: a set-point stream drives the position reference (CiA 402 CSP/IP over CANopen): between
     #: set-points the reference moves on at v_ref (linear interpolation); set by a protocol front
     streaming = _flag(K.STREAMING)
+    stream_goal = _column(K.STREAM_GOAL, "the newest streamed set-point [count]: the reference stops there")
     enabled_at = _column(K.ENABLED_AT)
     watchdog = _column(K.WATCHDOG, "s, 0 = off")
     kp = _column(K.KP)

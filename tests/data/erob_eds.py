@@ -21,7 +21,7 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
 sys.path.insert(0, str(REPO))
 
-from joints.devices.canopen import parse_eds  # noqa: E402
+from joints.devices.canopen import parse_eds
 
 TARGETS = (REPO / "joints" / "devices" / "erob" / "zeroerr_eds.json", HERE / "zeroerr_eds.json")
 INFO_KEYS = {"FileInfo": ("FileName", "FileVersion", "FileRevision", "EDSVersion", "Description", "CreationDate",

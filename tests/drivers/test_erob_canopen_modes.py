@@ -28,7 +28,7 @@ PROFILE = profile("eRob80H100")
 
 def one(mode: str | None = None, *, sync_period: float | None = None, **joint: Any) -> dict[str, Any]:
     j: dict[str, Any] = {"device": "erob", "model": "eRob80H100", "bus": "bus", "address": 2,
-                         "limits": {"position": [-3.1, 3.1], "velocity": 2.0, "torque": 20.0}, **joint}
+                         "limits": {"position": [-3.1, 3.1], "velocity": 2.0}, **joint}
     if mode is not None:
         j["mode"] = mode
     bus: dict[str, Any] = {"protocol": "canopen"}

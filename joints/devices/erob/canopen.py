@@ -73,6 +73,7 @@ __all__ = [
     "ERUNNER_TPDOS",
     "MODE_CHANGE_REFUSED",
     "OBJECT_NAMES",
+    "QUICK_STOP_OPTION_CODE",
     "SUPPORTED_MODES",
     "TARGET_PARAM",
     "CanopenObject",
@@ -141,6 +142,9 @@ TARGET_PARAM: Mapping[Mode, str] = {
     Mode.IP: "interpolation_data_record_1",
 }
 
+#: 0x605A is not in ZeroErr's EDS: the quick stop reacts as CiA 402's default option code 2 (stop on
+#: the quick-stop ramp, then SWITCH ON DISABLED; S3 of joints.devices.cia402)
+QUICK_STOP_OPTION_CODE = 2
 MODE_CHANGE_REFUSED = 0x08000022  #: SDO abort for a 0x6060 write in OPERATION ENABLED (E7)
 
 

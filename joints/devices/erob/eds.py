@@ -39,8 +39,9 @@ def eds_text(node: int = 1, values: Mapping[str, int] | None = None) -> str:
     """The EDS (CiA 306) of the eRob twin at node ``node``."""
     src = source()
     dev = src.get("DeviceInfo", {})
-    comments = [f"eRob twin of the joints package: ZeroErr's {src['file']} (sha256 {src['sha256'][:16]}...) "
-                f"with {len(DEVIATIONS)} deviations:", *(str(d) for d in DEVIATIONS)]
+    head = (f"eRob twin of the joints package: ZeroErr's {src['file']} (sha256 {src['sha256'][:16]}...) "
+            f"with {len(DEVIATIONS)} deviations:")
+    comments = [head, *(str(d) for d in DEVIATIONS)]
     info = [
         ("FileInfo", [("FileName", f"erob_node{node}.eds"), ("FileVersion", "1"), ("FileRevision", "1"),
                       ("EDSVersion", "4.0"), ("Description", "ZeroErr eRob (joints twin), from " + src["file"]),
