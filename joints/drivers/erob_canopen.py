@@ -21,13 +21,13 @@ cyclic ``csp``, ``csv``, ``cst``, ``ip``, driven by :meth:`joints.rig.Rig.cycle`
 
 What a state (:class:`~joints.drivers.base.RawState`) contains. Profile modes (``state()``: one
 SYNC, that cycle's TPDO1 + TPDO2): statusword, position, velocity 0x606C and current 0x6078 as
-the drive measured them at the SYNC. Cyclic modes (``Rig.cycle``: the cycle's TPDO1 only, to keep
+the drive measured them at the SYNC, and the temperature 0x22A2 (degC, read by SDO at most every
+:data:`TEMPERATURE_PERIOD`). Cyclic modes (``Rig.cycle``: the cycle's TPDO1 only, to keep
 the bus load down): statusword and position at the SYNC; velocity = the position difference of
 the last two cycles over their time; current 0x6078 from TPDO1 when the bus has room for 8-byte
 TPDOs (:meth:`SyncCycle.feedback_tpdo`: every cyclic joint of the bus at the SYNC period fits
-with worst-case stuffing; e.g. up to 3 joints at 1 kHz on 1 Mbit/s), else NaN. The temperature
-is NaN in every mode: the eRob has no temperature object on CANopen (E11 of
-:mod:`joints.devices.erob.canopen`).
+with worst-case stuffing; e.g. up to 3 joints at 1 kHz on 1 Mbit/s), else NaN; the temperature
+as state() last read it (no SDO in the cycle; NaN before the first state()).
 
 Safety and liveness: the host consumes each node's heartbeat (0x1017 = 100 ms, consumer time
 250 ms, armed at the first heartbeat); a silent node is a fault (:data:`NODE_LOST`). The
@@ -79,6 +79,7 @@ CONSUMER_FACTOR = 2.5  #: host consumer time = this x the producer time
 LIFE_TIME_FACTOR = 4  #: 0x100D while the watchdog is armed (guard time = watchdog / 4)
 STATE_TIMEOUT = 1.5  #: s for a CiA 402 state change (the brake releases in 0.5 s)
 POLL = 0.005  #: s between two state reads while waiting
+TEMPERATURE_PERIOD = 1.0  #: s between two SDO reads of 0x22A2 drive temperature by state()
 #: host-defined fault: the node stopped answering (heartbeat or node guarding)
 NODE_LOST = HOST_DEFINED | 0x8130
 _CANOPEN_FAULTS = {
@@ -284,6 +285,8 @@ class ErobCanopenDriver(ErobDriver):
         self.emcys: list[co.Emcy] = []
         self._watchdog_ms = 0
         self._last_guard = -math.inf
+        self.temperature = math.nan  #: degC, 0x22A2 as last read (state(): at most every TEMPERATURE_PERIOD)
+        self._temperature_time = -math.inf
 
     # -- bring-up ---------------------------------------------------------------------------
     @property
@@ -463,6 +466,10 @@ class ErobCanopenDriver(ErobDriver):
         self._keepalive()
         if self.lost() is None:
             self._snapshot()
+            now = self.clock.now()
+            if now - self._temperature_time >= TEMPERATURE_PERIOD:
+                self._temperature_time = now
+                self.temperature = float(self.read("part_of_power_temperature"))
         return self._raw(self.clock.now())
 
     def observe(self) -> RawState:
@@ -471,7 +478,8 @@ class ErobCanopenDriver(ErobDriver):
         Works whatever mode and NMT state (PRE-OPERATIONAL or OPERATIONAL) the node is in; the
         host's own view (:attr:`statusword`, PDO values) is left untouched.
         """
-        v = self.access.read_many(("statusword", "actual_position", "current_speed", "motor_current"))
+        v = self.access.read_many(("statusword", "actual_position", "current_speed", "motor_current",
+                                   "part_of_power_temperature"))
         sw = v["statusword"]
         try:
             st = cia402.state_of(sw)
@@ -483,8 +491,8 @@ class ErobCanopenDriver(ErobDriver):
         enabled = st is State.OPERATION_ENABLED
         moving = enabled and (not cia402.target_reached(sw) or abs(v["current_speed"]) > 200)
         return RawState(position=v["actual_position"], velocity=v["current_speed"], current=v["motor_current"],
-                        temperature=math.nan, enabled=enabled, moving=moving, fault=fault, time=self.clock.now(),
-                        extra={"statusword": sw, "node": self.node})
+                        temperature=float(v["part_of_power_temperature"]), enabled=enabled, moving=moving,
+                        fault=fault, time=self.clock.now(), extra={"statusword": sw, "node": self.node})
 
     def cycle_state(self) -> RawState:
         return self._raw(self.status_time)
@@ -511,7 +519,7 @@ class ErobCanopenDriver(ErobDriver):
             moving = enabled and abs(self.velocity) > 200
         return RawState(position=self.position, velocity=self.velocity,
                         current=self.current if self.reports_current else math.nan,
-                        temperature=math.nan, enabled=enabled, moving=moving, fault=fault, time=t,
+                        temperature=self.temperature, enabled=enabled, moving=moving, fault=fault, time=t,
                         extra={"statusword": sw, "mode": int(self.mode), "node": self.node})
 
     @property
