@@ -17,8 +17,8 @@ from typing import Any
 
 import can
 import pytest
-import simkit
 
+import simkit
 from joints.devices.canopen import EdsObject, EdsVariable, ObjectType, format_eds
 from joints.devices.erob import od as erob_od
 from joints.devices.erob.eds import eds_text
@@ -113,7 +113,7 @@ def test_export_matches_zeroerr_eds_except_the_listed_deviations(tmp_path: Path)
 
 
 def test_objects_the_issue_names(tmp_path: Path) -> None:
-    _world, front, node = twin(vendor_eds(tmp_path / "zeroerr.eds"))
+    _world, _front, node = twin(vendor_eds(tmp_path / "zeroerr.eds"))
     sdo = node.sdo
     assert sdo[0x1000].raw == 0x00420192 and sdo[0x1018][1].raw == 0x5A65726F and sdo[0x1018][0].raw == 3
     assert sdo[0x1006].raw == 0  # the EDS's power-on value
