@@ -40,7 +40,7 @@ real eRob, also listed in the README):
   bit 6; target reached bit 10), PV (0x60FF with 0x6083/0x6084; bit 10 at speed, bit 12 speed 0),
   PT (0x6071 per mille of rated torque), CSP (0x607A streamed: the reference moves linearly
   towards each set-point over :meth:`CanopenFront.stream_period` - 0x60C2 where set, else the
-  measured interval of the last two SYNCs, else 0x1006, else 1 ms - and stops at it: never past
+  mean SYNC interval over the last 8 SYNCs, else 0x1006, else 1 ms - and stops at it: never past
   the newest set-point, so a SYNC interval other than 0x1006 neither overshoots nor faults), CSV (0x60FF with the profile ramps, as eRunner's CSV
   sets them), CST (0x6071), IP (0x60C1:01 streamed over the 0x60C2 period while bit 4 is set).
 * PDOs: synchronous TPDOs (types 1..240) sampled at SYNC, every n-th SYNC; event TPDOs (254/255)
@@ -88,6 +88,7 @@ LIFE_GUARD_ERROR = 0x8130  #: EMCY / fault code of a life-guarding timeout (CiA 
 BOOT_TIME_COMMUNICATION = 0.001
 BOOT_TIME_NODE = 0.05
 PDO_LENGTH_ERROR = 0x8210  #: EMCY of an RPDO shorter than its mapping
+SYNC_WINDOW = 8  #: SYNCs over which the SYNC interval is measured
 _A = co.SdoAbortCode
 _POSITION, _SPEED, _TORQUE = int(OperationMode.POSITION), int(OperationMode.SPEED), int(OperationMode.TORQUE)
 #: CiA 402 mode -> the firmware's operation mode
@@ -194,8 +195,8 @@ class CanopenFront:
         self._pdos: dict[tuple[str, int], _Pdo] | None = None
         self._pdo_state: dict[tuple[str, int], _Pdo] = {}  #: timers and last data kept over a reconfiguration
         self.controlword_prev = 0
-        self.last_sync: float | None = None
-        self.sync_interval: float | None = None  #: s between the last two SYNCs (the CSP/IP period)
+        self.sync_times: list[float] = []  #: drive times of the last SYNCs
+        self.sync_interval: float | None = None  #: s between SYNCs, measured (the CSP/IP period)
         self._boot = True  #: the boot-up is due at the next tick
 
     def power_off(self) -> None:
@@ -697,10 +698,16 @@ class CanopenFront:
         return 1e-3
 
     def _sync_seen(self) -> None:
+        """The SYNC interval: the mean over the last :data:`SYNC_WINDOW` SYNCs (the drive's clock
+        sees a SYNC at the end of a control substep; the mean is free of that quantisation)."""
         t = float(self.firmware.time)
-        if self.last_sync is not None and t - self.last_sync > 1e-6:
-            self.sync_interval = t - self.last_sync
-        self.last_sync = t
+        times = self.sync_times
+        if times and t < times[-1]:
+            times.clear()  # the world was reset
+        times.append(t)
+        del times[:-SYNC_WINDOW]
+        if len(times) >= 2 and times[-1] - times[0] > 1e-6:
+            self.sync_interval = (times[-1] - times[0]) / (len(times) - 1)
 
     def _stream(self, target: int, period: float) -> None:
         """CSP/IP: the position reference moves from where it is towards ``target`` over ``period``

@@ -424,9 +424,10 @@ def _profile_step(s: Row, dt: float) -> None:
         if s[STREAMING] != 0.0:  # between two streamed set-points, up to the newest and no further
             step = s[V_REF] * dt
             rest = s[STREAM_GOAL] - s[P_REF]
-            if (step > 0.0 and step >= rest) or (step < 0.0 and step <= rest):
-                s[P_REF] = s[STREAM_GOAL]
-                s[V_REF] = 0.0
+            if rest == 0.0:
+                s[V_REF] = 0.0  # at the newest set-point since the last substep: hold there
+            elif (step > 0.0 and step >= rest) or (step < 0.0 and step <= rest):
+                s[P_REF] = s[STREAM_GOAL]  # arrives (the speed stands until the next substep)
             else:
                 s[P_REF] += step
             return

@@ -115,7 +115,9 @@ def test_cst_cycle_torque_accelerates_both_ways_and_the_state_reports_the_curren
         assert all(a.velocity < b.velocity for a, b in zip(up[:200:25], up[25:200:25]))
         assert up[-1].torque == pytest.approx(10.0, rel=0.03) and down[-1].torque == pytest.approx(-10.0, rel=0.03)
         fw = front_of(rig).firmware
-        assert up[-1].raw is not None and math.isnan(up[-1].temperature)
+        # the temperature as state() last read 0x22A2 (no SDO in the cycle): the Modbus 0x0078 value
+        assert up[-1].raw is not None and up[-1].temperature == pytest.approx(fw.read("part_of_power_temperature"),
+                                                                              abs=1.0)
         assert down[-1].raw is not None
         assert down[-1].current == pytest.approx(fw.read("motor_current") * 1e-3, abs=0.05)
         rig.cycle({"joint1": 0.0})

@@ -100,6 +100,12 @@ def test_export_matches_zeroerr_eds_except_the_listed_deviations(tmp_path: Path)
             expected[(o["index"], sub)] = (dt, access, bool(pdo), default, bool(rel))
     assert set(exported) == set(expected)  # presence, both ways
     differ = set()
+    kinds = {o["index"]: o["object_type"] for o in vendor()["objects"]}
+    for index, kind in kinds.items():
+        record = isinstance(theirs[index], canopen.objectdictionary.ODRecord)
+        array = isinstance(theirs[index], canopen.objectdictionary.ODArray)
+        if (kind == 8) != array or (kind == 9) != record:
+            differ.add((index, 0, "object_type"))
     for key, (dt, access, pdo, default, rel) in expected.items():
         var = exported[key]
         got_default = var.default - (3 if rel and var.default is not None else 0) if default is not None else None
@@ -108,7 +114,7 @@ def test_export_matches_zeroerr_eds_except_the_listed_deviations(tmp_path: Path)
             if a != b:
                 differ.add((*key, field))
     assert differ == listed
-    assert {f for *_k, f in listed} <= {"datatype", "access", "default"}
+    assert {f for *_k, f in listed} <= {"datatype", "access", "default", "object_type"}
     assert "0x6502:00 default" in path.read_text() and "5.7" in path.read_text()  # the list is in the EDS comments
 
 

@@ -12,7 +12,7 @@ from collections.abc import Mapping
 
 from joints.devices.canopen import EdsObject, EdsVariable, ObjectType, format_eds, parse_eds
 from joints.devices.erob.canopen import objects
-from joints.devices.erob.od import DEVIATIONS, OBJECT_NAMES, source
+from joints.devices.erob.od import DEVIATIONS, source
 from joints.devices.erob.params import CANOPEN_ENTRIES
 
 __all__ = ["eds_objects", "eds_text", "parse_eds"]
@@ -21,6 +21,7 @@ __all__ = ["eds_objects", "eds_text", "parse_eds"]
 def eds_objects(node: int = 1, values: Mapping[str, int] | None = None) -> list[EdsObject]:
     """The twin's objects as EDS objects (defaults: ``values`` where given, COB-IDs ``$NODEID``-relative)."""
     kinds = {e.index: e.object_type for e in CANOPEN_ENTRIES}
+    names = {e.index: e.object_name for e in CANOPEN_ENTRIES}
     limits = {(e.index, e.subindex): (e.low, e.high) for e in CANOPEN_ENTRIES}
     groups: dict[int, list[EdsVariable]] = {}
     for name, o in objects():
@@ -31,7 +32,7 @@ def eds_objects(node: int = 1, values: Mapping[str, int] | None = None) -> list[
         groups.setdefault(o.index, []).append(EdsVariable(
             o.index, o.subindex, o.name, int(o.datatype), o.access.value, o.pdo_mappable, default, o.node_relative,
             lo, hi))
-    return [EdsObject(index, OBJECT_NAMES[index], ObjectType(kinds[index]), tuple(vs))
+    return [EdsObject(index, names[index], ObjectType(kinds[index]), tuple(vs))
             for index, vs in sorted(groups.items())]
 
 

@@ -51,7 +51,7 @@ class Deviation:
 
     index: int
     subindex: int
-    field: str  #: "default", "access", "pdo_mappable", "datatype"
+    field: str  #: "default", "access", "pdo_mappable", "datatype", "object_type" (of the whole object)
     vendor: object
     twin: object
     evidence: str
@@ -145,6 +145,11 @@ DEVIATIONS: tuple[Deviation, ...] = (
                 "524288-count turn (about 0.02 rev/s), the EDS's value is a generic eDriver default")
       for i, v, what in ((0x6081, 10000, "max speed / 4"), (0x6083, 200, "max speed per s"),
                          (0x6084, 200, "max speed per s"))),
+    *(Deviation(i, 0, "object_type", "ARRAY (0x8)", "RECORD (0x9)",
+                "CiA 301 defines the PDO mapping parameter as a RECORD; with ZeroErr's ARRAY the canopen package's "
+                "PdoMap.save() writes no mapping entry (it iterates the array's current length, which it has just "
+                "set to 0), so a remap by canopen's PDO API fails (0x06040041) with the vendor file")
+      for i in (*range(0x1600, 0x1604), *range(0x1A00, 0x1A04))),
     Deviation(0x6502, 0, "default", 0x38D, 0x3CD, f"bit 6 (IP) set: {_IP}; the EDS has 0x60C0-0x60C2 too"),
     Deviation(0x60C1, 1, "datatype", 0x0003, 0x0004,
               f"INTEGER32: {_IP} with absolute set-points in cnt (\"motor moves to the interpolation value in absolute "
@@ -198,12 +203,15 @@ def vendor_entries(taken: frozenset[str] = frozenset()) -> tuple[OdEntry, ...]:
 def entries(taken: frozenset[str] = frozenset()) -> tuple[OdEntry, ...]:
     """The twin's objects: the EDS with :data:`DEVIATIONS` applied, by index and sub-index."""
     changes: dict[tuple[int, int], dict[str, object]] = {}
+    records = {d.index for d in DEVIATIONS if d.field == "object_type"}
     for d in DEVIATIONS:
-        changes.setdefault((d.index, d.subindex), {})[d.field] = d.twin
+        if d.field != "object_type":
+            changes.setdefault((d.index, d.subindex), {})[d.field] = d.twin
     out = []
     for e in vendor_entries(taken):
         change = changes.get((e.index, e.subindex))
-        out.append(replace(e, **change) if change else e)  # type: ignore[arg-type]
+        e = replace(e, **change) if change else e  # type: ignore[arg-type]
+        out.append(replace(e, object_type=9) if e.index in records else e)
     return tuple(out)
 
 
@@ -211,7 +219,7 @@ def unit(name: str) -> str:
     return _UNITS.get(name, "")
 
 
-#: object index -> its EDS name (every object)
-OBJECT_NAMES: dict[int, str] = {e.index: e.object_name for e in vendor_entries()}
+#: names of the objects that have sub-indices (EDS ARRAY/RECORD ParameterName)
+OBJECT_NAMES: dict[int, str] = {e.index: e.object_name for e in vendor_entries() if e.object_type != 7}
 #: parameter names of the objects :data:`BINDING` names (the others are named from the EDS)
 BOUND: frozenset[str] = frozenset(BINDING.values())
