@@ -317,10 +317,7 @@ def _erob_canopen_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict
     from joints.drivers.erob_canopen import ErobCanopenDriver, SyncCycle
 
     period = cfg.sync_period or link.sync_period or 0.001
-    key = ("canopen-sync", id(link))
-    cycle = shared.get(key)
-    if cycle is None:
-        cycle = shared[key] = SyncCycle(link, period)
+    cycle = SyncCycle.of(link, period)  # the bus's, held by its link
     return ErobCanopenDriver(link, cfg.address, profile=FAMILIES["erob"].config_profile(cfg), clock=clock,
                              name=cfg.name, mode=cfg.mode, sync_period=cycle.period, cycle=cycle)
 

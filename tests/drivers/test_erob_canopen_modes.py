@@ -161,7 +161,7 @@ def bus_of_own(nodes: int, period: float = 0.001) -> tuple[list[ErobCanopenDrive
 @pytest.mark.parametrize("nodes,period,current", [(3, 0.001, True), (4, 0.001, False), (4, 0.002, True)])
 def test_cyclic_tpdo_carries_the_current_where_the_bus_has_room(nodes: int, period: float, current: bool) -> None:
     drivers, cycle, device = bus_of_own(nodes, period)
-    assert cycle.feedback_tpdo() == (CYCLIC_TPDO1_CURRENT if current else ERUNNER_TPDOS[0])
+    assert all(d.feedback_tpdo() == (CYCLIC_TPDO1_CURRENT if current else ERUNNER_TPDOS[0]) for d in drivers)
     device.medium.reset_load()
     late = cycle.late
     for _ in range(100):

@@ -17,9 +17,9 @@ from typing import Any
 
 import can
 import pytest
+from edskit import vendor, vendor_eds
 
 import simkit
-from joints.devices.canopen import EdsObject, EdsVariable, ObjectType, format_eds
 from joints.devices.erob import od as erob_od
 from joints.devices.erob.eds import eds_text
 from joints.devices.erob.profiles import profile
@@ -27,24 +27,8 @@ from joints.sim.erob import COUNTS_PER_REV, power_on_defaults
 
 canopen: Any = pytest.importorskip("canopen")
 
-DATA = Path(__file__).resolve().parents[1] / "data" / "zeroerr_eds.json"
 NODE = 2
 DEG = COUNTS_PER_REV / 360.0
-
-
-def vendor() -> dict[str, Any]:
-    data: dict[str, Any] = json.loads(DATA.read_text(encoding="utf-8"))
-    return data
-
-
-def vendor_eds(path: Path) -> Path:
-    """ZeroErr's EDS (the extract's facts) as an EDS file again."""
-    objs = [EdsObject(o["index"], o["name"], ObjectType(o["object_type"]),
-                      tuple(EdsVariable(o["index"], *v[:4], bool(v[4]), v[5], bool(v[6]), v[7], v[8])
-                            for v in o["variables"]))
-            for o in vendor()["objects"]]
-    path.write_text(format_eds([("DeviceInfo", [("VendorName", "ZEROERR CONTROL")])], objs), encoding="utf-8")
-    return path
 
 
 class LoopNetwork(canopen.Network):  # type: ignore[misc]
