@@ -365,7 +365,8 @@ def _erob_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> tuple[Any,
     from joints.sim.erob_can import identify_twin
 
     d = specs[0]
-    twin = ErobFirmware(d.profile, d.address, inertia=inertia[d.name])
+    twin = ErobFirmware(d.profile, d.address, inertia=inertia[d.name],
+                        quirks=frozenset(FAMILIES["erob"].firmware_profile(d.extra.get("firmware")).quirks))
     identify_twin(twin, d.profile.model, d.address)  # CAN node id, module information (7.5.3)
     return twin, {None: twin}
 

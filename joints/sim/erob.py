@@ -243,8 +243,10 @@ class ErobFirmware(Firmware):
         inertia: float | None = None,
         multi_turn: bool = True,
         ambient: float = 30.0,
+        quirks: frozenset[str] = frozenset(),
     ) -> None:
         super().__init__(EROB_PARAMS, values=power_on_defaults(profile, address))
+        self.quirks = quirks  #: the firmware profile's quirks (joints.devices.quirks), read by the fronts
         self._bind_row([0.0] * K.WIDTH)
         self.profile = profile
         self.multi_turn = multi_turn

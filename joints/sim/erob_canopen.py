@@ -24,7 +24,7 @@ real eRob, also listed in the README):
   STOPPED. NMT stop or a reset while the drive is enabled switches it off (brake holds).
 * SDO refusals: unknown index 0x06020000, unknown sub-index 0x06090011, read-only 0x06010002,
   length 0x06070010, value out of range 0x06090030/31/32, 0x6060 in OPERATION ENABLED 0x08000022
-  (E7), a mode not in 0x6502 0x06090030, 0x1005 with bit 30 (SYNC producer: no evidence that an
+  (E7; taken with the firmware profile ``mode-change-while-enabled``), a mode not in 0x6502 0x06090030, 0x1005 with bit 30 (SYNC producer: no evidence that an
   eRob produces SYNC) 0x06090030, PDO mapping changed while the PDO is valid 0x06010000,
   an object that cannot be mapped 0x06040041, more than 64 bits 0x06040042.
 * CiA 402: OPERATION ENABLED is reported at once; the holding brake releases in the firmware's
@@ -77,6 +77,7 @@ from joints.devices.erob.canopen import (
 )
 from joints.devices.erob.params import EROB_PARAMS
 from joints.devices.erob.registers import AchieveStatus, MotionMode, OperationMode
+from joints.devices.quirks import EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED
 from joints.errors import CommandError, DeviceRejected, FrameError, ParameterRefused, Refusal, RegisterError
 from joints.transports.can_sim import CanMedium, ClockLike
 
@@ -355,7 +356,8 @@ class CanopenFront:
         if index in _PDO_AREA:
             self._pdo_write(name, value)
         elif name == "modes_of_operation":
-            if not mode_change_allowed(self.state) or self.enabling:
+            taken = EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED in self.firmware.quirks
+            if not taken and (not mode_change_allowed(self.state) or self.enabling):
                 raise DeviceRejected("0x6060 in OPERATION ENABLED", code=MODE_CHANGE_REFUSED)
             try:
                 mode = Mode(value)

@@ -23,7 +23,9 @@ import simkit
 from joints.devices.erob import od as erob_od
 from joints.devices.erob.eds import eds_text
 from joints.devices.erob.profiles import profile
-from joints.sim.erob import COUNTS_PER_REV, power_on_defaults
+from joints.devices.quirks import firmware_profile
+from joints.sim.erob import COUNTS_PER_REV, ErobFirmware, power_on_defaults
+from joints.sim.erob_canopen import CanopenFront, ErobCanopenBus
 
 canopen: Any = pytest.importorskip("canopen")
 
@@ -245,3 +247,31 @@ def test_csp_reference_never_passes_the_newest_setpoint_when_setpoints_stop(tmp_
             assert fw.p_ref + fw.offset <= target + 1e-6
     assert not fw.fault
     assert abs(fw.read("actual_position") - target) < 0.05 * DEG
+
+
+# --- E7: a mode change while enabled -----------------------------------------------------------
+
+
+@pytest.mark.parametrize("firmware", [None, "mode-change-while-enabled"])
+def test_mode_change_while_enabled_follows_the_firmware_profile(firmware: str | None, tmp_path: Path) -> None:
+    """Default: 0x6060 in OPERATION ENABLED is refused with 0x08000022 (E7, no evidence either way); the
+    firmware profile ``mode-change-while-enabled`` takes it (what ZeroErr's Linux node expects)."""
+    quirks = firmware_profile("erob", firmware).quirks
+    device = ErobCanopenBus()
+    front = CanopenFront(ErobFirmware(profile("eRob80H100"), NODE, quirks=frozenset(quirks)), NODE)
+    device.add(front)
+    device.tick(0.001)
+    network = LoopNetwork(device.on_frame)
+    node = canopen.RemoteNode(NODE, canopen.import_od(str(vendor_eds(tmp_path / "z.eds")), NODE))
+    network.add_node(node)
+    node.sdo[0x6060].raw = 1
+    for cw in (0x06, 0x07, 0x0F):
+        node.sdo[0x6040].raw = cw
+    assert front.state.name == "OPERATION_ENABLED"
+    if firmware is None:
+        with pytest.raises(canopen.SdoAbortedError) as info:
+            node.sdo[0x6060].raw = 8
+        assert info.value.code == 0x08000022 and node.sdo[0x6061].raw == 1
+    else:
+        node.sdo[0x6060].raw = 8
+        assert node.sdo[0x6061].raw == 8 and front.state.name == "OPERATION_ENABLED"

@@ -1,57 +1,46 @@
 """ZeroErr eRob over CANopen (CiA 402): the object dictionary as a map of the eRob parameters.
 
-Rule: pure data. :data:`EROB_CANOPEN` maps each parameter of :data:`~joints.devices.erob.params.EROB_PARAMS`
-that CANopen reaches to its object (index, subindex, CiA 301 data type, access, PDO mappability):
-a quantity the Modbus table already names keeps that name (``actual_position`` is register
-0x0066 and object 0x6064); objects only CANopen has are parameters of ``OTHER_PROTOCOLS``.
-Where the CANopen unit differs, the object says so (``unit``, ``scale``: value in the parameter's
-unit = raw x scale). The entries carry what an EDS needs (index, subindex, data type code,
-access, default, PDO mapping); the defaults are the parameters' defaults (COB-IDs + node id).
+Rule: pure data. :data:`EROB_CANOPEN` maps each eRob parameter CANopen reaches to its object
+(:class:`~joints.devices.canopen.CanopenObject`). The objects - sub-indices, data types, access,
+PDO flags, defaults - are ZeroErr's EDS ("ZeroErr Driver_V1.5.eds", read as data by
+:mod:`joints.devices.erob.od`, with its listed deviations); a quantity the Modbus table already
+names keeps that name (``actual_position`` is register 0x0066 and object 0x6064), the other objects
+are parameters named from the EDS. Where the CANopen unit differs, the object says so (``unit``,
+``scale``: value in the parameter's unit = raw x scale). The EDS export is :mod:`joints.devices.erob.eds`.
 
-Source: eRunner manual v1.7 chapter 5. It uses 0x6060/0x6061 (all modes), 0x6081 profile velocity,
-0x6083/0x6084 profile acceleration/deceleration, 0x60FF target velocity, 0x1005 COB-ID SYNC,
-0x1006 communication cycle period (figs 5-5..5-40), RPDO1 on 0x200+node with controlword + a
-32-bit target (6 bytes, figs 5-6, 5-9, 5-15, 5-19, 5-24, 5-28, 5-30), the panel units cnt, cnt/s,
-cnt/s^2, mA, mN*m, and "每次切换运动模式之前都需要先下使能" (disable before every mode change,
-section 5.1). It names the vendor's "eRob CANopen and EtherCAT User Manual V1.6" for the rest; that
-manual is not in our set, so everything below that chapter 5 does not show is CiA 301/402 and an
-assumption to confirm on a real eRob:
+Sources: ZeroErr's EDS (objects); the eRunner manual v1.7 chapter 5 (what eRunner writes: 0x6060/
+0x6061, 0x6081/0x6083/0x6084, 0x60FF, 0x1005 = 0x80, 0x1006, RPDO1 = controlword + a 32-bit target,
+the panel units cnt, cnt/s, cnt/s^2, mA, mN*m, "disable before every mode change", section 5.1).
+What neither says is an assumption to confirm on a real eRob. E1-E12, revised against the EDS
+(docs/canopen-eds.md):
 
-* E1 Position, velocity, acceleration and current objects use the Modbus units (count, count/s,
-  count/s^2, mA; the eRunner panel shows cnt, cnt/s, cnt/s^2 and mA). CiA 402 itself would give
-  0x6078 in per mille of rated current; the eRob is assumed to report mA like its panel.
-* E2 0x6071/0x6077 torque: CiA 402 INTEGER16, per mille of rated torque, although eRunner's PT/CST
-  panel labels the field mN*m. eRunner's PT/CST RPDO1 ``2F 00 28 00 00 00`` (fig 5-19) fits
-  controlword + target torque (16 bits) + 16 bits of padding: that is our RPDO1 for PT/CST.
-* E3 0x6068 position window time is in ms (CiA 402); the Modbus register 0x007A is in 0.05 ms.
-* E4 Power-on PDO mapping = the CiA 402 pre-defined mapping (RPDO1 controlword; RPDO2 +0x6060;
-  RPDO3 +0x607A; RPDO4 +0x60FF; TPDO1 statusword; TPDO2 +0x6061; TPDO3 +0x6064; TPDO4 +0x606C),
-  transmission type 255, event timers 0, heartbeat and guarding off (0x1017 = 0x100C = 0). Only
-  RPDO1 and TPDO1 are valid: RPDO2..4 repeat the controlword, and a master that sends one of them
-  whole for its other object (canopen's ``BaseNode402.op_mode`` does) would also send a stale
-  controlword; TPDO2..4 would only add bus load.
-* E5 eRunner's own mapping (:data:`ERUNNER_RPDO1`, :data:`ERUNNER_TPDOS`): RPDO1 = controlword +
-  the mode's target (PP/CSP 0x607A, PV/CSV 0x60FF, PT/CST 0x6071 + padding, IP 0x60C1:01), applied at
-  once in the profile modes (255) and at the next SYNC in the cyclic ones (1). Chapter 5 shows no
-  TPDO frame; eRunner's panel shows position, speed, current and status, so TPDO1 = statusword +
-  position actual value (6 bytes), TPDO2 = velocity actual value + current actual value (6 bytes),
-  both sent on every SYNC (type 1).
-* E6 0x6502 supported drive modes = PP, PV, PT, IP, CSP, CSV, CST (the modes of chapter 5; no
-  homing): 0x000003CD. Modes of operation power up as 0 (no mode).
-* E7 A mode change (0x6060 write) while OPERATION ENABLED is refused with SDO abort 0x08000022
-  (chapter 5 requires disabling first; strict on purpose): :func:`mode_change_allowed`.
-* E8 0x1006 defaults to 1000 us (chapter 3: "通信周期 ... 默认设置为1000 µs"); 0x1005 to 0x80
-  (consumer of SYNC 0x080, as eRunner writes it). 0x603F error code holds the eRob error code
-  of :mod:`joints.devices.erob.faults` (same quantity as Modbus 0x0060).
-* E10 0x6073 max current is in mA (like E1; CiA 402: per mille of rated current) and 0x6080 max
-  motor speed in count/s: the joint's limits go there (the Modbus max_motor_current / max_speed).
-* E9 Only the objects above exist; vendor id, product code, revision and serial number read 0.
-* E11 No object reports a temperature: chapter 5 shows none, and ZeroErr's EDS for its eDriver
-  CANopen slave lists only CiA 301/402 objects (no manufacturer area). The power-stage temperature
-  is read over Modbus RTU or the CAN custom protocol.
-* E12 Our cyclic feedback (:data:`CYCLIC_TPDO1_CURRENT`): TPDO1 = statusword + position + current
-  actual value 0x6078 (8 bytes, every SYNC) where the bus has room for it, eRunner's 6-byte TPDO1
-  otherwise (the host's choice, not the drive's).
+* E1 (stands) Position, velocity, acceleration and current objects use the Modbus units (count,
+  count/s, count/s^2, mA): the EDS gives no units.
+* E2 (stands) 0x6071/0x6077 INTEGER16 (the EDS agrees) in per mille of rated torque; eRunner's
+  PT/CST RPDO1 ``2F 00 28 00 00 00`` (fig 5-19) = controlword + target torque + 16 bits of padding.
+* E3 (stands; type corrected) 0x6068 position window time is INTEGER16 (EDS) in ms; the Modbus
+  register 0x007A is in 0.05 ms.
+* E4 (replaced by the EDS) Power-on PDO mapping: RPDO1 controlword; RPDO2 + 0x607A; RPDO3 + 0x60FF;
+  RPDO4 empty; TPDO1 statusword; TPDO2 + 0x6064; TPDO3 + 0x606C; TPDO4 empty; transmission type
+  255; only PDO1 valid (COB-ID bit 31 set on 2..4). First run: a master that uses RPDO2/TPDO2
+  enables them first (0x1401:01 without bit 31); heartbeat and guarding off (0x1017 = 0x100C = 0).
+* E5 (stands) eRunner's own mapping (:data:`ERUNNER_RPDO1`, :data:`ERUNNER_TPDOS`): RPDO1 =
+  controlword + the mode's target, TPDO1 = statusword + position, TPDO2 = velocity + current.
+* E6 (deviation kept) 0x6502 = 0x3CD: the EDS says 0x38D (no IP bit); the eRunner manual 5.7 runs
+  IP mode. 0x60C1:01 is INTEGER32 (the EDS: INTEGER16) for the same reason. Modes power up as 0.
+* E7 (stands, no evidence) A mode change (0x6060 write) while OPERATION ENABLED is refused with SDO
+  abort 0x08000022 (section 5.1 requires disabling first): :func:`mode_change_allowed`. The firmware
+  profile ``mode-change-while-enabled`` (``firmware = "..."`` on the joint) accepts it instead.
+* E8 (corrected) 0x1006 powers up 0 (the EDS; eRunner writes 1000 us, its default setting); 0x1005
+  0x80 (the EDS agrees). 0x603F holds the eRob error code (same quantity as Modbus 0x0060).
+* E9 (replaced by the EDS) The objects are the EDS's; identity: vendor 0x5A65726F, product
+  0x26483052, revision 0x00020111, 0x1018:00 = 3 (no serial number object).
+* E10 (wrong) 0x6073 max current is not in the EDS: the driver refuses a torque limit over CANopen.
+  0x6080 max motor speed in count/s (the joint's speed limit).
+* E11 (wrong) 0x22A2 Drive Temperature (UNSIGNED16) is the power-stage temperature, assumed in degC:
+  the same quantity as Modbus 0x0078 (``part_of_power_temperature``).
+* E12 (stands) Our cyclic feedback (:data:`CYCLIC_TPDO1_CURRENT`): statusword + position + current
+  0x6078 (8 bytes) where the bus has room, eRunner's 6-byte TPDO1 otherwise (the host's choice).
 """
 
 from __future__ import annotations

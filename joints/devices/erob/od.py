@@ -58,7 +58,11 @@ class Deviation:
 
     def __str__(self) -> str:
         def fmt(v: object) -> str:
-            return f"0x{v:X}" if isinstance(v, int) and not isinstance(v, bool) and abs(v) > 9 else str(v)
+            if self.field == "datatype" and isinstance(v, int):
+                return {0x0003: "INTEGER16", 0x0004: "INTEGER32"}.get(v, f"0x{v:04X}")
+            if isinstance(v, int) and not isinstance(v, bool) and abs(v) > 9:
+                return f"-0x{-v:X}" if v < 0 else f"0x{v:X}"
+            return str(v)
         return (f"0x{self.index:04X}:{self.subindex:02X} {self.field}: EDS {fmt(self.vendor)}, twin {fmt(self.twin)}"
                 f" - {self.evidence}")
 
@@ -135,14 +139,15 @@ DEVIATIONS: tuple[Deviation, ...] = (
     *(Deviation(0x1800 + n, 0, "default", 4, 5, "as for 0x1400: the EDS lists sub-index 5 (event timer)")
       for n in range(4)),
     Deviation(0x606B, 0, "access", "rww", "ro", "the velocity demand value is the drive's own output (CiA 402: "
-              "ro; the Modbus register 0x0068 is read-only): a write is refused with 0x06010002"),
-    Deviation(0x607D, 1, "default", -0x80000000, 0, "the same firmware as over Modbus: registers 0x0051/0x0053 "
-              "power up 0 and 0/0 means no software limit (Modbus manual v1.6, 4.2); the EDS's full range is the same "
-              "meaning"),
+              "ro; the same quantity is the read-only Modbus register 0x006C given speed): a write is refused with "
+              "0x06010002"),
+    Deviation(0x607D, 1, "default", -0x80000000, 0, "the same firmware as over Modbus (registers 0x00BD/0x00BF, "
+              "listed without defaults in Modbus manual v1.6): the twin powers up with 0/0, which it takes as no "
+              "software limit (min >= max, an assumption); the EDS's full range means the same: no limit"),
     Deviation(0x607D, 2, "default", 0x7FFFFFFF, 0, "as 0x607D:01"),
     *(Deviation(i, 0, "default", v, f"the model's {what} (sim.erob.power_on_defaults)",
-                f"the same firmware as over Modbus; {v} cnt/s^2 or cnt/s is not a usable profile on a "
-                "524288-count turn (about 0.02 rev/s), the EDS's value is a generic eDriver default")
+                f"the same firmware as over Modbus (one set of power-on values for every protocol); {v} is a "
+                "generic eDriver default: on a 524288-count output turn it is at most 0.02 rev/s (or rev/s^2)")
       for i, v, what in ((0x6081, 10000, "max speed / 4"), (0x6083, 200, "max speed per s"),
                          (0x6084, 200, "max speed per s"))),
     *(Deviation(i, 0, "object_type", "ARRAY (0x8)", "RECORD (0x9)",
