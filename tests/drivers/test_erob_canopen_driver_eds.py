@@ -54,6 +54,13 @@ def test_ip_on_zeroerrs_eds_is_refused_the_twins_export_is_taken(tmp_path: Path)
     assert d.access.map.key("interpolation_data_record_1").datatype.name == "INTEGER32"
 
 
+@pytest.mark.parametrize("mode", ["pp", "pv", "pt", "csp", "csv", "cst"])
+def test_every_mode_but_ip_takes_zeroerrs_eds(mode: str, tmp_path: Path) -> None:
+    link, _device = bus()
+    d = ErobCanopenDriver(link, 2, mode=mode, heartbeat_ms=0, eds=vendor_eds(tmp_path / "zeroerr.eds"))
+    assert d.access.map.key("statusword").index == 0x6041
+
+
 def test_a_file_that_is_no_eds_is_a_config_error(tmp_path: Path) -> None:
     link, _device = bus()
     bad = tmp_path / "x.eds"
