@@ -23,9 +23,11 @@ import simkit
 from joints.devices.erob import od as erob_od
 from joints.devices.erob.eds import eds_text
 from joints.devices.erob.profiles import profile
+from joints.devices.erob.registers import EROB_MODBUS
 from joints.devices.quirks import firmware_profile
 from joints.sim.erob import COUNTS_PER_REV, ErobFirmware, power_on_defaults
 from joints.sim.erob_canopen import CanopenFront, ErobCanopenBus
+from joints.sim.modbus_front import ModbusFront
 
 canopen: Any = pytest.importorskip("canopen")
 
@@ -133,11 +135,12 @@ def test_objects_the_issue_names(tmp_path: Path) -> None:
 def test_temperature_over_canopen_is_the_modbus_temperature(tmp_path: Path) -> None:
     """0x22A2 (U16, degC: an assumption) = Modbus 0x0078 part_of_power_temperature (int16 degC)."""
     _world, front, node = twin(vendor_eds(tmp_path / "zeroerr.eds"))
+    modbus = ModbusFront(front.firmware, EROB_MODBUS, node_id="modbus_address")  # the same drive's Modbus side
     for celsius in (24.6, 61.2, 87.0):
         front.firmware.temperature = celsius
-        modbus = front.firmware.read("part_of_power_temperature")  # what the Modbus front answers for 0x0078
-        assert modbus == round(celsius)
-        assert node.sdo[0x22A2].raw == modbus
+        (register,) = modbus.read(0x0078, 1)
+        assert register == round(celsius)
+        assert node.sdo[0x22A2].raw == register
 
 
 # --- CiA 301 ---------------------------------------------------------------------------------
@@ -275,3 +278,24 @@ def test_mode_change_while_enabled_follows_the_firmware_profile(firmware: str | 
     else:
         node.sdo[0x6060].raw = 8
         assert node.sdo[0x6061].raw == 8 and front.state.name == "OPERATION_ENABLED"
+
+
+def test_the_twin_answers_as_its_export_says(tmp_path: Path) -> None:
+    """Every object of the export reads with its type's size; every ro/const one refuses a write (0x06010002)."""
+    path = tmp_path / "twin.eds"
+    path.write_text(eds_text(NODE), encoding="utf-8")
+    _world, _front, node = twin(path)
+    od = node.object_dictionary
+    checked = 0
+    for obj in od.values():
+        if obj.index < 0x1000:
+            continue
+        for var in ([obj] if isinstance(obj, canopen.objectdictionary.ODVariable) else obj.values()):
+            data = node.sdo.upload(var.index, var.subindex)
+            assert len(data) == max(1, len(var.encode_raw(0))), f"0x{var.index:04X}:{var.subindex:02X}"
+            if not var.writable:
+                with pytest.raises(canopen.SdoAbortedError) as info:
+                    node.sdo.download(var.index, var.subindex, data)
+                assert info.value.code == 0x06010002, f"0x{var.index:04X}:{var.subindex:02X}"
+            checked += 1
+    assert checked == sum(len(o["variables"]) for o in vendor()["objects"])
