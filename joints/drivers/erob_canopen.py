@@ -713,5 +713,6 @@ class ErobCanopenDriver(ErobDriver):
                            "not reach; use Modbus RTU; nothing was sent")
 
     def save_parameters(self, *, confirm: bool = False) -> None:
-        raise CommandError(f"{self.name}: saving (0x1010) is not in the eRob's CANopen map; save over Modbus RTU or "
+        raise CommandError(f"{self.name}: ZeroErr's EDS lists 0x1010 store parameters, but what an eRob saves "
+                           "through it is not documented (the twin only stores the value); save over Modbus RTU or "
                            "the CAN custom protocol; nothing was sent")
