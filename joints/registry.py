@@ -334,10 +334,7 @@ def _erob_canopen_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict
     from joints.drivers.erob_canopen import ErobCanopenDriver, SyncCycle
 
     period = cfg.sync_period or link.sync_period or 0.001
-    key = ("canopen-sync", id(link))
-    cycle = shared.get(key)
-    if cycle is None:
-        cycle = shared[key] = SyncCycle(link, period)
+    cycle = SyncCycle.of(link, period)  # the bus's, held by its link
     return ErobCanopenDriver(link, cfg.address, profile=FAMILIES["erob"].config_profile(cfg), clock=clock,
                              name=cfg.name, mode=cfg.mode, sync_period=cycle.period, cycle=cycle)
 
@@ -355,9 +352,11 @@ def _erob_canopen_front(twin: Any, address: int) -> Any:
 
 
 def _erob_eds(node: int) -> str:
-    from joints.sim.erob_canopen import eds_text
+    from joints.devices.erob.eds import eds_text
+    from joints.devices.erob.profiles import DEFAULT_MODEL, PROFILES
+    from joints.sim.erob import power_on_defaults
 
-    return eds_text(node)
+    return eds_text(node, power_on_defaults(PROFILES[DEFAULT_MODEL], node))
 
 
 def _erob_can_table() -> Any:
@@ -383,7 +382,8 @@ def _erob_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> tuple[Any,
     from joints.sim.erob_can import identify_twin
 
     d = specs[0]
-    twin = ErobFirmware(d.profile, d.address, inertia=inertia[d.name])
+    twin = ErobFirmware(d.profile, d.address, inertia=inertia[d.name],
+                        quirks=frozenset(FAMILIES["erob"].firmware_profile(d.extra.get("firmware")).quirks))
     identify_twin(twin, d.profile.model, d.address)  # CAN node id, module information (7.5.3)
     return twin, {None: twin}
 

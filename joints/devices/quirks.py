@@ -25,8 +25,8 @@ from types import MappingProxyType
 
 from joints.errors import ConfigError
 
-__all__ = ["DEFAULT_FIRMWARE", "FIRMWARES", "QUIRKS", "ZLAC_SYNC_FLAG_AS_EXAMPLES", "FirmwareProfile", "Quirk",
-           "firmware_profile"]
+__all__ = ["DEFAULT_FIRMWARE", "EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED", "FIRMWARES", "QUIRKS",
+           "ZLAC_SYNC_FLAG_AS_EXAMPLES", "FirmwareProfile", "Quirk", "firmware_profile"]
 
 
 @dataclass(frozen=True)
@@ -51,11 +51,17 @@ class FirmwareProfile:
 
 
 ZLAC_SYNC_FLAG_AS_EXAMPLES = "zlac-sync-flag-as-examples"
+#: eRob on CANopen: 0x6060 taken while OPERATION ENABLED (E7 of joints.devices.erob.canopen; not in any erratum)
+EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED = "erob-canopen-mode-change-while-enabled"
 
 QUIRKS: Mapping[str, Quirk] = MappingProxyType({q.name: q for q in (
     Quirk(ZLAC_SYNC_FLAG_AS_EXAMPLES, "zlac8015d", "DOC-ZLAC-1",
           "0x200F: 0 = asynchronous, 1 = synchronous (the section 3.2 examples; the register table says the opposite)",
           "write 1 for synchronous and 0 for asynchronous control"),
+    Quirk(EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED, "erob", "E7",
+          "0x6060 written while OPERATION ENABLED is taken (ZeroErr's Linux node writes it right after 0x0F) "
+          "instead of the default refusal with SDO abort 0x08000022",
+          "none needed: the driver's mode change goes through NMT reset communication, which disables first"),
 )})
 
 FIRMWARES: Mapping[tuple[str, str], FirmwareProfile] = MappingProxyType({(p.family, p.firmware): p for p in (
@@ -64,6 +70,9 @@ FIRMWARES: Mapping[tuple[str, str], FirmwareProfile] = MappingProxyType({(p.fami
     FirmwareProfile("zlac8015d", "register-table", frozenset(),
                     "a firmware that follows the chapter-4 register table for 0x200F (choose it if wheels "
                     "started with Start(Synchronous) stay still with the default)"),
+    FirmwareProfile("erob", "mode-change-while-enabled", frozenset({EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED}),
+                    "an eRob that takes a CANopen mode change (0x6060) while enabled; choose it if a real drive "
+                    "does (the default profile refuses it, as the eRunner manual's section 5.1 asks)"),
 )})
 
 #: family -> the firmware a joint has when its config names none

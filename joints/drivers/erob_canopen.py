@@ -21,28 +21,28 @@ cyclic ``csp``, ``csv``, ``cst``, ``ip``, driven by :meth:`joints.rig.Rig.cycle`
 
 What a state (:class:`~joints.drivers.base.RawState`) contains. Profile modes (``state()``: one
 SYNC, that cycle's TPDO1 + TPDO2): statusword, position, velocity 0x606C and current 0x6078 as
-the drive measured them at the SYNC. Cyclic modes (``Rig.cycle``: the cycle's TPDO1 only, to keep
+the drive measured them at the SYNC, and the temperature 0x22A2 (degC, read by SDO at most every
+:data:`TEMPERATURE_PERIOD`). Cyclic modes (``Rig.cycle``: the cycle's TPDO1 only, to keep
 the bus load down): statusword and position at the SYNC; velocity = the position difference of
 the last two cycles over their time; current 0x6078 from TPDO1 when the bus has room for 8-byte
 TPDOs (:meth:`SyncCycle.feedback_tpdo`: every cyclic joint of the bus at the SYNC period fits
-with worst-case stuffing; e.g. up to 3 joints at 1 kHz on 1 Mbit/s), else NaN. The temperature
-is NaN in every mode: the eRob has no temperature object on CANopen (E11 of
-:mod:`joints.devices.erob.canopen`).
+with worst-case stuffing; e.g. up to 3 joints at 1 kHz on 1 Mbit/s), else NaN; the temperature
+as state() last read it (no SDO in the cycle; NaN before the first state()).
 
 Safety and liveness: the host consumes each node's heartbeat (0x1017 = 100 ms, consumer time
 250 ms, armed at the first heartbeat); a silent node is a fault (:data:`NODE_LOST`). The
 communication watchdog of the joint is life guarding (0x100C guard time x 0x100D factor 4 = the
 watchdog time; heartbeat off meanwhile, CiA 301): the host guards the node at every state read.
 Quick stop = controlword 0x0002; fault reset = rising bit 7; an EMCY is the drive's fault
-(code = the eRob error code, by name). Software position limits go to 0x607D, the speed limit
-to 0x6080 and the current limit to 0x6073 (volatile).
+(code = the eRob error code, by name). Software position limits go to 0x607D and the speed limit
+to 0x6080 (volatile); a torque limit is refused (no max current object in ZeroErr's EDS).
 """
 
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 from joints.clock import Clock
@@ -57,17 +57,24 @@ from joints.devices.erob.canopen import (
     ERUNNER_TPDOS,
     CanopenObject,
     PdoConfig,
-    has_index,
-    name_at,
 )
 from joints.devices.erob.params import EROB_PARAMS
 from joints.devices.erob.profiles import ErobProfile
-from joints.devices.faults import DEFINED_BY_JOINTS, HOST_DEFINED, Fault
+from joints.devices.faults import DEFINED_BY_JOINTS, Fault
 from joints.devices.params import ParamMap
-from joints.drivers.access import ParamAccess
 from joints.drivers.base import RawState
+from joints.drivers.canopen_access import CanopenAccess, map_from_eds
+from joints.drivers.canopen_sync import NODE_LOST, SyncCycle
 from joints.drivers.erob import CalibrationResult, ErobDriver
-from joints.errors import CommandError, DeviceFault, FrameError, PeerProtocolError, ReplyTimeout, StateError
+from joints.errors import (
+    CommandError,
+    ConfigError,
+    DeviceFault,
+    FrameError,
+    PeerProtocolError,
+    ReplyTimeout,
+    StateError,
+)
 
 __all__ = ["HEARTBEAT_MS", "MODES", "NODE_LOST", "CanopenAccess", "ErobCanopenDriver", "SyncCycle"]
 
@@ -79,8 +86,7 @@ CONSUMER_FACTOR = 2.5  #: host consumer time = this x the producer time
 LIFE_TIME_FACTOR = 4  #: 0x100D while the watchdog is armed (guard time = watchdog / 4)
 STATE_TIMEOUT = 1.5  #: s for a CiA 402 state change (the brake releases in 0.5 s)
 POLL = 0.005  #: s between two state reads while waiting
-#: host-defined fault: the node stopped answering (heartbeat or node guarding)
-NODE_LOST = HOST_DEFINED | 0x8130
+TEMPERATURE_PERIOD = 1.0  #: s between two SDO reads of 0x22A2 drive temperature by state()
 _CANOPEN_FAULTS = {
     0x8130: ("life_guard_error", "the drive's life guarding expired: the host stopped guarding it (EMCY 0x8130)",
              "keep the host talking (the rig does while it waits), then clear_faults() and enable()"),
@@ -89,146 +95,13 @@ _CANOPEN_FAULTS = {
     0x8250: ("rpdo_timeout", "an RPDO did not arrive within its deadline (EMCY 0x8250)",
              "send set-points every cycle, then clear_faults()"),
 }
-_WHERE = re.compile(r"(?:0x)?([0-9a-fA-F]{4})(?:[:/.sub]+(0x[0-9a-fA-F]+|\d+))?")
 _CYCLIC_KIND = {Mode.CSP: "position", Mode.IP: "position", Mode.CSV: "velocity", Mode.CST: "torque"}
-
-
-class CanopenAccess(ParamAccess):
-    """Parameters of one eRob node as CANopen objects, by SDO (expedited; segmented above 4 bytes)."""
-
-    protocol = "canopen"
-
-    def __init__(self, link: Any, node: int, cmap: ParamMap[CanopenObject] = EROB_CANOPEN) -> None:
-        if type(node) is not int or not 1 <= node <= co.MAX_NODE:
-            raise CommandError(f"CANopen node id must be 1..{co.MAX_NODE}, got {node!r}")
-        self.link = link
-        self.node = node
-        self.map = cmap
-        self.params = cmap.params
-
-    def resolve(self, key: str | int) -> str:
-        if isinstance(key, int):
-            return name_at(key, 0)
-        if key in self.map:
-            return key
-        m = _WHERE.fullmatch(key.strip())
-        if m is not None:  # "0x6064", "0x607D:1", "607D/2"
-            index = int(m.group(1), 16)
-            sub = 0 if m.group(2) is None else int(m.group(2), 0)
-            if not has_index(index):
-                name_at(index, sub)  # the right RegisterError
-            return name_at(index, sub)
-        self.map.key(key)  # unknown, or not reachable over CANopen
-        return key
-
-    def where(self, name: str) -> str:
-        o = self.map.key(name)
-        return f"0x{o.index:04X}:{o.subindex:02X}"
-
-    def read(self, name: str) -> int:
-        o = self.map.key(name)
-        raw = o.decode(self.link.sdo_upload(self.node, o.index, o.subindex))
-        return round(raw * o.scale) if o.scale != 1.0 else raw
-
-    def encode(self, name: str, value: int) -> tuple[CanopenObject, bytes]:
-        """The object and SDO bytes of ``value`` (checked: nothing is sent on error)."""
-        o = self.map.key(name)
-        self.params[name].check(value)
-        raw = round(value / o.scale) if o.scale != 1.0 else value
-        return o, o.encode(raw)
-
-    def write(self, name: str, value: int, *, idempotent: bool = True) -> None:
-        o, data = self.encode(name, value)
-        self.link.sdo_download(self.node, o.index, o.subindex, data, idempotent=idempotent)
-
-    def write_many(self, values: Mapping[str, int], *, idempotent: bool = True) -> None:
-        encoded = [self.encode(n, v) for n, v in values.items()]  # every value checked first
-        for o, data in encoded:
-            self.link.sdo_download(self.node, o.index, o.subindex, data, idempotent=idempotent)
 
 
 def _power_on_objects(node: int) -> dict[tuple[int, int], int]:
     """Object values after NMT reset communication (the parameters' defaults, COB-IDs + node)."""
     return {(o.index, o.subindex): EROB_PARAMS[n].default + (node if o.node_relative else 0)
             for n, o in EROB_CANOPEN.keys.items() if 0x1400 <= o.index < 0x1C00}
-
-
-class SyncCycle:
-    """The SYNC cycle of one CANopen bus: each cyclic joint's RPDO, one SYNC, that cycle's TPDO1s.
-
-    :meth:`send` waits until the cycle is due (on the rig's clock: lockstep in sim), sends the
-    set-points and the SYNC; :meth:`collect` returns as soon as every joint's TPDO1 of the cycle
-    is in, or at the end of the period: a TPDO that has not come by then is late (:attr:`late`
-    counts them) and the joint's last values stand.
-    """
-
-    def __init__(self, link: Any, period: float, *, current: bool | None = None) -> None:
-        self.link = link
-        self.period = period
-        #: the motor current in the cyclic TPDO1: None = where the bus has room, True/False = always/never
-        self.current = current
-        self.cycles = 0
-        self.late = 0  #: TPDOs that missed their cycle
-        self.next_due: float | None = None
-        self._grid = 0.0
-        self._n = 0
-        self.sync_time = 0.0
-        self.drivers: list[ErobCanopenDriver] = []
-        self._expect: list[ErobCanopenDriver] = []
-
-    def feedback_tpdo(self) -> PdoConfig:
-        """The cyclic joints' TPDO1: with the motor current if the cycle still fits the bus with it
-        (every cyclic joint of the bus, worst-case bit stuffing:
-        :meth:`~joints.link.canopen.CanopenLink.cycle_load`), else eRunner's statusword + position."""
-        if self.current is not None:
-            return CYCLIC_TPDO1_CURRENT if self.current else ERUNNER_TPDOS[0]
-        cyclic = [d for d in self.drivers if d.mode.cyclic]
-        load = self.link.cycle_load([d.node for d in cyclic] or [1],
-                                    rpdo_bytes=(max((ERUNNER_RPDO1[d.mode].size for d in cyclic), default=6),),
-                                    tpdo_bytes=(CYCLIC_TPDO1_CURRENT.size,), period=self.period)
-        return CYCLIC_TPDO1_CURRENT if load.fits else ERUNNER_TPDOS[0]
-
-    def send(self, targets: Mapping[ErobCanopenDriver, int]) -> None:
-        link = self.link
-        now = link.bus_now()
-        eps = 1e-9
-        if self.next_due is None or now > self.next_due + self.period + eps:
-            self._grid, self._n = now, 0  # first cycle, or the caller fell behind: restart the grid
-        elif now < self.next_due - eps:
-            link.wait_bus(self.next_due)  # TPDOs of earlier cycles still arriving are delivered as such
-        self._n += 1
-        due = self._grid + self._n * self.period  # on a grid: no drift
-        link.poll(0.0)
-        for driver, target in targets.items():
-            driver.cycle_send(target)
-        link.sync()
-        self.sync_time = link.bus_now()
-        self.cycles += 1
-        self.next_due = due
-        self._expect = list(targets)
-
-    def collect(self) -> dict[ErobCanopenDriver, RawState]:
-        link = self.link
-        cycle = self.cycles
-        waiting = {d.tpdo1_cob: d for d in self._expect if d.status_cycle < cycle}
-        deadline = self.next_due if self.next_due is not None else link.bus_now()
-        while waiting:
-            left = deadline - link.bus_now()
-            if left <= 1e-9:
-                break
-            try:
-                msg = link.wait_for(lambda m: isinstance(m, co.Pdo) and m.cob_id in waiting, left)
-            except ReplyTimeout:
-                break
-            waiting.pop(msg.cob_id).on_tpdo(msg)
-        self.late += len(waiting)
-        out: dict[ErobCanopenDriver, RawState] = {}
-        for d in self._expect:
-            lost = d.lost()
-            if lost is not None:
-                raise DeviceFault(d.name, NODE_LOST, lost, hint=d.fault_text(NODE_LOST), name="node_lost")
-            out[d] = d.cycle_state()
-        return out
 
 
 class ErobCanopenDriver(ErobDriver):
@@ -248,10 +121,12 @@ class ErobCanopenDriver(ErobDriver):
         sync_period: float = 0.001,
         heartbeat_ms: int = HEARTBEAT_MS,
         cycle: SyncCycle | None = None,
+        eds: str | Path | None = None,
     ) -> None:
         self.link = link
         self.node = node
-        super().__init__(CanopenAccess(link, node), profile=profile, clock=clock or link.clock,
+        cmap = EROB_CANOPEN if eds is None else map_from_eds(eds, EROB_CANOPEN)
+        super().__init__(CanopenAccess(link, node, cmap), profile=profile, clock=clock or link.clock,
                          name=name or f"erob@canopen:{node}")
         if isinstance(mode, str):
             try:
@@ -284,6 +159,40 @@ class ErobCanopenDriver(ErobDriver):
         self.emcys: list[co.Emcy] = []
         self._watchdog_ms = 0
         self._last_guard = -math.inf
+        self.temperature = math.nan  #: degC, 0x22A2 as last read (state(): at most every TEMPERATURE_PERIOD)
+        self._temperature_time = -math.inf
+        try:
+            self._check_dictionary(cmap, eds)
+        except ConfigError:
+            self.group.drivers.remove(self)  # a shared cycle does not keep a driver that was refused
+            raise
+
+    def _check_dictionary(self, cmap: ParamMap[CanopenObject], eds: str | Path | None) -> None:
+        """With an EDS (ZeroErr's, or a twin's export): every object this mode's PDOs and bring-up use
+        is in the file with the data type the driver packs; else :class:`ConfigError` naming both."""
+        if eds is None:
+            return
+        needed = [*(n for p in (self._rpdo, *ERUNNER_TPDOS, CYCLIC_TPDO1_CURRENT) for n in p.objects
+                    if isinstance(n, str)), "statusword", "controlword", "modes_of_operation",
+                  "modes_of_operation_display", "producer_heartbeat_time"]
+        for name in dict.fromkeys(needed):
+            ours = EROB_CANOPEN.key(name)
+            theirs = cmap.keys.get(name)
+            if theirs is None or theirs.datatype is not ours.datatype:
+                found = "absent" if theirs is None else theirs.datatype.name
+                raise ConfigError(f"{self.name}: {eds} has {ours} ({name}) {found}; mode {self.mode.name} packs it as "
+                                  f"{ours.datatype.name}: use the EDS exported by `joints sim eds` or another mode",
+                                  file=str(eds))
+
+    def feedback_tpdo(self) -> PdoConfig:
+        """The cyclic TPDO1: with the motor current if the cycle still fits the bus with it (every cyclic
+        joint of the bus, :meth:`SyncCycle.fits`), else eRunner's statusword + position (E12)."""
+        current = self.group.current
+        if current is not None:
+            return CYCLIC_TPDO1_CURRENT if current else ERUNNER_TPDOS[0]
+        rpdo = max((ERUNNER_RPDO1[d.mode].size for d in self.group.drivers
+                    if isinstance(d, ErobCanopenDriver) and d.mode.cyclic), default=6)
+        return CYCLIC_TPDO1_CURRENT if self.group.fits(rpdo, CYCLIC_TPDO1_CURRENT.size) else ERUNNER_TPDOS[0]
 
     # -- bring-up ---------------------------------------------------------------------------
     @property
@@ -348,7 +257,7 @@ class ErobCanopenDriver(ErobDriver):
                                 "interpolation_time_index": -4})
         self.mode = mode
         self._rpdo = ERUNNER_RPDO1[mode]
-        self._tpdos = (self.group.feedback_tpdo(),) if mode.cyclic else ERUNNER_TPDOS
+        self._tpdos = (self.feedback_tpdo(),) if mode.cyclic else ERUNNER_TPDOS
         known = _power_on_objects(node)
         self._pdo_writes((*self._tpdos, self._rpdo), known)
         self._subscribe()
@@ -463,6 +372,10 @@ class ErobCanopenDriver(ErobDriver):
         self._keepalive()
         if self.lost() is None:
             self._snapshot()
+            now = self.clock.now()
+            if now - self._temperature_time >= TEMPERATURE_PERIOD:
+                self._temperature_time = now
+                self.temperature = float(self.read("part_of_power_temperature"))
         return self._raw(self.clock.now())
 
     def observe(self) -> RawState:
@@ -471,7 +384,8 @@ class ErobCanopenDriver(ErobDriver):
         Works whatever mode and NMT state (PRE-OPERATIONAL or OPERATIONAL) the node is in; the
         host's own view (:attr:`statusword`, PDO values) is left untouched.
         """
-        v = self.access.read_many(("statusword", "actual_position", "current_speed", "motor_current"))
+        v = self.access.read_many(("statusword", "actual_position", "current_speed", "motor_current",
+                                   "part_of_power_temperature"))
         sw = v["statusword"]
         try:
             st = cia402.state_of(sw)
@@ -483,8 +397,8 @@ class ErobCanopenDriver(ErobDriver):
         enabled = st is State.OPERATION_ENABLED
         moving = enabled and (not cia402.target_reached(sw) or abs(v["current_speed"]) > 200)
         return RawState(position=v["actual_position"], velocity=v["current_speed"], current=v["motor_current"],
-                        temperature=math.nan, enabled=enabled, moving=moving, fault=fault, time=self.clock.now(),
-                        extra={"statusword": sw, "node": self.node})
+                        temperature=float(v["part_of_power_temperature"]), enabled=enabled, moving=moving,
+                        fault=fault, time=self.clock.now(), extra={"statusword": sw, "node": self.node})
 
     def cycle_state(self) -> RawState:
         return self._raw(self.status_time)
@@ -511,7 +425,7 @@ class ErobCanopenDriver(ErobDriver):
             moving = enabled and abs(self.velocity) > 200
         return RawState(position=self.position, velocity=self.velocity,
                         current=self.current if self.reports_current else math.nan,
-                        temperature=math.nan, enabled=enabled, moving=moving, fault=fault, time=t,
+                        temperature=self.temperature, enabled=enabled, moving=moving, fault=fault, time=t,
                         extra={"statusword": sw, "mode": int(self.mode), "node": self.node})
 
     @property
@@ -563,7 +477,8 @@ class ErobCanopenDriver(ErobDriver):
     def _pause(self) -> None:
         """Wait a moment; the other nodes of the bus stay guarded meanwhile (their life guarding)."""
         for d in self.group.drivers:
-            d._keepalive()
+            if isinstance(d, ErobCanopenDriver):
+                d._keepalive()
         self.clock.sleep(POLL)
 
     def _hold_target(self) -> int:
@@ -764,14 +679,17 @@ class ErobCanopenDriver(ErobDriver):
 
     def apply_limits(self, *, position: tuple[int, int] | None = None, velocity: int | None = None,
                      current: int | None = None) -> None:
-        """0x607D software position limits, 0x6080 max motor speed, 0x6073 max current (volatile)."""
+        """0x607D software position limits, 0x6080 max motor speed (volatile). A current (torque) limit is
+        refused before anything is sent: ZeroErr's EDS has no max current object (0x6073, 0x6072)."""
+        if current is not None:
+            raise CommandError(f"{self.name}: a torque limit cannot be applied over CANopen (ZeroErr's EDS has no "
+                               "0x6072/0x6073); set max_motor_current over Modbus RTU or the CAN custom protocol, "
+                               "or drop limits.torque from this joint; nothing was sent")
         self._ensure()
         if position is not None:
             self._set_many({"min_position_limit_value": position[0], "max_position_limit_value": position[1]})
         if velocity is not None:
             self._set("max_speed", max(1, min(velocity, 0x7FFFFFFF)))
-        if current is not None:
-            self._set("max_motor_current", max(1, min(current, 0xFFFF)))
 
     def motion_targets(self) -> dict[str, tuple[str, float]]:
         rad = self.units.position
@@ -783,7 +701,7 @@ class ErobCanopenDriver(ErobDriver):
     def identity(self) -> dict[str, object]:
         """0x1018 identity and 0x1000 device type (and the supported modes 0x6502)."""
         out: dict[str, object] = {}
-        for key in ("device_type", "vendor_id", "product_code", "revision_number", "serial_number"):
+        for key in ("device_type", "vendor_id", "product_code", "revision_number"):
             out[key] = f"0x{self.read(key):08X}"
         bits = self.read("supported_drive_modes")
         out["modes"] = sorted(m.name.lower() for m in cia402.modes_from_bits(bits))
@@ -795,5 +713,6 @@ class ErobCanopenDriver(ErobDriver):
                            "not reach; use Modbus RTU; nothing was sent")
 
     def save_parameters(self, *, confirm: bool = False) -> None:
-        raise CommandError(f"{self.name}: saving (0x1010) is not in the eRob's CANopen map; save over Modbus RTU or "
+        raise CommandError(f"{self.name}: ZeroErr's EDS lists 0x1010 store parameters, but what an eRob saves "
+                           "through it is not documented (the twin only stores the value); save over Modbus RTU or "
                            "the CAN custom protocol; nothing was sent")

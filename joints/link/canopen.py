@@ -215,6 +215,8 @@ class CanopenLink(Link[Any]):
         self.sdo_transfers = 0
         #: the bus's SYNC period from its config (s; None: the joints' or the default 1 ms)
         self.sync_period: float | None = None
+        #: the bus's SYNC cycle, shared by its drivers (joints.drivers.canopen_sync.SyncCycle.of)
+        self.sync_cycle: object | None = None
         #: the bus's bit rate (bit/s; from its config) for bus-load decisions
         self.bitrate = 1_000_000
         self.subscribe(lambda m: isinstance(m, (co.Heartbeat, co.BootUp)), self._error_control)

@@ -243,8 +243,10 @@ class ErobFirmware(Firmware):
         inertia: float | None = None,
         multi_turn: bool = True,
         ambient: float = 30.0,
+        quirks: frozenset[str] = frozenset(),
     ) -> None:
         super().__init__(EROB_PARAMS, values=power_on_defaults(profile, address))
+        self.quirks = quirks  #: the firmware profile's quirks (joints.devices.quirks), read by the fronts
         self._bind_row([0.0] * K.WIDTH)
         self.profile = profile
         self.multi_turn = multi_turn
@@ -335,6 +337,7 @@ class ErobFirmware(Firmware):
     #: a set-point stream drives the position reference (CiA 402 CSP/IP over CANopen): between
     #: set-points the reference moves on at v_ref (linear interpolation); set by a protocol front
     streaming = _flag(K.STREAMING)
+    stream_goal = _column(K.STREAM_GOAL, "the newest streamed set-point [count]: the reference stops there")
     enabled_at = _column(K.ENABLED_AT)
     watchdog = _column(K.WATCHDOG, "s, 0 = off")
     kp = _column(K.KP)

@@ -24,7 +24,8 @@ real eRob, also listed in the README):
   STOPPED. NMT stop or a reset while the drive is enabled switches it off (brake holds).
 * SDO refusals: unknown index 0x06020000, unknown sub-index 0x06090011, read-only 0x06010002,
   length 0x06070010, value out of range 0x06090030/31/32, 0x6060 in OPERATION ENABLED 0x08000022
-  (E7), a mode not in 0x6502 0x06090030, PDO mapping changed while the PDO is valid 0x06010000,
+  (E7; taken with the firmware profile ``mode-change-while-enabled``), a mode not in 0x6502 0x06090030, 0x1005 with bit 30 (SYNC producer: no evidence that an
+  eRob produces SYNC) 0x06090030, PDO mapping changed while the PDO is valid 0x06010000,
   an object that cannot be mapped 0x06040041, more than 64 bits 0x06040042.
 * CiA 402: OPERATION ENABLED is reported at once; the holding brake releases in the firmware's
   500 ms and set-points written meanwhile act when it has (a PP set-point is acknowledged at once
@@ -37,8 +38,10 @@ real eRob, also listed in the README):
 * Modes: PP (new set-point bit 4 edge, acknowledge bit 12 while bit 4 is held, change set
   immediately bit 5; with bit 5 = 0 a new set-point waits until the running move ends; relative
   bit 6; target reached bit 10), PV (0x60FF with 0x6083/0x6084; bit 10 at speed, bit 12 speed 0),
-  PT (0x6071 per mille of rated torque), CSP (0x607A streamed; the reference moves linearly to
-  each set-point over one 0x1006 period), CSV (0x60FF with the profile ramps, as eRunner's CSV
+  PT (0x6071 per mille of rated torque), CSP (0x607A streamed: the reference moves linearly
+  towards each set-point over :meth:`CanopenFront.stream_period` - 0x60C2 where set, else the
+  mean SYNC interval over the last 8 SYNCs, else 0x1006, else 1 ms - and stops at it: never past
+  the newest set-point, so a SYNC interval other than 0x1006 neither overshoots nor faults), CSV (0x60FF with the profile ramps, as eRunner's CSV
   sets them), CST (0x6071), IP (0x60C1:01 streamed over the 0x60C2 period while bit 4 is set).
 * PDOs: synchronous TPDOs (types 1..240) sampled at SYNC, every n-th SYNC; event TPDOs (254/255)
   on change of their data (not faster than the inhibit time) and every event timer; synchronous
@@ -54,7 +57,6 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import can
@@ -65,7 +67,7 @@ from joints.devices.cia402 import Mode, State
 from joints.devices.erob.canopen import (
     EROB_CANOPEN,
     MODE_CHANGE_REFUSED,
-    OBJECT_NAMES,
+    QUICK_STOP_OPTION_CODE,
     SUPPORTED_MODES,
     CanopenObject,
     has_index,
@@ -75,10 +77,11 @@ from joints.devices.erob.canopen import (
 )
 from joints.devices.erob.params import EROB_PARAMS
 from joints.devices.erob.registers import AchieveStatus, MotionMode, OperationMode
+from joints.devices.quirks import EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED
 from joints.errors import CommandError, DeviceRejected, FrameError, ParameterRefused, Refusal, RegisterError
 from joints.transports.can_sim import CanMedium, ClockLike
 
-__all__ = ["LIFE_GUARD_ERROR", "CanopenFront", "ErobCanopenBus", "eds_text", "object_dictionary", "write_eds"]
+__all__ = ["LIFE_GUARD_ERROR", "CanopenFront", "ErobCanopenBus"]
 
 LIFE_GUARD_ERROR = 0x8130  #: EMCY / fault code of a life-guarding timeout (CiA 301)
 #: s from an NMT reset command to the node's boot-up: reset communication as eRunner's monitor shows
@@ -86,6 +89,7 @@ LIFE_GUARD_ERROR = 0x8130  #: EMCY / fault code of a life-guarding timeout (CiA 
 BOOT_TIME_COMMUNICATION = 0.001
 BOOT_TIME_NODE = 0.05
 PDO_LENGTH_ERROR = 0x8210  #: EMCY of an RPDO shorter than its mapping
+SYNC_WINDOW = 8  #: SYNCs over which the SYNC interval is measured
 _A = co.SdoAbortCode
 _POSITION, _SPEED, _TORQUE = int(OperationMode.POSITION), int(OperationMode.SPEED), int(OperationMode.TORQUE)
 #: CiA 402 mode -> the firmware's operation mode
@@ -192,6 +196,8 @@ class CanopenFront:
         self._pdos: dict[tuple[str, int], _Pdo] | None = None
         self._pdo_state: dict[tuple[str, int], _Pdo] = {}  #: timers and last data kept over a reconfiguration
         self.controlword_prev = 0
+        self.sync_times: list[float] = []  #: drive times of the last SYNCs
+        self.sync_interval: float | None = None  #: s between SYNCs, measured (the CSP/IP period)
         self._boot = True  #: the boot-up is due at the next tick
 
     def power_off(self) -> None:
@@ -259,6 +265,7 @@ class CanopenFront:
             reply = self.sdo.feed(frame)
             return [reply] if reply is not None else []
         if kind is co.Kind.SYNC:
+            self._sync_seen()
             return self._sync() if nmt is co.NmtState.OPERATIONAL else []
         if kind.is_pdo and nmt is co.NmtState.OPERATIONAL and not frame.is_remote_frame:
             self._rpdo(frame)
@@ -349,7 +356,8 @@ class CanopenFront:
         if index in _PDO_AREA:
             self._pdo_write(name, value)
         elif name == "modes_of_operation":
-            if not mode_change_allowed(self.state) or self.enabling:
+            taken = EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED in self.firmware.quirks
+            if not taken and (not mode_change_allowed(self.state) or self.enabling):
                 raise DeviceRejected("0x6060 in OPERATION ENABLED", code=MODE_CHANGE_REFUSED)
             try:
                 mode = Mode(value)
@@ -369,6 +377,8 @@ class CanopenFront:
             self._store(name, value)
             self._apply_target()
             return
+        if name == "cob_id_sync" and value & co.SYNC_PRODUCER:
+            raise DeviceRejected("0x1005 bit 30: the eRob does not produce SYNC", code=_A.INVALID_VALUE)
         self._store(name, value)
         if name == "producer_heartbeat_time":
             self.next_heartbeat = self.now + value * 1e-3 if value else math.inf
@@ -568,7 +578,8 @@ class CanopenFront:
                 bit12 = abs(v) < 100 if mode is Mode.PV else not self.enabling
             elif mode is Mode.IP:
                 bit12 = bool(self.controlword & cia402.CW_ENABLE_IP) and not self.enabling  # interpolating
-                reached = not fw.gen.active and abs(fw.v_ref) < 1
+                # at rest at the newest set-point (the reference stops at each set-point until the next)
+                reached = not fw.gen.active and abs(fw.v_ref) < 1 and abs(fw.read("current_speed")) < 100
             elif mode in (Mode.CSP, Mode.CST):
                 bit12 = not self.halted and not self.enabling  # following the target (brake released)
                 reached = True
@@ -585,7 +596,7 @@ class CanopenFront:
         self.controlword = cw
         fw = self.firmware
         state = self.state
-        qsoc = fw.values["quick_stop_option_code"]
+        qsoc = QUICK_STOP_OPTION_CODE
         if state is State.FAULT:
             if cia402.command_of(cw, prev) is cia402.Command.FAULT_RESET:
                 fw.write("clear_errors", 1)
@@ -671,21 +682,45 @@ class CanopenFront:
             lim = fw.params["target_current"].type_range
             fw.write("target_current", max(lim[0], min(lim[1], current)))
         elif mode is Mode.CSP and name in (None, "target_absolute_position"):
-            self._stream(v["target_absolute_position"], v["communication_cycle_period"] * 1e-6)
+            self._stream(v["target_absolute_position"], self.stream_period())
         elif mode is Mode.IP and name in (None, "interpolation_data_record_1") \
                 and self.controlword & cia402.CW_ENABLE_IP:
-            period = v["interpolation_time_period_value"] * 10.0 ** v["interpolation_time_index"]
-            self._stream(v["interpolation_data_record_1"], period)
+            self._stream(v["interpolation_data_record_1"], self.stream_period())
+
+    def stream_period(self) -> float:
+        """s over which a CSP/IP set-point is approached: 0x60C2 where set (value != 0), else the
+        measured SYNC interval, else 0x1006 where set, else 1 ms (see the module docstring)."""
+        v = self.firmware.values
+        if v["interpolation_time_period_value"]:
+            return float(v["interpolation_time_period_value"] * 10.0 ** v["interpolation_time_index"])
+        if self.sync_interval is not None:
+            return self.sync_interval
+        if v["communication_cycle_period"]:
+            return float(v["communication_cycle_period"] * 1e-6)
+        return 1e-3
+
+    def _sync_seen(self) -> None:
+        """The SYNC interval: the mean over the last :data:`SYNC_WINDOW` SYNCs (the drive's clock
+        sees a SYNC at the end of a control substep; the mean is free of that quantisation)."""
+        t = float(self.firmware.time)
+        times = self.sync_times
+        if times and t < times[-1]:
+            times.clear()  # the world was reset
+        times.append(t)
+        del times[:-SYNC_WINDOW]
+        if len(times) >= 2 and times[-1] - times[0] > 1e-6:
+            self.sync_interval = (times[-1] - times[0]) / (len(times) - 1)
 
     def _stream(self, target: int, period: float) -> None:
-        """CSP/IP: the position reference moves from where it is to ``target`` over one period."""
+        """CSP/IP: the position reference moves from where it is towards ``target`` over ``period``
+        and stops there (never past the newest set-point)."""
         fw = self.firmware
         goal = float(fw._clamp_target(target - fw.offset))  # the firmware's own software-limit clamp
-        period = period if period > 0 else 1e-3
         if not fw.streaming:
             fw.streaming = True
             fw.p_ref = fw.pos
-        fw.v_ref = (goal - fw.p_ref) / period
+        fw.stream_goal = goal
+        fw.v_ref = (goal - fw.p_ref) / max(period, 1e-4)
 
     # -- time ---------------------------------------------------------------------------------
     def tick(self, t: float) -> list[can.Message]:
@@ -708,7 +743,7 @@ class CanopenFront:
         if fw.fault and state is not State.FAULT:
             self._fault(fw.fault)
         elif state is State.QUICK_STOP_ACTIVE and abs(fw.v_ref) < 1 and not fw.gen.active:
-            self.state = cia402.settle(state, quick_stop_option_code=fw.values["quick_stop_option_code"])
+            self.state = cia402.settle(state, quick_stop_option_code=QUICK_STOP_OPTION_CODE)
             if self.state is not State.QUICK_STOP_ACTIVE:
                 self._switch_off()
         elif (state is State.OPERATION_ENABLED and self.pp_pending is not None and not fw.gen.active
@@ -829,65 +864,3 @@ class ErobCanopenBus:
             frames = f.tick(t)
             for frame in frames:
                 self.medium.send_at(self._node, frame, t)
-
-
-# --- the object dictionary as an EDS (through the canopen package) ----------------------------
-
-
-def object_dictionary(node: int = 1) -> Any:
-    """The eRob object dictionary as a ``canopen.ObjectDictionary`` (defaults of node ``node``)."""
-    import canopen
-    from canopen.objectdictionary import ODRecord, ODVariable
-
-    od = canopen.ObjectDictionary()  # type: ignore[no-untyped-call]
-    od.node_id = node
-    info: Any = od.device_information
-    info.vendor_name = "ZeroErr"
-    info.product_name = "eRob (joints twin)"
-    info.nr_of_RXPDO = 4
-    info.nr_of_TXPDO = 4
-    info.allowed_baudrates = {1000_000}
-    records: dict[int, Any] = {}
-    for name, obj in objects():
-        var = ODVariable(obj.name, obj.index, obj.subindex)
-        var.data_type = int(obj.datatype)
-        var.access_type = obj.access.value
-        var.pdo_mappable = obj.pdo_mappable
-        default = EROB_PARAMS[name].default
-        if obj.scale != 1.0:
-            default = round(default / obj.scale)
-        var.default = default + node if obj.node_relative else default
-        if obj.node_relative:  # a COB-ID: written as $NODEID+base, as CiA 306 allows
-            var.relative = True
-            setattr(var, "default_raw", f"$NODEID+0x{default:X}")  # noqa: B010 - what the EDS writer reads
-        var.value = var.default
-        p = EROB_PARAMS[name]
-        if p.unit and not obj.unit:
-            var.unit = p.unit
-        if obj.index in OBJECT_NAMES:
-            rec = records.get(obj.index)
-            if rec is None:
-                rec = records[obj.index] = ODRecord(OBJECT_NAMES[obj.index], obj.index)
-                od.add_object(rec)
-            rec.add_member(var)
-        else:
-            od.add_object(var)
-    return od
-
-
-def eds_text(node: int = 1) -> str:
-    """The EDS of the eRob object dictionary (CiA 306), as the ``canopen`` package writes it."""
-    import io
-
-    from canopen.objectdictionary import eds
-
-    buf = io.StringIO()
-    eds.export_eds(object_dictionary(node), buf)  # type: ignore[no-untyped-call]
-    return buf.getvalue()
-
-
-def write_eds(path: str | Path, node: int = 1) -> Path:
-    """Write the EDS to ``path`` (``joints sim eds``)."""
-    p = Path(path)
-    p.write_text(eds_text(node), encoding="utf-8")
-    return p

@@ -104,6 +104,7 @@ BRAKE_RELEASED = _column("brake_released")
 LAST_FRAME = _column("last_frame")
 STARTED = _column("started")
 STREAMING = _column("streaming")  #: set-points stream in (CANopen CSP/IP): p_ref moves on at v_ref between them
+STREAM_GOAL = _column("stream_goal")  #: the newest streamed set-point (counts): p_ref stops there, never past it
 SUP = _column("sup")  #: drive time since the last slow task
 STATE = _column("state")  #: code of :data:`STATES`
 ENABLED_AT = _column("enabled_at")
@@ -420,8 +421,15 @@ def _next_repetitive_leg(s: Row) -> None:
 @jitable
 def _profile_step(s: Row, dt: float) -> None:
     if s[G_ACTIVE] == 0.0:
-        if s[STREAMING] != 0.0:
-            s[P_REF] += s[V_REF] * dt  # between two streamed set-points
+        if s[STREAMING] != 0.0:  # between two streamed set-points, up to the newest and no further
+            step = s[V_REF] * dt
+            rest = s[STREAM_GOAL] - s[P_REF]
+            if rest == 0.0:
+                s[V_REF] = 0.0  # at the newest set-point since the last substep: hold there
+            elif (step > 0.0 and step >= rest) or (step < 0.0 and step <= rest):
+                s[P_REF] = s[STREAM_GOAL]  # arrives (the speed stands until the next substep)
+            else:
+                s[P_REF] += step
             return
         if s[DWELL_UNTIL] >= 0 and s[TIME] >= s[DWELL_UNTIL]:
             s[DWELL_UNTIL] = -1.0

@@ -83,7 +83,9 @@ def test_scan_finds_the_can_nodes_with_what_they_report(served: Any, capsys: pyt
     custom, canopen = found[("can", 6)], found[("co", 7)]
     assert custom["device"] == "erob" and custom["model"].startswith("eRob") and custom["serial"] and custom["firmware"]
     # CANopen's own scan finds any node: its make is not on the bus (device null), its identity is
-    assert canopen["device"] is None and canopen["serial"].startswith("0x") and canopen["model"] is None
+    # ZeroErr's EDS: 0x1018:00 = 3, no serial number object; the identity is vendor, product and revision
+    assert canopen["device"] is None and canopen["serial"] is None and canopen["model"] is None
+    assert canopen["details"]["vendor_id"] == "0x5A65726F" and canopen["details"]["product_code"] == "0x26483052"
     assert canopen["details"]["profile"] == 402 and "pp" in canopen["details"]["modes"]
 
 

@@ -221,14 +221,14 @@ def test_their_view_of_the_power_on_mapping_is_ours(kind: str, number: int) -> N
 
 def test_their_pdo_packing_is_ours() -> None:
     node, _od = remote_erob()
-    rpdo = node.rpdo[3]  # controlword + target position
+    rpdo = node.rpdo[2]  # controlword + target position (ZeroErr's EDS)
     for cw, target in ((0x1F, 0), (0x2F, 0x0021F368), (0x06, -123456)):
         rpdo[0x6040].raw = cw
         rpdo[0x607A].raw = target
-        entries = power_on_pdo("RPDO", 3).entries
+        entries = power_on_pdo("RPDO", 2).entries
         assert bytes(rpdo.data) == co.pack_pdo(entries, [cw, target])
-    tpdo = node.tpdo[4]  # statusword + velocity actual value
-    data = co.pack_pdo(power_on_pdo("TPDO", 4).entries, [0x1637, -5566])
+    tpdo = node.tpdo[3]  # statusword + velocity actual value
+    data = co.pack_pdo(power_on_pdo("TPDO", 3).entries, [0x1637, -5566])
     tpdo.on_message(tpdo.cob_id, bytearray(data), 0.0)
     assert (tpdo[0x6041].raw, tpdo[0x606C].raw) == (0x1637, -5566)
 
@@ -244,7 +244,8 @@ def test_their_pdo_configuration_writes_are_ours() -> None:
     rpdo.enabled = True
     rpdo.save()
     theirs = [(i, s, int.from_bytes(d, "little")) for i, s, d in od.writes]
-    ours = co.pdo_configuration_writes(co.Kind.RPDO1, co.PdoComm(0x200 + NODE, 255, None, 0),
+    # ZeroErr's EDS has an RPDO inhibit time (0x1400:03): canopen writes it
+    ours = co.pdo_configuration_writes(co.Kind.RPDO1, co.PdoComm(0x200 + NODE, 255, 0, 0),
                                        ERUNNER_RPDO1[Mode.PP].entries)
     assert theirs == [(i, s, v) for i, s, v, _size in ours]
     assert [len(d) for _i, _s, d in od.writes] == [size for *_x, size in ours]

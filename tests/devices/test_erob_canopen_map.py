@@ -38,7 +38,8 @@ SHARED = {
     "error_code", "given_position", "actual_position", "max_position_error", "position_reaches_set_precision",
     "time_setting_of_achieving_position", "given_speed", "current_speed", "motor_current", "bus_voltage",
     "target_absolute_position", "min_position_limit_value", "max_position_limit_value", "profile_speed",
-    "profile_acceleration", "profile_deceleration", "position_error", "target_speed", "max_speed", "max_motor_current",
+    "profile_acceleration", "profile_deceleration", "position_error", "target_speed", "max_speed",
+    "part_of_power_temperature",  # 0x22A2 drive temperature = Modbus 0x0078 (E11)
 }
 CANOPEN_ONLY = {p.name for p in OTHER_PROTOCOLS if re.match(r"0x[0-9A-F]{4}", p.description)}
 
@@ -57,7 +58,8 @@ def test_addresses_are_unique_and_every_name_is_a_parameter() -> None:
 def test_shared_names_are_the_modbus_quantities() -> None:
     shared = {n for n in EROB_CANOPEN if n in EROB_MODBUS}
     assert shared == SHARED
-    assert {n for n in EROB_CANOPEN if n not in EROB_MODBUS} == CANOPEN_ONLY
+    # the CAN custom protocol's analog input is ZeroErr's 0x2205
+    assert {n for n in EROB_CANOPEN if n not in EROB_MODBUS} == CANOPEN_ONLY | {"analog_input"}
     # the Modbus mode codes (1 torque, 2 speed, 3 position) are not CiA 402 codes: no shared name
     with pytest.raises(RegisterError, match="cannot be reached over canopen"):
         EROB_CANOPEN.key("operation_mode")
@@ -72,7 +74,7 @@ def test_object_matches_its_parameter(name: str) -> None:
     assert obj.size == TYPES[obj.datatype.param_type][2]
     lo, hi = TYPES[obj.datatype.param_type][:2]
     assert lo <= obj.default(1) and obj.default(127) <= hi  # the EDS default fits the type
-    if name in CANOPEN_ONLY:
+    if name in CANOPEN_ONLY and name != "analog_input":
         assert param.type == obj.datatype.param_type
         assert param.description.startswith(f"0x{obj.index:04X}")
         if obj.subindex or obj.index in OBJECT_NAMES:
@@ -81,7 +83,7 @@ def test_object_matches_its_parameter(name: str) -> None:
     else:  # a Modbus quantity: same unit unless the object says otherwise
         assert (obj.scale == 1.0) == (not obj.unit)
     if obj.pdo_mappable:
-        assert obj.bits <= 32 and obj.subindex == 0 or obj.index == 0x60C1
+        assert obj.bits <= 32
 
 
 def test_scale_of_the_position_window_time() -> None:
@@ -101,6 +103,8 @@ def test_records_have_their_subindex_zero() -> None:
             sub0 = EROB_PARAMS[name_at(index, 0)].default
             if 0x1600 <= index <= 0x17FF or 0x1A00 <= index <= 0x1BFF:
                 assert subs == list(range(9)) and sub0 <= 8  # mapping: sub 0 = number of mapped objects
+            elif index == 0x1003:
+                assert sub0 == 0 and subs[-1] == 4  # pre-defined error field: sub 0 = number of errors
             else:
                 assert sub0 == subs[-1], hex(index)  # highest sub-index supported
         else:
@@ -109,12 +113,14 @@ def test_records_have_their_subindex_zero() -> None:
 
 def test_cob_ids_are_node_relative() -> None:
     relative = {n for n, o in objects() if o.node_relative}
-    assert relative == {"cob_id_emcy"} | {f"{k}{i}_cob_id" for k in ("rpdo", "tpdo") for i in range(1, 5)}
+    sdo = {"server_sdo_parameter_cob_id_client_to_server_receive_sdo",
+           "server_sdo_parameter_cob_id_server_to_client_transmit_sdo"}
+    assert relative == {"cob_id_emcy"} | sdo | {f"{k}{i}_cob_id" for k in ("rpdo", "tpdo") for i in range(1, 5)}
     assert EROB_CANOPEN.key("rpdo1_cob_id").default(2) == 0x202
     assert EROB_CANOPEN.key("tpdo4_cob_id").default(2) == 0x80000482
     assert EROB_CANOPEN.key("cob_id_emcy").default(5) == 0x85
     assert EROB_CANOPEN.key("cob_id_sync").default(5) == 0x80
-    assert EROB_CANOPEN.key("rpdo2_cob_id").default(2) == 0x80000302  # not valid at power-on (E4)
+    assert EROB_CANOPEN.key("rpdo2_cob_id").default(2) == 0x80000302  # not valid at power-on (the EDS)
 
 
 def test_encode_decode_values() -> None:
@@ -129,8 +135,8 @@ def test_encode_decode_values() -> None:
     with pytest.raises(FrameError):
         EROB_CANOPEN.key("statusword").decode(b"\x37")
     with pytest.raises(RegisterError):
-        name_at(0x6099, 0)
-    assert eco.has_index(0x1600) and not eco.has_index(0x6099)
+        name_at(0x6073, 0)  # not in ZeroErr's EDS
+    assert eco.has_index(0x1600) and eco.has_index(0x6099) and not eco.has_index(0x6073)
 
 
 def test_objects_are_equal_by_address() -> None:
@@ -145,12 +151,14 @@ def test_objects_are_equal_by_address() -> None:
 
 @pytest.mark.parametrize("kind", ["RPDO", "TPDO"])
 @pytest.mark.parametrize("number", [1, 2, 3, 4])
-def test_power_on_mapping_is_the_cia402_predefined_one(kind: str, number: int) -> None:
+def test_power_on_mapping_is_zeroerrs(kind: str, number: int) -> None:
+    """ZeroErr's EDS: PDO1 control/statusword alone, PDO2 + position, PDO3 + velocity, PDO4 empty."""
     pdo = eco.power_on_pdo(kind, number)
     first = "controlword" if kind == "RPDO" else "statusword"
-    second = {"RPDO": (None, "modes_of_operation", "target_absolute_position", "target_speed"),
-              "TPDO": (None, "modes_of_operation_display", "actual_position", "current_speed")}[kind][number - 1]
-    assert pdo.objects == ((first,) if second is None else (first, second))
+    second = {"RPDO": (None, "target_absolute_position", "target_speed"),
+              "TPDO": (None, "actual_position", "current_speed")}[kind][number - 1] if number < 4 else None
+    expected = () if number == 4 else (first,) if second is None else (first, second)
+    assert pdo.objects == expected
     for name in pdo.objects:
         assert isinstance(name, str) and EROB_CANOPEN.key(name).pdo_mappable
     assert pdo.cob_id(3) == {"RPDO": 0x100, "TPDO": 0x80}[kind] + 0x100 * number + 3
@@ -233,7 +241,8 @@ def test_chapter5_units_and_defaults() -> None:
     assert "设置加速度为5566cnt/s" in CHAPTER5 and EROB_PARAMS["profile_acceleration"].unit == "count/s^2"
     assert "Set communication cycle period(µs)" in CHAPTER5
     assert EROB_PARAMS["communication_cycle_period"].unit == "us"
-    assert re.search(r"默认设置为1000 ?µ ?s", MANUAL) and EROB_PARAMS["communication_cycle_period"].default == 1000
+    # eRunner's connection setting is 1000 us (what eRunner writes); the power-on value is the EDS's 0
+    assert re.search(r"默认设置为1000 ?µ ?s", MANUAL) and EROB_PARAMS["communication_cycle_period"].default == 0
     assert "关闭同步发生器 Disable cob-id sync" in CHAPTER5 and EROB_PARAMS["cob_id_sync"].default == 0x80
     assert "电机电流" in CHAPTER5 and "mA" in CHAPTER5 and EROB_PARAMS["motor_current"].unit == "mA"
     assert "mN · m" in CHAPTER5 or "mN·m" in CHAPTER5  # E2: the torque panel's label

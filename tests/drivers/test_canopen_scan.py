@@ -57,8 +57,8 @@ def test_scan_finds_nodes_by_sdo_and_a_stopped_one_by_its_heartbeat(tmp_path: Pa
         rig.trace(None)
     assert sorted(found) == [3, 5]
     three, five = found[3], found[5]
-    assert three["device_type"] == "0x00020192" and three["profile"] == 402
-    assert three["vendor_id"] == "0x00000000" and "serial_number" in three
+    assert three["device_type"] == "0x00420192" and three["profile"] == 402  # ZeroErr's EDS
+    assert three["vendor_id"] == "0x5A65726F" and "serial_number" not in three  # 0x1018:00 = 3
     assert three["modes"] == ["csp", "cst", "csv", "ip", "pp", "pt", "pv"]
     assert three["state"] == "SWITCH ON DISABLED" and three["error_code"] == "0x0000"
     assert "device_name" not in three and "software_version" not in three  # refused (0x06020000): left out
@@ -95,5 +95,5 @@ def test_cli_scan_finds_the_nodes_of_a_served_config(tmp_path: Path, capsys: pyt
     assert rc == 0
     found = json.loads(capsys.readouterr().out)
     assert [f["address"] for f in found] == [3, 5]
-    assert all(f["details"]["device_type"] == "0x00020192" and f["details"]["state"] == "SWITCH ON DISABLED"
+    assert all(f["details"]["device_type"] == "0x00420192" and f["details"]["state"] == "SWITCH ON DISABLED"
                for f in found)

@@ -26,12 +26,16 @@ from joints.transports.can_timing import canopen_cycle_load
 
 
 def one_joint(protocol: str) -> dict[str, Any]:
+    # no torque limit over CANopen: ZeroErr's EDS has no max current object (the driver refuses it)
+    limits: dict[str, Any] = {"position": [-3.1, 3.1], "velocity": 2.0}
+    if protocol != "canopen":
+        limits["torque"] = 20.0
     return {
         "backend": "sim",
         "sim": {"model": "erob_stand.xml", "timestep": 0.001},
         "buses": {"bus": {"protocol": protocol}},
         "joints": {"joint1": {"device": "erob", "model": "eRob80H100", "bus": "bus", "address": 2,
-                              "limits": {"position": [-3.1, 3.1], "velocity": 2.0, "torque": 20.0}}},
+                              "limits": limits}},
     }
 
 

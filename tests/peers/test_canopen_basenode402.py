@@ -20,9 +20,9 @@ pytest.importorskip("mujoco")
 import can
 
 import simkit
+from joints.devices.erob.eds import eds_text
 from joints.devices.erob.profiles import profile
 from joints.sim.can_serve import client_bus
-from joints.sim.erob_canopen import write_eds
 from simkit import served_can
 
 SERVED = """
@@ -37,6 +37,12 @@ model = "eRob80H100"
 bus = "can"
 address = 2
 """
+
+
+def write_eds(path: Path, node: int) -> Path:
+    """The twin's EDS (joints.devices.erob.eds) as a file, for the canopen package."""
+    path.write_text(eds_text(node), encoding="utf-8")
+    return path
 
 
 def wait_until(cond: Callable[[], Any], timeout: float, what: str) -> None:

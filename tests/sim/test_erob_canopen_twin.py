@@ -3,15 +3,24 @@ refusal (0x08000022), PDOs on SYNC, the EDS the canopen package imports."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import can
 import pytest
 
 from joints.codecs import canopen as co
+from joints.devices.erob.eds import eds_text
 from joints.devices.erob.profiles import profile
 from joints.sim.erob import ErobFirmware
-from joints.sim.erob_canopen import CanopenFront, ErobCanopenBus, write_eds
+from joints.sim.erob_canopen import CanopenFront, ErobCanopenBus
 from joints.transports.can_sim import LockstepCanBus
 from testdata import records
+
+
+def write_eds(path: Path, node: int) -> Path:
+    """The twin's EDS (joints.devices.erob.eds) as a file, for the canopen package."""
+    path.write_text(eds_text(node), encoding="utf-8")
+    return path
 
 
 class Bench:

@@ -1,0 +1,127 @@
+"""The SYNC cycle of one CANopen bus: each cyclic node's RPDO, one SYNC, that cycle's TPDOs.
+
+Rule: one per bus, held by the bus's link (:attr:`joints.link.canopen.CanopenLink.sync_cycle`,
+:meth:`SyncCycle.of`), shared by the drivers of that bus; it knows nodes only through
+:class:`CyclicNode` (what a CANopen driver in a cyclic mode offers), not any device family.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, Protocol
+
+from joints.codecs import canopen as co
+from joints.drivers.base import RawState
+from joints.errors import DeviceFault, ReplyTimeout
+
+__all__ = ["NODE_LOST", "CyclicNode", "SyncCycle"]
+
+from joints.devices.faults import HOST_DEFINED
+
+#: host-defined fault: the node stopped answering (heartbeat or node guarding)
+NODE_LOST = HOST_DEFINED | 0x8130
+
+
+class CyclicNode(Protocol):
+    """A CANopen node driven by the SYNC cycle."""
+
+    name: str
+    node: int
+    tpdo1_cob: int
+    status_cycle: int
+
+    @property
+    def cyclic(self) -> bool: ...
+
+    def cycle_send(self, target: int) -> None: ...
+
+    def on_tpdo(self, msg: co.Pdo) -> None: ...
+
+    def lost(self) -> str | None: ...
+
+    def cycle_state(self) -> RawState: ...
+
+    def fault_text(self, code: int) -> str: ...
+
+
+class SyncCycle:
+    """The SYNC cycle of one CANopen bus: each cyclic joint's RPDO, one SYNC, that cycle's TPDO1s.
+
+    :meth:`send` waits until the cycle is due (on the rig's clock: lockstep in sim), sends the
+    set-points and the SYNC; :meth:`collect` returns as soon as every joint's TPDO1 of the cycle
+    is in, or at the end of the period: a TPDO that has not come by then is late (:attr:`late`
+    counts them) and the joint's last values stand.
+    """
+
+    def __init__(self, link: Any, period: float, *, current: bool | None = None) -> None:
+        self.link = link
+        self.period = period
+        #: the motor current in the cyclic TPDO1: None = where the bus has room, True/False = always/never
+        self.current = current
+        self.cycles = 0
+        self.late = 0  #: TPDOs that missed their cycle
+        self.next_due: float | None = None
+        self._grid = 0.0
+        self._n = 0
+        self.sync_time = 0.0
+        self.drivers: list[CyclicNode] = []
+        self._expect: list[CyclicNode] = []
+
+    @classmethod
+    def of(cls, link: Any, period: float) -> SyncCycle:
+        """The SYNC cycle of ``link``'s bus: the one the link holds, else a new one it then holds."""
+        cycle = link.sync_cycle
+        if cycle is None:
+            cycle = link.sync_cycle = cls(link, period)
+        assert isinstance(cycle, SyncCycle)
+        return cycle
+
+    def fits(self, rpdo_bytes: int, tpdo_bytes: int) -> bool:
+        """Whether every cyclic joint of the bus, each with one RPDO and one TPDO of these sizes, fits
+        the SYNC period (worst-case bit stuffing: :meth:`~joints.link.canopen.CanopenLink.cycle_load`)."""
+        cyclic = [d for d in self.drivers if d.cyclic]
+        load = self.link.cycle_load([d.node for d in cyclic] or [1], rpdo_bytes=(rpdo_bytes,),
+                                    tpdo_bytes=(tpdo_bytes,), period=self.period)
+        return bool(load.fits)
+
+    def send(self, targets: Mapping[CyclicNode, int]) -> None:
+        link = self.link
+        now = link.bus_now()
+        eps = 1e-9
+        if self.next_due is None or now > self.next_due + self.period + eps:
+            self._grid, self._n = now, 0  # first cycle, or the caller fell behind: restart the grid
+        elif now < self.next_due - eps:
+            link.wait_bus(self.next_due)  # TPDOs of earlier cycles still arriving are delivered as such
+        self._n += 1
+        due = self._grid + self._n * self.period  # on a grid: no drift
+        link.poll(0.0)
+        for driver, target in targets.items():
+            driver.cycle_send(target)
+        link.sync()
+        self.sync_time = link.bus_now()
+        self.cycles += 1
+        self.next_due = due
+        self._expect = list(targets)
+
+    def collect(self) -> dict[CyclicNode, RawState]:
+        link = self.link
+        cycle = self.cycles
+        waiting = {d.tpdo1_cob: d for d in self._expect if d.status_cycle < cycle}
+        deadline = self.next_due if self.next_due is not None else link.bus_now()
+        while waiting:
+            left = deadline - link.bus_now()
+            if left <= 1e-9:
+                break
+            try:
+                msg = link.wait_for(lambda m: isinstance(m, co.Pdo) and m.cob_id in waiting, left)
+            except ReplyTimeout:
+                break
+            waiting.pop(msg.cob_id).on_tpdo(msg)
+        self.late += len(waiting)
+        out: dict[CyclicNode, RawState] = {}
+        for d in self._expect:
+            lost = d.lost()
+            if lost is not None:
+                raise DeviceFault(d.name, NODE_LOST, lost, hint=d.fault_text(NODE_LOST), name="node_lost")
+            out[d] = d.cycle_state()
+        return out
