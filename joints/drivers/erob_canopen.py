@@ -35,11 +35,12 @@ communication watchdog of the joint is life guarding (0x100C guard time x 0x100D
 watchdog time; heartbeat off meanwhile, CiA 301): the host guards the node at every state read.
 Quick stop = controlword 0x0002; fault reset = rising bit 7; an EMCY is the drive's fault
 (code = the eRob error code, by name). Software position limits go to 0x607D and the speed limit
-to 0x6080 (volatile); a torque limit is refused (no max current object in ZeroErr's EDS).
+to 0x6080 (volatile); a torque limit stays host-side (no max current object in ZeroErr's EDS: a warning).
 """
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -104,6 +105,9 @@ def _power_on_objects(node: int) -> dict[tuple[int, int], int]:
             for n, o in EROB_CANOPEN.keys.items() if 0x1400 <= o.index < 0x1C00}
 
 
+log = logging.getLogger("joints.drivers")
+
+
 class ErobCanopenDriver(ErobDriver):
     """One eRob actuator on a CANopen bus (see the module docstring)."""
 
@@ -143,6 +147,7 @@ class ErobCanopenDriver(ErobDriver):
         self.tpdo1_cob = 0x180 + node
         self.tpdo2_cob = 0x280 + node
         self._up: Mode | None = None
+        self._torque_limit_warned = False
         self._cw = 0
         self._target = 0
         self._rpdo = ERUNNER_RPDO1[self.mode]
@@ -679,12 +684,15 @@ class ErobCanopenDriver(ErobDriver):
 
     def apply_limits(self, *, position: tuple[int, int] | None = None, velocity: int | None = None,
                      current: int | None = None) -> None:
-        """0x607D software position limits, 0x6080 max motor speed (volatile). A current (torque) limit is
-        refused before anything is sent: ZeroErr's EDS has no max current object (0x6073, 0x6072)."""
-        if current is not None:
-            raise CommandError(f"{self.name}: a torque limit cannot be applied over CANopen (ZeroErr's EDS has no "
-                               "0x6072/0x6073); set max_motor_current over Modbus RTU or the CAN custom protocol, "
-                               "or drop limits.torque from this joint; nothing was sent")
+        """0x607D software position limits, 0x6080 max motor speed (volatile). A current (torque) limit has
+        no object to go to (ZeroErr's EDS has no 0x6072/0x6073): it stays a host-side limit only (every
+        torque command is still checked against it before it is sent), and a warning says so once."""
+        if current is not None and not self._torque_limit_warned:
+            self._torque_limit_warned = True
+            log.warning("%s: limits.torque is enforced by the host only: over CANopen the eRob has no max torque "
+                        "or max current object (ZeroErr's EDS lacks 0x6072/0x6073), so the drive itself does not "
+                        "limit its current; set max_motor_current over Modbus RTU or the CAN custom protocol if "
+                        "the drive must enforce it", self.name)
         self._ensure()
         if position is not None:
             self._set_many({"min_position_limit_value": position[0], "max_position_limit_value": position[1]})

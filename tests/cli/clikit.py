@@ -54,8 +54,6 @@ timeout = 0.25
 """
 
 LIMITS = 'limits = { position = [-3.0, 3.0], velocity = 2.0, torque = 20.0 }\n'
-#: no torque limit over CANopen: ZeroErr's EDS has no max current object (the driver refuses one)
-CANOPEN_LIMITS = 'limits = { position = [-3.0, 3.0], velocity = 2.0 }\n'
 JOINTS = (
     '[joints.a]\ndevice = "erob"\nbus = "rs485"\naddress = 1\n' + LIMITS
     + '[joints.b]\ndevice = "erob"\nbus = "rs485"\naddress = 2\n' + LIMITS
@@ -64,7 +62,7 @@ JOINTS = (
     + '[joints.m]\ndevice = "mks-servo42d"\nbus = "rs485"\naddress = 4\n'
     + '[joints.n]\ndevice = "mks-servo57d"\nbus = "mks"\naddress = 5\n'
     + '[joints.c]\ndevice = "erob"\nbus = "can"\naddress = 6\n' + LIMITS
-    + '[joints.o]\ndevice = "erob"\nbus = "co"\naddress = 7\n' + CANOPEN_LIMITS
+    + '[joints.o]\ndevice = "erob"\nbus = "co"\naddress = 7\n' + LIMITS
 )
 #: joint -> (family, protocol) of the world above
 FAMILY_OF = {"a": ("erob", "modbus-rtu"), "b": ("erob", "modbus-rtu"), "l": ("zlac8015d", "modbus-rtu"),

@@ -26,10 +26,7 @@ from joints.transports.can_timing import canopen_cycle_load
 
 
 def one_joint(protocol: str) -> dict[str, Any]:
-    # no torque limit over CANopen: ZeroErr's EDS has no max current object (the driver refuses it)
-    limits: dict[str, Any] = {"position": [-3.1, 3.1], "velocity": 2.0}
-    if protocol != "canopen":
-        limits["torque"] = 20.0
+    limits: dict[str, Any] = {"position": [-3.1, 3.1], "velocity": 2.0, "torque": 20.0}
     return {
         "backend": "sim",
         "sim": {"model": "erob_stand.xml", "timestep": 0.001},
@@ -37,6 +34,23 @@ def one_joint(protocol: str) -> dict[str, Any]:
         "joints": {"joint1": {"device": "erob", "model": "eRob80H100", "bus": "bus", "address": 2,
                               "limits": limits}},
     }
+
+
+def test_a_torque_limit_over_canopen_is_host_side_with_a_warning(caplog: pytest.LogCaptureFixture) -> None:
+    """ZeroErr's EDS has no max torque/current object: the limit cannot go to the drive, so the host keeps
+    enforcing it on every torque command and says once that the drive does not."""
+    from joints.errors import LimitError
+
+    with caplog.at_level("WARNING", logger="joints.drivers"), joints.open(one_joint("canopen")) as rig:
+        j = rig.joints["joint1"]
+        j.enable()
+        j.disable()
+        j.enable()
+        warned = [r for r in caplog.records if "enforced by the host only" in r.getMessage()]
+        assert len(warned) == 1
+        with pytest.raises(LimitError):
+            j.set_torque(25.0)
+        j.set_torque(5.0)
 
 
 def script(rig: joints.Rig) -> float:
