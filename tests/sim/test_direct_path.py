@@ -110,7 +110,7 @@ def test_direct_path_times_out_on_missing_slave_after_the_time_the_byte_path_tak
     assert policy.late is None and policy.retries == 2
     waited = 3 * (policy.timeout + policy.timeout)  # per attempt: its timeout, then the late window
     assert took[True] == pytest.approx(took[False], abs=1e-9)
-    assert waited <= took[False] <= waited + 0.05, took  # + three requests' wire time
+    assert waited - 1e-9 <= took[False] <= waited + 0.05, took  # at most three requests' wire time more
 
 
 # -- replies the wire cannot carry -----------------------------------------------------------------
