@@ -454,14 +454,13 @@ class DirectFraming(Framing[M]):
 
     Rule: identical results to the byte path (the link still encodes every request, so an
     illegal one raises the same error before anything happens), with no bytes on the way. Each
-    reply passes ``as_received(request, reply)``, the codec's account of what the host receives
-    when the peer sends it: it raises the device encoder's error for a reply the byte path could
-    not send, and returns the host decoder's :class:`~joints.errors.FrameError` for one it would
-    refuse, so the direct path refuses what the byte path refuses.
+    reply passes ``as_received(request, reply)``, the protocol codec's account of what the host
+    receives when the peer sends it: it raises the device encoder's error for a reply the byte
+    path could not send and returns the host decoder's :class:`~joints.errors.FrameError` for one
+    it would refuse, so the direct path refuses what the byte path refuses.
     """
 
-    def __init__(self, peer: Any, transport: Any,
-                 as_received: Callable[[Any, M], M | FrameError | None] | None = None) -> None:
+    def __init__(self, peer: Any, transport: Any, as_received: Callable[[Any, M], M | FrameError | None]) -> None:
         self.peer = peer
         self.transport = transport
         self.as_received = as_received
@@ -478,9 +477,7 @@ class DirectFraming(Framing[M]):
 
     def _reply(self, message: Any) -> M | FrameError | None:
         reply: M | None = self.peer.exchange(message)
-        if reply is None or self.as_received is None:
-            return reply
-        return self.as_received(message, reply)
+        return None if reply is None else self.as_received(message, reply)
 
     def put(self, reply: M | FrameError | None) -> None:
         """Queue ``reply`` to be received (None: nothing)."""
