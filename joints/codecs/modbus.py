@@ -155,8 +155,8 @@ Message = Request | Reply | UnsupportedRequest
 
 
 def _u8(name: str, v: int) -> int:
-    if not 0 <= v <= 0xFF:
-        raise EncodeError(f"{name} must be 0..255, got {v}")
+    if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 0xFF:
+        raise EncodeError(f"{name} must be an integer 0..255, got {v!r}")
     return v
 
 
@@ -676,3 +676,61 @@ class ModbusRtuCodec:
                 f"{frame.hex(' ')}",
                 data=frame,
             )
+
+
+# --- the direct path --------------------------------------------------------------------------
+
+
+_INT = {int}
+
+
+def _plain_fields(slave: object, address: object, value: object) -> bool:
+    return (type(slave) is int and type(address) is int and type(value) is int and 0 <= slave <= 0xFF
+            and 0 <= address <= 0xFFFF and 0 <= value <= 0xFFFF)
+
+
+def _plain_reply(request: object, reply: object) -> bool:
+    """Whether ``reply`` crosses the wire unchanged and passes the host's checks against ``request``:
+    exactly a reply type with plain in-range ints, whose encoding the host decodes to an equal message."""
+    if type(reply) is ReadRegistersReply:
+        s, fc, values = reply.slave, reply.function, reply.values
+        if (type(s) is not int or type(fc) is not int or type(values) is not tuple or not 0 <= s <= 0xFF
+                or (fc != READ_HOLDING_REGISTERS and fc != READ_INPUT_REGISTERS) or not 1 <= len(values) <= MAX_READ):
+            return False
+        if (isinstance(request, (ReadHoldingRegisters, ReadInputRegisters)) and request.slave == s
+                and request.function == fc and request.count != len(values)):
+            return False  # the host's byte-count check refuses it
+        return set(map(type, values)) == _INT and 0 <= min(values) and max(values) <= 0xFFFF
+    if type(reply) is WriteSingleRegisterReply:
+        return _plain_fields(reply.slave, reply.address, reply.value)
+    if type(reply) is WriteMultipleRegistersReply:
+        return _plain_fields(reply.slave, reply.address, reply.count)
+    if type(reply) is ExceptionReply:
+        s, fc, code = reply.slave, reply.function, reply.code
+        return (type(s) is int and type(fc) is int and type(code) is int and 0 <= s <= 0xFF
+                and fc in _EXCEPTION_FCS and 0 <= code <= 0xFF)
+    return False
+
+
+def as_received(request: Request | UnsupportedRequest, reply: Reply) -> Reply | FrameError | None:
+    """``reply``, sent by a device to a host that sent ``request``, as the host receives it over RTU.
+
+    For the sim's direct path (message objects, no bytes), so that it refuses what the byte path
+    refuses: raises the :class:`~joints.errors.EncodeError` the device's :func:`encode` raises for
+    a reply it cannot put on the wire; returns the :class:`~joints.errors.FrameError` the host's
+    decoder makes of a frame it refuses (a byte count other than the request's, a function code
+    no reply has), ``None`` where the frame is garbage to the host, else the (first) decoded reply. A
+    plain, well-formed reply (the usual case) is returned as it is, without building its frame.
+    """
+    if _plain_reply(request, reply):
+        return reply
+    frame = encode(reply)  # the device's encoder: EncodeError
+    codec = ModbusRtuCodec(Role.HOST)
+    if isinstance(request, (ReadHoldingRegisters, ReadInputRegisters, WriteSingleRegister, WriteMultipleRegisters)):
+        codec.expect_reply_to(request)
+    codec.feed(frame)
+    codec.flush()  # the line goes silent after the reply
+    try:
+        return codec.next_message()  # type: ignore[return-value]
+    except FrameError as exc:
+        return exc

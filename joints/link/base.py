@@ -308,7 +308,8 @@ class Link(Generic[M]):
         rule.before_send(framing, request, frame)
         if direct is not None:  # the peer answers at once: a matching reply needs no waiting
             reply = direct.exchange(request)
-            if reply is not None and rule.expects_reply(request) and rule.is_reply(request, reply):
+            if (reply is not None and not isinstance(reply, FrameError) and rule.expects_reply(request)
+                    and rule.is_reply(request, reply)):
                 return reply
             direct.put(reply)  # what the byte path would receive next
         else:
@@ -452,23 +453,33 @@ class DirectFraming(Framing[M]):
     """The sim's direct path: request objects go to an in-process peer, replies come back as objects.
 
     Rule: identical results to the byte path (the link still encodes every request, so an
-    illegal one raises the same error before anything happens), with no bytes on the way.
+    illegal one raises the same error before anything happens), with no bytes on the way. Each
+    reply passes ``as_received(request, reply)``, the protocol codec's account of what the host
+    receives when the peer sends it: it raises the device encoder's error for a reply the byte
+    path could not send and returns the host decoder's :class:`~joints.errors.FrameError` for one
+    it would refuse, so the direct path refuses what the byte path refuses.
     """
 
-    def __init__(self, peer: Any, transport: Any) -> None:
+    def __init__(self, peer: Any, transport: Any, as_received: Callable[[Any, M], M | FrameError | None]) -> None:
         self.peer = peer
         self.transport = transport
-        self._queue: deque[M] = deque()
+        self.as_received = as_received
+        self._queue: deque[M | FrameError] = deque()
+        self.exchanges = 0  #: requests answered on the fast path (:meth:`exchange`: no frame built)
 
     def write(self, message: Any, frame: Any) -> None:
-        self.put(self.peer.exchange(message))
+        self.put(self._reply(message))
 
-    def exchange(self, message: Any) -> M | None:
-        """The peer's reply to ``message`` (None: it stays silent), not queued."""
+    def exchange(self, message: Any) -> M | FrameError | None:
+        """The peer's reply to ``message`` as the host receives it (None: silence), not queued."""
+        self.exchanges += 1
+        return self._reply(message)
+
+    def _reply(self, message: Any) -> M | FrameError | None:
         reply: M | None = self.peer.exchange(message)
-        return reply
+        return None if reply is None else self.as_received(message, reply)
 
-    def put(self, reply: M | None) -> None:
+    def put(self, reply: M | FrameError | None) -> None:
         """Queue ``reply`` to be received (None: nothing)."""
         if reply is not None:
             self._queue.append(reply)

@@ -153,7 +153,7 @@ class ModbusLink(Link[Any]):
 
         clock = clock or MonotonicClock()
         framing: Framing[Any] = (StreamFraming(transport, mb.ModbusRtuCodec(mb.Role.HOST), clock) if peer is None
-                                 else DirectFraming(peer, transport))
+                                 else DirectFraming(peer, transport, mb.as_received))
         super().__init__(framing, ModbusRule(echo=echo), policy=policy, clock=clock, trace=trace, name=name)
         self.echo = echo
 

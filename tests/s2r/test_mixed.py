@@ -4,7 +4,6 @@ simulated joints are dynamic; ``joints/ErobArmReach-v0`` runs on a rig whose bas
 
 from __future__ import annotations
 
-import copy
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -172,10 +171,3 @@ def test_erob_arm_reach_runs_on_a_mixed_rig(served_base: str) -> None:
         assert np.allclose(obs[:3], [0.6, -0.2, 0.7], atol=0.05)  # real and simulated joints got there
     finally:
         env.close()
-
-
-def test_copy_of_config_helper_is_independent() -> None:
-    a = mixed()
-    b = copy.deepcopy(a)
-    b["joints"]["joint1"]["bus"] = "arm"
-    assert a["joints"]["joint1"]["bus"] == "base"
