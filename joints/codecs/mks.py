@@ -15,11 +15,16 @@ Frames (every multi-byte field big-endian; ``chk`` = sum of all previous bytes &
 Frame length = 4 + the data length, which the head, the role and the function code determine
 (the frame has no length field):
 
-* downlink (FA): 0 data bytes for 0x30-0x34, 0x39-0x3B, 0x3D-0x3F, 0x41, 0x91, 0x92, 0xF1, 0xF7;
-  1 for 0x80, 0x82, 0x84-0x8B, 0x8D-0x8F, 0x9B, 0x9E, 0xF3, 0xFF; 2 for 0x83, 0x8C; 3 for 0xF6;
-  4 for 0x9A; 5 for 0x90; 7 for 0x94, 0xF4, 0xF5, 0xFD, 0xFE (:data:`REQUEST_DATA_LENGTH`).
-* uplink (FB): 6 data bytes for 0x30 and 0x31, 2 for 0x32, 4 for 0x33 and 0x39, 1 (a status
+* downlink (FA): 0 data bytes for 0x30-0x34, 0x39-0x3B, 0x3D-0x3F, 0x40, 0x41, 0x91, 0x92, 0xF1,
+  0xF7; 1 for 0x80, 0x82, 0x84-0x8B, 0x8D-0x8F, 0x9B, 0x9E, 0xF3, 0xFF; 2 for 0x83, 0x8C; 3 for
+  0xF6; 4 for 0x98, 0x9A; 5 for 0x90; 7 for 0x94, 0xF4, 0xF5, 0xFD, 0xFE (:data:`REQUEST_DATA_LENGTH`).
+* uplink (FB): 6 data bytes for 0x30 and 0x31, 2 for 0x32, 4 for 0x33, 0x39 and 0x40, 1 (a status
   byte) for every other command (:data:`REPLY_DATA_LENGTH`).
+
+Commands of later firmware (manual V1.0.9; a drive before it does not answer them): 0x40 read
+version information (5.1.11; reply: calibration status in b7-b4 and hardware version in b3-b0 of
+byte 4, firmware version in bytes 5-7 - read as major, minor, patch, our reading), 0x98 heartbeat
+protection time (5.2.16; uint32 ms, 0 = off; answered by a set status).
 * long packet (FC): always 52 bytes: five 10-byte slots, each an ordinary command without head
   and checksum (address, code, data) padded with zeros; an all-zero slot is an unused slot (None).
 
@@ -499,6 +504,23 @@ class SetZeroMode:
 
 
 @dataclass(frozen=True, slots=True)
+class ReadVersion:
+    """0x40 read version information (V1.0.9) -> :class:`VersionReply`."""
+
+    address: int
+    function: ClassVar[int] = 0x40
+
+
+@dataclass(frozen=True, slots=True)
+class SetHeartbeat:
+    """0x98 heartbeat protection time [ms] (V1.0.9): no command for this long -> urgent stop; 0 = off."""
+
+    address: int
+    times: int
+    function: ClassVar[int] = 0x98
+
+
+@dataclass(frozen=True, slots=True)
 class SetLimitPortRemap:
     """0x9E remap the limit ports (left -> En, right -> Dir): 1 enable, 0 disable."""
 
@@ -638,6 +660,7 @@ Request = (
     | SetRespondActive | SetGroupAddress | SetModbusRtu | SetKeyLock | SetHomeParameters | GoHome | SetAxisZero
     | SetNoLimitHomeParameters | SetZeroMode | SetLimitPortRemap | QueryStatus | EnableMotor | EmergencyStop
     | RunSpeed | SaveCleanSpeedMode | RunRelativePulses | RunAbsolutePulses | RunRelativeAxis | RunAbsoluteAxis
+    | ReadVersion | SetHeartbeat
 )
 
 
@@ -799,6 +822,29 @@ class MotorStatusReply:
 
 
 @dataclass(frozen=True, slots=True)
+class VersionReply:
+    """0x40 (V1.0.9): the four data bytes as one big-endian ``version`` (uint32): b31-b28 calibration
+    status, b27-b24 hardware version (1 S42D_485, 2 S42D_CAN, 3 S57D_485, 4 S57D_CAN ...), b23-b0 the
+    firmware version, one byte each of major, minor, patch."""
+
+    address: int
+    version: int
+    function: ClassVar[int] = 0x40
+
+    @property
+    def calibrated(self) -> bool:
+        return bool(self.version >> 28)
+
+    @property
+    def hardware(self) -> int:
+        return (self.version >> 24) & 0x0F
+
+    @property
+    def firmware(self) -> tuple[int, int, int]:
+        return ((self.version >> 16) & 0xFF, (self.version >> 8) & 0xFF, self.version & 0xFF)
+
+
+@dataclass(frozen=True, slots=True)
 class SetReply:
     """Status reply (0 fail, 1 success) of a set command; ``function`` is the command's code."""
 
@@ -828,7 +874,7 @@ class RunReply:
 Reply = (
     EncoderCarryReply | EncoderAdditionReply | SpeedReply | PulsesReply | IoStatusReply | AngleErrorReply
     | EnPinReply | GoBackToZeroStatusReply | ProtectionStateReply | CalibrationReply | MotorStatusReply | SetReply
-    | RunReply
+    | RunReply | VersionReply
 )
 Message = Request | UnknownRequest | LongPacket | Reply
 
@@ -1036,6 +1082,8 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _struct(RunAbsolutePulses, "HBi", ("speed", "acc", "abs_pulses")),
     _struct(RunRelativeAxis, "HBi", ("speed", "acc", "rel_axis")),
     _struct(RunAbsoluteAxis, "HBi", ("speed", "acc", "abs_axis")),
+    _struct(ReadVersion),
+    _struct(SetHeartbeat, "I", ("times",)),
 )
 
 _REQUESTS: dict[int, _Spec] = {s.cls.function: s for s in _REQUEST_SPECS}  # type: ignore[attr-defined]
@@ -1044,7 +1092,7 @@ _REQUEST_BY_TYPE: dict[type, _Spec] = {s.cls: s for s in _REQUEST_SPECS}
 #: function codes answered by :class:`RunReply` and by :class:`SetReply`
 RUN_REPLY_FUNCTIONS = frozenset((0x91, 0xF4, 0xF5, 0xF6, 0xFD, 0xFE, 0xFF))
 SET_REPLY_FUNCTIONS = frozenset((0x3D, 0x3F, 0x41, 0x82, 0x83, 0x84, 0x85, 0x86, 0x87, 0x88, 0x89, 0x8A, 0x8B,
-                                 0x8C, 0x8D, 0x8E, 0x8F, 0x90, 0x92, 0x94, 0x9A, 0x9B, 0x9E, 0xF3, 0xF7))
+                                 0x8C, 0x8D, 0x8E, 0x8F, 0x90, 0x92, 0x94, 0x98, 0x9A, 0x9B, 0x9E, 0xF3, 0xF7))
 
 _RUN_REPLY = _coded_spec(RunReply, RunStatus)
 _SET_REPLY = _coded_spec(SetReply, SetStatus)
@@ -1060,6 +1108,7 @@ _FIXED_REPLY_SPECS: tuple[_Spec, ...] = (
     _flag_spec(ProtectionStateReply, "protected"),
     _status_spec(CalibrationReply, "status", CalibrationStatus),
     _status_spec(MotorStatusReply, "status", MotorStatus),
+    _struct(VersionReply, "I", ("version",)),
 )
 _REPLIES: dict[int, _Spec] = {s.cls.function: s for s in _FIXED_REPLY_SPECS}  # type: ignore[attr-defined]
 _REPLIES.update({f: _RUN_REPLY for f in RUN_REPLY_FUNCTIONS})

@@ -15,6 +15,19 @@ asynchronous control" - the chapter-4 table says 0 = synchronous, 1 = asynchrono
 the manual's section 3.2 examples were captured on (and the widely used community drivers) takes
 0 = asynchronous, 1 = synchronous. With the quirk the driver writes 1 for synchronous control and
 the twin starts both wheels on START_SYNC only when 0x200F = 1; without it both follow the table.
+
+Firmware features
+
+A newer firmware may also *add* commands: a :class:`FirmwareProfile` lists them in ``features``
+(names below), the driver uses them only where the profile has them and the twin answers them only
+then (an older twin ignores the native command / answers Modbus exception 02, as a drive without
+it would). MKS SERVO42D/57D (manuals V1.0.5 May 2024, V1.0.6 Sep 2024, V1.0.9 Nov 2025, see
+docs/mks-firmware.md):
+
+``mks-failure-replies`` (V1.0.6+): a Modbus write the drive cannot carry out is answered by FC06
+with register data 0xFFFF / FC16 with register quantity 0 (before: the twin's exception 04).
+``mks-version`` (V1.0.9): 0x40 reads calibration state, hardware and firmware version.
+``mks-heartbeat`` (V1.0.9): 0x98 heartbeat protection time - the communication watchdog.
 """
 
 from __future__ import annotations
@@ -25,8 +38,8 @@ from types import MappingProxyType
 
 from joints.errors import ConfigError
 
-__all__ = ["DEFAULT_FIRMWARE", "FIRMWARES", "QUIRKS", "ZLAC_SYNC_FLAG_AS_EXAMPLES", "FirmwareProfile", "Quirk",
-           "firmware_profile"]
+__all__ = ["DEFAULT_FIRMWARE", "FIRMWARES", "MKS_FAILURE_REPLIES", "MKS_FIRMWARES", "MKS_HEARTBEAT", "MKS_VERSION",
+           "QUIRKS", "ZLAC_SYNC_FLAG_AS_EXAMPLES", "FirmwareProfile", "Quirk", "firmware_profile"]
 
 
 @dataclass(frozen=True)
@@ -48,9 +61,26 @@ class FirmwareProfile:
     firmware: str  #: the config's ``firmware`` value
     quirks: frozenset[str]
     description: str
+    features: frozenset[str] = frozenset()  #: commands this firmware adds over its family's oldest profile
+    version: tuple[int, ...] = ()  #: the version the drive reports for it (MKS 0x40: major, minor, patch)
 
 
 ZLAC_SYNC_FLAG_AS_EXAMPLES = "zlac-sync-flag-as-examples"
+MKS_FAILURE_REPLIES = "mks-failure-replies"
+MKS_VERSION = "mks-version"
+MKS_HEARTBEAT = "mks-heartbeat"
+#: the MKS firmware profiles, oldest first (the last is the default)
+MKS_FIRMWARES = ("v1.0.5", "v1.0.6", "v1.0.9")
+_MKS_FEATURES = {
+    "v1.0.5": frozenset(),
+    "v1.0.6": frozenset({MKS_FAILURE_REPLIES}),
+    "v1.0.9": frozenset({MKS_FAILURE_REPLIES, MKS_VERSION, MKS_HEARTBEAT}),
+}
+_MKS_TEXT = {
+    "v1.0.5": "manual V1.0.5 (May 2024): no heartbeat, no version command; Modbus write failures undocumented",
+    "v1.0.6": "manual V1.0.6 (Sep 2024): Modbus write failures answered by FC06 data 0xFFFF / FC16 quantity 0",
+    "v1.0.9": "manual V1.0.9 (Nov 2025): + 0x40 version, 0x98 heartbeat protection (the communication watchdog)",
+}
 
 QUIRKS: Mapping[str, Quirk] = MappingProxyType({q.name: q for q in (
     Quirk(ZLAC_SYNC_FLAG_AS_EXAMPLES, "zlac8015d", "DOC-ZLAC-1",
@@ -64,10 +94,12 @@ FIRMWARES: Mapping[tuple[str, str], FirmwareProfile] = MappingProxyType({(p.fami
     FirmwareProfile("zlac8015d", "register-table", frozenset(),
                     "a firmware that follows the chapter-4 register table for 0x200F (choose it if wheels "
                     "started with Start(Synchronous) stay still with the default)"),
+    *(FirmwareProfile("mks", fw, frozenset(), _MKS_TEXT[fw], _MKS_FEATURES[fw],
+                      tuple(int(x) for x in fw[1:].split("."))) for fw in MKS_FIRMWARES),
 )})
 
 #: family -> the firmware a joint has when its config names none
-DEFAULT_FIRMWARE: Mapping[str, str] = MappingProxyType({"zlac8015d": "examples"})
+DEFAULT_FIRMWARE: Mapping[str, str] = MappingProxyType({"zlac8015d": "examples", "mks": MKS_FIRMWARES[-1]})
 
 
 def firmware_profile(family: str, firmware: str | None = None) -> FirmwareProfile:

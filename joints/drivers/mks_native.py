@@ -31,12 +31,13 @@ from joints.devices.mks.native import MKS_NATIVE, fields_of
 from joints.devices.mks.params import model_params
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import ParamSet
-from joints.drivers.mks import RUN_GROUPS, MksAccess, MksDriver
+from joints.devices.quirks import FirmwareProfile
+from joints.drivers.mks import RUN_GROUPS, MksAccess, MksDriver, MksHeartbeat
 from joints.errors import CommandError, MotionTimeout, RegisterError
 from joints.link.base import Subscription
 from joints.link.mks import MksLink
 
-__all__ = ["MksNativeAccess", "MksNativeDriver", "long_packet"]
+__all__ = ["MksNativeAccess", "MksNativeDriver", "MksNativeHeartbeatDriver", "long_packet"]
 
 class MksNativeAccess(MksAccess):
     """One drive's parameters as native MKS commands (see the module docstring)."""
@@ -67,8 +68,16 @@ class MksNativeAccess(MksAccess):
     def _query(self, command: int) -> Any:
         return self.link.request(mks.REQUEST_TYPES[command](self.address), idempotent=True)
 
+    def read_version(self, *, retry: bool = True) -> int:
+        """0x40 (V1.0.9) version word; ``retry=False``: one attempt (a probe of a drive that may not answer)."""
+        reply = self.link.request(mks.ReadVersion(self.address), idempotent=retry)
+        if not isinstance(reply, mks.VersionReply):
+            raise CommandError(f"{self.params.device}@{self.address}: no version reply")
+        return int(reply.version)
+
     def read_many(self, names: Sequence[str]) -> dict[str, int]:
         """One query per command (0x30 gives carry and value together)."""
+        self.require(names)
         out: dict[str, int] = {}
         by_command: dict[int, list[str]] = {}
         for n in names:
@@ -100,6 +109,7 @@ class MksNativeAccess(MksAccess):
 
     def write_many(self, values: Mapping[str, int], *, idempotent: bool = True) -> None:
         """One frame per command; every field of it sent (the others from the image); all checked first."""
+        self.require(values)
         groups: dict[int, dict[str, int]] = {}
         for n, v in values.items():
             groups.setdefault(int(MKS_NATIVE.key(n).command), {})[n] = v
@@ -132,6 +142,7 @@ class MksNativeDriver(MksDriver):
         work_mode: int = st.WorkMode.SR_vFOC,
         microsteps: int = 16,
         active: bool = True,
+        firmware: FirmwareProfile | str | None = None,
     ) -> None:
         if not 1 <= address <= 255:
             raise CommandError(f"MKS slave address must be 1..255 (0 is broadcast), got {address}")
@@ -140,7 +151,7 @@ class MksNativeDriver(MksDriver):
         self.active = active  #: ask for completion frames (0x8C active = 1)
         super().__init__(MksNativeAccess(link, address, model_params(device)), device=device, profile=profile,
                          clock=clock or link.clock, name=name or f"{device}@{address}", work_mode=work_mode,
-                         microsteps=microsteps)
+                         microsteps=microsteps, firmware=firmware)
         #: the last completion frame of this drive (RunReply / CalibrationReply), None before any
         self.completion: Any = None
         self.completion_time = -math.inf
@@ -266,6 +277,10 @@ class MksNativeDriver(MksDriver):
         if self._sub is not None:
             self._sub.cancel()
             self._sub = None
+
+
+class MksNativeHeartbeatDriver(MksHeartbeat, MksNativeDriver):
+    """A native MKS axis whose firmware (V1.0.9) has the heartbeat protection: the watchdog capability."""
 
 
 _RUN_FUNCTION_MODES = {0xF6: "speed", 0xFD: "pulses", 0xFE: "abs_pulses", 0xF4: "rel_axis", 0xF5: "abs_axis"}

@@ -53,6 +53,15 @@ The model
       0x3F restores the factory defaults (the configured address and protocol included) and
       reboots, the encoder then needs calibrating (0x80) before motion; 0x41 reboots.
 
+Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; default the newest)
+    The twin has what its firmware has: :meth:`MksFirmware.supports` says whether a parameter of a
+    later firmware (:data:`~joints.devices.mks.params.FEATURE_OF`) exists; the fronts treat the
+    others as unknown commands. V1.0.9's 0x40 reports calibration, the hardware version (1
+    S42D_485, 3 S57D_485) and the profile's version. V1.0.9's heartbeat protection (0x98): while a
+    motion runs and no frame addressed to the drive arrived for the set time (0 = off), the drive
+    stops at once, as 0xF7 does (:attr:`MksFirmware.heartbeat_trips` counts it; the shaft stays
+    enabled and held). Like the other settings it is kept in flash (the manual does not say).
+
 Choices where the manual is silent (documented here, see also :mod:`joints.devices.mks.state`)
     * The drive is enabled at power-on (the Part 7 examples run without 0xF3); motion and 0xF3 enable
       need a serial work mode (0xF3 disable always works) and a calibrated encoder; a run command
@@ -77,8 +86,10 @@ from dataclasses import dataclass
 
 from joints.devices.mks import state as st
 from joints.devices.mks.native import Command
+from joints.devices.mks.params import FEATURE_OF
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import Access, ParamSet
+from joints.devices.quirks import FirmwareProfile, firmware_profile
 from joints.sim.firmware import Firmware
 
 __all__ = ["CALIBRATION_TIME", "FLASH_TIME", "SERVO_BANDWIDTH", "SPEED_MODE_LEAD", "ZERO_MODE_RPM", "Completion",
@@ -145,7 +156,10 @@ class MksFirmware(Firmware):
     zero_status: int
 
     def __init__(self, profile: MksProfile, params: ParamSet, address: int = 1, *, inertia: float | None = None,
-                 modbus: bool = False, values: Mapping[str, int] | None = None) -> None:
+                 modbus: bool = False, values: Mapping[str, int] | None = None,
+                 firmware: FirmwareProfile | str | None = None) -> None:
+        #: the firmware version this drive runs (its added commands; joints.devices.quirks)
+        self.firmware = firmware if isinstance(firmware, FirmwareProfile) else firmware_profile("mks", firmware)
         factory = {"working_current": round(profile.default_working_current * 1000),
                    "home_current": round(profile.default_home_current * 1000), "motor_enable": 1}
         super().__init__(params, values=factory)
@@ -176,7 +190,10 @@ class MksFirmware(Firmware):
             "go_back_to_zero_status": lambda: self.zero_status,
             "protection_state": lambda: int(self.protected),
             "motor_status": lambda: int(self.motor_status()),
+            "version_information": self.version_information,
         })
+        self.heartbeat_trips = 0  #: motions the heartbeat protection stopped
+        self._last_frame = 0.0  #: when the last frame addressed to this drive arrived
         self._handlers: dict[int, Callable[[Mapping[str, int], bool], int]] = {
             Command.RELEASE_PROTECTION_STATE: self._release,
             Command.RESTORE_DEFAULT_PARAMETERS: self._restore,
@@ -260,6 +277,21 @@ class MksFirmware(Firmware):
         self.end_stops = (low, high)
 
     # -- what the fronts call -----------------------------------------------------------------------
+    def supports(self, name: str) -> bool:
+        """Whether this firmware has parameter ``name`` (the later firmware's ones need their feature)."""
+        feature = FEATURE_OF.get(name)
+        return feature is None or feature in self.firmware.features
+
+    def frame_received(self) -> None:
+        """A frame for this drive arrived: the heartbeat protection's food."""
+        self._last_frame = self.time
+
+    def version_information(self) -> int:
+        """0x40: calibration (b31-b28), hardware version (b27-b24: 1 S42D_485, 3 S57D_485), firmware."""
+        hardware = 3 if self.profile.model == "SERVO57D" else 1
+        major, minor, patch = (tuple(self.firmware.version) + (0, 0, 0))[:3]
+        return (int(self.calibrated) << 28) | (hardware << 24) | (major << 16) | (minor << 8) | patch
+
     def on_write(self, name: str, value: int) -> None:
         if name in self._persistent:
             self.saved[name] = value  # the drive keeps its menu settings in flash
@@ -530,6 +562,11 @@ class MksFirmware(Firmware):
             self.calibrated = True
             self._hold()
             self._complete(Command.CALIBRATE_ENCODER, int(st.CalibrationStatus.SUCCESS), self._calibrating_answered)
+        hb = self.values.get("heartbeat_protection_time", 0)
+        if hb and self.motion is not None and t - self._last_frame > hb * 1e-3:
+            self.heartbeat_trips += 1  # the host went silent: stop urgently (V1.0.9 5.2.16)
+            self._end(st.RunEvent.EMERGENCY_STOP)
+            self._hold()
         if not self.enabled or self.protected:
             self.r = q  # released: the reference follows the shaft (enable holds where it is)
             self.v_ref = 0.0

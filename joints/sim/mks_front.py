@@ -19,7 +19,8 @@ do (manual Part 4, 5.2 #13 and #16, 5.7):
   drive by broadcast, group or long packet sends no completion either ("slave does not answer").
 
 A value the firmware refuses (unknown, out of range) is answered with status 0, as the drive's
-"set fail" / "run fail". Unknown function codes and corrupt frames get no answer.
+"set fail" / "run fail". Unknown function codes and corrupt frames get no answer - so do the
+commands of a later firmware than the twin's (0x40, 0x98 before V1.0.9).
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ _READS = frozenset(int(c) for c in (
     Command.READ_ENCODER_VALUE_CARRY, Command.READ_ENCODER_VALUE_ADDITION, Command.READ_REAL_TIME_SPEED,
     Command.READ_NUMBER_OF_PULSES, Command.READ_IO_PORTS_STATUS, Command.READ_ERROR_OF_ANGLE,
     Command.READ_EN_PINS_STATUS, Command.READ_GO_BACK_TO_ZERO_STATUS, Command.READ_PROTECTION_STATE,
-    Command.QUERY_MOTOR_STATUS))
+    Command.QUERY_MOTOR_STATUS, Command.READ_VERSION_INFORMATION))
 #: reply fields that are flags or enums on the message
 _FLAGS = frozenset(("enabled", "protected"))
 _ENUMS: dict[type, Callable[[int], Any]] = {mks.GoBackToZeroStatusReply: mks.GoBackToZeroStatus,
@@ -76,6 +77,8 @@ class MksNativeFront:
             return None
         code = request.function
         names = fields_of(code)
+        if not all(fw.supports(n) for n in names):
+            return None  # a command of a later firmware: unknown to this one
         if code in _READS:
             values = fw.read_many(names)
             cls = mks.REPLY_TYPES[code]

@@ -46,6 +46,8 @@ class Drive:
         return out
 
     def answer(self, msg: Any) -> bytes:
+        if isinstance(msg, mks.ReadVersion):  # a V1.0.9 drive, calibrated, S42D_485
+            return mks.encode(mks.VersionReply(msg.address, 0x11_01_00_09))
         if isinstance(msg, mks.QueryStatus):
             return mks.encode(mks.MotorStatusReply(msg.address, self.status))
         if isinstance(msg, mks.ReadEncoderAddition):
@@ -126,7 +128,7 @@ def test_multi_field_commands_send_all_their_fields() -> None:
 def test_enable_sets_serial_mode_subdivision_respond_active_once() -> None:
     driver, drive = native()
     driver.enable()
-    assert drive.requests == [mks.SetWorkMode(ADDRESS, 5), mks.SetSubdivision(ADDRESS, 16),
+    assert drive.requests == [mks.ReadVersion(ADDRESS), mks.SetWorkMode(ADDRESS, 5), mks.SetSubdivision(ADDRESS, 16),
                               mks.SetRespondActive(ADDRESS, 1, 1), mks.EnableMotor(ADDRESS, 1)]
     driver.disable()
     driver.enable()

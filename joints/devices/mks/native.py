@@ -47,6 +47,7 @@ class Command(enum.IntEnum):
     RELEASE_PROTECTION_STATE = 0x3D
     READ_PROTECTION_STATE = 0x3E
     RESTORE_DEFAULT_PARAMETERS = 0x3F
+    READ_VERSION_INFORMATION = 0x40
     RESTART_MOTOR = 0x41
     CALIBRATE_ENCODER = 0x80
     SET_WORK_MODE = 0x82
@@ -67,6 +68,7 @@ class Command(enum.IntEnum):
     GO_HOME = 0x91
     SET_CURRENT_AXIS_TO_ZERO = 0x92
     SET_NOLIMIT_HOME_PARAMETERS = 0x94
+    SET_HEARTBEAT_PROTECTION_TIME = 0x98
     SET_ZERO_MODE = 0x9A
     SET_HOLDING_CURRENT = 0x9B
     SET_LIMIT_PORT_REMAP = 0x9E
@@ -206,6 +208,8 @@ _KEYS: dict[str, NativeKey] = {
     "position_mode4_speed": NativeKey(C.POSITION_MODE4_ABSOLUTE_AXIS, "speed"),
     "position_mode4_acc": NativeKey(C.POSITION_MODE4_ABSOLUTE_AXIS, "acc"),
     "position_mode4_abs_axis": NativeKey(C.POSITION_MODE4_ABSOLUTE_AXIS, "abs_axis"),
+    "version_information": NativeKey(C.READ_VERSION_INFORMATION, "version"),
+    "heartbeat_protection_time": NativeKey(C.SET_HEARTBEAT_PROTECTION_TIME, "times"),
 }
 del C
 
