@@ -193,6 +193,7 @@ class MksFirmware(Firmware):
             "version_information": self.version_information,
         })
         self.heartbeat_trips = 0  #: motions the heartbeat protection stopped
+        self.heartbeat_tripped_at = -1.0  #: when it last did [s]
         self._last_frame = 0.0  #: when the last frame addressed to this drive arrived
         self._handlers: dict[int, Callable[[Mapping[str, int], bool], int]] = {
             Command.RELEASE_PROTECTION_STATE: self._release,
@@ -565,6 +566,7 @@ class MksFirmware(Firmware):
         hb = self.values.get("heartbeat_protection_time", 0)
         if hb and self.motion is not None and t - self._last_frame > hb * 1e-3:
             self.heartbeat_trips += 1  # the host went silent: stop urgently (V1.0.9 5.2.16)
+            self.heartbeat_tripped_at = t
             self._end(st.RunEvent.EMERGENCY_STOP)
             self._hold()
         if not self.enabled or self.protected:
