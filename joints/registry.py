@@ -402,8 +402,9 @@ def _zlac_modbus_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[
     elif drive.quirks != quirks:
         raise ConfigError("both channels of one drive run one firmware: give them the same firmware key",
                           key=f"joints.{cfg.name}.firmware")
+    lines = cfg.profile.get("encoder_lines")  # named by the config, else the drive's setting (read at connect)
     return ZlacChannelDriver(drive, cfg.channel or "", profile=FAMILIES["zlac8015d"].config_profile(cfg),
-                             name=cfg.name)
+                             name=cfg.name, encoder_lines=None if lines is None else int(lines))
 
 
 def _zlac_modbus_table() -> Any:
