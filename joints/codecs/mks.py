@@ -24,13 +24,16 @@ Frame length = 4 + the data length, which the head, the role and the function co
 Commands of later firmware (manual V1.0.9; a drive before it does not answer them): 0x40 read
 version information (5.1.11; reply: calibration status in b7-b4 and hardware version in b3-b0 of
 byte 4, firmware version in bytes 5-7 - read as major, minor, patch, our reading), 0x98 heartbeat
-protection time (5.2.16; uint32 ms, 0 = off; answered by a set status).
+protection time (5.2.16; uint32 ms, 0 = off; answered by a set status). Manual V1.0.6 added 0x46
+write all configuration parameters (34 data bytes; set status), 0x47 read all configuration
+parameters and 0x48 read all status parameters (replies of 34 and 28 data bytes): the codec keeps
+their data as bytes (``params``), :mod:`joints.devices.mks.blocks` names the fields.
 * long packet (FC): always 52 bytes: five 10-byte slots, each an ordinary command without head
   and checksum (address, code, data) padded with zeros; an all-zero slot is an unused slot (None).
 
 Unknown function codes
     Device role: an FA frame with a code the manual does not define is delimited by its checksum:
-    the shortest length from 4 to 11 bytes (the longest downlink frame) whose last byte is the
+    the shortest length from 4 to 11 bytes (the longest fixed command frame) whose last byte is the
     checksum of the bytes before it. It comes out as :class:`UnknownRequest` (a twin ignores it;
     the drive's firmware does not document an answer). With no match in 11 bytes, or at silence,
     the FA byte is garbage. Checksum-8 makes this a guess: 1 in 256 per candidate length matches
@@ -133,8 +136,10 @@ LONG_PACKET_SLOTS = 5
 LONG_PACKET_SLOT = 10
 LONG_PACKET_LENGTH = 1 + LONG_PACKET_SLOTS * LONG_PACKET_SLOT + 1  #: 52
 MIN_FRAME = 4  #: head, address, code, checksum
-MAX_DOWNLINK_FRAME = 11  #: 0x94, 0xF4, 0xF5, 0xFD, 0xFE
-MAX_UPLINK_FRAME = 10  #: 0x30, 0x31
+MAX_DOWNLINK_FRAME = 38  #: 0x46 (V1.0.6)
+MAX_UPLINK_FRAME = 38  #: 0x47 (V1.0.6)
+#: the longest frame an unknown code is searched for (the longest fixed command frame: 0x94, 0xF4, 0xF5, 0xFD, 0xFE)
+MAX_UNKNOWN_FRAME = 11
 SPEED_FIELD_MAX = 0x0FFF  #: 12-bit speed of 0xF6/0xFD
 ENCODER_COUNTS_PER_TURN = 0x4000  #: encoder value range of one turn (0x30, 0x31)
 ANGLE_ERROR_PER_TURN = 51200  #: 0x39: 0..51200 = 0..360 degrees
@@ -521,6 +526,31 @@ class SetHeartbeat:
 
 
 @dataclass(frozen=True, slots=True)
+class WriteAllParameters:
+    """0x46 write all configuration parameters (V1.0.6): the 34 bytes of 5.7.1 -> set status."""
+
+    address: int
+    params: bytes
+    function: ClassVar[int] = 0x46
+
+
+@dataclass(frozen=True, slots=True)
+class ReadAllParameters:
+    """0x47 read all configuration parameters (V1.0.6) -> :class:`AllParametersReply`."""
+
+    address: int
+    function: ClassVar[int] = 0x47
+
+
+@dataclass(frozen=True, slots=True)
+class ReadAllStatus:
+    """0x48 read all status parameters (V1.0.6) -> :class:`AllStatusReply`."""
+
+    address: int
+    function: ClassVar[int] = 0x48
+
+
+@dataclass(frozen=True, slots=True)
 class SetLimitPortRemap:
     """0x9E remap the limit ports (left -> En, right -> Dir): 1 enable, 0 disable."""
 
@@ -660,7 +690,7 @@ Request = (
     | SetRespondActive | SetGroupAddress | SetModbusRtu | SetKeyLock | SetHomeParameters | GoHome | SetAxisZero
     | SetNoLimitHomeParameters | SetZeroMode | SetLimitPortRemap | QueryStatus | EnableMotor | EmergencyStop
     | RunSpeed | SaveCleanSpeedMode | RunRelativePulses | RunAbsolutePulses | RunRelativeAxis | RunAbsoluteAxis
-    | ReadVersion | SetHeartbeat
+    | ReadVersion | SetHeartbeat | WriteAllParameters | ReadAllParameters | ReadAllStatus
 )
 
 
@@ -845,6 +875,24 @@ class VersionReply:
 
 
 @dataclass(frozen=True, slots=True)
+class AllParametersReply:
+    """0x47 (V1.0.6): the 34 configuration bytes (5.7.2; layout in joints.devices.mks.blocks)."""
+
+    address: int
+    params: bytes
+    function: ClassVar[int] = 0x47
+
+
+@dataclass(frozen=True, slots=True)
+class AllStatusReply:
+    """0x48 (V1.0.6): the 28 status bytes (5.7.3; layout in joints.devices.mks.blocks)."""
+
+    address: int
+    params: bytes
+    function: ClassVar[int] = 0x48
+
+
+@dataclass(frozen=True, slots=True)
 class SetReply:
     """Status reply (0 fail, 1 success) of a set command; ``function`` is the command's code."""
 
@@ -874,7 +922,7 @@ class RunReply:
 Reply = (
     EncoderCarryReply | EncoderAdditionReply | SpeedReply | PulsesReply | IoStatusReply | AngleErrorReply
     | EnPinReply | GoBackToZeroStatusReply | ProtectionStateReply | CalibrationReply | MotorStatusReply | SetReply
-    | RunReply | VersionReply
+    | RunReply | VersionReply | AllParametersReply | AllStatusReply
 )
 Message = Request | UnknownRequest | LongPacket | Reply
 
@@ -1038,6 +1086,25 @@ def _coded_spec(cls: type, enum_type: type[enum.IntEnum]) -> _Spec:
     return _Spec(cls, 1, pack, unpack)
 
 
+ALL_PARAMETERS_SIZE = 34  #: data bytes of 0x46 / the 0x47 reply
+ALL_STATUS_SIZE = 28  #: data bytes of the 0x48 reply
+
+
+def _raw(cls: type, size: int) -> _Spec:
+    """A message whose data is ``size`` bytes kept as they are (field ``params``)."""
+
+    def pack(msg: Any) -> bytes:
+        data = msg.params
+        if not isinstance(data, (bytes, bytearray)) or len(data) != size:
+            raise EncodeError(f"{cls.__name__}.params must be {size} bytes, got {data!r}")
+        return bytes(data)
+
+    def unpack(address: int, function: int, data: bytes, frame: bytes) -> Any:
+        return cls(address, bytes(data))
+
+    return _Spec(cls, size, pack, unpack)
+
+
 def _pack_int48(msg: Any) -> bytes:
     v = _check_int("EncoderAdditionReply.value", msg.value, -(1 << 47), (1 << 47) - 1)
     return v.to_bytes(6, "big", signed=True)
@@ -1084,6 +1151,9 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _struct(RunAbsoluteAxis, "HBi", ("speed", "acc", "abs_axis")),
     _struct(ReadVersion),
     _struct(SetHeartbeat, "I", ("times",)),
+    _raw(WriteAllParameters, ALL_PARAMETERS_SIZE),
+    _struct(ReadAllParameters),
+    _struct(ReadAllStatus),
 )
 
 _REQUESTS: dict[int, _Spec] = {s.cls.function: s for s in _REQUEST_SPECS}  # type: ignore[attr-defined]
@@ -1092,7 +1162,8 @@ _REQUEST_BY_TYPE: dict[type, _Spec] = {s.cls: s for s in _REQUEST_SPECS}
 #: function codes answered by :class:`RunReply` and by :class:`SetReply`
 RUN_REPLY_FUNCTIONS = frozenset((0x91, 0xF4, 0xF5, 0xF6, 0xFD, 0xFE, 0xFF))
 SET_REPLY_FUNCTIONS = frozenset((0x3D, 0x3F, 0x41, 0x82, 0x83, 0x84, 0x85, 0x86, 0x87, 0x88, 0x89, 0x8A, 0x8B,
-                                 0x8C, 0x8D, 0x8E, 0x8F, 0x90, 0x92, 0x94, 0x98, 0x9A, 0x9B, 0x9E, 0xF3, 0xF7))
+                                 0x8C, 0x8D, 0x8E, 0x8F, 0x90, 0x92, 0x94, 0x98, 0x9A, 0x9B, 0x9E, 0xF3, 0xF7,
+                                 0x46))
 
 _RUN_REPLY = _coded_spec(RunReply, RunStatus)
 _SET_REPLY = _coded_spec(SetReply, SetStatus)
@@ -1109,6 +1180,8 @@ _FIXED_REPLY_SPECS: tuple[_Spec, ...] = (
     _status_spec(CalibrationReply, "status", CalibrationStatus),
     _status_spec(MotorStatusReply, "status", MotorStatus),
     _struct(VersionReply, "I", ("version",)),
+    _raw(AllParametersReply, ALL_PARAMETERS_SIZE),
+    _raw(AllStatusReply, ALL_STATUS_SIZE),
 )
 _REPLIES: dict[int, _Spec] = {s.cls.function: s for s in _FIXED_REPLY_SPECS}  # type: ignore[attr-defined]
 _REPLIES.update({f: _RUN_REPLY for f in RUN_REPLY_FUNCTIONS})
@@ -1128,7 +1201,7 @@ assert set(REQUEST_TYPES) == set(REPLY_TYPES), "every command has a reply layout
 # --- encoding --------------------------------------------------------------------------------
 
 
-def _inner(msg: Request | UnknownRequest, max_unknown: int = MAX_DOWNLINK_FRAME - MIN_FRAME) -> bytes:
+def _inner(msg: Request | UnknownRequest, max_unknown: int = MAX_UNKNOWN_FRAME - MIN_FRAME) -> bytes:
     """Address, code and data of a request (a frame without head and checksum)."""
     address = _check_u8("address", msg.address)
     if isinstance(msg, UnknownRequest):
@@ -1156,6 +1229,8 @@ def _encode_long(msg: LongPacket) -> bytes:
         if isinstance(cmd, LongPacket):
             raise EncodeError("a long packet cannot contain a long packet")
         inner = _inner(cmd, LONG_PACKET_SLOT - 2)
+        if len(inner) > LONG_PACKET_SLOT:
+            raise EncodeError(f"long packet slot {i + 1}: {type(cmd).__name__} does not fit {LONG_PACKET_SLOT} bytes")
         if not any(inner):
             raise EncodeError(f"long packet slot {i + 1}: an all-zero command reads as an empty slot")
         body += inner + bytes(LONG_PACKET_SLOT - len(inner))
@@ -1212,6 +1287,9 @@ def _decode_long(frame: bytes) -> LongPacket:
         if spec is None:
             cmds.append(UnknownRequest(address, function, bytes(slot[2:])))
             continue
+        if 2 + spec.size > LONG_PACKET_SLOT:
+            raise FrameError(f"long packet slot {i + 1}: {spec.cls.__name__} does not fit a slot: {frame.hex(' ')}",
+                             data=frame)
         data, pad = slot[2:2 + spec.size], slot[2 + spec.size:]
         if any(pad):
             raise FrameError(f"long packet slot {i + 1} ({spec.cls.__name__}) has non-zero padding "
@@ -1293,7 +1371,7 @@ class MksCodec:
             return None
         n = REQUEST_DATA_LENGTH.get(buf[2])
         if n is None:
-            found = _unknown_length(buf, MAX_DOWNLINK_FRAME)
+            found = _unknown_length(buf, MAX_UNKNOWN_FRAME)
             if found is None and self._silent:
                 return 0
             return found

@@ -26,6 +26,8 @@ docs/mks-firmware.md):
 
 ``mks-failure-replies`` (V1.0.6+): a Modbus write the drive cannot carry out is answered by FC06
 with register data 0xFFFF / FC16 with register quantity 0 (before: the twin's exception 04).
+``mks-all-parameters`` (V1.0.6+): 0x46 / 0x47 write / read all configuration parameters, 0x48 read
+all status parameters (native protocol only).
 ``mks-version`` (V1.0.9): 0x40 reads calibration state, hardware and firmware version.
 ``mks-heartbeat`` (V1.0.9): 0x98 heartbeat protection time - the communication watchdog.
 """
@@ -38,7 +40,7 @@ from types import MappingProxyType
 
 from joints.errors import ConfigError
 
-__all__ = ["DEFAULT_FIRMWARE", "FIRMWARES", "MKS_FAILURE_REPLIES", "MKS_FIRMWARES", "MKS_HEARTBEAT", "MKS_VERSION",
+__all__ = ["DEFAULT_FIRMWARE", "FIRMWARES", "MKS_ALL_PARAMETERS", "MKS_FAILURE_REPLIES", "MKS_FIRMWARES", "MKS_HEARTBEAT", "MKS_VERSION",
            "QUIRKS", "ZLAC_SYNC_FLAG_AS_EXAMPLES", "FirmwareProfile", "Quirk", "firmware_profile"]
 
 
@@ -67,18 +69,20 @@ class FirmwareProfile:
 
 ZLAC_SYNC_FLAG_AS_EXAMPLES = "zlac-sync-flag-as-examples"
 MKS_FAILURE_REPLIES = "mks-failure-replies"
+MKS_ALL_PARAMETERS = "mks-all-parameters"
 MKS_VERSION = "mks-version"
 MKS_HEARTBEAT = "mks-heartbeat"
 #: the MKS firmware profiles, oldest first (the last is the default)
 MKS_FIRMWARES = ("v1.0.5", "v1.0.6", "v1.0.9")
 _MKS_FEATURES = {
     "v1.0.5": frozenset(),
-    "v1.0.6": frozenset({MKS_FAILURE_REPLIES}),
-    "v1.0.9": frozenset({MKS_FAILURE_REPLIES, MKS_VERSION, MKS_HEARTBEAT}),
+    "v1.0.6": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS}),
+    "v1.0.9": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_VERSION, MKS_HEARTBEAT}),
 }
 _MKS_TEXT = {
     "v1.0.5": "manual V1.0.5 (May 2024): no heartbeat, no version command; Modbus write failures undocumented",
-    "v1.0.6": "manual V1.0.6 (Sep 2024): Modbus write failures answered by FC06 data 0xFFFF / FC16 quantity 0",
+    "v1.0.6": "manual V1.0.6 (Sep 2024): Modbus write failures answered by FC06 data 0xFFFF / FC16 quantity 0; "
+              "0x46/0x47/0x48 write/read all parameters",
     "v1.0.9": "manual V1.0.9 (Nov 2025): + 0x40 version, 0x98 heartbeat protection (the communication watchdog)",
 }
 

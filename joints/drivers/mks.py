@@ -169,6 +169,10 @@ class MksAccess(ParamAccess):
     def read(self, name: str) -> int:
         return self.read_many((name,))[name]
 
+    def read_version(self, *, retry: bool = True) -> int:
+        """0x40 version word (V1.0.9); ``retry=False``: one attempt. Each protocol's access implements it."""
+        raise NotImplementedError
+
     def write(self, name: str, value: int, *, idempotent: bool = True) -> None:
         self.write_many({name: value}, idempotent=idempotent)
 

@@ -26,14 +26,15 @@ from typing import Any
 
 from joints.clock import Clock
 from joints.codecs import mks
+from joints.devices.mks import blocks
 from joints.devices.mks import state as st
 from joints.devices.mks.native import MKS_NATIVE, fields_of
 from joints.devices.mks.params import model_params
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import ParamSet
-from joints.devices.quirks import FirmwareProfile
+from joints.devices.quirks import MKS_ALL_PARAMETERS, FirmwareProfile
 from joints.drivers.mks import RUN_GROUPS, MksAccess, MksDriver, MksHeartbeat
-from joints.errors import CommandError, MotionTimeout, RegisterError
+from joints.errors import CommandError, ConfirmationRequired, MotionTimeout, RegisterError
 from joints.link.base import Subscription
 from joints.link.mks import MksLink
 
@@ -225,6 +226,50 @@ class MksNativeDriver(MksDriver):
                 left = poll - (clock.now() - t0)
                 if left > 0:
                     clock.sleep(left)  # in process the bus waits no time: let the world run
+
+    # -- all parameters at once (V1.0.6+, 5.7) ------------------------------------------------------
+    def _require_blocks(self) -> None:
+        if MKS_ALL_PARAMETERS not in self.firmware.features:
+            raise RegisterError(f"{self.name}: reading/writing all parameters (0x46/0x47) needs firmware v1.0.6 or "
+                                f"later; the joint's firmware is {self.firmware.firmware}")
+
+    def read_all_parameters(self) -> dict[str, int]:
+        """0x47: every configuration setting the drive holds (the write-only ones included), by name."""
+        self._require_blocks()
+        reply = self.link.request(mks.ReadAllParameters(self.address), idempotent=True)
+        if not isinstance(reply, mks.AllParametersReply):
+            raise CommandError(f"{self.name}: no reply to 0x47")
+        values = blocks.unpack(blocks.ALL_PARAMETERS, reply.params, skip=blocks.NOT_READ_BACK)
+        self.access.remember(values)  # what the drive holds: redundant writes are skipped from now on
+        return values
+
+    def read_all_status(self) -> dict[str, int]:
+        """0x48: every status value in one transaction, by name (5.7.3)."""
+        self._require_blocks()
+        reply = self.link.request(mks.ReadAllStatus(self.address), idempotent=True)
+        if not isinstance(reply, mks.AllStatusReply):
+            raise CommandError(f"{self.name}: no reply to 0x48")
+        return blocks.unpack(blocks.ALL_STATUS, reply.params)
+
+    def write_all_parameters(self, values: Mapping[str, int], *, confirm: bool = False) -> None:
+        """0x46: write every configuration setting in one frame - ``values`` over what 0x47 reads now. It can
+        change the address, baud rate and protocol (the host may lose the drive): needs ``confirm=True``."""
+        if not confirm:
+            raise ConfirmationRequired(f"{self.name}: 0x46 writes every setting at once (address, baud rate and "
+                                       "protocol included); pass confirm=True if you mean it (nothing was sent)")
+        self._require_blocks()
+        unknown = sorted(set(values) - {n for n, _o, _s in blocks.ALL_PARAMETERS})
+        if unknown:
+            raise RegisterError(f"{self.name}: 0x46 carries no {', '.join(unknown)}")
+        full = {**self.read_all_parameters(), "zero_mode_set_zero": self.image.get("zero_mode_set_zero", 0),
+                **dict(values)}
+        for name, value in full.items():
+            self.params[name].check(value)
+        data = blocks.pack(blocks.ALL_PARAMETERS, full, mks.ALL_PARAMETERS_SIZE)
+        self.access.sent(full, lambda: self.link.request(mks.WriteAllParameters(self.address, data)))
+        for name, value in full.items():
+            self._noted(name, value)
+        self.access._tell_link(full)
 
     # -- frames for several drives ---------------------------------------------------------------
     def plan(self, values: Mapping[str, int], address: int | None = None) -> Any:

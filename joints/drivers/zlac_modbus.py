@@ -296,7 +296,7 @@ class ZlacChannelDriver(JointDriver):
         self.profile = profile
         self.name = name or f"{drive.name}:{side}"
         self.encoder_lines = encoder_lines
-        lines = encoder_lines or getattr(profile, "encoder_lines", zr.COUNTS_PER_REV // 4)
+        lines = encoder_lines or int(getattr(profile, "encoder_lines", zr.COUNTS_PER_REV // 4))
         self.units = self._units(lines)  # until the drive told its own (ZlacDrive.identify)
         drive._channels.append(self)
         if drive.lines is not None:

@@ -61,6 +61,8 @@ Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; defa
     motion runs and no frame addressed to the drive arrived for the set time (0 = off), the drive
     stops at once, as 0xF7 does (:attr:`MksFirmware.heartbeat_trips` counts it; the shaft stays
     enabled and held). Like the other settings it is kept in flash (the manual does not say).
+    V1.0.6's 0x46/0x47/0x48 (:mod:`joints.devices.mks.blocks`) write/read the same settings and
+    statuses as the single commands; a 0x46 with any value out of range changes nothing (status 0).
 
 Choices where the manual is silent (documented here, see also :mod:`joints.devices.mks.state`)
     * The drive is enabled at power-on (the Part 7 examples run without 0xF3); motion and 0xF3 enable
@@ -84,12 +86,14 @@ from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
+from joints.devices.mks import blocks
 from joints.devices.mks import state as st
 from joints.devices.mks.native import Command
 from joints.devices.mks.params import FEATURE_OF
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import Access, ParamSet
-from joints.devices.quirks import FirmwareProfile, firmware_profile
+from joints.devices.quirks import MKS_ALL_PARAMETERS, FirmwareProfile, firmware_profile
+from joints.errors import CommandError
 from joints.sim.firmware import Firmware
 
 __all__ = ["CALIBRATION_TIME", "FLASH_TIME", "SERVO_BANDWIDTH", "SPEED_MODE_LEAD", "ZERO_MODE_RPM", "Completion",
@@ -286,6 +290,46 @@ class MksFirmware(Firmware):
     def frame_received(self) -> None:
         """A frame for this drive arrived: the heartbeat protection's food."""
         self._last_frame = self.time
+
+    @property
+    def has_blocks(self) -> bool:
+        """Firmware V1.0.6+: 0x46/0x47/0x48 read and write all parameters."""
+        return MKS_ALL_PARAMETERS in self.firmware.features
+
+    def all_parameters(self) -> bytes:
+        """0x47: the 34 configuration bytes (the "set 0" byte reads FF, reserved)."""
+        data = bytearray(blocks.pack(blocks.ALL_PARAMETERS, self.values, 34))
+        for name, offset, n in blocks.ALL_PARAMETERS:
+            if name in blocks.NOT_READ_BACK:
+                data[offset:offset + n] = b"\xff" * n
+        return bytes(data)
+
+    def write_all_parameters(self, data: bytes) -> int:
+        """0x46: every configuration setting at once, as the single set commands would (all checked first:
+        a value out of range fails the whole block, status 0)."""
+        values = blocks.unpack(blocks.ALL_PARAMETERS, data)
+        try:
+            for name, value in values.items():
+                self.params[name].check(value)
+        except CommandError:
+            return int(_SET.FAIL)
+        mode = values["work_mode"] != self.values["work_mode"]
+        self.write_many(list(values.items()))
+        if mode:
+            self._work_mode({}, True)
+        self.zero_point = self.counts() % COUNTS if values["zero_mode_set_zero"] else self.zero_point
+        return int(_SET.SUCCESS)
+
+    def all_status(self) -> bytes:
+        """0x48: the 28 status bytes."""
+        zero = self.zero_status
+        values = {"motor_status": int(self.motor_status()), "encoder_addition": self.counts(),
+                  "real_time_speed": round(self.qd / RPM), "io_status": self.io_status(),
+                  "number_of_pulses": self.read("number_of_pulses"), "raw_encoder_value": self.counts() % COUNTS,
+                  "angle_error": self.read("angle_error"), "en_pin_status": int(self.enabled),
+                  "single_turn_zero_status": zero, "protection_state": int(self.protected),
+                  "go_back_to_zero_status": zero}
+        return blocks.pack(blocks.ALL_STATUS, values, 28)
 
     def version_information(self) -> int:
         """0x40: calibration (b31-b28), hardware version (b27-b24: 1 S42D_485, 3 S57D_485), firmware."""

@@ -29,7 +29,7 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from joints.codecs import mks
-from joints.devices.mks.native import MKS_NATIVE, REPLY_RULES, Command, fields_of
+from joints.devices.mks.native import BLOCK_COMMANDS, MKS_NATIVE, REPLY_RULES, Command, fields_of
 from joints.errors import FrameError, ParameterRefused
 from joints.sim.mks import MksFirmware
 
@@ -76,6 +76,8 @@ class MksNativeFront:
         if isinstance(request, mks.UnknownRequest):
             return None
         code = request.function
+        if code in BLOCK_COMMANDS:
+            return self._block(request, answer)
         names = fields_of(code)
         if not all(fw.supports(n) for n in names):
             return None  # a command of a later firmware: unknown to this one
@@ -101,6 +103,20 @@ class MksNativeFront:
         if code in mks.RUN_REPLY_FUNCTIONS:
             return mks.RunReply(request.address, code, mks.RunStatus(status))
         return mks.SetReply(request.address, code, mks.SetStatus(status))
+
+    def _block(self, request: Any, answer: bool) -> Any:
+        """0x46/0x47/0x48 (V1.0.6): all configuration parameters / all statuses at once."""
+        fw = self.firmware
+        if not fw.has_blocks:
+            return None
+        if isinstance(request, mks.WriteAllParameters):
+            status = fw.write_all_parameters(request.params)
+            return mks.SetReply(request.address, request.function, mks.SetStatus(status)) if answer else None
+        if not answer:
+            return None
+        if isinstance(request, mks.ReadAllParameters):
+            return mks.AllParametersReply(request.address, fw.all_parameters())
+        return mks.AllStatusReply(request.address, fw.all_status())
 
     def take_completions(self, now: float) -> list[tuple[float, Any]]:
         """The completion frames due by ``now`` that go on the wire (active on, respond on for run commands),

@@ -27,7 +27,7 @@ from types import MappingProxyType
 from joints.devices.mks.params import MKS_PARAMS
 from joints.devices.params import ParamMap
 
-__all__ = ["BROADCAST", "MKS_NATIVE", "REPLY_RULES", "Command", "NativeKey", "ReplyRule", "expects_completion",
+__all__ = ["BLOCK_COMMANDS", "BROADCAST", "MKS_NATIVE", "REPLY_RULES", "Command", "NativeKey", "ReplyRule", "expects_completion",
            "expects_reply"]
 
 BROADCAST = 0
@@ -48,6 +48,9 @@ class Command(enum.IntEnum):
     READ_PROTECTION_STATE = 0x3E
     RESTORE_DEFAULT_PARAMETERS = 0x3F
     READ_VERSION_INFORMATION = 0x40
+    WRITE_ALL_PARAMETERS = 0x46
+    READ_ALL_PARAMETERS = 0x47
+    READ_ALL_STATUS = 0x48
     RESTART_MOTOR = 0x41
     CALIBRATE_ENCODER = 0x80
     SET_WORK_MODE = 0x82
@@ -84,6 +87,9 @@ class Command(enum.IntEnum):
 
 
 LONG_PACKET = 0xFC  #: head of a long data package (not a function code)
+
+#: commands that carry whole blocks (joints.devices.mks.blocks), not one parameter's fields (V1.0.6)
+BLOCK_COMMANDS = frozenset((Command.WRITE_ALL_PARAMETERS, Command.READ_ALL_PARAMETERS, Command.READ_ALL_STATUS))
 
 #: run commands of Part 6 (0x8C respond/active applies to them)
 RUN_COMMANDS = frozenset((Command.SPEED_MODE, Command.POSITION_MODE1_RELATIVE_PULSES,
