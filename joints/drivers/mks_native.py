@@ -263,8 +263,7 @@ class MksNativeDriver(MksDriver):
             raise RegisterError(f"{self.name}: 0x46 carries no {', '.join(unknown)}")
         full = {**self.read_all_parameters(), "zero_mode_set_zero": self.image.get("zero_mode_set_zero", 0),
                 **dict(values)}
-        for name, value in full.items():
-            self.params[name].check(value)
+        blocks.check(self.params, full)
         data = blocks.pack(blocks.ALL_PARAMETERS, full, mks.ALL_PARAMETERS_SIZE)
         self.access.sent(full, lambda: self.link.request(mks.WriteAllParameters(self.address, data)))
         for name, value in full.items():

@@ -309,12 +309,13 @@ class MksFirmware(Firmware):
         a value out of range fails the whole block, status 0)."""
         values = blocks.unpack(blocks.ALL_PARAMETERS, data)
         try:
-            for name, value in values.items():
-                self.params[name].check(value)
+            blocks.check(self.params, values)
         except CommandError:
             return int(_SET.FAIL)
         mode = values["work_mode"] != self.values["work_mode"]
-        self.write_many(list(values.items()))
+        if values["group_address"] == 0:  # "no group" (the power-on value; 0x8D itself takes 1-255)
+            self.values["group_address"] = self.saved["group_address"] = 0
+        self.write_many([(n, v) for n, v in values.items() if not (n == "group_address" and v == 0)])
         if mode:
             self._work_mode({}, True)
         self.zero_point = self.counts() % COUNTS if values["zero_mode_set_zero"] else self.zero_point

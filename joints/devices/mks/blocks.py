@@ -8,7 +8,7 @@ decodes to the documented defaults of a SERVO57D (3200 mA, 16 microsteps, 38400 
 
 Choices where the manual is thin: ``microsteps`` byte 0x00 means 256 (as 0x84); the 0x47 reply
 carries "Reserved (FF)" where 0x46 has "setting 0 point" (``zero_mode_set_zero``): a read leaves it
-out; byte 30 "Zero mode" under 0x94 is ``home_mode`` and bytes 31-32 "Zero-return current" are
+out; a group address 0 is "none" (the drive's power-on value); byte 30 "Zero mode" under 0x94 is ``home_mode`` and bytes 31-32 "Zero-return current" are
 ``home_current`` (0x94's fields). In the 0x48 status block the raw encoder value (0x35) is 6 bytes
 and the angle error 4 (the byte count 28 fixes both); the two "return to zero" bytes are 0x3B's
 single-turn and non-single-turn states, of which the twin reports the one it has in both.
@@ -18,7 +18,9 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-__all__ = ["ALL_PARAMETERS", "ALL_STATUS", "NOT_READ_BACK", "pack", "unpack"]
+from joints.devices.params import ParamSet
+
+__all__ = ["ALL_PARAMETERS", "ALL_STATUS", "NOT_READ_BACK", "check", "pack", "unpack"]
 
 #: 0x46/0x47: (parameter, byte offset in the data, size)
 ALL_PARAMETERS: tuple[tuple[str, int, int], ...] = (
@@ -62,3 +64,12 @@ def unpack(layout: tuple[tuple[str, int, int], ...], data: bytes, *, skip: froze
         v = int.from_bytes(data[offset:offset + n], "big", signed=name in _SIGNED)
         out[name] = 256 if name == "microsteps" and v == 0 else v
     return out
+
+
+def check(params: ParamSet, values: Mapping[str, int]) -> None:
+    """Range-check a configuration block's values (raises :class:`~joints.errors.CommandError`); a group
+    address of 0 is "no group" there, as at power-on."""
+    for name, value in values.items():
+        if name == "group_address" and value == 0:
+            continue
+        params[name].check(value)
