@@ -27,7 +27,10 @@ byte 4, firmware version in bytes 5-7 - read as major, minor, patch, our reading
 protection time (5.2.16; uint32 ms, 0 = off; answered by a set status). Manual V1.0.6 added 0x46
 write all configuration parameters (34 data bytes; set status), 0x47 read all configuration
 parameters and 0x48 read all status parameters (replies of 34 and 28 data bytes): the codec keeps
-their data as bytes (``params``), :mod:`joints.devices.mks.blocks` names the fields.
+their data as bytes (``params``), :mod:`joints.devices.mks.blocks` names the fields. V1.0.9's
+0x01 (5.1.9) asks the drive to send one read command's reply every ``times`` ms (0 stops it):
+request code + uint16 times, reply code + status; the periodic frames are that command's ordinary
+replies (FB addr code param chk), arriving unsolicited.
 * long packet (FC): always 52 bytes: five 10-byte slots, each an ordinary command without head
   and checksum (address, code, data) padded with zeros; an all-zero slot is an unused slot (None).
 
@@ -509,6 +512,16 @@ class SetZeroMode:
 
 
 @dataclass(frozen=True, slots=True)
+class SetTimedReturn:
+    """0x01 return the reply of read command ``code`` every ``times`` ms, unasked (V1.0.9; 0 stops it)."""
+
+    address: int
+    code: int
+    times: int
+    function: ClassVar[int] = 0x01
+
+
+@dataclass(frozen=True, slots=True)
 class ReadVersion:
     """0x40 read version information (V1.0.9) -> :class:`VersionReply`."""
 
@@ -690,7 +703,7 @@ Request = (
     | SetRespondActive | SetGroupAddress | SetModbusRtu | SetKeyLock | SetHomeParameters | GoHome | SetAxisZero
     | SetNoLimitHomeParameters | SetZeroMode | SetLimitPortRemap | QueryStatus | EnableMotor | EmergencyStop
     | RunSpeed | SaveCleanSpeedMode | RunRelativePulses | RunAbsolutePulses | RunRelativeAxis | RunAbsoluteAxis
-    | ReadVersion | SetHeartbeat | WriteAllParameters | ReadAllParameters | ReadAllStatus
+    | SetTimedReturn | ReadVersion | SetHeartbeat | WriteAllParameters | ReadAllParameters | ReadAllStatus
 )
 
 
@@ -875,6 +888,16 @@ class VersionReply:
 
 
 @dataclass(frozen=True, slots=True)
+class TimedReturnReply:
+    """0x01 (V1.0.9): the read command ``code`` whose timed return was set, and ``status`` 1 set / 0 fail."""
+
+    address: int
+    code: int
+    status: SetStatus
+    function: ClassVar[int] = 0x01
+
+
+@dataclass(frozen=True, slots=True)
 class AllParametersReply:
     """0x47 (V1.0.6): the 34 configuration bytes (5.7.2; layout in joints.devices.mks.blocks)."""
 
@@ -922,7 +945,7 @@ class RunReply:
 Reply = (
     EncoderCarryReply | EncoderAdditionReply | SpeedReply | PulsesReply | IoStatusReply | AngleErrorReply
     | EnPinReply | GoBackToZeroStatusReply | ProtectionStateReply | CalibrationReply | MotorStatusReply | SetReply
-    | RunReply | VersionReply | AllParametersReply | AllStatusReply
+    | RunReply | VersionReply | AllParametersReply | AllStatusReply | TimedReturnReply
 )
 Message = Request | UnknownRequest | LongPacket | Reply
 
@@ -1105,6 +1128,17 @@ def _raw(cls: type, size: int) -> _Spec:
     return _Spec(cls, size, pack, unpack)
 
 
+def _pack_timed_reply(msg: Any) -> bytes:
+    try:
+        return bytes((_check_u8("TimedReturnReply.code", msg.code), SetStatus(msg.status)))
+    except ValueError:
+        raise EncodeError(f"TimedReturnReply.status must be a SetStatus, got {msg.status!r}") from None
+
+
+def _unpack_timed_reply(address: int, function: int, data: bytes, frame: bytes) -> TimedReturnReply:
+    return TimedReturnReply(address, data[0], _enum_value(SetStatus, data[1], "TimedReturnReply.status", frame))
+
+
 def _pack_int48(msg: Any) -> bytes:
     v = _check_int("EncoderAdditionReply.value", msg.value, -(1 << 47), (1 << 47) - 1)
     return v.to_bytes(6, "big", signed=True)
@@ -1149,6 +1183,7 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _struct(RunAbsolutePulses, "HBi", ("speed", "acc", "abs_pulses")),
     _struct(RunRelativeAxis, "HBi", ("speed", "acc", "rel_axis")),
     _struct(RunAbsoluteAxis, "HBi", ("speed", "acc", "abs_axis")),
+    _struct(SetTimedReturn, "BH", ("code", "times")),
     _struct(ReadVersion),
     _struct(SetHeartbeat, "I", ("times",)),
     _raw(WriteAllParameters, ALL_PARAMETERS_SIZE),
@@ -1182,6 +1217,7 @@ _FIXED_REPLY_SPECS: tuple[_Spec, ...] = (
     _struct(VersionReply, "I", ("version",)),
     _raw(AllParametersReply, ALL_PARAMETERS_SIZE),
     _raw(AllStatusReply, ALL_STATUS_SIZE),
+    _Spec(TimedReturnReply, 2, _pack_timed_reply, _unpack_timed_reply),
 )
 _REPLIES: dict[int, _Spec] = {s.cls.function: s for s in _FIXED_REPLY_SPECS}  # type: ignore[attr-defined]
 _REPLIES.update({f: _RUN_REPLY for f in RUN_REPLY_FUNCTIONS})

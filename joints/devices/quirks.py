@@ -30,6 +30,7 @@ with register data 0xFFFF / FC16 with register quantity 0 (before: the twin's ex
 all status parameters (native protocol only).
 ``mks-version`` (V1.0.9): 0x40 reads calibration state, hardware and firmware version.
 ``mks-heartbeat`` (V1.0.9): 0x98 heartbeat protection time - the communication watchdog.
+``mks-timed-returns`` (V1.0.9): 0x01 - the drive sends a read command's reply every n ms, unasked.
 """
 
 from __future__ import annotations
@@ -40,8 +41,8 @@ from types import MappingProxyType
 
 from joints.errors import ConfigError
 
-__all__ = ["DEFAULT_FIRMWARE", "FIRMWARES", "MKS_ALL_PARAMETERS", "MKS_FAILURE_REPLIES", "MKS_FIRMWARES", "MKS_HEARTBEAT", "MKS_VERSION",
-           "QUIRKS", "ZLAC_SYNC_FLAG_AS_EXAMPLES", "FirmwareProfile", "Quirk", "firmware_profile"]
+__all__ = ["DEFAULT_FIRMWARE", "FIRMWARES", "MKS_ALL_PARAMETERS", "MKS_FAILURE_REPLIES", "MKS_FIRMWARES",
+           "MKS_HEARTBEAT", "MKS_TIMED_RETURNS", "MKS_VERSION", "QUIRKS", "ZLAC_SYNC_FLAG_AS_EXAMPLES", "FirmwareProfile", "Quirk", "firmware_profile"]
 
 
 @dataclass(frozen=True)
@@ -72,18 +73,20 @@ MKS_FAILURE_REPLIES = "mks-failure-replies"
 MKS_ALL_PARAMETERS = "mks-all-parameters"
 MKS_VERSION = "mks-version"
 MKS_HEARTBEAT = "mks-heartbeat"
+MKS_TIMED_RETURNS = "mks-timed-returns"
 #: the MKS firmware profiles, oldest first (the last is the default)
 MKS_FIRMWARES = ("v1.0.5", "v1.0.6", "v1.0.9")
 _MKS_FEATURES = {
     "v1.0.5": frozenset(),
     "v1.0.6": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS}),
-    "v1.0.9": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_VERSION, MKS_HEARTBEAT}),
+    "v1.0.9": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_VERSION, MKS_HEARTBEAT, MKS_TIMED_RETURNS}),
 }
 _MKS_TEXT = {
     "v1.0.5": "manual V1.0.5 (May 2024): no heartbeat, no version command; Modbus write failures undocumented",
     "v1.0.6": "manual V1.0.6 (Sep 2024): Modbus write failures answered by FC06 data 0xFFFF / FC16 quantity 0; "
               "0x46/0x47/0x48 write/read all parameters",
-    "v1.0.9": "manual V1.0.9 (Nov 2025): + 0x40 version, 0x98 heartbeat protection (the communication watchdog)",
+    "v1.0.9": "manual V1.0.9 (Nov 2025): + 0x40 version, 0x98 heartbeat protection (the communication watchdog), "
+              "0x01 timed returns",
 }
 
 QUIRKS: Mapping[str, Quirk] = MappingProxyType({q.name: q for q in (

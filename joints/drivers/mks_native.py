@@ -20,7 +20,7 @@ adds what only the native protocol has:
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from functools import partial
 from typing import Any
 
@@ -32,7 +32,7 @@ from joints.devices.mks.native import MKS_NATIVE, fields_of
 from joints.devices.mks.params import model_params
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import ParamSet
-from joints.devices.quirks import MKS_ALL_PARAMETERS, FirmwareProfile
+from joints.devices.quirks import MKS_ALL_PARAMETERS, MKS_TIMED_RETURNS, FirmwareProfile
 from joints.drivers.mks import RUN_GROUPS, MksAccess, MksDriver, MksHeartbeat
 from joints.errors import CommandError, ConfirmationRequired, MotionTimeout, RegisterError
 from joints.link.base import Subscription
@@ -158,6 +158,9 @@ class MksNativeDriver(MksDriver):
         self.completion_time = -math.inf
         self.completions = 0
         self._sub: Subscription[Any] | None = link.subscribe_completions(address, self._on_completion)
+        self._returns: dict[int, Subscription[Any]] = {}  #: read command -> its timed returns' subscription
+        #: read command -> the values its last timed return carried (V1.0.9 0x01)
+        self.returned: dict[int, dict[str, int]] = {}
 
     def _on_completion(self, message: Any) -> None:
         self.completion = message
@@ -226,6 +229,41 @@ class MksNativeDriver(MksDriver):
                 left = poll - (clock.now() - t0)
                 if left > 0:
                     clock.sleep(left)  # in process the bus waits no time: let the world run
+
+    # -- timed returns (V1.0.9, 5.1.9) -----------------------------------------------------------------
+    def timed_return(self, name: str, milliseconds: int, callback: Callable[[dict[str, int]], None] | None = None,
+                     ) -> None:
+        """0x01: the drive sends the read that carries ``name`` (e.g. "encoder_addition": 0x31) every
+        ``milliseconds``, unasked; each arrives through the link's subscriptions as {parameter: value} to
+        ``callback`` (and :attr:`returned`). 0 stops it."""
+        if MKS_TIMED_RETURNS not in self.firmware.features:
+            raise RegisterError(f"{self.name}: timed returns (0x01) need firmware v1.0.9; the joint's firmware is "
+                                f"{self.firmware.firmware}")
+        if not self.params[name].access.readable:
+            raise RegisterError(f"{self.name}: {name} is not a read the drive can return by itself")
+        code = int(MKS_NATIVE.key(name).command)
+        if not 0 <= milliseconds <= 0xFFFF:
+            raise CommandError(f"{self.name}: a timed return's period is 0..65535 ms, got {milliseconds}")
+        old = self._returns.pop(code, None)
+        if old is not None:
+            old.cancel()
+        names = fields_of(code)
+
+        def deliver(message: Any) -> None:
+            values = {n: int(getattr(message, MKS_NATIVE.key(n).field)) for n in names}
+            self.returned[code] = values
+            if callback is not None:
+                callback(values)
+
+        if milliseconds:
+            self._returns[code] = self.link.subscribe_returns(self.address, code, deliver)
+        try:
+            self.link.request(mks.SetTimedReturn(self.address, code, milliseconds))
+        except BaseException:
+            sub = self._returns.pop(code, None)
+            if sub is not None:
+                sub.cancel()
+            raise
 
     # -- all parameters at once (V1.0.6+, 5.7) ------------------------------------------------------
     def _require_blocks(self) -> None:
@@ -321,6 +359,9 @@ class MksNativeDriver(MksDriver):
         if self._sub is not None:
             self._sub.cancel()
             self._sub = None
+        for sub in self._returns.values():
+            sub.cancel()
+        self._returns.clear()
 
 
 class MksNativeHeartbeatDriver(MksHeartbeat, MksNativeDriver):

@@ -61,6 +61,8 @@ Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; defa
     motion runs and no frame addressed to the drive arrived for the set time (0 = off), the drive
     stops at once, as 0xF7 does (:attr:`MksFirmware.heartbeat_trips` counts it; the shaft stays
     enabled and held). Like the other settings it is kept in flash (the manual does not say).
+    V1.0.9's 0x01 timed returns sample the read's values every period on the simulated clock
+    (:meth:`MksFirmware.set_timed_return`); the front sends them as that read's reply, unasked.
     V1.0.6's 0x46/0x47/0x48 (:mod:`joints.devices.mks.blocks`) write/read the same settings and
     statuses as the single commands; a 0x46 with any value out of range changes nothing (status 0).
 
@@ -92,12 +94,12 @@ from joints.devices.mks.native import Command
 from joints.devices.mks.params import FEATURE_OF
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import Access, ParamSet
-from joints.devices.quirks import MKS_ALL_PARAMETERS, FirmwareProfile, firmware_profile
+from joints.devices.quirks import MKS_ALL_PARAMETERS, MKS_TIMED_RETURNS, FirmwareProfile, firmware_profile
 from joints.errors import CommandError
 from joints.sim.firmware import Firmware
 
 __all__ = ["CALIBRATION_TIME", "FLASH_TIME", "SERVO_BANDWIDTH", "SPEED_MODE_LEAD", "ZERO_MODE_RPM", "Completion",
-           "MksFirmware"]
+           "MksFirmware", "TimedReturn"]
 
 TAU = 2.0 * math.pi
 RPM = TAU / 60.0
@@ -131,6 +133,15 @@ class Completion:
     function: int  #: the command it ends (0xF6, 0xFD, 0x91, 0x80, 0xFF ...)
     status: int  #: RunStatus 2/3 (CalibrationStatus 1/2 for 0x80)
     answered: bool  #: the command came to this drive alone (not broadcast, group or long packet)
+
+
+@dataclass(frozen=True, slots=True)
+class TimedReturn:
+    """A read the drive sends by itself (V1.0.9 0x01): the values of ``names`` sampled at ``time``."""
+
+    time: float
+    code: int  #: the read command whose reply it is
+    values: tuple[int, ...]
 
 
 @dataclass
@@ -196,6 +207,9 @@ class MksFirmware(Firmware):
             "motor_status": lambda: int(self.motor_status()),
             "version_information": self.version_information,
         })
+        #: V1.0.9 0x01 timed returns: read command -> (its parameter names, period [s], next due time)
+        self.timed: dict[int, tuple[tuple[str, ...], float, float]] = {}
+        self.returns: deque[TimedReturn] = deque()  #: sampled, waiting for a front
         self.heartbeat_trips = 0  #: motions the heartbeat protection stopped
         self.heartbeat_tripped_at = -1.0  #: when it last did [s]
         self._last_frame = 0.0  #: when the last frame addressed to this drive arrived
@@ -245,6 +259,8 @@ class MksFirmware(Firmware):
     def power_cycle(self) -> None:
         """Power off/on: flash survives (settings, 0_Mode zero, saved speed mode), the rest restarts."""
         super().power_cycle()
+        self.timed.clear()  # timed returns are not kept (the manual does not say; our choice)
+        self.returns.clear()
         self._reset_state()
 
     def _cache(self) -> None:
@@ -331,6 +347,25 @@ class MksFirmware(Firmware):
                   "single_turn_zero_status": zero, "protection_state": int(self.protected),
                   "go_back_to_zero_status": zero}
         return blocks.pack(blocks.ALL_STATUS, values, 28)
+
+    def set_timed_return(self, code: int, names: tuple[str, ...], milliseconds: int) -> int:
+        """0x01 (V1.0.9): sample ``names`` (read command ``code``) every ``milliseconds`` and send them; 0 stops it.
+        Status 0 for a firmware without it or a command that is not a read."""
+        if MKS_TIMED_RETURNS not in self.firmware.features or not names or not all(
+                self.params[n].access is Access.R for n in names):
+            return int(_SET.FAIL)
+        if milliseconds:
+            self.timed[code] = (names, milliseconds * 1e-3, self.time + milliseconds * 1e-3)
+        else:
+            self.timed.pop(code, None)
+        return int(_SET.SUCCESS)
+
+    def take_returns(self, now: float) -> list[TimedReturn]:
+        """Timed returns sampled by ``now`` (the front turns them into frames)."""
+        out: list[TimedReturn] = []
+        while self.returns and self.returns[0].time <= now + 1e-12:
+            out.append(self.returns.popleft())
+        return out
 
     def version_information(self) -> int:
         """0x40: calibration (b31-b28), hardware version (b27-b24: 1 S42D_485, 3 S57D_485), firmware."""
@@ -608,6 +643,10 @@ class MksFirmware(Firmware):
             self.calibrated = True
             self._hold()
             self._complete(Command.CALIBRATE_ENCODER, int(st.CalibrationStatus.SUCCESS), self._calibrating_answered)
+        for code, (names, period, due) in list(self.timed.items()):
+            if t >= due - 1e-12:  # 0x01 timed return: sample now, the front sends it
+                self.returns.append(TimedReturn(t, code, tuple(self.read_many(names))))
+                self.timed[code] = (names, period, max(due + period, t))
         hb = self.values.get("heartbeat_protection_time", 0)
         if hb and self.motion is not None and t - self._last_frame > hb * 1e-3:
             self.heartbeat_trips += 1  # the host went silent: stop urgently (V1.0.9 5.2.16)

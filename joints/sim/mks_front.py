@@ -10,6 +10,7 @@ do (manual Part 4, 5.2 #13 and #16, 5.7):
 * address 0 (broadcast) and a drive's group address (0x8D): every such drive executes, none answers;
 * a long packet (0xFC): each drive executes the first command addressed to it, none answers;
 * respond off (0x8C): a drive executes its run commands silently, queries still answer;
+* timed returns (0x01, V1.0.9): the read's reply every period, unasked, queued like completions;
 * completion frames (status 2/3 of run commands and go home with active on; calibrate's 1/2; save/clean's
   2) are queued on the simulated clock and taken with :meth:`MksDeviceBus.take_unsolicited` - the
   in-process transport and ``joints sim serve`` deliver them unasked - or, with their times, with
@@ -25,11 +26,12 @@ commands of a later firmware than the twin's (0x40, 0x98 before V1.0.9).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from joints.codecs import mks
 from joints.devices.mks.native import BLOCK_COMMANDS, MKS_NATIVE, REPLY_RULES, Command, fields_of
+from joints.devices.quirks import MKS_TIMED_RETURNS
 from joints.errors import FrameError, ParameterRefused
 from joints.sim.mks import MksFirmware
 
@@ -82,13 +84,7 @@ class MksNativeFront:
         if not all(fw.supports(n) for n in names):
             return None  # a command of a later firmware: unknown to this one
         if code in _READS:
-            values = fw.read_many(names)
-            cls = mks.REPLY_TYPES[code]
-            fields: dict[str, Any] = {}
-            for n, v in zip(names, values):
-                f = MKS_NATIVE.key(n).field
-                fields[f] = bool(v) if f in _FLAGS else _ENUMS[cls](v) if cls in _ENUMS else v
-            return cls(request.address, **fields) if answer else None
+            return self._read_reply(request.address, code, fw.read_many(names)) if answer else None
         given = {n: int(getattr(request, MKS_NATIVE.key(n).field)) for n in names if MKS_NATIVE.key(n).field}
         if not given:
             given = {n: 1 for n in names}  # a command without data: the parameter's "1"
@@ -104,9 +100,26 @@ class MksNativeFront:
             return mks.RunReply(request.address, code, mks.RunStatus(status))
         return mks.SetReply(request.address, code, mks.SetStatus(status))
 
+    @staticmethod
+    def _read_reply(address: int, code: int, values: Sequence[int]) -> Any:
+        """The reply of read command ``code`` carrying ``values`` (its fields' order)."""
+        cls = mks.REPLY_TYPES[code]
+        fields: dict[str, Any] = {}
+        for n, v in zip(fields_of(code), values):
+            f = MKS_NATIVE.key(n).field
+            fields[f] = bool(v) if f in _FLAGS else _ENUMS[cls](v) if cls in _ENUMS else v
+        return cls(address, **fields)
+
     def _block(self, request: Any, answer: bool) -> Any:
-        """0x46/0x47/0x48 (V1.0.6): all configuration parameters / all statuses at once."""
+        """0x46/0x47/0x48 (V1.0.6): all configuration parameters / all statuses at once; 0x01 (V1.0.9):
+        a read's timed return."""
         fw = self.firmware
+        if isinstance(request, mks.SetTimedReturn):
+            if MKS_TIMED_RETURNS not in fw.firmware.features:
+                return None  # unknown to this firmware
+            names = fields_of(request.code) if request.code in _READS else ()
+            status = fw.set_timed_return(request.code, names, request.times)
+            return mks.TimedReturnReply(request.address, request.code, mks.SetStatus(status)) if answer else None
         if not fw.has_blocks:
             return None
         if isinstance(request, mks.WriteAllParameters):
@@ -123,6 +136,9 @@ class MksNativeFront:
         with the time each was sent."""
         fw = self.firmware
         out: list[tuple[float, Any]] = []
+        for r in fw.take_returns(now):  # 0x01 timed returns: the read's own reply, unasked
+            if self.speaks:
+                out.append((r.time, self._read_reply(self.address, r.code, r.values)))
         for c in fw.take_completions(now):
             if not c.answered or not self.speaks:
                 continue
@@ -136,6 +152,7 @@ class MksNativeFront:
                 out.append((c.time, mks.CalibrationReply(self.address, mks.CalibrationStatus(c.status))))
             else:
                 out.append((c.time, mks.RunReply(self.address, c.function, mks.RunStatus(c.status))))
+        out.sort(key=lambda x: x[0])
         return out
 
     def __repr__(self) -> str:

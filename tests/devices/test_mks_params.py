@@ -20,7 +20,7 @@ MANUAL = manual("mks-servo42d-57d-rs485-manual-v1.0.5.txt")
 PARTS_5_6 = MANUAL[MANUAL.index("Part5. Serial command description"):MANUAL.index("Part7. Serial example")]
 PART_8 = MANUAL[MANUAL.index("Part8. MODBUS-RTU command description"):MANUAL.index("Part9. FAQ")]
 #: what V1.0.9 added (manuals V1.0.9: 0x40 read version 5.1.11 / 3.1.8, 0x98 heartbeat 5.2.16 / 3.2.14)
-LATER = {0x40, 0x98, 0x46, 0x47, 0x48}
+LATER = {0x40, 0x98, 0x46, 0x47, 0x48, 0x01}
 
 
 # ------------------------------------------------------------------------------ parameters

@@ -113,3 +113,38 @@ def test_identity_reads_0x40_where_the_firmware_has_it(tmp_path: Path, protocol:
         else:
             assert "older than v1.0.9" in str(ident["firmware_version"])
         rig.joints["m1"].enable()  # the configured firmware agrees with the drive's
+
+
+def test_v109_timed_returns_arrive_unsolicited_through_the_links_subscriptions(tmp_path: Path) -> None:
+    from joints.codecs import mks
+
+    with open_motor(tmp_path, joint={"firmware": "v1.0.9", "watchdog_ms": 0}) as rig:
+        j = rig.joints["m1"]
+        d = j.driver
+        got: list[tuple[float, int]] = []
+        j.enable()
+        j.set_velocity(2 * 3.141592653589793)  # one turn per second: 16384 counts/s
+        rig.sleep(2.0)  # at speed
+        d.timed_return("encoder_addition", 100, lambda v: got.append((rig.time, v["encoder_addition"])))
+        sent = d.link.transactions
+        for _ in range(10):
+            rig.sleep(0.1)
+            d.link.poll(0)  # deliver what arrived; sends nothing
+        assert d.link.transactions == sent  # nothing was asked: the drive sent them by itself
+        assert 9 <= len(got) <= 11
+        steps = [b - a for (_t, a), (_u, b) in zip(got, got[1:])]
+        assert all(abs(s - 1638) <= 20 for s in steps), steps  # 0.1 s apart at 16384 counts/s
+        assert d.returned[0x31]["encoder_addition"] == got[-1][1]
+        d.timed_return("encoder_addition", 0)
+        n = len(got)
+        rig.sleep(0.5)
+        d.link.poll(0)
+        assert len(got) == n  # stopped
+        assert mks.encode(mks.SetTimedReturn(1, 0x31, 1000)) == bytes.fromhex("FA 01 01 31 03 E8 18")  # 5.1.9
+        assert mks.encode(mks.TimedReturnReply(1, 0x31, mks.SetStatus.SUCCESS)) == bytes.fromhex("FB 01 01 31 01 2F")
+
+
+def test_timed_returns_need_v109(tmp_path: Path) -> None:
+    with open_motor(tmp_path, joint={"firmware": "v1.0.6"}) as rig:
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            rig.joints["m1"].driver.timed_return("encoder_addition", 100)

@@ -36,6 +36,7 @@ BROADCAST = 0
 class Command(enum.IntEnum):
     """Function codes of Parts 5 and 6 (names after the manual's section titles)."""
 
+    SET_TIMED_RETURN = 0x01
     READ_ENCODER_VALUE_CARRY = 0x30
     READ_ENCODER_VALUE_ADDITION = 0x31
     READ_REAL_TIME_SPEED = 0x32
@@ -88,8 +89,10 @@ class Command(enum.IntEnum):
 
 LONG_PACKET = 0xFC  #: head of a long data package (not a function code)
 
-#: commands that carry whole blocks (joints.devices.mks.blocks), not one parameter's fields (V1.0.6)
-BLOCK_COMMANDS = frozenset((Command.WRITE_ALL_PARAMETERS, Command.READ_ALL_PARAMETERS, Command.READ_ALL_STATUS))
+#: commands that carry no parameter's fields: whole blocks (joints.devices.mks.blocks, V1.0.6) and the timed
+#: return of another command's reply (0x01, V1.0.9)
+BLOCK_COMMANDS = frozenset((Command.WRITE_ALL_PARAMETERS, Command.READ_ALL_PARAMETERS, Command.READ_ALL_STATUS,
+                            Command.SET_TIMED_RETURN))
 
 #: run commands of Part 6 (0x8C respond/active applies to them)
 RUN_COMMANDS = frozenset((Command.SPEED_MODE, Command.POSITION_MODE1_RELATIVE_PULSES,
