@@ -20,9 +20,10 @@ deceleration is the same acc (the drive has one). Speeds above the work mode's m
 / 3000 rpm) are clamped by the drive.
 
 What the driver sets before motion (``enable``): the work mode (serial commands need SR_*; default
-SR_vFOC), the subdivision it computes speeds with (default 16) and, natively, respond and active on
-(0x8C 1 1: completion frames). Settings the drive cannot report are written once per session and
-remembered (the access keeps an image of what was written).
+SR_vFOC), the subdivision it computes speeds with (the one given; else the drive's where 0x47
+reports it - V1.0.6+ native - else 16) and, natively, respond and active on (0x8C 1 1: completion
+frames). Settings the drive cannot report are written once per session and remembered (the access
+keeps an image of what was written; 0x47 fills it with what the drive holds).
 
 Firmware (``firmware`` of the joint, :mod:`joints.devices.quirks`; default the newest, V1.0.9)
     The driver uses a later firmware's commands only where its profile has them (others raise
@@ -191,7 +192,7 @@ class MksDriver(JointDriver):
         clock: Clock | None = None,
         name: str = "",
         work_mode: int = st.WorkMode.SR_vFOC,
-        microsteps: int = 16,
+        microsteps: int | None = None,
         firmware: FirmwareProfile | str | None = None,
     ) -> None:
         self.access = access
@@ -207,7 +208,10 @@ class MksDriver(JointDriver):
             raise CommandError(f"{self.name}: serial commands need an SR_* work mode (3, 4, 5), got "
                                f"{st.WorkMode(work_mode).name}")
         self.work_mode = st.WorkMode(work_mode)
-        self.microsteps = int(self.params["microsteps"].check(microsteps))
+        #: the subdivision the driver computes with: the one given, else the drive's (where it can tell:
+        #: 0x47, V1.0.6+ native), else 16 - written at enable unless the drive holds it already
+        self.microsteps = int(self.params["microsteps"].check(16 if microsteps is None else microsteps))
+        self.microsteps_given = microsteps is not None
         rad = 2.0 * math.pi / _COUNTS
         self.units = Units(rad, _RPM, 0.001, self.profile.torque_constant)
         self._enabled = False
@@ -528,6 +532,7 @@ class MksDriver(JointDriver):
                      current: int | None = None) -> None:
         """The working current (0x83, mA) is the drive's torque limit; it has no speed or position limit
         parameters (end-stop switches only), so those stay with the joint's checks."""
+        self.verify_firmware()  # before the first setting is written (what the drive holds is read there)
         if current is not None:
             top = round(self.profile.max_working_current * 1000)
             self._set("working_current", max(0, min(current, top)))

@@ -134,7 +134,7 @@ class MksModbusDriver(MksDriver):
         clock: Clock | None = None,
         name: str = "",
         work_mode: int = st.WorkMode.SR_vFOC,
-        microsteps: int = 16,
+        microsteps: int | None = None,
         firmware: FirmwareProfile | str | None = None,
     ) -> None:
         if not 1 <= slave <= 247:

@@ -141,7 +141,7 @@ class MksNativeDriver(MksDriver):
         clock: Clock | None = None,
         name: str = "",
         work_mode: int = st.WorkMode.SR_vFOC,
-        microsteps: int = 16,
+        microsteps: int | None = None,
         active: bool = True,
         firmware: FirmwareProfile | str | None = None,
     ) -> None:
@@ -229,6 +229,18 @@ class MksNativeDriver(MksDriver):
                 left = poll - (clock.now() - t0)
                 if left > 0:
                     clock.sleep(left)  # in process the bus waits no time: let the world run
+
+    def verify_firmware(self) -> None:
+        """The firmware check, then (V1.0.6+) what the drive holds by one 0x47: its settings fill the image
+        (nothing the drive already holds is written again) and, unless one was given, its subdivision is the
+        one the driver computes with."""
+        if self._verified:
+            return
+        super().verify_firmware()
+        if MKS_ALL_PARAMETERS in self.firmware.features:
+            held = self.read_all_parameters()
+            if not self.microsteps_given:
+                self.microsteps = held["microsteps"]
 
     # -- timed returns (V1.0.9, 5.1.9) -----------------------------------------------------------------
     def timed_return(self, name: str, milliseconds: int, callback: Callable[[dict[str, int]], None] | None = None,

@@ -11,7 +11,8 @@ import pytest
 from joints.clock import ManualClock
 from joints.codecs import mks
 from joints.codecs import modbus as mb
-from joints.devices.mks.params import DANGEROUS
+from joints.devices.mks import blocks
+from joints.devices.mks.params import DANGEROUS, MKS_PARAMS
 from joints.devices.mks.state import MotorStatus
 from joints.drivers.mks_modbus import MksModbusDriver
 from joints.drivers.mks_native import MksNativeDriver
@@ -35,6 +36,7 @@ class Drive:
         self.hook = hook
         self.status = MotorStatus.STOP
         self.position = 0
+        self.held: dict[str, int] = {}  #: settings the drive holds beyond the factory ones (0x47)
 
     def __call__(self, data: bytes) -> bytes:
         self.codec.feed(data)
@@ -48,6 +50,9 @@ class Drive:
     def answer(self, msg: Any) -> bytes:
         if isinstance(msg, mks.ReadVersion):  # a V1.0.9 drive, calibrated, S42D_485
             return mks.encode(mks.VersionReply(msg.address, 0x11_01_00_09))
+        if isinstance(msg, mks.ReadAllParameters):  # 0x47: what the drive holds (factory settings + held)
+            values = {n: MKS_PARAMS[n].default for n, _o, _s in blocks.ALL_PARAMETERS} | self.held
+            return mks.encode(mks.AllParametersReply(msg.address, blocks.pack(blocks.ALL_PARAMETERS, values, 34)))
         if isinstance(msg, mks.QueryStatus):
             return mks.encode(mks.MotorStatusReply(msg.address, self.status))
         if isinstance(msg, mks.ReadEncoderAddition):
@@ -126,13 +131,27 @@ def test_multi_field_commands_send_all_their_fields() -> None:
 
 
 def test_enable_sets_serial_mode_subdivision_respond_active_once() -> None:
-    driver, drive = native()
+    drive = Drive(lambda m: b"" if isinstance(m, mks.ReadVersion) else None)  # a V1.0.5 drive: no 0x40, no 0x47
+    link = MksLink(LoopbackTransport(drive), clock=ManualClock(), policy=RetryPolicy(timeout=0.05, retries=2))
+    driver = MksNativeDriver(link, ADDRESS, device="mks-servo42d", firmware="v1.0.5")
     driver.enable()
     assert drive.requests == [mks.ReadVersion(ADDRESS), mks.SetWorkMode(ADDRESS, 5), mks.SetSubdivision(ADDRESS, 16),
                               mks.SetRespondActive(ADDRESS, 1, 1), mks.EnableMotor(ADDRESS, 1)]
     driver.disable()
     driver.enable()
     assert drive.requests[-2:] == [mks.EnableMotor(ADDRESS, 0), mks.EnableMotor(ADDRESS, 1)]
+
+
+def test_v106_enable_reads_what_the_drive_holds_and_writes_only_what_differs() -> None:
+    driver, drive = native()
+    drive.held = {"microsteps": 32, "work_mode": 5}  # set on the drive's menu
+    driver.enable()
+    assert drive.requests == [mks.ReadVersion(ADDRESS), mks.ReadAllParameters(ADDRESS), mks.EnableMotor(ADDRESS, 1)]
+    assert driver.microsteps == 32 and driver.pulses_per_turn == 6400  # the drive's subdivision
+    drive.requests.clear()
+    given = MksNativeDriver(driver.link, ADDRESS, device="mks-servo42d", microsteps=16)
+    given.enable()  # a subdivision given to the driver is written
+    assert mks.SetSubdivision(ADDRESS, 16) in drive.requests and given.microsteps == 16
 
 
 def test_units_speed_value_and_acc_follow_the_manual() -> None:
