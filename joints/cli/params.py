@@ -126,7 +126,12 @@ def read_settings(j: Joint, fam: registry.DeviceFamily) -> dict[str, int]:
     live - plus its mode parameters (what a one-shot command puts back when it is done)."""
     driver = j.driver
     found: dict[str, int] = {}
+    block = read_block(driver)
     for p in driver.params:
+        if p.name in block and not p.persistent and (p.name in fam.mode_params
+                                                      or section(fam, p.name, True, True) == "settings"):
+            found[p.name] = block[p.name]  # write-only, but the drive's block read reports it
+            continue
         if not (p.access.readable and p.access.writable) or p.persistent:
             continue
         if p.name not in fam.mode_params and section(fam, p.name, True, True) != "settings":

@@ -5,8 +5,9 @@ adds what only the native protocol has:
 
 * :class:`MksNativeAccess` - each parameter is a field of one command (:data:`MKS_NATIVE`): a read
   is that command's query (one per command, several fields from one reply); a write sends the whole
-  command with its other fields from the image of what was written before (reads of write-only
-  settings are refused by the driver: the drive cannot report them).
+  command with its other fields from the image of what was written before. Reads of write-only
+  settings are one 0x47 (read all parameters) from firmware V1.0.6, refused before (the drive
+  cannot report them).
 * Completion frames (0x8C active = 1): the driver subscribes to its drive's frames, so it knows that
   a move ended without polling (:attr:`MksNativeDriver.completion`); :meth:`MksNativeDriver.wait_motion`
   waits for that frame and, when it does not come (lost to a collision on the half-duplex line),
@@ -39,6 +40,10 @@ from joints.link.base import Subscription
 from joints.link.mks import MksLink
 
 __all__ = ["MksNativeAccess", "MksNativeDriver", "MksNativeHeartbeatDriver", "long_packet"]
+
+#: the write-only settings 0x47 reports (V1.0.6+)
+_HELD = frozenset(n for n, _o, _s in blocks.ALL_PARAMETERS) - blocks.NOT_READ_BACK
+
 
 class MksNativeAccess(MksAccess):
     """One drive's parameters as native MKS commands (see the module docstring)."""
@@ -81,10 +86,18 @@ class MksNativeAccess(MksAccess):
         self.require(names)
         out: dict[str, int] = {}
         by_command: dict[int, list[str]] = {}
-        for n in names:
-            if not self.params[n].access.readable:
+        held = [n for n in names if not self.params[n].access.readable]
+        if held:
+            if MKS_ALL_PARAMETERS not in self.features or any(n not in _HELD for n in held):
+                n = next(n for n in held if MKS_ALL_PARAMETERS not in self.features or n not in _HELD)
                 raise RegisterError(f"{self.params.device}: {n} ({self.where(n)}) cannot be read: the drive does not "
-                                    "report it")
+                                    "report it" + ("" if n in _HELD else " (not even in 0x47)")
+                                    + ("" if MKS_ALL_PARAMETERS in self.features else
+                                       " before firmware v1.0.6 (0x47 read all parameters)"))
+            out.update({n: self.read_all()[n] for n in held})
+        for n in names:
+            if n in out:
+                continue
             by_command.setdefault(int(MKS_NATIVE.key(n).command), []).append(n)
         for command, wanted in by_command.items():
             reply = self._query(command)
@@ -93,6 +106,15 @@ class MksNativeAccess(MksAccess):
             for n in wanted:
                 out[n] = int(getattr(reply, MKS_NATIVE.key(n).field))
         return out
+
+    def read_all(self) -> dict[str, int]:
+        """0x47 (V1.0.6): every configuration setting the drive holds, by name; they fill the image."""
+        reply = self.link.request(mks.ReadAllParameters(self.address), idempotent=True)
+        if not isinstance(reply, mks.AllParametersReply):
+            raise CommandError(f"{self.params.device}@{self.address}: no reply to 0x47")
+        values = blocks.unpack(blocks.ALL_PARAMETERS, reply.params, skip=blocks.NOT_READ_BACK)
+        self.remember(values)
+        return values
 
     # -- writes -----------------------------------------------------------------------------
     def message(self, values: Mapping[str, int], address: int | None = None) -> tuple[Any, dict[str, int]]:
@@ -230,6 +252,13 @@ class MksNativeDriver(MksDriver):
                 if left > 0:
                     clock.sleep(left)  # in process the bus waits no time: let the world run
 
+    def read(self, key: str | int) -> int:
+        """Read one parameter; the write-only settings too from firmware V1.0.6 (one 0x47)."""
+        name = self.access.resolve(key)
+        if name in _HELD and MKS_ALL_PARAMETERS in self.firmware.features:
+            return self.access.read(name)
+        return super().read(key)
+
     def verify_firmware(self) -> None:
         """The firmware check, then (V1.0.6+) what the drive holds by one 0x47: its settings fill the image
         (nothing the drive already holds is written again) and, unless one was given, its subdivision is the
@@ -286,12 +315,7 @@ class MksNativeDriver(MksDriver):
     def read_all_parameters(self) -> dict[str, int]:
         """0x47: every configuration setting the drive holds (the write-only ones included), by name."""
         self._require_blocks()
-        reply = self.link.request(mks.ReadAllParameters(self.address), idempotent=True)
-        if not isinstance(reply, mks.AllParametersReply):
-            raise CommandError(f"{self.name}: no reply to 0x47")
-        values = blocks.unpack(blocks.ALL_PARAMETERS, reply.params, skip=blocks.NOT_READ_BACK)
-        self.access.remember(values)  # what the drive holds: redundant writes are skipped from now on
-        return values
+        return self.access.read_all()  # what the drive holds fills the image: redundant writes are skipped
 
     def read_all_status(self) -> dict[str, int]:
         """0x48: every status value in one transaction, by name (5.7.3)."""

@@ -3,6 +3,7 @@ restored on disable, fed by waiting, stops a silent host's axis), V1.0.6+'s Modb
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import pytest
@@ -132,7 +133,7 @@ def test_v109_timed_returns_arrive_unsolicited_through_the_links_subscriptions(t
             d.link.poll(0)  # deliver what arrived; sends nothing
         assert d.link.transactions == sent  # nothing was asked: the drive sent them by itself
         assert 9 <= len(got) <= 11
-        steps = [b - a for (_t, a), (_u, b) in zip(got, got[1:])]
+        steps = [b - a for (_t, a), (_u, b) in itertools.pairwise(got)]
         assert all(abs(s - 1638) <= 20 for s in steps), steps  # 0.1 s apart at 16384 counts/s
         assert d.returned[0x31]["encoder_addition"] == got[-1][1]
         d.timed_return("encoder_addition", 0)
@@ -145,6 +146,5 @@ def test_v109_timed_returns_arrive_unsolicited_through_the_links_subscriptions(t
 
 
 def test_timed_returns_need_v109(tmp_path: Path) -> None:
-    with open_motor(tmp_path, joint={"firmware": "v1.0.6"}) as rig:
-        with pytest.raises(RegisterError, match="v1.0.9"):
-            rig.joints["m1"].driver.timed_return("encoder_addition", 100)
+    with open_motor(tmp_path, joint={"firmware": "v1.0.6"}) as rig, pytest.raises(RegisterError, match="v1.0.9"):
+        rig.joints["m1"].driver.timed_return("encoder_addition", 100)

@@ -243,8 +243,9 @@ def test_microstep_speed_scaling_of_6_1(tmp_path: Path) -> None:
             j = rig.joints["m1"]
             fw = rig.world.drives["m1"]
             d = j.driver
-            d.microsteps = microsteps
+            d.set_microsteps(microsteps)  # the drive holds it: the driver computes with it (0x47 at enable)
             j.enable()
+            assert d.microsteps == microsteps
             assert fw.microsteps == microsteps
             d.access.write_many({"speed_mode_direction": 0, "speed_mode_speed": 300, "speed_mode_acc": 0},
                                 idempotent=False)
