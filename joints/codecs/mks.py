@@ -27,7 +27,8 @@ byte 4, firmware version in bytes 5-7 - read as major, minor, patch, our reading
 protection time (5.2.16; uint32 ms, 0 = off; answered by a set status). Manual V1.0.6 added 0x46
 write all configuration parameters (34 data bytes; set status), 0x47 read all configuration
 parameters and 0x48 read all status parameters (replies of 34 and 28 data bytes): the codec keeps
-their data as bytes (``params``), :mod:`joints.devices.mks.blocks` names the fields. V1.0.9's
+their data as bytes (``params``), :mod:`joints.devices.mks.blocks` names the fields; 0x35 reads the
+raw accumulated encoder value (int48 like 0x31). V1.0.9's
 0x01 (5.1.9) asks the drive to send one read command's reply every ``times`` ms (0 stops it):
 request code + uint16 times, reply code + status; the periodic frames are that command's ordinary
 replies (FB addr code param chk), arriving unsolicited.
@@ -512,6 +513,14 @@ class SetZeroMode:
 
 
 @dataclass(frozen=True, slots=True)
+class ReadRawEncoder:
+    """0x35 read the raw accumulated multi-turn encoder value (V1.0.6) -> :class:`RawEncoderReply`."""
+
+    address: int
+    function: ClassVar[int] = 0x35
+
+
+@dataclass(frozen=True, slots=True)
 class SetTimedReturn:
     """0x01 return the reply of read command ``code`` every ``times`` ms, unasked (V1.0.9; 0 stops it)."""
 
@@ -703,7 +712,7 @@ Request = (
     | SetRespondActive | SetGroupAddress | SetModbusRtu | SetKeyLock | SetHomeParameters | GoHome | SetAxisZero
     | SetNoLimitHomeParameters | SetZeroMode | SetLimitPortRemap | QueryStatus | EnableMotor | EmergencyStop
     | RunSpeed | SaveCleanSpeedMode | RunRelativePulses | RunAbsolutePulses | RunRelativeAxis | RunAbsoluteAxis
-    | SetTimedReturn | ReadVersion | SetHeartbeat | WriteAllParameters | ReadAllParameters | ReadAllStatus
+    | ReadRawEncoder | SetTimedReturn | ReadVersion | SetHeartbeat | WriteAllParameters | ReadAllParameters | ReadAllStatus
 )
 
 
@@ -888,6 +897,15 @@ class VersionReply:
 
 
 @dataclass(frozen=True, slots=True)
+class RawEncoderReply:
+    """0x35 (V1.0.6): ``value`` (int48, 0x4000 per turn) counted since power-on, whatever zero was set."""
+
+    address: int
+    value: int
+    function: ClassVar[int] = 0x35
+
+
+@dataclass(frozen=True, slots=True)
 class TimedReturnReply:
     """0x01 (V1.0.9): the read command ``code`` whose timed return was set, and ``status`` 1 set / 0 fail."""
 
@@ -945,7 +963,7 @@ class RunReply:
 Reply = (
     EncoderCarryReply | EncoderAdditionReply | SpeedReply | PulsesReply | IoStatusReply | AngleErrorReply
     | EnPinReply | GoBackToZeroStatusReply | ProtectionStateReply | CalibrationReply | MotorStatusReply | SetReply
-    | RunReply | VersionReply | AllParametersReply | AllStatusReply | TimedReturnReply
+    | RunReply | VersionReply | AllParametersReply | AllStatusReply | TimedReturnReply | RawEncoderReply
 )
 Message = Request | UnknownRequest | LongPacket | Reply
 
@@ -1140,12 +1158,16 @@ def _unpack_timed_reply(address: int, function: int, data: bytes, frame: bytes) 
 
 
 def _pack_int48(msg: Any) -> bytes:
-    v = _check_int("EncoderAdditionReply.value", msg.value, -(1 << 47), (1 << 47) - 1)
+    v = _check_int(f"{type(msg).__name__}.value", msg.value, -(1 << 47), (1 << 47) - 1)
     return v.to_bytes(6, "big", signed=True)
 
 
 def _unpack_int48(address: int, function: int, data: bytes, frame: bytes) -> EncoderAdditionReply:
     return EncoderAdditionReply(address, int.from_bytes(data, "big", signed=True))
+
+
+def _unpack_raw_int48(address: int, function: int, data: bytes, frame: bytes) -> RawEncoderReply:
+    return RawEncoderReply(address, int.from_bytes(data, "big", signed=True))
 
 
 _REQUEST_SPECS: tuple[_Spec, ...] = (
@@ -1183,6 +1205,7 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _struct(RunAbsolutePulses, "HBi", ("speed", "acc", "abs_pulses")),
     _struct(RunRelativeAxis, "HBi", ("speed", "acc", "rel_axis")),
     _struct(RunAbsoluteAxis, "HBi", ("speed", "acc", "abs_axis")),
+    _struct(ReadRawEncoder),
     _struct(SetTimedReturn, "BH", ("code", "times")),
     _struct(ReadVersion),
     _struct(SetHeartbeat, "I", ("times",)),
@@ -1218,6 +1241,7 @@ _FIXED_REPLY_SPECS: tuple[_Spec, ...] = (
     _raw(AllParametersReply, ALL_PARAMETERS_SIZE),
     _raw(AllStatusReply, ALL_STATUS_SIZE),
     _Spec(TimedReturnReply, 2, _pack_timed_reply, _unpack_timed_reply),
+    _Spec(RawEncoderReply, 6, _pack_int48, _unpack_raw_int48),
 )
 _REPLIES: dict[int, _Spec] = {s.cls.function: s for s in _FIXED_REPLY_SPECS}  # type: ignore[attr-defined]
 _REPLIES.update({f: _RUN_REPLY for f in RUN_REPLY_FUNCTIONS})

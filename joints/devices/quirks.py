@@ -27,7 +27,7 @@ docs/mks-firmware.md):
 ``mks-failure-replies`` (V1.0.6+): a Modbus write the drive cannot carry out is answered by FC06
 with register data 0xFFFF / FC16 with register quantity 0 (before: the twin's exception 04).
 ``mks-all-parameters`` (V1.0.6+): 0x46 / 0x47 write / read all configuration parameters, 0x48 read
-all status parameters (native protocol only).
+all status parameters, 0x35 raw encoder value (native protocol only).
 ``mks-version`` (V1.0.9): 0x40 reads calibration state, hardware and firmware version.
 ``mks-heartbeat`` (V1.0.9): 0x98 heartbeat protection time - the communication watchdog.
 ``mks-timed-returns`` (V1.0.9): 0x01 - the drive sends a read command's reply every n ms, unasked.

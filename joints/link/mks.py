@@ -45,11 +45,12 @@ RUN_FUNCTIONS = frozenset((0xF4, 0xF5, 0xF6, 0xFD, 0xFE))
 #: requests that change nothing on the drive (5.1 reads and the 0xF1 query)
 _READS = (mks.ReadEncoderCarry, mks.ReadEncoderAddition, mks.ReadSpeed, mks.ReadPulses, mks.ReadIoStatus,
           mks.ReadAngleError, mks.ReadEnPin, mks.ReadGoBackToZeroStatus, mks.ReadProtectionState, mks.QueryStatus,
-          mks.ReadVersion, mks.ReadAllParameters, mks.ReadAllStatus)
+          mks.ReadVersion, mks.ReadAllParameters, mks.ReadAllStatus, mks.ReadRawEncoder)
 _REPLIES = (mks.EncoderCarryReply, mks.EncoderAdditionReply, mks.SpeedReply, mks.PulsesReply, mks.IoStatusReply,
             mks.AngleErrorReply, mks.EnPinReply, mks.GoBackToZeroStatusReply, mks.ProtectionStateReply,
             mks.CalibrationReply, mks.MotorStatusReply, mks.SetReply, mks.RunReply, mks.VersionReply,
-            mks.AllParametersReply, mks.AllStatusReply, mks.TimedReturnReply)
+            mks.AllParametersReply, mks.AllStatusReply, mks.TimedReturnReply,
+            mks.RawEncoderReply)
 
 
 def is_completion(message: Any) -> bool:

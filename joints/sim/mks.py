@@ -167,6 +167,7 @@ class MksFirmware(Firmware):
     qd: float  #: shaft speed [rad/s]
     r: float  #: reference [rad]
     enc_zero: float
+    raw_zero: float
     pulse_zero: float
     zero_status: int
 
@@ -206,6 +207,7 @@ class MksFirmware(Firmware):
             "protection_state": lambda: int(self.protected),
             "motor_status": lambda: int(self.motor_status()),
             "version_information": self.version_information,
+            "raw_encoder_value": lambda: math.floor((self.q - self.raw_zero) * COUNTS / TAU + 1e-9),
         })
         #: V1.0.9 0x01 timed returns: read command -> (its parameter names, period [s], next due time)
         self.timed: dict[int, tuple[tuple[str, ...], float, float]] = {}
@@ -230,6 +232,7 @@ class MksFirmware(Firmware):
         self.q = 0.0
         self.qd = 0.0
         self.enc_zero = 0.0  #: rad where the encoder axis counts 0
+        self.raw_zero = 0.0  #: rad where the raw encoder value (0x35) counts 0: the power-on turn
         self.pulse_zero = 0.0  #: rad where the pulse position counts 0
         self._calibrating_answered = True
         self._reset_state()
@@ -284,6 +287,7 @@ class MksFirmware(Firmware):
         self._power_on = False
         self.enc_zero = TAU * math.floor(q / TAU + 1e-12)
         self.pulse_zero = self.enc_zero
+        self.raw_zero = self.enc_zero
         self.r = q
         if self.saved_speed is not None and self.mode.serial and self.calibrated:
             direction, speed, acc = self.saved_speed
@@ -342,7 +346,7 @@ class MksFirmware(Firmware):
         zero = self.zero_status
         values = {"motor_status": int(self.motor_status()), "encoder_addition": self.counts(),
                   "real_time_speed": round(self.qd / RPM), "io_status": self.io_status(),
-                  "number_of_pulses": self.read("number_of_pulses"), "raw_encoder_value": self.counts() % COUNTS,
+                  "number_of_pulses": self.read("number_of_pulses"), "raw_encoder_value": self.read("raw_encoder_value"),
                   "angle_error": self.read("angle_error"), "en_pin_status": int(self.enabled),
                   "single_turn_zero_status": zero, "protection_state": int(self.protected),
                   "go_back_to_zero_status": zero}

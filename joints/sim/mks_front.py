@@ -41,7 +41,7 @@ _READS = frozenset(int(c) for c in (
     Command.READ_ENCODER_VALUE_CARRY, Command.READ_ENCODER_VALUE_ADDITION, Command.READ_REAL_TIME_SPEED,
     Command.READ_NUMBER_OF_PULSES, Command.READ_IO_PORTS_STATUS, Command.READ_ERROR_OF_ANGLE,
     Command.READ_EN_PINS_STATUS, Command.READ_GO_BACK_TO_ZERO_STATUS, Command.READ_PROTECTION_STATE,
-    Command.QUERY_MOTOR_STATUS, Command.READ_VERSION_INFORMATION))
+    Command.QUERY_MOTOR_STATUS, Command.READ_VERSION_INFORMATION, Command.READ_RAW_ENCODER_VALUE))
 #: reply fields that are flags or enums on the message
 _FLAGS = frozenset(("enabled", "protected"))
 _ENUMS: dict[type, Callable[[int], Any]] = {mks.GoBackToZeroStatusReply: mks.GoBackToZeroStatus,

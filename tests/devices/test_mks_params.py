@@ -20,7 +20,7 @@ MANUAL = manual("mks-servo42d-57d-rs485-manual-v1.0.5.txt")
 PARTS_5_6 = MANUAL[MANUAL.index("Part5. Serial command description"):MANUAL.index("Part7. Serial example")]
 PART_8 = MANUAL[MANUAL.index("Part8. MODBUS-RTU command description"):MANUAL.index("Part9. FAQ")]
 #: what V1.0.9 added (manuals V1.0.9: 0x40 read version 5.1.11 / 3.1.8, 0x98 heartbeat 5.2.16 / 3.2.14)
-LATER = {0x40, 0x98, 0x46, 0x47, 0x48, 0x01}
+LATER = {0x40, 0x98, 0x46, 0x47, 0x48, 0x01, 0x35}
 
 
 # ------------------------------------------------------------------------------ parameters
@@ -79,7 +79,7 @@ def test_documented_defaults_and_ranges() -> None:
     readable = {x.name for x in p if x.access is Access.R}
     assert readable == {"encoder_carry", "encoder_value", "encoder_addition", "real_time_speed", "number_of_pulses",
                         "io_status", "angle_error", "en_pin_status", "go_back_to_zero_status", "protection_state",
-                        "motor_status", "version_information"}
+                        "motor_status", "version_information", "raw_encoder_value"}
     assert p["heartbeat_protection_time"].default == 0  # "Default: 0" (off), V1.0.9 5.2.16
     assert not any(x.access is Access.RW for x in p)  # the MKS reports no setting back
 
@@ -165,7 +165,7 @@ def test_reply_rules_follow_the_manual() -> None:
 
 
 def test_every_modbus_field_is_a_parameter_of_the_same_type_and_access() -> None:
-    assert len(MKS_MODBUS) == 58 + len(FEATURE_OF)
+    assert len(MKS_MODBUS) == 58 + len(FEATURE_OF) - 1  # 0x35 is native only
     for f in MKS_MODBUS:
         p = MKS_PARAMS[f.name]
         assert (f.type, f.access) == (p.type, p.access), f.name
@@ -183,7 +183,7 @@ def test_modbus_and_native_reach_the_same_command() -> None:
         if expected_fc:
             assert f.function == expected_fc
     assert NATIVE_ONLY == {"slave_respond", "slave_active", "group_address", "home_reverse_angle", "home_mode",
-                           "home_current"}
+                           "home_current", "raw_encoder_value"}  # 0x35: not in the Modbus-RTU manual V1.0.9
     assert set(MKS_MODBUS.names()) | NATIVE_ONLY == set(MKS_PARAMS.names())
 
 

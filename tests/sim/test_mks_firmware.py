@@ -148,3 +148,24 @@ def test_v109_timed_returns_arrive_unsolicited_through_the_links_subscriptions(t
 def test_timed_returns_need_v109(tmp_path: Path) -> None:
     with open_motor(tmp_path, joint={"firmware": "v1.0.6"}) as rig, pytest.raises(RegisterError, match="v1.0.9"):
         rig.joints["m1"].driver.timed_return("encoder_addition", 100)
+
+
+@pytest.mark.parametrize("firmware", MKS_FIRMWARES)
+def test_raw_encoder_counts_from_power_on_whatever_zero_was_set(tmp_path: Path, firmware: str) -> None:
+    """0x35 (V1.0.6): the accumulated encoder since power-on; 0x92 set zero moves 0x31's zero, not 0x35's."""
+    with open_motor(tmp_path, joint={"firmware": firmware}) as rig:
+        j = rig.joints["m1"]
+        d = j.driver
+        if firmware == "v1.0.5":
+            with pytest.raises(RegisterError, match="v1.0.6"):
+                d.read("raw_encoder_value")
+            return
+        j.enable()
+        j.move_by(3.141592653589793)
+        j.wait(timeout=10)
+        d.set_zero(confirm=True)
+        j.move_by(3.141592653589793)
+        j.wait(timeout=10)
+        axis, raw = d.read("encoder_addition"), d.read("raw_encoder_value")
+        assert abs(axis - 8192) <= 2 and abs(raw - 16384) <= 2
+        assert d.read_all_status()["raw_encoder_value"] == raw

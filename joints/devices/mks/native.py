@@ -42,6 +42,7 @@ class Command(enum.IntEnum):
     READ_REAL_TIME_SPEED = 0x32
     READ_NUMBER_OF_PULSES = 0x33
     READ_IO_PORTS_STATUS = 0x34
+    READ_RAW_ENCODER_VALUE = 0x35
     READ_ERROR_OF_ANGLE = 0x39
     READ_EN_PINS_STATUS = 0x3A
     READ_GO_BACK_TO_ZERO_STATUS = 0x3B
@@ -217,6 +218,7 @@ _KEYS: dict[str, NativeKey] = {
     "position_mode4_speed": NativeKey(C.POSITION_MODE4_ABSOLUTE_AXIS, "speed"),
     "position_mode4_acc": NativeKey(C.POSITION_MODE4_ABSOLUTE_AXIS, "acc"),
     "position_mode4_abs_axis": NativeKey(C.POSITION_MODE4_ABSOLUTE_AXIS, "abs_axis"),
+    "raw_encoder_value": NativeKey(C.READ_RAW_ENCODER_VALUE, "value"),
     "version_information": NativeKey(C.READ_VERSION_INFORMATION, "version"),
     "heartbeat_protection_time": NativeKey(C.SET_HEARTBEAT_PROTECTION_TIME, "times"),
 }
