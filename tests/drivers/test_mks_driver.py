@@ -109,13 +109,25 @@ def test_dangerous_parameters_by_name_need_confirm_through_the_joint_too() -> No
 
 
 def test_write_only_settings_are_remembered_not_read() -> None:
-    driver, drive = native()
+    drive = Drive()
+    link = MksLink(LoopbackTransport(drive), clock=ManualClock(), policy=RetryPolicy(timeout=0.05, retries=2))
+    driver = MksNativeDriver(link, ADDRESS, device="mks-servo42d", firmware="v1.0.5")
     with pytest.raises(RegisterError, match="cannot be read"):
         driver.read("working_current")
     assert drive.requests == []
     driver.set_working_current(1200)
     assert driver.written("working_current") == 1200
     assert drive.requests == [mks.SetWorkingCurrent(ADDRESS, 1200)]
+
+
+def test_from_v106_write_only_settings_are_read_by_0x47() -> None:
+    driver, drive = native()  # v1.0.9
+    drive.held = {"working_current": 1400}
+    assert driver.read("working_current") == 1400
+    assert drive.requests == [mks.ReadAllParameters(ADDRESS)]
+    assert driver.written("working_current") == 1400  # what the drive holds: not written again
+    with pytest.raises(RegisterError, match="cannot be read"):
+        driver.read("zero_mode_set_zero")  # 0x47 reads it as "Reserved (FF)"
 
 
 def test_multi_field_commands_send_all_their_fields() -> None:
