@@ -419,8 +419,9 @@ def _zlac_modbus_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[
     elif drive.quirks != quirks:
         raise ConfigError("both channels of one drive run one firmware: give them the same firmware key",
                           key=f"joints.{cfg.name}.firmware")
+    lines = cfg.profile.get("encoder_lines")  # named by the config, else the drive's setting (read at connect)
     return ZlacChannelDriver(drive, cfg.channel or "", profile=FAMILIES["zlac8015d"].config_profile(cfg),
-                             name=cfg.name)
+                             name=cfg.name, encoder_lines=None if lines is None else int(lines))
 
 
 def _zlac_modbus_table() -> Any:
@@ -462,17 +463,23 @@ def _mks_profile(model: str | None) -> Any:
 
 
 def _mks_native_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[Any, Any]) -> JointDriver:
-    from joints.drivers.mks_native import MksNativeDriver
+    from joints.devices.quirks import MKS_HEARTBEAT
+    from joints.drivers.mks_native import MksNativeDriver, MksNativeHeartbeatDriver
 
-    return MksNativeDriver(link, cfg.address, device=cfg.device, profile=FAMILIES["mks"].config_profile(cfg),
-                           clock=clock, name=cfg.name)
+    fw = FAMILIES["mks"].firmware_profile(cfg.firmware)  # V1.0.9's heartbeat: the watchdog capability
+    cls = MksNativeHeartbeatDriver if MKS_HEARTBEAT in fw.features else MksNativeDriver
+    return cls(link, cfg.address, device=cfg.device, profile=FAMILIES["mks"].config_profile(cfg),
+               clock=clock, name=cfg.name, firmware=fw)
 
 
 def _mks_modbus_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict[Any, Any]) -> JointDriver:
-    from joints.drivers.mks_modbus import MksModbusDriver
+    from joints.devices.quirks import MKS_HEARTBEAT
+    from joints.drivers.mks_modbus import MksModbusDriver, MksModbusHeartbeatDriver
 
-    return MksModbusDriver(link, cfg.address, device=cfg.device, profile=FAMILIES["mks"].config_profile(cfg),
-                           clock=clock, name=cfg.name)
+    fw = FAMILIES["mks"].firmware_profile(cfg.firmware)
+    cls = MksModbusHeartbeatDriver if MKS_HEARTBEAT in fw.features else MksModbusDriver
+    return cls(link, cfg.address, device=cfg.device, profile=FAMILIES["mks"].config_profile(cfg),
+               clock=clock, name=cfg.name, firmware=fw)
 
 
 def _mks_native_table() -> Any:
@@ -493,7 +500,8 @@ def _mks_twin(specs: Sequence[Any], inertia: Mapping[str, float]) -> tuple[Any, 
 
     d = specs[0]
     twin = MksFirmware(d.profile, model_params(d.device), d.address, inertia=inertia[d.name],
-                       modbus=d.protocol == "modbus-rtu")
+                       modbus=d.protocol == "modbus-rtu",
+                       firmware=FAMILIES["mks"].firmware_profile(d.extra.get("firmware")))
     return twin, {None: twin}
 
 
@@ -557,13 +565,15 @@ FAMILIES: dict[str, DeviceFamily] = {
     ),
     "mks": DeviceFamily(
         name="mks", devices=("mks-servo42d", "mks-servo57d"),
-        description="MKS SERVO42D (NEMA17) / SERVO57D (NEMA23) closed-loop stepper drives; NO communication watchdog",
+        description="MKS SERVO42D (NEMA17) / SERVO57D (NEMA23) closed-loop stepper drives; communication watchdog "
+                    "(heartbeat 0x98) from firmware V1.0.9 only",
         params=_mks_params, profile=_mks_profile,
         drivers={"mks-serial": _mks_native_driver, "modbus-rtu": _mks_modbus_driver},
         tables={"mks-serial": _mks_native_table, "modbus-rtu": _mks_modbus_table},
         addresses={"mks-serial": (1, 255), "modbus-rtu": (1, 247)},
         twin=_mks_twin, fronts={"mks-serial": _mks_native_front, "modbus-rtu": _mks_modbus_front},
         device_models={"mks-servo42d": "SERVO42D", "mks-servo57d": "SERVO57D"},
+        watchdog_ms=1000,  # V1.0.9 heartbeat protection (0x98, off at power-on): armed while enabled; older: none
         scan_param="motor_status",  # 0xF1: the MKS reports no error code
         identity_params=("slave_address", "baud_rate", "modbus_rtu", "group_address", "slave_respond",
                          "slave_active"),

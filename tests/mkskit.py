@@ -29,20 +29,32 @@ def motor_model(tmp_path: Path, n: int = 1) -> Path:
 
 
 def motor_config(model: Path | str, *, n: int = 1, protocol: str = "mks-serial", device: str = "mks-servo42d",
-                 backend: str = "sim", port: str = "/dev/null", **bus: Any) -> dict[str, Any]:
-    """``n`` MKS drives at addresses 1..n, each on its own bare shaft."""
+                 backend: str = "sim", port: str = "/dev/null", joint: dict[str, Any] | None = None,
+                 **bus: Any) -> dict[str, Any]:
+    """``n`` MKS drives at addresses 1..n, each on its own bare shaft (``joint``: keys every joint gets,
+    e.g. ``{"firmware": "v1.0.5"}``)."""
     return {
         "backend": backend,
         "sim": {"model": str(model)},
         "buses": {"rs485": {"protocol": protocol, "port": port, "baudrate": 38400, **bus}},
-        "joints": {f"m{i}": {"device": device, "bus": "rs485", "address": i, "mjcf_joint": f"shaft{i}"}
+        "joints": {f"m{i}": {"device": device, "bus": "rs485", "address": i, "mjcf_joint": f"shaft{i}",
+                             **(joint or {})}
                    for i in range(1, n + 1)},
     }
 
 
 def axis_config(*, protocol: str = "mks-serial", device: str = "mks-servo42d", backend: str = "sim",
-                port: str = "/dev/null", model: str = "mks_linear_axis.xml", **bus: Any) -> dict[str, Any]:
-    """The linear axis of models/mks_linear_axis.xml: joint ``carriage``, lead 8 mm."""
+                port: str = "/dev/null", model: str = "mks_linear_axis.xml", firmware: str | None = None,
+                **bus: Any) -> dict[str, Any]:
+    """The linear axis of models/mks_linear_axis.xml: joint ``carriage``, lead 8 mm (``firmware``: the
+    joint's firmware profile, None: the default)."""
+    cfg = _axis_config(protocol=protocol, device=device, backend=backend, port=port, model=model, **bus)
+    if firmware is not None:
+        cfg["joints"]["carriage"]["firmware"] = firmware
+    return cfg
+
+
+def _axis_config(*, protocol: str, device: str, backend: str, port: str, model: str, **bus: Any) -> dict[str, Any]:
     return {
         "backend": backend,
         "sim": {"model": model},

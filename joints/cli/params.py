@@ -14,6 +14,10 @@ Rules:
   ``--save`` stores the settings in the drive's memory (``--confirm``).
 * ``diff`` compares two dumps, or a drive against a dump: settings only (identity with
   ``--include-identity``); no output means no difference.
+* Drives with a read/write-all block (:class:`AllParameters`: MKS firmware V1.0.6+ on the native
+  protocol, 0x47/0x46) are dumped with one 0x47 - their write-only settings then have values - and
+  ``load --apply --confirm`` writes what differs in one 0x46 (without ``--confirm``: one command per
+  setting, as for every drive).
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ import datetime
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 from joints import registry
 from joints.cli.common import UsageError, add_json, command, emit_json, joint, load_config, open_rig, out
@@ -35,6 +39,28 @@ if TYPE_CHECKING:
     from joints.rig import Rig
 
 SECTIONS = ("settings", "identity", "live", "status", "not_readable", "read_failed")
+
+
+@runtime_checkable
+class AllParameters(Protocol):
+    """A driver that reads and writes every configuration setting in one transaction (MKS 0x47/0x46).
+
+    ``read_all_parameters`` raises :class:`~joints.errors.RegisterError` where the drive's firmware lacks it.
+    """
+
+    def read_all_parameters(self) -> dict[str, int]: ...
+
+    def write_all_parameters(self, values: Mapping[str, int], *, confirm: bool = False) -> None: ...
+
+
+def read_block(driver: object) -> dict[str, int]:
+    """Every setting by one block read where the driver and the drive's firmware have it, else {}."""
+    if not isinstance(driver, AllParameters):
+        return {}
+    try:
+        return driver.read_all_parameters()
+    except RegisterError:
+        return {}
 NOT_READABLE = "not readable"
 
 
@@ -71,6 +97,7 @@ def dump_joint(rig: Rig, j: Joint) -> dict[str, Any]:
     for s in SECTIONS:
         data[s] = {}
     driver = j.driver
+    block = read_block(driver)
     for p in driver.params:
         if p.access is Access.COMMAND:
             continue
@@ -78,6 +105,9 @@ def dump_joint(rig: Rig, j: Joint) -> dict[str, Any]:
             name = driver.access.resolve(p.name)
         except RegisterError:
             continue  # not on this protocol
+        if name in block:
+            data[section(fam, name, True, p.access.writable)][name] = block[name]
+            continue
         where = section(fam, name, p.access.readable, p.access.writable)
         if where == "not_readable":
             data[where][name] = NOT_READABLE
@@ -96,7 +126,12 @@ def read_settings(j: Joint, fam: registry.DeviceFamily) -> dict[str, int]:
     live - plus its mode parameters (what a one-shot command puts back when it is done)."""
     driver = j.driver
     found: dict[str, int] = {}
+    block = read_block(driver)
     for p in driver.params:
+        if p.name in block and not p.persistent and (p.name in fam.mode_params
+                                                      or section(fam, p.name, True, True) == "settings"):
+            found[p.name] = block[p.name]  # write-only, but the drive's block read reports it
+            continue
         if not (p.access.readable and p.access.writable) or p.persistent:
             continue
         if p.name not in fam.mode_params and section(fam, p.name, True, True) != "settings":
@@ -176,6 +211,7 @@ def cmd_load(args: argparse.Namespace) -> int:
         j = joint(rig, args.joint)
         driver = j.driver
         values = comparable(wanted, args.include_identity)
+        block = read_block(driver)
         here: dict[str, int | None] = {}
         for name in values:
             try:
@@ -183,7 +219,7 @@ def cmd_load(args: argparse.Namespace) -> int:
             except RegisterError:
                 raise UsageError(f"{args.file}: {name} is not a parameter {driver.device} over "
                                  f"{driver.protocol} reaches") from None
-            here[name] = driver.read(name) if param.access.readable else None
+            here[name] = block[name] if name in block else driver.read(name) if param.access.readable else None
         diffs = [(n, here[n], v) for n, v in values.items() if here[n] != v]
         _show(diffs, "drive", "file", args.json)
         if not args.apply:
@@ -196,8 +232,11 @@ def cmd_load(args: argparse.Namespace) -> int:
                                        "written; add --confirm if you mean it")
         for n, _x, v in diffs:
             driver.params[n].check(v)  # every value checked before the first write
-        for n, _x, v in diffs:
-            j.write(n, v, confirm=args.confirm)
+        if diffs and block and args.confirm and isinstance(driver, AllParameters) and all(n in block for n, _x, _v in diffs):
+            driver.write_all_parameters({n: v for n, _x, v in diffs}, confirm=True)  # one 0x46
+        else:
+            for n, _x, v in diffs:
+                j.write(n, v, confirm=args.confirm)
         if args.save:
             if not isinstance(driver, SaveParameters):
                 raise UsageError(f"{driver.device} over {driver.protocol} has no save command (its settings are "

@@ -15,17 +15,29 @@ Frames (every multi-byte field big-endian; ``chk`` = sum of all previous bytes &
 Frame length = 4 + the data length, which the head, the role and the function code determine
 (the frame has no length field):
 
-* downlink (FA): 0 data bytes for 0x30-0x34, 0x39-0x3B, 0x3D-0x3F, 0x41, 0x91, 0x92, 0xF1, 0xF7;
-  1 for 0x80, 0x82, 0x84-0x8B, 0x8D-0x8F, 0x9B, 0x9E, 0xF3, 0xFF; 2 for 0x83, 0x8C; 3 for 0xF6;
-  4 for 0x9A; 5 for 0x90; 7 for 0x94, 0xF4, 0xF5, 0xFD, 0xFE (:data:`REQUEST_DATA_LENGTH`).
-* uplink (FB): 6 data bytes for 0x30 and 0x31, 2 for 0x32, 4 for 0x33 and 0x39, 1 (a status
+* downlink (FA): 0 data bytes for 0x30-0x34, 0x39-0x3B, 0x3D-0x3F, 0x40, 0x41, 0x91, 0x92, 0xF1,
+  0xF7; 1 for 0x80, 0x82, 0x84-0x8B, 0x8D-0x8F, 0x9B, 0x9E, 0xF3, 0xFF; 2 for 0x83, 0x8C; 3 for
+  0xF6; 4 for 0x98, 0x9A; 5 for 0x90; 7 for 0x94, 0xF4, 0xF5, 0xFD, 0xFE (:data:`REQUEST_DATA_LENGTH`).
+* uplink (FB): 6 data bytes for 0x30 and 0x31, 2 for 0x32, 4 for 0x33, 0x39 and 0x40, 1 (a status
   byte) for every other command (:data:`REPLY_DATA_LENGTH`).
+
+Commands of later firmware (manual V1.0.9; a drive before it does not answer them): 0x40 read
+version information (5.1.11; reply: calibration status in b7-b4 and hardware version in b3-b0 of
+byte 4, firmware version in bytes 5-7 - read as major, minor, patch, our reading), 0x98 heartbeat
+protection time (5.2.16; uint32 ms, 0 = off; answered by a set status). Manual V1.0.6 added 0x46
+write all configuration parameters (34 data bytes; set status), 0x47 read all configuration
+parameters and 0x48 read all status parameters (replies of 34 and 28 data bytes): the codec keeps
+their data as bytes (``params``), :mod:`joints.devices.mks.blocks` names the fields; 0x35 reads the
+raw accumulated encoder value (int48 like 0x31). V1.0.9's
+0x01 (5.1.9) asks the drive to send one read command's reply every ``times`` ms (0 stops it):
+request code + uint16 times, reply code + status; the periodic frames are that command's ordinary
+replies (FB addr code param chk), arriving unsolicited.
 * long packet (FC): always 52 bytes: five 10-byte slots, each an ordinary command without head
   and checksum (address, code, data) padded with zeros; an all-zero slot is an unused slot (None).
 
 Unknown function codes
     Device role: an FA frame with a code the manual does not define is delimited by its checksum:
-    the shortest length from 4 to 11 bytes (the longest downlink frame) whose last byte is the
+    the shortest length from 4 to 11 bytes (the longest fixed command frame) whose last byte is the
     checksum of the bytes before it. It comes out as :class:`UnknownRequest` (a twin ignores it;
     the drive's firmware does not document an answer). With no match in 11 bytes, or at silence,
     the FA byte is garbage. Checksum-8 makes this a guess: 1 in 256 per candidate length matches
@@ -128,8 +140,10 @@ LONG_PACKET_SLOTS = 5
 LONG_PACKET_SLOT = 10
 LONG_PACKET_LENGTH = 1 + LONG_PACKET_SLOTS * LONG_PACKET_SLOT + 1  #: 52
 MIN_FRAME = 4  #: head, address, code, checksum
-MAX_DOWNLINK_FRAME = 11  #: 0x94, 0xF4, 0xF5, 0xFD, 0xFE
-MAX_UPLINK_FRAME = 10  #: 0x30, 0x31
+MAX_DOWNLINK_FRAME = 38  #: 0x46 (V1.0.6)
+MAX_UPLINK_FRAME = 38  #: 0x47 (V1.0.6)
+#: the longest frame an unknown code is searched for (the longest fixed command frame: 0x94, 0xF4, 0xF5, 0xFD, 0xFE)
+MAX_UNKNOWN_FRAME = 11
 SPEED_FIELD_MAX = 0x0FFF  #: 12-bit speed of 0xF6/0xFD
 ENCODER_COUNTS_PER_TURN = 0x4000  #: encoder value range of one turn (0x30, 0x31)
 ANGLE_ERROR_PER_TURN = 51200  #: 0x39: 0..51200 = 0..360 degrees
@@ -499,6 +513,66 @@ class SetZeroMode:
 
 
 @dataclass(frozen=True, slots=True)
+class ReadRawEncoder:
+    """0x35 read the raw accumulated multi-turn encoder value (V1.0.6) -> :class:`RawEncoderReply`."""
+
+    address: int
+    function: ClassVar[int] = 0x35
+
+
+@dataclass(frozen=True, slots=True)
+class SetTimedReturn:
+    """0x01 return the reply of read command ``code`` every ``times`` ms, unasked (V1.0.9; 0 stops it)."""
+
+    address: int
+    code: int
+    times: int
+    function: ClassVar[int] = 0x01
+
+
+@dataclass(frozen=True, slots=True)
+class ReadVersion:
+    """0x40 read version information (V1.0.9) -> :class:`VersionReply`."""
+
+    address: int
+    function: ClassVar[int] = 0x40
+
+
+@dataclass(frozen=True, slots=True)
+class SetHeartbeat:
+    """0x98 heartbeat protection time [ms] (V1.0.9): no command for this long -> urgent stop; 0 = off."""
+
+    address: int
+    times: int
+    function: ClassVar[int] = 0x98
+
+
+@dataclass(frozen=True, slots=True)
+class WriteAllParameters:
+    """0x46 write all configuration parameters (V1.0.6): the 34 bytes of 5.7.1 -> set status."""
+
+    address: int
+    params: bytes
+    function: ClassVar[int] = 0x46
+
+
+@dataclass(frozen=True, slots=True)
+class ReadAllParameters:
+    """0x47 read all configuration parameters (V1.0.6) -> :class:`AllParametersReply`."""
+
+    address: int
+    function: ClassVar[int] = 0x47
+
+
+@dataclass(frozen=True, slots=True)
+class ReadAllStatus:
+    """0x48 read all status parameters (V1.0.6) -> :class:`AllStatusReply`."""
+
+    address: int
+    function: ClassVar[int] = 0x48
+
+
+@dataclass(frozen=True, slots=True)
 class SetLimitPortRemap:
     """0x9E remap the limit ports (left -> En, right -> Dir): 1 enable, 0 disable."""
 
@@ -638,6 +712,7 @@ Request = (
     | SetRespondActive | SetGroupAddress | SetModbusRtu | SetKeyLock | SetHomeParameters | GoHome | SetAxisZero
     | SetNoLimitHomeParameters | SetZeroMode | SetLimitPortRemap | QueryStatus | EnableMotor | EmergencyStop
     | RunSpeed | SaveCleanSpeedMode | RunRelativePulses | RunAbsolutePulses | RunRelativeAxis | RunAbsoluteAxis
+    | ReadRawEncoder | SetTimedReturn | ReadVersion | SetHeartbeat | WriteAllParameters | ReadAllParameters | ReadAllStatus
 )
 
 
@@ -799,6 +874,66 @@ class MotorStatusReply:
 
 
 @dataclass(frozen=True, slots=True)
+class VersionReply:
+    """0x40 (V1.0.9): the four data bytes as one big-endian ``version`` (uint32): b31-b28 calibration
+    status, b27-b24 hardware version (1 S42D_485, 2 S42D_CAN, 3 S57D_485, 4 S57D_CAN ...), b23-b0 the
+    firmware version, one byte each of major, minor, patch."""
+
+    address: int
+    version: int
+    function: ClassVar[int] = 0x40
+
+    @property
+    def calibrated(self) -> bool:
+        return bool(self.version >> 28)
+
+    @property
+    def hardware(self) -> int:
+        return (self.version >> 24) & 0x0F
+
+    @property
+    def firmware(self) -> tuple[int, int, int]:
+        return ((self.version >> 16) & 0xFF, (self.version >> 8) & 0xFF, self.version & 0xFF)
+
+
+@dataclass(frozen=True, slots=True)
+class RawEncoderReply:
+    """0x35 (V1.0.6): ``value`` (int48, 0x4000 per turn) counted since power-on, whatever zero was set."""
+
+    address: int
+    value: int
+    function: ClassVar[int] = 0x35
+
+
+@dataclass(frozen=True, slots=True)
+class TimedReturnReply:
+    """0x01 (V1.0.9): the read command ``code`` whose timed return was set, and ``status`` 1 set / 0 fail."""
+
+    address: int
+    code: int
+    status: SetStatus
+    function: ClassVar[int] = 0x01
+
+
+@dataclass(frozen=True, slots=True)
+class AllParametersReply:
+    """0x47 (V1.0.6): the 34 configuration bytes (5.7.2; layout in joints.devices.mks.blocks)."""
+
+    address: int
+    params: bytes
+    function: ClassVar[int] = 0x47
+
+
+@dataclass(frozen=True, slots=True)
+class AllStatusReply:
+    """0x48 (V1.0.6): the 28 status bytes (5.7.3; layout in joints.devices.mks.blocks)."""
+
+    address: int
+    params: bytes
+    function: ClassVar[int] = 0x48
+
+
+@dataclass(frozen=True, slots=True)
 class SetReply:
     """Status reply (0 fail, 1 success) of a set command; ``function`` is the command's code."""
 
@@ -828,7 +963,7 @@ class RunReply:
 Reply = (
     EncoderCarryReply | EncoderAdditionReply | SpeedReply | PulsesReply | IoStatusReply | AngleErrorReply
     | EnPinReply | GoBackToZeroStatusReply | ProtectionStateReply | CalibrationReply | MotorStatusReply | SetReply
-    | RunReply
+    | RunReply | VersionReply | AllParametersReply | AllStatusReply | TimedReturnReply | RawEncoderReply
 )
 Message = Request | UnknownRequest | LongPacket | Reply
 
@@ -992,13 +1127,47 @@ def _coded_spec(cls: type, enum_type: type[enum.IntEnum]) -> _Spec:
     return _Spec(cls, 1, pack, unpack)
 
 
+ALL_PARAMETERS_SIZE = 34  #: data bytes of 0x46 / the 0x47 reply
+ALL_STATUS_SIZE = 28  #: data bytes of the 0x48 reply
+
+
+def _raw(cls: type, size: int) -> _Spec:
+    """A message whose data is ``size`` bytes kept as they are (field ``params``)."""
+
+    def pack(msg: Any) -> bytes:
+        data = msg.params
+        if not isinstance(data, (bytes, bytearray)) or len(data) != size:
+            raise EncodeError(f"{cls.__name__}.params must be {size} bytes, got {data!r}")
+        return bytes(data)
+
+    def unpack(address: int, function: int, data: bytes, frame: bytes) -> Any:
+        return cls(address, bytes(data))
+
+    return _Spec(cls, size, pack, unpack)
+
+
+def _pack_timed_reply(msg: Any) -> bytes:
+    try:
+        return bytes((_check_u8("TimedReturnReply.code", msg.code), SetStatus(msg.status)))
+    except ValueError:
+        raise EncodeError(f"TimedReturnReply.status must be a SetStatus, got {msg.status!r}") from None
+
+
+def _unpack_timed_reply(address: int, function: int, data: bytes, frame: bytes) -> TimedReturnReply:
+    return TimedReturnReply(address, data[0], _enum_value(SetStatus, data[1], "TimedReturnReply.status", frame))
+
+
 def _pack_int48(msg: Any) -> bytes:
-    v = _check_int("EncoderAdditionReply.value", msg.value, -(1 << 47), (1 << 47) - 1)
+    v = _check_int(f"{type(msg).__name__}.value", msg.value, -(1 << 47), (1 << 47) - 1)
     return v.to_bytes(6, "big", signed=True)
 
 
 def _unpack_int48(address: int, function: int, data: bytes, frame: bytes) -> EncoderAdditionReply:
     return EncoderAdditionReply(address, int.from_bytes(data, "big", signed=True))
+
+
+def _unpack_raw_int48(address: int, function: int, data: bytes, frame: bytes) -> RawEncoderReply:
+    return RawEncoderReply(address, int.from_bytes(data, "big", signed=True))
 
 
 _REQUEST_SPECS: tuple[_Spec, ...] = (
@@ -1036,6 +1205,13 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _struct(RunAbsolutePulses, "HBi", ("speed", "acc", "abs_pulses")),
     _struct(RunRelativeAxis, "HBi", ("speed", "acc", "rel_axis")),
     _struct(RunAbsoluteAxis, "HBi", ("speed", "acc", "abs_axis")),
+    _struct(ReadRawEncoder),
+    _struct(SetTimedReturn, "BH", ("code", "times")),
+    _struct(ReadVersion),
+    _struct(SetHeartbeat, "I", ("times",)),
+    _raw(WriteAllParameters, ALL_PARAMETERS_SIZE),
+    _struct(ReadAllParameters),
+    _struct(ReadAllStatus),
 )
 
 _REQUESTS: dict[int, _Spec] = {s.cls.function: s for s in _REQUEST_SPECS}  # type: ignore[attr-defined]
@@ -1044,7 +1220,8 @@ _REQUEST_BY_TYPE: dict[type, _Spec] = {s.cls: s for s in _REQUEST_SPECS}
 #: function codes answered by :class:`RunReply` and by :class:`SetReply`
 RUN_REPLY_FUNCTIONS = frozenset((0x91, 0xF4, 0xF5, 0xF6, 0xFD, 0xFE, 0xFF))
 SET_REPLY_FUNCTIONS = frozenset((0x3D, 0x3F, 0x41, 0x82, 0x83, 0x84, 0x85, 0x86, 0x87, 0x88, 0x89, 0x8A, 0x8B,
-                                 0x8C, 0x8D, 0x8E, 0x8F, 0x90, 0x92, 0x94, 0x9A, 0x9B, 0x9E, 0xF3, 0xF7))
+                                 0x8C, 0x8D, 0x8E, 0x8F, 0x90, 0x92, 0x94, 0x98, 0x9A, 0x9B, 0x9E, 0xF3, 0xF7,
+                                 0x46))
 
 _RUN_REPLY = _coded_spec(RunReply, RunStatus)
 _SET_REPLY = _coded_spec(SetReply, SetStatus)
@@ -1060,6 +1237,11 @@ _FIXED_REPLY_SPECS: tuple[_Spec, ...] = (
     _flag_spec(ProtectionStateReply, "protected"),
     _status_spec(CalibrationReply, "status", CalibrationStatus),
     _status_spec(MotorStatusReply, "status", MotorStatus),
+    _struct(VersionReply, "I", ("version",)),
+    _raw(AllParametersReply, ALL_PARAMETERS_SIZE),
+    _raw(AllStatusReply, ALL_STATUS_SIZE),
+    _Spec(TimedReturnReply, 2, _pack_timed_reply, _unpack_timed_reply),
+    _Spec(RawEncoderReply, 6, _pack_int48, _unpack_raw_int48),
 )
 _REPLIES: dict[int, _Spec] = {s.cls.function: s for s in _FIXED_REPLY_SPECS}  # type: ignore[attr-defined]
 _REPLIES.update({f: _RUN_REPLY for f in RUN_REPLY_FUNCTIONS})
@@ -1079,7 +1261,7 @@ assert set(REQUEST_TYPES) == set(REPLY_TYPES), "every command has a reply layout
 # --- encoding --------------------------------------------------------------------------------
 
 
-def _inner(msg: Request | UnknownRequest, max_unknown: int = MAX_DOWNLINK_FRAME - MIN_FRAME) -> bytes:
+def _inner(msg: Request | UnknownRequest, max_unknown: int = MAX_UNKNOWN_FRAME - MIN_FRAME) -> bytes:
     """Address, code and data of a request (a frame without head and checksum)."""
     address = _check_u8("address", msg.address)
     if isinstance(msg, UnknownRequest):
@@ -1107,6 +1289,8 @@ def _encode_long(msg: LongPacket) -> bytes:
         if isinstance(cmd, LongPacket):
             raise EncodeError("a long packet cannot contain a long packet")
         inner = _inner(cmd, LONG_PACKET_SLOT - 2)
+        if len(inner) > LONG_PACKET_SLOT:
+            raise EncodeError(f"long packet slot {i + 1}: {type(cmd).__name__} does not fit {LONG_PACKET_SLOT} bytes")
         if not any(inner):
             raise EncodeError(f"long packet slot {i + 1}: an all-zero command reads as an empty slot")
         body += inner + bytes(LONG_PACKET_SLOT - len(inner))
@@ -1163,6 +1347,9 @@ def _decode_long(frame: bytes) -> LongPacket:
         if spec is None:
             cmds.append(UnknownRequest(address, function, bytes(slot[2:])))
             continue
+        if 2 + spec.size > LONG_PACKET_SLOT:
+            raise FrameError(f"long packet slot {i + 1}: {spec.cls.__name__} does not fit a slot: {frame.hex(' ')}",
+                             data=frame)
         data, pad = slot[2:2 + spec.size], slot[2 + spec.size:]
         if any(pad):
             raise FrameError(f"long packet slot {i + 1} ({spec.cls.__name__}) has non-zero padding "
@@ -1244,7 +1431,7 @@ class MksCodec:
             return None
         n = REQUEST_DATA_LENGTH.get(buf[2])
         if n is None:
-            found = _unknown_length(buf, MAX_DOWNLINK_FRAME)
+            found = _unknown_length(buf, MAX_UNKNOWN_FRAME)
             if found is None and self._silent:
                 return 0
             return found

@@ -15,6 +15,22 @@ asynchronous control" - the chapter-4 table says 0 = synchronous, 1 = asynchrono
 the manual's section 3.2 examples were captured on (and the widely used community drivers) takes
 0 = asynchronous, 1 = synchronous. With the quirk the driver writes 1 for synchronous control and
 the twin starts both wheels on START_SYNC only when 0x200F = 1; without it both follow the table.
+
+Firmware features
+
+A newer firmware may also *add* commands: a :class:`FirmwareProfile` lists them in ``features``
+(names below), the driver uses them only where the profile has them and the twin answers them only
+then (an older twin ignores the native command / answers Modbus exception 02, as a drive without
+it would). MKS SERVO42D/57D (manuals V1.0.5 May 2024, V1.0.6 Sep 2024, V1.0.9 Nov 2025, see
+docs/mks-firmware.md):
+
+``mks-failure-replies`` (V1.0.6+): a Modbus write the drive cannot carry out is answered by FC06
+with register data 0xFFFF / FC16 with register quantity 0 (before: the twin's exception 04).
+``mks-all-parameters`` (V1.0.6+): 0x46 / 0x47 write / read all configuration parameters, 0x48 read
+all status parameters, 0x35 raw encoder value (native protocol only).
+``mks-version`` (V1.0.9): 0x40 reads calibration state, hardware and firmware version.
+``mks-heartbeat`` (V1.0.9): 0x98 heartbeat protection time - the communication watchdog.
+``mks-timed-returns`` (V1.0.9): 0x01 - the drive sends a read command's reply every n ms, unasked.
 """
 
 from __future__ import annotations
@@ -25,7 +41,8 @@ from types import MappingProxyType
 
 from joints.errors import ConfigError
 
-__all__ = ["DEFAULT_FIRMWARE", "EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED", "FIRMWARES", "QUIRKS",
+__all__ = ["DEFAULT_FIRMWARE", "EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED", "FIRMWARES", "MKS_ALL_PARAMETERS",
+           "MKS_FAILURE_REPLIES", "MKS_FIRMWARES", "MKS_HEARTBEAT", "MKS_TIMED_RETURNS", "MKS_VERSION", "QUIRKS",
            "ZLAC_SYNC_FLAG_AS_EXAMPLES", "FirmwareProfile", "Quirk", "firmware_profile"]
 
 
@@ -48,11 +65,32 @@ class FirmwareProfile:
     firmware: str  #: the config's ``firmware`` value
     quirks: frozenset[str]
     description: str
+    features: frozenset[str] = frozenset()  #: commands this firmware adds over its family's oldest profile
+    version: tuple[int, ...] = ()  #: the version the drive reports for it (MKS 0x40: major, minor, patch)
 
 
 ZLAC_SYNC_FLAG_AS_EXAMPLES = "zlac-sync-flag-as-examples"
 #: eRob on CANopen: 0x6060 taken while OPERATION ENABLED (E7 of joints.devices.erob.canopen; not in any erratum)
 EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED = "erob-canopen-mode-change-while-enabled"
+MKS_FAILURE_REPLIES = "mks-failure-replies"
+MKS_ALL_PARAMETERS = "mks-all-parameters"
+MKS_VERSION = "mks-version"
+MKS_HEARTBEAT = "mks-heartbeat"
+MKS_TIMED_RETURNS = "mks-timed-returns"
+#: the MKS firmware profiles, oldest first (the last is the default)
+MKS_FIRMWARES = ("v1.0.5", "v1.0.6", "v1.0.9")
+_MKS_FEATURES = {
+    "v1.0.5": frozenset(),
+    "v1.0.6": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS}),
+    "v1.0.9": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_VERSION, MKS_HEARTBEAT, MKS_TIMED_RETURNS}),
+}
+_MKS_TEXT = {
+    "v1.0.5": "manual V1.0.5 (May 2024): no heartbeat, no version command; Modbus write failures undocumented",
+    "v1.0.6": "manual V1.0.6 (Sep 2024): Modbus write failures answered by FC06 data 0xFFFF / FC16 quantity 0; "
+              "0x46/0x47/0x48 write/read all parameters",
+    "v1.0.9": "manual V1.0.9 (Nov 2025): + 0x40 version, 0x98 heartbeat protection (the communication watchdog), "
+              "0x01 timed returns",
+}
 
 QUIRKS: Mapping[str, Quirk] = MappingProxyType({q.name: q for q in (
     Quirk(ZLAC_SYNC_FLAG_AS_EXAMPLES, "zlac8015d", "DOC-ZLAC-1",
@@ -73,10 +111,12 @@ FIRMWARES: Mapping[tuple[str, str], FirmwareProfile] = MappingProxyType({(p.fami
     FirmwareProfile("erob", "mode-change-while-enabled", frozenset({EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED}),
                     "an eRob that takes a CANopen mode change (0x6060) while enabled; choose it if a real drive "
                     "does (the default profile refuses it, as the eRunner manual's section 5.1 asks)"),
+    *(FirmwareProfile("mks", fw, frozenset(), _MKS_TEXT[fw], _MKS_FEATURES[fw],
+                      tuple(int(x) for x in fw[1:].split("."))) for fw in MKS_FIRMWARES),
 )})
 
 #: family -> the firmware a joint has when its config names none
-DEFAULT_FIRMWARE: Mapping[str, str] = MappingProxyType({"zlac8015d": "examples"})
+DEFAULT_FIRMWARE: Mapping[str, str] = MappingProxyType({"zlac8015d": "examples", "mks": MKS_FIRMWARES[-1]})
 
 
 def firmware_profile(family: str, firmware: str | None = None) -> FirmwareProfile:

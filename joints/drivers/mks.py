@@ -20,13 +20,27 @@ deceleration is the same acc (the drive has one). Speeds above the work mode's m
 / 3000 rpm) are clamped by the drive.
 
 What the driver sets before motion (``enable``): the work mode (serial commands need SR_*; default
-SR_vFOC), the subdivision it computes speeds with (default 16) and, natively, respond and active on
-(0x8C 1 1: completion frames). Settings the drive cannot report are written once per session and
-remembered (the access keeps an image of what was written).
+SR_vFOC), the subdivision it computes speeds with (the one given; else the drive's where 0x47
+reports it - V1.0.6+ native - else 16) and, natively, respond and active on (0x8C 1 1: completion
+frames). Settings the drive cannot report are written once per session and remembered (the access
+keeps an image of what was written; 0x47 fills it with what the drive holds).
+
+Firmware (``firmware`` of the joint, :mod:`joints.devices.quirks`; default the newest, V1.0.9)
+    The driver uses a later firmware's commands only where its profile has them (others raise
+    :class:`~joints.errors.RegisterError` naming the firmware needed). Before the first enable
+    (or watchdog or identity call) it asks the drive: with V1.0.9 it reads 0x40 and refuses
+    (:class:`~joints.errors.ConfigError`, key ``firmware``) a drive that reports another version
+    or does not answer 0x40 at all (older than V1.0.9); with an older profile it asks 0x40 once
+    (no retry) and refuses a drive that answers it. :meth:`MksDriver.identity` reports what 0x40
+    says. Modbus writes that fail are answered by V1.0.6+ with FC06 data 0xFFFF / FC16 quantity
+    0: :class:`~joints.errors.DeviceRejected` (code 0), as the native status 0.
 
 Safety
-    * The MKS has NO communication watchdog: a speed-mode axis keeps turning if the host dies.
-      Leaving a :class:`~joints.rig.Rig` stops (:meth:`MksDriver.stop`: the running mode's own stop
+    * Before firmware V1.0.9 the MKS has NO communication watchdog: a speed-mode axis keeps
+      turning if the host dies. V1.0.9's heartbeat protection (0x98) is the watchdog:
+      :class:`MksHeartbeat` drivers (what the registry builds for a V1.0.9 joint) arm it while
+      the joint is enabled (:class:`~joints.drivers.capabilities.CommunicationWatchdog`) and the
+      rig's waits feed it. Leaving a :class:`~joints.rig.Rig` stops (:meth:`MksDriver.stop`: the running mode's own stop
       command, speed mode's 0xF6 speed 0 when the mode is unknown) and disables every axis this
       host enabled; prefer position moves (they end by themselves) where a target is known.
     * A run command is never sent twice blindly: when its reply is lost the driver reads the motor
@@ -51,14 +65,27 @@ from typing import TypeVar
 from joints.clock import Clock, MonotonicClock
 from joints.devices.faults import DEFINED_BY_JOINTS, HOST_DEFINED, Fault
 from joints.devices.mks import state as st
+from joints.devices.mks.params import FEATURE_OF
 from joints.devices.mks.profile import MksProfile
 from joints.devices.mks.profile import profile as lookup_profile
 from joints.devices.params import ParamSet
+from joints.devices.quirks import MKS_FIRMWARES, MKS_VERSION, FirmwareProfile, firmware_profile
 from joints.drivers.access import ParamAccess
 from joints.drivers.base import JointDriver, RawState, Units
-from joints.errors import CommandError, ConfirmationRequired, MotionTimeout, OutcomeUnknown, PeerProtocolError
+from joints.errors import (
+    CommandError,
+    ConfigError,
+    ConfirmationRequired,
+    DeviceRejected,
+    MotionTimeout,
+    OutcomeUnknown,
+    PeerProtocolError,
+    RegisterError,
+    ReplyTimeout,
+)
 
-__all__ = ["DEFAULT_ACC", "DEFAULT_SPEED", "LOCKED_ROTOR", "RUN_GROUPS", "STATUS_NAMES", "MksAccess", "MksDriver"]
+__all__ = ["DEFAULT_ACC", "DEFAULT_SPEED", "HARDWARE", "LOCKED_ROTOR", "RUN_GROUPS", "STATUS_NAMES", "MksAccess",
+           "MksDriver", "MksHeartbeat", "firmware_text"]
 
 #: the fault the drive reports (0x3E = 1), as a host-defined code (the MKS has no fault codes)
 LOCKED_ROTOR = HOST_DEFINED | 0x3E
@@ -78,6 +105,14 @@ _MODE_OF = {name: mode for mode, names in RUN_GROUPS.items() for name in names}
 _MODE_OF["position_mode1_direction"] = "pulses"
 _COUNTS = st.ENCODER_COUNTS_PER_TURN
 _RPM = 2.0 * math.pi / 60.0
+#: 0x40 hardware version -> board (manual V1.0.9 5.1.11)
+HARDWARE: Mapping[int, str] = {1: "S42D_485", 2: "S42D_CAN", 3: "S57D_485", 4: "S57D_CAN", 5: "S28D_RS485",
+                               6: "S28D_CAN", 7: "S35D_RS485", 8: "S35D_CAN"}
+
+
+def firmware_text(version: Sequence[int]) -> str:
+    """(1, 0, 9) -> "v1.0.9" (the config's spelling)."""
+    return "v" + ".".join(str(v) for v in version)
 
 
 T = TypeVar("T")
@@ -94,6 +129,17 @@ class MksAccess(ParamAccess):
     def __init__(self, params: ParamSet) -> None:
         self.params = params
         self.image: dict[str, int] = {}
+        #: the firmware's added commands this drive has (joints.devices.quirks; the driver sets them)
+        self.features: frozenset[str] = firmware_profile("mks").features
+
+    def require(self, names: Sequence[str] | Mapping[str, int]) -> None:
+        """Refuse parameters of a later firmware than this drive's profile (nothing is sent)."""
+        for n in names:
+            feature = FEATURE_OF.get(n)
+            if feature is not None and feature not in self.features:
+                newer = [f for f in MKS_FIRMWARES if feature in firmware_profile("mks", f).features]
+                raise RegisterError(f"{self.params.device}: {n} needs firmware {newer[0]} or later (the joint's "
+                                    f"firmware key names an older one)")
 
     def forget(self) -> None:
         """The drive was power-cycled or restored: nothing written is known any more."""
@@ -124,6 +170,10 @@ class MksAccess(ParamAccess):
     def read(self, name: str) -> int:
         return self.read_many((name,))[name]
 
+    def read_version(self, *, retry: bool = True) -> int:
+        """0x40 version word (V1.0.9); ``retry=False``: one attempt. Each protocol's access implements it."""
+        raise NotImplementedError
+
     def write(self, name: str, value: int, *, idempotent: bool = True) -> None:
         self.write_many({name: value}, idempotent=idempotent)
 
@@ -142,9 +192,14 @@ class MksDriver(JointDriver):
         clock: Clock | None = None,
         name: str = "",
         work_mode: int = st.WorkMode.SR_vFOC,
-        microsteps: int = 16,
+        microsteps: int | None = None,
+        firmware: FirmwareProfile | str | None = None,
     ) -> None:
         self.access = access
+        #: the drive's firmware profile (its added commands; joints.devices.quirks)
+        self.firmware = firmware if isinstance(firmware, FirmwareProfile) else firmware_profile("mks", firmware)
+        access.features = self.firmware.features
+        self._verified = False
         self.device = device
         self.profile = lookup_profile(profile or device) if not isinstance(profile, MksProfile) else profile
         self.clock: Clock = clock or MonotonicClock()
@@ -153,7 +208,10 @@ class MksDriver(JointDriver):
             raise CommandError(f"{self.name}: serial commands need an SR_* work mode (3, 4, 5), got "
                                f"{st.WorkMode(work_mode).name}")
         self.work_mode = st.WorkMode(work_mode)
-        self.microsteps = int(self.params["microsteps"].check(microsteps))
+        #: the subdivision the driver computes with: the one given, else the drive's (where it can tell:
+        #: 0x47, V1.0.6+ native), else 16 - written at enable unless the drive holds it already
+        self.microsteps = int(self.params["microsteps"].check(16 if microsteps is None else microsteps))
+        self.microsteps_given = microsteps is not None
         rad = 2.0 * math.pi / _COUNTS
         self.units = Units(rad, _RPM, 0.001, self.profile.torque_constant)
         self._enabled = False
@@ -212,6 +270,42 @@ class MksDriver(JointDriver):
         self._enabled = False
         self._running = None
 
+    # -- firmware -----------------------------------------------------------------------------
+    def read_version(self, *, retry: bool = True) -> int | None:
+        """0x40 version word (V1.0.9), None if the drive does not answer it (an older firmware)."""
+        try:
+            return self.access.read_version(retry=retry)
+        except (ReplyTimeout, DeviceRejected, PeerProtocolError):
+            return None
+
+    def verify_firmware(self) -> None:
+        """Check once that the drive runs the configured firmware (see the module docstring); raises
+        :class:`~joints.errors.ConfigError` (key ``firmware``) naming both versions."""
+        if self._verified:
+            return
+        expected = firmware_text(self.firmware.version)
+        has_version = MKS_VERSION in self.firmware.features
+        word = self.read_version(retry=has_version)
+        if word is None and has_version:
+            raise ConfigError(f"{self.name}: the drive does not answer 0x40 (read version), so its firmware is "
+                              f"older than {expected}: set the joint's firmware to the drive's (its screen's "
+                              "About page shows it)", key="firmware", allowed=MKS_FIRMWARES[:-1])
+        if word is not None:
+            reported = firmware_text(((word >> 16) & 0xFF, (word >> 8) & 0xFF, word & 0xFF))
+            if reported != expected:
+                raise ConfigError(f"{self.name}: the drive reports firmware {reported}, the config says {expected}: "
+                                  "set the joint's firmware to the drive's", key="firmware", allowed=MKS_FIRMWARES)
+        self._verified = True
+
+    def identity(self) -> dict[str, object]:
+        """What 0x40 reports (V1.0.9): firmware, hardware board, calibration; older firmware: said so."""
+        word = self.read_version(retry=MKS_VERSION in self.firmware.features)
+        if word is None:
+            return {"firmware_version": f"older than v1.0.9 (no answer to 0x40); configured {self.firmware.firmware}"}
+        hardware = (word >> 24) & 0x0F
+        return {"firmware_version": firmware_text(((word >> 16) & 0xFF, (word >> 8) & 0xFF, word & 0xFF)),
+                "hardware_version": HARDWARE.get(hardware, str(hardware)), "calibrated": bool(word >> 28)}
+
     # -- units --------------------------------------------------------------------------------
     def speed_value(self, rpm: float) -> int:
         """The 6.1 speed value for ``rpm`` at this driver's subdivision (0 stops: callers keep moves >= 1)."""
@@ -240,7 +334,8 @@ class MksDriver(JointDriver):
         self._set("microsteps", self.microsteps)
 
     def enable(self) -> None:
-        """Serial work mode, subdivision, then 0xF3 enable."""
+        """Check the firmware (once), serial work mode, subdivision, then 0xF3 enable."""
+        self.verify_firmware()
         self.prepare()
         self.write_param("motor_enable", 1)
 
@@ -437,6 +532,7 @@ class MksDriver(JointDriver):
                      current: int | None = None) -> None:
         """The working current (0x83, mA) is the drive's torque limit; it has no speed or position limit
         parameters (end-stop switches only), so those stay with the joint's checks."""
+        self.verify_firmware()  # before the first setting is written (what the drive holds is read there)
         if current is not None:
             top = round(self.profile.max_working_current * 1000)
             self._set("working_current", max(0, min(current, top)))
@@ -549,3 +645,21 @@ class MksDriver(JointDriver):
     def describe_running(self) -> str | None:
         """The run mode this host started last and believes running (None: none)."""
         return self._running
+
+
+class MksHeartbeat:
+    """V1.0.9's heartbeat protection (0x98) as the communication watchdog (mixed into the MKS drivers of
+    a V1.0.9 joint, so ``isinstance(driver, CommunicationWatchdog)`` holds only for them).
+
+    The drive cannot report the time it holds: :meth:`communication_timeout` is what this host wrote,
+    else the power-on default 0 (off).
+    """
+
+    def set_communication_timeout(self: MksDriver, milliseconds: int) -> None:  # type: ignore[misc]
+        """0x98 heartbeat protection time [ms]; 0 switches it off."""
+        self.verify_firmware()
+        self.write_param("heartbeat_protection_time", milliseconds)
+
+    def communication_timeout(self: MksDriver) -> int:  # type: ignore[misc]
+        self.verify_firmware()
+        return self.image.get("heartbeat_protection_time", 0)

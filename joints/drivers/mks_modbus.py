@@ -24,11 +24,15 @@ from joints.devices.mks.modbus import FC_READ, FC_WRITE_MULTIPLE, FC_WRITE_SINGL
 from joints.devices.mks.params import model_params
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import ParamSet
-from joints.drivers.mks import MksAccess, MksDriver
+from joints.devices.quirks import FirmwareProfile
+from joints.drivers.mks import MksAccess, MksDriver, MksHeartbeat
 from joints.errors import CommandError, RegisterError
 from joints.link.modbus import ModbusLink
 
-__all__ = ["MksModbusAccess", "MksModbusDriver"]
+__all__ = ["MksModbusAccess", "MksModbusDriver", "MksModbusHeartbeatDriver"]
+
+#: FC06 register data of a failed write (V1.0.6+)
+_FAILED = 0xFFFF
 
 
 class MksModbusAccess(MksAccess):
@@ -59,8 +63,17 @@ class MksModbusAccess(MksAccess):
         f = self.map.get(name)
         return f"FC{f.function:02d} 0x{f.address:04X}"
 
+    def read_version(self, *, retry: bool = True) -> int:
+        """FC04 0x0040 (V1.0.9) version word; ``retry=False``: one attempt (a probe)."""
+        block = self.map.block_of("version_information")
+        reply = self.link.request(mb.ReadInputRegisters(self.slave, block.address, block.count), idempotent=retry)
+        if not isinstance(reply, mb.ReadRegistersReply):
+            raise CommandError(f"{self.params.device}@{self.slave}: no version reply")
+        return block.decode_words(reply.values)["version_information"]
+
     def read_many(self, names: Sequence[str]) -> dict[str, int]:
         """One FC04 per Part 8 read block."""
+        self.require(names)
         blocks: dict[int, ModbusBlock] = {}
         for n in names:
             block = self.map.block_of(n)
@@ -76,6 +89,7 @@ class MksModbusAccess(MksAccess):
 
     def write_many(self, values: Mapping[str, int], *, idempotent: bool = True) -> None:
         """One request per block, every field of it sent; all values checked before anything is sent."""
+        self.require(values)
         groups: dict[tuple[int, int], dict[str, int]] = {}
         for n, v in values.items():
             block = self.map.block_of(n)
@@ -94,6 +108,9 @@ class MksModbusAccess(MksAccess):
     def _send(self, block: ModbusBlock, values: Mapping[str, int], idempotent: bool) -> None:
         if block.function == FC_WRITE_SINGLE:
             (word,) = block.words(values)
+            if word == _FAILED:  # the failure reply's value: an echo cannot tell success from failure
+                raise CommandError(f"{self.params.device}: 0x{word:04X} to 0x{block.address:04X} would be answered "
+                                   "like a failed write (V1.0.6+) and none of its values needs it; nothing was sent")
             self.link.write_register(self.slave, block.address, word, idempotent=idempotent)
         elif block.byte_count % 2:  # the manual's own odd frame (0x90): sent exactly as documented
             self.link.write_pdu(self.slave, mb.WRITE_MULTIPLE_REGISTERS, block.request_pdu(values),
@@ -117,7 +134,8 @@ class MksModbusDriver(MksDriver):
         clock: Clock | None = None,
         name: str = "",
         work_mode: int = st.WorkMode.SR_vFOC,
-        microsteps: int = 16,
+        microsteps: int | None = None,
+        firmware: FirmwareProfile | str | None = None,
     ) -> None:
         if not 1 <= slave <= 247:
             raise CommandError(f"MKS Modbus slave address must be 1..247, got {slave}")
@@ -125,4 +143,8 @@ class MksModbusDriver(MksDriver):
         self.slave = slave
         super().__init__(MksModbusAccess(link, slave, model_params(device)), device=device, profile=profile,
                          clock=clock or link.clock, name=name or f"{device}@{slave}", work_mode=work_mode,
-                         microsteps=microsteps)
+                         microsteps=microsteps, firmware=firmware)
+
+
+class MksModbusHeartbeatDriver(MksHeartbeat, MksModbusDriver):
+    """An MKS axis in Modbus mode whose firmware (V1.0.9) has the heartbeat protection: the watchdog capability."""

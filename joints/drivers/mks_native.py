@@ -5,8 +5,9 @@ adds what only the native protocol has:
 
 * :class:`MksNativeAccess` - each parameter is a field of one command (:data:`MKS_NATIVE`): a read
   is that command's query (one per command, several fields from one reply); a write sends the whole
-  command with its other fields from the image of what was written before (reads of write-only
-  settings are refused by the driver: the drive cannot report them).
+  command with its other fields from the image of what was written before. Reads of write-only
+  settings are one 0x47 (read all parameters) from firmware V1.0.6, refused before (the drive
+  cannot report them).
 * Completion frames (0x8C active = 1): the driver subscribes to its drive's frames, so it knows that
   a move ended without polling (:attr:`MksNativeDriver.completion`); :meth:`MksNativeDriver.wait_motion`
   waits for that frame and, when it does not come (lost to a collision on the half-duplex line),
@@ -20,23 +21,29 @@ adds what only the native protocol has:
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from functools import partial
 from typing import Any
 
 from joints.clock import Clock
 from joints.codecs import mks
+from joints.devices.mks import blocks
 from joints.devices.mks import state as st
 from joints.devices.mks.native import MKS_NATIVE, fields_of
 from joints.devices.mks.params import model_params
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import ParamSet
-from joints.drivers.mks import RUN_GROUPS, MksAccess, MksDriver
-from joints.errors import CommandError, MotionTimeout, RegisterError
+from joints.devices.quirks import MKS_ALL_PARAMETERS, MKS_TIMED_RETURNS, FirmwareProfile
+from joints.drivers.mks import RUN_GROUPS, MksAccess, MksDriver, MksHeartbeat
+from joints.errors import CommandError, ConfirmationRequired, MotionTimeout, RegisterError
 from joints.link.base import Subscription
 from joints.link.mks import MksLink
 
-__all__ = ["MksNativeAccess", "MksNativeDriver", "long_packet"]
+__all__ = ["MksNativeAccess", "MksNativeDriver", "MksNativeHeartbeatDriver", "long_packet"]
+
+#: the write-only settings 0x47 reports (V1.0.6+)
+_HELD = frozenset(n for n, _o, _s in blocks.ALL_PARAMETERS) - blocks.NOT_READ_BACK
+
 
 class MksNativeAccess(MksAccess):
     """One drive's parameters as native MKS commands (see the module docstring)."""
@@ -67,14 +74,30 @@ class MksNativeAccess(MksAccess):
     def _query(self, command: int) -> Any:
         return self.link.request(mks.REQUEST_TYPES[command](self.address), idempotent=True)
 
+    def read_version(self, *, retry: bool = True) -> int:
+        """0x40 (V1.0.9) version word; ``retry=False``: one attempt (a probe of a drive that may not answer)."""
+        reply = self.link.request(mks.ReadVersion(self.address), idempotent=retry)
+        if not isinstance(reply, mks.VersionReply):
+            raise CommandError(f"{self.params.device}@{self.address}: no version reply")
+        return int(reply.version)
+
     def read_many(self, names: Sequence[str]) -> dict[str, int]:
         """One query per command (0x30 gives carry and value together)."""
+        self.require(names)
         out: dict[str, int] = {}
         by_command: dict[int, list[str]] = {}
-        for n in names:
-            if not self.params[n].access.readable:
+        held = [n for n in names if not self.params[n].access.readable]
+        if held:
+            if MKS_ALL_PARAMETERS not in self.features or any(n not in _HELD for n in held):
+                n = next(n for n in held if MKS_ALL_PARAMETERS not in self.features or n not in _HELD)
                 raise RegisterError(f"{self.params.device}: {n} ({self.where(n)}) cannot be read: the drive does not "
-                                    "report it")
+                                    "report it" + ("" if n in _HELD else " (not even in 0x47)")
+                                    + ("" if MKS_ALL_PARAMETERS in self.features else
+                                       " before firmware v1.0.6 (0x47 read all parameters)"))
+            out.update({n: self.read_all()[n] for n in held})
+        for n in names:
+            if n in out:
+                continue
             by_command.setdefault(int(MKS_NATIVE.key(n).command), []).append(n)
         for command, wanted in by_command.items():
             reply = self._query(command)
@@ -83,6 +106,15 @@ class MksNativeAccess(MksAccess):
             for n in wanted:
                 out[n] = int(getattr(reply, MKS_NATIVE.key(n).field))
         return out
+
+    def read_all(self) -> dict[str, int]:
+        """0x47 (V1.0.6): every configuration setting the drive holds, by name; they fill the image."""
+        reply = self.link.request(mks.ReadAllParameters(self.address), idempotent=True)
+        if not isinstance(reply, mks.AllParametersReply):
+            raise CommandError(f"{self.params.device}@{self.address}: no reply to 0x47")
+        values = blocks.unpack(blocks.ALL_PARAMETERS, reply.params, skip=blocks.NOT_READ_BACK)
+        self.remember(values)
+        return values
 
     # -- writes -----------------------------------------------------------------------------
     def message(self, values: Mapping[str, int], address: int | None = None) -> tuple[Any, dict[str, int]]:
@@ -100,6 +132,7 @@ class MksNativeAccess(MksAccess):
 
     def write_many(self, values: Mapping[str, int], *, idempotent: bool = True) -> None:
         """One frame per command; every field of it sent (the others from the image); all checked first."""
+        self.require(values)
         groups: dict[int, dict[str, int]] = {}
         for n, v in values.items():
             groups.setdefault(int(MKS_NATIVE.key(n).command), {})[n] = v
@@ -130,8 +163,9 @@ class MksNativeDriver(MksDriver):
         clock: Clock | None = None,
         name: str = "",
         work_mode: int = st.WorkMode.SR_vFOC,
-        microsteps: int = 16,
+        microsteps: int | None = None,
         active: bool = True,
+        firmware: FirmwareProfile | str | None = None,
     ) -> None:
         if not 1 <= address <= 255:
             raise CommandError(f"MKS slave address must be 1..255 (0 is broadcast), got {address}")
@@ -140,12 +174,15 @@ class MksNativeDriver(MksDriver):
         self.active = active  #: ask for completion frames (0x8C active = 1)
         super().__init__(MksNativeAccess(link, address, model_params(device)), device=device, profile=profile,
                          clock=clock or link.clock, name=name or f"{device}@{address}", work_mode=work_mode,
-                         microsteps=microsteps)
+                         microsteps=microsteps, firmware=firmware)
         #: the last completion frame of this drive (RunReply / CalibrationReply), None before any
         self.completion: Any = None
         self.completion_time = -math.inf
         self.completions = 0
         self._sub: Subscription[Any] | None = link.subscribe_completions(address, self._on_completion)
+        self._returns: dict[int, Subscription[Any]] = {}  #: read command -> its timed returns' subscription
+        #: read command -> the values its last timed return carried (V1.0.9 0x01)
+        self.returned: dict[int, dict[str, int]] = {}
 
     def _on_completion(self, message: Any) -> None:
         self.completion = message
@@ -215,6 +252,98 @@ class MksNativeDriver(MksDriver):
                 if left > 0:
                     clock.sleep(left)  # in process the bus waits no time: let the world run
 
+    def read(self, key: str | int) -> int:
+        """Read one parameter; the write-only settings too from firmware V1.0.6 (one 0x47)."""
+        name = self.access.resolve(key)
+        if name in _HELD and MKS_ALL_PARAMETERS in self.firmware.features:
+            return self.access.read(name)
+        return super().read(key)
+
+    def verify_firmware(self) -> None:
+        """The firmware check, then (V1.0.6+) what the drive holds by one 0x47: its settings fill the image
+        (nothing the drive already holds is written again) and, unless one was given, its subdivision is the
+        one the driver computes with."""
+        if self._verified:
+            return
+        super().verify_firmware()
+        if MKS_ALL_PARAMETERS in self.firmware.features:
+            held = self.read_all_parameters()
+            if not self.microsteps_given:
+                self.microsteps = held["microsteps"]
+
+    # -- timed returns (V1.0.9, 5.1.9) -----------------------------------------------------------------
+    def timed_return(self, name: str, milliseconds: int, callback: Callable[[dict[str, int]], None] | None = None,
+                     ) -> None:
+        """0x01: the drive sends the read that carries ``name`` (e.g. "encoder_addition": 0x31) every
+        ``milliseconds``, unasked; each arrives through the link's subscriptions as {parameter: value} to
+        ``callback`` (and :attr:`returned`). 0 stops it."""
+        if MKS_TIMED_RETURNS not in self.firmware.features:
+            raise RegisterError(f"{self.name}: timed returns (0x01) need firmware v1.0.9; the joint's firmware is "
+                                f"{self.firmware.firmware}")
+        if not self.params[name].access.readable:
+            raise RegisterError(f"{self.name}: {name} is not a read the drive can return by itself")
+        code = int(MKS_NATIVE.key(name).command)
+        if not 0 <= milliseconds <= 0xFFFF:
+            raise CommandError(f"{self.name}: a timed return's period is 0..65535 ms, got {milliseconds}")
+        old = self._returns.pop(code, None)
+        if old is not None:
+            old.cancel()
+        names = fields_of(code)
+
+        def deliver(message: Any) -> None:
+            values = {n: int(getattr(message, MKS_NATIVE.key(n).field)) for n in names}
+            self.returned[code] = values
+            if callback is not None:
+                callback(values)
+
+        if milliseconds:
+            self._returns[code] = self.link.subscribe_returns(self.address, code, deliver)
+        try:
+            self.link.request(mks.SetTimedReturn(self.address, code, milliseconds))
+        except BaseException:
+            sub = self._returns.pop(code, None)
+            if sub is not None:
+                sub.cancel()
+            raise
+
+    # -- all parameters at once (V1.0.6+, 5.7) ------------------------------------------------------
+    def _require_blocks(self) -> None:
+        if MKS_ALL_PARAMETERS not in self.firmware.features:
+            raise RegisterError(f"{self.name}: reading/writing all parameters (0x46/0x47) needs firmware v1.0.6 or "
+                                f"later; the joint's firmware is {self.firmware.firmware}")
+
+    def read_all_parameters(self) -> dict[str, int]:
+        """0x47: every configuration setting the drive holds (the write-only ones included), by name."""
+        self._require_blocks()
+        return self.access.read_all()  # what the drive holds fills the image: redundant writes are skipped
+
+    def read_all_status(self) -> dict[str, int]:
+        """0x48: every status value in one transaction, by name (5.7.3)."""
+        self._require_blocks()
+        reply = self.link.request(mks.ReadAllStatus(self.address), idempotent=True)
+        if not isinstance(reply, mks.AllStatusReply):
+            raise CommandError(f"{self.name}: no reply to 0x48")
+        return blocks.unpack(blocks.ALL_STATUS, reply.params)
+
+    def write_all_parameters(self, values: Mapping[str, int], *, confirm: bool = False) -> None:
+        """0x46: write every configuration setting in one frame - ``values`` over what 0x47 reads now. It can
+        change the address, baud rate and protocol (the host may lose the drive): needs ``confirm=True``."""
+        if not confirm:
+            raise ConfirmationRequired(f"{self.name}: 0x46 writes every setting at once (address, baud rate and "
+                                       "protocol included); pass confirm=True if you mean it (nothing was sent)")
+        self._require_blocks()
+        unknown = sorted(set(values) - {n for n, _o, _s in blocks.ALL_PARAMETERS})
+        if unknown:
+            raise RegisterError(f"{self.name}: 0x46 carries no {', '.join(unknown)}")
+        full = {**self.read_all_parameters(), "zero_mode_set_zero": self.image.get("zero_mode_set_zero", 0),
+                **dict(values)}
+        blocks.check(self.params, full)
+        data = blocks.pack(blocks.ALL_PARAMETERS, full, mks.ALL_PARAMETERS_SIZE)
+        self.access.sent(full, lambda: self.link.request(mks.WriteAllParameters(self.address, data)))
+        for name, value in full.items():
+            self._noted(name, value)
+        self.access._tell_link(full)
+
     # -- frames for several drives ---------------------------------------------------------------
     def plan(self, values: Mapping[str, int], address: int | None = None) -> Any:
         """The request that would write ``values`` (one command) - for long packets, broadcast, groups."""
@@ -266,6 +395,13 @@ class MksNativeDriver(MksDriver):
         if self._sub is not None:
             self._sub.cancel()
             self._sub = None
+        for sub in self._returns.values():
+            sub.cancel()
+        self._returns.clear()
+
+
+class MksNativeHeartbeatDriver(MksHeartbeat, MksNativeDriver):
+    """A native MKS axis whose firmware (V1.0.9) has the heartbeat protection: the watchdog capability."""
 
 
 _RUN_FUNCTION_MODES = {0xF6: "speed", 0xFD: "pulses", 0xFE: "abs_pulses", 0xF4: "rel_axis", 0xF5: "abs_axis"}

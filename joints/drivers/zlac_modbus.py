@@ -7,11 +7,18 @@ channel for a mode while its sibling is enabled in another mode is an error that
 Synchronous commands are one FC16 (both target velocities at 0x2088-0x2089, both torques at
 0x2090-0x2091, both positions at 0x208A-0x208D).
 
-Units used towards :class:`~joints.joint.Joint`: position in encoder counts (4096/rev), velocity
+Units used towards :class:`~joints.joint.Joint`: position in encoder counts (4 x the encoder lines
+the drive is set to per turn: 0x2030/0x2060, 1024 lines = 4096 counts by default), velocity
 in 0.1 r/min (the feedback unit; commands are rounded to the register's 1 r/min), current in mA
 (feedback 0.1 A is scaled to mA). 0x200F follows the drive's firmware profile
 (:mod:`joints.devices.quirks`): by default the manual's EXAMPLES (1 = synchronous,
 0 = asynchronous; the register table says the opposite, ERRATA DOC-ZLAC-1).
+
+What the drive is set to (:meth:`ZlacDrive.identify`, once, before the first status read or
+enable): the encoder lines of both motors (0x2030, 0x2060) are read and each wheel counts 4 x its
+motor's lines per turn. A config that names ``encoder_lines`` in the joint's profile and disagrees
+with the drive is refused (:class:`~joints.errors.ConfigError` naming both numbers; a wrong count
+would scale every position and speed); a config silent on it takes the drive's.
 """
 
 from __future__ import annotations
@@ -28,7 +35,7 @@ from joints.devices.zlac import faults as zf
 from joints.devices.zlac import registers as zr
 from joints.drivers.access import ModbusAccess
 from joints.drivers.base import JointDriver, RawState, Units
-from joints.errors import CommandError, ConfirmationRequired, StateError
+from joints.errors import CommandError, ConfigError, ConfirmationRequired, StateError
 from joints.link.modbus import ModbusLink
 
 SIDES = ("left", "right")
@@ -77,6 +84,19 @@ class ZlacDrive:
         self.adopted = False  #: found enabled by another program (its mode is read before changing it)
         self.access = ModbusAccess(link, slave, self.table)
         self._cache: dict[str, int] = {}
+        #: side -> the encoder lines the drive is set to (0x2030/0x2060), read once (None: not yet)
+        self.lines: dict[str, int] | None = None
+        self._channels: list[ZlacChannelDriver] = []
+
+    def identify(self) -> None:
+        """Read once what the drive is set to (encoder lines of both motors) and tell the wheels."""
+        if self.lines is not None:
+            return
+        values = self.access.read_many(("encoder_line_left", "encoder_line_right"))
+        lines = {side: values[f"encoder_line_{side}"] for side in SIDES}
+        for channel in self._channels:
+            channel.use_lines(lines[channel.side])  # raises if the config contradicts the drive
+        self.lines = lines
 
     # -- parameters --
     def write_param(self, name: str, value: int, *, idempotent: bool = True) -> None:
@@ -109,6 +129,7 @@ class ZlacDrive:
 
     def forget(self) -> None:
         self._cache.clear()
+        self.lines = None
         self.state = _DriveState()
         self.offline = False
         self.commanded = False
@@ -181,6 +202,7 @@ class ZlacDrive:
 
         Whether the drive is already on is what the drive says (one status read), not what this
         host remembers: a drive that quick-stopped on its own is enabled again."""
+        self.identify()
         if self.state.enabled and not self.energised(self.read_status()):
             self.state.enabled.clear()  # it switched itself off (offline trip, fault)
         if not self.state.enabled:
@@ -252,6 +274,7 @@ class ZlacDrive:
     # -- status --
     def read_status(self) -> dict[str, int]:
         """Both wheels' status in ONE FC03 (motor state .. actual torque right)."""
+        self.identify()
         return self.access.read_block(STATUS_START, STATUS_WORDS)
 
 
@@ -261,7 +284,9 @@ class ZlacChannelDriver(JointDriver):
     device = "zlac8015d"
     table = zr.ZLAC8015D
 
-    def __init__(self, drive: ZlacDrive, side: str, *, profile: Any, name: str = "") -> None:
+    def __init__(self, drive: ZlacDrive, side: str, *, profile: Any, name: str = "",
+                 encoder_lines: int | None = None) -> None:
+        """``encoder_lines``: what the config says the motor has (None: silent - the drive's setting is used)."""
         if side not in SIDES:
             raise CommandError(f"ZLAC8015D channel must be 'left' or 'right', got {side!r}")
         self.drive = drive
@@ -270,8 +295,35 @@ class ZlacChannelDriver(JointDriver):
         self.access = drive.access
         self.profile = profile
         self.name = name or f"{drive.name}:{side}"
-        rad_per_count = 2.0 * math.pi / zr.COUNTS_PER_REV
-        self.units = Units(rad_per_count, 2.0 * math.pi / 60.0 * 0.1, 0.001, float(profile.torque_constant))
+        self.encoder_lines = encoder_lines
+        lines = encoder_lines or int(getattr(profile, "encoder_lines", zr.COUNTS_PER_REV // 4))
+        self.units = self._units(lines)  # until the drive told its own (ZlacDrive.identify)
+        drive._channels.append(self)
+        if drive.lines is not None:
+            self.use_lines(drive.lines[side])
+
+    def _units(self, lines: int) -> Units:
+        return Units(2.0 * math.pi / (4 * lines), 2.0 * math.pi / 60.0 * 0.1, 0.001,
+                     float(self.profile.torque_constant))
+
+    @property
+    def counts_per_rev(self) -> int:
+        """Encoder counts per wheel turn (4 x the lines; the drive's once it was read)."""
+        return round(2.0 * math.pi / self.units.position)
+
+    def use_lines(self, lines: int) -> None:
+        """The drive says this motor's encoder has ``lines`` (0x2030/0x2060): count 4 x lines per turn, or
+        refuse a config that names another number."""
+        register = "0x2030" if self.side == "left" else "0x2060"
+        if lines <= 0:
+            raise ConfigError(f"{self.name}: the drive reports {lines} encoder lines ({register}); set the motor's "
+                              "line count on the drive", key="profile.encoder_lines")
+        if self.encoder_lines is not None and self.encoder_lines != lines:
+            raise ConfigError(f"{self.name}: the config says encoder_lines = {self.encoder_lines} "
+                              f"({4 * self.encoder_lines} counts/rev), the drive is set to {lines} lines ({register}: "
+                              f"{4 * lines} counts/rev); remove the key to use the drive's, or set the drive",
+                              key="profile.encoder_lines", allowed=(lines,))
+        self.units = self._units(lines)
 
     def _r(self, stem: str) -> str:
         return f"{stem}_{self.side}"
@@ -282,8 +334,12 @@ class ZlacChannelDriver(JointDriver):
         return self.drive
 
     def identity(self) -> dict[str, object]:
-        """The software version (0x20A0), the one identity register of the drive (no model, no serial number)."""
-        return {"firmware_version": f"0x{self.access.read('software_version'):04X}"}
+        """The software version (0x20A0), the one identity register of the drive (no model, no serial
+        number), and the encoder lines this wheel's motor is set to (0x2030/0x2060)."""
+        self.drive.identify()
+        lines = self.drive.lines[self.side] if self.drive.lines is not None else None
+        return {"firmware_version": f"0x{self.access.read('software_version'):04X}", "encoder_lines": lines,
+                "counts_per_rev": self.counts_per_rev}
 
     def write_param(self, name: str, value: int) -> None:
         self.drive.write_param(name, value)

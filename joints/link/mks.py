@@ -14,6 +14,8 @@ Rule (manual Parts 4-6, 5.2 #13 and #16, 5.7):
   its run commands (0xF4, 0xF5, 0xF6, 0xFD, 0xFE), while every query still answers. The link
   learns both from the driver (:meth:`MksLink.note_respond`, :meth:`MksLink.note_group`), which
   tells it after the drive confirmed the setting.
+* Timed returns (V1.0.9 0x01): the drive sends a read's reply every n ms, unasked; one that does
+  not answer the outstanding request goes to the subscribers (:meth:`MksLink.subscribe_returns`).
 * A status 0 ("set fail", "run fail", "query fail") is the drive's refusal:
   :class:`~joints.errors.DeviceRejected` with ``code=0`` and the function code.
 * Only reads are retried (the driver marks them idempotent); a run command whose reply was lost
@@ -42,10 +44,13 @@ BROADCAST = mks.BROADCAST
 RUN_FUNCTIONS = frozenset((0xF4, 0xF5, 0xF6, 0xFD, 0xFE))
 #: requests that change nothing on the drive (5.1 reads and the 0xF1 query)
 _READS = (mks.ReadEncoderCarry, mks.ReadEncoderAddition, mks.ReadSpeed, mks.ReadPulses, mks.ReadIoStatus,
-          mks.ReadAngleError, mks.ReadEnPin, mks.ReadGoBackToZeroStatus, mks.ReadProtectionState, mks.QueryStatus)
+          mks.ReadAngleError, mks.ReadEnPin, mks.ReadGoBackToZeroStatus, mks.ReadProtectionState, mks.QueryStatus,
+          mks.ReadVersion, mks.ReadAllParameters, mks.ReadAllStatus, mks.ReadRawEncoder)
 _REPLIES = (mks.EncoderCarryReply, mks.EncoderAdditionReply, mks.SpeedReply, mks.PulsesReply, mks.IoStatusReply,
             mks.AngleErrorReply, mks.EnPinReply, mks.GoBackToZeroStatusReply, mks.ProtectionStateReply,
-            mks.CalibrationReply, mks.MotorStatusReply, mks.SetReply, mks.RunReply)
+            mks.CalibrationReply, mks.MotorStatusReply, mks.SetReply, mks.RunReply, mks.VersionReply,
+            mks.AllParametersReply, mks.AllStatusReply, mks.TimedReturnReply,
+            mks.RawEncoderReply)
 
 
 def is_completion(message: Any) -> bool:
@@ -120,7 +125,7 @@ class MksRule(Rule[Any]):
         if message.address != request.address or message.function != request.function:
             return False  # not for this request: unsolicited (a late reply of another exchange)
         status = getattr(message, "status", None)
-        if isinstance(message, (mks.SetReply, mks.RunReply, mks.MotorStatusReply)) and status == 0:
+        if isinstance(message, (mks.SetReply, mks.RunReply, mks.MotorStatusReply, mks.TimedReturnReply)) and status == 0:
             raise DeviceRejected(f"slave {request.address} refused {request!r}: status 0 (fail)", code=0,
                                  function=request.function)
         return True
@@ -189,6 +194,12 @@ class MksLink(Link[Any]):
     def subscribe_completions(self, address: int, callback: Callable[[Any], None]) -> Subscription[Any]:
         """Deliver the completion frames of slave ``address`` to ``callback``."""
         return self.subscribe(lambda m: is_completion(m) and m.address == address, callback)
+
+    def subscribe_returns(self, address: int, code: int, callback: Callable[[Any], None]) -> Subscription[Any]:
+        """Deliver the timed returns (V1.0.9 0x01) of read command ``code`` from slave ``address`` - that
+        read's replies arriving unasked - to ``callback``."""
+        return self.subscribe(lambda m: isinstance(m, _REPLIES) and not is_completion(m) and m.address == address
+                              and m.function == code, callback)
 
 
 def _readdress(request: Any, address: int) -> Any:

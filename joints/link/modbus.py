@@ -125,7 +125,24 @@ class ModbusRule(Rule[Any]):
                             and reply.address == address and reply.value == second)
             if answered:
                 return True
+        _failure_reply(request, reply)
         raise UnexpectedReply(f"reply {_describe(reply)} does not answer {_describe(request)}")
+
+
+def _failure_reply(request: Any, reply: Any) -> None:
+    """A write answered at its own address with register data 0xFFFF (FC06) or register quantity 0
+    (FC16) is the drive's refusal where a firmware documents it so (MKS V1.0.6+: "If write fails"):
+    :class:`~joints.errors.DeviceRejected` with ``code=0``, like a native MKS status 0."""
+    address = getattr(request, "address", None)
+    if isinstance(request, mb.UnsupportedRequest) and len(request.pdu) >= 2:
+        address = int.from_bytes(request.pdu[0:2], "big")
+    failed = (isinstance(reply, mb.WriteSingleRegisterReply) and request.function == mb.WRITE_SINGLE_REGISTER
+              and reply.address == address and reply.value == 0xFFFF) or (
+        isinstance(reply, mb.WriteMultipleRegistersReply) and request.function == mb.WRITE_MULTIPLE_REGISTERS
+        and reply.address == address and reply.count == 0)
+    if failed:
+        raise DeviceRejected(f"slave {request.slave} refused {_describe(request)}: failure reply {_describe(reply)} "
+                             "(the write failed)", code=0, function=request.function)
 
 
 class MessagePeer(Protocol):

@@ -53,6 +53,19 @@ The model
       0x3F restores the factory defaults (the configured address and protocol included) and
       reboots, the encoder then needs calibrating (0x80) before motion; 0x41 reboots.
 
+Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; default the newest)
+    The twin has what its firmware has: :meth:`MksFirmware.supports` says whether a parameter of a
+    later firmware (:data:`~joints.devices.mks.params.FEATURE_OF`) exists; the fronts treat the
+    others as unknown commands. V1.0.9's 0x40 reports calibration, the hardware version (1
+    S42D_485, 3 S57D_485) and the profile's version. V1.0.9's heartbeat protection (0x98): while a
+    motion runs and no frame addressed to the drive arrived for the set time (0 = off), the drive
+    stops at once, as 0xF7 does (:attr:`MksFirmware.heartbeat_trips` counts it; the shaft stays
+    enabled and held). Like the other settings it is kept in flash (the manual does not say).
+    V1.0.9's 0x01 timed returns sample the read's values every period on the simulated clock
+    (:meth:`MksFirmware.set_timed_return`); the front sends them as that read's reply, unasked.
+    V1.0.6's 0x46/0x47/0x48 (:mod:`joints.devices.mks.blocks`) write/read the same settings and
+    statuses as the single commands; a 0x46 with any value out of range changes nothing (status 0).
+
 Choices where the manual is silent (documented here, see also :mod:`joints.devices.mks.state`)
     * The drive is enabled at power-on (the Part 7 examples run without 0xF3); motion and 0xF3 enable
       need a serial work mode (0xF3 disable always works) and a calibrated encoder; a run command
@@ -75,14 +88,18 @@ from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
+from joints.devices.mks import blocks
 from joints.devices.mks import state as st
 from joints.devices.mks.native import Command
+from joints.devices.mks.params import FEATURE_OF
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import Access, ParamSet
+from joints.devices.quirks import MKS_ALL_PARAMETERS, MKS_TIMED_RETURNS, FirmwareProfile, firmware_profile
+from joints.errors import CommandError
 from joints.sim.firmware import Firmware
 
 __all__ = ["CALIBRATION_TIME", "FLASH_TIME", "SERVO_BANDWIDTH", "SPEED_MODE_LEAD", "ZERO_MODE_RPM", "Completion",
-           "MksFirmware"]
+           "MksFirmware", "TimedReturn"]
 
 TAU = 2.0 * math.pi
 RPM = TAU / 60.0
@@ -118,6 +135,15 @@ class Completion:
     answered: bool  #: the command came to this drive alone (not broadcast, group or long packet)
 
 
+@dataclass(frozen=True, slots=True)
+class TimedReturn:
+    """A read the drive sends by itself (V1.0.9 0x01): the values of ``names`` sampled at ``time``."""
+
+    time: float
+    code: int  #: the read command whose reply it is
+    values: tuple[int, ...]
+
+
 @dataclass
 class _Motion:
     """The reference generator's job."""
@@ -141,11 +167,15 @@ class MksFirmware(Firmware):
     qd: float  #: shaft speed [rad/s]
     r: float  #: reference [rad]
     enc_zero: float
+    raw_zero: float
     pulse_zero: float
     zero_status: int
 
     def __init__(self, profile: MksProfile, params: ParamSet, address: int = 1, *, inertia: float | None = None,
-                 modbus: bool = False, values: Mapping[str, int] | None = None) -> None:
+                 modbus: bool = False, values: Mapping[str, int] | None = None,
+                 firmware: FirmwareProfile | str | None = None) -> None:
+        #: the firmware version this drive runs (its added commands; joints.devices.quirks)
+        self.firmware = firmware if isinstance(firmware, FirmwareProfile) else firmware_profile("mks", firmware)
         factory = {"working_current": round(profile.default_working_current * 1000),
                    "home_current": round(profile.default_home_current * 1000), "motor_enable": 1}
         super().__init__(params, values=factory)
@@ -176,7 +206,15 @@ class MksFirmware(Firmware):
             "go_back_to_zero_status": lambda: self.zero_status,
             "protection_state": lambda: int(self.protected),
             "motor_status": lambda: int(self.motor_status()),
+            "version_information": self.version_information,
+            "raw_encoder_value": lambda: math.floor((self.q - self.raw_zero) * COUNTS / TAU + 1e-9),
         })
+        #: V1.0.9 0x01 timed returns: read command -> (its parameter names, period [s], next due time)
+        self.timed: dict[int, tuple[tuple[str, ...], float, float]] = {}
+        self.returns: deque[TimedReturn] = deque()  #: sampled, waiting for a front
+        self.heartbeat_trips = 0  #: motions the heartbeat protection stopped
+        self.heartbeat_tripped_at = -1.0  #: when it last did [s]
+        self._last_frame = 0.0  #: when the last frame addressed to this drive arrived
         self._handlers: dict[int, Callable[[Mapping[str, int], bool], int]] = {
             Command.RELEASE_PROTECTION_STATE: self._release,
             Command.RESTORE_DEFAULT_PARAMETERS: self._restore,
@@ -194,6 +232,7 @@ class MksFirmware(Firmware):
         self.q = 0.0
         self.qd = 0.0
         self.enc_zero = 0.0  #: rad where the encoder axis counts 0
+        self.raw_zero = 0.0  #: rad where the raw encoder value (0x35) counts 0: the power-on turn
         self.pulse_zero = 0.0  #: rad where the pulse position counts 0
         self._calibrating_answered = True
         self._reset_state()
@@ -223,6 +262,8 @@ class MksFirmware(Firmware):
     def power_cycle(self) -> None:
         """Power off/on: flash survives (settings, 0_Mode zero, saved speed mode), the rest restarts."""
         super().power_cycle()
+        self.timed.clear()  # timed returns are not kept (the manual does not say; our choice)
+        self.returns.clear()
         self._reset_state()
 
     def _cache(self) -> None:
@@ -246,6 +287,7 @@ class MksFirmware(Firmware):
         self._power_on = False
         self.enc_zero = TAU * math.floor(q / TAU + 1e-12)
         self.pulse_zero = self.enc_zero
+        self.raw_zero = self.enc_zero
         self.r = q
         if self.saved_speed is not None and self.mode.serial and self.calibrated:
             direction, speed, acc = self.saved_speed
@@ -260,6 +302,81 @@ class MksFirmware(Firmware):
         self.end_stops = (low, high)
 
     # -- what the fronts call -----------------------------------------------------------------------
+    def supports(self, name: str) -> bool:
+        """Whether this firmware has parameter ``name`` (the later firmware's ones need their feature)."""
+        feature = FEATURE_OF.get(name)
+        return feature is None or feature in self.firmware.features
+
+    def frame_received(self) -> None:
+        """A frame for this drive arrived: the heartbeat protection's food."""
+        self._last_frame = self.time
+
+    @property
+    def has_blocks(self) -> bool:
+        """Firmware V1.0.6+: 0x46/0x47/0x48 read and write all parameters."""
+        return MKS_ALL_PARAMETERS in self.firmware.features
+
+    def all_parameters(self) -> bytes:
+        """0x47: the 34 configuration bytes (the "set 0" byte reads FF, reserved)."""
+        data = bytearray(blocks.pack(blocks.ALL_PARAMETERS, self.values, 34))
+        for name, offset, n in blocks.ALL_PARAMETERS:
+            if name in blocks.NOT_READ_BACK:
+                data[offset:offset + n] = b"\xff" * n
+        return bytes(data)
+
+    def write_all_parameters(self, data: bytes) -> int:
+        """0x46: every configuration setting at once, as the single set commands would (all checked first:
+        a value out of range fails the whole block, status 0)."""
+        values = blocks.unpack(blocks.ALL_PARAMETERS, data)
+        try:
+            blocks.check(self.params, values)
+        except CommandError:
+            return int(_SET.FAIL)
+        mode = values["work_mode"] != self.values["work_mode"]
+        if values["group_address"] == 0:  # "no group" (the power-on value; 0x8D itself takes 1-255)
+            self.values["group_address"] = self.saved["group_address"] = 0
+        self.write_many([(n, v) for n, v in values.items() if not (n == "group_address" and v == 0)])
+        if mode:
+            self._work_mode({}, True)
+        self.zero_point = self.counts() % COUNTS if values["zero_mode_set_zero"] else self.zero_point
+        return int(_SET.SUCCESS)
+
+    def all_status(self) -> bytes:
+        """0x48: the 28 status bytes."""
+        zero = self.zero_status
+        values = {"motor_status": int(self.motor_status()), "encoder_addition": self.counts(),
+                  "real_time_speed": round(self.qd / RPM), "io_status": self.io_status(),
+                  "number_of_pulses": self.read("number_of_pulses"), "raw_encoder_value": self.read("raw_encoder_value"),
+                  "angle_error": self.read("angle_error"), "en_pin_status": int(self.enabled),
+                  "single_turn_zero_status": zero, "protection_state": int(self.protected),
+                  "go_back_to_zero_status": zero}
+        return blocks.pack(blocks.ALL_STATUS, values, 28)
+
+    def set_timed_return(self, code: int, names: tuple[str, ...], milliseconds: int) -> int:
+        """0x01 (V1.0.9): sample ``names`` (read command ``code``) every ``milliseconds`` and send them; 0 stops it.
+        Status 0 for a firmware without it or a command that is not a read."""
+        if MKS_TIMED_RETURNS not in self.firmware.features or not names or not all(
+                self.params[n].access is Access.R for n in names):
+            return int(_SET.FAIL)
+        if milliseconds:
+            self.timed[code] = (names, milliseconds * 1e-3, self.time + milliseconds * 1e-3)
+        else:
+            self.timed.pop(code, None)
+        return int(_SET.SUCCESS)
+
+    def take_returns(self, now: float) -> list[TimedReturn]:
+        """Timed returns sampled by ``now`` (the front turns them into frames)."""
+        out: list[TimedReturn] = []
+        while self.returns and self.returns[0].time <= now + 1e-12:
+            out.append(self.returns.popleft())
+        return out
+
+    def version_information(self) -> int:
+        """0x40: calibration (b31-b28), hardware version (b27-b24: 1 S42D_485, 3 S57D_485), firmware."""
+        hardware = 3 if self.profile.model == "SERVO57D" else 1
+        major, minor, patch = (tuple(self.firmware.version) + (0, 0, 0))[:3]
+        return (int(self.calibrated) << 28) | (hardware << 24) | (major << 16) | (minor << 8) | patch
+
     def on_write(self, name: str, value: int) -> None:
         if name in self._persistent:
             self.saved[name] = value  # the drive keeps its menu settings in flash
@@ -530,6 +647,16 @@ class MksFirmware(Firmware):
             self.calibrated = True
             self._hold()
             self._complete(Command.CALIBRATE_ENCODER, int(st.CalibrationStatus.SUCCESS), self._calibrating_answered)
+        for code, (names, period, due) in list(self.timed.items()):
+            if t >= due - 1e-12:  # 0x01 timed return: sample now, the front sends it
+                self.returns.append(TimedReturn(t, code, tuple(self.read_many(names))))
+                self.timed[code] = (names, period, max(due + period, t))
+        hb = self.values.get("heartbeat_protection_time", 0)
+        if hb and self.motion is not None and t - self._last_frame > hb * 1e-3:
+            self.heartbeat_trips += 1  # the host went silent: stop urgently (V1.0.9 5.2.16)
+            self.heartbeat_tripped_at = t
+            self._end(st.RunEvent.EMERGENCY_STOP)
+            self._hold()
         if not self.enabled or self.protected:
             self.r = q  # released: the reference follows the shaft (enable holds where it is)
             self.v_ref = 0.0

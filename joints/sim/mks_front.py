@@ -10,6 +10,7 @@ do (manual Part 4, 5.2 #13 and #16, 5.7):
 * address 0 (broadcast) and a drive's group address (0x8D): every such drive executes, none answers;
 * a long packet (0xFC): each drive executes the first command addressed to it, none answers;
 * respond off (0x8C): a drive executes its run commands silently, queries still answer;
+* timed returns (0x01, V1.0.9): the read's reply every period, unasked, queued like completions;
 * completion frames (status 2/3 of run commands and go home with active on; calibrate's 1/2; save/clean's
   2) are queued on the simulated clock and taken with :meth:`MksDeviceBus.take_unsolicited` - the
   in-process transport and ``joints sim serve`` deliver them unasked - or, with their times, with
@@ -19,16 +20,18 @@ do (manual Part 4, 5.2 #13 and #16, 5.7):
   drive by broadcast, group or long packet sends no completion either ("slave does not answer").
 
 A value the firmware refuses (unknown, out of range) is answered with status 0, as the drive's
-"set fail" / "run fail". Unknown function codes and corrupt frames get no answer.
+"set fail" / "run fail". Unknown function codes and corrupt frames get no answer - so do the
+commands of a later firmware than the twin's (0x40, 0x98 before V1.0.9).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from joints.codecs import mks
-from joints.devices.mks.native import MKS_NATIVE, REPLY_RULES, Command, fields_of
+from joints.devices.mks.native import BLOCK_COMMANDS, MKS_NATIVE, REPLY_RULES, Command, fields_of
+from joints.devices.quirks import MKS_TIMED_RETURNS
 from joints.errors import FrameError, ParameterRefused
 from joints.sim.mks import MksFirmware
 
@@ -38,7 +41,7 @@ _READS = frozenset(int(c) for c in (
     Command.READ_ENCODER_VALUE_CARRY, Command.READ_ENCODER_VALUE_ADDITION, Command.READ_REAL_TIME_SPEED,
     Command.READ_NUMBER_OF_PULSES, Command.READ_IO_PORTS_STATUS, Command.READ_ERROR_OF_ANGLE,
     Command.READ_EN_PINS_STATUS, Command.READ_GO_BACK_TO_ZERO_STATUS, Command.READ_PROTECTION_STATE,
-    Command.QUERY_MOTOR_STATUS))
+    Command.QUERY_MOTOR_STATUS, Command.READ_VERSION_INFORMATION, Command.READ_RAW_ENCODER_VALUE))
 #: reply fields that are flags or enums on the message
 _FLAGS = frozenset(("enabled", "protected"))
 _ENUMS: dict[type, Callable[[int], Any]] = {mks.GoBackToZeroStatusReply: mks.GoBackToZeroStatus,
@@ -75,15 +78,13 @@ class MksNativeFront:
         if isinstance(request, mks.UnknownRequest):
             return None
         code = request.function
+        if code in BLOCK_COMMANDS:
+            return self._block(request, answer)
         names = fields_of(code)
+        if not all(fw.supports(n) for n in names):
+            return None  # a command of a later firmware: unknown to this one
         if code in _READS:
-            values = fw.read_many(names)
-            cls = mks.REPLY_TYPES[code]
-            fields: dict[str, Any] = {}
-            for n, v in zip(names, values):
-                f = MKS_NATIVE.key(n).field
-                fields[f] = bool(v) if f in _FLAGS else _ENUMS[cls](v) if cls in _ENUMS else v
-            return cls(request.address, **fields) if answer else None
+            return self._read_reply(request.address, code, fw.read_many(names)) if answer else None
         given = {n: int(getattr(request, MKS_NATIVE.key(n).field)) for n in names if MKS_NATIVE.key(n).field}
         if not given:
             given = {n: 1 for n in names}  # a command without data: the parameter's "1"
@@ -99,11 +100,45 @@ class MksNativeFront:
             return mks.RunReply(request.address, code, mks.RunStatus(status))
         return mks.SetReply(request.address, code, mks.SetStatus(status))
 
+    @staticmethod
+    def _read_reply(address: int, code: int, values: Sequence[int]) -> Any:
+        """The reply of read command ``code`` carrying ``values`` (its fields' order)."""
+        cls = mks.REPLY_TYPES[code]
+        fields: dict[str, Any] = {}
+        for n, v in zip(fields_of(code), values):
+            f = MKS_NATIVE.key(n).field
+            fields[f] = bool(v) if f in _FLAGS else _ENUMS[cls](v) if cls in _ENUMS else v
+        return cls(address, **fields)
+
+    def _block(self, request: Any, answer: bool) -> Any:
+        """0x46/0x47/0x48 (V1.0.6): all configuration parameters / all statuses at once; 0x01 (V1.0.9):
+        a read's timed return."""
+        fw = self.firmware
+        if isinstance(request, mks.SetTimedReturn):
+            if MKS_TIMED_RETURNS not in fw.firmware.features:
+                return None  # unknown to this firmware
+            names = fields_of(request.code) if request.code in _READS else ()
+            status = fw.set_timed_return(request.code, names, request.times)
+            return mks.TimedReturnReply(request.address, request.code, mks.SetStatus(status)) if answer else None
+        if not fw.has_blocks:
+            return None
+        if isinstance(request, mks.WriteAllParameters):
+            status = fw.write_all_parameters(request.params)
+            return mks.SetReply(request.address, request.function, mks.SetStatus(status)) if answer else None
+        if not answer:
+            return None
+        if isinstance(request, mks.ReadAllParameters):
+            return mks.AllParametersReply(request.address, fw.all_parameters())
+        return mks.AllStatusReply(request.address, fw.all_status())
+
     def take_completions(self, now: float) -> list[tuple[float, Any]]:
         """The completion frames due by ``now`` that go on the wire (active on, respond on for run commands),
         with the time each was sent."""
         fw = self.firmware
         out: list[tuple[float, Any]] = []
+        for r in fw.take_returns(now):  # 0x01 timed returns: the read's own reply, unasked
+            if self.speaks:
+                out.append((r.time, self._read_reply(self.address, r.code, r.values)))
         for c in fw.take_completions(now):
             if not c.answered or not self.speaks:
                 continue
@@ -117,6 +152,7 @@ class MksNativeFront:
                 out.append((c.time, mks.CalibrationReply(self.address, mks.CalibrationStatus(c.status))))
             else:
                 out.append((c.time, mks.RunReply(self.address, c.function, mks.RunStatus(c.status))))
+        out.sort(key=lambda x: x[0])
         return out
 
     def __repr__(self) -> str:

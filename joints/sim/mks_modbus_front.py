@@ -8,9 +8,14 @@ front, so both fronts drive the same firmware identically. Only while the drive 
 * FC04 reads exactly the documented blocks (start address and register count of Part 8); another
   address -> exception 02, another count -> 03. FC03 -> exception 01 (Part 8 reads with FC04).
 * FC06 writes one setting or command, FC16 one multi-field command with all its fields; the reply
-  echoes the request. An unknown address -> 02; a value out of range -> 03; a command the drive
-  cannot execute now (motion while disabled or in a pulse work mode) -> 04 (server device
-  failure: Part 8 documents no failure reply, this is our choice).
+  echoes the request. An unknown address (or one of a later firmware: 0x40, 0x98 before V1.0.9)
+  -> 02; a register count or byte count other than the block's -> 03.
+* A write the drive cannot carry out - the cases the native protocol answers with status 0: a
+  value out of range or refused, a command it cannot execute now (motion while disabled or in a
+  pulse work mode, enable in a pulse mode) - is answered by firmware V1.0.6 and later as their
+  manuals say ("If write fails, the function code 06H response frame register data is 0xFFFF.
+  The function code 10H response frame register quantity is 0"); V1.0.5 documents no failure
+  reply: the twin answers exception 03 (value) or 04 (server device failure), our choice.
 * The 0x90 home-parameter request is accepted EXACTLY as the manual prints it (3 registers, byte
   count 5, 5 data bytes; ERRATA DOC-MKS-5) and recorded in :attr:`MksModbusFront.quirks`; every
   other request whose counts disagree gets exception 03 - also when it arrives as raw bytes that
@@ -24,6 +29,7 @@ from typing import Any
 from joints.codecs import modbus as mb
 from joints.devices.mks.modbus import FC_READ, FC_WRITE_MULTIPLE, FC_WRITE_SINGLE, MKS_MODBUS, ModbusBlock
 from joints.devices.mks.native import Command
+from joints.devices.quirks import MKS_FAILURE_REPLIES
 from joints.errors import CommandError, ParameterRefused
 from joints.sim.mks import MksFirmware
 from joints.sim.modbus_front import ILLEGAL_DATA_ADDRESS, ILLEGAL_DATA_VALUE, ILLEGAL_FUNCTION, SERVER_DEVICE_FAILURE
@@ -35,6 +41,15 @@ class _Exception(Exception):
     def __init__(self, code: int) -> None:
         super().__init__(code)
         self.code = code
+
+
+class _Failed(_Exception):
+    """The drive could not carry out a write (the native protocol's status 0)."""
+
+
+#: FC06 register data / FC16 register quantity of a failure reply (V1.0.6+)
+FAILED_VALUE = 0xFFFF
+FAILED_COUNT = 0
 
 
 class MksModbusFront:
@@ -63,14 +78,24 @@ class MksModbusFront:
             if isinstance(request, mb.ReadInputRegisters):
                 return mb.ReadRegistersReply(request.slave, request.function, self._read(request.address, request.count))
             if isinstance(request, mb.WriteSingleRegister):
-                self._write(self._block(FC_WRITE_SINGLE, request.address), request.value.to_bytes(2, "big"))
+                try:
+                    self._write(self._block(FC_WRITE_SINGLE, request.address), request.value.to_bytes(2, "big"))
+                except _Failed:
+                    if not self.failure_replies:
+                        raise
+                    return mb.WriteSingleRegisterReply(request.slave, request.address, FAILED_VALUE)
                 return mb.WriteSingleRegisterReply(request.slave, request.address, request.value)
             if isinstance(request, mb.WriteMultipleRegisters):
                 block = self._block(FC_WRITE_MULTIPLE, request.address)
                 n = len(request.values)
                 if not block.accepts(n, 2 * n):
                     raise _Exception(ILLEGAL_DATA_VALUE)
-                self._write(block, b"".join(v.to_bytes(2, "big") for v in request.values))
+                try:
+                    self._write(block, b"".join(v.to_bytes(2, "big") for v in request.values))
+                except _Failed:
+                    if not self.failure_replies:
+                        raise
+                    return mb.WriteMultipleRegistersReply(request.slave, request.address, FAILED_COUNT)
                 return mb.WriteMultipleRegistersReply(request.slave, request.address, n)
             if isinstance(request, mb.UnsupportedRequest) and request.function == FC_WRITE_MULTIPLE:
                 return self._raw_write_multiple(request)
@@ -84,10 +109,15 @@ class MksModbusFront:
             return None
         return self.handle(mb.UnsupportedRequest(frame[0], frame[1], bytes(frame[2:-2])))
 
+    @property
+    def failure_replies(self) -> bool:
+        """Firmware V1.0.6+: failed writes get the manual's failure replies, not exceptions."""
+        return MKS_FAILURE_REPLIES in self.firmware.firmware.features
+
     # -- internals ----------------------------------------------------------------------------------
     def _block(self, function: int, address: int) -> ModbusBlock:
         block = self.map.find(function, address)
-        if block is None:
+        if block is None or not all(self.firmware.supports(f.name) for f in block.fields):
             raise _Exception(ILLEGAL_DATA_ADDRESS)
         return block
 
@@ -109,13 +139,13 @@ class MksModbusFront:
             for f in block.fields:
                 f.check(values[f.name])
         except CommandError:
-            raise _Exception(ILLEGAL_DATA_VALUE) from None
+            raise _Failed(ILLEGAL_DATA_VALUE) from None
         try:
             status = self.firmware.execute(block.address, values)
         except ParameterRefused:
-            raise _Exception(ILLEGAL_DATA_VALUE) from None
+            raise _Failed(ILLEGAL_DATA_VALUE) from None
         if status == 0 and block.address != Command.CALIBRATE_ENCODER:
-            raise _Exception(SERVER_DEVICE_FAILURE)
+            raise _Failed(SERVER_DEVICE_FAILURE)
 
     def _raw_write_multiple(self, request: mb.UnsupportedRequest) -> mb.Reply:
         pdu = request.pdu
@@ -126,7 +156,12 @@ class MksModbusFront:
         data = pdu[5:]
         if not block.quirk or not block.accepts(count, byte_count) or len(data) != byte_count:
             raise _Exception(ILLEGAL_DATA_VALUE)
-        self._write(block, data)
+        try:
+            self._write(block, data)
+        except _Failed:
+            if not self.failure_replies:
+                raise
+            return mb.WriteMultipleRegistersReply(request.slave, address, FAILED_COUNT)
         self.quirks.append((block.title, bytes(pdu)))
         return mb.WriteMultipleRegistersReply(request.slave, address, count)
 

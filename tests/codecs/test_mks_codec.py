@@ -84,14 +84,15 @@ def test_encode_manual_frames(msg: Any, frame: str) -> None:
 
 def test_frame_lengths_follow_the_function_code() -> None:
     """Data length per code, per direction: the frame length table of the module docstring."""
-    expected_request = {**{c: 0 for c in (0x30, 0x31, 0x32, 0x33, 0x34, 0x39, 0x3A, 0x3B, 0x3D, 0x3E, 0x3F, 0x41,
-                                          0x91, 0x92, 0xF1, 0xF7)},
+    expected_request = {**{c: 0 for c in (0x30, 0x31, 0x32, 0x33, 0x34, 0x39, 0x3A, 0x3B, 0x3D, 0x3E, 0x3F, 0x40,
+                                          0x41, 0x47, 0x48, 0x91, 0x92, 0xF1, 0xF7, 0x35)},
                         **{c: 1 for c in (0x80, 0x82, 0x84, 0x85, 0x86, 0x87, 0x88, 0x89, 0x8A, 0x8B, 0x8D, 0x8E,
                                           0x8F, 0x9B, 0x9E, 0xF3, 0xFF)},
-                        0x83: 2, 0x8C: 2, 0xF6: 3, 0x9A: 4, 0x90: 5,
+                        0x83: 2, 0x8C: 2, 0xF6: 3, 0x98: 4, 0x9A: 4, 0x90: 5, 0x46: 34, 0x01: 3,
                         **{c: 7 for c in (0x94, 0xF4, 0xF5, 0xFD, 0xFE)}}
     assert dict(mks.REQUEST_DATA_LENGTH) == expected_request
-    expected_reply = {c: 1 for c in expected_request} | {0x30: 6, 0x31: 6, 0x32: 2, 0x33: 4, 0x39: 4}
+    expected_reply = {c: 1 for c in expected_request} | {0x30: 6, 0x31: 6, 0x32: 2, 0x33: 4, 0x39: 4, 0x40: 4,
+                                                         0x47: 34, 0x48: 28, 0x01: 2, 0x35: 6}
     assert dict(mks.REPLY_DATA_LENGTH) == expected_reply
     assert max(expected_request.values()) + 4 == mks.MAX_DOWNLINK_FRAME
     assert max(expected_reply.values()) + 4 == mks.MAX_UPLINK_FRAME
@@ -214,10 +215,10 @@ def test_every_function_code_has_a_request_and_a_reply_type() -> None:
 def test_checksum_error_drops_one_byte_then_resynchronises() -> None:
     good = h("FB 01 FD 01 FA")
     codec = mks.MksCodec(Role.HOST)
-    codec.feed(h("FB 01 FD 01 FB") + good)
+    codec.feed(h("FB 01 FD 01 00") + good)  # (a last byte FB would start "FB FB 01 ..": a 0x01 reply's head)
     with pytest.raises(ChecksumError) as info:
         codec.next_message()
-    assert info.value.data == h("FB 01 FD 01 FB")
+    assert info.value.data == h("FB 01 FD 01 00")
     assert codec.next_message() == mks.RunReply(1, 0xFD, mks.RunStatus.STARTED)
     assert codec.next_message() is None and codec.buffered == 0
 
@@ -353,6 +354,9 @@ _FIELD = {
     "abs_pulses": i32,
     "rel_axis": i32,
     "abs_axis": i32,
+    "times": u32,
+    "code": u8,
+    "params": st.binary(min_size=mks.ALL_PARAMETERS_SIZE, max_size=mks.ALL_PARAMETERS_SIZE),
 }
 _WIDE_SPEED = {mks.SetHomeParameters, mks.RunAbsolutePulses, mks.RunRelativeAxis, mks.RunAbsoluteAxis}
 
@@ -362,6 +366,8 @@ def _request_strategy(cls: type) -> st.SearchStrategy[Any]:
     for f in dataclasses.fields(cls):
         if f.name == "direction" and cls in (mks.RunSpeed, mks.RunRelativePulses):
             kwargs[f.name] = st.sampled_from(mks.RunDirection)
+        elif f.name == "times" and cls is mks.SetTimedReturn:
+            kwargs[f.name] = u16
         elif f.name == "speed":
             kwargs[f.name] = (u16 if cls in _WIDE_SPEED else u8 if cls is mks.SetZeroMode
                               else st.integers(0, mks.SPEED_FIELD_MAX))
@@ -371,9 +377,11 @@ def _request_strategy(cls: type) -> st.SearchStrategy[Any]:
 
 
 requests = st.one_of([_request_strategy(c) for c in mks.REQUEST_TYPES.values()])
+#: what fits a 10-byte long-packet slot (0x46's 34 data bytes do not)
+slot_requests = st.one_of([_request_strategy(c) for c in mks.REQUEST_TYPES.values() if c is not mks.WriteAllParameters])
 long_packets = st.builds(
     lambda cmds: mks.LongPacket(tuple(cmds)),
-    st.lists(st.none() | requests | st.builds(mks.UnknownRequest, u8, st.integers(0x42, 0x7F),
+    st.lists(st.none() | slot_requests | st.builds(mks.UnknownRequest, u8, st.integers(0x42, 0x7F),
                                               st.binary(min_size=8, max_size=8)), max_size=5),
 )
 downlink = st.one_of(requests, long_packets)
@@ -392,6 +400,12 @@ replies = st.one_of(
     st.builds(mks.MotorStatusReply, u8, st.sampled_from(mks.MotorStatus)),
     st.builds(mks.SetReply, u8, st.sampled_from(sorted(mks.SET_REPLY_FUNCTIONS)), st.sampled_from(mks.SetStatus)),
     st.builds(mks.RunReply, u8, st.sampled_from(sorted(mks.RUN_REPLY_FUNCTIONS)), st.sampled_from(mks.RunStatus)),
+    st.builds(mks.VersionReply, u8, u32),
+    st.builds(mks.TimedReturnReply, u8, u8, st.sampled_from(mks.SetStatus)),
+    st.builds(mks.RawEncoderReply, u8, st.integers(-(1 << 47), (1 << 47) - 1)),
+    st.builds(mks.AllParametersReply, u8, st.binary(min_size=mks.ALL_PARAMETERS_SIZE,
+                                                   max_size=mks.ALL_PARAMETERS_SIZE)),
+    st.builds(mks.AllStatusReply, u8, st.binary(min_size=mks.ALL_STATUS_SIZE, max_size=mks.ALL_STATUS_SIZE)),
 )
 
 
@@ -474,7 +488,9 @@ def test_byte_by_byte_equals_all_at_once(msgs: list[Any]) -> None:
 
 replies_types = (mks.EncoderCarryReply, mks.EncoderAdditionReply, mks.SpeedReply, mks.PulsesReply,
                  mks.IoStatusReply, mks.AngleErrorReply, mks.EnPinReply, mks.GoBackToZeroStatusReply,
-                 mks.ProtectionStateReply, mks.CalibrationReply, mks.MotorStatusReply, mks.SetReply, mks.RunReply)
+                 mks.ProtectionStateReply, mks.CalibrationReply, mks.MotorStatusReply, mks.SetReply, mks.RunReply,
+                 mks.VersionReply, mks.AllParametersReply, mks.AllStatusReply, mks.TimedReturnReply,
+                 mks.RawEncoderReply)
 
 ROLES = st.sampled_from([Role.HOST, Role.DEVICE])
 frame_like = st.lists(

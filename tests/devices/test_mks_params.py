@@ -11,7 +11,7 @@ from joints.codecs import mks as codec
 from joints.devices.mks import native, state
 from joints.devices.mks.modbus import FC_READ, FC_WRITE_MULTIPLE, FC_WRITE_SINGLE, MKS_MODBUS, NATIVE_ONLY
 from joints.devices.mks.native import MKS_NATIVE, REPLY_RULES, Command, NativeKey
-from joints.devices.mks.params import DANGEROUS, MKS_PARAMS, model_params
+from joints.devices.mks.params import DANGEROUS, FEATURE_OF, MKS_PARAMS, model_params
 from joints.devices.params import TYPES, Access
 from joints.errors import CommandError, RegisterError
 from testdata import manual
@@ -19,6 +19,8 @@ from testdata import manual
 MANUAL = manual("mks-servo42d-57d-rs485-manual-v1.0.5.txt")
 PARTS_5_6 = MANUAL[MANUAL.index("Part5. Serial command description"):MANUAL.index("Part7. Serial example")]
 PART_8 = MANUAL[MANUAL.index("Part8. MODBUS-RTU command description"):MANUAL.index("Part9. FAQ")]
+#: what V1.0.9 added (manuals V1.0.9: 0x40 read version 5.1.11 / 3.1.8, 0x98 heartbeat 5.2.16 / 3.2.14)
+LATER = {0x40, 0x98, 0x46, 0x47, 0x48, 0x01, 0x35}
 
 
 # ------------------------------------------------------------------------------ parameters
@@ -26,7 +28,7 @@ PART_8 = MANUAL[MANUAL.index("Part8. MODBUS-RTU command description"):MANUAL.ind
 
 def test_names_are_unique_snake_case_identifiers() -> None:
     names = MKS_PARAMS.names()
-    assert len(names) == len(set(names)) == 64
+    assert len(names) == len(set(names)) == 64 + len(FEATURE_OF)
     for n in names:
         assert re.fullmatch(r"[a-z0-9]+(_[a-z0-9]+)*", n), n
 
@@ -77,7 +79,8 @@ def test_documented_defaults_and_ranges() -> None:
     readable = {x.name for x in p if x.access is Access.R}
     assert readable == {"encoder_carry", "encoder_value", "encoder_addition", "real_time_speed", "number_of_pulses",
                         "io_status", "angle_error", "en_pin_status", "go_back_to_zero_status", "protection_state",
-                        "motor_status"}
+                        "motor_status", "version_information", "raw_encoder_value"}
+    assert p["heartbeat_protection_time"].default == 0  # "Default: 0" (off), V1.0.9 5.2.16
     assert not any(x.access is Access.RW for x in p)  # the MKS reports no setting back
 
 
@@ -118,7 +121,7 @@ def test_native_fields_are_fields_of_the_codec_messages() -> None:
     # every data field of every request is some parameter (a driver can build each command)
     for code, cls in codec.REQUEST_TYPES.items():
         for f in dataclasses.fields(cls):
-            if f.name != "address":
+            if f.name != "address" and code not in native.BLOCK_COMMANDS:
                 assert NativeKey(Command(code), f.name) in {MKS_NATIVE.key(n) for n in MKS_NATIVE}, (cls, f.name)
 
 
@@ -135,10 +138,11 @@ def test_every_command_of_parts_5_and_6_is_in_the_manual_and_the_map() -> None:
     "FA 01 30 CRC") and compare with the Command enum."""
     codes = {int(c, 16) for c in re.findall(r"\|\s*FA\s*\|\s*(?:01|addr)\s*\|\s*([0-9A-F]{2})\s*\|", PARTS_5_6)}
     codes |= {int(c, 16) for c in re.findall(r"FA 01 ([0-9A-F]{2}) CRC", PARTS_5_6)}
-    assert codes == {int(c) for c in Command}
+    assert codes == {int(c) for c in Command} - LATER
+    assert {int(MKS_NATIVE.key(n).command) for n in FEATURE_OF} | set(native.BLOCK_COMMANDS) == LATER
     assert "| Head | 0xFC |" in PARTS_5_6  # the long data package head
     used = {MKS_NATIVE.key(n).command for n in MKS_NATIVE}
-    assert used == set(Command)
+    assert used == set(Command) - native.BLOCK_COMMANDS  # the blocks carry many (joints.devices.mks.blocks)
 
 
 def test_reply_rules_follow_the_manual() -> None:
@@ -161,7 +165,7 @@ def test_reply_rules_follow_the_manual() -> None:
 
 
 def test_every_modbus_field_is_a_parameter_of_the_same_type_and_access() -> None:
-    assert len(MKS_MODBUS) == 58
+    assert len(MKS_MODBUS) == 58 + len(FEATURE_OF) - 1  # 0x35 is native only
     for f in MKS_MODBUS:
         p = MKS_PARAMS[f.name]
         assert (f.type, f.access) == (p.type, p.access), f.name
@@ -179,7 +183,7 @@ def test_modbus_and_native_reach_the_same_command() -> None:
         if expected_fc:
             assert f.function == expected_fc
     assert NATIVE_ONLY == {"slave_respond", "slave_active", "group_address", "home_reverse_angle", "home_mode",
-                           "home_current"}
+                           "home_current", "raw_encoder_value"}  # 0x35: not in the Modbus-RTU manual V1.0.9
     assert set(MKS_MODBUS.names()) | NATIVE_ONLY == set(MKS_PARAMS.names())
 
 
@@ -197,7 +201,9 @@ def test_modbus_map_is_a_param_map() -> None:
 def test_every_modbus_request_of_part_8_is_in_the_table() -> None:
     found = set(re.findall(r"\|\s*01H\s*\|\s*(04|06|10)\s*H\s*\|\s*00H\s*\|\s*([0-9A-F]{2})H\s*\|", PART_8))
     blocks = {(int(fc, 16), int(a, 16)) for fc, a in found}
-    assert blocks == {(b.function, b.address) for b in MKS_MODBUS.blocks}
+    assert blocks == {(b.function, b.address) for b in MKS_MODBUS.blocks if b.address not in LATER}
+    # V1.0.9 Modbus manual: 3.1.8 "01H 04H 00H 40H 00H 02H 70H 1FH", 3.2.14 FC10 0x0098 2 registers 4 bytes
+    assert (MKS_MODBUS.block(FC_READ, 0x40).count, MKS_MODBUS.block(FC_WRITE_MULTIPLE, 0x98).count) == (2, 2)
     # register counts as printed ("| 00H | count |" after the address) for FC04 and FC16 requests
     for fc, a, count in re.findall(r"\|\s*01H\s*\|\s*(04|10)\s*H\s*\|\s*00H\s*\|\s*([0-9A-F]{2})H\s*\|\s*00H\s*\|"
                                    r"\s*([0-9A-F]{2})H", PART_8):

@@ -11,11 +11,12 @@ import pytest
 from joints.clock import ManualClock
 from joints.codecs import mks
 from joints.codecs import modbus as mb
-from joints.devices.mks.params import DANGEROUS
+from joints.devices.mks import blocks
+from joints.devices.mks.params import DANGEROUS, MKS_PARAMS
 from joints.devices.mks.state import MotorStatus
 from joints.drivers.mks_modbus import MksModbusDriver
 from joints.drivers.mks_native import MksNativeDriver
-from joints.errors import ConfirmationRequired, OutcomeUnknown, RegisterError
+from joints.errors import ConfigError, ConfirmationRequired, OutcomeUnknown, RegisterError
 from joints.joint import Joint
 from joints.link import RetryPolicy
 from joints.link.mks import MksLink
@@ -35,6 +36,7 @@ class Drive:
         self.hook = hook
         self.status = MotorStatus.STOP
         self.position = 0
+        self.held: dict[str, int] = {}  #: settings the drive holds beyond the factory ones (0x47)
 
     def __call__(self, data: bytes) -> bytes:
         self.codec.feed(data)
@@ -46,6 +48,11 @@ class Drive:
         return out
 
     def answer(self, msg: Any) -> bytes:
+        if isinstance(msg, mks.ReadVersion):  # a V1.0.9 drive, calibrated, S42D_485
+            return mks.encode(mks.VersionReply(msg.address, 0x11_01_00_09))
+        if isinstance(msg, mks.ReadAllParameters):  # 0x47: what the drive holds (factory settings + held)
+            values = {n: MKS_PARAMS[n].default for n, _o, _s in blocks.ALL_PARAMETERS} | self.held
+            return mks.encode(mks.AllParametersReply(msg.address, blocks.pack(blocks.ALL_PARAMETERS, values, 34)))
         if isinstance(msg, mks.QueryStatus):
             return mks.encode(mks.MotorStatusReply(msg.address, self.status))
         if isinstance(msg, mks.ReadEncoderAddition):
@@ -102,13 +109,25 @@ def test_dangerous_parameters_by_name_need_confirm_through_the_joint_too() -> No
 
 
 def test_write_only_settings_are_remembered_not_read() -> None:
-    driver, drive = native()
+    drive = Drive()
+    link = MksLink(LoopbackTransport(drive), clock=ManualClock(), policy=RetryPolicy(timeout=0.05, retries=2))
+    driver = MksNativeDriver(link, ADDRESS, device="mks-servo42d", firmware="v1.0.5")
     with pytest.raises(RegisterError, match="cannot be read"):
         driver.read("working_current")
     assert drive.requests == []
     driver.set_working_current(1200)
     assert driver.written("working_current") == 1200
     assert drive.requests == [mks.SetWorkingCurrent(ADDRESS, 1200)]
+
+
+def test_from_v106_write_only_settings_are_read_by_0x47() -> None:
+    driver, drive = native()  # v1.0.9
+    drive.held = {"working_current": 1400}
+    assert driver.read("working_current") == 1400
+    assert drive.requests == [mks.ReadAllParameters(ADDRESS)]
+    assert driver.written("working_current") == 1400  # what the drive holds: not written again
+    with pytest.raises(RegisterError, match="cannot be read"):
+        driver.read("zero_mode_set_zero")  # 0x47 reads it as "Reserved (FF)"
 
 
 def test_multi_field_commands_send_all_their_fields() -> None:
@@ -124,13 +143,27 @@ def test_multi_field_commands_send_all_their_fields() -> None:
 
 
 def test_enable_sets_serial_mode_subdivision_respond_active_once() -> None:
-    driver, drive = native()
+    drive = Drive(lambda m: b"" if isinstance(m, mks.ReadVersion) else None)  # a V1.0.5 drive: no 0x40, no 0x47
+    link = MksLink(LoopbackTransport(drive), clock=ManualClock(), policy=RetryPolicy(timeout=0.05, retries=2))
+    driver = MksNativeDriver(link, ADDRESS, device="mks-servo42d", firmware="v1.0.5")
     driver.enable()
-    assert drive.requests == [mks.SetWorkMode(ADDRESS, 5), mks.SetSubdivision(ADDRESS, 16),
+    assert drive.requests == [mks.ReadVersion(ADDRESS), mks.SetWorkMode(ADDRESS, 5), mks.SetSubdivision(ADDRESS, 16),
                               mks.SetRespondActive(ADDRESS, 1, 1), mks.EnableMotor(ADDRESS, 1)]
     driver.disable()
     driver.enable()
     assert drive.requests[-2:] == [mks.EnableMotor(ADDRESS, 0), mks.EnableMotor(ADDRESS, 1)]
+
+
+def test_v106_enable_reads_what_the_drive_holds_and_writes_only_what_differs() -> None:
+    driver, drive = native()
+    drive.held = {"microsteps": 32, "work_mode": 5}  # set on the drive's menu
+    driver.enable()
+    assert drive.requests == [mks.ReadVersion(ADDRESS), mks.ReadAllParameters(ADDRESS), mks.EnableMotor(ADDRESS, 1)]
+    assert driver.microsteps == 32 and driver.pulses_per_turn == 6400  # the drive's subdivision
+    drive.requests.clear()
+    given = MksNativeDriver(driver.link, ADDRESS, device="mks-servo42d", microsteps=16)
+    given.enable()  # a subdivision given to the driver is written
+    assert mks.SetSubdivision(ADDRESS, 16) in drive.requests and given.microsteps == 16
 
 
 def test_units_speed_value_and_acc_follow_the_manual() -> None:
@@ -253,3 +286,86 @@ def test_the_torque_limit_becomes_the_working_current_while_enabled() -> None:
     joint.enable()
     assert mks.SetWorkingCurrent(ADDRESS, round(0.3 / driver.profile.torque_constant * 1000)) in drive.requests
     assert driver.written("working_current") == 1017
+
+
+# ------------------------------------------------------------------------------ firmware profiles
+
+
+def _versioned(word: int | None) -> Callable[[Any], bytes | None]:
+    """A hook: the drive answers 0x40 with ``word`` (None: not at all, like firmware before V1.0.9)."""
+    def hook(msg: Any) -> bytes | None:
+        if isinstance(msg, mks.ReadVersion):
+            return b"" if word is None else mks.encode(mks.VersionReply(msg.address, word))
+        return None
+    return hook
+
+
+def _driver(firmware: str, word: int | None) -> tuple[MksNativeDriver, Drive]:
+    drive = Drive(_versioned(word))
+    link = MksLink(LoopbackTransport(drive), clock=ManualClock(), policy=RetryPolicy(timeout=0.05, retries=2))
+    return MksNativeDriver(link, ADDRESS, device="mks-servo42d", firmware=firmware), drive
+
+
+@pytest.mark.parametrize("firmware,word,refused", [
+    ("v1.0.9", 0x11_01_00_09, None),
+    ("v1.0.9", 0x11_01_00_0A, "reports firmware v1.0.10, the config says v1.0.9"),
+    ("v1.0.9", None, "does not answer 0x40"),
+    ("v1.0.6", None, None),
+    ("v1.0.5", None, None),
+    ("v1.0.5", 0x11_01_00_09, "reports firmware v1.0.9, the config says v1.0.5"),
+])
+def test_the_first_enable_checks_the_configured_firmware_against_0x40(firmware: str, word: int | None,
+                                                                      refused: str | None) -> None:
+    driver, drive = _driver(firmware, word)
+    if refused is None:
+        driver.enable()
+        assert drive.requests[-1] == mks.EnableMotor(ADDRESS, 1)
+        probes = [r for r in drive.requests if isinstance(r, mks.ReadVersion)]
+        assert len(probes) == 1  # once; an older profile's probe is not retried either
+        driver.disable()
+        driver.enable()
+        assert len([r for r in drive.requests if isinstance(r, mks.ReadVersion)]) == 1
+    else:
+        with pytest.raises(ConfigError, match=refused) as exc:
+            driver.enable()
+        assert exc.value.key == "firmware"
+        assert all(isinstance(r, mks.ReadVersion) for r in drive.requests)  # nothing else was sent
+
+
+def test_commands_of_a_later_firmware_are_refused_before_anything_is_sent() -> None:
+    driver, drive = _driver("v1.0.6", None)
+    with pytest.raises(RegisterError, match="v1.0.9"):
+        driver.write_param("heartbeat_protection_time", 1000)
+    with pytest.raises(RegisterError, match="v1.0.9"):
+        driver.read("version_information")
+    assert drive.requests == []
+    driver, drive = _driver("v1.0.9", 0x11_01_00_09)
+    driver.write_param("heartbeat_protection_time", 1000)
+    assert drive.requests == [mks.SetHeartbeat(ADDRESS, 1000)]
+    assert mks.encode(drive.requests[0]) == bytes.fromhex("FA 01 98 00 00 03 E8") + bytes(
+        (sum(bytes.fromhex("FA 01 98 00 00 03 E8")) & 0xFF,))
+
+
+def test_v106_failure_replies_are_refusals_and_an_echo_of_0xffff_is_never_sent() -> None:
+    """FC06 data 0xFFFF / FC16 quantity 0 (V1.0.6+ "If write fails") -> DeviceRejected code 0, not retried."""
+    from joints.errors import DeviceRejected
+
+    class Failing(ModbusDrive):
+        def __call__(self, data: bytes) -> bytes:
+            self.frames.append(data)
+            if data[1] == 0x06:
+                return mb.encode(mb.WriteSingleRegisterReply(data[0], int.from_bytes(data[2:4], "big"), 0xFFFF))
+            if data[1] == 0x10:
+                return mb.encode(mb.WriteMultipleRegistersReply(data[0], int.from_bytes(data[2:4], "big"), 0))
+            return super().__call__(data)
+
+    drive = Failing()
+    link = ModbusLink(LoopbackTransport(drive), clock=ManualClock(), policy=RetryPolicy(timeout=0.05, retries=2))
+    driver = MksModbusDriver(link, 1, device="mks-servo42d", firmware="v1.0.6")
+    with pytest.raises(DeviceRejected, match="failure reply") as fc06:
+        driver.set_working_current(1000)
+    with pytest.raises(DeviceRejected, match="failure reply") as fc16:
+        driver.set_velocity(100)
+    assert (fc06.value.code, fc16.value.code) == (0, 0)
+    assert len(drive.frames) == 2  # a refusal is an answer: nothing was sent again
+    assert "working_current" not in driver.image

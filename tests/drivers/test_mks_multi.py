@@ -109,7 +109,8 @@ def test_scan_finds_mks_drives_on_both_protocols(tmp_path: Path, protocol: str,
     found = json.loads(capsys.readouterr().out)
     # the bus cannot tell a SERVO42D from a 57D, and the MKS reports no model, serial or version
     assert found == [{"bus": "rs485", "protocol": protocol, "device": "mks", "address": a, "model": None,
-                      "serial": None, "firmware": None, "details": {}} for a in (1, 2)]
+                      "serial": None, "firmware": "v1.0.9",  # 0x40 (the default firmware profile's twins)
+                      "details": {"hardware_version": "S42D_485", "calibrated": True}} for a in (1, 2)]
 
 
 def test_registers_lists_both_mks_maps(capsys: pytest.CaptureFixture[str]) -> None:

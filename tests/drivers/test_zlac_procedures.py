@@ -132,8 +132,10 @@ def test_state_of_both_wheels_is_one_block_read() -> None:
     slave.set("actual_motor_position_left", -20480)
     slave.set("actual_velocity_right", 1000)
     slave.set("error_code_left", 0x0020)
+    d.identify()  # once per connection: the encoder lines the drive is set to (0x2030, 0x2060)
+    sent = len([r for r in trace if r.direction == "tx"])
     block = d.read_status()
-    assert len([r for r in trace if r.direction == "tx"]) == 1
+    assert len([r for r in trace if r.direction == "tx"]) == sent + 1
     ls, rs = left.state_from(block, 0.0), right.state_from(block, 0.0)
     assert (ls.position, ls.fault, rs.velocity) == (-20480, 0x0020, 1000)
     assert "Position following error" in left.fault_text(ls.fault)

@@ -14,6 +14,7 @@ from mkskit import axis_config
 import joints
 from joints.codecs import mks
 from joints.devices.mks.state import MotorStatus
+from joints.devices.quirks import MKS_FIRMWARES
 from joints.errors import ConfigError, LimitError
 
 LEAD = 0.008
@@ -30,10 +31,11 @@ def _script(rig: joints.Rig) -> int:
     return j.read("encoder_addition")
 
 
-def test_same_script_on_the_native_protocol_and_modbus_ends_within_one_count() -> None:
+@pytest.mark.parametrize("firmware", MKS_FIRMWARES)
+def test_same_script_on_the_native_protocol_and_modbus_ends_within_one_count(firmware: str) -> None:
     ends = {}
     for protocol in ("mks-serial", "modbus-rtu", "modbus-rtu direct"):
-        cfg = axis_config(protocol=protocol.split()[0])
+        cfg = axis_config(protocol=protocol.split()[0], firmware=firmware)
         cfg["sim"]["direct"] = protocol.endswith("direct")  # Modbus's no-bytes path: the same results
         with joints.open(cfg) as rig:
             ends[protocol] = _script(rig)

@@ -19,6 +19,7 @@ from joints.codecs import modbus as mb
 from joints.codecs.crc import append_crc
 from joints.devices.mks.modbus import MKS_MODBUS
 from joints.devices.mks.state import WorkMode
+from joints.devices.quirks import MKS_FIRMWARES
 from testdata import by_id, sequences, vectors
 
 RECORDS = by_id()
@@ -253,13 +254,24 @@ def test_the_0x90_quirk_is_accepted_exactly_and_recorded_other_counts_get_except
         assert bus.receive(append_crc(bytes.fromhex("01 04 00 35 00 01"))) == mb.encode(mb.ExceptionReply(1, 4, 2))
 
 
-def test_part8_refusals_native_mode_and_range(tmp_path: Path) -> None:
-    with _modbus_rig(tmp_path) as rig:
+@pytest.mark.parametrize("firmware", MKS_FIRMWARES)
+def test_part8_refusals_native_mode_and_range(tmp_path: Path, firmware: str) -> None:
+    with open_motor(tmp_path, protocol="modbus-rtu", joint={"firmware": firmware}) as rig:
         bus = rig.world.buses["rs485"]
-        # the twin is in CR_vFOC (factory): a run command cannot execute -> 04; out of range -> 03
+        # the twin is in CR_vFOC (factory): a run command cannot execute; 10000 mA is out of range.
+        # V1.0.5 documents no failure reply (exceptions 04 / 03, our choice); V1.0.6+ answer FC16 with
+        # register quantity 0 and FC06 with register data 0xFFFF ("If write fails")
         run = append_crc(bytes((1, 0x10)) + MKS_MODBUS.block(0x10, 0xF6).request_pdu(
             {"speed_mode_direction": 0, "speed_mode_acc": 2, "speed_mode_speed": 100}))
-        assert bus.receive(run) == mb.encode(mb.ExceptionReply(1, 0x10, 4))
-        assert bus.receive(append_crc(bytes.fromhex("01 06 00 83 27 10"))) == mb.encode(mb.ExceptionReply(1, 6, 3))
+        current = append_crc(bytes.fromhex("01 06 00 83 27 10"))
+        if firmware == "v1.0.5":
+            assert bus.receive(run) == mb.encode(mb.ExceptionReply(1, 0x10, 4))
+            assert bus.receive(current) == mb.encode(mb.ExceptionReply(1, 6, 3))
+        else:
+            assert bus.receive(run) == append_crc(bytes.fromhex("01 10 00 F6 00 00"))
+            assert bus.receive(current) == append_crc(bytes.fromhex("01 06 00 83 FF FF"))
+        # a request the protocol rejects stays an exception on every firmware: unknown register, wrong count
+        assert bus.receive(append_crc(bytes.fromhex("01 06 00 99 00 01"))) == mb.encode(mb.ExceptionReply(1, 6, 2))
+        assert bus.receive(append_crc(bytes.fromhex("01 04 00 F1 00 02"))) == mb.encode(mb.ExceptionReply(1, 4, 3))
         rig.world.drives["m1"].write("modbus_rtu", 0)  # the drive now speaks the native protocol only
         assert bus.receive(append_crc(bytes.fromhex("01 04 00 F1 00 01"))) == b""

@@ -16,6 +16,7 @@ from mkskit import open_motor
 
 from joints.codecs import mks
 from joints.devices.mks.state import MotorStatus, WorkMode
+from joints.devices.quirks import MKS_FIRMWARES
 from joints.errors import DeviceRejected
 from joints.sim.mks import MksFirmware
 
@@ -242,8 +243,9 @@ def test_microstep_speed_scaling_of_6_1(tmp_path: Path) -> None:
             j = rig.joints["m1"]
             fw = rig.world.drives["m1"]
             d = j.driver
-            d.microsteps = microsteps
+            d.set_microsteps(microsteps)  # the drive holds it: the driver computes with it (0x47 at enable)
             j.enable()
+            assert d.microsteps == microsteps
             assert fw.microsteps == microsteps
             d.access.write_many({"speed_mode_direction": 0, "speed_mode_speed": 300, "speed_mode_acc": 0},
                                 idempotent=False)
@@ -269,8 +271,10 @@ def test_emergency_stop_stops_at_once_without_completion(tmp_path: Path) -> None
         assert d.completions == before
 
 
-def test_completion_frames_tell_the_driver_the_move_ended_without_polling(tmp_path: Path) -> None:
-    with open_motor(tmp_path) as rig:
+@pytest.mark.parametrize("firmware", MKS_FIRMWARES)
+def test_completion_frames_tell_the_driver_the_move_ended_without_polling(tmp_path: Path, firmware: str) -> None:
+    # watchdog 0: no keep-alive reads of a V1.0.9 heartbeat (they are its food, not a poll for the end)
+    with open_motor(tmp_path, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
         j = rig.joints["m1"]
         d = j.driver
         j.enable()
@@ -284,8 +288,11 @@ def test_completion_frames_tell_the_driver_the_move_ended_without_polling(tmp_pa
         assert rig.time < 1.5
 
 
-def test_run_commands_fail_while_disabled_or_in_a_pulse_work_mode(tmp_path: Path) -> None:
-    with open_motor(tmp_path) as rig:
+@pytest.mark.parametrize("firmware", MKS_FIRMWARES)
+@pytest.mark.parametrize("protocol", ["mks-serial", "modbus-rtu"])
+def test_run_commands_fail_while_disabled_or_in_a_pulse_work_mode(tmp_path: Path, protocol: str,
+                                                                  firmware: str) -> None:
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware}) as rig:
         j = rig.joints["m1"]
         d = j.driver
         j.enable()

@@ -239,6 +239,10 @@ _BLOCKS: tuple[ModbusBlock, ...] = (
     _multi(0xF5, 4, 8, "8.3.7 Position mode4: absolute motion by axis", C,
            ("position_mode4_acc", 0, 2, "uint8"), ("position_mode4_speed", 2, 2, "uint16"),
            ("position_mode4_abs_axis", 4, 4, "int32")),
+    # Modbus-RTU manual V1.0.9 (the layout of the version word is the native 0x40 reply's, our reading)
+    _read(0x40, 2, "V1.0.9 3.1.8 Read version information", ("version_information", 0, 4, "uint32")),
+    _multi(0x98, 2, 4, "V1.0.9 3.2.14 Set heartbeat protection time", W,
+           ("heartbeat_protection_time", 0, 4, "uint32")),
 )
 
 

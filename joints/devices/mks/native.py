@@ -27,7 +27,7 @@ from types import MappingProxyType
 from joints.devices.mks.params import MKS_PARAMS
 from joints.devices.params import ParamMap
 
-__all__ = ["BROADCAST", "MKS_NATIVE", "REPLY_RULES", "Command", "NativeKey", "ReplyRule", "expects_completion",
+__all__ = ["BLOCK_COMMANDS", "BROADCAST", "MKS_NATIVE", "REPLY_RULES", "Command", "NativeKey", "ReplyRule", "expects_completion",
            "expects_reply"]
 
 BROADCAST = 0
@@ -36,17 +36,23 @@ BROADCAST = 0
 class Command(enum.IntEnum):
     """Function codes of Parts 5 and 6 (names after the manual's section titles)."""
 
+    SET_TIMED_RETURN = 0x01
     READ_ENCODER_VALUE_CARRY = 0x30
     READ_ENCODER_VALUE_ADDITION = 0x31
     READ_REAL_TIME_SPEED = 0x32
     READ_NUMBER_OF_PULSES = 0x33
     READ_IO_PORTS_STATUS = 0x34
+    READ_RAW_ENCODER_VALUE = 0x35
     READ_ERROR_OF_ANGLE = 0x39
     READ_EN_PINS_STATUS = 0x3A
     READ_GO_BACK_TO_ZERO_STATUS = 0x3B
     RELEASE_PROTECTION_STATE = 0x3D
     READ_PROTECTION_STATE = 0x3E
     RESTORE_DEFAULT_PARAMETERS = 0x3F
+    READ_VERSION_INFORMATION = 0x40
+    WRITE_ALL_PARAMETERS = 0x46
+    READ_ALL_PARAMETERS = 0x47
+    READ_ALL_STATUS = 0x48
     RESTART_MOTOR = 0x41
     CALIBRATE_ENCODER = 0x80
     SET_WORK_MODE = 0x82
@@ -67,6 +73,7 @@ class Command(enum.IntEnum):
     GO_HOME = 0x91
     SET_CURRENT_AXIS_TO_ZERO = 0x92
     SET_NOLIMIT_HOME_PARAMETERS = 0x94
+    SET_HEARTBEAT_PROTECTION_TIME = 0x98
     SET_ZERO_MODE = 0x9A
     SET_HOLDING_CURRENT = 0x9B
     SET_LIMIT_PORT_REMAP = 0x9E
@@ -82,6 +89,11 @@ class Command(enum.IntEnum):
 
 
 LONG_PACKET = 0xFC  #: head of a long data package (not a function code)
+
+#: commands that carry no parameter's fields: whole blocks (joints.devices.mks.blocks, V1.0.6) and the timed
+#: return of another command's reply (0x01, V1.0.9)
+BLOCK_COMMANDS = frozenset((Command.WRITE_ALL_PARAMETERS, Command.READ_ALL_PARAMETERS, Command.READ_ALL_STATUS,
+                            Command.SET_TIMED_RETURN))
 
 #: run commands of Part 6 (0x8C respond/active applies to them)
 RUN_COMMANDS = frozenset((Command.SPEED_MODE, Command.POSITION_MODE1_RELATIVE_PULSES,
@@ -206,6 +218,9 @@ _KEYS: dict[str, NativeKey] = {
     "position_mode4_speed": NativeKey(C.POSITION_MODE4_ABSOLUTE_AXIS, "speed"),
     "position_mode4_acc": NativeKey(C.POSITION_MODE4_ABSOLUTE_AXIS, "acc"),
     "position_mode4_abs_axis": NativeKey(C.POSITION_MODE4_ABSOLUTE_AXIS, "abs_axis"),
+    "raw_encoder_value": NativeKey(C.READ_RAW_ENCODER_VALUE, "value"),
+    "version_information": NativeKey(C.READ_VERSION_INFORMATION, "version"),
+    "heartbeat_protection_time": NativeKey(C.SET_HEARTBEAT_PROTECTION_TIME, "times"),
 }
 del C
 

@@ -39,6 +39,13 @@ Per model
     800 mA, 57D 400 mA; Part 3 #23). :data:`MKS_PARAMS` holds the family (bounds wide enough for
     both, 42D defaults); :func:`model_params` gives a model's own set, with the same names.
 
+Added by later firmware (:data:`FEATURE_OF`: parameter -> the firmware feature of
+:mod:`joints.devices.quirks` it needs; manual V1.0.9): ``raw_encoder_value`` (0x35, V1.0.6, with
+the read/write-all commands), ``version_information`` (0x40, read) and
+``heartbeat_protection_time`` (0x98, ms, 0 = off: the drive stops urgently when no command
+arrived for that long). A driver or twin whose firmware profile lacks the feature has no such
+parameter.
+
 Defaults the manual does not give (choices): ``home_speed`` 60 rpm (menu options 30-180),
 ``zero_mode_speed`` 2 (middle of 0-4), ``group_address`` 0 (no group), ``motor_enable`` 0.
 """
@@ -49,7 +56,7 @@ from dataclasses import replace
 
 from joints.devices.params import Access, Param, ParamSet
 
-__all__ = ["DANGEROUS", "MKS_PARAMS", "MODELS", "model_params"]
+__all__ = ["DANGEROUS", "FEATURE_OF", "MKS_PARAMS", "MODELS", "model_params"]
 
 R, W, C = Access.R, Access.W, Access.COMMAND
 
@@ -152,7 +159,19 @@ _PARAMS: tuple[Param, ...] = (
           0, 3000, 0),
     Param("position_mode4_acc", "uint8", C, "", "0xF5 acc", 0, 255, 0),
     Param("position_mode4_abs_axis", "int32", C, "count", "0xF5 absAxis: absolute axis (encoder counts)"),
+    # V1.0.6
+    Param("raw_encoder_value", "int48", R, "count", "0x35 raw accumulated multi-turn encoder value (V1.0.6): "
+          "0x4000 per turn since power-on (no zero applied)"),
+    # V1.0.9
+    Param("version_information", "uint32", R, "", "0x40 version (V1.0.9): b31-b28 calibrated, b27-b24 hardware "
+          "version, b23-b0 firmware version major.minor.patch"),
+    Param("heartbeat_protection_time", "uint32", W, "ms", "0x98 heartbeat protection time (V1.0.9): no command "
+          "for this long stops the motor urgently; 0 = off", 0, 0xFFFFFFFF, 0),
 )
+
+#: parameters a later firmware added -> the feature (joints.devices.quirks) a firmware profile needs for them
+FEATURE_OF: dict[str, str] = {"raw_encoder_value": "mks-all-parameters", "version_information": "mks-version",
+                              "heartbeat_protection_time": "mks-heartbeat"}
 
 MKS_PARAMS: ParamSet = ParamSet("mks-servo42d57d", _PARAMS)
 
