@@ -7,7 +7,7 @@ Rules:
   real drives. Sim-only extras (seeded start state, domain randomisation, rendering, ground-truth
   task terms) use the rig's public sim API ``rig.sim`` (None on hardware), as gymnasium's
   ``MujocoEnv`` exposes ``model`` and ``data`` (here too, None on hardware).
-* Fixed control period (``dt``, default 20 ms): ``step`` sends the action's commands, waits on the
+* Fixed control period (``dt``, per env a rate its default bus carries): ``step`` sends the action's commands, waits on the
   rig's clock until the next tick of a fixed schedule (sim: advances physics; hardware: the wall
   clock, absorbing the bus time), then reads every joint's state. The drive holds the command
   between ticks (zero-order hold).
@@ -70,7 +70,7 @@ import joints
 from envs.configs import config_path
 from envs.randomization import GAINS, DomainRandomization
 from envs.render import CameraSpec, SceneRenderer
-from joints.errors import MotionTimeout
+from joints.errors import MotionTimeout, OverrunError
 
 ACTION_MODES = ("position", "velocity", "torque")
 #: s between "enable" and the first motion command (the eRob manual's 500 ms; the emulator enforces it)
@@ -199,8 +199,29 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
         remaining = t - self.rig.time
         if remaining > 0:
             self.rig.sleep(remaining)
-        elif remaining < -1e-9:
-            self.overruns += 1
+        self._note_overrun(-remaining)
+
+    #: raise :class:`~joints.errors.OverrunError` on an overrun instead of counting it
+    raise_on_overrun = False
+
+    def _note_overrun(self, late: float) -> None:
+        """This step reached its tick ``late`` s after it (<= 0: in time): counted in :attr:`overruns` and
+        :attr:`overrun_time`, shown as ``info["overrun"]``; the schedule goes on from the late tick (later
+        steps are not charged for this one)."""
+        if late <= 1e-9:
+            self._overrun = 0.0
+            return
+        self._overrun = late
+        self.overruns += 1
+        self.overrun_time += late
+        self._t0 += late
+        if self.raise_on_overrun:
+            raise OverrunError(f"step {self._tick} ran {late * 1e3:.2f} ms over its {self.control_period * 1e3:g} ms "
+                               "period: the bus cannot carry this rate (see rig.cycle_time())")
+
+    def _check_rate(self, mode: str = "position") -> None:
+        """Refuse a control period one cycle of this env's bus traffic does not fit (:meth:`joints.Rig.check_rate`)."""
+        self.rig.check_rate(self.control_period, mode)
 
     def _start(self, config: Any, backend: str | None, domain_randomization: Any) -> None:
         """Open the rig and set the task up; the rig is closed again if the setup fails."""
@@ -237,7 +258,11 @@ class JointsEnv(RigEnv):
         config: a joints config - TOML path or dict; ``None``: the shipped default of the task.
         backend: ``"sim"`` | ``"hardware"``; overrides the config (as ``joints.open``).
         action_mode: ``"position"`` | ``"velocity"`` | ``"torque"``.
-        control_period: seconds per step (``dt``); in sim a whole number of physics substeps.
+        control_period: seconds per step (``dt``; None: the env's ``default_control_period``); in sim a
+            whole number of physics substeps; one cycle of bus traffic must fit it on every bus
+            (:meth:`joints.Rig.check_rate`, a :class:`~joints.errors.ConfigError` otherwise).
+        raise_on_overrun: raise :class:`~joints.errors.OverrunError` when a step misses its tick
+            (default: count it in ``overruns`` / ``overrun_time`` and show it as ``info["overrun"]``).
         render_mode: ``None`` | ``"rgb_array"`` | ``"human"``.
         domain_randomization: sim only - ``False``, ``True`` (default ranges), a mapping of ranges,
             or a :class:`~envs.randomization.DomainRandomization`.
@@ -252,6 +277,8 @@ class JointsEnv(RigEnv):
 
     #: the shipped config used when ``config`` is None (file stem in ``joints/configs``)
     default_config: str = ""
+    #: s per step when ``control_period`` is None: a rate the default config's bus carries (docs/timing.md)
+    default_control_period: float = 0.02
 
     def __init__(
         self,
@@ -259,7 +286,7 @@ class JointsEnv(RigEnv):
         backend: str | None = None,
         *,
         action_mode: str = "position",
-        control_period: float = 0.02,
+        control_period: float | None = None,
         render_mode: str | None = None,
         domain_randomization: bool | Mapping[str, Any] | DomainRandomization = False,
         reset_velocity: float = 0.5,
@@ -268,9 +295,12 @@ class JointsEnv(RigEnv):
         reset_tolerance: float = 0.02,
         width: int = 480,
         height: int = 480,
+        raise_on_overrun: bool = False,
     ) -> None:
         if action_mode not in ACTION_MODES:
             raise ValueError(f"action_mode {action_mode!r} is not one of {ACTION_MODES}")
+        if control_period is None:
+            control_period = self.default_control_period
         if isinstance(control_period, bool) or not isinstance(control_period, (int, float)) \
                 or not math.isfinite(control_period) or control_period <= 0:
             raise ValueError(f"control_period must be a finite number of seconds > 0, got {control_period!r}")
@@ -281,6 +311,7 @@ class JointsEnv(RigEnv):
             if not math.isfinite(v) or v <= 0:
                 raise ValueError(f"{what} must be > 0, got {v!r}")
         self.action_mode = action_mode
+        self.raise_on_overrun = bool(raise_on_overrun)
         self.control_period = float(control_period)
         self.render_mode = render_mode
         self.reset_velocity = float(reset_velocity)
@@ -370,7 +401,10 @@ class JointsEnv(RigEnv):
         self._noisy = False  #: any joint's encoder noise above 0
         self._noise_rng: np.random.Generator | None = None
         self.randomization_sample: dict[str, Any] | None = None
-        self.overruns = 0  #: hardware: steps whose tick had passed before the commands were sent
+        self.overruns = 0  #: steps whose tick had passed before their commands were sent
+        self.overrun_time = 0.0  #: s, the total of those steps' lateness
+        self._overrun = 0.0
+        self._check_rate(self.action_mode)
 
     def _select_joints(self, rig: joints.Rig) -> list[str]:
         """The joints this env drives, in action/observation order (default: the config's order)."""
@@ -608,6 +642,7 @@ class JointsEnv(RigEnv):
     def _info(self, states: Sequence[joints.JointState]) -> dict[str, Any]:
         return {
             "time": float(self.rig.time),  # s on the rig's clock (sim: simulated seconds since reset)
+            "overrun": self._overrun,  # s this step ran over its period (0.0: none)
             "faults": {n: (s.fault.name if s.fault else None) for n, s in zip(self.joint_names, states)},
         }
 
