@@ -134,6 +134,8 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
     sim: bool
     control_period: float
     overruns: int
+    overrun_time: float
+    _overrun: float
     _tick: int
     width: int
     height: int

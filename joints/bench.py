@@ -444,6 +444,12 @@ def _at_rate(p: BusPlan, rate: float) -> BusPlan:
     return BusPlan(p.bus, p.protocol, p.line, p.joints, p.frames, p.data_bytes, load, p.transactions, p.overhead)
 
 
+def _can_frame(record: Any) -> Any:
+    import can
+
+    return can.Message(arbitration_id=record.ident, data=record.data, is_extended_id=False)
+
+
 def _measure(joints: Any, registry: Any, cfg: Any, mode: str) -> list[BusPlan]:
     from joints.link.trace import TraceRecord
     from joints.transports import can_timing, serial_timing
@@ -472,14 +478,26 @@ def _measure(joints: Any, registry: Any, cfg: Any, mode: str) -> list[BusPlan]:
                                                 stopbits=b.stopbits, silence=proto.silence)
                 line = f"{b.baudrate} baud 8{b.parity}{b.stopbits}" + (", t3.5" if proto.silence else "")
             latency = registry.adapter_latency(b) if b.timing != "ideal" else registry.ADAPTER_LATENCY[proto.medium]
-            replies = [r for r in mine if r.direction == "rx" and not r.meaning.startswith("unsolicited")]
+            turnaround_of = getattr(rig.world.buses.get(name), "turnaround", None)
+            last: dict[int | None, TraceRecord] = {}
+            replies = 0
             overhead = 0.0
-            for r in replies:
-                c = on_bus.get(r.node) if r.node is not None else None
-                turnaround = registry.family(c.device).config_profile(c).turnaround if c is not None else 0.0
+            for r in mine:  # each reply: its drive's turnaround (as the twin's bus gives it) and the adapter's latency
+                if r.direction == "tx":
+                    last[r.node] = r
+                    continue
+                if r.meaning.startswith("unsolicited"):
+                    continue
+                replies += 1
+                turnaround = None
+                request = last.get(r.node)
+                if callable(turnaround_of) and request is not None:
+                    turnaround = turnaround_of(request.data if request.ident is None else _can_frame(request))
+                if turnaround is None:
+                    c = on_bus.get(r.node) if r.node is not None else None
+                    turnaround = registry.family(c.device).config_profile(c).turnaround if c is not None else 0.0
                 overhead += turnaround + latency
-            out.append(BusPlan(name, b.protocol, line, len(on_bus), len(mine), sum(sizes), load, len(replies),
-                               overhead))
+            out.append(BusPlan(name, b.protocol, line, len(on_bus), len(mine), sum(sizes), load, replies, overhead))
         return out
 
 

@@ -240,7 +240,7 @@ def _can_transport(cfg: BusConfig) -> Any:
 def _erob_can_device_bus(cfg: BusConfig) -> Any:
     from joints.sim.erob_can import ErobCanBus
 
-    return ErobCanBus(name=cfg.name, bitrate=cfg.bitrate)
+    return ErobCanBus(name=cfg.name, bitrate=cfg.bitrate, ideal=cfg.timing == "ideal")
 
 
 def _canopen_link(cfg: BusConfig, transport: Any, clock: Clock, peer: Any) -> Link[Any]:
@@ -260,7 +260,7 @@ def _canopen_link(cfg: BusConfig, transport: Any, clock: Clock, peer: Any) -> Li
 def _canopen_device_bus(cfg: BusConfig) -> Any:
     from joints.sim.erob_canopen import ErobCanopenBus
 
-    return ErobCanopenBus(name=cfg.name, bitrate=cfg.bitrate)
+    return ErobCanopenBus(name=cfg.name, bitrate=cfg.bitrate, ideal=cfg.timing == "ideal")
 
 
 def _canopen_scan(link: Any, addresses: Sequence[int], listen: float) -> Iterable[dict[str, object]]:
@@ -270,10 +270,12 @@ def _canopen_scan(link: Any, addresses: Sequence[int], listen: float) -> Iterabl
 
 
 def _lockstep_can(device_bus: Any, config: BusConfig | None = None, clock: Any = None) -> Any:
+    """Sim: a python-can node on the device bus's timed medium (the host adapter's latency from the config)."""
     from joints.transports.can import PythonCanTransport
     from joints.transports.can_sim import LockstepCanBus
 
-    return PythonCanTransport(LockstepCanBus(medium=device_bus.medium))
+    latency = 0.0 if config is None else adapter_latency(config)
+    return PythonCanTransport(LockstepCanBus(medium=device_bus.medium, adapter_latency=latency))
 
 
 def _mks_link(cfg: BusConfig, transport: Any, clock: Clock, peer: Any) -> Link[Any]:

@@ -10,12 +10,11 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-import joints  # noqa: E402
-from joints import bench, registry  # noqa: E402
-from joints.errors import ConfigError, OverrunError  # noqa: E402
-from joints.link.trace import TraceRecord  # noqa: E402
-
-from envs.configs import default_config  # noqa: E402
+import joints
+from envs.configs import default_config
+from joints import bench, registry
+from joints.errors import ConfigError, OverrunError
+from joints.link.trace import TraceRecord
 
 T35 = 0.00175  # s: Modbus RTU's silence above 19200 baud
 

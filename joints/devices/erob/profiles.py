@@ -97,8 +97,7 @@ _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction", "command_delay")
 TURNAROUND = 0.0008
 TURNAROUND_SOURCE = ("EST: 0.8 ms - no eRob manual states a reply turnaround; a real ZLAC8015D log shows 1.8 ms "
                      "per transaction beyond bytes and t3.5, less 1 ms of USB adapter latency (docs/timing.md)")
-_FLOAT_FIELDS += ("turnaround",)
-_NON_NEGATIVE_FIELDS += ("turnaround",)
+_TIMING_FIELDS = ("turnaround",)  # bus timing (issue 29): finite, >= 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -126,7 +125,7 @@ class ErobProfile:
     sources: Mapping[str, str] = field(default_factory=_empty_sources, compare=False, hash=False)
 
     def __post_init__(self) -> None:
-        validate_fields(self, _INT_FIELDS, _FLOAT_FIELDS, _NON_NEGATIVE_FIELDS)
+        validate_fields(self, _INT_FIELDS, _FLOAT_FIELDS + _TIMING_FIELDS, _NON_NEGATIVE_FIELDS + _TIMING_FIELDS)
         if self.efficiency > 1.0:
             raise ConfigError(
                 f"{self.model}: efficiency must be in (0, 1], got {self.efficiency!r}",

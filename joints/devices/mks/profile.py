@@ -84,7 +84,7 @@ class MksProfile:
     sources: Mapping[str, str] = field(default_factory=_empty_sources, compare=False, hash=False)
 
     def __post_init__(self) -> None:
-        validate_fields(self, _INT_FIELDS, _FLOAT_FIELDS, _NON_NEGATIVE_FIELDS)
+        validate_fields(self, _INT_FIELDS, _FLOAT_FIELDS + _TIMING_FIELDS, _NON_NEGATIVE_FIELDS + _TIMING_FIELDS)
         for name in ("default_working_current", "default_home_current"):
             if getattr(self, name) > self.max_working_current:
                 raise ConfigError(f"{self.model}: {name} {getattr(self, name)} A exceeds max_working_current "
@@ -141,8 +141,7 @@ _FLOAT_FIELDS = (
     "rotor_inertia", "coulomb_friction", "viscous_friction", "motor_mass", "stall_error", "stall_time",
 )
 _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction")
-_FLOAT_FIELDS += ("turnaround",)  # bus timing (issue 29)
-_NON_NEGATIVE_FIELDS += ("turnaround",)
+_TIMING_FIELDS = ("turnaround",)  # bus timing (issue 29): finite, >= 0
 _OVERRIDABLE: tuple[str, ...] = tuple(f.name for f in fields(MksProfile) if f.name not in ("model", "sources"))
 
 _COMMON_SOURCES = {

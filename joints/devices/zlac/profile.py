@@ -114,7 +114,7 @@ class HubMotorProfile:
     sources: Mapping[str, str] = field(default_factory=_sources, compare=False, hash=False)
 
     def __post_init__(self) -> None:
-        validate_fields(self, _INT_FIELDS, _FLOAT_FIELDS, _NON_NEGATIVE_FIELDS)
+        validate_fields(self, _INT_FIELDS, _FLOAT_FIELDS + _TIMING_FIELDS, _NON_NEGATIVE_FIELDS + _TIMING_FIELDS)
         if self.encoder_lines > 4096:
             raise ConfigError(
                 f"{self.model}: encoder_lines {self.encoder_lines} exceeds register 0x2030's range 0-4096",
@@ -243,8 +243,7 @@ _FLOAT_FIELDS = (
 )
 # Friction and the assumed vehicle share may be 0 (ideal simulation / a wheel in the air).
 _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction", "load_inertia")
-_FLOAT_FIELDS += ("turnaround",)  # bus timing (issue 29)
-_NON_NEGATIVE_FIELDS += ("turnaround",)
+_TIMING_FIELDS = ("turnaround",)  # bus timing (issue 29): finite, >= 0
 
 _SOURCES: dict[str, str] = {
     "model": "PUB ZLLG80ASM250 8-inch hub servo motor (facts 2.2)",
