@@ -335,7 +335,7 @@ class CanMedium:
                 answers = node.peer.on_frame(frame)
                 if answers:
                     turn = node.turnaround(frame) if node.turnaround is not None else None
-                    delay = node.latency if turn is None else turn
+                    delay = 0.0 if self.ideal else node.latency if turn is None else turn
                     for answer in answers:
                         self._enqueue(answer, node, t + delay)
                 continue

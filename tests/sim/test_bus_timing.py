@@ -168,3 +168,34 @@ def test_a_step_that_does_not_fit_reports_its_overrun() -> None:
     finally:
         env.close()
 
+
+
+@pytest.mark.parametrize("protocol", ["erob-can", "canopen"])
+def test_can_buses_add_turnaround_and_adapter_latency(protocol: str) -> None:
+    cfg = default_config("erob_arm_reach")
+    cfg["buses"]["rs485"] = {"protocol": protocol, "bitrate": 1_000_000}
+    (p,) = bench.plan(cfg, 50.0)
+    with joints.open(cfg) as rig:
+        for j in rig.joints.values():
+            j.enable()
+        rig.sleep(0.6)
+        bench._cycle(rig)
+        t0 = rig.time
+        for _ in range(20):
+            bench._cycle(rig)
+        per_cycle = (rig.time - t0) / 20
+    latency = registry.ADAPTER_LATENCY["can"]
+    if protocol == "erob-can":  # request/reply: the sim's cycle is the planner's, turnaround and latency included
+        assert p.overhead == pytest.approx(p.transactions * (0.0008 + latency))
+        assert per_cycle == pytest.approx(p.cycle, rel=0.05)
+    else:  # PDOs at the SYNC: no turnaround, the host sees each TPDO after the adapter's latency
+        assert p.overhead == pytest.approx(p.transactions * latency)
+        assert p.wire < per_cycle <= p.cycle * 1.05
+    if protocol == "canopen":
+        return  # its state reads wait for the SYNC schedule's TPDOs: protocol time, not bus time
+    cfg["buses"]["rs485"]["timing"] = "ideal"
+    with joints.open(cfg) as rig:
+        t0 = rig.time
+        for _ in range(20):
+            rig.read_states()
+        assert rig.time == t0
