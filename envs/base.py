@@ -140,6 +140,7 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
     width: int
     height: int
     _t0: float
+    _slip: float
     _closed: bool
     _renderer: SceneRenderer | None
     #: how the renderer looks at the model
@@ -185,7 +186,7 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def tick_time(self) -> float:
         """Rig time of the tick the last action waits for."""
-        return self._t0 + self._tick * self.control_period
+        return self._t0 + self._slip + self._tick * self.control_period
 
     def begin_step(self, action: np.ndarray) -> Any:
         """The first half of :meth:`step`: check ``action`` and send its commands (returns what
@@ -216,7 +217,7 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
         self._overrun = late
         self.overruns += 1
         self.overrun_time += late
-        self._t0 += late
+        self._slip += late
         if self.raise_on_overrun:
             raise OverrunError(f"step {self._tick} ran {late * 1e3:.2f} ms over its {self.control_period * 1e3:g} ms "
                                "period: the bus cannot carry this rate (see rig.cycle_time())")
@@ -398,6 +399,7 @@ class JointsEnv(RigEnv):
         self._states: list[joints.JointState] = []
         self._sent = np.zeros(n)  # the SI command of the last step (after safe_command)
         self._tick = 0
+        self._slip = 0.0  #: s the schedule slipped by overruns this episode
         self._t0 = 0.0
         self._noise = np.zeros(n)
         self._noisy = False  #: any joint's encoder noise above 0
@@ -568,6 +570,7 @@ class JointsEnv(RigEnv):
         latency = self.randomization_sample["latency"] if self.randomization_sample else 0
         self._queue = deque(neutral.astype(np.float64) for _ in range(latency))
         self._tick = 0
+        self._slip = 0.0  #: s the schedule slipped by overruns this episode
         self._t0 = self.rig.time
         states = self._read()
         obs = self._observation(states)

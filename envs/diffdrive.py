@@ -346,6 +346,7 @@ class DiffDriveGoalEnv(RigEnv):
         self._angles = np.zeros(2)
         self._distance = 0.0
         self._tick = 0
+        self._slip = 0.0  #: s the schedule slipped by overruns this episode
         self._t0 = 0.0
         self._last_io = 0.0
         self._origin = np.zeros(3)  #: sim: the true pose at which the estimate restarted
@@ -429,6 +430,7 @@ class DiffDriveGoalEnv(RigEnv):
         latency = self.randomization_sample["latency"] if self.randomization_sample else 0
         self._queue = deque(np.zeros(2) for _ in range(latency))
         self._tick = 0
+        self._slip = 0.0  #: s the schedule slipped by overruns this episode
         states = self._read()
         self.odometry.restart(*self._angles)
         if self.sim:

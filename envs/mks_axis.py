@@ -192,6 +192,7 @@ class MksAxisPositionEnv(RigEnv):
         self._state: joints.JointState | None = None
         self._prev_action = 0.0
         self._tick = 0
+        self._slip = 0.0  #: s the schedule slipped by overruns this episode
         self._t0 = 0.0
         self.overruns = 0  #: steps whose tick had passed before their commands were sent
         self.overrun_time = 0.0  #: s, the total of those steps' lateness
@@ -261,6 +262,7 @@ class MksAxisPositionEnv(RigEnv):
         self._hold(start)
         self._prev_action = float(self.action_of(start if self.action_mode == "position" else 0.0)[0])
         self._tick = 0
+        self._slip = 0.0  #: s the schedule slipped by overruns this episode
         self._t0 = self.rig.time
         s = self._read()
         info = self._info(s)
@@ -283,7 +285,7 @@ class MksAxisPositionEnv(RigEnv):
             else:
                 self.joint.move_to(command)
         self._tick += 1
-        self._wait_until(self._t0 + self._tick * self.control_period)
+        self._wait_until(self.tick_time())
         s = self._read()
         distance = abs(self.goal - s.position)
         r_dist = -distance / 0.01
