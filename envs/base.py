@@ -571,8 +571,8 @@ class JointsEnv(RigEnv):
         self._queue = deque(neutral.astype(np.float64) for _ in range(latency))
         self._tick = 0
         self._slip = 0.0  #: s the schedule slipped by overruns this episode
-        self._t0 = self.rig.time
         states = self._read()
+        self._t0 = self.rig.time  # the schedule starts with the first observation (its read took bus time)
         obs = self._observation(states)
         info = self._info(states)
         if self.randomization_sample is not None:

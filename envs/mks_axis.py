@@ -263,8 +263,8 @@ class MksAxisPositionEnv(RigEnv):
         self._prev_action = float(self.action_of(start if self.action_mode == "position" else 0.0)[0])
         self._tick = 0
         self._slip = 0.0  #: s the schedule slipped by overruns this episode
-        self._t0 = self.rig.time
         s = self._read()
+        self._t0 = self.rig.time  # the schedule starts with the first observation (its read took bus time)
         info = self._info(s)
         if self.render_mode == "human":
             self.render()
