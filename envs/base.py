@@ -70,7 +70,7 @@ import joints
 from envs.configs import config_path
 from envs.randomization import GAINS, DomainRandomization
 from envs.render import CameraSpec, SceneRenderer
-from joints.errors import MotionTimeout, OverrunError
+from joints.errors import MissingDependencyError, MotionTimeout, OverrunError
 
 ACTION_MODES = ("position", "velocity", "torque")
 #: s between "enable" and the first motion command (the eRob manual's 500 ms; the emulator enforces it)
@@ -202,12 +202,12 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
         remaining = t - self.rig.time
         if remaining > 0:
             self.rig.sleep(remaining)
-        self._note_overrun(-remaining)
+        self.note_overrun(-remaining)
 
     #: raise :class:`~joints.errors.OverrunError` on an overrun instead of counting it
     raise_on_overrun = False
 
-    def _note_overrun(self, late: float) -> None:
+    def note_overrun(self, late: float) -> None:
         """This step reached its tick ``late`` s after it (<= 0: in time): counted in :attr:`overruns` and
         :attr:`overrun_time`, shown as ``info["overrun"]``; the schedule goes on from the late tick (later
         steps are not charged for this one)."""
@@ -222,9 +222,22 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
             raise OverrunError(f"step {self._tick} ran {late * 1e3:.2f} ms over its {self.control_period * 1e3:g} ms "
                                "period: the bus cannot carry this rate (see rig.cycle_time())")
 
+    #: s from a state's sample to the next command taking effect, at most: one cycle of bus traffic (the
+    #: planner's, for the env's action mode; 0 on ideal buses). Safety shields extend their horizon by it.
+    bus_lag = 0.0
+
     def _check_rate(self, mode: str = "position") -> None:
-        """Refuse a control period one cycle of this env's bus traffic does not fit (:meth:`joints.Rig.check_rate`)."""
-        self.rig.check_rate(self.control_period, mode)
+        """Refuse a control period one cycle of this env's bus traffic does not fit (:meth:`joints.Rig.check_rate`),
+        and note the cycle as :attr:`bus_lag`."""
+        rig = self.rig
+        rig.check_rate(self.control_period, mode)
+        try:
+            plans = rig.cycle_time(mode)
+        except MissingDependencyError:  # hardware-only install: check_rate warned
+            return
+        ideal = {n for n, b in rig.config.buses.items()
+                 if b.timing == "ideal" and (rig.backend == "sim" or b.backend == "sim")}
+        self.bus_lag = max((p.cycle for n, p in plans.items() if n not in ideal), default=0.0)
 
     def _start(self, config: Any, backend: str | None, domain_randomization: Any) -> None:
         """Open the rig and set the task up; the rig is closed again if the setup fails."""
@@ -494,7 +507,7 @@ class JointsEnv(RigEnv):
             return c
         if self.action_mode == "velocity":
             p = np.array([s.position for s in self._states])
-            a, dt = self.profile_acceleration, self.control_period
+            a, dt = self.profile_acceleration, self.control_period + self.bus_lag
             v = np.array([s.velocity for s in self._states])
             lo, hi = self.position_limits[:, 0] + LIMIT_INSET, self.position_limits[:, 1] - LIMIT_INSET
             np.clip(c, -braking_speed(p - lo, a, dt, -v), braking_speed(hi - p, a, dt, v), out=c)
@@ -520,7 +533,7 @@ class JointsEnv(RigEnv):
         drive's deceleration - a conservative envelope of the drive's own profile."""
         p = np.array([s.position for s in self._states])
         v = np.array([s.velocity for s in self._states])
-        dt = self.control_period
+        dt = self.control_period + self.bus_lag  # the state is older, the command later, by up to a bus cycle
         if self.action_mode == "velocity":
             acc = dec = self.profile_acceleration
             step = acc * dt

@@ -231,7 +231,7 @@ class MksAxisPositionEnv(RigEnv):
         if self._state is None:
             return v
         x, speed = self._state.position, self._state.velocity
-        a, dt = np.array([BRAKING_SHARE * self.joint.motion.acceleration]), self.control_period
+        a, dt = np.array([BRAKING_SHARE * self.joint.motion.acceleration]), self.control_period + self.bus_lag
         up = float(braking_speed(np.array([self.hi - LIMIT_INSET - x]), a, dt, speed)[0])
         down = float(braking_speed(np.array([x - self.lo - LIMIT_INSET]), a, dt, -speed)[0])
         return min(max(v, -down), up)

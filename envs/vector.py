@@ -172,7 +172,7 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
             if remaining > 0:
                 rigs.append(env.rig)
                 spans.append(remaining)
-            env._note_overrun(-remaining)
+            env.note_overrun(-remaining)
         if rigs:
             joints.sleep_together(rigs, spans)
         for i, token in acting:
