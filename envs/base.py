@@ -70,7 +70,7 @@ import joints
 from envs.configs import config_path
 from envs.randomization import GAINS, DomainRandomization
 from envs.render import CameraSpec, SceneRenderer
-from joints.errors import MissingDependencyError, MotionTimeout, OverrunError
+from joints.errors import MotionTimeout, OverrunError
 
 ACTION_MODES = ("position", "velocity", "torque")
 #: s between "enable" and the first motion command (the eRob manual's 500 ms; the emulator enforces it)
@@ -220,24 +220,17 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
         self._slip += late
         if self.raise_on_overrun:
             raise OverrunError(f"step {self._tick} ran {late * 1e3:.2f} ms over its {self.control_period * 1e3:g} ms "
-                               "period: the bus cannot carry this rate (see rig.cycle_time())")
+                               "period: the bus cannot carry this rate (see joints.cycle_times)")
 
     #: s from a state's sample to the next command taking effect, at most: one cycle of bus traffic (the
     #: planner's, for the env's action mode; 0 on ideal buses). Safety shields extend their horizon by it.
     bus_lag = 0.0
 
     def _check_rate(self, mode: str = "position") -> None:
-        """Refuse a control period one cycle of this env's bus traffic does not fit (:meth:`joints.Rig.check_rate`),
+        """Refuse a control period one cycle of this env's bus traffic does not fit (:func:`joints.check_rate`),
         and note the cycle as :attr:`bus_lag`."""
-        rig = self.rig
-        rig.check_rate(self.control_period, mode)
-        try:
-            plans = rig.cycle_time(mode)
-        except MissingDependencyError:  # hardware-only install: check_rate warned
-            return
-        ideal = {n for n, b in rig.config.buses.items()
-                 if b.timing == "ideal" and (rig.backend == "sim" or b.backend == "sim")}
-        self.bus_lag = max((p.cycle for n, p in plans.items() if n not in ideal), default=0.0)
+        plans = joints.check_rate(self.rig.config, self.control_period, mode)  # {} without MuJoCo (it warned)
+        self.bus_lag = max((p.cycle for p in plans.values()), default=0.0)
 
     def _start(self, config: Any, backend: str | None, domain_randomization: Any) -> None:
         """Open the rig and set the task up; the rig is closed again if the setup fails."""
@@ -276,7 +269,7 @@ class JointsEnv(RigEnv):
         action_mode: ``"position"`` | ``"velocity"`` | ``"torque"``.
         control_period: seconds per step (``dt``; None: the env's ``default_control_period``); in sim a
             whole number of physics substeps; one cycle of bus traffic must fit it on every bus
-            (:meth:`joints.Rig.check_rate`, a :class:`~joints.errors.ConfigError` otherwise).
+            (:func:`joints.check_rate`, a :class:`~joints.errors.ConfigError` otherwise).
         raise_on_overrun: raise :class:`~joints.errors.OverrunError` when a step misses its tick
             (default: count it in ``overruns`` / ``overrun_time`` and show it as ``info["overrun"]``).
         render_mode: ``None`` | ``"rgb_array"`` | ``"human"``.

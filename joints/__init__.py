@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+from joints.bench import check_rate, cycle_times
 from joints.errors import (
     ConfigError,
     ConfirmationRequired,
@@ -33,6 +34,8 @@ __all__ = [
     "ReplyTimeout",
     "Rig",
     "__version__",
+    "check_rate",
+    "cycle_times",
     "open",
     "sleep_together",
 ]

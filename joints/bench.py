@@ -437,6 +437,48 @@ def cycle_times(config: Any, mode: str = "position") -> dict[str, BusPlan]:
     return {p.bus: p for p in plan(config, PLAN_RATE, mode=mode)}
 
 
+def check_rate(config: Any, period: float, mode: str = "position") -> dict[str, BusPlan]:
+    """Refuse (:class:`~joints.errors.ConfigError` with the planner's numbers and the ways out) a control
+    ``period`` [s] that one cycle of ``config`` (:func:`cycle_times`; a rig's ``config`` too) does not fit on
+    every bus; returns the plans. In sim a bus with ``timing = "ideal"`` takes no time and always fits (its
+    plan is left out). Without MuJoCo (a hardware-only install) the cycle cannot be planned on the twins: a
+    warning says so, nothing is refused and no plan is returned."""
+    import logging
+
+    from joints.config import RigConfig, load, parse
+    from joints.errors import ConfigError, MissingDependencyError
+
+    if isinstance(config, RigConfig):
+        cfg = config
+    elif isinstance(config, Mapping):
+        cfg = parse(config)
+    else:
+        cfg = load(Path(config))
+    try:
+        plans = cycle_times(cfg, mode)
+    except MissingDependencyError as exc:
+        logging.getLogger("joints").warning(
+            "cannot check the control rate against the buses (the planner runs the config's twins): %s", exc)
+        return {}
+    out = {}
+    for name, p in plans.items():
+        bus = cfg.buses[name]
+        if (cfg.backend == "sim" or bus.backend == "sim") and bus.timing == "ideal":
+            continue
+        out[name] = p
+        if p.cycle <= period:
+            continue
+        raise ConfigError(
+            f"a {1.0 / period:g} Hz control loop does not fit this bus ({p.protocol}, {p.line}): one cycle of "
+            f"{mode} commands and state reads of its {p.joints} joint(s) takes {p.cycle * 1e3:.1f} ms "
+            f"({p.wire * 1e3:.1f} ms on the wire + {p.overhead * 1e3:.1f} ms of drive turnaround and adapter "
+            f"latency over {p.transactions} transactions), {p.share(period):.0%} of the {period * 1e3:g} ms "
+            f"period; it fits up to {p.max_rate():.0f} Hz. Ways out: a higher baud rate, another protocol "
+            f"(eRob CAN or CANopen at 1 Mbit/s), fewer joints per bus, a lower rate (a period of at least "
+            f"{p.cycle:.3f} s), or another action mode", file=cfg.source, key=f"buses.{name}")
+    return out
+
+
 def _at_rate(p: BusPlan, rate: float) -> BusPlan:
     from joints.transports.can_timing import CycleLoad
 

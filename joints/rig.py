@@ -262,42 +262,6 @@ class Rig:
             raise
         return {name: out[name] for name in targets}
 
-    def cycle_time(self, mode: str = "position") -> dict[str, Any]:
-        """Per bus: the plan of one control cycle of this rig's config (a command in ``mode`` and a state read
-        per joint, measured on the config's twins; :class:`joints.bench.BusPlan`, its ``cycle`` in s: wire
-        time, drive turnarounds and adapter latency)."""
-        from joints.bench import cycle_times
-
-        return cycle_times(self.config, mode)
-
-    def check_rate(self, period: float, mode: str = "position") -> None:
-        """Refuse (:class:`~joints.errors.ConfigError` with the planner's numbers and the ways out) a control
-        ``period`` [s] that one cycle (:meth:`cycle_time`) does not fit on every bus. In sim a bus with
-        ``timing = "ideal"`` takes no time and always fits. Without MuJoCo (a hardware-only install) the cycle
-        cannot be planned on the twins: a warning says so and nothing is refused."""
-        from joints.errors import MissingDependencyError
-
-        try:
-            plans = self.cycle_time(mode)
-        except MissingDependencyError as exc:
-            log.warning("cannot check the control rate against the buses (the planner runs the config's twins): %s",
-                        exc)
-            return
-        for name, p in plans.items():
-            bus = self.config.buses[name]
-            if (self.backend == "sim" or bus.backend == "sim") and bus.timing == "ideal":
-                continue
-            if p.cycle <= period:
-                continue
-            raise ConfigError(
-                f"a {1.0 / period:g} Hz control loop does not fit this bus ({p.protocol}, {p.line}): one cycle of "
-                f"{mode} commands and state reads of its {p.joints} joint(s) takes {p.cycle * 1e3:.1f} ms "
-                f"({p.wire * 1e3:.1f} ms on the wire + {p.overhead * 1e3:.1f} ms of drive turnaround and adapter "
-                f"latency over {p.transactions} transactions), {p.share(period):.0%} of the {period * 1e3:g} ms "
-                f"period; it fits up to {p.max_rate():.0f} Hz. Ways out: a higher baud rate, another protocol "
-                f"(eRob CAN or CANopen at 1 Mbit/s), fewer joints per bus, a lower rate (a period of at least "
-                f"{p.cycle:.3f} s), or another action mode", file=self.config.source, key=f"buses.{name}")
-
     def cycle_late(self) -> int:
         """Feedback frames (TPDOs) that missed their cycle, over every bus, since the rig opened."""
         groups = {id(j.driver.group): j.driver.group for j in self.joints.values() if isinstance(j.driver, CyclicJoint)}
