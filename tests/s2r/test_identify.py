@@ -191,7 +191,8 @@ def test_overlay_errors_name_the_key(tmp_path: Path) -> None:
 
 
 def test_no_gravity_needs_a_known_inertia_and_then_identifies_in_speed_mode() -> None:
-    rig = joints.open(STAND)  # vertical axis: no gravity torque
+    stand = STAND.read_text().replace('protocol = "modbus-rtu"', 'protocol = "modbus-rtu"\ntiming = "ideal"', 1)
+    rig = joints.open(tomllib.loads(stand))  # vertical axis: no gravity torque; an ideal bus (see pendulum_text)
     try:
         rig.sim.perturb("joint1", armature=1.4, coulomb_friction=2.0, viscous_friction=1.5, torque_constant=0.9)
         before = rig.sim.data.qpos.copy()
