@@ -65,6 +65,18 @@ def test_read_states_of_the_arm_take_the_planners_time_on_both_paths(direct: boo
 def test_direct_and_byte_paths_take_the_same_time() -> None:
     (t_direct, _), (t_bytes, _) = _reads(_arm(True), 20), _reads(_arm(False), 20)
     assert t_direct == pytest.approx(t_bytes, abs=1e-9)
+    ends = []
+    for direct in (True, False):  # enabling, position targets (FC16, FC06) and reads; a broadcast write
+        with joints.open(_arm(direct)) as rig:
+            for j in rig.joints.values():
+                j.enable()
+            rig.sleep(0.6)
+            for _ in range(5):
+                bench._cycle(rig)
+            rig.buses["rs485"].link.write_register(0, 0x0002, 0)  # broadcast: no reply, the next frame waits its gap
+            rig.read_states()
+            ends.append((rig.time, [s.position for s in rig.read_states().values()]))
+    assert ends[0] == ends[1]
 
 
 def test_ideal_timing_takes_no_time() -> None:
