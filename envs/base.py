@@ -7,7 +7,7 @@ Rules:
   real drives. Sim-only extras (seeded start state, domain randomisation, rendering, ground-truth
   task terms) use the rig's public sim API ``rig.sim`` (None on hardware), as gymnasium's
   ``MujocoEnv`` exposes ``model`` and ``data`` (here too, None on hardware).
-* Fixed control period (``dt``, default 20 ms): ``step`` sends the action's commands, waits on the
+* Fixed control period (``dt``, per env a rate its default bus carries): ``step`` sends the action's commands, waits on the
   rig's clock until the next tick of a fixed schedule (sim: advances physics; hardware: the wall
   clock, absorbing the bus time), then reads every joint's state. The drive holds the command
   between ticks (zero-order hold).
@@ -70,7 +70,7 @@ import joints
 from envs.configs import config_path
 from envs.randomization import GAINS, DomainRandomization
 from envs.render import CameraSpec, SceneRenderer
-from joints.errors import MotionTimeout
+from joints.errors import MotionTimeout, OverrunError
 
 ACTION_MODES = ("position", "velocity", "torque")
 #: s between "enable" and the first motion command (the eRob manual's 500 ms; the emulator enforces it)
@@ -134,10 +134,13 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
     sim: bool
     control_period: float
     overruns: int
+    overrun_time: float
+    _overrun: float
     _tick: int
     width: int
     height: int
     _t0: float
+    _slip: float
     _closed: bool = True  #: until ``_start`` opened the rig (close() of an env whose setup failed does nothing)
     _renderer: SceneRenderer | None
     #: how the renderer looks at the model
@@ -183,7 +186,7 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def tick_time(self) -> float:
         """Rig time of the tick the last action waits for."""
-        return self._t0 + self._tick * self.control_period
+        return self._t0 + self._slip + self._tick * self.control_period
 
     def begin_step(self, action: np.ndarray) -> Any:
         """The first half of :meth:`step`: check ``action`` and send its commands (returns what
@@ -199,8 +202,35 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
         remaining = t - self.rig.time
         if remaining > 0:
             self.rig.sleep(remaining)
-        elif remaining < -1e-9:
-            self.overruns += 1
+        self.note_overrun(-remaining)
+
+    #: raise :class:`~joints.errors.OverrunError` on an overrun instead of counting it
+    raise_on_overrun = False
+
+    def note_overrun(self, late: float) -> None:
+        """This step reached its tick ``late`` s after it (<= 0: in time): counted in :attr:`overruns` and
+        :attr:`overrun_time`, shown as ``info["overrun"]``; the schedule goes on from the late tick (later
+        steps are not charged for this one)."""
+        if late <= 1e-9:
+            self._overrun = 0.0
+            return
+        self._overrun = late
+        self.overruns += 1
+        self.overrun_time += late
+        self._slip += late
+        if self.raise_on_overrun:
+            raise OverrunError(f"step {self._tick} ran {late * 1e3:.2f} ms over its {self.control_period * 1e3:g} ms "
+                               "period: the bus cannot carry this rate (see joints.cycle_times)")
+
+    #: s from a state's sample to the next command taking effect, at most: one cycle of bus traffic (the
+    #: planner's, for the env's action mode; 0 on ideal buses). Safety shields extend their horizon by it.
+    bus_lag = 0.0
+
+    def _check_rate(self, mode: str = "position") -> None:
+        """Refuse a control period one cycle of this env's bus traffic does not fit (:func:`joints.check_rate`),
+        and note the cycle as :attr:`bus_lag`."""
+        plans = joints.check_rate(self.rig.config, self.control_period, mode)  # {} without MuJoCo (it warned)
+        self.bus_lag = max((p.cycle for p in plans.values()), default=0.0)
 
     def _start(self, config: Any, backend: str | None, domain_randomization: Any) -> None:
         """Open the rig and set the task up; the rig is closed again if the setup fails."""
@@ -237,7 +267,11 @@ class JointsEnv(RigEnv):
         config: a joints config - TOML path or dict; ``None``: the shipped default of the task.
         backend: ``"sim"`` | ``"hardware"``; overrides the config (as ``joints.open``).
         action_mode: ``"position"`` | ``"velocity"`` | ``"torque"``.
-        control_period: seconds per step (``dt``); in sim a whole number of physics substeps.
+        control_period: seconds per step (``dt``; None: the env's ``default_control_period``); in sim a
+            whole number of physics substeps; one cycle of bus traffic must fit it on every bus
+            (:func:`joints.check_rate`, a :class:`~joints.errors.ConfigError` otherwise).
+        raise_on_overrun: raise :class:`~joints.errors.OverrunError` when a step misses its tick
+            (default: count it in ``overruns`` / ``overrun_time`` and show it as ``info["overrun"]``).
         render_mode: ``None`` | ``"rgb_array"`` | ``"human"``.
         domain_randomization: sim only - ``False``, ``True`` (default ranges), a mapping of ranges,
             or a :class:`~envs.randomization.DomainRandomization`.
@@ -252,6 +286,8 @@ class JointsEnv(RigEnv):
 
     #: the shipped config used when ``config`` is None (file stem in ``joints/configs``)
     default_config: str = ""
+    #: s per step when ``control_period`` is None: a rate the default config's bus carries (docs/timing.md)
+    default_control_period: float = 0.02
 
     def __init__(
         self,
@@ -259,7 +295,7 @@ class JointsEnv(RigEnv):
         backend: str | None = None,
         *,
         action_mode: str = "position",
-        control_period: float = 0.02,
+        control_period: float | None = None,
         render_mode: str | None = None,
         domain_randomization: bool | Mapping[str, Any] | DomainRandomization = False,
         reset_velocity: float = 0.5,
@@ -268,9 +304,12 @@ class JointsEnv(RigEnv):
         reset_tolerance: float = 0.02,
         width: int = 480,
         height: int = 480,
+        raise_on_overrun: bool = False,
     ) -> None:
         if action_mode not in ACTION_MODES:
             raise ValueError(f"action_mode {action_mode!r} is not one of {ACTION_MODES}")
+        if control_period is None:
+            control_period = self.default_control_period
         if isinstance(control_period, bool) or not isinstance(control_period, (int, float)) \
                 or not math.isfinite(control_period) or control_period <= 0:
             raise ValueError(f"control_period must be a finite number of seconds > 0, got {control_period!r}")
@@ -281,6 +320,7 @@ class JointsEnv(RigEnv):
             if not math.isfinite(v) or v <= 0:
                 raise ValueError(f"{what} must be > 0, got {v!r}")
         self.action_mode = action_mode
+        self.raise_on_overrun = bool(raise_on_overrun)
         self.control_period = float(control_period)
         self.render_mode = render_mode
         self.reset_velocity = float(reset_velocity)
@@ -365,12 +405,16 @@ class JointsEnv(RigEnv):
         self._states: list[joints.JointState] = []
         self._sent = np.zeros(n)  # the SI command of the last step (after safe_command)
         self._tick = 0
+        self._slip = 0.0  #: s the schedule slipped by overruns this episode
         self._t0 = 0.0
         self._noise = np.zeros(n)
         self._noisy = False  #: any joint's encoder noise above 0
         self._noise_rng: np.random.Generator | None = None
         self.randomization_sample: dict[str, Any] | None = None
-        self.overruns = 0  #: hardware: steps whose tick had passed before the commands were sent
+        self.overruns = 0  #: steps whose tick had passed before their commands were sent
+        self.overrun_time = 0.0  #: s, the total of those steps' lateness
+        self._overrun = 0.0
+        self._check_rate(self.action_mode)
 
     def _select_joints(self, rig: joints.Rig) -> list[str]:
         """The joints this env drives, in action/observation order (default: the config's order)."""
@@ -456,7 +500,7 @@ class JointsEnv(RigEnv):
             return c
         if self.action_mode == "velocity":
             p = np.array([s.position for s in self._states])
-            a, dt = self.profile_acceleration, self.control_period
+            a, dt = self.profile_acceleration, self.control_period + self.bus_lag
             v = np.array([s.velocity for s in self._states])
             lo, hi = self.position_limits[:, 0] + LIMIT_INSET, self.position_limits[:, 1] - LIMIT_INSET
             np.clip(c, -braking_speed(p - lo, a, dt, -v), braking_speed(hi - p, a, dt, v), out=c)
@@ -482,7 +526,7 @@ class JointsEnv(RigEnv):
         drive's deceleration - a conservative envelope of the drive's own profile."""
         p = np.array([s.position for s in self._states])
         v = np.array([s.velocity for s in self._states])
-        dt = self.control_period
+        dt = self.control_period + self.bus_lag  # the state is older, the command later, by up to a bus cycle
         if self.action_mode == "velocity":
             acc = dec = self.profile_acceleration
             step = acc * dt
@@ -532,8 +576,9 @@ class JointsEnv(RigEnv):
         latency = self.randomization_sample["latency"] if self.randomization_sample else 0
         self._queue = deque(neutral.astype(np.float64) for _ in range(latency))
         self._tick = 0
-        self._t0 = self.rig.time
+        self._slip = 0.0  #: s the schedule slipped by overruns this episode
         states = self._read()
+        self._t0 = self.rig.time  # the schedule starts with the first observation (its read took bus time)
         obs = self._observation(states)
         info = self._info(states)
         if self.randomization_sample is not None:
@@ -608,6 +653,7 @@ class JointsEnv(RigEnv):
     def _info(self, states: Sequence[joints.JointState]) -> dict[str, Any]:
         return {
             "time": float(self.rig.time),  # s on the rig's clock (sim: simulated seconds since reset)
+            "overrun": self._overrun,  # s this step ran over its period (0.0: none)
             "faults": {n: (s.fault.name if s.fault else None) for n, s in zip(self.joint_names, states)},
         }
 

@@ -243,6 +243,7 @@ class DiffDriveGoalEnv(RigEnv):
         reset_timeout: float = 10.0,
         width: int = 480,
         height: int = 480,
+        raise_on_overrun: bool = False,
     ) -> None:
         if isinstance(control_period, bool) or not isinstance(control_period, (int, float)) \
                 or not math.isfinite(control_period) or control_period <= 0:
@@ -264,6 +265,7 @@ class DiffDriveGoalEnv(RigEnv):
             raise ValueError(f"goal_distance must be (low, high) with 0 <= low <= high < arena, got {goal_distance!r}")
         self.odometry = WheelOdometry(wheel_radius, track)  # validates the geometry
         self.control_period = float(control_period)
+        self.raise_on_overrun = bool(raise_on_overrun)
         self.render_mode = render_mode
         self.goal_distance = gd
         self.success_distance = float(success_distance)
@@ -319,6 +321,7 @@ class DiffDriveGoalEnv(RigEnv):
             if abs(steps - round(steps)) > 1e-6 or round(steps) < 1:
                 raise ValueError(f"control_period {self.control_period} s must be a whole number of physics "
                                  f"substeps of {rig.sim.timestep} s")
+        self._check_rate("velocity")
         self.randomization = DomainRandomization.from_arg(domain_randomization)
         if self.randomization is not None and not self.sim:
             gym.logger.warn("domain randomisation acts on the simulation only; ignored on hardware")
@@ -343,13 +346,16 @@ class DiffDriveGoalEnv(RigEnv):
         self._angles = np.zeros(2)
         self._distance = 0.0
         self._tick = 0
+        self._slip = 0.0  #: s the schedule slipped by overruns this episode
         self._t0 = 0.0
         self._last_io = 0.0
         self._origin = np.zeros(3)  #: sim: the true pose at which the estimate restarted
         self._noise = 0.0
         self._noise_rng: np.random.Generator | None = None
         self.randomization_sample: dict[str, Any] | None = None
-        self.overruns = 0  #: hardware: steps whose tick had passed before the commands were sent
+        self.overruns = 0  #: steps whose tick had passed before their commands were sent
+        self.overrun_time = 0.0  #: s, the total of those steps' lateness
+        self._overrun = 0.0
 
     @property
     def model(self) -> Any:
@@ -424,6 +430,7 @@ class DiffDriveGoalEnv(RigEnv):
         latency = self.randomization_sample["latency"] if self.randomization_sample else 0
         self._queue = deque(np.zeros(2) for _ in range(latency))
         self._tick = 0
+        self._slip = 0.0  #: s the schedule slipped by overruns this episode
         states = self._read()
         self.odometry.restart(*self._angles)
         if self.sim:
@@ -520,6 +527,7 @@ class DiffDriveGoalEnv(RigEnv):
         d, e = self._goal_terms()
         info: dict[str, Any] = {
             "time": float(self.rig.time),  # s on the rig's clock (sim: simulated seconds since reset)
+            "overrun": self._overrun,  # s this step ran over its period (0.0: none)
             "faults": {n: _fault_name(states[n]) for n in self.wheel_names},
             "distance": d,
             "heading_error": e,

@@ -116,6 +116,7 @@ class MksAxisPositionEnv(RigEnv):
         reset_timeout: float = 20.0,
         width: int = 480,
         height: int = 480,
+        raise_on_overrun: bool = False,
     ) -> None:
         if action_mode not in ACTION_MODES:
             raise ValueError(f"action_mode {action_mode!r} is not one of {ACTION_MODES} (the MKS has no torque mode)")
@@ -133,6 +134,7 @@ class MksAxisPositionEnv(RigEnv):
             raise ValueError("action_rate_weight and min_goal_distance must be >= 0")
         self.action_mode = action_mode
         self.control_period = float(control_period)
+        self.raise_on_overrun = bool(raise_on_overrun)
         self.render_mode = render_mode
         self._ranges = (tuple(map(float, goal_range)), tuple(map(float, start_range)))
         self.min_goal_distance = float(min_goal_distance)
@@ -176,6 +178,7 @@ class MksAxisPositionEnv(RigEnv):
             if abs(steps - round(steps)) > 1e-6 or round(steps) < 1:
                 raise ValueError(f"control_period {self.control_period} s must be a whole number of physics "
                                  f"substeps of {rig.sim.timestep} s")
+        self._check_rate(self.action_mode)
         span = self.hi - self.lo
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
         low = np.array([self.lo - 0.01, -2 * self.velocity_limit, self.lo, -span])
@@ -189,8 +192,11 @@ class MksAxisPositionEnv(RigEnv):
         self._state: joints.JointState | None = None
         self._prev_action = 0.0
         self._tick = 0
+        self._slip = 0.0  #: s the schedule slipped by overruns this episode
         self._t0 = 0.0
-        self.overruns = 0  #: hardware: steps whose tick had passed before the command was sent
+        self.overruns = 0  #: steps whose tick had passed before their commands were sent
+        self.overrun_time = 0.0  #: s, the total of those steps' lateness
+        self._overrun = 0.0
 
     # -- conversions ------------------------------------------------------------------------
     @property
@@ -225,7 +231,7 @@ class MksAxisPositionEnv(RigEnv):
         if self._state is None:
             return v
         x, speed = self._state.position, self._state.velocity
-        a, dt = np.array([BRAKING_SHARE * self.joint.motion.acceleration]), self.control_period
+        a, dt = np.array([BRAKING_SHARE * self.joint.motion.acceleration]), self.control_period + self.bus_lag
         up = float(braking_speed(np.array([self.hi - LIMIT_INSET - x]), a, dt, speed)[0])
         down = float(braking_speed(np.array([x - self.lo - LIMIT_INSET]), a, dt, -speed)[0])
         return min(max(v, -down), up)
@@ -256,8 +262,9 @@ class MksAxisPositionEnv(RigEnv):
         self._hold(start)
         self._prev_action = float(self.action_of(start if self.action_mode == "position" else 0.0)[0])
         self._tick = 0
-        self._t0 = self.rig.time
+        self._slip = 0.0  #: s the schedule slipped by overruns this episode
         s = self._read()
+        self._t0 = self.rig.time  # the schedule starts with the first observation (its read took bus time)
         info = self._info(s)
         if self.render_mode == "human":
             self.render()
@@ -278,7 +285,7 @@ class MksAxisPositionEnv(RigEnv):
             else:
                 self.joint.move_to(command)
         self._tick += 1
-        self._wait_until(self._t0 + self._tick * self.control_period)
+        self._wait_until(self.tick_time())
         s = self._read()
         distance = abs(self.goal - s.position)
         r_dist = -distance / 0.01
@@ -349,7 +356,7 @@ class MksAxisPositionEnv(RigEnv):
 
     def _info(self, s: joints.JointState) -> dict[str, Any]:
         distance = abs(self.goal - s.position)
-        info = {"time": float(self.rig.time - self._t0), "distance": distance,
+        info = {"time": float(self.rig.time - self._t0), "overrun": self._overrun, "distance": distance,
                 "is_success": distance < self.success_tolerance and abs(s.velocity) < 0.005,
                 "faults": {self.joint_name: s.fault.name if s.fault else None}}
         if s.fault is not None:

@@ -100,13 +100,13 @@ class ErobReachEnv(JointsEnv):
     - Termination: the drive reports a fault (``info["fault"]``; ``reset()`` clears it: sim power
       cycle, hardware clear + enable), or the joint passes its position limits by more than
       0.05 rad (torque actions only can drive it there; the env then stops the joint).
-    - Truncation: 250 steps (5 s at the default control period), by the registered
+    - Truncation: 250 steps (10 s at the default control period of 40 ms), by the registered
       ``max_episode_steps``.
     The env does not end an episode on success: hold the target.
 
     ## Arguments
     ``gymnasium.make("joints/ErobReach-v0", config=None, backend=None, action_mode="position",
-    control_period=0.02, render_mode=None, domain_randomization=False, target_range=(-2.5, 2.5),
+    control_period=0.04, render_mode=None, domain_randomization=False, target_range=(-2.5, 2.5),
     start_range=(-1.0, 1.0), success_tolerance=0.02, action_rate_weight=0.01, ...)``
 
     - ``config``: joints config (TOML path or dict) with one joint; default the shipped
@@ -123,6 +123,9 @@ class ErobReachEnv(JointsEnv):
     """
 
     default_config = "erob_reach"
+    #: 25 Hz: one cycle (position command + state read) takes 24.6 ms of the RS485 bus at 115200 baud,
+    #: 61 % of 40 ms (50 Hz would need 123 %; docs/timing.md)
+    default_control_period = 0.04
     camera = CameraSpec(lookat=(0.1, 0.0, 0.35), distance=1.1, azimuth=135.0, elevation=-40.0)
 
     def __init__(
@@ -248,11 +251,11 @@ class ErobArmReachEnv(JointsEnv):
     ## Episode End
     - Termination: a drive fault (``info["fault"]``; cleared by ``reset()``), or a joint past its
       position limits by more than 0.05 rad (torque actions only).
-    - Truncation: 250 steps (5 s at the default control period).
+    - Truncation: 250 steps (25 s at the default control period of 100 ms).
 
     ## Arguments
     ``gymnasium.make("joints/ErobArmReach-v0", config=None, backend=None, action_mode="position",
-    control_period=0.02, render_mode=None, domain_randomization=False,
+    control_period=0.1, render_mode=None, domain_randomization=False,
     start_ranges=((-0.5, 0.5), (-0.6, 0.0), (0.3, 1.2)),
     target_ranges=((-2.0, 2.0), (-1.0, 0.3), (-1.2, 1.2)), success_tolerance=0.02,
     action_rate_weight=0.01, ...)``; the common arguments as in :class:`ErobReachEnv`. The config
@@ -264,6 +267,9 @@ class ErobArmReachEnv(JointsEnv):
     """
 
     default_config = "erob_arm_reach"
+    #: 10 Hz: one cycle of three joints takes 73.7 ms of the RS485 bus at 115200 baud, 74 % of 100 ms
+    #: (50 Hz would need 369 %; CANopen at 1 Mbit/s carries 40 Hz: docs/timing.md)
+    default_control_period = 0.1
     camera = CameraSpec(lookat=(0.1, 0.0, 0.3), distance=1.8, azimuth=135.0, elevation=-25.0)
     MODEL_JOINTS = ("joint1", "joint2", "joint3")
     MIN_HEIGHT = 0.10  #: m, lowest target

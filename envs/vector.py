@@ -171,8 +171,7 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
             if remaining > 0:
                 rigs.append(env.rig)
                 spans.append(remaining)
-            elif remaining < -1e-9:
-                env.overruns += 1
+            env.note_overrun(-remaining)
         if rigs:
             joints.sleep_together(rigs, spans)
         for i, token in acting:

@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+from joints.bench import check_rate, cycle_times
 from joints.configtypes import Limits, Motion
 from joints.errors import (
     ConfigError,
@@ -34,6 +35,8 @@ __all__ = [
     "ReplyTimeout",
     "Rig",
     "__version__",
+    "check_rate",
+    "cycle_times",
     "open",
     "sleep_together",
 ]

@@ -18,8 +18,9 @@ import math
 import os
 import platform
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 __all__ = ["ENV_ROWS", "Row", "pin_one_core", "run"]
@@ -332,7 +333,7 @@ PLAN_RATE = 50.0
 
 @dataclass
 class BusPlan:
-    """One bus of a config: its traffic per control cycle and what fits."""
+    """One bus of a config: its traffic per control cycle, its time and what fits."""
 
     bus: str
     protocol: str
@@ -340,21 +341,47 @@ class BusPlan:
     joints: int
     frames: int  #: frames per cycle (requests and replies)
     data_bytes: int  #: bytes of those frames (serial: whole RTU frames; CAN: data fields)
-    load: Any  #: :class:`joints.transports.can_timing.CycleLoad` at the checked rate
+    load: Any  #: :class:`joints.transports.can_timing.CycleLoad` of the wire alone at the checked rate
+    transactions: int = 0  #: replies per cycle (each costs a drive turnaround and the adapter's latency)
+    overhead: float = 0.0  #: s per cycle of drive turnarounds and adapter latency
+
+    @property
+    def wire(self) -> float:
+        """s one cycle's frames occupy the wire (worst-case CAN stuffing; Modbus t3.5 included)."""
+        return float(self.load.bits_worst / self.load.bitrate)
+
+    @property
+    def cycle(self) -> float:
+        """s of one control cycle on this bus: wire time plus turnarounds and adapter latency."""
+        return self.wire + self.overhead
+
+    def share(self, period: float) -> float:
+        """The fraction of a control ``period`` one cycle takes (1.0 = all of it)."""
+        return self.cycle / period
+
+    def max_rate(self, fraction: float = 1.0) -> float:
+        """The highest control rate [Hz] at which a cycle takes at most ``fraction`` of the period."""
+        return fraction / self.cycle if self.cycle > 0 else math.inf
 
     def text(self, rate: float) -> str:
-        load = self.load
-        cycle = load.bits_worst / load.bitrate
-        fit = int(load.period // (cycle / self.joints)) if self.joints else 0
-        verdict = "fits" if load.fits else "does NOT fit"
+        period = 1.0 / rate
+        per_joint = self.cycle / self.joints if self.joints else 0.0
+        fit = int(period // per_joint) if per_joint else 0
+        verdict = "fits" if self.cycle <= period else "does NOT fit"
         return (f"bus {self.bus} ({self.protocol}, {self.line}): {self.joints} joint(s), {self.frames} frames / "
-                f"{self.data_bytes} bytes per control cycle -> {cycle * 1e3:.2f} ms on the wire; at {rate:g} Hz "
-                f"{load.worst:.0%} of the bus ({verdict}); these joints fit up to {load.max_rate:,.0f} Hz; at "
-                f"{rate:g} Hz up to {fit} joint(s) like these fit")
+                f"{self.data_bytes} bytes per control cycle -> {self.wire * 1e3:.2f} ms on the wire + "
+                f"{self.overhead * 1e3:.2f} ms of drive turnaround and adapter latency ({self.transactions} "
+                f"transactions) = {self.cycle * 1e3:.2f} ms; at {rate:g} Hz {self.share(period):.0%} of the period "
+                f"({verdict}); these joints fit up to {self.max_rate():,.0f} Hz ({self.max_rate(CYCLE_BUDGET):,.0f} Hz "
+                f"within {CYCLE_BUDGET:.0%}); at {rate:g} Hz up to {fit} joint(s) like these fit")
 
 
-def _cycle(rig: Any) -> None:
-    """One control cycle of every joint as the envs run it: a command, then every joint's state."""
+#: the share of the control period the shipped env configs keep one cycle within (the rest is margin)
+CYCLE_BUDGET = 0.8
+
+
+def _cycle(rig: Any, mode: str = "position") -> None:
+    """One control cycle of every joint as the envs run it: a command in ``mode``, then every joint's state."""
     from joints.drivers.capabilities import GroupedChannel, SyncVelocityGroup
 
     velocities = {}
@@ -362,6 +389,10 @@ def _cycle(rig: Any) -> None:
         d = j.driver
         if isinstance(d, GroupedChannel) and isinstance(d.group, SyncVelocityGroup):
             velocities[name] = 0.0  # wheels: both targets in one command (as the diffdrive env)
+        elif mode == "velocity":
+            j.set_velocity(0.0)
+        elif mode == "torque":
+            j.set_torque(0.0)
         else:
             s = j.last_state or j.state()
             j.move_to(s.position)
@@ -370,43 +401,145 @@ def _cycle(rig: Any) -> None:
     rig.read_states()
 
 
-def plan(config: Any, rate: float | None = None) -> list[BusPlan]:
-    """The traffic of one control cycle per bus of ``config``, from the frames the drivers really send
-    (run on the config's twins), timed with the wire-time model of each medium: Modbus RTU characters
-    and t3.5 (:mod:`joints.transports.serial_timing`), CAN frames with worst-case bit stuffing
-    (:func:`joints.transports.can_timing.cycle_load`)."""
+_PLANS: dict[tuple[str, str, str], list[BusPlan]] = {}
+
+
+def plan(config: Any, rate: float | None = None, *, mode: str = "position") -> list[BusPlan]:
+    """The traffic and time of one control cycle per bus of ``config``, from the frames the drivers really
+    send (run on the config's twins, with the action ``mode``'s commands), timed with the wire-time model
+    of each medium: serial characters at the bus's framing and Modbus RTU's t3.5
+    (:mod:`joints.transports.serial_timing`), CAN frames with worst-case bit stuffing
+    (:func:`joints.transports.can_timing.cycle_load`), plus per transaction the drive's turnaround (its
+    profile) and the host adapter's latency (the bus's ``adapter_latency`` or the medium's default)."""
     import joints
     from joints import registry
-    from joints.link.trace import TraceRecord
-    from joints.transports import can_timing, serial_timing
+    from joints.config import RigConfig, load, parse
 
     rate = rate or PLAN_RATE
     if not rate > 0:
         raise ValueError(f"the control rate must be > 0 Hz, got {rate!r}")
-    with joints.open(config, backend="sim") as rig:
+    if isinstance(config, RigConfig):
+        cfg = config.with_backend("sim")
+    elif isinstance(config, Mapping):
+        cfg = parse(config, backend="sim")
+    else:
+        cfg = load(Path(config), backend="sim")
+    key = (repr(cfg), mode, "")
+    cached = _PLANS.get(key)
+    if cached is None:
+        cached = _PLANS[key] = _measure(joints, registry, cfg, mode)
+    return [_at_rate(p, rate) for p in cached]
+
+
+def cycle_times(config: Any, mode: str = "position") -> dict[str, BusPlan]:
+    """Bus name -> the plan of one control cycle of ``config`` on it (:attr:`BusPlan.cycle`: its time in s):
+    what the envs and the rig's fixed-rate helpers check their period against."""
+    return {p.bus: p for p in plan(config, PLAN_RATE, mode=mode)}
+
+
+def check_rate(config: Any, period: float, mode: str = "position") -> dict[str, BusPlan]:
+    """Refuse (:class:`~joints.errors.ConfigError` with the planner's numbers and the ways out) a control
+    ``period`` [s] that one cycle of ``config`` (:func:`cycle_times`; a rig's ``config`` too) does not fit on
+    every bus; returns the plans. In sim a bus with ``timing = "ideal"`` takes no time and always fits (its
+    plan is left out). Without MuJoCo (a hardware-only install) the cycle cannot be planned on the twins: a
+    warning says so, nothing is refused and no plan is returned."""
+    import logging
+
+    from joints.config import RigConfig, load, parse
+    from joints.errors import ConfigError, MissingDependencyError
+
+    if isinstance(config, RigConfig):
+        cfg = config
+    elif isinstance(config, Mapping):
+        cfg = parse(config)
+    else:
+        cfg = load(Path(config))
+    try:
+        plans = cycle_times(cfg, mode)
+    except MissingDependencyError as exc:
+        logging.getLogger("joints").warning(
+            "cannot check the control rate against the buses (the planner runs the config's twins): %s", exc)
+        return {}
+    out = {}
+    for name, p in plans.items():
+        bus = cfg.buses[name]
+        if (cfg.backend == "sim" or bus.backend == "sim") and bus.timing == "ideal":
+            continue
+        out[name] = p
+        if p.cycle <= period:
+            continue
+        raise ConfigError(
+            f"a {1.0 / period:g} Hz control loop does not fit this bus ({p.protocol}, {p.line}): one cycle of "
+            f"{mode} commands and state reads of its {p.joints} joint(s) takes {p.cycle * 1e3:.1f} ms "
+            f"({p.wire * 1e3:.1f} ms on the wire + {p.overhead * 1e3:.1f} ms of drive turnaround and adapter "
+            f"latency over {p.transactions} transactions), {p.share(period):.0%} of the {period * 1e3:g} ms "
+            f"period; it fits up to {p.max_rate():.0f} Hz. Ways out: a higher baud rate, another protocol "
+            f"(eRob CAN or CANopen at 1 Mbit/s), fewer joints per bus, a lower rate (a period of at least "
+            f"{p.cycle:.3f} s), or another action mode", file=cfg.source, key=f"buses.{name}")
+    return out
+
+
+def _at_rate(p: BusPlan, rate: float) -> BusPlan:
+    from joints.transports.can_timing import CycleLoad
+
+    load = CycleLoad(p.load.bits_best, p.load.bits_worst, 1.0 / rate, p.load.bitrate)
+    return BusPlan(p.bus, p.protocol, p.line, p.joints, p.frames, p.data_bytes, load, p.transactions, p.overhead)
+
+
+def _can_frame(record: Any) -> Any:
+    import can
+
+    return can.Message(arbitration_id=record.ident, data=record.data, is_extended_id=False)
+
+
+def _measure(joints: Any, registry: Any, cfg: Any, mode: str) -> list[BusPlan]:
+    from joints.link.trace import TraceRecord
+    from joints.transports import can_timing, serial_timing
+
+    with joints.open(cfg) as rig:
         for j in rig.joints.values():
             j.enable()
         rig.sleep(0.6)
-        _cycle(rig)  # the first cycle also configures modes and profiles: not counted
+        _cycle(rig, mode)  # the first cycle also configures modes and profiles: not counted
         records: list[TraceRecord] = []
         rig.trace(records.append)
-        _cycle(rig)
+        _cycle(rig, mode)
         rig.trace(None)
         out = []
         for name, b in rig.config.buses.items():
             mine = [r for r in records if r.bus == rig.buses[name].link.name]
-            n = sum(1 for c in rig.config.joints.values() if c.bus == name)
+            on_bus = {c.address: c for c in rig.config.joints.values() if c.bus == name}
             proto = registry.protocol(b.protocol)
             sizes = [len(r.data) for r in mine]
+            period = 1.0 / PLAN_RATE
             if proto.medium == "can":
-                load = can_timing.cycle_load(sizes, period=1.0 / rate, bitrate=b.bitrate)
+                load = can_timing.cycle_load(sizes, period=period, bitrate=b.bitrate)
                 line = f"{b.bitrate} bit/s"
             else:
-                rtu = proto.silence  # frames delimited by the t3.5 silence
-                load = serial_timing.cycle_load(sizes, period=1.0 / rate, baudrate=b.baudrate, parity=b.parity,
-                                                stopbits=b.stopbits, silence=rtu)
-                line = f"{b.baudrate} baud 8{b.parity}{b.stopbits}" + (", t3.5" if rtu else "")
-            out.append(BusPlan(name, b.protocol, line, n, len(mine), sum(sizes), load))
+                load = serial_timing.cycle_load(sizes, period=period, baudrate=b.baudrate, parity=b.parity,
+                                                stopbits=b.stopbits, silence=proto.silence)
+                line = f"{b.baudrate} baud 8{b.parity}{b.stopbits}" + (", t3.5" if proto.silence else "")
+            latency = registry.adapter_latency(b) if b.timing != "ideal" else registry.ADAPTER_LATENCY[proto.medium]
+            turnaround_of = getattr(rig.world.buses.get(name), "turnaround", None)
+            last: dict[int | None, TraceRecord] = {}
+            replies = 0
+            overhead = 0.0
+            for r in mine:  # each reply: its drive's turnaround (as the twin's bus gives it) and the adapter's latency
+                if r.direction == "tx":
+                    last[r.node] = r
+                    continue
+                if r.meaning.startswith("unsolicited"):
+                    continue
+                replies += 1
+                turnaround = None
+                request = last.get(r.node)
+                if callable(turnaround_of) and request is not None:
+                    turnaround = turnaround_of(request.data if request.ident is None else _can_frame(request))
+                if turnaround is None:
+                    c = on_bus.get(r.node) if r.node is not None else None
+                    turnaround = registry.family(c.device).config_profile(c).turnaround if c is not None else 0.0
+                overhead += turnaround + latency
+            out.append(BusPlan(name, b.protocol, line, len(on_bus), len(mine), sum(sizes), load, replies, overhead))
         return out
 
 
@@ -444,7 +577,8 @@ def _run(quick: bool, config: str | None, rate: float | None, out: Callable[[str
 def _print_plan(config: Any, rate: float | None, out: Callable[[str], None]) -> None:
     r = rate or PLAN_RATE
     out(f"\nBus planner for {config} (one control cycle = a command and a state read per joint, as measured on "
-        f"its twins; wire time with worst-case CAN stuffing, Modbus t3.5; drive turnaround not included):")
+        f"its twins; wire time with worst-case CAN stuffing, Modbus t3.5; plus each transaction's drive turnaround "
+        f"and adapter latency):")
     for p in plan(config, r):
         out("- " + p.text(r))
 

@@ -206,3 +206,7 @@ class OutcomeUnknown(ReplyTimeout):
 
     The link never re-sends such a write blindly; read back what matters before acting again.
     """
+
+
+class OverrunError(JointsError):
+    """A fixed-rate loop's step took longer than its period (the bus or the host cannot keep the rate)."""

@@ -40,12 +40,13 @@ class BusProtocol:
     link: LinkFactory
     open_transport: Callable[[BusConfig], Any]  #: hardware: the bus's transport from its config
     device_bus: Callable[[BusConfig], Any]  #: sim: the emulated side of the bus (fronts attach with .add)
-    sim_transport: Callable[[Any], Any]  #: sim: an in-process transport to a device bus
+    #: sim: (device bus, bus config, clock) -> an in-process transport to it; without a config: untimed
+    sim_transport: Callable[..., Any]
     direct: bool = False  #: the sim may skip bytes (message objects straight to the device bus)
+    silence: bool = False  #: frames end with a t3.5 silence (Modbus RTU); bus timing and the planner count it
     #: ``joints scan`` of any node of the protocol: (link, addresses, listen [s]) -> a record per node found;
     #: None: the scan probes each address with the device family's driver
     scan: Callable[[Any, Sequence[int], float], Iterable[dict[str, object]]] | None = None
-    silence: bool = False  #: serial frames end with a 3.5-character silence (Modbus RTU's t3.5)
     sync: bool = False  #: the bus has a SYNC for cyclic modes (bus and joint key ``sync_period``)
     #: replay and plots: (address -> (joint, its family's map on this protocol), a request frame, its reply
     #: frames; frames have ``data``, ``can_id``, ``extended``) -> {"joint.parameter": value}, or None: not named
@@ -179,10 +180,42 @@ def _modbus_device_bus(cfg: BusConfig) -> Any:
     return ModbusDeviceBus()
 
 
-def _byte_loopback(device_bus: Any) -> Any:
+# --- bus timing (issue 29; docs/timing.md) -------------------------------------------------------
+
+#: s of host adapter latency per transaction when a bus config gives no ``adapter_latency``, per medium.
+#: serial: USB-serial adapters (FTDI, CH340, CP210x) are USB full-speed devices: the host polls them once per
+#: 1 ms frame (FTDI's latency timer at its 1 ms minimum); a real ZLAC8015D log shows 1.8 ms per transaction
+#: beyond bytes and t3.5, of which this is the adapter's share (the drive's turnaround the rest).
+#: can: EST 0.2 ms, the receive path of a CAN controller to a Linux SocketCAN socket (interrupt, softirq,
+#: socket wake-up); USB-CAN adapters on full-speed USB take up to 1 ms more: measure it (``joints bench
+#: --hardware``) and set ``adapter_latency``.
+ADAPTER_LATENCY: dict[str, float] = {"serial": 0.001, "can": 0.0002}
+
+
+def adapter_latency(cfg: BusConfig) -> float:
+    """The host adapter's latency per transaction on a configured bus [s] (0 with ``timing = "ideal"``)."""
+    if cfg.timing == "ideal":
+        return 0.0
+    if cfg.adapter_latency is not None:
+        return float(cfg.adapter_latency)
+    return ADAPTER_LATENCY[protocol(cfg.protocol).medium]
+
+
+def _serial_line(device_bus: Any, config: BusConfig | None = None, clock: Any = None) -> Any:
+    """Sim: a timed RS485 line to the device bus (``timing = "wire"``), or an instant loopback (``"ideal"``,
+    or no config: test harnesses)."""
     from joints.transports.loopback import LoopbackTransport
 
-    return LoopbackTransport(device_bus)
+    if config is None or clock is None or config.timing == "ideal":
+        return LoopbackTransport(device_bus)
+    from joints.transports.serial_sim import TimedSerialLine
+    from joints.transports.serial_timing import char_bits, t35_bits
+
+    bits = char_bits(config.parity, config.stopbits)
+    gap = t35_bits(config.baudrate, config.parity, config.stopbits) / config.baudrate \
+        if protocol(config.protocol).silence else 0.0
+    return TimedSerialLine(device_bus, baudrate=config.baudrate, clock=clock, adapter_latency=adapter_latency(config),
+                           gap=gap, bits_per_char=bits)
 
 
 def _erob_can_link(cfg: BusConfig, transport: Any, clock: Clock, peer: Any) -> Link[Any]:
@@ -211,7 +244,7 @@ def _can_transport(cfg: BusConfig) -> Any:
 def _erob_can_device_bus(cfg: BusConfig) -> Any:
     from joints.sim.erob_can import ErobCanBus
 
-    return ErobCanBus(name=cfg.name, bitrate=cfg.bitrate)
+    return ErobCanBus(name=cfg.name, bitrate=cfg.bitrate, ideal=cfg.timing == "ideal")
 
 
 def _canopen_link(cfg: BusConfig, transport: Any, clock: Clock, peer: Any) -> Link[Any]:
@@ -231,7 +264,7 @@ def _canopen_link(cfg: BusConfig, transport: Any, clock: Clock, peer: Any) -> Li
 def _canopen_device_bus(cfg: BusConfig) -> Any:
     from joints.sim.erob_canopen import ErobCanopenBus
 
-    return ErobCanopenBus(name=cfg.name, bitrate=cfg.bitrate)
+    return ErobCanopenBus(name=cfg.name, bitrate=cfg.bitrate, ideal=cfg.timing == "ideal")
 
 
 def _canopen_scan(link: Any, addresses: Sequence[int], listen: float) -> Iterable[dict[str, object]]:
@@ -240,11 +273,13 @@ def _canopen_scan(link: Any, addresses: Sequence[int], listen: float) -> Iterabl
     return scan(link, addresses, listen=listen)
 
 
-def _lockstep_can(device_bus: Any) -> Any:
+def _lockstep_can(device_bus: Any, config: BusConfig | None = None, clock: Any = None) -> Any:
+    """Sim: a python-can node on the device bus's timed medium (the host adapter's latency from the config)."""
     from joints.transports.can import PythonCanTransport
     from joints.transports.can_sim import LockstepCanBus
 
-    return PythonCanTransport(LockstepCanBus(medium=device_bus.medium))
+    latency = 0.0 if config is None else adapter_latency(config)
+    return PythonCanTransport(LockstepCanBus(medium=device_bus.medium, adapter_latency=latency))
 
 
 def _mks_link(cfg: BusConfig, transport: Any, clock: Clock, peer: Any) -> Link[Any]:
@@ -278,7 +313,7 @@ PROTOCOLS: dict[str, BusProtocol] = {
         name="modbus-rtu", medium="serial", addresses=(1, 247),
         description="Modbus RTU over RS485 (FC03/04/06/16)",
         link=_modbus_link, open_transport=_serial_transport, device_bus=_modbus_device_bus,
-        sim_transport=_byte_loopback, direct=True, silence=True, values=_modbus_values,
+        sim_transport=_serial_line, direct=True, silence=True, values=_modbus_values,
     ),
     "erob-can": BusProtocol(
         name="erob-can", medium="can", addresses=(1, 127),
@@ -290,7 +325,7 @@ PROTOCOLS: dict[str, BusProtocol] = {
         name="mks-serial", medium="serial", addresses=(1, 255),
         description="MKS SERVO42D/57D native RS485 protocol (0xFA/0xFB/0xFC, checksum-8, completion frames)",
         link=_mks_link, open_transport=_serial_transport, device_bus=_mks_device_bus,
-        sim_transport=_byte_loopback, direct=False,  # completion frames come unasked: the byte path only
+        sim_transport=_serial_line, direct=False,  # completion frames come unasked: the byte path only
     ),
     "canopen": BusProtocol(
         name="canopen", medium="can", addresses=(1, 127),

@@ -470,7 +470,8 @@ def sim_world(cfg: RigConfig) -> Any:
             if b.backend != "sim":
                 continue
             proto = registry.protocol(b.protocol, key=f"buses.{name}.protocol")
-            buses[name] = BusSpec(name, b.protocol, functools.partial(proto.device_bus, b), proto.sim_transport)
+            buses[name] = BusSpec(name, b.protocol, functools.partial(proto.device_bus, b),
+                                  functools.partial(proto.sim_transport, config=b))
         drives = []
         kinematic = {}
         for name, j in cfg.joints.items():

@@ -50,10 +50,15 @@ def test_planner_counts_the_frames_the_drivers_send() -> None:
     # target (FC16: 13 + 8 bytes), start (FC06: 8 + 8), status (FC03: 8 + 55): 3 transactions
     assert (p.protocol, p.joints, p.frames, p.data_bytes) == ("modbus-rtu", 1, 6, 100)
     assert p.load.bits_worst == int(np.ceil(1000 + 6 * 1.75e-3 * 115200))
-    assert "fits" in p.text(50.0)
+    # each of the 3 replies adds the eRob's turnaround and the USB adapter's latency (issue 29)
+    assert p.transactions == 3 and p.overhead == pytest.approx(3 * (0.0008 + 0.001))
+    assert p.cycle == pytest.approx(p.load.bits_worst / 115200 + p.overhead)
+    assert "does NOT fit" in p.text(50.0)  # 24.6 ms: 123 % of 20 ms
+    assert "(fits)" in p.text(25.0) and p.share(0.04) == pytest.approx(0.61, abs=0.01)
     with envs.config_path("erob_arm_reach") as path:
         (arm,) = bench.plan(path, 50.0)
     assert arm.frames == 18 and not arm.load.fits  # 3 joints x 3 transactions do not fit 20 ms at 115200
+    assert arm.share(0.1) <= bench.CYCLE_BUDGET  # the env's 10 Hz
 
 
 def test_planner_on_a_can_bus() -> None:

@@ -12,6 +12,7 @@ Nothing is dropped silently. One lock per bus: two threads never interleave thei
 from __future__ import annotations
 
 import abc
+import functools
 import logging
 import threading
 from collections import deque
@@ -128,6 +129,10 @@ class Rule(abc.ABC, Generic[M]):
         """The wire bytes of a received message, for the trace."""
         return b""
 
+    def frame_size(self, message: Any) -> int:
+        """Characters ``message``'s frame takes on a byte stream (the direct path is timed as its bytes)."""
+        return len(self.frame_bytes(message))
+
     def frame_id(self, message: Any) -> int | None:
         """The CAN identifier of a message's frame, for the trace (None on byte streams)."""
         return None
@@ -200,6 +205,8 @@ class Link(Generic[M]):
         self.late_discarded = 0  #: frames discarded as late replies after a failed attempt
         #: requests go to an in-process peer as objects (no frame is built unless traced)
         self._direct: DirectFraming[M] | None = framing if isinstance(framing, DirectFraming) else None
+        if self._direct is not None:
+            self._direct.size = rule.frame_size  # timed as the byte path's frames
 
     @property
     def transport(self) -> Any:
@@ -306,9 +313,12 @@ class Link(Generic[M]):
             self._record("tx", self._bytes(frame), rule.describe(request), self._ident(frame),
                          rule.address(request))
         rule.before_send(framing, request, frame)
-        if direct is not None:  # the peer answers at once: a matching reply needs no waiting
-            reply = direct.exchange(request)
-            if (reply is not None and not isinstance(reply, FrameError) and rule.expects_reply(request)
+        timeout = self.policy.timeout
+        deadline = self.clock.now() + timeout  # from the request's start, on either path
+        if direct is not None:  # the reply comes back as an object: a matching one needs no more waiting
+            expects = rule.expects_reply(request)
+            reply = direct.exchange(request, expects)
+            if (reply is not None and not isinstance(reply, FrameError) and expects
                     and rule.is_reply(request, reply)):
                 return reply
             direct.put(reply)  # what the byte path would receive next
@@ -316,8 +326,6 @@ class Link(Generic[M]):
             framing.write(request, frame)
         if not rule.expects_reply(request):
             return None
-        timeout = self.policy.timeout
-        deadline = self.clock.now() + timeout
         error: FrameError | None = None
         while True:
             got = framing.receive(deadline)
@@ -458,6 +466,9 @@ class DirectFraming(Framing[M]):
     receives when the peer sends it: it raises the device encoder's error for a reply the byte
     path could not send and returns the host decoder's :class:`~joints.errors.FrameError` for one
     it would refuse, so the direct path refuses what the byte path refuses.
+    Over a timed line (the sim's :class:`~joints.transports.serial_sim.TimedSerialLine`: it has
+    ``transact``) each message takes the simulated time its frame would (:meth:`Rule.frame_size`
+    characters, the drive's turnaround, the adapter's latency); over an untimed transport, none.
     """
 
     def __init__(self, peer: Any, transport: Any, as_received: Callable[[Any, M], M | FrameError | None]) -> None:
@@ -466,17 +477,33 @@ class DirectFraming(Framing[M]):
         self.as_received = as_received
         self._queue: deque[M | FrameError] = deque()
         self.exchanges = 0  #: requests answered on the fast path (:meth:`exchange`: no frame built)
+        #: characters a message's frame takes (the link sets it to its rule's :meth:`Rule.frame_size`)
+        self.size: Callable[[Any], int] = lambda message: 0
+        self._line: Any = transport if callable(getattr(transport, "transact", None)) else None
+        turnaround = getattr(peer, "message_turnaround", None)
+        self._turnaround: Callable[[Any], float | None] = turnaround if callable(turnaround) else (lambda m: None)
 
     def write(self, message: Any, frame: Any) -> None:
-        self.put(self._reply(message))
+        self.put(self._timed(message, True))
 
-    def exchange(self, message: Any) -> M | FrameError | None:
-        """The peer's reply to ``message`` as the host receives it (None: silence), not queued."""
+    def exchange(self, message: Any, expects_reply: bool = True) -> M | FrameError | None:
+        """The peer's reply to ``message`` as the host receives it (None: silence), not queued; on a timed
+        line, once the host would have received it (a message that expects none is sent and not waited for)."""
         self.exchanges += 1
-        return self._reply(message)
+        return self._timed(message, expects_reply)
 
-    def _reply(self, message: Any) -> M | FrameError | None:
-        reply: M | None = self.peer.exchange(message)
+    def _timed(self, message: Any, expects_reply: bool) -> M | FrameError | None:
+        line = self._line
+        act = functools.partial(self.peer.exchange, message)
+        if line is None:
+            return self._received(message, act())
+        if expects_reply:  # the frame's time is the sent reply's; what the host makes of it comes after
+            return self._received(message, line.transact(self.size(message), act, self.size, self._turnaround(message)))
+        line.post(self.size(message), act, self.size, lambda reply: self.put(self._received(message, reply)),
+                  self._turnaround(message))
+        return None
+
+    def _received(self, message: Any, reply: M | None) -> M | FrameError | None:
         return None if reply is None else self.as_received(message, reply)
 
     def put(self, reply: M | FrameError | None) -> None:
@@ -489,6 +516,9 @@ class DirectFraming(Framing[M]):
         return bool(self._queue)
 
     def receive(self, deadline: float, *, settle: bool = True) -> M | FrameError | None:
+        line = self._line
+        if not self._queue and line is not None:  # waiting is letting simulated time pass, as on the wire
+            line.wait(deadline - line.clock.now())
         return self._queue.popleft() if self._queue else None
 
 

@@ -25,6 +25,8 @@ from joints.transports.base import ByteTransport
 
 BROADCAST = 0
 _READS = (mb.ReadHoldingRegisters, mb.ReadInputRegisters)
+#: 8-byte frames besides the reads: address, function, two words, CRC
+_FIXED = (mb.WriteSingleRegister, mb.WriteSingleRegisterReply, mb.WriteMultipleRegistersReply)
 
 
 def _describe(msg: object) -> str:
@@ -69,6 +71,19 @@ class ModbusRule(Rule[Any]):
 
     def frame_bytes(self, message: Any) -> bytes:
         return mb.encode(message)
+
+    def frame_size(self, message: Any) -> int:
+        """RTU frame length without encoding (address, function, data, CRC): the direct path's timing."""
+        kind = type(message)
+        if kind in _READS or kind in _FIXED:
+            return 8
+        if kind is mb.ReadRegistersReply:
+            return 5 + 2 * len(message.values)
+        if kind is mb.WriteMultipleRegisters:
+            return 9 + 2 * len(message.values)
+        if kind is mb.ExceptionReply:
+            return 5
+        return len(mb.encode(message))
 
     def address(self, message: Any) -> int | None:
         slave = getattr(message, "slave", None)

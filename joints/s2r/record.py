@@ -417,7 +417,8 @@ def replay(recording: Recording | str | Path, *, perturb: Mapping[str, Mapping[s
     for name, kw in (perturb or {}).items():
         world.perturb(name, **dict(kw))
     origin = float(rec.header.get("origin", 0.0))
-    transports = {name: world.transport(name) for name in cfg.buses}
+    # untimed transports: each recorded frame reaches the twins at its recorded time (the wire's time is in it)
+    transports = {name: registry.protocol(b.protocol).sim_transport(world.buses[name]) for name, b in cfg.buses.items()}
     for name, t in transports.items():
         if hasattr(t, "echo"):
             t.echo = cfg.buses[name].echo

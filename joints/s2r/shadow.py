@@ -73,7 +73,8 @@ class Shadow:
         self.twin = build(cfg, transports={b: world.transport(b) for b in cfg.buses}, clock=world.clock, world=world)
         self.twin.keepalive = False
         self._medium = {b: registry.protocol(c.protocol).medium for b, c in cfg.buses.items()}
-        self._feed = {b: world.transport(b) for b in cfg.buses}
+        # untimed: each host frame reaches the twins at the time the host sent it (the real bus took its time)
+        self._feed = {b: registry.protocol(c.protocol).sim_transport(world.buses[b]) for b, c in cfg.buses.items()}
         self.samples: dict[str, list[Sample]] = {name: [] for name in rig.joints}
         self.frames = 0  #: host frames fed to the twins
         self._last_tx: dict[str, float] = {}  #: bus -> time of the host's last frame on it

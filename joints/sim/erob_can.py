@@ -275,9 +275,11 @@ class ErobCanBus:
     """
 
     def __init__(self, fronts: Iterable[ErobCanFront] = (), *, name: str = "can", bitrate: int = 1_000_000,
-                 latency: float = 0.0) -> None:
+                 latency: float = 0.0, ideal: bool = False) -> None:
         self.fronts: list[ErobCanFront] = []
-        self.medium = CanMedium(name, bitrate=bitrate)
+        #: bus timing: node -> its drive's reply turnaround [s] (the world fills it from the profiles)
+        self.turnarounds: dict[int, float] = {}
+        self.medium = CanMedium(name, bitrate=bitrate, ideal=ideal)
         self.channel = self.medium.channel  #: ``can.Bus(interface="joints-sim", channel=...)`` joins this bus
         self.medium.attach_peer(self, latency=latency, name="twins")
         self.frame_errors = 0
@@ -295,6 +297,10 @@ class ErobCanBus:
             if f.node == node:
                 return f
         return None
+
+    def turnaround(self, frame: can.Message) -> float | None:
+        """The reply turnaround [s] of the drive a request frame (0x640 + node) addresses; None: unknown."""
+        return self.turnarounds.get(frame.arbitration_id - 0x640)
 
     def exchange(self, request: ec.Request) -> list[ec.Reply]:
         """Message-level twin of :meth:`on_frame`: the replies to one request ([] where nobody answers)."""

@@ -801,9 +801,11 @@ class ErobCanopenBus:
     """The device side of one CANopen bus: fronts by node id, routed by COB-ID, on a timed medium."""
 
     def __init__(self, fronts: Iterable[CanopenFront] = (), *, name: str = "canopen", bitrate: int = 1_000_000,
-                 latency: float = 0.0) -> None:
+                 latency: float = 0.0, ideal: bool = False) -> None:
         self.fronts: list[CanopenFront] = []
-        self.medium = CanMedium(name, bitrate=bitrate)
+        #: bus timing: node -> its drive's reply turnaround [s] (the world fills it from the profiles)
+        self.turnarounds: dict[int, float] = {}
+        self.medium = CanMedium(name, bitrate=bitrate, ideal=ideal)
         self.channel = self.medium.channel
         self._node = self.medium.attach_peer(self, latency=latency, name="twins")
         self.frame_errors = 0
@@ -821,6 +823,14 @@ class ErobCanopenBus:
             if f.node == node:
                 return f
         return None
+
+    def turnaround(self, frame: can.Message) -> float | None:
+        """The answer delay [s] of a frame: a node's turnaround for its SDO requests and guard requests; none for
+        SYNC, NMT and PDOs (a CiA 402 drive samples its synchronous TPDOs at the SYNC and sends them then)."""
+        route = co.classify(frame)
+        if route.kind in (co.Kind.SDO_RX, co.Kind.GUARD_REQUEST):
+            return self.turnarounds.get(route.node)
+        return 0.0
 
     def on_frame(self, frame: can.Message) -> Sequence[can.Message]:
         if frame.is_extended_id or frame.is_error_frame:

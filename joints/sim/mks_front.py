@@ -175,6 +175,8 @@ class MksDeviceBus:
         self.frame_errors = 0
         self.clock: Any = None
         self._listeners: list[Callable[[float], None]] = []
+        #: bus timing: drive address -> its reply turnaround [s] (the world fills it from the profiles)
+        self.turnarounds: dict[int, float] = {}
 
     def add(self, front: MksNativeFront) -> None:
         if any(f.address == front.address for f in self.fronts):
@@ -198,6 +200,13 @@ class MksDeviceBus:
     def time(self) -> float:
         """The drives' clock (the world's simulated time)."""
         return max((f.firmware.time for f in self.fronts), default=0.0)
+
+    def turnaround(self, frame: bytes) -> float | None:
+        """The reply turnaround [s] of the drive a frame (0xFA, address, ...) addresses; None: unknown."""
+        if len(frame) < 2:
+            return None
+        turns = self.turnarounds
+        return turns.get(frame[1]) if frame[1] != mks.BROADCAST else max(turns.values(), default=None)
 
     def receive(self, data: bytes) -> bytes:
         """Feed received bytes; return the bytes the addressed drives send back."""

@@ -308,6 +308,8 @@ class ModbusDeviceBus:
         self._codec = mb.ModbusRtuCodec(mb.Role.DEVICE)
         self.trace = trace
         self.frame_errors = 0
+        #: bus timing: slave address -> its drive's reply turnaround [s] (the world fills it from the profiles)
+        self.turnarounds: dict[int, float] = {}
 
     def add(self, slave: ModbusSlave) -> None:
         address = slave.address
@@ -332,6 +334,20 @@ class ModbusDeviceBus:
                 self._refresh()
                 break
         return self._slaves
+
+    def turnaround(self, frame: bytes) -> float | None:
+        """The reply turnaround [s] of the drive a frame addresses (a broadcast: the slowest); None: unknown."""
+        return self._turnaround(frame[0]) if frame else None
+
+    def message_turnaround(self, msg: Any) -> float | None:
+        """:meth:`turnaround` of a request message (the direct path)."""
+        return self._turnaround(msg.slave)
+
+    def _turnaround(self, slave: int) -> float | None:
+        turns = self.turnarounds
+        if slave == 0:
+            return max(turns.values(), default=None)
+        return turns.get(slave)
 
     def receive(self, data: bytes) -> bytes:
         """Feed received bytes; return the bytes the addressed slaves send back."""

@@ -154,7 +154,7 @@ class BusSpec:
     name: str
     protocol: str
     device_bus: Callable[[], Any]
-    transport: Callable[[Any], Any]
+    transport: Callable[..., Any]  #: (device bus, clock=the world's clock) -> the host's transport
 
 
 @dataclass
@@ -295,6 +295,9 @@ class World:
             if (d.bus, d.address) not in fronts:
                 self.buses[d.bus].add(d.maker.front(d.protocol, twin, d.address))
                 fronts.add((d.bus, d.address))
+                turnarounds = getattr(self.buses[d.bus], "turnarounds", None)  # bus timing: the drive's turnaround
+                if turnarounds is not None:
+                    turnarounds[d.address] = float(getattr(d.profile, "turnaround", 0.0))
             qa, da, aid = addr[d.name]
             r = ratios[d.name]
             self._bound.append(_Bound(d.name, twin, stepper, qa, da, aid, d.channel, d.mjcf_joint, r))
@@ -445,7 +448,7 @@ class World:
         """An in-process transport whose peer is every emulated drive on ``bus``."""
         if bus not in self.buses:
             raise ConfigError(f"no emulated bus {bus!r}", key="buses", allowed=sorted(self.buses))
-        return self.bus_specs[bus].transport(self.buses[bus])
+        return self.bus_specs[bus].transport(self.buses[bus], clock=self.clock)
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics substeps (drives' loops every substep), one caller at a time.

@@ -18,7 +18,10 @@ Nodes:
   more (in lockstep nobody else could send).
 * peers (:meth:`CanMedium.attach_peer`): in-process devices (the sim's twins) that get every
   delivered frame and answer with frames sent ``latency`` seconds after the frame that caused
-  them.
+  them - or the peer's own ``turnaround(frame)`` where it gives one (the drive's, from its profile).
+* a python-can node's ``adapter_latency`` (:meth:`CanMedium.attach`): it sees every frame that
+  long after the frame left the wire (the host adapter's receive path; docs/timing.md).
+* ``ideal`` media take no time: frames arrive the moment they are sent (``timing = "ideal"``).
 
 Time model. The medium keeps its own time (``now``), exact to the frame edge. Waiting until a
 time the clock has not reached yet sleeps the clock (the world steps its physics up to or past
@@ -104,9 +107,11 @@ class _Node:
 
     name: str
     peer: FramePeer | None = None
-    latency: float = 0.0
+    latency: float = 0.0  #: a peer's answer delay; a python-can node's adapter latency (frames held that long)
     receive_own: bool = False
     rx: deque[can.Message] = field(default_factory=deque)
+    held: deque[tuple[float, can.Message]] = field(default_factory=deque)  #: delivered, not yet seen by the host
+    turnaround: Callable[[can.Message], float | None] | None = None  #: a peer's own answer delay per frame
     rx_dropped: int = 0
     rx_limit: int = 100_000
 
@@ -134,13 +139,14 @@ class CanMedium:
     """The wire of one in-process CAN bus (see the module docstring)."""
 
     def __init__(self, channel: str | None = None, *, bitrate: int = 1_000_000, stuffing: str = "worst",
-                 clock: ClockLike | None = None, register: bool = True) -> None:
+                 clock: ClockLike | None = None, register: bool = True, ideal: bool = False) -> None:
         if stuffing not in STUFFING:
             raise ValueError(f"stuffing must be one of {STUFFING}, got {stuffing!r}")
         if not (isinstance(bitrate, int) and bitrate > 0):
             raise ValueError(f"bitrate must be a positive integer (bit/s), got {bitrate!r}")
         self.bitrate = bitrate
         self.stuffing = stuffing
+        self.ideal = ideal  #: frames take no time (``timing = "ideal"``)
         self.clock: ClockLike = clock or _OwnClock()
         self.now = self.clock.now()
         self._clock_seen = self.now
@@ -180,8 +186,11 @@ class CanMedium:
         return CanMedium(None if channel is None else str(channel), **kwargs)
 
     # -- attachment -----------------------------------------------------------------------
-    def attach(self, name: str, *, receive_own: bool = False) -> _Node:
-        node = _Node(name, receive_own=receive_own)
+    def attach(self, name: str, *, receive_own: bool = False, adapter_latency: float = 0.0) -> _Node:
+        """Attach a python-can node; it sees each frame ``adapter_latency`` s after the frame ended."""
+        if adapter_latency < 0 or not math.isfinite(adapter_latency):
+            raise ValueError(f"adapter_latency must be a finite number >= 0, got {adapter_latency!r}")
+        node = _Node(name, receive_own=receive_own, latency=adapter_latency)
         self._nodes.append(node)
         return node
 
@@ -189,7 +198,8 @@ class CanMedium:
         """Attach an in-process device: it gets every frame others send and answers after ``latency`` s."""
         if latency < 0 or not math.isfinite(latency):
             raise ValueError(f"latency must be a finite number >= 0, got {latency!r}")
-        node = _Node(name, peer=peer, latency=latency)
+        turnaround = getattr(peer, "turnaround", None)
+        node = _Node(name, peer=peer, latency=latency, turnaround=turnaround if callable(turnaround) else None)
         self._nodes.append(node)
         return node
 
@@ -208,6 +218,7 @@ class CanMedium:
         self._wire = None
         for n in self._nodes:
             n.rx.clear()
+            n.held.clear()
         self.now = self._free = self._clock_seen = t
         self._mark = (t, self.frames, self.bits, self.busy)
 
@@ -275,10 +286,11 @@ class CanMedium:
                 winner = min(self._contenders(start), key=lambda p: (p.key, p.seq))
                 self._pending.remove(winner)
                 bits = self._bits(winner.frame)
-                wire = self._wire = (start, start + bits / self.bitrate, winner)
+                took = 0.0 if self.ideal else bits / self.bitrate
+                wire = self._wire = (start, start + took, winner)
                 self.frames += 1
                 self.bits += bits
-                self.busy += bits / self.bitrate
+                self.busy += took
             start, end, pend = wire
             if end > until:
                 return
@@ -320,17 +332,25 @@ class CanMedium:
             if node.peer is not None:
                 if own:
                     continue
-                for answer in node.peer.on_frame(frame):
-                    self._enqueue(answer, node, t + node.latency)
+                answers = node.peer.on_frame(frame)
+                if answers:
+                    turn = node.turnaround(frame) if node.turnaround is not None else None
+                    delay = 0.0 if self.ideal else node.latency if turn is None else turn
+                    for answer in answers:
+                        self._enqueue(answer, node, t + delay)
                 continue
-            if len(node.rx) >= node.rx_limit:
-                node.rx.popleft()
+            if len(node.rx) + len(node.held) >= node.rx_limit:
+                (node.held if not node.rx else node.rx).popleft()
                 node.rx_dropped += 1
-            node.rx.append(can.Message(
+            msg = can.Message(
                 timestamp=t, arbitration_id=frame.arbitration_id, is_extended_id=frame.is_extended_id,
                 is_remote_frame=frame.is_remote_frame, is_error_frame=frame.is_error_frame, dlc=frame.dlc,
                 data=frame.data, channel=self.channel, is_rx=not own, check=False,
-            ))
+            )
+            if node.latency > 0 and not self.ideal:
+                node.held.append((t + node.latency, msg))  # the host adapter passes it on later
+            else:
+                node.rx.append(msg)
 
     def _enqueue(self, frame: can.Message, sender: _Node, ready: float) -> None:
         if frame.is_fd:
@@ -368,12 +388,17 @@ class CanMedium:
         self._sync()
         deadline = math.inf if timeout is None else self.now + max(timeout, 0.0)
         while True:
+            held = node.held
+            while held and held[0][0] <= self.now + 1e-12:
+                node.rx.append(held.popleft()[1])
             if node.rx:
                 return node.rx.popleft()
-            target = min(self._next_event(), deadline)
+            target = min(self._next_event(), held[0][0] if held else math.inf, deadline)
             if math.isinf(target):
                 return None  # nothing in flight: in lockstep nothing can arrive any more
             self._wait_until(target)
+            while held and held[0][0] <= self.now + 1e-12:
+                node.rx.append(held.popleft()[1])
             if not node.rx and target >= deadline:
                 return None
 
@@ -403,14 +428,15 @@ class LockstepCanBus(can.BusABC):
 
     def __init__(self, channel: Any = None, can_filters: Any = None, *, medium: CanMedium | None = None,
                  receive_own_messages: bool = False, bitrate: int | None = None, stuffing: str = "worst",
-                 **kwargs: Any) -> None:
+                 adapter_latency: float = 0.0, **kwargs: Any) -> None:
         if medium is None:
             medium = CanMedium.named(None if channel is None else str(channel), bitrate=bitrate or 1_000_000,
                                      stuffing=stuffing)
         self.medium = medium
         self.channel = medium.channel
         self.channel_info = f"{INTERFACE} {medium.channel}"
-        self._node = medium.attach(self.channel_info, receive_own=receive_own_messages)
+        self._node = medium.attach(self.channel_info, receive_own=receive_own_messages,
+                                   adapter_latency=adapter_latency)
         self._can_protocol = can.CanProtocol.CAN_20
         super().__init__(channel=medium.channel, can_filters=can_filters, **kwargs)
 

@@ -4,19 +4,29 @@ Rule: no threads, no wall clock. The line is a :class:`~joints.transports.base.B
 the host and a byte peer (an emulated device bus: ``receive(bytes) -> bytes``, ``silence()``) on the
 other side, both on one clock (the simulated world's: sleeping it steps the physics).
 
-Time model:
+Time model (docs/timing.md):
 
-* every character takes ``bits_per_char / baudrate`` seconds (10 bits: start, 8 data, stop); a
-  frame occupies the line from its first to its last character; each side's UART sends its frames
-  one after the other;
-* the device gets a host frame when its last character has arrived and answers ``latency`` seconds
-  later; frames it sends by itself (:class:`TimedFrames`: MKS completion frames at the moment the
-  motion ended) go out at their own time;
+* every character takes ``bits_per_char / baudrate`` seconds (start, 8 data, parity, stop bits);
+  a frame occupies the line from its first to its last character, then its sender keeps the line
+  quiet for ``gap`` seconds (Modbus RTU: t3.5, which ends the frame for the receiver; 0 for
+  protocols without a silence rule); each side's UART sends its frames one after the other;
+* the device acts on a host frame - a read samples its state, a write takes effect - and starts
+  its answer ``turnaround`` seconds after the frame ended (gap included): the drive's own number
+  (the peer's ``turnaround(frame)``, from the device profile), else the line's default; frames it
+  sends by itself (:class:`TimedFrames`: MKS completion frames at the moment the motion ended)
+  go out at their own time;
+* the host sees a device frame ``adapter_latency`` seconds after it ended (gap included): the
+  USB adapter's and the host's share of a transaction;
+* the line keeps its own exact time (like :class:`~joints.transports.can_sim.CanMedium`): waiting
+  sleeps the clock, the world steps whole physics substeps (so a frame instant sees the physics
+  of the substep that ends at or after it), but bus time is never rounded to substeps;
 * RS485 is half duplex and neither side listens before talking: when a host frame and a device
   frame overlap in time BOTH arrive corrupted (every byte inverted - the receivers' codecs see
   garbage and checksum errors), and :attr:`TimedSerialLine.collisions` counts it;
 * ``read(timeout)`` waits on the clock - waiting IS letting simulated time pass - and returns as
   soon as a frame has arrived (at the latest when the time is up);
+* :meth:`TimedSerialLine.transact` and :meth:`TimedSerialLine.post` carry the sim's direct path
+  (message objects, no bytes) over the same timing: a frame of the same size takes the same time;
 * a device side that ticks with the world (:class:`Ticking`, e.g. the MKS device bus) lets the line
   run after every physics substep, so frames arrive on time while the host does something else (a
   broadcast is executed while the host sleeps); otherwise the line runs at the host's reads and writes.
@@ -71,7 +81,7 @@ class Ticking(Protocol):
     def on_tick(self, callback: Callable[[float], None]) -> None: ...
 
 
-@dataclass
+@dataclass(eq=False)
 class Transmission:
     """One frame on the line."""
 
@@ -81,11 +91,17 @@ class Transmission:
     data: bytes
     corrupted: bool = False
     delivered: bool = False
+    due: float = 0.0  #: when the receiver acts on it (host frame) or sees it (device frame)
+    size: int = 0  #: characters (a direct-path frame carries no bytes)
+    #: direct path: a host frame's action (returns the reply message or None), a device frame's receiver
+    handler: Callable[..., Any] | None = None
+    payload: Any = None  #: direct path: the reply message a device frame carries
 
     def __str__(self) -> str:
         arrow = "->" if self.side == "host" else "<-"
         bad = "  COLLISION" if self.corrupted else ""
-        return f"{self.start * 1000:10.3f} ms {arrow} {self.data.hex(' ').upper()}{bad}"
+        what = self.data.hex(" ").upper() if self.data or not self.size else f"<{self.size} bytes: {self.payload!r}>"
+        return f"{self.start * 1000:10.3f} ms {arrow} {what}{bad}"
 
 
 def _garbled(data: bytes) -> bytes:
@@ -95,27 +111,34 @@ def _garbled(data: bytes) -> bytes:
 class TimedSerialLine(ByteTransport):
     """The host's end of a simulated half-duplex RS485 line (see the module docstring)."""
 
-    def __init__(self, peer: Any, *, baudrate: int, clock: ClockLike, latency: float = 0.0005,
-                 bits_per_char: int = 10) -> None:
-        if baudrate <= 0 or latency < 0:
-            raise ValueError(f"baudrate must be > 0 and latency >= 0, got {baudrate}, {latency}")
+    def __init__(self, peer: Any, *, baudrate: int, clock: ClockLike, turnaround: float = 0.0,
+                 adapter_latency: float = 0.0, gap: float = 0.0, bits_per_char: int = 10) -> None:
+        for what, v in (("turnaround", turnaround), ("adapter_latency", adapter_latency), ("gap", gap)):
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{what} must be a finite number of seconds >= 0, got {v!r}")
+        if baudrate <= 0:
+            raise ValueError(f"baudrate must be > 0, got {baudrate}")
         self.peer = peer
         self.clock = clock
         self.baudrate = baudrate
         self.char_time = bits_per_char / baudrate
-        self.latency = latency
+        self.turnaround = turnaround  #: s, the device's default (a peer that knows its drives' wins)
+        self.adapter_latency = adapter_latency
+        self.gap = gap
         self.log: list[Transmission] = []
         self.collisions = 0
-        self._pending: list[Transmission] = []  #: on the line, not yet arrived
+        self._pending: list[Transmission] = []  #: on the line, not yet acted on / seen
         self._rx = bytearray()
         self._free = {"host": -math.inf, "device": -math.inf}  #: when each side's UART is free again
         self._closed = False
+        self.now = clock.now()  #: the line's exact time (the clock may be up to a substep ahead)
+        self._clock_seen = self.now
+        self._cap: float | None = None  #: while the line sleeps the clock itself: run no further than this
+        self._turnaround_of: Callable[[bytes], float | None] | None = getattr(peer, "turnaround", None)
+        if not callable(self._turnaround_of):
+            self._turnaround_of = None
         if isinstance(peer, Ticking):
             peer.on_tick(self._tick)
-
-    def _tick(self, t: float) -> None:
-        if not self._closed:
-            self._run(t)
 
     @property
     def name(self) -> str:
@@ -125,11 +148,63 @@ class TimedSerialLine(ByteTransport):
         """Seconds ``n`` characters occupy the line."""
         return n * self.char_time
 
+    # -- time ---------------------------------------------------------------------------------------
+    def _tick(self, t: float) -> None:
+        if self._closed:
+            return
+        if self._cap is not None:
+            t = min(t, self._cap)
+        if t > self.now:
+            self._run(t)
+            if self._cap is None:
+                self.now = t
+                self._clock_seen = max(self._clock_seen, t)
+
+    def _sync(self) -> float:
+        """Catch up with a clock that moved without the line (the host slept) or went back (a reset)."""
+        c = self.clock.now()
+        if c < self._clock_seen - 1e-12:
+            self._pending.clear()
+            self._rx.clear()
+            self._free = {"host": -math.inf, "device": -math.inf}
+            self.now = self._clock_seen = c
+        elif c > self._clock_seen:
+            self._clock_seen = c
+            if c > self.now:
+                self._run(c)
+                self.now = c
+        return self.now
+
+    def _wait_until(self, t: float) -> None:
+        """Let time pass until ``t``: sleep the clock if it is behind, run the line up to ``t``."""
+        behind = t - self.clock.now()
+        if behind > 0:
+            self._cap = t
+            try:
+                self.clock.sleep(behind)
+            finally:
+                self._cap = None
+            self._clock_seen = self.clock.now()
+        self._run(t)
+        self.now = max(self.now, t)
+
     # -- the line ---------------------------------------------------------------------------------
-    def _put(self, side: str, at: float, data: bytes) -> Transmission:
+    def _device_turnaround(self, data: bytes) -> float:
+        of = self._turnaround_of
+        got = of(data) if of is not None and data else None
+        return self.turnaround if got is None else got
+
+    def _put(self, side: str, at: float, data: bytes, *, size: int | None = None, turnaround: float | None = None,
+             handler: Callable[..., Any] | None = None, payload: Any = None) -> Transmission:
+        n = len(data) if size is None else size
         start = max(at, self._free[side])
-        tx = Transmission(start, start + self.wire_time(len(data)), side, bytes(data))
-        self._free[side] = tx.end
+        end = start + self.wire_time(n)
+        if side == "host":
+            due = end + self.gap + (self._device_turnaround(data) if turnaround is None else turnaround)
+        else:
+            due = end + self.gap + self.adapter_latency
+        tx = Transmission(start, end, side, bytes(data), due=due, size=n, handler=handler, payload=payload)
+        self._free[side] = end + self.gap
         for other in reversed(self.log):
             if other.end <= start - 1.0:
                 break  # older than any frame still able to overlap
@@ -148,38 +223,93 @@ class TimedSerialLine(ByteTransport):
             if isinstance(peer, TimedFrames):
                 for at, data in peer.take_frames(until):
                     self._put("device", at, data)
-            due = [tx for tx in self._pending if tx.end <= until + 1e-12]
+            due = [tx for tx in self._pending if tx.due <= until + 1e-12]
             if not due:
                 return
-            tx = min(due, key=lambda x: x.end)
+            tx = min(due, key=lambda x: x.due)
             self._pending.remove(tx)
             tx.delivered = True
-            data = _garbled(tx.data) if tx.corrupted else tx.data
             if tx.side == "device":
-                self._rx += data
+                if tx.handler is not None:  # the direct path: the reply message reaches the host
+                    tx.handler(tx.payload)
+                else:
+                    self._rx += _garbled(tx.data) if tx.corrupted else tx.data
                 continue
-            reply = peer.receive(data) + peer.silence()  # the line is quiet after a frame
-            if reply:
-                self._put("device", tx.end + self.latency, reply)
+            if tx.handler is not None:  # the direct path: the drive acts on the message now
+                reply, size, receiver = tx.handler()
+                if reply is not None:
+                    self._put("device", tx.due, b"", size=size, handler=receiver, payload=reply)
+                continue
+            data = _garbled(tx.data) if tx.corrupted else tx.data
+            reply_bytes = peer.receive(data) + peer.silence()  # the line is quiet after a frame
+            if reply_bytes:
+                self._put("device", tx.due, reply_bytes)
 
-    def _next_arrival(self) -> float | None:
-        return min((tx.end for tx in self._pending), default=None)
+    def _next_due(self) -> float | None:
+        return min((tx.due for tx in self._pending), default=None)
+
+    # -- the direct path (message objects, the same time as their bytes) ---------------------------
+    def transact(self, size: int, act: Callable[[], Any], reply_size: Callable[[Any], int],
+                 turnaround: float | None = None) -> Any:
+        """Send a request of ``size`` characters now; the device acts on it (``act()``: its reply message or
+        None) when the byte path's device would; returns the reply once the host would have received it
+        (None at once after the device acted if it stays silent)."""
+        if self._closed:
+            raise TransportError("serial line is closed")
+        got: list[Any] = []
+
+        def action() -> tuple[Any, int, Callable[[Any], None]]:
+            reply = act()
+            got.append(None)
+            return reply, (reply_size(reply) if reply is not None else 0), got.append
+
+        now = self._sync()
+        self._run(now)
+        tx = self._put("host", now, b"", size=size, turnaround=turnaround, handler=action)
+        self._wait_until(tx.due)
+        while len(got) < 2:
+            nxt = self._next_due()
+            if got == [None] and (nxt is None or not any(p.side == "device" and p.handler is not None
+                                                         for p in self._pending)):
+                return None  # the device stays silent
+            assert nxt is not None
+            self._wait_until(nxt)
+        return got[1]
+
+    def post(self, size: int, act: Callable[[], Any], reply_size: Callable[[Any], int],
+             receiver: Callable[[Any], None], turnaround: float | None = None) -> None:
+        """Send a request of ``size`` characters that waits for nothing (a broadcast): the device acts on it
+        (``act()``) when the byte path's device would; a reply nobody waited for goes to ``receiver``."""
+        if self._closed:
+            raise TransportError("serial line is closed")
+
+        def action() -> tuple[Any, int, Callable[[Any], None]]:
+            reply = act()
+            return reply, (reply_size(reply) if reply is not None else 0), receiver
+
+        now = self._sync()
+        self._run(now)
+        self._put("host", now, b"", size=size, turnaround=turnaround, handler=action)
+
+    def wait(self, timeout: float) -> None:
+        """Let ``timeout`` s pass on the line (the direct path waiting for a reply that does not come)."""
+        if timeout > 0:
+            self._wait_until(self._sync() + timeout)
 
     # -- ByteTransport ----------------------------------------------------------------------------
     def write(self, data: bytes) -> None:
         if self._closed:
             raise TransportError("serial line is closed")
-        now = self.clock.now()
+        now = self._sync()
         self._run(now)
         self._put("host", now, data)
 
     def read(self, timeout: float) -> bytes:
         if self._closed:
             raise TransportError("serial line is closed")
-        clock = self.clock
-        deadline = clock.now() + max(timeout, 0.0)
+        deadline = self._sync() + max(timeout, 0.0)
         while True:
-            now = clock.now()
+            now = self.now
             self._run(now)
             if self._rx:
                 data = bytes(self._rx)
@@ -187,9 +317,8 @@ class TimedSerialLine(ByteTransport):
                 return data
             if now >= deadline - 1e-12:
                 return b""
-            nxt = self._next_arrival()
-            wait = min(deadline, nxt if nxt is not None and nxt > now else now + IDLE_STEP) - now
-            clock.sleep(max(wait, 1e-9))
+            nxt = self._next_due()
+            self._wait_until(min(deadline, nxt if nxt is not None and nxt > now else now + IDLE_STEP))
 
     def reset_input(self) -> None:
         self._rx.clear()

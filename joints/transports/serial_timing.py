@@ -8,8 +8,9 @@ Modbus over serial line (V1.02, 2.5.1.1): a character is 1 start + 8 data + pari
 bits with parity or two stop bits; 10 with 8N1, which the spec allows only as an option); frames
 are separated by a silence of at least 3.5 characters (t3.5), fixed at 1.75 ms above 19200 baud.
 A transaction is the request, t3.5, the reply, t3.5. The slave's own turnaround (the time it takes
-to start answering) is the drive's: pass it as ``turnaround`` where the datasheet gives it (the
-eRob and ZLAC manuals do not; 0 by default, so the rates are upper bounds).
+to start answering) is the drive's: ``turnaround`` here is 0 by default (wire time only); the bus
+planner (:func:`joints.bench.plan`) adds each drive's profile turnaround and the host adapter's
+latency per transaction (docs/timing.md).
 """
 
 from __future__ import annotations

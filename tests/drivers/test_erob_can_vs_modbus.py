@@ -19,7 +19,9 @@ def config(protocol: str) -> dict[str, Any]:
     return {
         "backend": "sim",
         "sim": {"model": "erob_stand.xml", "timestep": 0.001},
-        "buses": {"bus": {"protocol": protocol}},
+        # ideal buses: the protocols' semantics compared; on the wire their timing differs (a state read
+        # during the speed run comes milliseconds later on RS485), and so do positions sampled in motion
+        "buses": {"bus": {"protocol": protocol, "timing": "ideal"}},
         "joints": {"joint1": {"device": "erob", "model": "eRob80H100", "bus": "bus", "address": 2,
                               "limits": {"position": [-3.1, 3.1], "velocity": 2.0, "torque": 20.0}}},
     }

@@ -110,7 +110,9 @@ def min_jerk(s: float, duration: float) -> float:
 def test_csp_1khz_three_joint_arm_tracks_within_a_tenth_of_a_degree(capsys: pytest.CaptureFixture[str]) -> None:
     duration, period = 3.0, 0.001
     sign = {"joint1": 1.0, "joint2": -1.0, "joint3": 1.0}  # shoulder up: the arm never meets the floor
-    with joints.open(arm()) as rig:
+    # a native CAN controller (PCIe, SoC: ~50 us to the host): the default 0.2 ms adapter sees the third TPDO
+    # after the 1 ms period and rig.cycle_late() counts every cycle (see test_a_slow_adapter_makes_1khz_late)
+    with joints.open(arm(adapter_latency=0.00005)) as rig:
         for j in rig.joints.values():
             j.enable()
         start = {n: j.state().position for n, j in rig.joints.items()}
@@ -255,3 +257,20 @@ def test_a_fault_on_a_node_this_host_did_not_bring_up_is_cleared_by_sdo() -> Non
         cleared = j.to_si(other.observe())
         assert cleared.fault is None and not cleared.enabled
         assert other._up is None  # by SDO: no bring-up
+
+
+def test_a_slow_adapter_makes_1khz_late() -> None:
+    """Three csp joints at 1 kHz: with a native controller (50 us) no TPDO misses its cycle; behind the
+    default CAN adapter latency (0.2 ms) the host sees them too late and the rig counts it (issue 29)."""
+    late = {}
+    for latency in (0.00005, None):
+        with joints.open(arm(**({} if latency is None else {"adapter_latency": latency}))) as rig:
+            for j in rig.joints.values():
+                j.enable()
+            start = {n: j.state().position for n, j in rig.joints.items()}
+            rig.cycle(start)
+            late0 = rig.cycle_late()
+            for _ in range(100):
+                rig.cycle(start)
+            late[latency] = rig.cycle_late() - late0
+    assert late[0.00005] == 0 and late[None] >= 90

@@ -225,10 +225,15 @@ def test_shield_shortcut_answers_as_the_grid() -> None:
         env.close()
 
 
+@pytest.mark.parametrize("timing", ["wire", "ideal"])
 @pytest.mark.parametrize("mode", ["position", "velocity"])
-def test_arm_commanded_into_the_floor_stops_short_of_it(mode: str) -> None:
-    """A pose inside the floor (the forearm through it): the arm stops CLEARANCE off it, no contact, no fault."""
-    env = ErobArmReachEnv(action_mode=mode)
+def test_arm_commanded_into_the_floor_stops_short_of_it(mode: str, timing: str) -> None:
+    """A pose inside the floor (the forearm through it): the arm stops CLEARANCE off it, no contact, no fault.
+    On its RS485 bus (10 Hz, states a bus cycle old) the shield keeps a wider berth; on an ideal bus at 50 Hz
+    the arm gets as close as it may."""
+    cfg = envs.default_config("erob_arm_reach")
+    cfg["buses"]["rs485"]["timing"] = timing
+    env = ErobArmReachEnv(config=cfg, action_mode=mode, control_period=0.02 if timing == "ideal" else None)
     try:
         goal = np.array([1.0, 0.5, 0.9])
         assert erob_arm3_clearance(goal[1], goal[2]) < -0.05
@@ -240,7 +245,8 @@ def test_arm_commanded_into_the_floor_stops_short_of_it(mode: str) -> None:
             assert not term and env.data.ncon == 0
             assert env.clearance(obs[:3], obs[:3]) >= env.CLEARANCE - 0.002
         assert abs(obs[0] - goal[0]) < 0.01  # joint1 (no part in the clearance) got there
-        assert env.clearance(obs[:3], obs[:3]) < env.CLEARANCE + 0.01  # the rest as close as it may
+        if timing == "ideal":
+            assert env.clearance(obs[:3], obs[:3]) < env.CLEARANCE + 0.01  # the rest as close as it may
     finally:
         env.close()
 

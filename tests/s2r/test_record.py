@@ -23,7 +23,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def config(protocol: str = "modbus-rtu", **sim: Any) -> dict[str, Any]:
-    return {"sim": {"model": "erob_pendulum.xml", **sim}, "buses": {"bus": {"protocol": protocol}},
+    # an ideal bus: the replay gives each recorded frame to the twins at its recorded (host) time
+    return {"sim": {"model": "erob_pendulum.xml", **sim}, "buses": {"bus": {"protocol": protocol, "timing": "ideal"}},
             "joints": {"joint1": {"device": "erob", "bus": "bus", "address": 1, "model": "eRob80H100",
                                   "limits": {"position": [-1.2, 1.2], "velocity": 3.0, "torque": 40.0},
                                   "motion": {"velocity": 1.0, "acceleration": 4.0, "deceleration": 4.0}}}}

@@ -61,7 +61,8 @@ def _first_motion(world: object, rig_joint: joints.Joint, rig: joints.Rig) -> fl
 
 
 def test_world_perturb_adds_the_delay_and_restore_removes_it() -> None:
-    cfg = {"sim": {"model": "erob_stand.xml"}, "buses": {"b": {"protocol": "modbus-rtu"}},
+    # ideal bus: the delay is measured from the command's arrival, which on the wire hides in its reply's time
+    cfg = {"sim": {"model": "erob_stand.xml"}, "buses": {"b": {"protocol": "modbus-rtu", "timing": "ideal"}},
            "joints": {"joint1": {"device": "erob", "bus": "b", "address": 1,
                                  "limits": {"position": [-3, 3], "torque": 40.0}}}}
     with joints.open(cfg) as rig:

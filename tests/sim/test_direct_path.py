@@ -91,8 +91,6 @@ def test_traced_direct_path_frames_what_the_byte_path_sends() -> None:
     assert fast_direct == 0
 
 
-@pytest.mark.xfail(strict=True, reason="a timeout takes no simulated time on either path until the timed lines of "
-                                       "issue 29 (branch i29-wire) are merged; remove this mark then")
 def test_direct_path_times_out_on_missing_slave_after_the_time_the_byte_path_takes() -> None:
     """3 attempts, each waiting out its timeout and then the late window: the same simulated time on both paths."""
     took = {}

@@ -403,7 +403,10 @@ def test_decelerated_and_immediate_stops(tmp_path: Path) -> None:
         steps = d.read("number_of_pulses")
         before = d.completions
         d.stop_now()
-        d.link.poll(0)
+        d.link.poll(0.01)  # the completion frame follows the reply on the wire (a few ms at 38400 baud)
         assert d.completions == before + 1  # complete at once
         assert d.completion == mks.RunReply(1, 0xF6, mks.RunStatus.COMPLETE)
-        assert d.read("number_of_pulses") == steps
+        stopped = d.read("number_of_pulses")  # it ran on only while the stop was on the wire (~5 ms at 500 rpm)
+        assert 0 <= stopped - steps < 500 * 3200 / 60 * 0.01
+        rig.sleep(0.1)
+        assert d.read("number_of_pulses") == stopped

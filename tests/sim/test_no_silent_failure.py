@@ -140,7 +140,8 @@ def test_readme_config_needs_no_mjcf_joint_and_a_wrong_one_lists_the_model_joint
 # --- one caller at a time ----------------------------------------------------------------------
 
 def test_two_threads_sleeping_and_reading_share_one_world_safely() -> None:
-    with joints.open(EROB) as rig:
+    ideal = {**EROB, "buses": {"rs485": {**EROB["buses"]["rs485"], "timing": "ideal"}}}  # the sleeps' time only
+    with joints.open(ideal) as rig:
         j = rig.joints["joint1"]
         j.enable()
         j.set_velocity(0.5)  # (after the manual's 500 ms from enable)

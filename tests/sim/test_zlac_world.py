@@ -132,15 +132,15 @@ def test_acceleration_time_is_the_time_to_reach_the_commanded_speed(rig: joints.
         right.write("target_velocity_right", 100)
     else:  # SI through the Joint API: the driver turns 100 r/min at 125 r/min/s into 800 ms
         acc = W100 / 0.8
-        t0 = rig.time
         left.set_velocity(W100, acceleration=acc)
+        t0 = rig.time  # the commands take bus time: count from the first target's reply
         right.set_velocity(W100, acceleration=acc)
         assert left.read("acceleration_time_left") == 800 and right.read("acceleration_time_right") == 800
     times, speeds = [], []
     while rig.time < t0 + 1.2 - 1e-9:
         rig.sleep(0.01)  # sampled every 10 ms of simulated time
         s = rig.read_states()
-        times.append(rig.time - t0)
+        times.append(s["left_wheel"].time - t0)  # when the drive sampled them (the read takes bus time)
         speeds.append([s["left_wheel"].velocity / RPM, s["right_wheel"].velocity / RPM])
     t, v = np.array(times), np.array(speeds)
     for k in range(2):

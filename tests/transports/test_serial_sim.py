@@ -33,10 +33,10 @@ class Echo:
         return due
 
 
-def test_frames_take_their_wire_time_and_the_reply_follows_after_the_latency() -> None:
+def test_frames_take_their_wire_time_and_the_reply_follows_after_the_turnaround() -> None:
     clock = ManualClock()
     request, reply = mks.encode(mks.ReadSpeed(1)), mks.encode(mks.SpeedReply(1, 7))
-    line = TimedSerialLine(Echo(reply), baudrate=38400, clock=clock, latency=0.0005)
+    line = TimedSerialLine(Echo(reply), baudrate=38400, clock=clock, turnaround=0.0005)
     line.write(request)
     assert line.read(0.0) == b""  # nothing has arrived yet
     got = line.read(0.1)

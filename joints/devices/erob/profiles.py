@@ -92,6 +92,13 @@ _FLOAT_FIELDS = (
 # everything else must be > 0.
 _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction", "command_delay")
 
+# bus timing (issue 29): the drive's reply turnaround; no eRob manual states one
+#: s, EST: the ZLAC8015D log's 1.8 ms per Modbus transaction less a USB adapter's 1 ms (docs/timing.md)
+TURNAROUND = 0.0008
+TURNAROUND_SOURCE = ("EST: 0.8 ms - no eRob manual states a reply turnaround; a real ZLAC8015D log shows 1.8 ms "
+                     "per transaction beyond bytes and t3.5, less 1 ms of USB adapter latency (docs/timing.md)")
+_TIMING_FIELDS = ("turnaround",)  # bus timing (issue 29): finite, >= 0
+
 
 @dataclass(frozen=True, slots=True)
 class ErobProfile:
@@ -113,10 +120,12 @@ class ErobProfile:
     viscous_friction: float  #: N*m*s/rad at the output
     #: s from a motion command's arrival to the drive acting on it (the twin's; ``joints identify``)
     command_delay: float = 0.0
+    #: s from a request's end (after the protocol's silence) to the drive answering it (docs/timing.md)
+    turnaround: float = TURNAROUND
     sources: Mapping[str, str] = field(default_factory=_empty_sources, compare=False, hash=False)
 
     def __post_init__(self) -> None:
-        validate_fields(self, _INT_FIELDS, _FLOAT_FIELDS, _NON_NEGATIVE_FIELDS)
+        validate_fields(self, _INT_FIELDS, _FLOAT_FIELDS + _TIMING_FIELDS, _NON_NEGATIVE_FIELDS + _TIMING_FIELDS)
         if self.efficiency > 1.0:
             raise ConfigError(
                 f"{self.model}: efficiency must be in (0, 1], got {self.efficiency!r}",
@@ -360,6 +369,7 @@ def _build(size: int, ratio: int) -> ErobProfile:
         "viscous_friction": viscous_src,
         "command_delay": ("EST: 0 - the twin acts on a command at its next substep; a real drive's delay comes "
                           "from `joints identify` (profile overlay)"),
+        "turnaround": TURNAROUND_SOURCE,
     }
     return ErobProfile(
         model=model,

@@ -79,10 +79,12 @@ class MksProfile:
     motor_mass: float  #: kg
     stall_error: float  #: rad, locked-rotor protection threshold
     stall_time: float  #: s, how long the error must last
+    #: s from a request's end to the drive answering it (docs/timing.md)
+    turnaround: float = 0.0008
     sources: Mapping[str, str] = field(default_factory=_empty_sources, compare=False, hash=False)
 
     def __post_init__(self) -> None:
-        validate_fields(self, _INT_FIELDS, _FLOAT_FIELDS, _NON_NEGATIVE_FIELDS)
+        validate_fields(self, _INT_FIELDS, _FLOAT_FIELDS + _TIMING_FIELDS, _NON_NEGATIVE_FIELDS + _TIMING_FIELDS)
         for name in ("default_working_current", "default_home_current"):
             if getattr(self, name) > self.max_working_current:
                 raise ConfigError(f"{self.model}: {name} {getattr(self, name)} A exceeds max_working_current "
@@ -139,9 +141,12 @@ _FLOAT_FIELDS = (
     "rotor_inertia", "coulomb_friction", "viscous_friction", "motor_mass", "stall_error", "stall_time",
 )
 _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction")
+_TIMING_FIELDS = ("turnaround",)  # bus timing (issue 29): finite, >= 0
 _OVERRIDABLE: tuple[str, ...] = tuple(f.name for f in fields(MksProfile) if f.name not in ("model", "sources"))
 
 _COMMON_SOURCES = {
+    "turnaround": ("EST 0.8 ms: no MKS manual states a reply turnaround; a real ZLAC8015D log shows 1.8 ms per "
+                   "transaction beyond bytes and t3.5, less 1 ms of USB adapter latency (docs/timing.md)"),
     "full_steps": "PUB 1.8 degree motors only (facts 3, MKS-man §14)",
     "encoder_counts": "PUB MT6816 14-bit, 16384 counts/rev (facts 3, MKS-man §1.3)",
     "bus_voltage": "PUB supply 12-24 V (facts 3); 24 V assumed (the 57D's MOSFETs are 30 V parts: stay <= 24 V)",

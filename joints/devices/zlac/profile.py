@@ -77,6 +77,11 @@ DRIVER_MAX_CURRENT = 30.0
 DRIVER_MAX_SPEED = 1000 * _RPM
 
 
+# bus timing (issue 29): the drive's reply turnaround; the manual states none
+#: s, EST: the ZLAC8015D log's 1.8 ms per Modbus transaction less a USB adapter's 1 ms (docs/timing.md)
+TURNAROUND = 0.0008
+
+
 def _sources() -> Mapping[str, str]:
     return MappingProxyType(dict(_SOURCES))
 
@@ -104,10 +109,12 @@ class HubMotorProfile:
     load_inertia: float = 0.129  #: kg*m^2 (EST), vehicle inertia per wheel the gains assume
     coulomb_friction: float = 0.2  #: N*m (EST)
     viscous_friction: float = 0.003  #: N*m*s/rad (EST)
+    #: s from a request's end (after t3.5) to the drive answering it (docs/timing.md)
+    turnaround: float = TURNAROUND
     sources: Mapping[str, str] = field(default_factory=_sources, compare=False, hash=False)
 
     def __post_init__(self) -> None:
-        validate_fields(self, _INT_FIELDS, _FLOAT_FIELDS, _NON_NEGATIVE_FIELDS)
+        validate_fields(self, _INT_FIELDS, _FLOAT_FIELDS + _TIMING_FIELDS, _NON_NEGATIVE_FIELDS + _TIMING_FIELDS)
         if self.encoder_lines > 4096:
             raise ConfigError(
                 f"{self.model}: encoder_lines {self.encoder_lines} exceeds register 0x2030's range 0-4096",
@@ -236,6 +243,7 @@ _FLOAT_FIELDS = (
 )
 # Friction and the assumed vehicle share may be 0 (ideal simulation / a wheel in the air).
 _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction", "load_inertia")
+_TIMING_FIELDS = ("turnaround",)  # bus timing (issue 29): finite, >= 0
 
 _SOURCES: dict[str, str] = {
     "model": "PUB ZLLG80ASM250 8-inch hub servo motor (facts 2.2)",
@@ -270,6 +278,9 @@ _SOURCES: dict[str, str] = {
     "coulomb_friction": "EST 0.2 N*m from the 80.7 % max-efficiency point (module docstring)",
     "viscous_friction": "EST 0.003 N*m*s/rad from the 80.7 % max-efficiency point (module docstring)",
 }
+_SOURCES["turnaround"] = ("EST 0.8 ms: a real ZLAC8015D at 115200 baud (augustocamaral2003/zlac8015d-tests, "
+                          "scripts/data.csv) takes 1.8 ms per transaction beyond bytes and t3.5; less 1 ms of USB "
+                          "adapter latency (docs/timing.md)")
 
 _OVERRIDABLE: tuple[str, ...] = tuple(f.name for f in fields(HubMotorProfile) if f.name != "sources")
 
