@@ -42,6 +42,7 @@ class BusProtocol:
     device_bus: Callable[[BusConfig], Any]  #: sim: the emulated side of the bus (fronts attach with .add)
     sim_transport: Callable[[Any], Any]  #: sim: an in-process transport to a device bus
     direct: bool = False  #: the sim may skip bytes (message objects straight to the device bus)
+    silence: bool = False  #: serial frames are delimited by the t3.5 silence (Modbus RTU)
     #: ``joints scan`` of any node of the protocol: (link, addresses, listen [s]) -> a record per node found;
     #: None: the scan probes each address with the device family's driver
     scan: Callable[[Any, Sequence[int], float], Iterable[dict[str, object]]] | None = None
@@ -261,7 +262,7 @@ PROTOCOLS: dict[str, BusProtocol] = {
         name="modbus-rtu", medium="serial", addresses=(1, 247),
         description="Modbus RTU over RS485 (FC03/04/06/16)",
         link=_modbus_link, open_transport=_serial_transport, device_bus=_modbus_device_bus,
-        sim_transport=_byte_loopback, direct=True,
+        sim_transport=_byte_loopback, direct=True, silence=True,
     ),
     "erob-can": BusProtocol(
         name="erob-can", medium="can", addresses=(1, 127),

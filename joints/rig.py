@@ -490,6 +490,34 @@ def sim_world(cfg: RigConfig) -> Any:
         raise
 
 
+def served_timing(cfg: RigConfig) -> dict[str, Any]:
+    """The real bus's time of every simulated bus of ``cfg`` (:class:`joints.sim.served_timing.BusTiming`):
+    wire time from the bus's line settings, each drive's turnaround from its profile, the bus's
+    ``adapter_latency`` and ``timing`` (what ``joints sim serve`` holds requests and replies for)."""
+    from joints.sim import served_timing as st
+
+    out: dict[str, Any] = {}
+    for name, b in cfg.buses.items():
+        if b.backend != "sim":
+            continue
+        proto = registry.protocol(b.protocol, key=f"buses.{name}.protocol")
+        turnarounds: dict[int, float] = {}
+        for jname, j in cfg.joints.items():
+            if j.bus == name:
+                prof = registry.family(j.device, key=f"joints.{jname}.device").config_profile(j)
+                turnarounds[j.address] = max(turnarounds.get(j.address, 0.0), st.turnaround(prof))
+        latency = st.adapter_latency(b.adapter_latency)
+        ideal = b.timing == "ideal"
+        if proto.medium == "can":
+            out[name] = st.BusTiming.can(bitrate=b.bitrate, adapter_latency=latency, turnarounds=turnarounds,
+                                         ideal=ideal)
+        else:
+            out[name] = st.BusTiming.serial(baudrate=b.baudrate, parity=b.parity, stopbits=b.stopbits,
+                                            rtu=proto.silence, adapter_latency=latency, turnarounds=turnarounds,
+                                            ideal=ideal)
+    return out
+
+
 def open_sim(cfg: RigConfig) -> Rig:
     """Build the sim backend: world + emulated drives + in-process links, same drivers as hardware."""
     world = sim_world(cfg)

@@ -183,7 +183,7 @@ def launch_viewer(world: Any) -> Any:
 
 def serve_config(args: argparse.Namespace, *, view: bool = False) -> int:
     from joints.config import load
-    from joints.rig import sim_world
+    from joints.rig import served_timing, sim_world
     from joints.sim.serve import serve
 
     cfg = load(args.config, backend="sim")
@@ -219,7 +219,7 @@ def serve_config(args: argparse.Namespace, *, view: bool = False) -> int:
     try:
         serve(world, serial, can_buses=cans, out=sys.stdout, stop=stop, on_ready=ready,
               realtime_factor=args.realtime_factor, log=_frame_log(time.monotonic()) if args.verbose else None,
-              tick=tick, links=links)
+              tick=tick, links=links, timing=served_timing(cfg))
     finally:
         if usr1 is not None and before is not None:
             signal.signal(usr1, before)
