@@ -180,7 +180,7 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
 
     def sim_wall(t_sim: float) -> float:
         """The wall time of simulated time ``t_sim``."""
-        return t0_wall + (t_sim - t0_sim) / factor
+        return float(t0_wall + (t_sim - t0_sim) / factor)
 
     while not stop.is_set():
         if tick is not None:
