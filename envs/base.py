@@ -70,7 +70,7 @@ import joints
 from envs.configs import config_path
 from envs.randomization import GAINS, DomainRandomization
 from envs.render import CameraSpec, SceneRenderer
-from joints.errors import MotionTimeout
+from joints.errors import MotionTimeout, OverrunError
 
 ACTION_MODES = ("position", "velocity", "torque")
 #: s between "enable" and the first motion command (the eRob manual's 500 ms; the emulator enforces it)
@@ -176,13 +176,27 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
     #: finish_step (read, observe, reward): a batched env (envs.vector) waits for all its rigs at once
     batchable = False
 
+    #: overruns: a step that ends after its tick ran over its period by ``info["overrun"]`` s; it is
+    #: counted (``overruns``, ``overrun_time``), the schedule starts again from then (the next step
+    #: gets its whole period: the period is held, no burst of short steps), and with
+    #: ``raise_on_overrun`` it raises :class:`~joints.errors.OverrunError`
+    raise_on_overrun = False
+    overrun_time = 0.0
+    last_overrun = 0.0
+    _anchor: tuple[float, int, float] | None = None  #: (episode start, tick, rig time) of the last re-anchoring
+
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         token = self.begin_step(action)
         self._wait_until(self.tick_time())
-        return self.finish_step(token)
+        obs, reward, terminated, truncated, info = self.finish_step(token)
+        info["overrun"] = self.last_overrun
+        return obs, reward, terminated, truncated, info
 
     def tick_time(self) -> float:
         """Rig time of the tick the last action waits for."""
+        anchor = self._anchor
+        if anchor is not None and anchor[0] == self._t0:
+            return anchor[2] + (self._tick - anchor[1]) * self.control_period
         return self._t0 + self._tick * self.control_period
 
     def begin_step(self, action: np.ndarray) -> Any:
@@ -196,11 +210,22 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
         raise NotImplementedError
 
     def _wait_until(self, t: float) -> None:
+        self.last_overrun = 0.0
         remaining = t - self.rig.time
         if remaining > 0:
             self.rig.sleep(remaining)
         elif remaining < -1e-9:
-            self.overruns += 1
+            self._overran(-remaining)
+
+    def _overran(self, late: float) -> None:
+        """This step's tick passed ``late`` s ago: count it, start the schedule again from now, raise if asked."""
+        self.overruns += 1
+        self.overrun_time += late
+        self.last_overrun = late
+        self._anchor = (self._t0, self._tick, self.tick_time() + late)
+        if self.raise_on_overrun:
+            raise OverrunError(f"step {self._tick} ran {late * 1e3:.3f} ms over its {self.control_period * 1e3:g} ms "
+                               "period (the buses cannot carry this rate: see `joints bench --plan-only`)")
 
     def _start(self, config: Any, backend: str | None, domain_randomization: Any) -> None:
         """Open the rig and set the task up; the rig is closed again if the setup fails."""
@@ -268,6 +293,7 @@ class JointsEnv(RigEnv):
         reset_tolerance: float = 0.02,
         width: int = 480,
         height: int = 480,
+        raise_on_overrun: bool = False,
     ) -> None:
         if action_mode not in ACTION_MODES:
             raise ValueError(f"action_mode {action_mode!r} is not one of {ACTION_MODES}")
@@ -288,6 +314,7 @@ class JointsEnv(RigEnv):
         self.reset_timeout = float(reset_timeout)
         self.reset_tolerance = float(reset_tolerance)
         self.width, self.height = int(width), int(height)
+        self.raise_on_overrun = bool(raise_on_overrun)
         self._start(config, backend, domain_randomization)
 
     # -- construction -----------------------------------------------------------------------

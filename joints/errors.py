@@ -206,3 +206,7 @@ class OutcomeUnknown(ReplyTimeout):
 
     The link never re-sends such a write blindly; read back what matters before acting again.
     """
+
+
+class OverrunError(JointsError):
+    """A fixed-rate step ran over its control period (raised only where asked: ``raise_on_overrun=True``)."""
