@@ -540,8 +540,9 @@ def open_mixed(cfg: RigConfig) -> Rig:
     """A rig with hardware and simulated buses (see :class:`joints.sim.pacing.MixedClock`).
 
     The simulated buses are in-process twins in one world; the hardware buses' joints are the
-    world's measured joints: whenever the rig sleeps the world catches up with the wall clock and
-    the real joints' measured positions and velocities drive their MuJoCo joints (kinematically),
+    world's measured joints: at every transaction (and while the rig sleeps) the world catches up
+    with the wall clock and the real joints' measured positions and velocities drive their MuJoCo
+    joints (prescribed motion),
     so the simulated joints feel them through the model. The real joints do not feel the
     simulated ones (no force goes back to hardware).
     """
@@ -558,7 +559,7 @@ def open_mixed(cfg: RigConfig) -> Rig:
     last = [-math.inf]
 
     def refresh() -> None:
-        now = clock.now()
+        now = clock.wall()
         if now - last[0] < MIXED_REFRESH:
             return
         last[0] = now
@@ -572,5 +573,13 @@ def open_mixed(cfg: RigConfig) -> Rig:
                     continue
             world.set_measured(name, (s.position - j.offset) * j.direction, s.velocity * j.direction, s.time)
 
+    def feed() -> None:
+        """The real joints' latest states (whatever the host read last) to the world: no bus traffic."""
+        for name, j in measured:
+            s = j.last_state
+            if s is not None:
+                world.set_measured(name, (s.position - j.offset) * j.direction, s.velocity * j.direction, s.time)
+
     clock.refresh = refresh
+    clock.feed = feed
     return rig
