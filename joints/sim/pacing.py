@@ -81,8 +81,7 @@ class MixedClock:
                     self.feed()
                 self.world.advance(behind)
             lag = self.wall() - self.world.time
-            if lag > self.max_lag:
-                self.max_lag = lag
+            self.max_lag = max(self.max_lag, lag)
             if lag > self.lag_warning and not self._warned:
                 self._warned = True
                 log.warning("mixed rig: the simulation is %.0f ms behind real time (physics slower than the wall "
