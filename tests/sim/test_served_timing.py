@@ -2,6 +2,15 @@
 
 from __future__ import annotations
 
+import os
+import select
+import statistics
+import sys
+import threading
+import time
+import tty
+from typing import Any
+
 import can
 import pytest
 
@@ -60,3 +69,97 @@ def test_turnaround_of_a_broadcast_is_the_slowest_drive_and_defaults() -> None:
 
     assert turnaround(Profile()) == 0.0042 and turnaround(object()) == FALLBACK_TURNAROUND
     assert adapter_latency(None) == 0.0 and adapter_latency(0.003) == 0.003
+
+
+class _Recorder:
+    """A served device bus that notes the world's time whenever a request acts (and answers as the real one)."""
+
+    def __init__(self, bus: Any, world: Any) -> None:
+        self.bus, self.world = bus, world
+        self.acted: list[float] = []
+
+    def receive(self, data: bytes) -> bytes:
+        self.acted.append(self.world.time)
+        return bytes(self.bus.receive(data))
+
+    def silence(self) -> bytes:
+        return bytes(self.bus.silence())
+
+
+class _World:
+    """A world whose physics costs nothing (it follows the wall clock substep by substep)."""
+
+    timestep = 0.001
+
+    def __init__(self) -> None:
+        self.steps = 0
+        self.buses: dict[str, Any] = {}
+
+    @property
+    def time(self) -> float:
+        return self.steps * self.timestep
+
+    def step(self, n: int = 1) -> None:
+        self.steps += n
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals need POSIX")
+def test_served_request_acts_at_arrival_plus_turnaround_and_its_reply_waits_for_the_wire() -> None:
+    """Over a real pty: the request acts (the state is sampled) on the world's clock when its 8 bytes and t3.5
+    at 9600 baud and the drive's 20 ms turnaround have passed; the reply reaches the host after its own wire
+    time and the adapter's 10 ms on top. Wall-clock bounds with room for a loaded machine (medians)."""
+    from joints.codecs import modbus as mb
+    from joints.devices.erob.params import EROB_PARAMS
+    from joints.devices.erob.registers import EROB_MODBUS
+    from joints.sim.firmware import Firmware
+    from joints.sim.modbus_front import ModbusDeviceBus, ModbusFront
+    from joints.sim.serve import serve
+
+    world = _World()
+    rec = _Recorder(ModbusDeviceBus([ModbusFront(Firmware(EROB_PARAMS), EROB_MODBUS, 2)]), world)
+    world.buses["rs485"] = rec
+    timing = BusTiming.serial(baudrate=9600, adapter_latency=0.010, turnarounds={2: 0.020})
+    char = 10 / 9600
+    t35 = 3.5 * char
+    arrived: list[float] = []
+    ports: dict[str, Any] = {}
+    ready, stop = threading.Event(), threading.Event()
+
+    def on_ready(lines: dict[str, Any]) -> None:
+        ports.update(lines)
+        ready.set()
+
+    def log(bus: str, direction: str, data: bytes, ident: int | None) -> None:
+        if direction == "rx":
+            arrived.append(world.time)
+
+    thread = threading.Thread(target=serve, args=(world, ["rs485"]), daemon=True,
+                              kwargs={"stop": stop, "on_ready": on_ready, "install_signals": False, "log": log,
+                                      "timing": {"rs485": timing}})
+    thread.start()
+    assert ready.wait(30)
+    fd = os.open(ports["rs485"]["port"], os.O_RDWR | os.O_NOCTTY)
+    request = mb.encode(mb.ReadHoldingRegisters(2, 0x0066, 2))  # 8 bytes; the reply: 9 bytes
+    trips: list[float] = []
+    try:
+        tty.setraw(fd)
+        for _ in range(15):
+            got = b""
+            t = time.perf_counter()
+            os.write(fd, request)
+            while len(got) < 9:
+                r, _, _ = select.select([fd], [], [], 1.0)
+                assert r, "no reply"
+                got += os.read(fd, 64)
+            trips.append(time.perf_counter() - t)
+            time.sleep(0.01)
+    finally:
+        os.close(fd)
+        stop.set()
+        thread.join(10)
+    assert len(rec.acted) == len(arrived) == 15
+    delay = 8 * char + t35 + 0.020
+    waited = statistics.median(a - b for a, b in zip(rec.acted, arrived))
+    assert delay - 0.0015 <= waited <= delay + 0.003, (waited, delay)
+    expected = delay + 9 * char + 0.010
+    assert statistics.median(trips) == pytest.approx(expected, abs=0.004), (trips, expected)
