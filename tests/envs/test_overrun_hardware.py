@@ -11,6 +11,7 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 import pytest
@@ -21,6 +22,7 @@ pytest.importorskip("serial")
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals need POSIX")
 
 import envs
+from envs.reach import ErobReachEnv
 from joints.cli.tomlout import dumps
 from joints.errors import OverrunError
 
@@ -38,18 +40,24 @@ def port(tmp_path_factory: pytest.TempPathFactory, sim_served) -> Iterator[str]:
         yield served.port("rs485")
 
 
-def _env(port: str, control_period: float = PERIOD, **kwargs: object) -> gym.Env:  # type: ignore[type-arg]
+class Forced(ErobReachEnv):
+    """The env with its construction-time rate check off (it would refuse this bus at 50 Hz)."""
+
+    def _check_rate(self, mode: str = "position") -> None:
+        pass
+
+
+def _env(port: str, control_period: float = PERIOD, **kwargs: Any) -> Forced:
     cfg = envs.default_config("erob_reach")
     cfg["buses"]["rs485"]["port"] = port
     cfg["buses"]["rs485"]["timeout"] = 0.5
-    return gym.make("joints/ErobReach-v0", config=cfg, backend="hardware", control_period=control_period,
-                    **kwargs)
+    return Forced(config=cfg, backend="hardware", control_period=control_period, **kwargs)
 
 
 def test_steps_that_do_not_fit_report_overruns(port: str) -> None:
     env = _env(port)
     try:
-        u = env.unwrapped
+        u = env
         env.reset(seed=0)
         action = np.zeros(env.action_space.shape, np.float32)
         late: list[float] = []
@@ -85,6 +93,6 @@ def test_a_step_that_fits_reports_no_overrun(port: str) -> None:
     try:
         env.reset(seed=0)
         _obs, _r, _term, _trunc, info = env.step(np.zeros(env.action_space.shape, np.float32))
-        assert info["overrun"] == 0.0 and env.unwrapped.overruns == 0
+        assert info["overrun"] == 0.0 and env.overruns == 0
     finally:
         env.close()
