@@ -238,7 +238,6 @@ class DiffDriveGoalEnv(RigEnv):
         action_weight: float = 0.01,
         success_bonus: float = 5.0,
         arena: float = 4.0,
-        raise_on_overrun: bool = False,
         wheel_radius: float = WHEEL_RADIUS,
         track: float = TRACK,
         reset_timeout: float = 10.0,
@@ -278,7 +277,6 @@ class DiffDriveGoalEnv(RigEnv):
         self.arena = float(arena)
         self.reset_timeout = float(reset_timeout)
         self.width, self.height = int(width), int(height)
-        self.raise_on_overrun = bool(raise_on_overrun)
         self._start(config, backend, domain_randomization)
 
     # -- construction -----------------------------------------------------------------------

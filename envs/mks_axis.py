@@ -116,7 +116,6 @@ class MksAxisPositionEnv(RigEnv):
         reset_timeout: float = 20.0,
         width: int = 480,
         height: int = 480,
-        raise_on_overrun: bool = False,
     ) -> None:
         if action_mode not in ACTION_MODES:
             raise ValueError(f"action_mode {action_mode!r} is not one of {ACTION_MODES} (the MKS has no torque mode)")
@@ -142,7 +141,6 @@ class MksAxisPositionEnv(RigEnv):
         self.reset_velocity = float(reset_velocity)
         self.reset_timeout = float(reset_timeout)
         self.width, self.height = int(width), int(height)
-        self.raise_on_overrun = bool(raise_on_overrun)
         self._start(config, backend, False)
 
     # -- construction -----------------------------------------------------------------------
@@ -280,7 +278,7 @@ class MksAxisPositionEnv(RigEnv):
             else:
                 self.joint.move_to(command)
         self._tick += 1
-        self._wait_until(self.tick_time())
+        self._wait_until(self._t0 + self._tick * self.control_period)
         s = self._read()
         distance = abs(self.goal - s.position)
         r_dist = -distance / 0.01
@@ -289,7 +287,7 @@ class MksAxisPositionEnv(RigEnv):
         info = self._info(s)
         violation = not (self.lo - LIMIT_MARGIN <= s.position <= self.hi + LIMIT_MARGIN)
         info.update({"reward_distance": r_dist, "reward_action_rate": r_rate, "limit_violation": violation,
-                     "command": command, "overrun": self.last_overrun})
+                     "command": command})
         terminated = violation or s.fault is not None
         if terminated and self.joint.enabled:
             try:

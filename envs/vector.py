@@ -173,7 +173,7 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
                 rigs.append(env.rig)
                 spans.append(remaining)
             elif remaining < -1e-9:
-                env._overran(-remaining)
+                env.overruns += 1
         if rigs:
             joints.sleep_together(rigs, spans)
         for i, token in acting:
