@@ -480,26 +480,38 @@ class Probe:
 
 @dataclass
 class BusTimingReport:
-    """What ``joints bench --hardware`` measured on one bus."""
+    """What ``joints bench --hardware`` measured on one bus: per transaction of ``rig.read_states()``."""
 
     bus: str
     protocol: str
     line: str
     joints: dict[int | None, list[str]]  #: node -> the joints it serves
-    round_trips: dict[int | None, list[float]]  #: node -> measured round trips [s]
-    wire: dict[int | None, float]  #: node -> wire time of its transaction [s]
+    probes: list[Probe]  #: the transactions measured
+    wires: list[float]  #: wire time of each transaction [s]
+    trips: list[list[float]]  #: measured round trips of each transaction [s]
     failures: int = 0
     warnings: list[str] | None = None
 
+    def nodes(self) -> list[int | None]:
+        """The drives measured (each once, in bus order)."""
+        return list(dict.fromkeys(p.node for p, t in zip(self.probes, self.trips) if t))
+
+    def round_trips(self, node: int | None) -> list[float]:
+        return [x for p, t in zip(self.probes, self.trips) if p.node == node for x in t]
+
+    def wire(self, node: int | None) -> float:
+        """Median wire time of the drive's transactions [s]."""
+        return _median([w for p, w in zip(self.probes, self.wires) if p.node == node])
+
     def overhead(self, node: int | None) -> float:
-        """Median round trip minus wire time [s]: the drive's turnaround + the adapter's latency."""
-        return float(_median(self.round_trips[node])) - self.wire[node]
+        """Median of round trip minus wire time over the drive's transactions [s]: turnaround + adapter latency."""
+        return _median([x - w for p, w, t in zip(self.probes, self.wires, self.trips) if p.node == node for x in t])
 
     def adapter_latency(self, turnarounds: dict[int | None, float]) -> float:
         """The bus's adapter latency under the documented split: the median over its drives of the
         overhead minus the drive's own turnaround (its profile's), at least 0."""
-        nodes = [n for n in self.round_trips if self.round_trips[n]]
-        return max(0.0, float(_median([self.overhead(n) - turnarounds.get(n, 0.0) for n in nodes]))) if nodes else 0.0
+        nodes = self.nodes()
+        return max(0.0, _median([self.overhead(n) - turnarounds.get(n, 0.0) for n in nodes])) if nodes else 0.0
 
 
 def _median(values: Sequence[float]) -> float:
@@ -556,8 +568,7 @@ def _probes(rig: Any) -> dict[str, list[Probe]]:
     return out
 
 
-def _serial_round_trips(bcfg: Any, probes: Sequence[Probe], rounds: int, gap: float) -> tuple[dict[int | None,
-                                                                                                  list[float]], int]:
+def _serial_round_trips(bcfg: Any, probes: Sequence[Probe], rounds: int, gap: float) -> tuple[list[list[float]], int]:
     """Round trips over the serial port: write the request, time until every byte of the reply is in."""
     try:
         import serial
@@ -565,12 +576,12 @@ def _serial_round_trips(bcfg: Any, probes: Sequence[Probe], rounds: int, gap: fl
         from joints.errors import MissingDependencyError
 
         raise MissingDependencyError("pyserial", "serial") from exc
-    out: dict[int | None, list[float]] = {p.node: [] for p in probes}
+    out: list[list[float]] = [[] for _ in probes]
     failures = 0
     with serial.Serial(bcfg.port, bcfg.baudrate, parity=bcfg.parity, stopbits=bcfg.stopbits,
                        timeout=bcfg.timeout, exclusive=True) as ser:
         for _ in range(rounds):
-            for p in probes:
+            for i, p in enumerate(probes):
                 expect = sum(len(d) for _i, d in p.replies) + (len(p.request) if bcfg.echo else 0)
                 time.sleep(gap)
                 ser.reset_input_buffer()
@@ -579,21 +590,21 @@ def _serial_round_trips(bcfg: Any, probes: Sequence[Probe], rounds: int, gap: fl
                 got = ser.read(expect)
                 took = time.perf_counter() - t
                 if len(got) == expect:
-                    out[p.node].append(took)
+                    out[i].append(took)
                 else:
                     failures += 1
     return out, failures
 
 
 def _can_round_trips(transport: Any, probes: Sequence[Probe], rounds: int, gap: float,
-                     timeout: float) -> tuple[dict[int | None, list[float]], int]:
+                     timeout: float) -> tuple[list[list[float]], int]:
     """Round trips over the CAN transport: send the request frame, time until its reply frames are in."""
     import can
 
-    out: dict[int | None, list[float]] = {p.node: [] for p in probes}
+    out: list[list[float]] = [[] for _ in probes]
     failures = 0
     for _ in range(rounds):
-        for p in probes:
+        for i, p in enumerate(probes):
             assert p.ident is not None
             frame = can.Message(arbitration_id=p.ident, data=p.request, is_extended_id=p.ident > 0x7FF)
             wanted = [i for i, _d in p.replies]
@@ -613,7 +624,7 @@ def _can_round_trips(transport: Any, probes: Sequence[Probe], rounds: int, gap: 
             if wanted:
                 failures += 1
             else:
-                out[p.node].append(took)
+                out[i].append(took)
     return out, failures
 
 
@@ -671,17 +682,17 @@ def measure_hardware(config: Any, *, rounds: int = HARDWARE_ROUNDS, gap: float =
             else:
                 line = f"{b.baudrate} baud 8{b.parity}{b.stopbits}" + (", t3.5" if timing.silence else "")
                 serial_probes[name] = probes[name]
-                trips, failures = {}, 0
+                trips, failures = [], 0
                 found = latency_timer(b.port or "", sys_root)
                 if found is not None and found[0] > LATENCY_TIMER_MAX_MS:
                     warnings.append(latency_warning(name, b.port or "", found[0], found[1]))
-            reports.append(BusTimingReport(name, b.protocol, line, nodes, trips,
-                                           {p.node: _wire(timing, p) for p in probes[name]}, failures, warnings))
+            reports.append(BusTimingReport(name, b.protocol, line, nodes, probes[name],
+                                           [_wire(timing, p) for p in probes[name]], trips, failures, warnings))
     finally:
         rig.close()  # the serial ports are measured on their own, after the rig let them go
     for report in reports:
         if report.bus in serial_probes:
-            report.round_trips, report.failures = _serial_round_trips(cfg.buses[report.bus],
+            report.trips, report.failures = _serial_round_trips(cfg.buses[report.bus],
                                                                       serial_probes[report.bus], rounds, gap)
     return reports
 
@@ -711,7 +722,7 @@ def overlay_text(reports: Sequence[BusTimingReport], turnarounds: dict[str, dict
              ""]
     joint_lines: list[str] = []
     for r in reports:
-        nodes = [n for n in r.round_trips if r.round_trips[n]]
+        nodes = r.nodes()
         if not nodes:
             continue
         latency = r.adapter_latency(turnarounds.get(r.bus, {}))
@@ -740,14 +751,13 @@ def hardware_report(reports: Sequence[BusTimingReport]) -> str:
     out: list[str] = []
     for r in reports:
         out.append(f"bus {r.bus} ({r.protocol}, {r.line}):")
-        for n, trips in r.round_trips.items():
+        if not r.nodes():
+            out.append(f"- no complete reply in {r.failures} tries")
+        for n in r.nodes():
             who = ", ".join(r.joints.get(n, [])) or f"node {n}"
-            if not trips:
-                out.append(f"- {who}: no complete reply in {r.failures} tries")
-                continue
-            s = sorted(trips)
+            s = sorted(r.round_trips(n))
             out.append(f"- {who}: round trip median {_median(s) * 1e3:.3f} ms (p10 {s[len(s) // 10] * 1e3:.3f}, "
-                       f"p90 {s[(9 * len(s)) // 10] * 1e3:.3f}; {len(s)} transactions), wire {r.wire[n] * 1e3:.3f} ms "
+                       f"p90 {s[(9 * len(s)) // 10] * 1e3:.3f}; {len(s)} transactions), wire {r.wire(n) * 1e3:.3f} ms "
                        f"-> overhead {r.overhead(n) * 1e3:.3f} ms per transaction (turnaround + adapter latency)")
         if r.failures:
             out.append(f"- {r.failures} transaction(s) without a complete reply (not counted)")
