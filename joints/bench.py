@@ -503,9 +503,13 @@ class BusTimingReport:
         """Median wire time of the drive's transactions [s]."""
         return _median([w for p, w in zip(self.probes, self.wires) if p.node == node])
 
-    def overhead(self, node: int | None) -> float:
-        """Median of round trip minus wire time over the drive's transactions [s]: turnaround + adapter latency."""
-        return _median([x - w for p, w, t in zip(self.probes, self.wires, self.trips) if p.node == node for x in t])
+    def overhead(self, node: int | None, quantile: float = 0.5) -> float:
+        """Round trip minus wire time over the drive's transactions [s]: turnaround + adapter latency; the median,
+        or another ``quantile`` (a low one is what the bus takes when the host is not held up itself)."""
+        values = sorted(x - w for p, w, t in zip(self.probes, self.wires, self.trips) if p.node == node for x in t)
+        if quantile == 0.5 or not values:
+            return _median(values)
+        return values[min(len(values) - 1, int(quantile * len(values)))]
 
     def adapter_latency(self, turnarounds: dict[int | None, float]) -> float:
         """The bus's adapter latency under the documented split: the median over its drives of the

@@ -21,7 +21,7 @@ from joints.config import load, parse
 from joints.errors import ConfigError
 from joints.rig import served_timing
 
-LATENCY = 0.050  #: s of adapter latency the served twin emulates (large against scheduling delays of a loaded host)
+LATENCY = 0.020  #: s of adapter latency the served twin emulates
 
 CONFIG = f"""
 backend = "sim"
@@ -58,7 +58,8 @@ def test_bench_reports_the_served_turnaround_plus_adapter_latency(served, tmp_pa
     assert r.failures == 0 and len(r.round_trips(2)) == 40
     # the eRob status block: FC03 of 25 registers (8 bytes), reply 55 bytes, t3.5 between them
     assert r.wire(2) == pytest.approx((8 + 55) * 10 / 115200 + 1.75e-3)
-    assert r.overhead(2) == pytest.approx(expected, rel=0.10), bench.hardware_report(reports)
+    assert r.overhead(2, 0.1) == pytest.approx(expected, rel=0.10), bench.hardware_report(reports)
+    assert r.overhead(2) > 0.9 * expected
     assert not r.warnings  # no latency timer on a pty
 
     # the overlay: the profile keeps its turnaround, the bus gets the rest; a config that includes it
@@ -68,7 +69,8 @@ def test_bench_reports_the_served_turnaround_plus_adapter_latency(served, tmp_pa
     own = cfg.read_text().replace(f"adapter_latency = {LATENCY}\n", "")
     (tmp_path / "robot.toml").write_text('timing_overlay = "timing.toml"\n' + own)
     measured = load(tmp_path / "robot.toml").buses["rs485"].adapter_latency
-    assert measured == pytest.approx(LATENCY, rel=0.10)
+    split = r.adapter_latency(bench.profile_turnarounds(cfg)["rs485"])  # median overhead - the profile's turnaround
+    assert measured == pytest.approx(split, abs=1e-6) and split == pytest.approx(r.overhead(2) - timing.turnaround(2))
     (tmp_path / "own.toml").write_text('timing_overlay = "timing.toml"\n' + own.replace(
         'baudrate = 115200', 'baudrate = 115200\nadapter_latency = 0.0005'))
     assert load(tmp_path / "own.toml").buses["rs485"].adapter_latency == 0.0005
@@ -113,7 +115,7 @@ def test_timing_overlay_errors_name_the_overlay_file(tmp_path: Path) -> None:
         parse({**base, "timing_overlay": "t.toml"}, base_dir=tmp_path)
 
 
-CAN_LATENCY = 0.050  #: s of adapter latency the served CAN bus emulates
+CAN_LATENCY = 0.010  #: s of adapter latency the served CAN bus emulates
 
 CAN_CONFIG = f"""
 backend = "sim"
@@ -141,7 +143,8 @@ def test_bench_over_a_served_can_bus(tmp_path: Path, sim_served) -> None:  # typ
     cfg.write_text(CAN_CONFIG)
     expected = served_timing(load(cfg))["can"].turnaround(3) + CAN_LATENCY
     with sim_served(cfg) as s:
-        (r,) = bench.measure_hardware(s.hardware, rounds=8, sys_root=tmp_path)
+        (r,) = bench.measure_hardware(s.hardware, rounds=15, sys_root=tmp_path)
     assert r.failures == 0 and r.round_trips(3), bench.hardware_report([r])
     assert 100e-6 < r.wire(3) < 400e-6  # a request and its reply frame at 1 Mbit/s
-    assert r.overhead(3) == pytest.approx(expected, rel=0.10), bench.hardware_report([r])
+    assert r.overhead(3, 0.1) == pytest.approx(expected, rel=0.10), bench.hardware_report([r])
+    assert r.overhead(3) > 0.9 * expected
