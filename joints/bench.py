@@ -763,6 +763,10 @@ def hardware_report(reports: Sequence[BusTimingReport]) -> str:
             out.append(f"- {who}: round trip median {_median(s) * 1e3:.3f} ms (p10 {s[len(s) // 10] * 1e3:.3f}, "
                        f"p90 {s[(9 * len(s)) // 10] * 1e3:.3f}; {len(s)} transactions), wire {r.wire(n) * 1e3:.3f} ms "
                        f"-> overhead {r.overhead(n) * 1e3:.3f} ms per transaction (turnaround + adapter latency)")
+        if r.nodes():
+            every = sorted(x - w for w, t in zip(r.wires, r.trips) for x in t)
+            out.append(f"- the bus: overhead {_median(every) * 1e3:.3f} ms per transaction (median of all "
+                       f"{len(every)}; turnaround + adapter latency)")
         if r.failures:
             out.append(f"- {r.failures} transaction(s) without a complete reply (not counted)")
         out += [f"WARNING: {w}" for w in r.warnings or []]
