@@ -1,7 +1,9 @@
 """``joints sim serve`` and ``joints sim view``: the twins of a config, served in real time for other programs.
 
 Rule: serial buses become pseudo-terminals, CAN buses python-can channels that never reach a real
-bus (:mod:`joints.sim.can_serve`). One JSON line per bus on stdout says where each one is. While
+bus (:mod:`joints.sim.can_serve`). One JSON line per bus on stdout says where each one is. Replies
+leave after the time the real bus would take (wire time, the drive's turnaround, the bus's
+``adapter_latency``; :mod:`joints.sim.served_timing`; ``timing = "ideal"``: at once). While
 serving, a twin can be power-cycled (``--control``: commands on stdin; SIGUSR1: every twin), which
 is what a drive does when its supply is switched off and on. Everything that touches the world runs
 in the serving loop (:func:`joints.sim.serve.serve` ``tick``). ``sim view`` serves the same way
