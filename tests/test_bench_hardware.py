@@ -148,3 +148,17 @@ def test_bench_over_a_served_can_bus(tmp_path: Path, sim_served) -> None:  # typ
     assert 100e-6 < r.wire(3) < 400e-6  # a request and its reply frame at 1 Mbit/s
     assert r.overhead(3, 0.1) == pytest.approx(expected, rel=0.10), bench.hardware_report([r])
     assert r.overhead(3) > 0.9 * expected
+
+
+def test_the_hardware_config_of_served_twins_keeps_the_timing_overlay(tmp_path: Path) -> None:
+    from joints.cli.sim import hardware_config
+
+    (tmp_path / "timing.toml").write_text("[buses.rs485]\nadapter_latency = 0.002\n")
+    (tmp_path / "robot.toml").write_text('timing_overlay = "timing.toml"\n' + CONFIG.replace(
+        f"adapter_latency = {LATENCY}\n", ""))
+    elsewhere = tmp_path / "out"
+    elsewhere.mkdir()
+    (elsewhere / "hw.toml").write_text(hardware_config(tmp_path / "robot.toml", {"rs485": {"bus": "rs485",
+                                                                                           "port": "/dev/pts/9"}}))
+    hw = load(elsewhere / "hw.toml")
+    assert hw.backend == "hardware" and hw.buses["rs485"].adapter_latency == 0.002

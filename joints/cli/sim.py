@@ -94,6 +94,9 @@ def hardware_config(cfg_path: Path, lines: Mapping[str, Mapping[str, Any]]) -> s
                 b["udp_port"] = line["udp_port"]
             else:
                 b.pop("udp_port", None)
+    overlay = data.get("timing_overlay")
+    if isinstance(overlay, str) and not Path(overlay).is_absolute() and (cfg_path.parent / overlay).exists():
+        data["timing_overlay"] = str((cfg_path.parent / overlay).resolve())  # the file is written elsewhere
     sim = data.get("sim")
     if isinstance(sim, dict) and "model" in sim:
         model = Path(str(sim["model"]))
