@@ -169,17 +169,19 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
             if token is None or not env.batchable:
                 continue
             remaining = env.tick_time() - env.rig.time  # as RigEnv._wait_until
+            env.last_overrun = 0.0
             if remaining > 0:
                 rigs.append(env.rig)
                 spans.append(remaining)
             elif remaining < -1e-9:
-                env.overruns += 1
+                env._overran(-remaining)
         if rigs:
             joints.sleep_together(rigs, spans)
         for i, token in acting:
             env = self.envs[i]
             if env.batchable:
                 obs, rewards[i], terminated[i], truncated[i], infos_of[i] = env.finish_step(token)
+                infos_of[i]["overrun"] = env.last_overrun  # as RigEnv.step
                 self._obs[i] = obs
             self._elapsed[i] += 1
             if self.max_episode_steps is not None and self._elapsed[i] >= self.max_episode_steps:
