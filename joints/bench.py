@@ -590,3 +590,337 @@ def table(rows: Sequence[Row]) -> str:
     lines.append("")
     lines += [f"- {r.measure}: {r.detail}" for r in rows if r.detail]
     return "\n".join(lines)
+
+
+# -- the real bus: round trips of read-only transactions (joints bench --hardware) ------------------
+
+#: rounds of every transaction measured per bus (the report gives medians)
+HARDWARE_ROUNDS = 50
+#: s of quiet before each measured transaction (the line settles; t3.5 and more)
+HARDWARE_GAP = 0.004
+#: ms above which a USB-serial adapter's latency timer gets a warning
+LATENCY_TIMER_MAX_MS = 1
+
+
+@dataclass
+class Probe:
+    """One read-only transaction of a bus, as ``rig.read_states()`` sends it: a request and its reply frames."""
+
+    node: int | None  #: the drive's address / node id
+    request: bytes
+    ident: int | None  #: CAN identifier of the request (None on a byte stream)
+    replies: list[tuple[int | None, bytes]]  #: the reply frames (CAN identifier, data)
+
+
+@dataclass
+class BusTimingReport:
+    """What ``joints bench --hardware`` measured on one bus: per transaction of ``rig.read_states()``."""
+
+    bus: str
+    protocol: str
+    line: str
+    joints: dict[int | None, list[str]]  #: node -> the joints it serves
+    probes: list[Probe]  #: the transactions measured
+    wires: list[float]  #: wire time of each transaction [s]
+    trips: list[list[float]]  #: measured round trips of each transaction [s]
+    failures: int = 0
+    warnings: list[str] | None = None
+
+    def nodes(self) -> list[int | None]:
+        """The drives measured (each once, in bus order)."""
+        return list(dict.fromkeys(p.node for p, t in zip(self.probes, self.trips) if t))
+
+    def round_trips(self, node: int | None) -> list[float]:
+        return [x for p, t in zip(self.probes, self.trips) if p.node == node for x in t]
+
+    def wire(self, node: int | None) -> float:
+        """Median wire time of the drive's transactions [s]."""
+        return _median([w for p, w in zip(self.probes, self.wires) if p.node == node])
+
+    def overhead(self, node: int | None, quantile: float = 0.5) -> float:
+        """Round trip minus wire time over the drive's transactions [s]: turnaround + adapter latency; the median,
+        or another ``quantile`` (a low one is what the bus takes when the host is not held up itself)."""
+        values = sorted(x - w for p, w, t in zip(self.probes, self.wires, self.trips) if p.node == node for x in t)
+        if quantile == 0.5 or not values:
+            return _median(values)
+        return values[min(len(values) - 1, int(quantile * len(values)))]
+
+    def adapter_latency(self, turnarounds: dict[int | None, float]) -> float:
+        """The bus's adapter latency under the documented split: the median over its drives of the
+        overhead minus the drive's own turnaround (its profile's), at least 0."""
+        nodes = self.nodes()
+        return max(0.0, _median([self.overhead(n) - turnarounds.get(n, 0.0) for n in nodes])) if nodes else 0.0
+
+
+def _median(values: Sequence[float]) -> float:
+    s = sorted(values)
+    n = len(s)
+    return (s[n // 2] if n % 2 else 0.5 * (s[n // 2 - 1] + s[n // 2])) if n else math.nan
+
+
+def latency_timer(port: str, sys_root: Any = None) -> tuple[int, Any] | None:
+    """The Linux USB-serial latency timer [ms] of serial ``port`` and its sysfs file, or None where it has none
+    (``sys_root``: the sysfs mount, ``/sys`` by default; tests pass a fake tree)."""
+    from pathlib import Path
+
+    root = Path("/sys") if sys_root is None else Path(sys_root)
+    tty = Path(os.path.realpath(port)).name
+    path = root / "bus" / "usb-serial" / "devices" / tty / "latency_timer"
+    try:
+        return int(path.read_text().strip()), path
+    except (OSError, ValueError):
+        return None
+
+
+def latency_warning(bus: str, port: str, ms: int, path: Any) -> str:
+    """The warning for a latency timer above :data:`LATENCY_TIMER_MAX_MS`, with the ways to lower it."""
+    tty = os.path.basename(os.path.realpath(port))
+    return (f"bus {bus}: the USB-serial latency timer of {port} is {ms} ms ({path}): the adapter may hold every "
+            f"reply up to {ms} ms before the host sees it. Lower it to 1 ms: `echo 1 | sudo tee {path}` (until the "
+            f"adapter is plugged again), or for good with a udev rule (/etc/udev/rules.d/99-usb-serial-latency.rules: "
+            f'ACTION=="add", SUBSYSTEM=="usb-serial", DRIVER=="ftdi_sio", ATTR{{latency_timer}}="1"), or '
+            f"`setserial /dev/{tty} low_latency`")
+
+
+def _probes(rig: Any) -> dict[str, list[Probe]]:
+    """The transactions of one ``rig.read_states()`` per bus (read-only: status and position reads)."""
+    from joints.link.trace import TraceRecord
+
+    rig.read_states()  # first contact (a driver may learn the drive's firmware): not recorded
+    records: list[TraceRecord] = []
+    rig.trace(records.append)
+    try:
+        rig.read_states()
+    finally:
+        rig.trace(None)
+    out: dict[str, list[Probe]] = {}
+    for name, bus in rig.buses.items():
+        mine = [r for r in records if r.bus == bus.link.name]
+        probes: list[Probe] = []
+        for r in mine:
+            if r.direction == "tx":
+                probes.append(Probe(r.node, bytes(r.data), r.ident, []))
+            elif probes:
+                probes[-1].replies.append((r.ident, bytes(r.data)))
+        out[name] = [p for p in probes if p.replies]
+    return out
+
+
+def _serial_round_trips(bcfg: Any, probes: Sequence[Probe], rounds: int, gap: float) -> tuple[list[list[float]], int]:
+    """Round trips over the serial port: write the request, time until every byte of the reply is in."""
+    try:
+        import serial
+    except ImportError as exc:  # pragma: no cover - depends on the install
+        from joints.errors import MissingDependencyError
+
+        raise MissingDependencyError("pyserial", "serial") from exc
+    out: list[list[float]] = [[] for _ in probes]
+    failures = 0
+    with serial.Serial(bcfg.port, bcfg.baudrate, parity=bcfg.parity, stopbits=bcfg.stopbits,
+                       timeout=bcfg.timeout, exclusive=True) as ser:
+        for _ in range(rounds):
+            for i, p in enumerate(probes):
+                expect = sum(len(d) for _i, d in p.replies) + (len(p.request) if bcfg.echo else 0)
+                time.sleep(gap)
+                ser.reset_input_buffer()
+                t = time.perf_counter()
+                ser.write(p.request)
+                got = ser.read(expect)
+                took = time.perf_counter() - t
+                if len(got) == expect:
+                    out[i].append(took)
+                else:
+                    failures += 1
+    return out, failures
+
+
+def _can_round_trips(transport: Any, probes: Sequence[Probe], rounds: int, gap: float,
+                     timeout: float) -> tuple[list[list[float]], int]:
+    """Round trips over the CAN transport: send the request frame, time until its reply frames are in."""
+    import can
+
+    out: list[list[float]] = [[] for _ in probes]
+    failures = 0
+    for _ in range(rounds):
+        for i, p in enumerate(probes):
+            assert p.ident is not None
+            frame = can.Message(arbitration_id=p.ident, data=p.request, is_extended_id=p.ident > 0x7FF)
+            wanted = [i for i, _d in p.replies]
+            time.sleep(gap)
+            while transport.recv(0.0) is not None:  # stale frames (heartbeats) out of the way
+                pass
+            t = time.perf_counter()
+            transport.send(frame)
+            end = t + timeout
+            while wanted:
+                got = transport.recv(max(0.0, end - time.perf_counter()))
+                if got is None:
+                    break
+                if got.arbitration_id in wanted:
+                    wanted.remove(got.arbitration_id)
+            took = time.perf_counter() - t
+            if wanted:
+                failures += 1
+            else:
+                out[i].append(took)
+    return out, failures
+
+
+def _wire(timing: Any, probe: Probe) -> float:
+    """Wire time of one transaction: request (+ t3.5 on Modbus RTU) + reply frames."""
+    if timing.medium == "can":
+        import can
+
+        def frame(ident: int | None, data: bytes) -> Any:
+            return can.Message(arbitration_id=ident or 0, data=data, is_extended_id=(ident or 0) > 0x7FF)
+
+        return float(timing.frame_time(frame(probe.ident, probe.request)) + sum(
+            timing.frame_time(frame(i, d)) for i, d in probe.replies))
+    return float(timing.bytes_time(len(probe.request)) + timing.silence
+                 + timing.bytes_time(sum(len(d) for _i, d in probe.replies)))
+
+
+def measure_hardware(config: Any, *, rounds: int = HARDWARE_ROUNDS, gap: float = HARDWARE_GAP,
+                     sys_root: Any = None) -> list[BusTimingReport]:
+    """Round trips of every drive's read-only status transaction on the real buses of ``config``.
+
+    Opens the config on the hardware backend, enables nothing and writes nothing (``on_exit`` is
+    forced to ``"none"``): the transactions are those of ``rig.read_states()``, replayed byte for
+    byte (frame for frame) ``rounds`` times each, ``gap`` s apart.
+    """
+    from dataclasses import replace as _replace
+
+    import joints
+    from joints.config import RigConfig, load, parse
+    from joints.rig import served_timing
+
+    if isinstance(config, RigConfig):
+        cfg = config.with_backend("hardware")
+    elif isinstance(config, dict):
+        cfg = parse(config, backend="hardware")
+    else:
+        cfg = load(config, backend="hardware")
+    cfg = _replace(cfg, on_exit="none")  # read only: never disable (or stop) a drive on the way out
+    timings = served_timing(cfg.with_backend("sim"))
+    reports: list[BusTimingReport] = []
+    rig = joints.open(cfg)
+    serial_probes: dict[str, list[Probe]] = {}
+    try:
+        probes = _probes(rig)
+        for name, b in cfg.buses.items():
+            warnings: list[str] = []
+            timing = timings[name]
+            nodes: dict[int | None, list[str]] = {}
+            for jn, j in cfg.joints.items():
+                if j.bus == name:
+                    nodes.setdefault(j.address, []).append(jn)
+            if timing.medium == "can":
+                line = f"{b.bitrate} bit/s"
+                trips, failures = _can_round_trips(rig.buses[name].transport, probes[name], rounds, gap, b.timeout)
+            else:
+                line = f"{b.baudrate} baud 8{b.parity}{b.stopbits}" + (", t3.5" if timing.silence else "")
+                serial_probes[name] = probes[name]
+                trips, failures = [], 0
+                found = latency_timer(b.port or "", sys_root)
+                if found is not None and found[0] > LATENCY_TIMER_MAX_MS:
+                    warnings.append(latency_warning(name, b.port or "", found[0], found[1]))
+            reports.append(BusTimingReport(name, b.protocol, line, nodes, probes[name],
+                                           [_wire(timing, p) for p in probes[name]], trips, failures, warnings))
+    finally:
+        rig.close()  # the serial ports are measured on their own, after the rig let them go
+    for report in reports:
+        if report.bus in serial_probes:
+            report.trips, report.failures = _serial_round_trips(cfg.buses[report.bus],
+                                                                      serial_probes[report.bus], rounds, gap)
+    return reports
+
+
+def profile_turnarounds(config: Any) -> dict[str, dict[int | None, float]]:
+    """Per bus, per drive address: the turnaround its profile states (the split's assumption)."""
+    from joints.config import RigConfig, load
+    from joints.rig import served_timing
+
+    cfg = config if isinstance(config, RigConfig) else load(config, backend="sim")
+    return {name: dict(t.turnarounds) for name, t in served_timing(cfg.with_backend("sim")).items()}
+
+
+def overlay_text(reports: Sequence[BusTimingReport], turnarounds: dict[str, dict[int | None, float]], *,
+                 source: str = "", per_joint: bool = True) -> str:
+    """The measured timing as a config overlay (TOML; ``timing_overlay = "FILE"`` in a config uses it).
+
+    The split (from the host only the sum is seen): each drive keeps the turnaround its profile
+    states; the bus's ``adapter_latency`` is the median over its drives of the measured overhead
+    minus that turnaround; each joint's ``profile.turnaround`` is then its drive's overhead minus
+    the bus's adapter latency (so every drive's sum is the measured one). ``per_joint=False``
+    (profiles without a ``turnaround`` field) writes the adapter latency only.
+    """
+    lines = [(f"# measured by `joints bench --hardware`{' on ' + source if source else ''}: per transaction, the "
+              "overhead (round trip - wire time) = turnaround + adapter_latency;"),
+             "# split: drives keep their profile's turnaround, the bus gets the median rest (docs/hardware-timing.md)",
+             ""]
+    joint_lines: list[str] = []
+    for r in reports:
+        nodes = r.nodes()
+        if not nodes:
+            continue
+        latency = r.adapter_latency(turnarounds.get(r.bus, {}))
+        lines += [f"[buses.{r.bus}]", f"adapter_latency = {latency:.6f}", ""]
+        if per_joint:
+            for n in nodes:
+                turn = max(0.0, r.overhead(n) - latency)
+                for jn in r.joints.get(n, []):
+                    joint_lines += [f"[joints.{jn}.profile]", f"turnaround = {turn:.6f}", ""]
+    return "\n".join(lines + joint_lines)
+
+
+def _has_turnaround(cfg: Any, joint: str) -> bool:
+    """Whether the joint's device profile has a ``turnaround`` a config may override."""
+    import dataclasses
+
+    from joints import registry
+
+    j = cfg.joints[joint]
+    prof = registry.family(j.device).config_profile(j)
+    return "turnaround" in {f.name for f in dataclasses.fields(prof)}
+
+
+def hardware_report(reports: Sequence[BusTimingReport]) -> str:
+    """The measurements as text: per bus and drive, round trip, wire time and overhead per transaction."""
+    out: list[str] = []
+    for r in reports:
+        out.append(f"bus {r.bus} ({r.protocol}, {r.line}):")
+        if not r.nodes():
+            out.append(f"- no complete reply in {r.failures} tries")
+        for n in r.nodes():
+            who = ", ".join(r.joints.get(n, [])) or f"node {n}"
+            s = sorted(r.round_trips(n))
+            out.append(f"- {who}: round trip median {_median(s) * 1e3:.3f} ms (p10 {s[len(s) // 10] * 1e3:.3f}, "
+                       f"p90 {s[(9 * len(s)) // 10] * 1e3:.3f}; {len(s)} transactions), wire {r.wire(n) * 1e3:.3f} ms "
+                       f"-> overhead {r.overhead(n) * 1e3:.3f} ms per transaction (turnaround + adapter latency)")
+        if r.nodes():
+            every = sorted(x - w for w, t in zip(r.wires, r.trips) for x in t)
+            out.append(f"- the bus: overhead {_median(every) * 1e3:.3f} ms per transaction (median of all "
+                       f"{len(every)}; turnaround + adapter latency)")
+        if r.failures:
+            out.append(f"- {r.failures} transaction(s) without a complete reply (not counted)")
+        out += [f"WARNING: {w}" for w in r.warnings or []]
+    return "\n".join(out)
+
+
+def run_hardware(config: str, *, overlay: str | None = None, rounds: int = HARDWARE_ROUNDS, sys_root: Any = None,
+                 out: Callable[[str], None] = print) -> list[BusTimingReport]:
+    """``joints bench --hardware``: measure, print, and (``overlay``) write the timing overlay file."""
+    from pathlib import Path
+
+    from joints.config import load
+
+    reports = measure_hardware(config, rounds=rounds, sys_root=sys_root)
+    out(f"Round trips of read-only transactions on the buses of {config} ({rounds} each, medians):")
+    out(hardware_report(reports))
+    if overlay is not None:
+        cfg = load(config, backend="sim")
+        per_joint = all(_has_turnaround(cfg, name) for name in cfg.joints)
+        Path(overlay).write_text(overlay_text(reports, profile_turnarounds(cfg), source=str(config),
+                                              per_joint=per_joint), encoding="utf-8")
+        out(f"wrote {overlay}: add `timing_overlay = \"{overlay}\"` to the config for the twins to use it")
+    return reports

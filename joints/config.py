@@ -14,6 +14,12 @@ then ``"mixed"`` when the buses differ.
 Identified profiles: a joint's ``profile_overlay`` names a TOML file (relative to the config
 file) whose ``[profile]`` table holds device-profile overrides, as ``joints identify`` writes
 them; keys of the joint's inline ``profile`` table win over the file's.
+
+Measured timing: the top-level ``timing_overlay`` names a TOML file (relative to the config
+file) as ``joints bench --hardware --write-overlay`` writes it: ``[buses.NAME]`` tables with
+``adapter_latency`` (and ``timing``), ``[joints.NAME.profile]`` tables with device-profile
+numbers (``turnaround``). They are merged into the config before it is validated; the config's
+own keys win over the overlay's.
 """
 
 from __future__ import annotations
@@ -95,7 +101,10 @@ class _Reader:
 
 _BUS_KEYS = tuple(f for f in BusConfig.__dataclass_fields__ if f != "name")
 _JOINT_KEYS = tuple(f for f in JointConfig.__dataclass_fields__ if f not in ("name",))
-_TOP_KEYS = ("backend", "sim", "buses", "joints", "on_exit")
+_TOP_KEYS = ("backend", "sim", "buses", "joints", "on_exit", "timing_overlay")
+#: what a timing overlay may set: per bus, per joint
+_OVERLAY_BUS_KEYS = ("adapter_latency", "timing")
+_OVERLAY_JOINT_KEYS = ("profile",)
 
 
 def _limits(r: _Reader, data: Mapping[str, Any], key: str) -> Limits:
@@ -130,6 +139,8 @@ def parse(data: Mapping[str, Any], *, source: str = "<dict>", base_dir: Path | N
     """Validate a config mapping (the parsed TOML), one section after the other."""
     r = _Reader(source)
     r.known(data, "", _TOP_KEYS)
+    if "timing_overlay" in data:
+        data = _with_timing_overlay(data, r, base_dir)
     chosen, forced = _backend(r, data, backend)
     sim = _sim(r, r.table(data, "sim"))
     buses = _buses(r, r.table(data, "buses"), chosen, forced)
@@ -362,6 +373,45 @@ def _sync_period(r: _Reader, data: Mapping[str, Any], key: str, protocol: str) -
     if value is not None and not (entry is not None and entry.sync):
         raise r.err(key, f"only for a protocol with cyclic modes (this bus: {protocol!r})")
     return None if value is None else float(value)
+
+
+def _with_timing_overlay(data: Mapping[str, Any], r: _Reader, base_dir: Path | None) -> dict[str, Any]:
+    """``data`` with its ``timing_overlay`` file merged in (the config's own keys win)."""
+    name = data["timing_overlay"]
+    if not isinstance(name, str) or not name:
+        raise r.err("timing_overlay", f"expected the path of a timing overlay file, got {name!r}")
+    path = (base_dir or Path.cwd()) / name
+    try:
+        overlay = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise r.err("timing_overlay", f"timing overlay not found: {path}") from None
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise r.err("timing_overlay", f"cannot read the timing overlay {path}: {exc}") from exc
+    where = _Reader(str(path))
+    where.known(overlay, "", ("buses", "joints"))
+    out = dict(data)
+    for section, kind, allowed in (("buses", "bus", _OVERLAY_BUS_KEYS), ("joints", "joint", _OVERLAY_JOINT_KEYS)):
+        tables = where.table(overlay, section)
+        own = dict(r.table(data, section))
+        for item, values in tables.items():
+            key = f"{section}.{item}"
+            if not isinstance(values, Mapping):
+                raise where.err(key, "expected a table")
+            if item not in own:
+                raise where.err(key, f"the config {r.source} has no {kind} {item!r}", sorted(own))
+            where.known(values, key, allowed)
+            mine = own[item]
+            if not isinstance(mine, Mapping):
+                continue  # the config's own error is reported when it is validated
+            merged = {**values, **mine}
+            if "profile" in values:
+                if not isinstance(values["profile"], Mapping):
+                    raise where.err(f"{key}.profile", "expected a table of device-profile numbers")
+                inline = mine.get("profile", {})
+                merged["profile"] = {**values["profile"], **inline} if isinstance(inline, Mapping) else inline
+            own[item] = merged
+        out[section] = own
+    return out
 
 
 def read_overlay(path: str | os.PathLike[str], source: str | None = None) -> dict[str, Any]:

@@ -27,6 +27,7 @@ from typing import Any, TypeGuard
 from joints import exits, registry
 from joints.clock import Clock, MonotonicClock
 from joints.config import BusConfig, RigConfig, load, parse
+from joints.drivers.base import sampled_at
 from joints.drivers.capabilities import (
     CommunicationWatchdog,
     CycleGroup,
@@ -168,7 +169,9 @@ class Rig:
                 continue
             group: DriveGroup = driver.group
             if id(group) not in groups:
-                groups[id(group)] = (group.read_status(), self.clock.now())
+                t0 = self.clock.now()
+                block = group.read_status()
+                groups[id(group)] = (block, sampled_at(t0, self.clock.now()))
             block, t = groups[id(group)]
             out[name] = j.to_si(driver.state_from(block, t))
         return {name: out[name] for name in self.joints if name in out}
@@ -491,6 +494,34 @@ def sim_world(cfg: RigConfig) -> Any:
         raise
 
 
+def served_timing(cfg: RigConfig) -> dict[str, Any]:
+    """The real bus's time of every simulated bus of ``cfg`` (:class:`joints.sim.served_timing.BusTiming`):
+    wire time from the bus's line settings, each drive's turnaround from its profile, the bus's
+    ``adapter_latency`` (the medium's default where it sets none, as in process) and ``timing`` (what ``joints sim serve`` holds requests and replies for)."""
+    from joints.sim import served_timing as st
+
+    out: dict[str, Any] = {}
+    for name, b in cfg.buses.items():
+        if b.backend != "sim":
+            continue
+        proto = registry.protocol(b.protocol, key=f"buses.{name}.protocol")
+        turnarounds: dict[int, float] = {}
+        for jname, j in cfg.joints.items():
+            if j.bus == name:
+                prof = registry.family(j.device, key=f"joints.{jname}.device").config_profile(j)
+                turnarounds[j.address] = max(turnarounds.get(j.address, 0.0), float(prof.turnaround))
+        latency = registry.adapter_latency(b)  # as in process: the medium's default where the bus sets none
+        ideal = b.timing == "ideal"
+        if proto.medium == "can":
+            out[name] = st.BusTiming.can(bitrate=b.bitrate, adapter_latency=latency, turnarounds=turnarounds,
+                                         ideal=ideal)
+        else:
+            out[name] = st.BusTiming.serial(baudrate=b.baudrate, parity=b.parity, stopbits=b.stopbits,
+                                            rtu=proto.silence, adapter_latency=latency, turnarounds=turnarounds,
+                                            ideal=ideal)
+    return out
+
+
 def open_sim(cfg: RigConfig) -> Rig:
     """Build the sim backend: world + emulated drives + in-process links, same drivers as hardware."""
     world = sim_world(cfg)
@@ -513,8 +544,9 @@ def open_mixed(cfg: RigConfig) -> Rig:
     """A rig with hardware and simulated buses (see :class:`joints.sim.pacing.MixedClock`).
 
     The simulated buses are in-process twins in one world; the hardware buses' joints are the
-    world's measured joints: whenever the rig sleeps the world catches up with the wall clock and
-    the real joints' measured positions and velocities drive their MuJoCo joints (kinematically),
+    world's measured joints: at every transaction (and while the rig sleeps) the world catches up
+    with the wall clock and the real joints' measured positions and velocities drive their MuJoCo
+    joints (prescribed motion),
     so the simulated joints feel them through the model. The real joints do not feel the
     simulated ones (no force goes back to hardware).
     """
@@ -523,7 +555,8 @@ def open_mixed(cfg: RigConfig) -> Rig:
     world = sim_world(cfg)
     clock = MixedClock(world, period=MIXED_REFRESH)
     sim_buses = [name for name, b in cfg.buses.items() if b.backend == "sim"]
-    transports = {name: world.transport(name) for name in sim_buses}
+    # the timed lines wait on the mixed clock (the wall clock), not the world's own: the world follows it
+    transports = {name: world.bus_specs[name].transport(world.buses[name], clock=clock) for name in sim_buses}
     peers = ({name: world.buses[name] for name in sim_buses
               if registry.protocol(cfg.buses[name].protocol).direct} if cfg.sim.direct else None)
     rig = build(cfg, transports=transports, clock=clock, world=world, peers=peers)
@@ -531,7 +564,7 @@ def open_mixed(cfg: RigConfig) -> Rig:
     last = [-math.inf]
 
     def refresh() -> None:
-        now = clock.now()
+        now = clock.wall()
         if now - last[0] < MIXED_REFRESH:
             return
         last[0] = now
@@ -545,5 +578,13 @@ def open_mixed(cfg: RigConfig) -> Rig:
                     continue
             world.set_measured(name, (s.position - j.offset) * j.direction, s.velocity * j.direction, s.time)
 
+    def feed() -> None:
+        """The real joints' latest states (whatever the host read last) to the world: no bus traffic."""
+        for name, j in measured:
+            s = j.last_state
+            if s is not None:
+                world.set_measured(name, (s.position - j.offset) * j.direction, s.velocity * j.direction, s.time)
+
     clock.refresh = refresh
+    clock.feed = feed
     return rig

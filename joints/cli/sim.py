@@ -1,7 +1,9 @@
 """``joints sim serve`` and ``joints sim view``: the twins of a config, served in real time for other programs.
 
 Rule: serial buses become pseudo-terminals, CAN buses python-can channels that never reach a real
-bus (:mod:`joints.sim.can_serve`). One JSON line per bus on stdout says where each one is. While
+bus (:mod:`joints.sim.can_serve`). One JSON line per bus on stdout says where each one is. Replies
+leave after the time the real bus would take (wire time, the drive's turnaround, the bus's
+``adapter_latency``; :mod:`joints.sim.served_timing`; ``timing = "ideal"``: at once). While
 serving, a twin can be power-cycled (``--control``: commands on stdin; SIGUSR1: every twin), which
 is what a drive does when its supply is switched off and on. Everything that touches the world runs
 in the serving loop (:func:`joints.sim.serve.serve` ``tick``). ``sim view`` serves the same way
@@ -92,6 +94,9 @@ def hardware_config(cfg_path: Path, lines: Mapping[str, Mapping[str, Any]]) -> s
                 b["udp_port"] = line["udp_port"]
             else:
                 b.pop("udp_port", None)
+    overlay = data.get("timing_overlay")
+    if isinstance(overlay, str) and not Path(overlay).is_absolute() and (cfg_path.parent / overlay).exists():
+        data["timing_overlay"] = str((cfg_path.parent / overlay).resolve())  # the file is written elsewhere
     sim = data.get("sim")
     if isinstance(sim, dict) and "model" in sim:
         model = Path(str(sim["model"]))
@@ -183,7 +188,7 @@ def launch_viewer(world: Any) -> Any:
 
 def serve_config(args: argparse.Namespace, *, view: bool = False) -> int:
     from joints.config import load
-    from joints.rig import sim_world
+    from joints.rig import served_timing, sim_world
     from joints.sim.serve import serve
 
     cfg = load(args.config, backend="sim")
@@ -219,7 +224,7 @@ def serve_config(args: argparse.Namespace, *, view: bool = False) -> int:
     try:
         serve(world, serial, can_buses=cans, out=sys.stdout, stop=stop, on_ready=ready,
               realtime_factor=args.realtime_factor, log=_frame_log(time.monotonic()) if args.verbose else None,
-              tick=tick, links=links)
+              tick=tick, links=links, timing=served_timing(cfg))
     finally:
         if usr1 is not None and before is not None:
             signal.signal(usr1, before)

@@ -37,6 +37,13 @@ class Units:
         return Units(rad, rad, current_unit, torque_constant)
 
 
+def sampled_at(sent: float, received: float) -> float:
+    """When a status read between ``sent`` (before its request) and ``received`` (after its reply) was
+    sampled: the drive samples after the request has arrived and before it answers, an instant the
+    host cannot see; the middle of the transaction is off by at most half of it and lies inside it."""
+    return 0.5 * (sent + received)
+
+
 @dataclass(frozen=True, slots=True)
 class RawState:
     """One status snapshot in device units (what the drive reports)."""
@@ -48,7 +55,7 @@ class RawState:
     enabled: bool
     moving: bool
     fault: int  #: device error code, 0 = none
-    time: float  #: clock time of the read
+    time: float  #: clock time of the sample: the middle of its transaction (:func:`sampled_at`)
     extra: Mapping[str, int] = field(default_factory=dict)
 
 

@@ -27,7 +27,7 @@ from joints.devices.erob.registers import (
 )
 from joints.devices.faults import Fault
 from joints.drivers.access import ParamAccess
-from joints.drivers.base import JointDriver, RawState, Units
+from joints.drivers.base import JointDriver, RawState, Units, sampled_at
 from joints.errors import ConfirmationRequired, DeviceFault, OutcomeUnknown, StateError
 
 #: The manual: "After issuing the motor enable command, please wait for 500ms before issuing the
@@ -340,8 +340,11 @@ class ErobDriver(JointDriver):
 
     # -- status -----------------------------------------------------------------------------
     def state(self) -> RawState:
-        """The drive's status in as few transactions as the protocol allows (Modbus: ONE FC03)."""
-        return self.state_from(self.access.read_many(STATUS_NAMES), self.clock.now())
+        """The drive's status in as few transactions as the protocol allows (Modbus: ONE FC03), stamped at the
+        middle of its transaction (the drive sampled it between request and reply: :func:`sampled_at`)."""
+        t0 = self.clock.now()
+        v = self.access.read_many(STATUS_NAMES)
+        return self.state_from(v, sampled_at(t0, self.clock.now()))
 
     def state_from(self, v: Mapping[str, int], t: float) -> RawState:
         """The state from status values read at ``t`` (at least error_code, motion_status,

@@ -47,7 +47,7 @@ from joints.devices.erob.can import EROB_CAN, CanMap, ModuleInfo, Reach, module_
 from joints.devices.erob.profiles import ErobProfile
 from joints.devices.erob.registers import COUNTS_PER_REV, OperationMode
 from joints.drivers.access import ParamAccess
-from joints.drivers.base import RawState
+from joints.drivers.base import RawState, sampled_at
 from joints.drivers.erob import CalibrationResult, ErobDriver
 from joints.errors import CommandError, ConfirmationRequired, DeviceRejected, RegisterError
 
@@ -251,7 +251,7 @@ class ErobCanDriver(ErobDriver):
         else:
             assert cached is not None
             v[TEMPERATURE] = cached[1]
-        return self.state_from(v, self.clock.now())
+        return self.state_from(v, sampled_at(t0, self.clock.now()))
 
     def forget(self) -> None:
         super().forget()

@@ -34,7 +34,7 @@ from joints.devices.quirks import firmware_profile
 from joints.devices.zlac import faults as zf
 from joints.devices.zlac import registers as zr
 from joints.drivers.access import ModbusAccess
-from joints.drivers.base import JointDriver, RawState, Units
+from joints.drivers.base import JointDriver, RawState, Units, sampled_at
 from joints.errors import CommandError, ConfigError, ConfirmationRequired, StateError
 from joints.link.modbus import ModbusLink
 
@@ -448,7 +448,9 @@ class ZlacChannelDriver(JointDriver):
 
     # -- status --
     def state(self) -> RawState:
-        return self.state_from(self.drive.read_status(), self.drive.clock.now())
+        t0 = self.drive.clock.now()
+        v = self.drive.read_status()
+        return self.state_from(v, sampled_at(t0, self.drive.clock.now()))
 
     def state_from(self, v: Mapping[str, int], t: float) -> RawState:
         """This wheel's part of a status block read by :meth:`ZlacDrive.read_status`.

@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from joints.errors import ConfigError, TransportError
+from joints.sim.served_timing import ServedLine
 
 __all__ = ["MAX_FRAMES_PER_S", "CanEndpoint", "FrameLog", "ServedCan", "client_bus", "plan"]
 
@@ -178,18 +179,40 @@ class CanEndpoint:
         self.frames_out = 0
         self.log = log
         self.name = name  #: the bus's name in the config (for the frame log)
+        #: the real bus's time (:mod:`joints.sim.served_timing`); None: answered at once
+        self.line: ServedLine | None = None
+        self.held: deque[tuple[float, Any]] = deque()  #: requests waiting to act (wall time, frame)
+        self.timed: deque[tuple[float, Any]] = deque()  #: answers waiting for the real bus (wall time, frame)
 
     def fileno(self) -> int:
         return int(self.transport.bus.fileno())
 
-    def receive(self) -> None:
-        """Every frame waiting: the device bus answers (queued to be sent, paced)."""
+    def receive(self, now: float = 0.0) -> None:
+        """Every frame waiting (read at wall time ``now``): the device bus answers (queued to be sent, paced);
+        with a :attr:`line`, each frame is held until the drive acts on it (:meth:`act`)."""
+        line = self.line
         while (frame := self.transport.recv(0.0)) is not None:
             self.frames_in += 1
             if self.log is not None:
                 self.log(self.name, "rx", bytes(frame.data), int(frame.arbitration_id))
+            if line is not None:
+                node = int(frame.arbitration_id) & 0x7F  # eRob CAN 0x640+id, CANopen COB-IDs: function + node
+                self.held.append((line.request(now, line.timing.frame_time(frame), node or None), frame))
+                continue
             self.out.extend(self.device_bus.on_frame(frame))
         self.collect()
+
+    def first_act(self) -> float | None:
+        """Wall time the first held request acts (None: none held)."""
+        return self.held[0][0] if self.held else None
+
+    def act(self, until: float) -> None:
+        """The held requests due by wall time ``until`` act; their answers wait for the real bus."""
+        line = self.line
+        while line is not None and self.held and self.held[0][0] <= until:
+            at, frame = self.held.popleft()
+            for answer in self.device_bus.on_frame(frame):
+                self.timed.append((line.reply(at, line.timing.frame_time(answer)), answer))
 
     def collect(self) -> None:
         """Queue what the twins sent by themselves on their medium since the last call."""
@@ -202,6 +225,8 @@ class CanEndpoint:
     def send_due(self, now: float) -> float | None:
         """Send what the pacing allows at wall time ``now``; the time of the next send, if any wait."""
         self.collect()
+        while self.timed and self.timed[0][0] <= now:
+            self.out.append(self.timed.popleft()[1])
         while self.out and now >= self.next_send:
             frame = self.out.popleft()
             if self.log is not None:
@@ -209,7 +234,9 @@ class CanEndpoint:
             self.transport.send(frame)
             self.frames_out += 1
             self.next_send = max(self.next_send, now) + self.spacing
-        return self.next_send if self.out else None
+        if self.out:
+            return self.next_send
+        return self.timed[0][0] if self.timed else None
 
     def close(self) -> None:
         self.transport.close()

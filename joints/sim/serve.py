@@ -10,6 +10,13 @@ CAN buses are python-can channels another process can open
 (:mod:`joints.sim.can_serve`: udp_multicast by default, a vcan device where the config names one;
 never a real bus). Stops cleanly on SIGINT/SIGTERM or when ``stop`` is set.
 
+Timing (``timing``: bus name -> :class:`~joints.sim.served_timing.BusTiming`, which ``joints sim
+serve`` builds from the config): a request is held until the real bus would have carried it and
+the drive turned around, executed then (a state read samples the world at that instant, on the
+world's clock), and its reply leaves the pty (or goes onto the CAN channel) when the real bus and
+the host's adapter would have delivered it (:mod:`joints.sim.served_timing`). A bus without an
+entry (or ``timing = "ideal"``) is answered as soon as the request is read.
+
 Options: ``realtime_factor`` runs the physics that many times faster (or slower) than the wall
 clock; ``log`` gets every frame in and out (bus, direction, bytes, CAN id); ``tick`` is called in
 the serving thread once per loop (power-cycling a twin, a viewer's sync: anything that touches the
@@ -24,12 +31,14 @@ import select
 import signal
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, TextIO
 
 from joints.errors import TransportError
 from joints.sim.can_serve import CanEndpoint, FrameLog, ServedCan
+from joints.sim.served_timing import BusTiming, ServedLine
 from joints.transports.loopback import UnsolicitedPeer
 from joints.transports.pty import PtyEndpoint
 
@@ -68,6 +77,7 @@ def serve(
     log: FrameLog | None = None,
     tick: Callable[[], None] | None = None,
     links: Mapping[str, str] | None = None,
+    timing: Mapping[str, BusTiming] | None = None,
 ) -> None:
     """Expose serial ``buses`` of ``world`` on ptys and ``can_buses`` on their channels; run in real time until stopped.
 
@@ -88,6 +98,8 @@ def serve(
                 made_links.append(_symlink(Path(links[name]), endpoints[name].port))
         for name, spec in (can_buses or {}).items():
             cans[name] = CanEndpoint(spec, world.buses[name], log=log, name=name)
+            if timing and name in timing and not timing[name].ideal:
+                cans[name].line = ServedLine(timing[name], scale=1.0 / realtime_factor)
         if install_signals and threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
                 previous[sig] = signal.signal(sig, lambda *_: stop.set())
@@ -101,7 +113,9 @@ def serve(
             for line in lines.values():
                 out.write(json.dumps(line) + "\n")
             out.flush()
-        _run(world, endpoints, cans, stop, realtime_factor, log, tick)
+        served = {name: ServedLine(timing[name], scale=1.0 / realtime_factor)
+                  for name in endpoints if timing and name in timing and not timing[name].ideal}
+        _run(world, endpoints, cans, stop, realtime_factor, log, tick, served)
     finally:
         for ep in endpoints.values():
             ep.close()
@@ -125,16 +139,49 @@ def _symlink(path: Path, target: str) -> Path:
 
 def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, CanEndpoint],
          stop: threading.Event, factor: float = 1.0, log: FrameLog | None = None,
-         tick: Callable[[], None] | None = None) -> None:
+         tick: Callable[[], None] | None = None, lines: Mapping[str, ServedLine] | None = None) -> None:
     by_fd: dict[int, tuple[str, Any]] = {ep.master: (name, ep) for name, ep in endpoints.items()}
     by_fd.update({ep.fileno(): (name, ep) for name, ep in cans.items()})
+    lines = lines or {}
     last_rx = {name: 0.0 for name in endpoints}
     pending = {name: False for name in endpoints}
+    #: timed serial buses: requests waiting to act (wall time, bytes), replies waiting to leave (wall time, bytes)
+    inbox: dict[str, deque[tuple[float, bytes]]] = {name: deque() for name in lines}
+    outbox: dict[str, deque[tuple[float, bytes]]] = {name: deque() for name in lines}
     t0_wall = time.monotonic()
     t0_sim = world.time
     dt = world.timestep
     next_send: float | None = None
     slices = _Slices()
+
+    def reply(name: str, ep: PtyEndpoint, data: bytes, at: float) -> None:
+        """Reply bytes the drives sent at wall time ``at``: out now, or when the real bus delivers them."""
+        if not data:
+            return
+        line = lines.get(name)
+        if line is not None:
+            outbox[name].append((line.reply(at, line.timing.bytes_time(len(data))), data))
+            return
+        if log is not None:
+            log(name, "tx", data, None)
+        ep.write(data)
+
+    def act(until: float) -> None:
+        """Execute the held requests due by wall time ``until`` (the world is at their instant)."""
+        for name, held in inbox.items():
+            bus = world.buses[name]
+            while held and held[0][0] <= until:
+                at, data = held.popleft()
+                reply(name, endpoints[name], bus.receive(data), at)
+                last_rx[name] = at
+                pending[name] = True
+        for can_ep in cans.values():
+            can_ep.act(until)
+
+    def sim_wall(t_sim: float) -> float:
+        """The wall time of simulated time ``t_sim``."""
+        return float(t0_wall + (t_sim - t0_sim) / factor)
+
     while not stop.is_set():
         if tick is not None:
             tick()
@@ -142,52 +189,63 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
                 t0_wall, t0_sim = time.monotonic(), world.time
         sim_behind = (time.monotonic() - t0_wall) * factor - (world.time - t0_sim)
         timeout = max(0.0, dt - sim_behind) if sim_behind < dt else 0.0
+        due = [q[0][0] for q in outbox.values() if q]
         if next_send is not None:
-            timeout = min(timeout, max(0.0, next_send - time.monotonic()))
+            due.append(next_send)
+        if due:
+            timeout = min(timeout, max(0.0, min(due) - time.monotonic()))
         ready, _, _ = select.select(list(by_fd), [], [], timeout)
         now = time.monotonic()
         for fd in ready:
             name, ep = by_fd[fd]
             if isinstance(ep, CanEndpoint):
-                ep.receive()
+                ep.receive(now)
                 continue
             data = ep.read()
             if data:
                 if log is not None:
                     log(name, "rx", data, None)
-                reply = world.buses[name].receive(data)
-                if reply:
-                    if log is not None:
-                        log(name, "tx", reply, None)
-                    ep.write(reply)
+                line = lines.get(name)
+                if line is not None:  # held until the drive has it and turned around
+                    inbox[name].append((line.request(now, line.timing.bytes_time(len(data)), data[0]), data))
+                    continue
+                reply(name, ep, world.buses[name].receive(data), now)
                 last_rx[name] = now
                 pending[name] = True
+        # requests whose instant the world has reached (to within half a substep) act now
+        act(sim_wall(world.time + dt / 2))
         for name, ep in endpoints.items():
-            if pending[name] and now - last_rx[name] > IDLE_FLUSH:
-                reply = world.buses[name].silence()
-                if reply:
-                    if log is not None:
-                        log(name, "tx", reply, None)
-                    ep.write(reply)
+            if pending[name] and now - last_rx[name] > IDLE_FLUSH and not inbox.get(name):
+                reply(name, ep, world.buses[name].silence(), now)
                 pending[name] = False
-        next_send = None
-        for can_ep in cans.values():
-            due = can_ep.send_due(now)
-            if due is not None:
-                next_send = due if next_send is None else min(next_send, due)
         behind = (now - t0_wall) * factor - (world.time - t0_sim)
         if behind >= dt:
             # catch up in slices of about SERVICE_PERIOD of wall clock: a request that arrives
-            # meanwhile waits for one slice at most, never for a backlog of physics
+            # meanwhile waits for one slice at most, never for a backlog of physics; a held
+            # request's instant is never stepped over
             n = slices.size(min(int(behind / dt), max(1, int(0.05 / dt))))
+            first = min((q[0][0] for q in inbox.values() if q), default=None)
+            first = min((t for t in (first, *(c.first_act() for c in cans.values())) if t is not None),
+                        default=None)
+            if first is not None:
+                n = max(1, min(n, round(((first - t0_wall) * factor - (world.time - t0_sim)) / dt)))
             started = time.monotonic()
             world.step(n)
             slices.measured(n, time.monotonic() - started)
+            act(sim_wall(world.time + dt / 2))
             for name, ep in endpoints.items():
                 bus = world.buses[name]
                 if isinstance(bus, UnsolicitedPeer):
-                    data = bus.take_unsolicited()
-                    if data:
-                        if log is not None:
-                            log(name, "tx", data, None)
-                        ep.write(data)
+                    reply(name, ep, bus.take_unsolicited(), time.monotonic())
+        now = time.monotonic()
+        for name, waiting in outbox.items():
+            while waiting and waiting[0][0] <= now:
+                data = waiting.popleft()[1]
+                if log is not None:
+                    log(name, "tx", data, None)
+                endpoints[name].write(data)
+        next_send = None
+        for can_ep in cans.values():
+            due_at = can_ep.send_due(now)
+            if due_at is not None:
+                next_send = due_at if next_send is None else min(next_send, due_at)

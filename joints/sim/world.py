@@ -9,7 +9,10 @@ profile, not from the XML. Nothing here reads the wall clock.
 Measured joints (a mixed rig's real joints, ``kinematic``): the latest measurement of position
 and velocity is written into the joint after every substep (extrapolated at the measured velocity
 for at most :data:`KINEMATIC_HORIZON`), so the emulated joints feel the real ones through the
-model - their motion, not the forces the emulated ones exert back on them.
+model - their motion, not the forces the emulated ones exert back on them. During a substep a
+measured joint is prescribed, not free: its armature is :data:`KINEMATIC_ARMATURE` (and it has no
+damping or friction), so no force of the model accelerates it and it moves on at its measured
+velocity while the emulated joints are integrated against that motion.
 
 Joints: a hinge is driven directly (joint angle = motor angle). A slide is driven through a lead
 screw: its drive's ``lead`` [m per motor turn] gives the ratio r = 2 pi / lead [rad per m]; the
@@ -38,6 +41,9 @@ from joints.sim import kernel, stepping
 
 #: s a measured joint's last measurement is extrapolated at its velocity (then it is held)
 KINEMATIC_HORIZON = 0.05
+#: kg*m^2 (kg on a slide) of armature that makes a measured joint prescribed: any force the model puts
+#: on it (1e3 N*m) accelerates it by 1e-6 rad/s^2
+KINEMATIC_ARMATURE = 1e9
 
 
 def _mujoco() -> Any:
@@ -337,6 +343,10 @@ class World:
             if name in self.joints:
                 raise ConfigError(f"joint {name!r} is both emulated and measured", key=f"joints.{name}")
             self.kinematic[name] = (int(self.model.jnt_qposadr[jid]), int(self.model.jnt_dofadr[jid]))
+            dof = self.kinematic[name][1]
+            for what, value in (("armature", KINEMATIC_ARMATURE), ("frictionloss", 0.0), ("damping", 0.0)):
+                getattr(self.model, f"dof_{what}")[dof] = value  # prescribed motion (module docstring)
+                self._nominal[what][dof] = value
         #: the table of the drives' kernel rows this world is stepped with (shared with the worlds
         #: it is batched with: :func:`advance_together`), and this world's index in it
         self.group = stepping.Group([self], self.compiled)

@@ -171,3 +171,72 @@ def test_erob_arm_reach_runs_on_a_mixed_rig(served_base: str) -> None:
         assert np.allclose(obs[:3], [0.6, -0.2, 0.7], atol=0.05)  # real and simulated joints got there
     finally:
         env.close()
+
+
+def test_measured_joints_are_prescribed_during_a_substep(no_env: Any) -> None:
+    """A spinning base (measured) with the free arm lifting: no force of the model accelerates the base within a
+    substep (it is prescribed), where a free base would be sped up by the arm (1.5 rad/s^2 here)."""
+    pytest.importorskip("mujoco")
+    from joints.rig import sim_world
+
+    world = sim_world(parse(mixed()))
+    _qa, da = world.kinematic["joint1"]
+    for name in ("joint2", "joint3"):
+        world.drives[name].brake_released = True
+    world.set_joint_positions({"joint2": -0.5, "joint3": 1.0})
+    worst = 0.0
+    for _ in range(100):
+        t = world.time
+        world.set_measured("joint1", 6.0 * t, 6.0, t)
+        world.advance(0.001)
+        worst = max(worst, abs(float(world.data.qacc[da])))
+    assert worst < 1e-6, worst
+    world.restore()  # perturbations come back to the prescribed joint, not to a free one
+    assert world.model.dof_armature[da] == world._nominal["armature"][da] > 1e6
+
+
+def test_mixed_clock_warns_when_physics_falls_behind(monkeypatch: pytest.MonkeyPatch,
+                                                     caplog: pytest.LogCaptureFixture) -> None:
+    """A world whose physics takes twice real time: the lag after each catch-up grows; warned once."""
+    from joints.sim import pacing
+
+    wall = [100.0]
+    monkeypatch.setattr(pacing.time, "monotonic", lambda: wall[0])
+
+    class SlowWorld:
+        time = 0.0
+
+        def advance(self, seconds: float) -> None:
+            self.time += seconds
+            wall[0] += 2 * seconds  # physics at half real time
+
+    world = SlowWorld()
+    clock = pacing.MixedClock(world)
+    wall[0] += 0.01
+    with caplog.at_level("WARNING", logger="joints"):
+        for _ in range(8):
+            clock.now()
+    assert clock.max_lag > 0.05
+    assert [r.message for r in caplog.records if "behind real time" in r.message][:1] and sum(
+        "behind real time" in r.message for r in caplog.records) == 1
+
+
+def test_a_mixed_rig_whose_loop_never_sleeps_sees_its_simulated_joints_move(served_base: str) -> None:
+    import time
+
+    import joints
+
+    with joints.open(mixed(served_base)) as rig:
+        assert rig.backend == "mixed"
+        arm = rig.joints["joint2"]
+        arm.enable()
+        before = rig.read_states()["joint2"].position
+        arm.move_to(before + 0.3, velocity=1.0, acceleration=5.0, deceleration=5.0)
+        t0 = time.monotonic()
+        n = 0
+        while time.monotonic() - t0 < 1.0:  # talk, never sleep: the real base and the simulated arm
+            states = rig.read_states()
+            n += 1
+        assert n > 5
+        assert states["joint2"].position == pytest.approx(before + 0.3, abs=0.05)
+        assert rig.world.joint_position("joint2") == pytest.approx(before + 0.3, abs=0.05)
