@@ -91,6 +91,25 @@ _FLOAT_FIELDS = (
 # Friction may be switched off (0) for an ideal simulation, the delay is 0 unless identified;
 # everything else must be > 0.
 _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction", "command_delay")
+# the sensor models (joints.sim.sensors): 0 switches a term off
+_SENSOR_FIELDS = ("velocity_filter", "velocity_noise", "position_noise", "current_noise", "current_resolution",
+                  "sample_jitter")
+_FLOAT_FIELDS = (*_FLOAT_FIELDS, *_SENSOR_FIELDS)
+_NON_NEGATIVE_FIELDS = (*_NON_NEGATIVE_FIELDS, *_SENSOR_FIELDS)
+_SENSOR_SOURCES = {
+    "velocity_filter": ("EST: ZeroErr publishes no speed estimator; the status speed is taken as the output "
+                        "encoder's difference over one 1 kHz speed-loop period, a 1 ms moving average, modelled "
+                        "as a first-order filter of the same group delay (0.5 ms). Uncertain by ~3x"),
+    "velocity_noise": ("EST: one count of the 19-bit output encoder (2 pi / 524288 rad) differentiated over 1 ms "
+                       "is 0.012 rad/s; two independent quantisation errors give std 0.012 / sqrt(6) = "
+                       "0.0049 rad/s. Uncertain by ~2x (a longer estimator window lowers it)"),
+    "position_noise": "EST: 0 - an absolute encoder; the 19-bit quantisation is the register's",
+    "current_noise": ("EST: 20 mA std, a 12-bit phase-current ADC over a ~+-40 A range (1 LSB = 20 mA) with "
+                      "PWM ripple; not published. Uncertain by ~3x"),
+    "current_resolution": "EST: 10 mA measurement step (the register's unit is 1 mA); not published",
+    "sample_jitter": ("EST: status values refreshed on a 4 kHz drive cycle, so a read returns a value up to "
+                      "0.25 ms old; not published. Uncertain by ~4x"),
+}
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,6 +132,13 @@ class ErobProfile:
     viscous_friction: float  #: N*m*s/rad at the output
     #: s from a motion command's arrival to the drive acting on it (the twin's; ``joints identify``)
     command_delay: float = 0.0
+    # -- sensors as the drive reports them (joints.sim.sensors; sources: _SENSOR_SOURCES) --
+    velocity_filter: float = 0.0005  #: s, first-order filter of the reported speed
+    velocity_noise: float = 0.0049  #: rad/s, std of the reported speed's noise
+    position_noise: float = 0.0  #: rad, std beyond the encoder's counts
+    current_noise: float = 0.02  #: A, std of the measured current
+    current_resolution: float = 0.01  #: A, step of the current measurement
+    sample_jitter: float = 0.00025  #: s, age of a status value: uniform in [0, this]
     sources: Mapping[str, str] = field(default_factory=_empty_sources, compare=False, hash=False)
 
     def __post_init__(self) -> None:
@@ -358,6 +384,7 @@ def _build(size: int, ratio: int) -> ErobProfile:
         "rotor_inertia": j_in_src,
         "coulomb_friction": coulomb_src,
         "viscous_friction": viscous_src,
+        **_SENSOR_SOURCES,
         "command_delay": ("EST: 0 - the twin acts on a command at its next substep; a real drive's delay comes "
                           "from `joints identify` (profile overlay)"),
     }

@@ -79,6 +79,13 @@ class MksProfile:
     motor_mass: float  #: kg
     stall_error: float  #: rad, locked-rotor protection threshold
     stall_time: float  #: s, how long the error must last
+    # -- sensors as the drive reports them (joints.sim.sensors; sources: _SENSOR_SOURCES) --
+    velocity_filter: float = 0.005  #: s, first-order filter of the reported speed
+    velocity_noise: float = 0.031  #: rad/s, std of the reported speed's noise
+    position_noise: float = 0.0  #: rad, std beyond the encoder's counts
+    current_noise: float = 0.0  #: A (the drive reports no current)
+    current_resolution: float = 0.0  #: A (the drive reports no current)
+    sample_jitter: float = 0.0005  #: s, age of a status value: uniform in [0, this]
     sources: Mapping[str, str] = field(default_factory=_empty_sources, compare=False, hash=False)
 
     def __post_init__(self) -> None:
@@ -139,9 +146,25 @@ _FLOAT_FIELDS = (
     "rotor_inertia", "coulomb_friction", "viscous_friction", "motor_mass", "stall_error", "stall_time",
 )
 _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction")
+# the sensor models (joints.sim.sensors): 0 switches a term off
+_SENSOR_FIELDS = ("velocity_filter", "velocity_noise", "position_noise", "current_noise", "current_resolution",
+                  "sample_jitter")
+_FLOAT_FIELDS = (*_FLOAT_FIELDS, *_SENSOR_FIELDS)
+_NON_NEGATIVE_FIELDS = (*_NON_NEGATIVE_FIELDS, *_SENSOR_FIELDS)
+_SENSOR_SOURCES = {
+    "velocity_filter": ("EST: the manual states no speed estimator; the MT6816 (16384 counts) differentiated at "
+                        "1 kHz steps by 0.38 rad/s, so the drive must average: a 5 ms window assumed"),
+    "velocity_noise": ("EST: one count (2 pi / 16384 rad) over 5 ms is 0.077 rad/s; std 0.077 / sqrt(6) = "
+                       "0.031 rad/s (the speed register's 1 r/min unit quantises on top). Uncertain by ~3x"),
+    "position_noise": "EST: 0 - the encoder's quantisation is the register's",
+    "current_noise": "PUB: the drive reports no current (MKS-man: no current read command); 0",
+    "current_resolution": "PUB: the drive reports no current; 0",
+    "sample_jitter": "EST: status values refreshed every 0.5 ms; not published",
+}
 _OVERRIDABLE: tuple[str, ...] = tuple(f.name for f in fields(MksProfile) if f.name not in ("model", "sources"))
 
 _COMMON_SOURCES = {
+    **_SENSOR_SOURCES,
     "full_steps": "PUB 1.8 degree motors only (facts 3, MKS-man §14)",
     "encoder_counts": "PUB MT6816 14-bit, 16384 counts/rev (facts 3, MKS-man §1.3)",
     "bus_voltage": "PUB supply 12-24 V (facts 3); 24 V assumed (the 57D's MOSFETs are 30 V parts: stay <= 24 V)",

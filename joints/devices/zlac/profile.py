@@ -104,6 +104,13 @@ class HubMotorProfile:
     load_inertia: float = 0.129  #: kg*m^2 (EST), vehicle inertia per wheel the gains assume
     coulomb_friction: float = 0.2  #: N*m (EST)
     viscous_friction: float = 0.003  #: N*m*s/rad (EST)
+    # -- sensors as the drive reports them (joints.sim.sensors; sources: _SENSOR_SOURCES) --
+    velocity_filter: float = 0.01  #: s, first-order filter of the reported velocity
+    velocity_noise: float = 0.063  #: rad/s, std of the reported velocity's noise
+    position_noise: float = 0.0  #: rad, std beyond the encoder's counts
+    current_noise: float = 0.05  #: A, std of the measured current
+    current_resolution: float = 0.0  #: A, step of the current measurement (0: the register's 0.1 A)
+    sample_jitter: float = 0.001  #: s, age of a status value: uniform in [0, this]
     sources: Mapping[str, str] = field(default_factory=_sources, compare=False, hash=False)
 
     def __post_init__(self) -> None:
@@ -236,6 +243,22 @@ _FLOAT_FIELDS = (
 )
 # Friction and the assumed vehicle share may be 0 (ideal simulation / a wheel in the air).
 _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction", "load_inertia")
+# the sensor models (joints.sim.sensors): 0 switches a term off
+_SENSOR_FIELDS = ("velocity_filter", "velocity_noise", "position_noise", "current_noise", "current_resolution",
+                  "sample_jitter")
+_FLOAT_FIELDS = (*_FLOAT_FIELDS, *_SENSOR_FIELDS)
+_NON_NEGATIVE_FIELDS = (*_NON_NEGATIVE_FIELDS, *_SENSOR_FIELDS)
+_SENSOR_SOURCES = {
+    "velocity_filter": ("EST: the manual states no speed estimator; a 4096-count encoder differentiated at 1 kHz "
+                        "steps by 1.5 rad/s, so the drive must average: a 10 ms window assumed. Uncertain by ~3x"),
+    "velocity_noise": ("EST: one count (2 pi / 4096 rad) over the 10 ms window is 0.153 rad/s; two independent "
+                       "quantisation errors give std 0.153 / sqrt(6) = 0.063 rad/s. Uncertain by ~3x"),
+    "position_noise": "EST: 0 - the encoder's quantisation is the register's",
+    "current_noise": "EST: 50 mA std on a 30 A-range current measurement; not published. Uncertain by ~3x",
+    "current_resolution": "EST: 0 - the register's 0.1 A unit is coarser than the measurement",
+    "sample_jitter": ("EST: status values refreshed every 1 ms, so a read returns a value up to 1 ms old; "
+                      "not published"),
+}
 
 _SOURCES: dict[str, str] = {
     "model": "PUB ZLLG80ASM250 8-inch hub servo motor (facts 2.2)",
@@ -269,6 +292,7 @@ _SOURCES: dict[str, str] = {
     "load_inertia": "EST half of a 25 kg base at the wheel radius: 12.5 * 0.1016^2",
     "coulomb_friction": "EST 0.2 N*m from the 80.7 % max-efficiency point (module docstring)",
     "viscous_friction": "EST 0.003 N*m*s/rad from the 80.7 % max-efficiency point (module docstring)",
+    **_SENSOR_SOURCES,
 }
 
 _OVERRIDABLE: tuple[str, ...] = tuple(f.name for f in fields(HubMotorProfile) if f.name != "sources")
