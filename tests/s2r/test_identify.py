@@ -18,6 +18,7 @@ import joints
 from joints.config import load, parse
 from joints.devices.erob.profiles import PROFILES
 from joints.errors import ConfigError, LimitError
+from joints.sim.sensors import FIELDS
 from joints.s2r.identify import (
     Excitation,
     Identification,
@@ -41,9 +42,15 @@ PERTURB = {"armature": 1.4, "coulomb_friction": 2.0, "viscous_friction": 1.5, "t
 NOMINAL = PROFILES["eRob80H100"]
 
 
+#: ideal sensors (joints.sim.sensors): these tests check the fit's consistency on exact readings; the
+#: drives' own sensors are judged in test_identify_real.py
+IDEAL = {name: 0.0 for name in FIELDS}
+
+
 def pendulum(**joint: Any) -> dict[str, Any]:
     data: dict[str, Any] = tomllib.loads(PENDULUM.read_text())
     data["joints"]["joint1"].update(joint)
+    data["joints"]["joint1"]["profile"] = {**IDEAL, **joint.get("profile", {})}
     return data
 
 
@@ -77,7 +84,7 @@ def test_identification_recovers_every_perturbation(identified: tuple[Identifica
     assert abs(ident.command_delay - 0.002) < 2e-4
     assert ident.gravity_loaded and ident.mode == "torque"
     assert ident.period == pytest.approx(0.001)  # a sample every physics substep, lockstep
-    assert ident.residual < 0.01 and ident.used > 200
+    assert ident.residual < 0.01 and ident.used > 40  # 100 ms windows where the joint slides
     assert all(s < 0.01 for s in ident.std.values()), ident.std
 
 
@@ -92,7 +99,8 @@ def test_unperturbed_twin_identifies_as_its_profile() -> None:
     assert ident.viscous_friction == pytest.approx(NOMINAL.viscous_friction, rel=0.01)
     assert ident.torque_scale == pytest.approx(1.0, rel=0.01)
     assert ident.command_delay is not None and ident.command_delay < 2e-4
-    assert ident.delay == pytest.approx(0.001, abs=2e-4)  # the twin's own one-substep feedback latency
+    # the twin's own feedback latency as positions show it: half a substep (semi-implicit Euler)
+    assert ident.delay == pytest.approx(0.0005, abs=2e-4)
 
 
 def chirp_currents(profile: Any, seconds: float = 8.0, dt: float = 0.001) -> list[int]:
