@@ -642,8 +642,8 @@ class World:
         off the fused compiled path)."""
         for i, b in enumerate(self._bound):
             if b.name == name:
-                step, *rest = self._bind[i]
-                self._bind[i] = (wrap(step), *rest)
+                step, qa, da, aid, r = self._bind[i]
+                self._bind[i] = (wrap(step), qa, da, aid, r)  # type: ignore[assignment]
                 return
         raise KeyError(f"no simulated joint {name!r} (have {sorted(self.joints)})")
 

@@ -18,7 +18,6 @@ import joints
 from joints.config import load, parse
 from joints.devices.erob.profiles import PROFILES
 from joints.errors import ConfigError, LimitError
-from joints.sim.sensors import FIELDS
 from joints.s2r.identify import (
     Excitation,
     Identification,
@@ -27,6 +26,7 @@ from joints.s2r.identify import (
     model_terms,
     write_overlay,
 )
+from joints.sim.sensors import FIELDS
 
 if sys.version_info >= (3, 11):
     import tomllib

@@ -21,7 +21,7 @@ from joints.s2r.shadow import Shadow
 from joints.sim import sensors
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from reality import NOMINAL, PERTURBED, REALITIES, config, open_real  # noqa: E402
+from reality import PERTURBED, REALITIES, config, open_real
 
 if sys.version_info >= (3, 11):
     import tomllib

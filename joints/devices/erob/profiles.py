@@ -94,8 +94,8 @@ _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction", "command_delay")
 # the sensor models (joints.sim.sensors): 0 switches a term off
 _SENSOR_FIELDS = ("velocity_filter", "velocity_noise", "position_noise", "current_noise", "current_resolution",
                   "sample_jitter")
-_FLOAT_FIELDS = (*_FLOAT_FIELDS, *_SENSOR_FIELDS)
-_NON_NEGATIVE_FIELDS = (*_NON_NEGATIVE_FIELDS, *_SENSOR_FIELDS)
+_FLOAT_FIELDS: tuple[str, ...] = (*_FLOAT_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
+_NON_NEGATIVE_FIELDS: tuple[str, ...] = (*_NON_NEGATIVE_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
 _SENSOR_SOURCES = {
     "velocity_filter": ("EST: ZeroErr publishes no speed estimator; the status speed is taken as the output "
                         "encoder's difference over one 1 kHz speed-loop period, a 1 ms moving average, modelled "

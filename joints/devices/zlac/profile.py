@@ -246,8 +246,8 @@ _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction", "load_inertia")
 # the sensor models (joints.sim.sensors): 0 switches a term off
 _SENSOR_FIELDS = ("velocity_filter", "velocity_noise", "position_noise", "current_noise", "current_resolution",
                   "sample_jitter")
-_FLOAT_FIELDS = (*_FLOAT_FIELDS, *_SENSOR_FIELDS)
-_NON_NEGATIVE_FIELDS = (*_NON_NEGATIVE_FIELDS, *_SENSOR_FIELDS)
+_FLOAT_FIELDS: tuple[str, ...] = (*_FLOAT_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
+_NON_NEGATIVE_FIELDS: tuple[str, ...] = (*_NON_NEGATIVE_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
 _SENSOR_SOURCES = {
     "velocity_filter": ("EST: the manual states no speed estimator; a 4096-count encoder differentiated at 1 kHz "
                         "steps by 1.5 rad/s, so the drive must average: a 10 ms window assumed. Uncertain by ~3x"),
