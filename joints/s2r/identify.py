@@ -242,7 +242,7 @@ class ModelTerms:
 #: refusal thresholds (docs/identification.md): the held-out equation error over the RMS torque impulse,
 #: and each parameter's relative uncertainty (the larger of the regression's and the held-out folds' spread)
 MAX_VALIDATION = 0.15
-MAX_UNCERTAINTY: Mapping[str, float] = {"armature": 0.05, "torque_scale": 0.05, "viscous_friction": 0.10,
+MAX_UNCERTAINTY: Mapping[str, float] = {"armature": 0.10, "torque_scale": 0.10, "viscous_friction": 0.15,
                                         "coulomb_friction": 0.15}
 #: s of delay uncertainty above which the fit is refused
 MAX_DELAY_UNCERTAINTY = 0.001
