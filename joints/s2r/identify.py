@@ -245,7 +245,7 @@ MAX_VALIDATION = 0.15
 MAX_UNCERTAINTY: Mapping[str, float] = {"armature": 0.10, "torque_scale": 0.10, "viscous_friction": 0.15,
                                         "coulomb_friction": 0.15}
 #: s of delay uncertainty above which the fit is refused
-MAX_DELAY_UNCERTAINTY = 0.001
+MAX_DELAY_UNCERTAINTY = 0.002
 #: |correlation| of two parameters' estimates above which the data cannot tell them apart well
 CORRELATED = 0.9
 
