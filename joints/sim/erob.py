@@ -255,7 +255,7 @@ class ErobFirmware(Firmware):
         self.command_delay = profile.command_delay
         self.gen = _Generator(self)
         #: the drive's sensors (joints.sim.sensors): what a read of position, speed and current reports
-        self.sensor = Sensor(model_of(profile), f"erob:{address}")
+        self.sensor = Sensor(model_of(profile), f"erob:{address}", COUNTS_PER_RAD)
         self.sensors = (self.sensor,)
         self.computed.update({
             "actual_position": self._sensed_counts,
@@ -409,6 +409,7 @@ class ErobFirmware(Firmware):
         pos = self.pos
         super().power_cycle()
         self._reset_state()
+        self.sensor.reseed()  # the sensors' noise restarts with the drive: a world reset is reproducible
         # absolute encoder: a single-turn module keeps only the angle within one turn
         s = self._row
         s[K.POS] = pos if self.multi_turn else pos % COUNTS_PER_REV
@@ -531,7 +532,7 @@ class ErobFirmware(Firmware):
         get = self._get
         if self.sensor.model.ideal:
             return round(get(K.VEL))
-        return round(self.sensor.velocity(get(K.TIME), get(K.VEL) / COUNTS_PER_RAD) * COUNTS_PER_RAD)
+        return round(self.sensor.velocity(get(K.POS) / COUNTS_PER_RAD, get(K.VEL) / COUNTS_PER_RAD) * COUNTS_PER_RAD)
 
     def _sensed_current(self) -> int:
         """``motor_current`` [mA] as the drive measures it."""

@@ -157,7 +157,7 @@ class MksFirmware(Firmware):
         self.power_on_values = dict(self.values)
         self.inertia = inertia if inertia is not None else profile.rotor_inertia  #: kg*m^2 at the shaft
         #: the drive's sensors (joints.sim.sensors): what a read of the encoder and the speed reports
-        self.sensor = Sensor(model_of(profile), f"mks:{address}")
+        self.sensor = Sensor(model_of(profile), f"mks:{address}", COUNTS / TAU)
         self.sensors = (self.sensor,)
         self.time = 0.0
         #: flash beyond the parameters
@@ -228,6 +228,7 @@ class MksFirmware(Firmware):
         """Power off/on: flash survives (settings, 0_Mode zero, saved speed mode), the rest restarts."""
         super().power_cycle()
         self._reset_state()
+        self.sensor.reseed()  # the sensors' noise restarts with the drive: a world reset is reproducible
 
     def _cache(self) -> None:
         v = self.values
@@ -495,7 +496,7 @@ class MksFirmware(Firmware):
     def _sensed_speed(self) -> float:
         """The drive's speed estimate [rad/s] (:mod:`joints.sim.sensors`)."""
         sensor = self.sensor
-        return self.qd if sensor.model.ideal else sensor.velocity(self.time, self.qd)
+        return self.qd if sensor.model.ideal else sensor.velocity(self.q, self.qd)
 
     def _switches(self) -> tuple[bool, bool]:
         low, high = self.end_stops

@@ -10,12 +10,15 @@ one generator per twin, seeded from the twin's identity (family, address) and th
 =====================  ===============================================================================
 profile field          what the drive does to a reported value
 =====================  ===============================================================================
-``velocity_filter``    s, time constant of the first-order filter of the drive's velocity estimate
-                       (updated at each read with the physics velocity held since the last one: exact
-                       for reads every substep, converging faster when reads are sparse)
-``velocity_noise``     rad/s, std of the velocity estimate's noise (encoder steps differentiated)
+``velocity_window``    s, the drive's velocity estimate: encoder counts moved over the last window,
+                       divided by it (the position ``window`` ago taken as ``q - v * window``): exactly
+                       0 at rest, quantisation noise of ~one count / window / sqrt(6) when moving,
+                       and the window's lag (half of it)
+``velocity_noise``     rad/s, std of further noise on the velocity estimate (0 for the drives: their
+                       noise is the quantisation; tests raise it)
 ``position_noise``     rad, std of noise on the position beyond the encoder's own quantisation
-``current_noise``      A, std of the current measurement's noise
+``current_noise``      A, std of the current measurement's noise (while current flows: a drive whose
+                       bridge is off reports 0)
 ``current_resolution`` A, step of the drive's current measurement (before the register's own unit)
 ``sample_jitter``      s, age of a reported status value: uniform in [0, sample_jitter] (the drive
                        samples on its own cycle, not when the request arrives); the position is
@@ -37,7 +40,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 #: the profile fields of a sensor model (each family's profile has them, with sources)
-FIELDS = ("velocity_filter", "velocity_noise", "position_noise", "current_noise", "current_resolution",
+FIELDS = ("velocity_window", "velocity_noise", "position_noise", "current_noise", "current_resolution",
           "sample_jitter")
 
 __all__ = ["FIELDS", "Sensor", "SensorModel", "ideal", "model_of", "scale", "seed", "sensors_of"]
@@ -47,7 +50,7 @@ __all__ = ["FIELDS", "Sensor", "SensorModel", "ideal", "model_of", "scale", "see
 class SensorModel:
     """The numbers of one drive's sensors (see the module docstring); all zero: an ideal sensor."""
 
-    velocity_filter: float = 0.0
+    velocity_window: float = 0.0
     velocity_noise: float = 0.0
     position_noise: float = 0.0
     current_noise: float = 0.0
@@ -68,6 +71,10 @@ class SensorModel:
                        current_noise=self.current_noise * factor)
 
 
+#: a model whose every read is exact
+IDEAL = SensorModel()
+
+
 
 
 def model_of(profile: Any) -> SensorModel:
@@ -82,20 +89,22 @@ def _seed(key: str, world_seed: int) -> int:
 class Sensor:
     """One drive's sensors: a model, its random stream and the velocity filter's state."""
 
-    def __init__(self, model: SensorModel, key: str) -> None:
+    def __init__(self, model: SensorModel, key: str, counts_per_rad: float) -> None:
         self.key = key  #: the twin's identity (family:address) the stream is seeded from
         self.nominal = model  #: the profile's model (:meth:`scale` acts on it)
         self.model = model
+        self.counts_per_rad = float(counts_per_rad)  #: the encoder the velocity is estimated from
+        self.world_seed = 0
         self.rng = random.Random(_seed(key, 0))
-        self._v = 0.0  #: the velocity filter's output [rad/s]
-        self._t = -math.inf  #: when the filter was last updated [s]
         self._age = 0.0  #: the sample age drawn for the present read [s]
         self._age_t = math.nan  #: the drive time it was drawn at
 
-    def reseed(self, world_seed: int) -> None:
-        """Restart the random stream from ``world_seed`` (and the filter from rest)."""
-        self.rng = random.Random(_seed(self.key, world_seed))
-        self._v, self._t, self._age_t = 0.0, -math.inf, math.nan
+    def reseed(self, world_seed: int | None = None) -> None:
+        """Restart the random stream from ``world_seed`` (None: the last one; a power cycle does this)."""
+        if world_seed is not None:
+            self.world_seed = int(world_seed)
+        self.rng = random.Random(_seed(self.key, self.world_seed))
+        self._age_t = math.nan
 
     def _sample_age(self, t: float) -> float:
         """The age of the values reported at drive time ``t`` (one draw per read time: position and
@@ -117,15 +126,13 @@ class Sensor:
             q += self.rng.gauss(0.0, m.position_noise)
         return q
 
-    def velocity(self, t: float, v: float) -> float:
-        """The drive's velocity estimate [rad/s] at time ``t`` of a joint moving at ``v``."""
+    def velocity(self, q: float, v: float) -> float:
+        """The drive's velocity estimate [rad/s] of a joint at ``q`` moving at ``v``."""
         m = self.model
-        if m.velocity_filter:
-            dt = t - self._t
-            if dt > 0:
-                self._v = v + (self._v - v) * math.exp(-dt / m.velocity_filter)
-                self._t = t
-            v = self._v
+        window = m.velocity_window
+        if window and v:
+            k = self.counts_per_rad
+            v = (math.floor(q * k) - math.floor((q - v * window) * k)) / (k * window)
         if m.velocity_noise:
             v += self.rng.gauss(0.0, m.velocity_noise)
         return v
@@ -133,7 +140,7 @@ class Sensor:
     def current(self, i: float) -> float:
         """The current [A] the drive measures when ``i`` flows."""
         m = self.model
-        if m.current_noise:
+        if m.current_noise and i:
             i += self.rng.gauss(0.0, m.current_noise)
         if m.current_resolution:
             i = m.current_resolution * round(i / m.current_resolution)

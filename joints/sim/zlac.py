@@ -291,7 +291,8 @@ class ZlacChannel:
         self.inertia = float(inertia)  #: J [kg*m^2] the velocity-loop gains are scaled with (tuned for)
         self.kt = drive.profile.torque_constant
         #: the channel's sensors (joints.sim.sensors): what a read of position, velocity and current reports
-        self.sensor = Sensor(model_of(drive.profile), f"zlac:{drive.values['rs485_node_id']}:{side}")
+        self.sensor = Sensor(model_of(drive.profile), f"zlac:{drive.values['rs485_node_id']}:{side}",
+                             4 * drive.profile.encoder_lines / TWO_PI)
         self.temperature = drive.ambient
         self.v_start = RPM  #: initial velocity [rad/s] (cached from 0x2043/0x2073)
         self.reset_power()
@@ -427,7 +428,7 @@ class ZlacChannel:
         """Actual velocity value [0.1 r/min]: the drive's estimate."""
         v = self._get(Z.QD)
         if not self.sensor.model.ideal:
-            v = self.sensor.velocity(self.drive.time, v)
+            v = self.sensor.velocity(self._get(Z.Q), v)
         return round(v / RPM * 10)
 
     def current_status(self) -> int:
@@ -677,6 +678,8 @@ class ZlacFirmware(Firmware):
         The incremental position counters restart at 0 at the wheels' present angle; a new
         ``rs485_node_id`` takes effect now.
         """
+        for sensor in self.sensors:  # the sensors' noise restarts with the drive: a world reset is reproducible
+            sensor.reseed()
         super().power_cycle()
         self.ignored.clear()
         self._power_on()

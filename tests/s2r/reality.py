@@ -153,3 +153,21 @@ def open_real(reality: Reality, *, seed: int = 0, effects: bool = True, noise: b
     rig = joints.open(config(**joint))
     make_real(rig.sim, reality, seed=seed, effects=effects, noise=noise)
     return rig
+
+
+def _serve(argv: list[str]) -> None:
+    """``python reality.py NAME SEED``: serve reality twin NAME (the last word of its name: M2, M6,
+    perturbation) on a pseudo-terminal in real time; prints ``{"bus", "port"}`` when ready."""
+    from joints.config import parse
+    from joints.rig import sim_world
+    from joints.sim.serve import serve
+
+    by_name = {r.name.split()[-1]: r for r in REALITIES}
+    reality = by_name[argv[0]]
+    world = sim_world(parse(config(), source=f"reality twin {reality.name}"))
+    make_real(world, reality, seed=int(argv[1]))
+    serve(world, ["rs485"], out=sys.stdout)
+
+
+if __name__ == "__main__":
+    _serve(sys.argv[1:])

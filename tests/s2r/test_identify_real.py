@@ -31,7 +31,7 @@ from joints.s2r.shadow import Shadow
 from joints.sim import sensors
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from reality import EROB80_100_M2, NOMINAL, PERTURBED, REALITIES, config, make_real, open_real
+from reality import EROB80_100_M2, NOMINAL, PERTURBED, REALITIES, config, open_real
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -274,35 +274,23 @@ def test_identification_over_the_pty_at_wall_clock_time() -> None:
     """The reality twin (b) served on a pseudo-terminal in real time (wall clock), identified through the
     serial port as on hardware: the parameters, not only the sampling period."""
     pytest.importorskip("serial")
-    import threading
-
-    from joints.config import parse
-    from joints.rig import sim_world
-    from joints.sim.serve import serve
+    import json
+    import subprocess
 
     reality = PERTURBED
-    world = sim_world(parse(config(), source="reality twin (b)"))
-    make_real(world, reality, seed=3)
-    stop = threading.Event()
-    ready: dict[str, Any] = {}
-    up = threading.Event()
-
-    def on_ready(lines: dict[str, Any]) -> None:
-        ready.update(lines)
-        up.set()
-
-    server = threading.Thread(target=serve, args=(world, ["rs485"]), daemon=True,
-                              kwargs={"stop": stop, "on_ready": on_ready, "install_signals": False})
-    server.start()
+    # a process of its own (as a real drive is): the served world does not share the host's interpreter
+    server = subprocess.Popen([sys.executable, str(Path(__file__).resolve().parent / "reality.py"),
+                               reality.name.split()[-1], "3"], stdout=subprocess.PIPE, text=True)
     try:
-        assert up.wait(30), "the served reality twin did not come up"
+        assert server.stdout is not None
+        line = json.loads(server.stdout.readline())
         cfg = config()
-        cfg["buses"]["rs485"]["port"] = ready["rs485"]["port"]
+        cfg["buses"]["rs485"]["port"] = line["port"]
         with joints.open(cfg, backend="hardware") as rig:
             got = identify(rig, "joint1", EXCITATION)
     finally:
-        stop.set()
-        server.join(10)
+        server.terminate()
+        server.wait(10)
     # the reference: the same estimator on the same reality twin's noise-free readings, sampled as over the pty
     ref_rig = open_real(reality, noise=False)
     try:

@@ -92,17 +92,15 @@ _FLOAT_FIELDS = (
 # everything else must be > 0.
 _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction", "command_delay")
 # the sensor models (joints.sim.sensors): 0 switches a term off
-_SENSOR_FIELDS = ("velocity_filter", "velocity_noise", "position_noise", "current_noise", "current_resolution",
+_SENSOR_FIELDS = ("velocity_window", "velocity_noise", "position_noise", "current_noise", "current_resolution",
                   "sample_jitter")
 _FLOAT_FIELDS: tuple[str, ...] = (*_FLOAT_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
 _NON_NEGATIVE_FIELDS: tuple[str, ...] = (*_NON_NEGATIVE_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
 _SENSOR_SOURCES = {
-    "velocity_filter": ("EST: ZeroErr publishes no speed estimator; the status speed is taken as the output "
-                        "encoder's difference over one 1 kHz speed-loop period, a 1 ms moving average, modelled "
-                        "as a first-order filter of the same group delay (0.5 ms). Uncertain by ~3x"),
-    "velocity_noise": ("EST: one count of the 19-bit output encoder (2 pi / 524288 rad) differentiated over 1 ms "
-                       "is 0.012 rad/s; two independent quantisation errors give std 0.012 / sqrt(6) = "
-                       "0.0049 rad/s. Uncertain by ~2x (a longer estimator window lowers it)"),
+    "velocity_window": ("EST: ZeroErr publishes no speed estimator; the status speed is taken as the 19-bit output "
+                        "encoder's difference over one 1 kHz speed-loop period: steps of 0.012 rad/s, quantisation "
+                        "noise ~0.0049 rad/s when moving, 0 at rest. Uncertain by ~3x"),
+    "velocity_noise": "EST: 0 - the estimate's noise is its quantisation (velocity_window)",
     "position_noise": "EST: 0 - an absolute encoder; the 19-bit quantisation is the register's",
     "current_noise": ("EST: 20 mA std, a 12-bit phase-current ADC over a ~+-40 A range (1 LSB = 20 mA) with "
                       "PWM ripple; not published. Uncertain by ~3x"),
@@ -133,8 +131,8 @@ class ErobProfile:
     #: s from a motion command's arrival to the drive acting on it (the twin's; ``joints identify``)
     command_delay: float = 0.0
     # -- sensors as the drive reports them (joints.sim.sensors; sources: _SENSOR_SOURCES) --
-    velocity_filter: float = 0.0005  #: s, first-order filter of the reported speed
-    velocity_noise: float = 0.0049  #: rad/s, std of the reported speed's noise
+    velocity_window: float = 0.001  #: s, the speed estimate: encoder counts over this window
+    velocity_noise: float = 0.0  #: rad/s, std of noise beyond the quantisation
     position_noise: float = 0.0  #: rad, std beyond the encoder's counts
     current_noise: float = 0.02  #: A, std of the measured current
     current_resolution: float = 0.01  #: A, step of the current measurement

@@ -80,8 +80,8 @@ class MksProfile:
     stall_error: float  #: rad, locked-rotor protection threshold
     stall_time: float  #: s, how long the error must last
     # -- sensors as the drive reports them (joints.sim.sensors; sources: _SENSOR_SOURCES) --
-    velocity_filter: float = 0.005  #: s, first-order filter of the reported speed
-    velocity_noise: float = 0.031  #: rad/s, std of the reported speed's noise
+    velocity_window: float = 0.005  #: s, the speed estimate: encoder counts over this window
+    velocity_noise: float = 0.0  #: rad/s, std of noise beyond the quantisation
     position_noise: float = 0.0  #: rad, std beyond the encoder's counts
     current_noise: float = 0.0  #: A (the drive reports no current)
     current_resolution: float = 0.0  #: A (the drive reports no current)
@@ -147,15 +147,15 @@ _FLOAT_FIELDS = (
 )
 _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction")
 # the sensor models (joints.sim.sensors): 0 switches a term off
-_SENSOR_FIELDS = ("velocity_filter", "velocity_noise", "position_noise", "current_noise", "current_resolution",
+_SENSOR_FIELDS = ("velocity_window", "velocity_noise", "position_noise", "current_noise", "current_resolution",
                   "sample_jitter")
 _FLOAT_FIELDS: tuple[str, ...] = (*_FLOAT_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
 _NON_NEGATIVE_FIELDS: tuple[str, ...] = (*_NON_NEGATIVE_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
 _SENSOR_SOURCES = {
-    "velocity_filter": ("EST: the manual states no speed estimator; the MT6816 (16384 counts) differentiated at "
-                        "1 kHz steps by 0.38 rad/s, so the drive must average: a 5 ms window assumed"),
-    "velocity_noise": ("EST: one count (2 pi / 16384 rad) over 5 ms is 0.077 rad/s; std 0.077 / sqrt(6) = "
-                       "0.031 rad/s (the speed register's 1 r/min unit quantises on top). Uncertain by ~3x"),
+    "velocity_window": ("EST: the manual states no speed estimator; the MT6816 (16384 counts) differentiated at "
+                        "1 kHz steps by 0.38 rad/s, so the drive must average: a 5 ms window assumed (steps of "
+                        "0.077 rad/s; the register's 1 r/min unit quantises on top)"),
+    "velocity_noise": "EST: 0 - the estimate's noise is its quantisation (velocity_window)",
     "position_noise": "EST: 0 - the encoder's quantisation is the register's",
     "current_noise": "PUB: the drive reports no current (MKS-man: no current read command); 0",
     "current_resolution": "PUB: the drive reports no current; 0",

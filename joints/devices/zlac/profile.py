@@ -105,8 +105,8 @@ class HubMotorProfile:
     coulomb_friction: float = 0.2  #: N*m (EST)
     viscous_friction: float = 0.003  #: N*m*s/rad (EST)
     # -- sensors as the drive reports them (joints.sim.sensors; sources: _SENSOR_SOURCES) --
-    velocity_filter: float = 0.01  #: s, first-order filter of the reported velocity
-    velocity_noise: float = 0.063  #: rad/s, std of the reported velocity's noise
+    velocity_window: float = 0.05  #: s, the velocity estimate: encoder counts over this window
+    velocity_noise: float = 0.0  #: rad/s, std of noise beyond the quantisation
     position_noise: float = 0.0  #: rad, std beyond the encoder's counts
     current_noise: float = 0.05  #: A, std of the measured current
     current_resolution: float = 0.0  #: A, step of the current measurement (0: the register's 0.1 A)
@@ -244,15 +244,15 @@ _FLOAT_FIELDS = (
 # Friction and the assumed vehicle share may be 0 (ideal simulation / a wheel in the air).
 _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction", "load_inertia")
 # the sensor models (joints.sim.sensors): 0 switches a term off
-_SENSOR_FIELDS = ("velocity_filter", "velocity_noise", "position_noise", "current_noise", "current_resolution",
+_SENSOR_FIELDS = ("velocity_window", "velocity_noise", "position_noise", "current_noise", "current_resolution",
                   "sample_jitter")
 _FLOAT_FIELDS: tuple[str, ...] = (*_FLOAT_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
 _NON_NEGATIVE_FIELDS: tuple[str, ...] = (*_NON_NEGATIVE_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
 _SENSOR_SOURCES = {
-    "velocity_filter": ("EST: the manual states no speed estimator; a 4096-count encoder differentiated at 1 kHz "
-                        "steps by 1.5 rad/s, so the drive must average: a 10 ms window assumed. Uncertain by ~3x"),
-    "velocity_noise": ("EST: one count (2 pi / 4096 rad) over the 10 ms window is 0.153 rad/s; two independent "
-                       "quantisation errors give std 0.153 / sqrt(6) = 0.063 rad/s. Uncertain by ~3x"),
+    "velocity_window": ("EST: the manual states no speed estimator; a 4096-count encoder differentiated at 1 kHz "
+                        "steps by 1.5 rad/s, and the register reports 0.1 r/min, so the drive must average: a 50 ms "
+                        "window assumed (steps of 0.03 rad/s = 0.29 r/min). Uncertain by ~3x"),
+    "velocity_noise": "EST: 0 - the estimate's noise is its quantisation (velocity_window)",
     "position_noise": "EST: 0 - the encoder's quantisation is the register's",
     "current_noise": "EST: 50 mA std on a 30 A-range current measurement; not published. Uncertain by ~3x",
     "current_resolution": "EST: 0 - the register's 0.1 A unit is coarser than the measurement",
