@@ -458,7 +458,7 @@ def excite(rig: Any, name: str, excitation: Excitation, *, progress: Progress | 
 
 # -- fit ----------------------------------------------------------------------------------------------
 
-#: s, the modulating window's default length (at least 16 sampling periods)
+#: s, the modulating window's default length (at least 8 sampling periods)
 WINDOW = 0.1
 #: held-out folds (contiguous blocks of the excitation)
 FOLDS = 5
@@ -498,7 +498,7 @@ class _Regression:
         dt = np.diff(t)
         self.period = float(np.median(dt))
         h = min(self.period, 1e-3) / 2  # the integration grid: at least 2 points per sample
-        L = max(window, 16 * self.period)
+        L = max(window, 8 * self.period)
         phi, d1, d2, mid = _window_kernels(L, h)
         self.length = L = (len(phi) - 1) * h
         m = len(phi) - 1

@@ -105,8 +105,8 @@ _SENSOR_SOURCES = {
     "current_noise": ("EST: 20 mA std, a 12-bit phase-current ADC over a ~+-40 A range (1 LSB = 20 mA) with "
                       "PWM ripple; not published. Uncertain by ~3x"),
     "current_resolution": "EST: 10 mA measurement step (the register's unit is 1 mA); not published",
-    "sample_jitter": ("EST: status values refreshed on a 4 kHz drive cycle, so a read returns a value up to "
-                      "0.25 ms old; not published. Uncertain by ~4x"),
+    "sample_jitter": ("EST: 0 - the firmware latches its status in its fast loop (well under 0.1 ms) when a "
+                      "request is served; the host's own timing jitter is the bus's (wire time, issue 29)"),
 }
 
 
@@ -136,7 +136,7 @@ class ErobProfile:
     position_noise: float = 0.0  #: rad, std beyond the encoder's counts
     current_noise: float = 0.02  #: A, std of the measured current
     current_resolution: float = 0.01  #: A, step of the current measurement
-    sample_jitter: float = 0.00025  #: s, age of a status value: uniform in [0, this]
+    sample_jitter: float = 0.0  #: s, age of a status value: uniform in [0, this]
     sources: Mapping[str, str] = field(default_factory=_empty_sources, compare=False, hash=False)
 
     def __post_init__(self) -> None:
