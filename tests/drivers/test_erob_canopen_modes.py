@@ -18,11 +18,11 @@ from joints.devices.erob.profiles import profile
 from joints.drivers.erob_canopen import ErobCanopenDriver, SyncCycle
 from joints.errors import DeviceFault
 from joints.link.canopen import CanopenLink
+from joints.sim import sensors
 from joints.sim.erob import ErobFirmware
 from joints.sim.erob_canopen import LIFE_GUARD_ERROR, CanopenFront, ErobCanopenBus
 from joints.transports.can import PythonCanTransport
 from joints.transports.can_sim import LockstepCanBus
-from joints.sim import sensors
 
 PROFILE = profile("eRob80H100")
 

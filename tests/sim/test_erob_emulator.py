@@ -27,8 +27,8 @@ from joints.drivers.erob_modbus import ZERO_BASE, ErobModbusDriver
 from joints.errors import DeviceFault, DeviceRejected, StateError
 from joints.joint import Joint
 from joints.link.modbus import ModbusLink
-from joints.sim.erob import FOLLOWING_ERROR, STALL
 from joints.sim import sensors
+from joints.sim.erob import FOLLOWING_ERROR, STALL
 from simkit import erob_world
 
 PROFILE = profile("eRob80H100")
