@@ -153,11 +153,13 @@ class Samples:
 
     mode: str
     t: Any  #: s, state read times (numpy arrays from here on)
-    w: Any  #: s, command write times
-    u: Any  #: commanded torque [N*m] (torque mode) or speed [rad/s] (speed mode)
+    w: Any  #: s, command write times (as many as ``t``, or more once uncertain states were dropped)
+    u: Any  #: commanded torque [N*m] (torque mode) or speed [rad/s] (speed mode), at ``w``
     q: Any  #: rad
     v: Any  #: rad/s
     tau: Any  #: N*m, the drive's torque estimate (current x the profile's torque constant)
+    #: s from each state request to its reply: how uncertain the sample's time is (None: not recorded)
+    rtt: Any = None
 
     @property
     def period(self) -> float:
@@ -404,7 +406,7 @@ def excite(rig: Any, name: str, excitation: Excitation, *, progress: Progress | 
     else:
         def command(v: float) -> None:
             j.set_velocity(v, acceleration=acc)
-    t_, w_, u_, q_, v_, tau_ = [], [], [], [], [], []
+    t_, w_, u_, q_, v_, tau_, rtt_ = [], [], [], [], [], [], []
     t0 = rig.time
     next_report = 0.0
     aborted: str | None = None
@@ -421,6 +423,7 @@ def excite(rig: Any, name: str, excitation: Excitation, *, progress: Progress | 
             s = j.state()
             q = (s.position - off) * d
             t_.append(0.5 * (asked + s.time))  # the drive sampled between our request and its reply
+            rtt_.append(s.time - asked)
             w_.append(now)
             u_.append(u)
             q_.append(q)
@@ -452,7 +455,7 @@ def excite(rig: Any, name: str, excitation: Excitation, *, progress: Progress | 
                                     "torque/speed set to 0 and stopped")
     if progress is not None:
         progress(1.0, f"{len(t_)} samples")
-    arr = [np.asarray(x, dtype=float) for x in (t_, w_, u_, q_, v_, tau_)]
+    arr = [np.asarray(x, dtype=float) for x in (t_, w_, u_, q_, v_, tau_, rtt_)]
     return Samples(mode, *arr)
 
 
@@ -559,6 +562,23 @@ class _Regression:
                 ["viscous_friction", "coulomb_friction", "torque_scale"])
 
 
+def _certain(samples: Samples) -> Samples:
+    """Without the samples whose time is uncertain: a reply that took more than twice the median round
+    trip (the drive sampled somewhere in it; the fit reads its position at the midpoint). At most a
+    fifth of the samples go; the commands stay (they are timed where they were sent)."""
+    import numpy as np
+
+    rtt = samples.rtt
+    if rtt is None or len(rtt) != len(samples):
+        return samples
+    limit = max(2 * float(np.median(rtt)), float(np.quantile(rtt, 0.8)))
+    keep = rtt <= limit
+    if keep.all():
+        return samples
+    return Samples(samples.mode, samples.t[keep], samples.w, samples.u, samples.q[keep], samples.v[keep],
+                   samples.tau[keep], rtt[keep])
+
+
 def _solve(A: Any, y: Any, rows: Any = None) -> tuple[Any, float]:
     import numpy as np
 
@@ -617,6 +637,7 @@ def fit(samples: Samples, terms: ModelTerms | None, *, known_inertia: float | No
     n = len(samples)
     if n < 50:
         raise JointsError(f"identification needs more samples than {n}")
+    samples = _certain(samples)
     q = samples.q
     g = terms.gravity(q) if terms is not None else np.zeros(n)
     body = terms.body_inertia(float(q[0])) if terms is not None else 0.0
