@@ -19,6 +19,7 @@ from joints.codecs import modbus as mb
 from joints.codecs.crc import append_crc
 from joints.devices.mks.modbus import MKS_MODBUS
 from joints.devices.mks.state import WorkMode
+from joints.sim import sensors
 from testdata import by_id, sequences, vectors
 
 RECORDS = by_id()
@@ -95,6 +96,7 @@ def test_sequence_7_4_speed_mode_save_stop_power_cycle(tmp_path: Path) -> None:
     seq = _sequence("seq-mks-native-7.4")
     steps = seq["steps"]
     with open_motor(tmp_path) as rig:
+        sensors.ideal(rig.world)  # the manual's speeds exactly (the drive's estimate steps by 0.7 r/min)
         _serial_twin(rig)
         bus = rig.world.buses["rs485"]
         assert bus.receive(bytes.fromhex(steps[0]["send_hex"])) == bytes.fromhex(steps[0]["expect_hex"])
@@ -166,6 +168,7 @@ def test_long_packet_5_7_moves_five_twins_differently_and_nobody_answers(tmp_pat
     packet = _hex(RECORDS["mks-native-5.7-longpacket-send"])
     assert len(packet) == 52
     with open_motor(tmp_path, n=5) as rig:
+        sensors.ideal(rig.world)  # the manual's speeds exactly
         bus = rig.world.buses["rs485"]
         for i in range(1, 6):
             rig.world.drives[f"m{i}"].write("work_mode", int(WorkMode.SR_vFOC))
