@@ -68,7 +68,7 @@ from gymnasium import spaces
 
 import joints
 from envs.configs import config_path
-from envs.randomization import GAINS, DomainRandomization
+from envs.randomization import GAINS, DomainRandomization, apply_sensors
 from envs.render import CameraSpec, SceneRenderer
 from joints.errors import MotionTimeout, OverrunError
 
@@ -748,6 +748,7 @@ class JointsEnv(RigEnv):
             sim.perturb(nm, armature=f["armature"], coulomb_friction=f["friction"], viscous_friction=f["friction"],
                         torque_constant=f["torque_constant"], gains={g: f[field] for field, g in GAINS.items()})
             self._noise[i] = f["encoder_noise"]
+            apply_sensors(sim, nm, f["sensor_noise"])
             if self.action_mode != "torque":
                 self._derate(i, f["torque_constant"] / max(1.0, f["friction"], f["armature"]))
         self._noisy = bool(self._noise.any())

@@ -22,7 +22,12 @@ encoder_noise          std of Gaussian noise on the reported   rad              
                        joint positions (observations)
 latency                bus latency: an action takes effect     control periods       [0, 1]
                        this many periods later                 (integer)
+sensor_noise           the drives' sensor noise (velocity      factor                [1, 1]
+                       estimate, current, position: the
+                       profile's levels, joints.sim.sensors)
 =====================  ======================================  ====================  ==============
+
+A fixed range ``(x, x)`` of ``sensor_noise`` draws nothing (the other draws keep their stream).
 
 Everything goes through the rig's public sim API, ``rig.sim.perturb`` (in profile terms: armature,
 Coulomb and viscous friction, torque constant, loop gains): the loop gains are written into the
@@ -59,6 +64,7 @@ class DomainRandomization:
     torque_constant: tuple[float, float] = (0.9, 1.1)
     encoder_noise: tuple[float, float] = (0.0, 1e-4)
     latency: tuple[int, int] = (0, 1)
+    sensor_noise: tuple[float, float] = (1.0, 1.0)
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -74,6 +80,10 @@ class DomainRandomization:
                 if lo < 0 or not float(lo).is_integer() or not float(hi).is_integer():
                     raise ValueError(f"domain randomisation latency: expected whole periods >= 0, got {rng!r}")
                 object.__setattr__(self, f.name, (int(lo), int(hi)))
+            elif f.name == "sensor_noise":
+                if lo < 0:
+                    raise ValueError(f"domain randomisation sensor_noise: factors must be >= 0, got {rng!r}")
+                object.__setattr__(self, f.name, (float(lo), float(hi)))
             elif f.name == "encoder_noise":
                 if lo < 0:
                     raise ValueError(f"domain randomisation encoder_noise: std must be >= 0, got {rng!r}")
@@ -105,7 +115,17 @@ class DomainRandomization:
         per_joint: dict[str, dict[str, float]] = {}
         for name in joints:
             per_joint[name] = {
-                f.name: float(rng.uniform(*getattr(self, f.name))) for f in fields(self) if f.name != "latency"
+                f.name: float(rng.uniform(*getattr(self, f.name))) for f in fields(self)
+                if f.name not in ("latency", "sensor_noise")
             }
-        lo, hi = self.latency
-        return {"latency": int(rng.integers(lo, hi + 1)), "joints": per_joint}
+            lo, hi = self.sensor_noise
+            per_joint[name]["sensor_noise"] = float(rng.uniform(lo, hi)) if hi > lo else lo
+        lo_l, hi_l = self.latency
+        return {"latency": int(rng.integers(lo_l, hi_l + 1)), "joints": per_joint}
+
+
+def apply_sensors(world: Any, joint: str, factor: float) -> None:
+    """Set joint ``joint``'s sensor noise to ``factor`` x its profile's levels (a draw's ``sensor_noise``;
+    the twin's sensors: ``joints.sim.sensors``, reached through the world's drives)."""
+    for sensor in getattr(world.drives[joint], "sensors", ()):
+        sensor.model = sensor.nominal.scaled(factor)

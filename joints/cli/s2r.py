@@ -40,8 +40,16 @@ def cmd_identify(args: argparse.Namespace) -> int:
         profile = driver.profile
         device = rig.config.joints[args.joint].device
     out = Path(args.output) if args.output else Path(rig.config.base_dir) / f"{args.joint}.profile.toml"
-    write_overlay(out, profile, ident, device=device, config=rig.config.source)
     print(ident)
+    bad = ident.problems()
+    if bad and not args.force:
+        print(f"no overlay written: the fit misses its thresholds ({'; '.join(bad)}); see docs/identification.md, "
+              "or write it anyway with --force", file=sys.stderr)
+        return 1
+    write_overlay(out, profile, ident, device=device, config=rig.config.source, force=args.force)
+    if bad:
+        print(f"WARNING: written with --force although the fit misses its thresholds: {'; '.join(bad)}",
+              file=sys.stderr)
     print(f"wrote {out}; use it with  profile_overlay = \"{out.name}\"  under [joints.{args.joint}]")
     return 0
 
@@ -102,3 +110,6 @@ def register(sub: Any) -> None:
     ident.add_argument("--inertia", type=nonnegative,
                        help="the joint's whole inertia [kg*m^2] when it has no gravity torque")
     ident.add_argument("--output", help="overlay file (default: <joint>.profile.toml next to the config)")
+    ident.add_argument("--force", action="store_true",
+                       help="write the overlay even when the fit misses its thresholds (the warning goes into the "
+                            "file); without it such a fit exits 1 and writes nothing")

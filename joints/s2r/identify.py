@@ -61,10 +61,13 @@ from typing import Any
 from joints.errors import CommandError, ConfigError, JointsError, LimitError
 
 __all__ = [
+    "MAX_UNCERTAINTY",
+    "MAX_VALIDATION",
     "Excitation",
     "Identification",
     "IdentificationAborted",
     "ModelTerms",
+    "PoorFit",
     "Samples",
     "excite",
     "fit",
@@ -150,11 +153,13 @@ class Samples:
 
     mode: str
     t: Any  #: s, state read times (numpy arrays from here on)
-    w: Any  #: s, command write times
-    u: Any  #: commanded torque [N*m] (torque mode) or speed [rad/s] (speed mode)
+    w: Any  #: s, command write times (as many as ``t``, or more once uncertain states were dropped)
+    u: Any  #: commanded torque [N*m] (torque mode) or speed [rad/s] (speed mode), at ``w``
     q: Any  #: rad
     v: Any  #: rad/s
     tau: Any  #: N*m, the drive's torque estimate (current x the profile's torque constant)
+    #: s from each state request to its reply: how uncertain the sample's time is (None: not recorded)
+    rtt: Any = None
 
     @property
     def period(self) -> float:
@@ -179,11 +184,20 @@ class ModelTerms:
     path: Path
     joint: str
     pose: Mapping[str, float] = field(default_factory=dict)
+    #: the load's mass in the model x this (the load: the heaviest geom with a stated mass); for the
+    #: load-mass sensitivity of the fit
+    load_factor: float = 1.0
 
     def __post_init__(self) -> None:
         import mujoco
 
-        m = mujoco.MjModel.from_xml_path(str(self.path))
+        spec = mujoco.MjSpec.from_file(str(self.path))
+        masses = [(float(g.mass), g) for g in spec.geoms if math.isfinite(float(g.mass)) and float(g.mass) > 0]
+        load = max(masses, key=lambda x: x[0], default=None)
+        object.__setattr__(self, "load", (load[1].name or "(unnamed geom)", load[0]) if load else ("", 0.0))
+        if load is not None and self.load_factor != 1.0:
+            load[1].mass = load[0] * self.load_factor
+        m = spec.compile()
         m.dof_armature[:] = 0.0
         d = mujoco.MjData(m)
         jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, self.joint)
@@ -227,6 +241,22 @@ class ModelTerms:
         return float(out[dof])
 
 
+#: refusal thresholds (docs/identification.md): the held-out equation error over the RMS torque impulse,
+#: and each parameter's relative uncertainty (the larger of the regression's and the held-out folds' spread)
+MAX_VALIDATION = 0.15
+MAX_UNCERTAINTY: Mapping[str, float] = {"armature": 0.10, "torque_scale": 0.10, "viscous_friction": 0.15,
+                                        "coulomb_friction": 0.15}
+#: s of delay uncertainty above which the fit is refused
+MAX_DELAY_UNCERTAINTY = 0.002
+#: |correlation| of two parameters' estimates above which the data cannot tell them apart well
+CORRELATED = 0.9
+
+
+class PoorFit(JointsError):
+    """The identification does not meet the thresholds (:data:`MAX_VALIDATION`, :data:`MAX_UNCERTAINTY`):
+    no overlay is written unless forced."""
+
+
 @dataclass(frozen=True)
 class Identification:
     """The identified parameters of one joint and how well the model explains the data."""
@@ -242,11 +272,22 @@ class Identification:
     feedback_latency: float  #: s the twin's feedback lags (one physics substep)
     gravity_loaded: bool  #: the scale came from the gravity torque (else from ``known_inertia``)
     samples: int
-    used: int  #: samples of moving windows the fit used
-    period: float  #: s, the sampling period achieved
+    used: int  #: moving windows the fit used
+    period: float  #: s, the sampling period achieved (median)
     residual: float  #: RMS of the fit's residual over RMS of the torque impulse (0 = exact)
-    std: Mapping[str, float] = field(default_factory=dict)  #: relative standard errors
+    #: relative uncertainties (delay: absolute, s): the larger of the regression's standard error and
+    #: the spread of the estimates over held-out folds
+    std: Mapping[str, float] = field(default_factory=dict)
     excitation: Mapping[str, Any] = field(default_factory=dict)
+    validation: float = math.nan  #: held-out equation error over the RMS torque impulse
+    condition: float = math.nan  #: condition number of the column-scaled regressors
+    correlations: Mapping[str, float] = field(default_factory=dict)  #: "a/b" -> correlation of the estimates
+    #: d ln(parameter) / d ln(load mass): how the fit moves with an error in the stand's load mass
+    load_sensitivity: Mapping[str, float] = field(default_factory=dict)
+    load: str = ""  #: the model's load (the gravity-torque reference) and its mass
+    load_mass: float = math.nan
+    period_spread: float = math.nan  #: s, std of the sampling intervals
+    window: float = math.nan  #: s, the modulating window's length
 
     @property
     def armature(self) -> float:
@@ -258,23 +299,57 @@ class Identification:
         """The twin's command delay reproducing :attr:`delay` (its own feedback latency taken off)."""
         return None if self.delay is None else max(0.0, self.delay - self.feedback_latency)
 
+    def inseparable(self) -> list[str]:
+        """Pairs of parameters the data cannot tell apart well (|correlation| > :data:`CORRELATED`)."""
+        return [k for k, c in self.correlations.items() if abs(c) > CORRELATED]
+
+    def problems(self) -> list[str]:
+        """Why the fit should not be trusted (empty: it meets every threshold)."""
+        out = []
+        if not self.validation <= MAX_VALIDATION:
+            out.append(f"held-out error {self.validation:.1%} > {MAX_VALIDATION:.0%}")
+        for k, limit in MAX_UNCERTAINTY.items():
+            u = self.std.get(k)
+            if u is not None and not u <= limit:
+                out.append(f"{k} uncertainty {u:.1%} > {limit:.0%}")
+        du = self.std.get("delay")
+        if du is not None and not du <= MAX_DELAY_UNCERTAINTY:
+            out.append(f"delay uncertainty {du * 1e3:.2f} ms > {MAX_DELAY_UNCERTAINTY * 1e3:.1f} ms")
+        return out
+
     def summary(self) -> dict[str, Any]:
-        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("std", "excitation")}
+        out = {f.name: getattr(self, f.name) for f in fields(self)
+               if f.name not in ("std", "excitation", "correlations", "load_sensitivity")}
         out.update(armature=self.armature, command_delay=self.command_delay, std=dict(self.std),
-                   excitation=dict(self.excitation))
+                   excitation=dict(self.excitation), correlations=dict(self.correlations),
+                   load_sensitivity=dict(self.load_sensitivity), inseparable=self.inseparable(),
+                   problems=self.problems())
         return out
 
     def __str__(self) -> str:
-        lines = [(f"joint {self.joint}: {self.samples} samples every {self.period * 1e3:.3f} ms ({self.mode} mode), "
-                 f"{self.used} used, residual {self.residual:.3%}"),
-                 (f"  inertia          {self.inertia:.5g} kg*m^2 (bodies {self.body_inertia:.5g}, "
-                 f"armature {self.armature:.5g})"),
-                 f"  coulomb friction {self.coulomb_friction:.5g} N*m",
-                 f"  viscous friction {self.viscous_friction:.5g} N*m*s/rad",
-                 f"  torque scale     {self.torque_scale:.5g}"]
+        def u(k: str) -> str:
+            v = self.std.get(k)
+            return f"  +-{v:.1%}" if v is not None else ""
+
+        lines = [(f"joint {self.joint}: {self.samples} samples every {self.period * 1e3:.3f} ms "
+                  f"(spread {self.period_spread * 1e3:.3f} ms, {self.mode} mode), {self.used} windows of "
+                  f"{self.window * 1e3:.0f} ms used, residual {self.residual:.2%}, held-out {self.validation:.2%}"),
+                 (f"  inertia          {self.inertia:.5g} kg*m^2{u('inertia')} (bodies {self.body_inertia:.5g}, "
+                  f"armature {self.armature:.5g}{u('armature')})"),
+                 f"  coulomb friction {self.coulomb_friction:.5g} N*m{u('coulomb_friction')}",
+                 f"  viscous friction {self.viscous_friction:.5g} N*m*s/rad{u('viscous_friction')}",
+                 f"  torque scale     {self.torque_scale:.5g}{u('torque_scale')}"]
         if self.delay is not None:
-            lines.append(f"  delay            {self.delay * 1e3:.2f} ms (twin command delay "
-                         f"{(self.command_delay or 0.0) * 1e3:.2f} ms)")
+            lines.append(f"  delay            {self.delay * 1e3:.2f} ms +-{self.std.get('delay', 0) * 1e3:.2f} ms "
+                         f"(twin command delay {(self.command_delay or 0.0) * 1e3:.2f} ms)")
+        lines.append(f"  identifiability: condition number {self.condition:.3g}; "
+                     + (f"cannot be told apart well: {', '.join(self.inseparable())}" if self.inseparable()
+                        else "no two parameters correlated above " + f"{CORRELATED:g}"))
+        if self.load_sensitivity:
+            lines.append(f"  load mass ({self.load}, {self.load_mass:.4g} kg in the model) - d ln p / d ln m: "
+                         + ", ".join(f"{k} {v:+.2f}" for k, v in self.load_sensitivity.items()))
+        bad = self.problems()
+        lines.append("  REFUSED: " + "; ".join(bad) if bad else "  meets the thresholds")
         return "\n".join(lines)
 
 
@@ -331,7 +406,7 @@ def excite(rig: Any, name: str, excitation: Excitation, *, progress: Progress | 
     else:
         def command(v: float) -> None:
             j.set_velocity(v, acceleration=acc)
-    t_, w_, u_, q_, v_, tau_ = [], [], [], [], [], []
+    t_, w_, u_, q_, v_, tau_, rtt_ = [], [], [], [], [], [], []
     t0 = rig.time
     next_report = 0.0
     aborted: str | None = None
@@ -348,6 +423,7 @@ def excite(rig: Any, name: str, excitation: Excitation, *, progress: Progress | 
             s = j.state()
             q = (s.position - off) * d
             t_.append(0.5 * (asked + s.time))  # the drive sampled between our request and its reply
+            rtt_.append(s.time - asked)
             w_.append(now)
             u_.append(u)
             q_.append(q)
@@ -379,128 +455,291 @@ def excite(rig: Any, name: str, excitation: Excitation, *, progress: Progress | 
                                     "torque/speed set to 0 and stopped")
     if progress is not None:
         progress(1.0, f"{len(t_)} samples")
-    arr = [np.asarray(x, dtype=float) for x in (t_, w_, u_, q_, v_, tau_)]
+    arr = [np.asarray(x, dtype=float) for x in (t_, w_, u_, q_, v_, tau_, rtt_)]
     return Samples(mode, *arr)
 
 
 # -- fit ----------------------------------------------------------------------------------------------
 
+#: s, the modulating window's default length (at least 8 sampling periods)
+WINDOW = 0.1
+#: held-out folds (contiguous blocks of the excitation)
+FOLDS = 5
 
-def _cum(x: Any, dt: Any) -> Any:
-    """Running integral with a left sum: out[k] = sum_{i<k} x[i] dt[i] (len(x) values)."""
+
+def _window_kernels(length: float, h: float) -> tuple[Any, Any, Any, Any]:
+    """phi = sin^4(pi tau / L) on [0, L] and its first two derivatives at the grid points, and phi at
+    the cells' midpoints (for the command's cell averages)."""
     import numpy as np
 
-    return np.concatenate([[0.0], np.cumsum(x[:-1] * dt)])
+    m = max(8, round(length / h))
+    tau = np.arange(m + 1) * h
+    th = np.pi * tau / (m * h)
+    k = np.pi / (m * h)
+    sn, cs = np.sin(th), np.cos(th)
+    phi = sn ** 4
+    d1 = 4 * k * sn ** 3 * cs
+    d2 = k * k * (12 * sn ** 2 * cs ** 2 - 4 * sn ** 4)
+    mid = np.sin(np.pi * (np.arange(m) + 0.5) / m) ** 4
+    return phi, d1, d2, mid
+
+
+def _correlate(x: Any, kernel: Any, h: float) -> Any:
+    """out[j] = sum_k x[j + k] kernel[k] h: the windows starting at each grid point."""
+    import numpy as np
+
+    return np.convolve(x, kernel[::-1], mode="valid") * h
+
+
+class _Regression:
+    """The modulating-function form of the model on one recording (see :func:`fit`)."""
+
+    def __init__(self, samples: Samples, g: Any, *, window: float, max_delay: float, moving: float) -> None:
+        import numpy as np
+
+        t, q = samples.t, samples.q
+        dt = np.diff(t)
+        self.period = float(np.median(dt))
+        h = min(self.period, 1e-3) / 2  # the integration grid: at least 2 points per sample
+        L = max(window, 8 * self.period)
+        phi, d1, d2, mid = _window_kernels(L, h)
+        self.length = L = (len(phi) - 1) * h
+        m = len(phi) - 1
+        # the command's integral, exact for a zero-order hold, on a grid that starts max_delay earlier
+        if samples.mode == "torque":
+            w, u = samples.w, samples.u
+        else:  # speed mode: the drive's own torque estimate drove the step that starts at its sample
+            w, u = t, samples.tau
+        cum = np.concatenate([[0.0], np.cumsum(u[:-1] * np.diff(w))])
+
+        def U(x: Any) -> Any:
+            i = np.clip(np.searchsorted(w, x, side="right") - 1, 0, len(w) - 1)
+            return np.where(x < w[0], 0.0, cum[i] + u[i] * (x - w[i]))
+
+        start = t[0] - max_delay - h
+        grid_u = start + np.arange(int((t[-1] - start) / h) + 1) * h
+        cells = np.diff(U(grid_u)) / h
+        self.g0_at = grid_u[: len(cells) - m + 1]
+        self.g0 = np.convolve(cells, mid[::-1], mode="valid") * h
+        # the measured signals on the grid of the windows
+        grid = t[0] + np.arange(int((t[-1] - t[0]) / h) + 1) * h
+        Q = np.interp(grid, t, q)
+        G = np.interp(grid, t, g)
+        s = max(0.005, 2 * self.period)  # velocity from positions (never the drive's noisy estimate): its sign
+        vhat = (np.interp(grid + s, t, q) - np.interp(grid - s, t, q)) / (2 * s)
+        slow = np.abs(vhat) <= moving
+        cs = np.concatenate([[0], np.cumsum(slow)])
+        n_win = len(grid) - m
+        first = grid[:n_win]
+        # windows where the joint slides (at most 10 % of the window slow: a reversal, not a stick)
+        few_slow = (cs[m + 1: m + 1 + n_win] - cs[:n_win]) <= 0.1 * (m + 1)
+        edge = (first - s >= t[0]) & (first + L + s <= t[-1])
+        ok = few_slow & edge
+        stride = max(1, m // 8)  # windows a stride apart (overlapping: the covariance says how much)
+        sel = np.flatnonzero(ok)
+        sel = sel[(sel % stride) == 0]
+        self.x = first[sel]
+        self.f1 = _correlate(Q, d2, h)[sel]
+        self.f2 = _correlate(Q, d1, h)[sel]
+        self.f3 = _correlate(np.sign(vhat), phi, h)[sel]
+        self.f4 = _correlate(G, phi, h)[sel]
+        self.overlap = max(1.0, L / (2 * stride * h))  #: windows per independent one
+        self.used = len(sel)
+
+    def g(self, d: float) -> Any:
+        import numpy as np
+
+        return np.interp(self.x - d, self.g0_at, self.g0)
+
+    def system(self, d: float, known_inertia: float | None, f4_scale: float = 1.0) -> tuple[Any, Any, list[str]]:
+        import numpy as np
+
+        gd = self.g(d)
+        if known_inertia is None:
+            return (np.stack([self.f1, -self.f2, self.f3, -gd], axis=1), -self.f4 * f4_scale,
+                    ["inertia", "viscous_friction", "coulomb_friction", "torque_scale"])
+        return (np.stack([-self.f2, self.f3, -gd], axis=1), -(known_inertia * self.f1 + self.f4 * f4_scale),
+                ["viscous_friction", "coulomb_friction", "torque_scale"])
+
+
+def _certain(samples: Samples) -> Samples:
+    """Without the samples whose time is uncertain: a reply that took more than twice the median round
+    trip (the drive sampled somewhere in it; the fit reads its position at the midpoint). At most a
+    fifth of the samples go; the commands stay (they are timed where they were sent)."""
+    import numpy as np
+
+    rtt = samples.rtt
+    if rtt is None or len(rtt) != len(samples):
+        return samples
+    limit = max(2 * float(np.median(rtt)), float(np.quantile(rtt, 0.8)))
+    keep = rtt <= limit
+    if keep.all():
+        return samples
+    return Samples(samples.mode, samples.t[keep], samples.w, samples.u, samples.q[keep], samples.v[keep],
+                   samples.tau[keep], rtt[keep])
+
+
+def _solve(A: Any, y: Any, rows: Any = None) -> tuple[Any, float]:
+    import numpy as np
+
+    if rows is not None:
+        A, y = A[rows], y[rows]
+    x, *_ = np.linalg.lstsq(A, y, rcond=None)
+    r = A @ x - y
+    return x, float(r @ r)
+
+
+def _best_delay(reg: _Regression, known_inertia: float | None, max_delay: float, rows: Any = None) -> float:
+    import numpy as np
+
+    step = max(reg.period / 4, 1e-4)
+    grid = np.arange(0.0, max_delay + 1e-12, step)
+    def cost(d: float) -> float:
+        A, y, _ = reg.system(d, known_inertia)
+        return _solve(A, y, rows)[1]
+
+    costs = [cost(float(d)) for d in grid]
+    i = int(np.argmin(costs))
+    fine = np.linspace(grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)], 41)
+    return float(fine[int(np.argmin([cost(float(d)) for d in fine]))])
+
+
+def _named(x: Any, names: list[str], known_inertia: float | None) -> dict[str, float]:
+    out = {n: float(v) for n, v in zip(names, x)}
+    if known_inertia is not None:
+        out["inertia"] = float(known_inertia)
+    return out
 
 
 def fit(samples: Samples, terms: ModelTerms | None, *, known_inertia: float | None = None,
         feedback_latency: float = 0.0, window: float | None = None, max_delay: float = 0.05,
-        moving: float = MOVING, joint: str = "", excitation: Mapping[str, Any] | None = None) -> Identification:
-    """Fit inertia, friction, torque scale and delay to ``samples`` (see the module docstring).
+        moving: float = MOVING, joint: str = "", excitation: Mapping[str, Any] | None = None,
+        folds: int = FOLDS) -> Identification:
+    """Fit inertia, friction, torque scale and delay to ``samples``.
 
-    ``terms`` supplies G(q) and the bodies' inertia (None: no model, no gravity); with no gravity
-    torque worth the name ``known_inertia`` [kg*m^2, the whole J] is required. ``window`` [s] is
-    the integration window (a low-pass against measurement noise and timing jitter; default 10
-    sampling periods, at least 10 ms), ``max_delay`` [s] the largest delay tried.
+    The model ``J q'' + b q' + c sign(q') + G(q) = s u(t - d)`` is multiplied by a smooth window
+    ``phi`` (sin^4, ``window`` s long, vanishing with its slope at both ends) and integrated by
+    parts, so no measured signal is differentiated: ``J int q phi'' - b int q phi' + c int sign phi
+    + int G phi = s int u(t - d) phi``. The regressors hold only the position (the drive's encoder,
+    low noise: its noise enters through a band-pass, the bias is below 1e-4 relative at 1e-4 rad)
+    and the command; the drive's velocity estimate is never used (the sign of the motion comes from
+    positions too). Windows where the joint slides (slower than ``moving`` in at most 10 % of them) are fitted
+    by linear least squares for each candidate delay; the smallest residual picks the delay.
+
+    Uncertainty: the larger of the regression's standard error (overlap of the windows taken into
+    account) and the spread of the estimates over ``folds`` held-out contiguous blocks (a
+    jackknife); ``validation`` is the equation error on the held-out blocks. Identifiability: the
+    condition number of the column-scaled regressors and the estimates' correlations. Load mass:
+    every parameter's d ln p / d ln m of the model's load (refitted with the load 1 % heavier).
     """
     import numpy as np
 
     n = len(samples)
     if n < 50:
         raise JointsError(f"identification needs more samples than {n}")
-    t, w, u, q, v, tau = samples.t, samples.w, samples.u, samples.q, samples.v, samples.tau
-    dt = np.diff(t)
-    period = float(np.median(dt))
-    win = max(1, round((window if window is not None else max(0.01, 10 * period)) / period))
-    a = np.arange(0, n - win)
-    b = a + win
+    samples = _certain(samples)
+    q = samples.q
     g = terms.gravity(q) if terms is not None else np.zeros(n)
     body = terms.body_inertia(float(q[0])) if terms is not None else 0.0
-    # integral form over each window [t_a, t_b]: state samples are the physics at the start of a step
-    cum_g = _cum(g, dt)  # left sum: gravity at the start of each step
-    cum_s = np.concatenate([[0.0], np.cumsum(np.sign(v[1:]) * dt)])  # right sum: friction on the step's end
-    dv, dq = v[b] - v[a], q[b] - q[a]
-    int_g, int_s = cum_g[b] - cum_g[a], cum_s[b] - cum_s[a]
-    mv = np.abs(v) > moving
-    run = np.concatenate([[0], np.cumsum(~mv)])
-    ok = (run[b + 1] - run[a]) == 0  # every sample of the window moving
-    used = int(ok.sum())
-    if used < 20:
-        raise JointsError(f"joint {joint}: only {used} moving windows (|v| > {moving} rad/s): the excitation "
-                          "barely moved the joint; raise the amplitude")
-    rms_g = float(np.sqrt(np.mean(g[mv] ** 2)))
-
-    if samples.mode == "torque":
-        cum_u_w = _cum(u, np.diff(w)) if n > 1 else np.zeros(1)
-
-        def int_u(d: float) -> Any:
-            """Integral over each window of the zero-order-held command, delayed by d."""
-            def at(x: Any) -> Any:
-                i = np.clip(np.searchsorted(w, x, side="right") - 1, 0, n - 1)
-                return cum_u_w[i] + u[i] * (x - w[i])
-            return at(t[b] - d) - at(t[a] - d)
-    else:
-        cum_tau = _cum(tau, dt)  # the current a sample reports drove the step that starts at it
-        fixed = cum_tau[b] - cum_tau[a]
-
-        def int_u(d: float) -> Any:
-            return fixed
-
-    scale_from_gravity = rms_g > 0.05 * float(np.sqrt(np.mean(tau[mv] ** 2)) or 1.0)
-    if known_inertia is None and not scale_from_gravity:
+    reg = _Regression(samples, g, window=window if window is not None else WINDOW, max_delay=max_delay,
+                      moving=moving)
+    if reg.used < 20:
+        raise JointsError(f"joint {joint}: only {reg.used} moving windows (|v| > {moving} rad/s for "
+                          f"{reg.length * 1e3:.0f} ms): the excitation barely moved the joint; raise the amplitude")
+    rms_g = float(np.sqrt(np.mean(reg.f4 ** 2)))
+    rms_u = float(np.sqrt(np.mean(reg.g(0.0) ** 2))) or 1.0
+    if known_inertia is None and rms_g < 0.05 * rms_u:
         raise ConfigError(
             f"joint {joint}: the model gives no gravity torque about this joint, so inertia and torque constant "
             "are known only as a ratio; identify on a gravity-loaded stand (e.g. models/erob_pendulum.xml) or "
             "give the joint's whole inertia (known_inertia, joints identify --inertia)", key="known_inertia")
-
-    def solve(d: float) -> tuple[Any, float, Any, Any]:
-        iu = int_u(d)
-        if known_inertia is None:
-            A = np.stack([dv, dq, int_s, -iu], axis=1)[ok]
-            y = -int_g[ok]
-        else:
-            A = np.stack([dq, int_s, -iu], axis=1)[ok]
-            y = -(known_inertia * dv + int_g)[ok]
-        x, *_ = np.linalg.lstsq(A, y, rcond=None)
-        r = A @ x - y
-        return x, float(r @ r), A, iu
-
-    if samples.mode == "torque":
-        grid = np.arange(0.0, max_delay + 1e-12, max(period / 4, 1e-4))
-        costs = [solve(float(d))[1] for d in grid]
-        i = int(np.argmin(costs))
-        lo_, hi_ = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
-        fine = np.linspace(lo_, hi_, 41)
-        delay: float | None = float(fine[int(np.argmin([solve(float(d))[1] for d in fine]))])
-    else:
-        delay = None
-    x, cost, A, iu = solve(delay or 0.0)
-    if known_inertia is None:
-        inertia, visc, coul, s = (float(z) for z in x)
-    else:
-        visc, coul, s = (float(z) for z in x)
-        inertia = float(known_inertia)
+    torque_mode = samples.mode == "torque"
+    delay = _best_delay(reg, known_inertia, max_delay) if torque_mode else 0.0
+    A, y, names = reg.system(delay, known_inertia)
+    x, rss = _solve(A, y)
+    est = _named(x, names, known_inertia)
+    # the regression's standard errors (overlapping windows are not independent: inflate)
     dof = max(1, A.shape[0] - A.shape[1])
-    sigma2 = cost / dof
+    scale = np.sqrt((A ** 2).sum(axis=0))
+    As = A / scale
     try:
-        cov = sigma2 * np.linalg.inv(A.T @ A)
-        se = np.sqrt(np.clip(np.diag(cov), 0, None))
+        inv = np.linalg.inv(As.T @ As)
+        cov = rss / dof * reg.overlap * inv / np.outer(scale, scale)
+        se = dict(zip(names, np.sqrt(np.clip(np.diag(cov), 0, None))))
+        sd = np.sqrt(np.clip(np.diag(inv), 1e-300, None))
+        corr = inv / np.outer(sd, sd)
     except np.linalg.LinAlgError:
-        se = np.full(A.shape[1], math.inf)
-    names = ["inertia", "viscous_friction", "coulomb_friction", "torque_scale"]
-    if known_inertia is not None:
-        names = names[1:]
-    std = {nm: float(e / abs(val)) if val else math.inf for nm, e, val in zip(names, se, x)}
-    impulse = float(np.sqrt(np.mean((s * iu[ok]) ** 2))) or 1.0
-    residual = math.sqrt(cost / used) / impulse
-    if s <= 0 or inertia <= 0:
-        raise JointsError(f"joint {joint}: the fit is not physical (inertia {inertia:.4g}, torque scale {s:.4g}); "
-                          "the excitation did not move the joint enough or the model is not the joint's")
+        se = {k: math.inf for k in names}
+        corr = np.full((len(names), len(names)), 1.0)
+    condition = float(np.linalg.cond(As))
+    correlations = {f"{names[i]}/{names[j]}": float(corr[i, j])
+                    for i in range(len(names)) for j in range(i + 1, len(names))}
+    # held-out folds: contiguous blocks of the windows
+    block = np.minimum((np.arange(reg.used) * folds) // reg.used, folds - 1)
+    fold_est: list[dict[str, float]] = []
+    held_r, held_u = 0.0, 0.0
+    for k in range(folds):
+        train, test = block != k, block == k
+        if test.sum() == 0 or train.sum() < 20:
+            continue
+        dk = _best_delay(reg, known_inertia, max_delay, train) if torque_mode else 0.0
+        Ak, yk, _ = reg.system(dk, known_inertia)
+        xk, _ = _solve(Ak, yk, train)
+        e = _named(xk, names, known_inertia)
+        e["delay"] = dk
+        fold_est.append(e)
+        r = Ak[test] @ xk - yk[test]
+        held_r += float(r @ r)
+        held_u += float(((xk[-1] * Ak[test, -1]) ** 2).sum())
+    validation = math.sqrt(held_r / held_u) if held_u > 0 else math.inf
+    kf = len(fold_est)
+
+    def jack(key: str, value: Any) -> float:
+        vals = np.array([value(e) for e in fold_est])
+        return float(np.sqrt((kf - 1) / kf * ((vals - vals.mean()) ** 2).sum())) if kf > 1 else math.inf
+
+    armature = est["inertia"] - body
+    std: dict[str, float] = {}
+    for key in names:
+        std[key] = max(float(se[key]), jack(key, lambda e, k=key: e[k])) / abs(est[key]) if est[key] else math.inf
+    if known_inertia is None:
+        arm_unc = max(float(se["inertia"]), jack("armature", lambda e: e["inertia"] - body))
+        std["armature"] = arm_unc / abs(armature) if armature else math.inf
+    if torque_mode:
+        std["delay"] = max(jack("delay", lambda e: e["delay"]), reg.period / 4)
+    impulse = float(np.sqrt(np.mean((est["torque_scale"] * A[:, -1]) ** 2))) or 1.0
+    residual = math.sqrt(rss / reg.used) / impulse
+    # load-mass sensitivity: refit with the model's load 1 % heavier (gravity and the bodies' inertia)
+    sensitivity: dict[str, float] = {}
+    load, load_mass = "", math.nan
+    if terms is not None:
+        load, load_mass = terms.load  # type: ignore[attr-defined]
+        if load_mass > 0:
+            heavier = ModelTerms(terms.path, terms.joint, terms.pose, load_factor=1.01)
+            g2 = heavier.gravity(q)
+            body2 = heavier.body_inertia(float(q[0]))
+            ratio = float(np.sqrt(np.mean(g2 ** 2)) / (np.sqrt(np.mean(g ** 2)) or 1.0))
+            A2, y2, _ = reg.system(delay, known_inertia, f4_scale=ratio)
+            x2, _ = _solve(A2, y2)
+            e2 = _named(x2, names, known_inertia)
+            e2["armature"] = e2["inertia"] - body2
+            base = dict(est, armature=armature)
+            for key in ("armature", "inertia", "coulomb_friction", "viscous_friction", "torque_scale"):
+                if key in e2 and base[key]:
+                    sensitivity[key] = (e2[key] / base[key] - 1.0) / 0.01
+    if est["torque_scale"] <= 0 or est["inertia"] <= 0:
+        raise JointsError(f"joint {joint}: the fit is not physical (inertia {est['inertia']:.4g}, torque scale "
+                          f"{est['torque_scale']:.4g}); the excitation did not move the joint enough or the model is "
+                          "not the joint's")
+    spread = float(np.std(np.diff(samples.t)))
     return Identification(
-        joint=joint, mode=samples.mode, inertia=inertia, body_inertia=body, coulomb_friction=max(coul, 0.0),
-        viscous_friction=max(visc, 0.0), torque_scale=s, delay=delay, feedback_latency=feedback_latency,
-        gravity_loaded=known_inertia is None, samples=n, used=used, period=period, residual=residual, std=std,
-        excitation=dict(excitation or {}))
+        joint=joint, mode=samples.mode, inertia=est["inertia"], body_inertia=body,
+        coulomb_friction=max(est["coulomb_friction"], 0.0), viscous_friction=max(est["viscous_friction"], 0.0),
+        torque_scale=est["torque_scale"], delay=delay if torque_mode else None, feedback_latency=feedback_latency,
+        gravity_loaded=known_inertia is None, samples=n, used=reg.used, period=reg.period, residual=residual,
+        std=std, excitation=dict(excitation or {}), validation=validation, condition=condition,
+        correlations=correlations, load_sensitivity=sensitivity, load=load, load_mass=load_mass,
+        period_spread=spread, window=reg.length)
 
 
 # -- the whole procedure ------------------------------------------------------------------------------
@@ -551,7 +790,10 @@ def identify(rig: Any, name: str, excitation: Excitation | None = None, *, known
     if info.get("amplitude") is None:
         lim = j.limits.torque if excitation.mode == "torque" else j.limits.velocity
         info["amplitude"] = 0.5 * lim if lim is not None else None
-    return fit(samples, terms, known_inertia=known_inertia, feedback_latency=rig.config.sim.timestep,
+    # a twin's positions lag its physics by half a substep (semi-implicit Euler: the position steps with the
+    # velocity at the step's end, a state is read at the start of the last substep): the latency the
+    # position-based fit sees in a twin of the same delay
+    return fit(samples, terms, known_inertia=known_inertia, feedback_latency=0.5 * rig.config.sim.timestep,
                joint=name, excitation=info)
 
 
@@ -599,8 +841,16 @@ def _toml_value(v: Any) -> str:
 
 
 def write_overlay(path: str | Path, profile: Any, ident: Identification, *, device: str = "",
-                  config: str = "") -> Path:
-    """Write the profile overlay of ``ident`` (TOML, see the module docstring) and return its path."""
+                  config: str = "", force: bool = False) -> Path:
+    """Write the profile overlay of ``ident`` (TOML, see the module docstring) and return its path.
+
+    A fit that misses a threshold (:meth:`Identification.problems`) raises :class:`PoorFit` and
+    writes nothing; ``force=True`` writes it with the warning inside the file.
+    """
+    bad = ident.problems()
+    if bad and not force:
+        raise PoorFit(f"joint {ident.joint}: the identification is not trustworthy ({'; '.join(bad)}); no overlay "
+                      "written (joints identify --force writes it anyway, with this warning inside)")
     values = overlay_values(profile, ident)
     notes = {
         "rotor_inertia": f"armature {ident.armature:.6g} kg*m^2 at the output (inertia {ident.inertia:.6g} "
@@ -616,20 +866,30 @@ def write_overlay(path: str | Path, profile: Any, ident: Identification, *, devi
         (f"# Device-profile overlay of joint {ident.joint!r}, written by `joints identify` "
         f"{datetime.datetime.now(datetime.timezone.utc).isoformat(timespec='seconds')}."),
         "# Use it from the joint's config: profile_overlay = \"<this file>\" (inline `profile` keys win).",
-        "",
-        "[profile]",
     ]
+    if bad:
+        lines.append(f"# WARNING: written with --force although the fit misses its thresholds: {'; '.join(bad)}")
+    lines += ["", "[profile]"]
     for k, v in values.items():
         lines.append(f"{k} = {_toml_value(v)}  # {notes.get(k, '')}".rstrip(" #"))
     lines += ["", "[identification]"]
     summary = ident.summary()
     summary.update(device=device, model=str(getattr(profile, "model", "")), config=config)
+    summary.pop("problems", None)
+    summary.pop("inseparable", None)
+    if bad:
+        summary["warning"] = "forced: " + "; ".join(bad)
     for k, v in summary.items():
         if isinstance(v, Mapping) or v is None:
             continue
         lines.append(f"{k} = {_toml_value(v)}")
-    lines += ["", "[identification.std]  # relative standard errors of the least-squares fit"]
+    lines.append(f"inseparable = [{', '.join(_toml_value(k) for k in ident.inseparable())}]")
+    lines += ["", "[identification.std]  # relative uncertainties (delay: s): regression or held-out spread"]
     lines += [f"{k} = {_toml_value(v)}" for k, v in ident.std.items()]
+    lines += ["", "[identification.correlations]  # of the estimates"]
+    lines += [f'"{k}" = {_toml_value(v)}' for k, v in ident.correlations.items()]
+    lines += ["", "[identification.load_sensitivity]  # d ln(parameter) / d ln(load mass)"]
+    lines += [f"{k} = {_toml_value(v)}" for k, v in ident.load_sensitivity.items()]
     lines += ["", "[identification.excitation]"]
     lines += [f"{k} = {_toml_value(v)}" for k, v in ident.excitation.items() if v is not None]
     p = Path(path)

@@ -77,6 +77,9 @@ class Shadow:
         self._feed = {b: registry.protocol(c.protocol).sim_transport(world.buses[b]) for b, c in cfg.buses.items()}
         self.samples: dict[str, list[Sample]] = {name: [] for name in rig.joints}
         self.frames = 0  #: host frames fed to the twins
+        #: twin errors per joint: comparisons the twin could not answer (never raised into the real rig)
+        self.errors: dict[str, int] = {name: 0 for name in rig.joints}
+        self.last_error: dict[str, str] = {}
         self._last_tx: dict[str, float] = {}  #: bus -> time of the host's last frame on it
         self._taps: list[tuple[Any, Any, Any]] = []
         for name, bus in rig.buses.items():
@@ -127,8 +130,9 @@ class Shadow:
             if not self.closed:
                 try:
                     self._compare(name, state)
-                except JointsError:  # a twin that cannot answer must never break the real rig
-                    pass
+                except JointsError as exc:  # a twin that cannot answer must never break the real rig: counted
+                    self.errors[name] += 1
+                    self.last_error[name] = f"{type(exc).__name__}: {exc}"
             return state
         return observed
 
@@ -145,18 +149,27 @@ class Shadow:
 
     # -- results ------------------------------------------------------------------------------------
     def divergence(self, name: str, *, since: float = 0.0) -> dict[str, dict[str, float]]:
-        """Per quantity of joint ``name``: RMS and largest |real - twin| over the samples after ``since`` [s]."""
+        """Per quantity of joint ``name`` over the samples after ``since`` [s]: RMS and largest |real - twin|,
+        and the spread of the signed difference real - twin (mean, std, 5th/50th/95th percentiles)."""
         rows = [s for s in self.samples[name] if s.t >= since]
         out: dict[str, dict[str, float]] = {}
         for i, q in enumerate(QUANTITIES):
-            d = [abs(s.real[i] - s.twin[i]) for s in rows]
-            out[q] = {"rms": math.sqrt(sum(x * x for x in d) / len(d)) if d else math.nan,
-                      "max": max(d) if d else math.nan}
+            e = sorted(s.real[i] - s.twin[i] for s in rows)
+            d = [abs(x) for x in e]
+            n = len(e)
+            mean = sum(e) / n if n else math.nan
+            out[q] = {"rms": math.sqrt(sum(x * x for x in d) / n) if n else math.nan,
+                      "max": max(d) if d else math.nan, "mean": mean,
+                      "std": math.sqrt(sum((x - mean) ** 2 for x in e) / n) if n else math.nan,
+                      **{f"p{p}": e[min(n - 1, int(p / 100 * n))] if n else math.nan for p in (5, 50, 95)}}
         return out
 
     def summary(self, *, since: float = 0.0) -> dict[str, dict[str, Any]]:
-        """Every joint's divergence (see :meth:`divergence`) and how many samples it rests on."""
-        return {name: {"samples": sum(1 for s in rows if s.t >= since), **self.divergence(name, since=since)}
+        """Every joint's divergence (see :meth:`divergence`), how many samples it rests on and how many
+        comparisons the twin could not answer (``errors``; the last one's text in ``last_error``)."""
+        return {name: {"samples": sum(1 for s in rows if s.t >= since), "errors": self.errors.get(name, 0),
+                       **({"last_error": self.last_error[name]} if name in self.last_error else {}),
+                       **self.divergence(name, since=since)}
                 for name, rows in self.samples.items()}
 
     def plot(self, path: str | Path, *, joints: Sequence[str] | None = None, dpi: int = 100) -> Path:

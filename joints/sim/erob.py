@@ -67,6 +67,7 @@ from joints.sim.erob_kernel import (
     SUPERVISION_PERIOD,
 )
 from joints.sim.firmware import Firmware
+from joints.sim.sensors import Sensor, model_of
 
 __all__ = [
     "COUNTS_PER_RAD",
@@ -255,16 +256,19 @@ class ErobFirmware(Firmware):
         self.kt = profile.torque_constant
         self.command_delay = profile.command_delay
         self.gen = _Generator(self)
+        #: the drive's sensors (joints.sim.sensors): what a read of position, speed and current reports
+        self.sensor = Sensor(model_of(profile), f"erob:{address}", COUNTS_PER_RAD)
+        self.sensors = (self.sensor,)
         self.computed.update({
-            "actual_position": self.counts,
+            "actual_position": self._sensed_counts,
             "given_position": lambda: round(self._get(K.P_REF)) + self.offset,
             "position_error": lambda: round(self._get(K.P_REF) - self._get(K.POS)),
             "given_speed": lambda: round(self._get(K.V_CMD) if K.is_enabled(self._get(K.STATE)) else 0.0),
-            "current_speed": lambda: round(self._get(K.VEL)),
+            "current_speed": self._sensed_speed,
             "speed_error": lambda: round((self._get(K.V_CMD) - self._get(K.VEL))
                                          if K.is_enabled(self._get(K.STATE)) else 0.0),
             "given_current": lambda: round(self._get(K.I_CMD)),
-            "motor_current": lambda: round(self._get(K.I_OUT)),
+            "motor_current": self._sensed_current,
             "part_of_power_temperature": lambda: round(self._get(K.TEMPERATURE)),
             "torque_sensor_value": lambda: round(self._get(K.I_OUT) * self.kt),
             "error_code": lambda: int(self._get(K.FAULT_CODE)),
@@ -408,6 +412,7 @@ class ErobFirmware(Firmware):
         pos = self.pos
         super().power_cycle()
         self._reset_state()
+        self.sensor.reseed()  # the sensors' noise restarts with the drive: a world reset is reproducible
         # absolute encoder: a single-turn module keeps only the angle within one turn
         s = self._row
         s[K.POS] = pos if self.multi_turn else pos % COUNTS_PER_REV
@@ -498,6 +503,9 @@ class ErobFirmware(Firmware):
         def read() -> list[int]:
             self.on_read(names)
             st = self._k.status(self._row, values["motion_mode"] == repetitive)
+            if not self.sensor.model.ideal:  # what the drive reports (outside the kernel: same bits)
+                st = (*st[:4], self._sensed_counts(), *st[5:7], self._sensed_speed(), *st[8:10],
+                      self._sensed_current(), *st[11:])
             out: list[int] = []
             for i, name, lo, hi in entries:
                 if i < 0:
@@ -512,6 +520,29 @@ class ErobFirmware(Firmware):
     def counts(self) -> int:
         """Actual position value: encoder counts + position offset."""
         return round(self._get(K.POS)) + self.offset
+
+    def _sensed_counts(self) -> int:
+        """``actual_position`` as the drive reports it (:mod:`joints.sim.sensors`)."""
+        sensor = self.sensor
+        if sensor.model.ideal:
+            return self.counts()
+        get = self._get
+        pos = sensor.position(get(K.TIME), get(K.POS) / COUNTS_PER_RAD, get(K.VEL) / COUNTS_PER_RAD)
+        return round(pos * COUNTS_PER_RAD) + self.offset
+
+    def _sensed_speed(self) -> int:
+        """``current_speed`` [count/s]: the drive's velocity estimate."""
+        get = self._get
+        if self.sensor.model.ideal:
+            return round(get(K.VEL))
+        return round(self.sensor.velocity(get(K.POS) / COUNTS_PER_RAD, get(K.VEL) / COUNTS_PER_RAD) * COUNTS_PER_RAD)
+
+    def _sensed_current(self) -> int:
+        """``motor_current`` [mA] as the drive measures it."""
+        i = self._get(K.I_OUT)
+        if self.sensor.model.ideal:
+            return round(i)
+        return round(self.sensor.current(i * 1e-3) * 1e3)
 
     # -- what the fronts call ---------------------------------------------------------------
     def frame_received(self) -> None:

@@ -97,6 +97,7 @@ from joints.devices.params import Access, ParamSet
 from joints.devices.quirks import MKS_ALL_PARAMETERS, MKS_TIMED_RETURNS, FirmwareProfile, firmware_profile
 from joints.errors import CommandError
 from joints.sim.firmware import Firmware
+from joints.sim.sensors import Sensor, model_of
 
 __all__ = ["CALIBRATION_TIME", "FLASH_TIME", "SERVO_BANDWIDTH", "SPEED_MODE_LEAD", "ZERO_MODE_RPM", "Completion",
            "MksFirmware", "TimedReturn"]
@@ -185,6 +186,9 @@ class MksFirmware(Firmware):
         self.values.update(self.saved)
         self.power_on_values = dict(self.values)
         self.inertia = inertia if inertia is not None else profile.rotor_inertia  #: kg*m^2 at the shaft
+        #: the drive's sensors (joints.sim.sensors): what a read of the encoder and the speed reports
+        self.sensor = Sensor(model_of(profile), f"mks:{address}", COUNTS / TAU)
+        self.sensors = (self.sensor,)
         self.time = 0.0
         #: flash beyond the parameters
         self.calibrated = True
@@ -195,10 +199,10 @@ class MksFirmware(Firmware):
         self.completions: deque[Completion] = deque()
         self._persistent = frozenset(p.name for p in params if p.access is Access.W and p.name != "motor_enable")
         self.computed.update({
-            "encoder_carry": lambda: self.counts() // COUNTS,
-            "encoder_value": lambda: self.counts() % COUNTS,
-            "encoder_addition": self.counts,
-            "real_time_speed": lambda: round(self.qd / RPM),
+            "encoder_carry": lambda: self._sensed_counts() // COUNTS,
+            "encoder_value": lambda: self._sensed_counts() % COUNTS,
+            "encoder_addition": self._sensed_counts,
+            "real_time_speed": lambda: round(self._sensed_speed() / RPM),
             "number_of_pulses": lambda: round((self.r - self.pulse_zero) / self.rad_per_pulse),
             "io_status": self.io_status,
             "angle_error": lambda: round((self.r - self.q) * st.ANGLE_ERROR_PER_TURN / TAU),
@@ -265,6 +269,7 @@ class MksFirmware(Firmware):
         self.timed.clear()  # timed returns are not kept (the manual does not say; our choice)
         self.returns.clear()
         self._reset_state()
+        self.sensor.reseed()  # the sensors' noise restarts with the drive: a world reset is reproducible
 
     def _cache(self) -> None:
         v = self.values
@@ -596,6 +601,19 @@ class MksFirmware(Firmware):
     def counts(self) -> int:
         """Encoder axis [counts], floor-quantised."""
         return math.floor((self.q - self.enc_zero) * COUNTS / TAU + 1e-9)
+
+    def _sensed_counts(self) -> int:
+        """The encoder axis [counts] as a read reports it (:mod:`joints.sim.sensors`)."""
+        sensor = self.sensor
+        if sensor.model.ideal:
+            return self.counts()
+        q = sensor.position(self.time, self.q, self.qd)
+        return math.floor((q - self.enc_zero) * COUNTS / TAU + 1e-9)
+
+    def _sensed_speed(self) -> float:
+        """The drive's speed estimate [rad/s] (:mod:`joints.sim.sensors`)."""
+        sensor = self.sensor
+        return self.qd if sensor.model.ideal else sensor.velocity(self.q, self.qd)
 
     def _switches(self) -> tuple[bool, bool]:
         low, high = self.end_stops

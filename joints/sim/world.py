@@ -647,6 +647,19 @@ class World:
                 writes.append((names[k], max(max(lo, 1), min(hi, round(nominal[k] * f)))))
             b.emulator.write_many(writes)
 
+    def intercept(self, name: str, wrap: Callable[[Callable[[float, float, float, float], float]],
+                                                  Callable[[float, float, float, float], float]]) -> None:
+        """Put ``wrap(step)`` in place of joint ``name``'s per-substep drive step ``step(t, dt, q, qd) -> torque``:
+        effects the twin's model lacks (a test's reality twin: current-loop lag, torque ripple, friction that
+        depends on state) go between the drive and the joint. The joint then steps in Python (same results,
+        off the fused compiled path)."""
+        for i, b in enumerate(self._bound):
+            if b.name == name:
+                step, qa, da, aid, r = self._bind[i]
+                self._bind[i] = (wrap(step), qa, da, aid, r)  # type: ignore[assignment]
+                return
+        raise KeyError(f"no simulated joint {name!r} (have {sorted(self.joints)})")
+
     def restore(self) -> None:
         """Every joint's physics and loop gains back to their nominal values."""
         m, nom = self.model, self._nominal

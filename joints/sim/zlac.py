@@ -174,6 +174,7 @@ from joints.devices.zlac.state import step as transition
 from joints.errors import ParameterRefused, Refusal
 from joints.sim import zlac_kernel as Z
 from joints.sim.firmware import Firmware
+from joints.sim.sensors import Sensor, model_of
 
 __all__ = [
     "ABSOLUTE_TARGET_LIMIT",
@@ -289,6 +290,9 @@ class ZlacChannel:
         self._bind(drive._table, drive._first)
         self.inertia = float(inertia)  #: J [kg*m^2] the velocity-loop gains are scaled with (tuned for)
         self.kt = drive.profile.torque_constant
+        #: the channel's sensors (joints.sim.sensors): what a read of position, velocity and current reports
+        self.sensor = Sensor(model_of(drive.profile), f"zlac:{drive.values['rs485_node_id']}:{side}",
+                             4 * drive.profile.encoder_lines / TWO_PI)
         self.temperature = drive.ambient
         self.v_start = RPM  #: initial velocity [rad/s] (cached from 0x2043/0x2073)
         self.reset_power()
@@ -409,20 +413,30 @@ class ZlacChannel:
 
     # -- conversions -----------------------------------------------------------------------
     def counts(self) -> int:
-        """Actual position value [counts]."""
+        """Actual position value [counts] (as the channel's sensor reports it)."""
         get = self._get
-        return round((get(Z.Q) - get(Z.ORIGIN)) * get(Z.COUNTS_PER_RAD))
+        q = get(Z.Q)
+        sensor = self.sensor
+        if not sensor.model.ideal:
+            q = sensor.position(self.drive.time, q, get(Z.QD))
+        return round((q - get(Z.ORIGIN)) * get(Z.COUNTS_PER_RAD))
 
     def rpm(self) -> float:
         return float(self._get(Z.QD)) / RPM
 
     def velocity_status(self) -> int:
-        """Actual velocity value [0.1 r/min]."""
-        return round(self._get(Z.QD) / RPM * 10)
+        """Actual velocity value [0.1 r/min]: the drive's estimate."""
+        v = self._get(Z.QD)
+        if not self.sensor.model.ideal:
+            v = self.sensor.velocity(self._get(Z.Q), v)
+        return round(v / RPM * 10)
 
     def current_status(self) -> int:
-        """Actual torque (current) value [0.1 A]."""
-        return round(self._get(Z.I_OUT) * 10)
+        """Actual torque (current) value [0.1 A], as the drive measures it."""
+        i = self._get(Z.I_OUT)
+        if not self.sensor.model.ideal:
+            i = self.sensor.current(i)
+        return round(i * 10)
 
     def error_status(self) -> int:
         """Error code value (:class:`~joints.devices.zlac.registers.Fault` bits)."""
@@ -543,6 +557,7 @@ class ZlacFirmware(Firmware):
         self.left = ZlacChannel(self, "left", (inertia_left if inertia_left is not None else own) + load)
         self.right = ZlacChannel(self, "right", (inertia_right if inertia_right is not None else own) + load)
         self.channels = (self.left, self.right)
+        self.sensors = (self.left.sensor, self.right.sensor)
         for ch in self.channels:
             r = ch.reg
             self.computed[r["actual_motor_position"]] = ch.counts
@@ -663,6 +678,8 @@ class ZlacFirmware(Firmware):
         The incremental position counters restart at 0 at the wheels' present angle; a new
         ``rs485_node_id`` takes effect now.
         """
+        for sensor in self.sensors:  # the sensors' noise restarts with the drive: a world reset is reproducible
+            sensor.reseed()
         super().power_cycle()
         self.ignored.clear()
         self._power_on()

@@ -26,6 +26,7 @@ from joints.s2r.identify import (
     model_terms,
     write_overlay,
 )
+from joints.sim.sensors import FIELDS
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -41,9 +42,15 @@ PERTURB = {"armature": 1.4, "coulomb_friction": 2.0, "viscous_friction": 1.5, "t
 NOMINAL = PROFILES["eRob80H100"]
 
 
+#: ideal sensors (joints.sim.sensors): these tests check the fit's consistency on exact readings; the
+#: drives' own sensors are judged in test_identify_real.py
+IDEAL = {name: 0.0 for name in FIELDS}
+
+
 def pendulum(**joint: Any) -> dict[str, Any]:
     data: dict[str, Any] = tomllib.loads(pendulum_text())
     data["joints"]["joint1"].update(joint)
+    data["joints"]["joint1"]["profile"] = {**IDEAL, **joint.get("profile", {})}
     return data
 
 
@@ -83,7 +90,7 @@ def test_identification_recovers_every_perturbation(identified: tuple[Identifica
     assert abs(ident.command_delay - 0.002) < 2e-4
     assert ident.gravity_loaded and ident.mode == "torque"
     assert ident.period == pytest.approx(0.001)  # a sample every physics substep, lockstep
-    assert ident.residual < 0.01 and ident.used > 200
+    assert ident.residual < 0.01 and ident.used > 40  # 100 ms windows where the joint slides
     assert all(s < 0.01 for s in ident.std.values()), ident.std
 
 
@@ -98,7 +105,8 @@ def test_unperturbed_twin_identifies_as_its_profile() -> None:
     assert ident.viscous_friction == pytest.approx(NOMINAL.viscous_friction, rel=0.01)
     assert ident.torque_scale == pytest.approx(1.0, rel=0.01)
     assert ident.command_delay is not None and ident.command_delay < 2e-4
-    assert ident.delay == pytest.approx(0.001, abs=2e-4)  # the twin's own one-substep feedback latency
+    # the twin's own feedback latency as positions show it: half a substep (semi-implicit Euler)
+    assert ident.delay == pytest.approx(0.0005, abs=2e-4)
 
 
 def chirp_currents(profile: Any, seconds: float = 8.0, dt: float = 0.001) -> list[int]:

@@ -19,6 +19,7 @@ from joints.devices.erob.profiles import PROFILES
 from joints.errors import ConfigError
 from joints.s2r.identify import Excitation, identify, write_overlay
 from joints.s2r.shadow import Shadow
+from joints.sim import sensors
 
 ROOT = Path(__file__).resolve().parents[2]
 PERTURB = {"armature": 1.4, "coulomb_friction": 2.0, "viscous_friction": 1.5, "torque_constant": 0.9,
@@ -82,8 +83,11 @@ def test_lockstep_shadow_of_a_sim_rig(tmp_path: Path) -> None:
     pytest.importorskip("matplotlib")
     real = joints.open(config(), backend="sim")
     real.sim.perturb("joint1", **PERTURB)
+    sensors.ideal(real.sim)  # exact readings: "same frames, same times" must then give the same bits
     try:
         with Shadow(real) as nominal, Shadow(real, perturb={"joint1": PERTURB}) as same:
+            sensors.ideal(nominal.world)
+            sensors.ideal(same.world)
             workload(real, chirp=2.0)
             a, b = nominal.summary(), same.summary()
             png = nominal.plot(tmp_path / "shadow.png")

@@ -14,6 +14,7 @@ from joints.sim.erob import ErobFirmware
 pytest.importorskip("mujoco")
 
 import joints
+from joints.sim import sensors
 from simkit import erob_world
 
 PROFILE = PROFILES["eRob80H100"]
@@ -86,6 +87,7 @@ def test_torque_mode_current_follows_every_command() -> None:
            "joints": {"joint1": {"device": "erob", "bus": "b", "address": 1,
                                  "limits": {"position": [-3, 3], "torque": 40.0, "velocity": 3.0}}}}
     with joints.open(cfg) as rig:
+        sensors.ideal(rig.sim)  # the drive's own current, not as measured (noise, resolution)
         j = rig.joints["joint1"]
         j.enable()
         rig.sleep(0.6)

@@ -27,6 +27,7 @@ from joints.drivers.erob_modbus import ZERO_BASE, ErobModbusDriver
 from joints.errors import DeviceFault, DeviceRejected, StateError
 from joints.joint import Joint
 from joints.link.modbus import ModbusLink
+from joints.sim import sensors
 from joints.sim.erob import FOLLOWING_ERROR, STALL
 from simkit import erob_world
 
@@ -196,6 +197,7 @@ def test_stall_trips_after_struck_time(bench: Bench) -> None:
 
 def test_no_stall_below_struck_current(bench: Bench) -> None:
     _block_joint(bench)
+    sensors.ideal(bench.world)  # the current exactly as commanded (no measurement noise)
     drv = bench.drv["joint1"]
     drv.write("struck_time", 2000)
     drv.configure_torque(max_speed=0)

@@ -23,6 +23,7 @@ from joints.devices.erob.profiles import profile
 from joints.devices.erob.registers import COUNTS_PER_REV, AchieveStatus, MotionStatus
 from joints.drivers.erob_modbus import ErobModbusDriver
 from joints.link.modbus import ModbusLink
+from joints.sim import sensors
 from simkit import erob_world
 
 MODEL = "eRob80H100"
@@ -124,6 +125,7 @@ def test_single_read_after_settling_reports_target_reached(bench: Bench) -> None
 
 @pytest.mark.parametrize("sign", [1, -1])
 def test_speed_mode_ramps_with_profile_acceleration(bench: Bench, sign: int) -> None:
+    sensors.ideal(bench.world)  # the speed as the drive holds it (its estimate steps by 1000 count/s)
     drv = bench.drv["joint1"]
     target, accel = sign * 100_000, 100_000  # 1 s ramp
     drv.configure_velocity(acceleration=accel, deceleration=accel)
@@ -178,6 +180,7 @@ def test_torque_mode_holds_at_torque_mode_max_speed(bench: Bench) -> None:
 
 def test_torque_mode_without_speed_limit_is_friction_limited(bench: Bench) -> None:
     current = 3000
+    sensors.ideal(bench.world)  # the current exactly as it flows (no measurement noise)
     speeds, currents = _run_torque(bench, current, 0)  # 0 = "no limit but max_speed"
     terminal = (PROFILE.torque_constant * current / 1000 - PROFILE.coulomb_friction) / PROFILE.viscous_friction * C
     assert terminal < 262_144  # friction, not max_speed, limits here: 188597 count/s

@@ -20,6 +20,7 @@ from joints.codecs.crc import append_crc
 from joints.devices.mks.modbus import MKS_MODBUS
 from joints.devices.mks.state import WorkMode
 from joints.devices.quirks import MKS_FIRMWARES
+from joints.sim import sensors
 from testdata import by_id, sequences, vectors
 
 RECORDS = by_id()
@@ -97,6 +98,7 @@ def test_sequence_7_4_speed_mode_save_stop_power_cycle(tmp_path: Path) -> None:
     steps = seq["steps"]
     # the frames go straight to the device bus and its completions are taken there: no timed line in between
     with open_motor(tmp_path, timing="ideal") as rig:
+        sensors.ideal(rig.world)  # the manual's speeds exactly (the drive's estimate steps by 0.7 r/min)
         _serial_twin(rig)
         bus = rig.world.buses["rs485"]
         assert bus.receive(bytes.fromhex(steps[0]["send_hex"])) == bytes.fromhex(steps[0]["expect_hex"])
@@ -169,6 +171,7 @@ def test_long_packet_5_7_moves_five_twins_differently_and_nobody_answers(tmp_pat
     packet = _hex(RECORDS["mks-native-5.7-longpacket-send"])
     assert len(packet) == 52
     with open_motor(tmp_path, n=5) as rig:
+        sensors.ideal(rig.world)  # the manual's speeds exactly
         bus = rig.world.buses["rs485"]
         for i in range(1, 6):
             rig.world.drives[f"m{i}"].write("work_mode", int(WorkMode.SR_vFOC))

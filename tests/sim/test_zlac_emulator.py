@@ -29,6 +29,7 @@ from joints.devices.zlac.registers import (
 )
 from joints.errors import ConfigError
 from joints.sim.modbus_front import ModbusDeviceBus, ModbusFront
+from joints.sim.sensors import IDEAL
 from joints.sim.zlac import DriveState, ZlacFirmware
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -331,6 +332,8 @@ def test_replay_manual_sequences(seq_id: str) -> None:
     seq = seqs[seq_id]
     torque = "3.4" in seq_id
     b = Bench(damping=2.0) if torque else Bench()  # torque mode: a viscous load keeps speeds bounded
+    for sensor in b.emu.sensors:  # the manual's example values: exact readings
+        sensor.model = IDEAL
     chain = [seq]
     while chain[0].get("prerequisite"):
         chain.insert(0, seqs[chain[0]["prerequisite"]])
@@ -457,6 +460,8 @@ def test_rewriting_the_same_target_does_not_restart_the_ramp() -> None:
 @pytest.mark.parametrize("rpm", [100, -100, 30, 200])
 def test_steady_speed_within_3_percent(rpm: int) -> None:
     b = Bench(coulomb=0.5)  # more friction than the profile's estimate
+    for sensor in b.emu.sensors:  # the loop's own speed: exact readings (the estimate steps by 0.29 r/min)
+        sensor.model = IDEAL
     b.velocity_mode()
     b.write_words(0x2088, (rpm, rpm))
     b.run(2.0)

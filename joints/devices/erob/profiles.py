@@ -91,6 +91,23 @@ _FLOAT_FIELDS = (
 # Friction may be switched off (0) for an ideal simulation, the delay is 0 unless identified;
 # everything else must be > 0.
 _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction", "command_delay")
+# the sensor models (joints.sim.sensors): 0 switches a term off
+_SENSOR_FIELDS = ("velocity_window", "velocity_noise", "position_noise", "current_noise", "current_resolution",
+                  "sample_jitter")
+_FLOAT_FIELDS: tuple[str, ...] = (*_FLOAT_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
+_NON_NEGATIVE_FIELDS: tuple[str, ...] = (*_NON_NEGATIVE_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
+_SENSOR_SOURCES = {
+    "velocity_window": ("EST: ZeroErr publishes no speed estimator; the status speed is taken as the 19-bit output "
+                        "encoder's difference over one 1 kHz speed-loop period: steps of 0.012 rad/s, quantisation "
+                        "noise ~0.0049 rad/s when moving, 0 at rest. Uncertain by ~3x"),
+    "velocity_noise": "EST: 0 - the estimate's noise is its quantisation (velocity_window)",
+    "position_noise": "EST: 0 - an absolute encoder; the 19-bit quantisation is the register's",
+    "current_noise": ("EST: 20 mA std, a 12-bit phase-current ADC over a ~+-40 A range (1 LSB = 20 mA) with "
+                      "PWM ripple; not published. Uncertain by ~3x"),
+    "current_resolution": "EST: 10 mA measurement step (the register's unit is 1 mA); not published",
+    "sample_jitter": ("EST: 0 - the firmware latches its status in its fast loop (well under 0.1 ms) when a "
+                      "request is served; the host's own timing jitter is the bus's (wire time, issue 29)"),
+}
 
 # bus timing (issue 29): the drive's reply turnaround; no eRob manual states one
 #: s, EST: the ZLAC8015D log's 1.8 ms per Modbus transaction less a USB adapter's 1 ms (docs/timing.md)
@@ -122,6 +139,13 @@ class ErobProfile:
     command_delay: float = 0.0
     #: s from a request's end (after the protocol's silence) to the drive answering it (docs/timing.md)
     turnaround: float = TURNAROUND
+    # -- sensors as the drive reports them (joints.sim.sensors; sources: _SENSOR_SOURCES) --
+    velocity_window: float = 0.001  #: s, the speed estimate: encoder counts over this window
+    velocity_noise: float = 0.0  #: rad/s, std of noise beyond the quantisation
+    position_noise: float = 0.0  #: rad, std beyond the encoder's counts
+    current_noise: float = 0.02  #: A, std of the measured current
+    current_resolution: float = 0.01  #: A, step of the current measurement
+    sample_jitter: float = 0.0  #: s, age of a status value: uniform in [0, this]
     sources: Mapping[str, str] = field(default_factory=_empty_sources, compare=False, hash=False)
 
     def __post_init__(self) -> None:
@@ -367,6 +391,7 @@ def _build(size: int, ratio: int) -> ErobProfile:
         "rotor_inertia": j_in_src,
         "coulomb_friction": coulomb_src,
         "viscous_friction": viscous_src,
+        **_SENSOR_SOURCES,
         "command_delay": ("EST: 0 - the twin acts on a command at its next substep; a real drive's delay comes "
                           "from `joints identify` (profile overlay)"),
         "turnaround": TURNAROUND_SOURCE,

@@ -81,6 +81,13 @@ class MksProfile:
     stall_time: float  #: s, how long the error must last
     #: s from a request's end to the drive answering it (docs/timing.md)
     turnaround: float = 0.0008
+    # -- sensors as the drive reports them (joints.sim.sensors; sources: _SENSOR_SOURCES) --
+    velocity_window: float = 0.005  #: s, the speed estimate: encoder counts over this window
+    velocity_noise: float = 0.0  #: rad/s, std of noise beyond the quantisation
+    position_noise: float = 0.0  #: rad, std beyond the encoder's counts
+    current_noise: float = 0.0  #: A (the drive reports no current)
+    current_resolution: float = 0.0  #: A (the drive reports no current)
+    sample_jitter: float = 0.0005  #: s, age of a status value: uniform in [0, this]
     sources: Mapping[str, str] = field(default_factory=_empty_sources, compare=False, hash=False)
 
     def __post_init__(self) -> None:
@@ -141,10 +148,26 @@ _FLOAT_FIELDS = (
     "rotor_inertia", "coulomb_friction", "viscous_friction", "motor_mass", "stall_error", "stall_time",
 )
 _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction")
+# the sensor models (joints.sim.sensors): 0 switches a term off
+_SENSOR_FIELDS = ("velocity_window", "velocity_noise", "position_noise", "current_noise", "current_resolution",
+                  "sample_jitter")
+_FLOAT_FIELDS: tuple[str, ...] = (*_FLOAT_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
+_NON_NEGATIVE_FIELDS: tuple[str, ...] = (*_NON_NEGATIVE_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
+_SENSOR_SOURCES = {
+    "velocity_window": ("EST: the manual states no speed estimator; the MT6816 (16384 counts) differentiated at "
+                        "1 kHz steps by 0.38 rad/s, so the drive must average: a 5 ms window assumed (steps of "
+                        "0.077 rad/s; the register's 1 r/min unit quantises on top)"),
+    "velocity_noise": "EST: 0 - the estimate's noise is its quantisation (velocity_window)",
+    "position_noise": "EST: 0 - the encoder's quantisation is the register's",
+    "current_noise": "PUB: the drive reports no current (MKS-man: no current read command); 0",
+    "current_resolution": "PUB: the drive reports no current; 0",
+    "sample_jitter": "EST: status values refreshed every 0.5 ms; not published",
+}
 _TIMING_FIELDS = ("turnaround",)  # bus timing (issue 29): finite, >= 0
 _OVERRIDABLE: tuple[str, ...] = tuple(f.name for f in fields(MksProfile) if f.name not in ("model", "sources"))
 
 _COMMON_SOURCES = {
+    **_SENSOR_SOURCES,
     "turnaround": ("EST 0.8 ms: no MKS manual states a reply turnaround; a real ZLAC8015D log shows 1.8 ms per "
                    "transaction beyond bytes and t3.5, less 1 ms of USB adapter latency (docs/timing.md)"),
     "full_steps": "PUB 1.8 degree motors only (facts 3, MKS-man §14)",

@@ -111,6 +111,13 @@ class HubMotorProfile:
     viscous_friction: float = 0.003  #: N*m*s/rad (EST)
     #: s from a request's end (after t3.5) to the drive answering it (docs/timing.md)
     turnaround: float = TURNAROUND
+    # -- sensors as the drive reports them (joints.sim.sensors; sources: _SENSOR_SOURCES) --
+    velocity_window: float = 0.05  #: s, the velocity estimate: encoder counts over this window
+    velocity_noise: float = 0.0  #: rad/s, std of noise beyond the quantisation
+    position_noise: float = 0.0  #: rad, std beyond the encoder's counts
+    current_noise: float = 0.05  #: A, std of the measured current
+    current_resolution: float = 0.0  #: A, step of the current measurement (0: the register's 0.1 A)
+    sample_jitter: float = 0.001  #: s, age of a status value: uniform in [0, this]
     sources: Mapping[str, str] = field(default_factory=_sources, compare=False, hash=False)
 
     def __post_init__(self) -> None:
@@ -243,6 +250,22 @@ _FLOAT_FIELDS = (
 )
 # Friction and the assumed vehicle share may be 0 (ideal simulation / a wheel in the air).
 _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction", "load_inertia")
+# the sensor models (joints.sim.sensors): 0 switches a term off
+_SENSOR_FIELDS = ("velocity_window", "velocity_noise", "position_noise", "current_noise", "current_resolution",
+                  "sample_jitter")
+_FLOAT_FIELDS: tuple[str, ...] = (*_FLOAT_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
+_NON_NEGATIVE_FIELDS: tuple[str, ...] = (*_NON_NEGATIVE_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
+_SENSOR_SOURCES = {
+    "velocity_window": ("EST: the manual states no speed estimator; a 4096-count encoder differentiated at 1 kHz "
+                        "steps by 1.5 rad/s, and the register reports 0.1 r/min, so the drive must average: a 50 ms "
+                        "window assumed (steps of 0.03 rad/s = 0.29 r/min). Uncertain by ~3x"),
+    "velocity_noise": "EST: 0 - the estimate's noise is its quantisation (velocity_window)",
+    "position_noise": "EST: 0 - the encoder's quantisation is the register's",
+    "current_noise": "EST: 50 mA std on a 30 A-range current measurement; not published. Uncertain by ~3x",
+    "current_resolution": "EST: 0 - the register's 0.1 A unit is coarser than the measurement",
+    "sample_jitter": ("EST: status values refreshed every 1 ms, so a read returns a value up to 1 ms old; "
+                      "not published"),
+}
 _TIMING_FIELDS = ("turnaround",)  # bus timing (issue 29): finite, >= 0
 
 _SOURCES: dict[str, str] = {
@@ -277,6 +300,7 @@ _SOURCES: dict[str, str] = {
     "load_inertia": "EST half of a 25 kg base at the wheel radius: 12.5 * 0.1016^2",
     "coulomb_friction": "EST 0.2 N*m from the 80.7 % max-efficiency point (module docstring)",
     "viscous_friction": "EST 0.003 N*m*s/rad from the 80.7 % max-efficiency point (module docstring)",
+    **_SENSOR_SOURCES,
 }
 _SOURCES["turnaround"] = ("EST 0.8 ms: a real ZLAC8015D at 115200 baud (augustocamaral2003/zlac8015d-tests, "
                           "scripts/data.csv) takes 1.8 ms per transaction beyond bytes and t3.5; less 1 ms of USB "
