@@ -47,7 +47,7 @@ def test_v109_silent_host_leaves_the_axis_stopped_within_the_heartbeat_plus_one_
         while rig.time < last + HEARTBEAT + FRAME:  # the host goes silent (no frame, the world runs on)
             rig.clock.sleep(0.0005)
         assert fw.heartbeat_trips == 1
-        assert last + HEARTBEAT < fw.heartbeat_tripped_at <= last + HEARTBEAT + FRAME
+        assert last + HEARTBEAT <= fw.heartbeat_tripped_at <= last + HEARTBEAT + FRAME
         assert fw.motion is None and fw.motor_status() is MotorStatus.STOP and fw.enabled  # stopped, held
         rig.clock.sleep(0.3)
         assert abs(rig.world.joint_velocity("m1")) < 0.05
@@ -168,4 +168,4 @@ def test_raw_encoder_counts_from_power_on_whatever_zero_was_set(tmp_path: Path, 
         j.wait(timeout=10)
         axis, raw = d.read("encoder_addition"), d.read("raw_encoder_value")
         assert abs(axis - 8192) <= 2 and abs(raw - 16384) <= 2
-        assert d.read_all_status()["raw_encoder_value"] == raw
+        assert abs(d.read_all_status()["raw_encoder_value"] - raw) <= 2  # a later read: the shaft may settle a count
