@@ -45,6 +45,12 @@ address = 2
 CHILD = """
 import faulthandler, os, signal, sys, time
 faulthandler.register(signal.SIGUSR1, all_threads=True)  # the test asks for every thread's stack if we hang
+# a program started from a terminal: Ctrl-C raises KeyboardInterrupt, SIGTERM/SIGHUP end it - whatever the
+# test runner ignored (a background job ignores SIGINT, nohup SIGHUP, and a child inherits what is ignored)
+signal.signal(signal.SIGINT, signal.default_int_handler)
+for name in ("SIGTERM", "SIGHUP"):
+    if hasattr(signal, name):
+        signal.signal(getattr(signal, name), signal.SIG_DFL)
 import joints
 cfg = {{"backend": "hardware",
         "buses": {{"rs485": {{"protocol": "modbus-rtu", "port": {port!r}, "timeout": 0.2}}}},
@@ -52,14 +58,21 @@ cfg = {{"backend": "hardware",
 how = {how!r}
 if how == "never-closed":
     rig = joints.open(cfg)
-    rig.joints["joint1"].enable(); rig.joints["joint1"].set_velocity(1.0)
+    rig.joints["joint1"].enable()
+    rig.joints["joint1"].wait(timeout=10, until=lambda s: s.enabled)  # see below
+    rig.joints["joint1"].set_velocity(1.0)
     rig.joints["joint1"].wait(timeout=10, until=lambda s: s.velocity > 0.95)
     print("ready", rig.joints["joint1"].state().velocity, flush=True)
     sys.stdin.readline()
     sys.exit(0)  # leaves without rig.close(): the atexit hook closes it
 with joints.open(cfg) as rig:
     j = rig.joints["joint1"]
-    j.enable(); j.set_velocity(1.0)  # the driver waits the manual's 500 ms after enable itself
+    j.enable()
+    # the driver waits the manual's 500 ms after enable on this process's clock; the served world's clock lags the
+    # wall clock whenever its process waits for a core, and a start that reaches the twin before its 500 ms are
+    # over is refused with fault 0x0027 (start while disabled): go on when the drive reports its motor on
+    j.wait(timeout=10, until=lambda s: s.enabled)
+    j.set_velocity(1.0)
     j.wait(timeout=10, until=lambda s: s.velocity > 0.95)  # running at speed
     print("ready", j.state().velocity, flush=True)
     if how == "exception":
