@@ -46,21 +46,28 @@ def lower_bounds() -> dict[str, str]:
     return bounds
 
 
-def pins() -> dict[str, str]:
+def pins() -> tuple[dict[str, str], set[str]]:
+    """(name -> pinned version, names constrained otherwise: packages that are not direct dependencies)."""
     out: dict[str, str] = {}
+    others: set[str] = set()
     for line in (ROOT / ".ci" / "lowest.txt").read_text(encoding="utf-8").splitlines():
         line = line.split("#", 1)[0].strip()
-        if line:
-            name, sep, version = line.partition("==")
-            assert sep and version.strip(), f".ci/lowest.txt: {line!r} is not name==version"
-            assert _name(name) not in out, f".ci/lowest.txt: {name} twice"
-            out[_name(name)] = version.strip()
-    return out
+        if not line:
+            continue
+        name, sep, version = line.partition("==")
+        if not sep:
+            others.add(_name(re.split(r"[<>=!~;\s]", line)[0]))
+            continue
+        assert version.strip(), f".ci/lowest.txt: {line!r} is not name==version"
+        assert _name(name) not in out, f".ci/lowest.txt: {name} twice"
+        out[_name(name)] = version.strip()
+    return out, others
 
 
 def test_lowest_constraints_are_the_pyproject_lower_bounds() -> None:
-    bounds, pinned = lower_bounds(), pins()
+    bounds, (pinned, others) = lower_bounds(), pins()
     assert set(pinned) == set(bounds), (sorted(set(bounds) - set(pinned)), sorted(set(pinned) - set(bounds)))
+    assert not others & set(bounds), f"a direct dependency is constrained but not pinned: {others & set(bounds)}"
     wrong = {n: (bounds[n], pinned[n]) for n in bounds if _version(bounds[n]) != _version(pinned[n])}
     assert not wrong, f"pyproject bound vs .ci/lowest.txt pin: {wrong}"
     assert {"numpy", "mujoco", "numba", "gymnasium", "python-can", "pytest"} <= set(bounds)
