@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import os
 import select
@@ -24,6 +25,24 @@ if sys.platform.startswith("linux") and not os.environ.get("DISPLAY") and not os
     os.environ.setdefault("MUJOCO_GL", "egl")
 
 
+@functools.cache
+def _kernels_compiled() -> None:
+    """Compile the twins' kernels once, here, into numba's disk cache (joints.sim.kernel.cache_dir).
+
+    A served world loads them from there before it prints its port; on a cold cache (a fresh machine,
+    another Python) it would compile them first, which on a loaded 2-core machine takes longer than the
+    startup bound below allows, and the bound is for starting a server, not for the compiler.
+    """
+    from joints.sim import kernel
+
+    if not kernel.default_mode():
+        return
+    import joints
+
+    with joints.open(ROOT / "joints" / "configs" / "erob_pendulum.toml", backend="sim") as rig:
+        rig.sleep(0.01)  # a world with compiled twins: every kernel compiled (joints.sim.stepping._warm)
+
+
 @contextlib.contextmanager
 def _serve(config: Path, *, bus: str = "rs485", startup: float = 30.0) -> Iterator[str]:
     """Run ``joints sim serve CONFIG`` in another process; yield the pty port of ``bus``.
@@ -32,6 +51,7 @@ def _serve(config: Path, *, bus: str = "rs485", startup: float = 30.0) -> Iterat
     """
     if sys.platform == "win32":
         pytest.skip("pseudo-terminals need POSIX")
+    _kernels_compiled()
     proc = subprocess.Popen([sys.executable, "-m", "joints", "sim", "serve", str(config)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
     try:
@@ -100,6 +120,7 @@ def _serve_all(config: Path, *args: str, startup: float = 30.0) -> Iterator[Serv
     """Serve every bus of ``config`` (serial on ptys, CAN on udp_multicast) with ``--control``."""
     if sys.platform == "win32":
         pytest.skip("serving needs POSIX")
+    _kernels_compiled()
     if sys.version_info >= (3, 11):
         import tomllib
     else:  # pragma: no cover

@@ -168,6 +168,15 @@ def command(sub: Any, name: str, *, help: str, example: str, func: Handler,
     return p
 
 
+def command_group(sub: Any, name: str, *, help: str, example: str, description: str | None = None) -> Any:
+    """A command group (``joints NAME COMMAND ...``) with an example in its ``--help``; returns its subparsers."""
+    lines = "\n".join(f"  {line}" for line in example.strip().splitlines())
+    p: argparse.ArgumentParser = sub.add_parser(
+        name, help=help, description=description or help, epilog=f"example:\n{lines}",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    return p.add_subparsers(dest=f"{name}_command", required=True, metavar="COMMAND")
+
+
 def add_config(p: argparse.ArgumentParser, *, optional: bool = False) -> None:
     """The config file and ``--backend``."""
     if optional:

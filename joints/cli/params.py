@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 from joints import registry
-from joints.cli.common import UsageError, add_json, command, emit_json, joint, load_config, open_rig, out
+from joints.cli.common import UsageError, add_json, command, command_group, emit_json, joint, load_config, open_rig, out
 from joints.cli.tomlout import dumps
 from joints.errors import ConfirmationRequired, JointsError, RegisterError
 
@@ -268,9 +268,11 @@ def cmd_diff(args: argparse.Namespace) -> int:
 
 
 def register(sub: Any) -> None:
-    group = sub.add_parser("params", help="dump a drive's parameters to TOML, load them onto a drive, compare",
-                           description="parameter files (TOML)")
-    params = group.add_subparsers(dest="params_command", required=True, metavar="COMMAND")
+    params = command_group(sub, "params", help="dump a drive's parameters to TOML, load them onto a drive, compare",
+                           description="parameter files (TOML): dump a drive's parameters, load them onto a drive, "
+                                       "compare",
+                           example="joints params dump robot.toml shoulder -o shoulder.toml\n"
+                                   "joints params diff robot.toml elbow shoulder.toml")
 
     d = command(params, "dump", help="read every readable parameter of a joint's drive to TOML",
                 example="joints params dump robot.toml shoulder -o shoulder.toml", func=cmd_dump)

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from joints import registry
-from joints.cli.common import command, positive
+from joints.cli.common import command, command_group, positive
 from joints.errors import ConfigError
 
 #: the subcommands of ``joints sim`` (module, function that adds its parser); other modules may add theirs
@@ -284,9 +284,10 @@ def _serve_options(p: argparse.ArgumentParser) -> None:
 
 
 def register(sub: Any) -> None:
-    group = sub.add_parser("sim", help="simulation tools: serve twins, view a served world",
-                           description="simulation tools")
-    sim = group.add_subparsers(dest="sim_command", required=True, metavar="COMMAND")
+    sim = command_group(sub, "sim", help="simulation tools: serve twins, view a served world",
+                        description="simulation tools: serve a config's twins on pseudo-terminals and CAN channels, "
+                                    "view them",
+                        example="joints sim serve robot.toml --hardware-config twins.toml\njoints sim view robot.toml")
     sv = command(sim, "serve", help="serve the twins of CONFIG: serial buses on pseudo-terminals, CAN buses on "
                                     "python-can channels (one JSON line per bus)",
                  example="joints sim serve robot.toml --hardware-config twins.toml\n"

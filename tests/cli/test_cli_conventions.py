@@ -52,6 +52,33 @@ def test_every_command_has_help_with_an_example(path: tuple[str, ...], capsys: p
     assert "example:" in out and "joints " + path[0] in out.split("example:")[1]
 
 
+def _groups(parser: argparse.ArgumentParser, path: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
+    out = []
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            out += [path] if path else []
+            for name, sub in action.choices.items():
+                out += _groups(sub, (*path, name))
+    return out
+
+
+GROUPS = _groups(build_parser())
+
+
+def test_command_groups_are_found() -> None:
+    assert {("params",), ("sim",)} <= set(GROUPS)
+
+
+@pytest.mark.parametrize("path", GROUPS, ids=[" ".join(p) for p in GROUPS])
+def test_every_command_group_has_help_with_an_example(path: tuple[str, ...],
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as info:
+        main([*path, "--help"])
+    assert info.value.code == 0
+    out = capsys.readouterr().out
+    assert "example:" in out and "joints " + " ".join(path) + " " in out.split("example:")[1]
+
+
 @pytest.mark.parametrize("args", [
     ["monitor", "x.toml", "--duration", "-1"],
     ["watch", "x.toml", "--period", "0"],

@@ -7,6 +7,7 @@ harness in tests/harness/__init__.py); this slice takes a few seconds.
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Iterator
 
 import pytest
@@ -132,3 +133,75 @@ def test_it_sees_a_timed_out_write_reported_as_a_plain_failure(undo: pytest.Monk
     transactions.run(report, ["zlac8015d/modbus-rtu"], 1000, SEED)
     assert report.targets["transactions zlac8015d/modbus-rtu (in process)"].violations[
         "write-not-outcome-unknown"] > 0
+
+
+# --- reads serve changing values (issue 28: the MKS status reads served one value each) ------------------
+
+MKS_SETUPS = ["mks/mks-serial", "mks/modbus-rtu"]
+
+
+@pytest.mark.parametrize("name", MKS_SETUPS)
+def test_every_read_parameter_serves_a_new_value_after_every_read(name: str, undo: pytest.MonkeyPatch) -> None:
+    truths: list[transactions.Truth] = []
+    install = transactions.Truth.install
+
+    def keep(self: transactions.Truth, fw: object) -> None:
+        truths.append(self)
+        install(self, fw)
+
+    undo.setattr(transactions.Truth, "install", keep)
+    report = Report(SEED)
+    transactions.run(report, [name], 300, SEED)
+    assert violations(report) == {}, "\n".join(report.lines())
+    served = Counter(n for n, _v in truths[0].served)
+    reads = transactions.SETUPS[name].read_names
+    assert set(served) >= set(reads) and all(served[n] > 50 for n in reads), served  # distinct values per name
+
+
+@pytest.mark.parametrize("name", MKS_SETUPS)
+def test_it_sees_a_read_answered_by_the_previous_reply(name: str, undo: pytest.MonkeyPatch) -> None:
+    request = Link.request
+    last: dict[str, object] = {}
+
+    def stale(self: Link[object], req: object, *, idempotent: bool = False) -> object:
+        reply = request(self, req, idempotent=idempotent)
+        if not self.rule.is_read(req):
+            return reply
+        before = last.get(repr(req), reply)
+        last[repr(req)] = reply
+        return before
+
+    undo.setattr(Link, "request", stale)
+    report = Report(SEED)
+    transactions.run(report, [name], 300, SEED)
+    assert report.targets[f"transactions {name} (in process)"].violations["late-reply-accepted"] > 0
+
+
+class _Misplaced:
+    """A driver whose block reads put each value under the next parameter's name."""
+
+    def __init__(self, access: object) -> None:
+        self._access = access
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._access, name)
+
+    def read_many(self, names: list[str]) -> dict[str, int]:
+        got: dict[str, int] = self._access.read_many(names)  # type: ignore[attr-defined]
+        values = list(got.values())
+        return dict(zip(got, values[1:] + values[:1]))
+
+
+@pytest.mark.parametrize("name", MKS_SETUPS)
+def test_it_sees_a_value_read_into_the_wrong_parameter(name: str, undo: pytest.MonkeyPatch) -> None:
+    make = transactions.in_process
+
+    def misplaced(*args: object, **kwargs: object) -> transactions.Bench:
+        bench = make(*args, **kwargs)  # type: ignore[arg-type]
+        bench.access = _Misplaced(bench.access)
+        return bench
+
+    undo.setattr(transactions, "in_process", misplaced)
+    report = Report(SEED)
+    transactions.run(report, [name], 300, SEED)
+    assert report.targets[f"transactions {name} (in process)"].violations["wrong-value"] > 0

@@ -8,9 +8,10 @@ with :func:`joints.sim.serve.serve` (the code behind ``joints sim serve``) in a 
 to it over a pseudo-terminal on the wall clock.
 
 Ground truth comes from the twin's firmware, wrapped: every value a read serves is recorded with
-when it was served, and after each read the drive's pool parameters take fresh, unique values
-(as a moving drive's state would), so a stale reply cannot carry a current value; every write the
-firmware accepts is recorded. Host calls are the driver's parameter access: reads of one
+when it was served, and after each read every parameter the harness reads or writes takes a fresh,
+unique value (as a moving drive's state would; a status value the firmware computes from its motion,
+such as an MKS encoder count, is served from the harness's record instead), so a stale reply cannot
+carry a current value; every write the firmware accepts is recorded. Host calls are the driver's parameter access: reads of one
 parameter or a block, writes of one or a block, each write idempotent or not at random, each
 written value unique.
 
@@ -35,6 +36,7 @@ Adding a setup is one :class:`Setup` entry in :data:`SETUPS`.
 from __future__ import annotations
 
 import bisect
+import functools
 import random
 import threading
 import time
@@ -141,8 +143,8 @@ class Truth:
 
     clock: Clock
     pool: tuple[str, ...]  #: written with unique values; take fresh values after every read
-    ranges: dict[str, tuple[int, int]]
-    reads: tuple[str, ...] = ()  #: also recorded when served
+    ranges: dict[str, tuple[int, int]]  #: the values each pool and read parameter may take
+    reads: tuple[str, ...] = ()  #: also recorded when served, and fresh after every read
     served: dict[tuple[str, int], float] = field(default_factory=dict)  #: (name, value) -> when served last
     #: when each (name, value) of a pool parameter was written by an accepted write (values recur over
     #: a long run: each execution belongs to the latest call that wrote that value before it)
@@ -158,9 +160,17 @@ class Truth:
         return lo + (self.counter * 7919 + zlib.crc32(name.encode())) % span
 
     def install(self, fw: Any) -> None:
+        """Wrap ``fw`` (before its fronts make their readers): record what it serves and executes."""
         pool, served = set(self.pool), self.served
         watched_names = pool | set(self.reads)
         reader, write_many = fw.reader, fw.write_many
+        #: read-only parameters: their values now (computed ones are served from here, not from the motion)
+        status = {n: self.fresh(n) for n in self.reads if n not in pool}
+        for n, v in status.items():
+            if n in fw.computed:
+                fw.computed[n] = functools.partial(status.__getitem__, n)
+            else:
+                fw.set(n, v)
 
         def wrapped_reader(names: Sequence[str]) -> Callable[[], list[int]]:
             read = reader(names)
@@ -173,8 +183,12 @@ class Truth:
                         now = self.clock.now()
                         for i, n in watched:
                             served[(n, values[i])] = now
-                        for n in self.pool:  # the drive moves on: every pool value is new now
+                        for n in self.pool:  # the drive moves on: every value is new now
                             fw.set(n, self.fresh(n))
+                        status.update({n: self.fresh(n) for n in status})
+                        for n, v in status.items():
+                            if n not in fw.computed:
+                                fw.set(n, v)
                 return values
 
             return serve
@@ -217,10 +231,11 @@ def _drive_configs(setup: Setup, bus: str) -> list[JointConfig]:
 
 
 def _ranges(setup: Setup, params: Any = None) -> dict[str, tuple[int, int]]:
-    """Values the harness writes: in each parameter's range (the driver's own set: a model may narrow it)."""
+    """Values the harness writes and serves: in each parameter's range (the driver's own set: a model may narrow
+    it)."""
     params = params or _family(setup).params()
     out = {}
-    for name in setup.pool:
+    for name in dict.fromkeys((*setup.pool, *setup.read_names)):
         p = params[name]
         lo, hi = p.type_range
         lo = lo if p.minimum is None else max(lo, p.minimum)
