@@ -100,6 +100,11 @@ REALITIES = (EROB80_100_M2, EROB80_100_M6, PERTURBED)
 
 def config(**joint: Any) -> dict[str, Any]:
     data: dict[str, Any] = tomllib.loads(PENDULUM.read_text())
+    # the fit is judged at the drive's own sampling (1 kHz lockstep; the pty test at the rate a host reaches):
+    # on the stand's RS485 line at 115200 baud with its wire time, turnaround and adapter latency, one
+    # command + state pair takes ~8 ms and identification refuses the fit (its delay uncertainty is then above
+    # its threshold) instead of writing a biased overlay - docs/identification.md
+    data["buses"]["rs485"]["timing"] = "ideal"
     data["joints"]["joint1"].update(joint)
     return data
 

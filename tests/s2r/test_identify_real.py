@@ -230,6 +230,7 @@ def test_cli_refuses_a_poor_fit_and_force_writes_it_with_the_warning(tmp_path: P
     data = (Path(__file__).resolve().parents[2] / "joints" / "configs" / "erob_pendulum.toml").read_text()
     # an encoder far noisier than the eRob's (2 mrad): the fit cannot be trusted
     data = data.replace("address = 1\n", "address = 1\nprofile = { position_noise = 0.002 }\n")
+    data = data.replace("timeout = 0.1\n", "timeout = 0.1\ntiming = \"ideal\"\n")  # as reality.config()
     cfg = tmp_path / "stand.toml"
     cfg.write_text(data)
     assert main(["identify", str(cfg), "joint1", "--duration", "6"]) == 1

@@ -150,7 +150,10 @@ def test_shadow_of_a_served_joint_diverges_until_it_is_identified(served_perturb
     # identification through the same serial port, as on hardware
     with joints.open(cfg, backend="hardware") as rig:
         ident = identify(rig, "joint1", Excitation(duration=15.0, amplitude=30.0))
-        overlay = write_overlay(tmp_path / "joint1.profile.toml", rig.joints["joint1"].driver.profile, ident)
+        # forced: this test judges the overlay by the shadow's divergence below, not by the fit's own thresholds
+        # (on a loaded host the pty's sampling jitter can put the armature's uncertainty just above 10 %)
+        overlay = write_overlay(tmp_path / "joint1.profile.toml", rig.joints["joint1"].driver.profile, ident,
+                                force=True)
     assert ident.period < 0.02
     cfg["joints"]["joint1"]["profile_overlay"] = str(overlay)
     with joints.open(cfg, backend="hardware") as rig, Shadow(rig) as shadow:
