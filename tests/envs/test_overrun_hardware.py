@@ -96,3 +96,28 @@ def test_a_step_that_fits_reports_no_overrun(port: str) -> None:
         assert info["overrun"] == 0.0 and env.overruns == 0
     finally:
         env.close()
+
+
+def test_sim_and_served_twin_report_the_same_overrun_time(port: str) -> None:
+    """Issue 29: a forced config that does not fit (30 ms of adapter latency per transaction at a 20 ms
+    period) overruns on the served twin (hardware backend, wall clock) and in sim (simulated clock) alike,
+    and the total overrun time agrees within 10 %."""
+    totals = {}
+    for backend in ("sim", "hardware"):
+        cfg = envs.default_config("erob_reach")
+        cfg["buses"]["rs485"]["adapter_latency"] = LATENCY  # the sim's line and the served twin take the same
+        cfg["buses"]["rs485"]["timeout"] = 0.5
+        if backend == "hardware":
+            cfg["buses"]["rs485"]["port"] = port
+        env = Forced(config=cfg, backend=backend, control_period=PERIOD)
+        try:
+            env.reset(seed=0, options={"start": [0.0], "target": [1.0]})
+            action = np.zeros(env.action_space.shape, np.float32)
+            for _ in range(10):
+                env.step(action)
+            assert env.overruns == 10
+            totals[backend] = env.overrun_time
+        finally:
+            env.close()
+    print(f"overrun time over 10 steps: sim {totals['sim'] * 1e3:.1f} ms, served {totals['hardware'] * 1e3:.1f} ms")
+    assert totals["hardware"] == pytest.approx(totals["sim"], rel=0.10), totals
