@@ -393,12 +393,27 @@ class MksFirmware(Firmware):
 
         ``answered``: the command was addressed to this drive alone (its completion may be sent).
         Raises :class:`~joints.errors.ParameterRefused` when a value is unknown, not writable or out of
-        range (the front answers "fail" or a Modbus exception).
+        range (the front answers "fail" or a Modbus exception). A command the drive cannot carry out in its
+        present state (:meth:`_refusal`) gets status 0 and changes nothing, its fields included.
         """
+        refused = self._refusal(command, values)
+        if refused is not None:
+            return refused
         if values:
             self.write_many(list(values.items()))
         handler = self._handlers.get(command)
         return handler(values, answered) if handler is not None else int(_SET.SUCCESS)
+
+    def _refusal(self, command: int, values: Mapping[str, int]) -> int | None:
+        """Status 0 for a command the drive cannot carry out now - enable outside the serial work modes (the
+        pulse interface's En pin rules there), a motion (go home, a run command other than its stop) while it
+        cannot run; None: it executes."""
+        if command == Command.ENABLE_MOTOR:
+            return int(_SET.FAIL) if values.get("motor_enable") and not self.mode.serial else None
+        if command == Command.GO_HOME or (command in _PREFIX and values.get(
+                f"{_PREFIX[command]}_speed", self.values[f"{_PREFIX[command]}_speed"]) != 0):
+            return None if self._can_run() else self._refuse()
+        return None
 
     # -- commands -----------------------------------------------------------------------------------
     def _release(self, values: Mapping[str, int], answered: bool) -> int:
@@ -433,10 +448,7 @@ class MksFirmware(Firmware):
         return int(_SET.SUCCESS)
 
     def _enable(self, values: Mapping[str, int], answered: bool) -> int:
-        on = bool(values["motor_enable"])
-        if on and not self.mode.serial:  # the pulse interface's En pin rules there; releasing always works
-            self.values["motor_enable"] = int(self.enabled)
-            return int(_SET.FAIL)
+        on = bool(values["motor_enable"])  # (not in a pulse work mode: :meth:`_refusal`)
         if on and not self.enabled:
             self.enabled = True
             self._hold()
@@ -474,9 +486,7 @@ class MksFirmware(Firmware):
             and self._calibrating_until < 0
 
     def _go_home(self, values: Mapping[str, int], answered: bool) -> int:
-        if not self._can_run():
-            return self._refuse()
-        v = self.values
+        v = self.values  # (the drive can run: :meth:`_refusal`)
         home = -1 if v["home_direction"] == st.MotorDirection.CW else 1
         job = _Motion("home", Command.GO_HOME, answered, goal=self._clamp_value(max(1, v["home_speed"])), acc=0)
         if v["home_mode"] == st.HomeMode.NO_LIMIT:
@@ -496,8 +506,6 @@ class MksFirmware(Firmware):
         speed = v[f"{prefix}_speed"]
         if speed == 0:  # a stop: decelerating with acc, at once with acc 0 (always accepted)
             return self._stop(acc, code, answered)
-        if not self._can_run():
-            return self._refuse()
         goal = self._clamp_value(speed)
         if code == Command.SPEED_MODE:
             self._start(_Motion("speed", code, answered, goal=goal, acc=acc,

@@ -36,6 +36,7 @@ Time model (docs/timing.md):
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -126,6 +127,7 @@ class TimedSerialLine(ByteTransport):
         self.adapter_latency = adapter_latency
         self.gap = gap
         self.log: list[Transmission] = []
+        self._since_reset = 0  #: index in :attr:`log` of the first frame since the clock last went back
         self.collisions = 0
         self._pending: list[Transmission] = []  #: on the line, not yet acted on / seen
         self._rx = bytearray()
@@ -167,6 +169,7 @@ class TimedSerialLine(ByteTransport):
             self._pending.clear()
             self._rx.clear()
             self._free = {"host": -math.inf, "device": -math.inf}
+            self._since_reset = len(self.log)  # frames before a reset never overlap the ones after it
             self.now = self._clock_seen = c
         elif c > self._clock_seen:
             self._clock_seen = c
@@ -205,7 +208,7 @@ class TimedSerialLine(ByteTransport):
             due = end + self.gap + self.adapter_latency
         tx = Transmission(start, end, side, bytes(data), due=due, size=n, handler=handler, payload=payload)
         self._free[side] = end + self.gap
-        for other in reversed(self.log):
+        for other in itertools.islice(reversed(self.log), len(self.log) - self._since_reset):
             if other.end <= start - 1.0:
                 break  # older than any frame still able to overlap
             if other.side != side and other.start < tx.end and start < other.end:

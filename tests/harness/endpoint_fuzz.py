@@ -20,6 +20,8 @@ unanswered):
 * ``executed-twice`` - no frame executed more often than it occurs, no write acted on twice;
 * ``write-outside-frame`` - the firmware is written only while a write request is served;
 * ``ack-without-write`` - a write answered as done was done;
+* ``failed-but-written`` - a write answered with a failure reply (MKS V1.0.6+: FC06 data 0xFFFF, FC16
+  quantity 0) wrote nothing;
 * ``reply-to-broadcast`` / ``reply-to-other-address`` - replies only to the requester's address,
   and only for addresses on the bus;
 * ``reply-stream`` - the bytes out are exactly the replies the fronts built (no junk);
@@ -275,7 +277,7 @@ class ModbusAdapter(StreamAdapter):
         mb, ledger = self.mb, self.ledger
         present = set(self.ep.bus.slaves)
         seen: dict[tuple[bytes, int, bytes], int] = {}
-        for msg, reply, (number, segment) in ledger.executed:
+        for i, (msg, reply, (number, segment)) in enumerate(ledger.executed):
             if isinstance(msg, tuple):  # a malformed frame offered to its slave
                 frame = msg[1]
                 if not t.check("executed-invalid", frame in segment and frame[0] in present):
@@ -301,7 +303,10 @@ class ModbusAdapter(StreamAdapter):
                     t.example("reply-to-broadcast", f"{reply!r} to broadcast {msg!r}")
                 if not t.check("reply-to-other-address", reply.slave == msg.slave and msg.slave in present):
                     t.example("reply-to-other-address", f"{reply!r} to {msg!r}")
-                if isinstance(msg, (mb.WriteSingleRegister, mb.WriteMultipleRegisters)) and not isinstance(
+                if self._failure_reply(msg, reply):  # "the write failed": this request wrote nothing
+                    if not t.check("failed-but-written", not any(n == i for n, _a, _i in ledger.writes)):
+                        t.example("failed-but-written", f"{reply!r} to {msg!r} but the firmware was written")
+                elif isinstance(msg, (mb.WriteSingleRegister, mb.WriteMultipleRegisters)) and not isinstance(
                         reply, mb.ExceptionReply):
                     done = sum(1 for _n, a, _i in ledger.writes if a == msg.slave)
                     if not t.check("ack-without-write", done >= 1):
@@ -334,6 +339,15 @@ class ModbusAdapter(StreamAdapter):
                 break
             if not t.check("reply-to-other-address", r.slave in present):
                 t.example("reply-to-other-address", f"{r!r} from an address not on the bus")
+
+    def _failure_reply(self, msg: Any, reply: Any) -> bool:
+        """A failure reply (MKS V1.0.6+, its front's ``failure_replies``): an FC06 write answered with register data
+        0xFFFF (no MKS register takes 0xFFFF, so even its echo is one), an FC16 write with quantity 0."""
+        mb = self.mb
+        if not getattr(self.ep.fronts.get(msg.slave), "failure_replies", False):
+            return False
+        return (isinstance(reply, mb.WriteSingleRegisterReply) and reply.value == 0xFFFF) or (
+            isinstance(reply, mb.WriteMultipleRegistersReply) and reply.count == 0)
 
     def probe(self, t: Target) -> None:
         """After silence a valid request to a drive on the bus is answered, alone."""

@@ -52,6 +52,8 @@ def test_every_twin_endpoint_of_the_registry_survives_a_fuzzed_slice() -> None:
     assert not report.uncovered  # every protocol of the registry has a fuzz adapter
     modbus = report.targets["endpoint erob/modbus-rtu"]
     assert modbus.checks["reply-to-broadcast"] > 100 and modbus.checks["ack-without-write"] > 10
+    mks = report.targets["endpoint mks/modbus-rtu"]  # V1.0.6+ failure replies: judged as "not executed"
+    assert mks.checks["failed-but-written"] > 10 and mks.checks["ack-without-write"] > 10
 
 
 def test_transactions_under_ten_percent_faults_keep_every_invariant() -> None:

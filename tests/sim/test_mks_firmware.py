@@ -79,6 +79,8 @@ def test_failed_fc06_and_fc16_are_answered_as_the_firmware_does_and_refused_by_t
         d = j.driver
         j.enable()
         d.disable()
+        fw = _twin(rig)
+        before = dict(fw.values)
         replies: list[object] = []
         exchange = d.link.rule.is_reply
 
@@ -90,10 +92,13 @@ def test_failed_fc06_and_fc16_are_answered_as_the_firmware_does_and_refused_by_t
         with pytest.raises(DeviceRejected) as fc16:
             d.set_velocity(100)
         answers = [replies[-1]]
+        assert fw.values == before  # a failure: the twin carried out nothing, not even the command's fields
         d.set_work_mode(WorkMode.CR_vFOC)
+        before = dict(fw.values)
         with pytest.raises(DeviceRejected) as fc06:
             d.write_param("motor_enable", 1)
         answers.append(replies[-1])
+        assert fw.values == before and not fw.enabled
         if firmware == "v1.0.5":
             assert answers == [mb.ExceptionReply(1, 0x10, 4), mb.ExceptionReply(1, 0x06, 4)]
             assert (fc16.value.code, fc06.value.code) == (4, 4)

@@ -62,6 +62,29 @@ def test_overlapping_frames_are_corrupted_on_both_sides() -> None:
     assert "COLLISION" in line.trace()
 
 
+def test_frames_from_before_a_clock_reset_never_collide_with_later_ones() -> None:
+    """A reset (the sim's rig.reset) takes the clock back: the next episode's frames land on the times of the last
+    episode's, which are long gone from the line (before the fix, reads of the MKS env's second episode that met a
+    frame of the first at the same instant were garbled and its reset timed out)."""
+    clock = ManualClock()
+    request, reply = mks.encode(mks.ReadSpeed(1)), mks.encode(mks.SpeedReply(1, 7))
+    device = Echo(reply)
+    line = TimedSerialLine(device, baudrate=38400, clock=clock, turnaround=0.0005)
+    for start in (0.0, 0.002):  # the second episode's requests go out while the first's replies were on the line
+        clock.set(start)
+        for _ in range(3):
+            line.write(request)
+            assert line.read(0.1) == reply
+    assert line.collisions == 0 and not any(tx.corrupted for tx in line.log)
+    assert len(line.log) == 12  # the trace keeps both episodes
+    clock.set(0.0)  # a real overlap after a reset still collides
+    device.own.append((0.0005, mks.encode(mks.RunReply(1, 0xFD, mks.RunStatus.COMPLETE))))
+    clock.advance(0.0005)
+    line.write(request)
+    line.read(0.05)
+    assert line.collisions == 1
+
+
 def test_reads_wait_on_the_clock_and_return_at_the_deadline() -> None:
     clock = ManualClock()
     line = TimedSerialLine(Echo(b""), baudrate=9600, clock=clock)
