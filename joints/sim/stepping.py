@@ -143,6 +143,11 @@ class Group:
         for twin, first in self._owners:
             twin.adopt(self.table, first)
         self.dts = [w.timestep for w in self.worlds]
+        #: the Python path's per-substep inputs, kept: (active flags, step counts) and the worlds' arrays
+        #: (views of each world's one MjData)
+        self._flags = ([0] * len(self.worlds), [0] * len(self.worlds))
+        self._arrays = ([w.data.qpos for w in self.worlds], [w.data.qvel for w in self.worlds],
+                        [w.data.ctrl for w in self.worlds])
         self.mj_step = kernel.mj_step_address() if self.compiled else None
         if self.compiled:
             table = []
@@ -214,11 +219,10 @@ class Group:
             _run_compiled(1, 0, 0, self.table, self.adr, self.ratio, self.order, table,  # type: ignore[misc]
                           self.dts_array)
             return
-        active = [0] * len(self.worlds)
-        steps = [0] * len(self.worlds)
+        active, steps = self._flags
         for w in worlds:
             active[w] = 1
             steps[w] = self.worlds[w].steps
-        substep(self.table, self.adr, self.ratio, self.order, active, steps, self.dts,
-                [w.data.qpos for w in self.worlds], [w.data.qvel for w in self.worlds],
-                [w.data.ctrl for w in self.worlds])
+        substep(self.table, self.adr, self.ratio, self.order, active, steps, self.dts, *self._arrays)
+        for w in worlds:
+            active[w] = 0
