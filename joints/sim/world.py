@@ -394,7 +394,7 @@ class World:
     # -- how the drives are stepped ---------------------------------------------------------------
     def kernel_joints(self) -> list[_Bound]:
         """The joints whose twin runs its loops as kernel rows (:mod:`joints.sim.stepping`)."""
-        return [b for b in self._bound if getattr(b.emulator, "KERNEL", None) in stepping.KINDS]
+        return [b for b in self._bound if stepping.has_kernel(b.emulator)]
 
     def kernel_stepped(self, b: _Bound) -> bool:
         """Whether joint ``b`` is stepped by its kernel row (not by a function put in its place)."""
@@ -417,7 +417,7 @@ class World:
         """Whether N substeps can run in one compiled call: every drive a kernel row, no timed bus, an arena
         with room (the compiled call cannot turn MuJoCo's fatal errors into exceptions)."""
         return not self._unfused and not self._ticks and all(self.kernel_stepped(b) for b in self._bound
-                                       if getattr(b.emulator, "KERNEL", None) in stepping.KINDS) \
+                                       if stepping.has_kernel(b.emulator)) \
             and len(self.kernel_joints()) == len(self._bound)
 
     def _switches(self, joint: str, qadr: int, ratio: float) -> tuple[float | None, float | None]:
