@@ -520,28 +520,36 @@ class JointsEnv(RigEnv):
         stop = s.position + s.velocity * abs(s.velocity) / (2.0 * self.profile_deceleration[i])
         return float(np.clip(stop, *self.position_limits[i]))
 
-    def _reach(self, command: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _reach(self, command: np.ndarray) -> tuple[list[float], list[float]]:
         """Per joint, the lowest and highest position [rad] it can pass through if ``command``
         (position or velocity, SI) is held for one period and the joint is then stopped with the
-        drive's deceleration - a conservative envelope of the drive's own profile."""
-        p = np.array([s.position for s in self._states])
-        v = np.array([s.velocity for s in self._states])
+        drive's deceleration - a conservative envelope of the drive's own profile. Plain floats per
+        joint (a few joints: cheaper than arrays; the same IEEE operations, the same bits)."""
         dt = self.control_period + self.bus_lag  # the state is older, the command later, by up to a bus cycle
-        if self.action_mode == "velocity":
-            acc = dec = self.profile_acceleration
-            step = acc * dt
-            v1 = np.where(np.abs(command - v) <= step, command, v + np.copysign(step, command - v))
-            p1 = p + 0.5 * (v + v1) * dt
-            ends = [p1, p1 + v1 * np.abs(v1) / (2.0 * dec)]
-        else:
-            acc, dec = self.profile_acceleration, self.profile_deceleration
-            u = np.minimum(np.maximum(self.profile_velocity, np.abs(v)), np.abs(v) + acc * dt)
-            travel = u * dt + u * u / (2.0 * dec)
-            d = command - p
-            ends = [p + np.copysign(np.minimum(travel, np.abs(d)), d)]
-        stop_now = p + v * np.abs(v) / (2.0 * dec)
-        pts = np.stack([p, stop_now, *ends])
-        return pts.min(axis=0), pts.max(axis=0)
+        acc = self.profile_acceleration.tolist()
+        velocity = self.action_mode == "velocity"
+        dec = acc if velocity else self.profile_deceleration.tolist()
+        cruise = self.profile_velocity.tolist()
+        lows: list[float] = []
+        highs: list[float] = []
+        ends: tuple[float, ...]
+        for i, (s, c) in enumerate(zip(self._states, command.tolist())):
+            p, v = s.position, s.velocity
+            a, b = acc[i], dec[i]
+            stop_now = p + v * abs(v) / (2.0 * b)
+            if velocity:
+                step = a * dt
+                v1 = c if abs(c - v) <= step else v + math.copysign(step, c - v)
+                p1 = p + 0.5 * (v + v1) * dt
+                ends = (p1, p1 + v1 * abs(v1) / (2.0 * b))
+            else:
+                u = min(max(cruise[i], abs(v)), abs(v) + a * dt)
+                travel = u * dt + u * u / (2.0 * b)
+                d = c - p
+                ends = (p + math.copysign(min(travel, abs(d)), d),)
+            lows.append(min(p, stop_now, *ends))
+            highs.append(max(p, stop_now, *ends))
+        return lows, highs
 
     def _to_model(self, i: int, position: float) -> float:
         """Joint position (user frame) -> MJCF joint angle: ``(position - offset) * direction``."""

@@ -365,7 +365,7 @@ class ErobArmReachEnv(JointsEnv):
         return [(self.target, (0.1, 0.9, 0.2, 0.6))]
 
     # -- safety -----------------------------------------------------------------------------
-    def clearance(self, lo: np.ndarray, hi: np.ndarray) -> float:
+    def clearance(self, lo: Sequence[float], hi: Sequence[float]) -> float:
         """Smallest gap [m] between the arm and the floor / its base over every pose with joint2,
         joint3 (user frame, rad) anywhere in ``[lo, hi]`` (per joint; joint1 does not matter):
         :func:`~envs.kinematics.erob_arm3_clearance` on a grid of :attr:`GRID` rad."""
@@ -376,7 +376,7 @@ class ErobArmReachEnv(JointsEnv):
             axes.append((np.linspace(lo[i], hi[i], n) - j.offset) * j.direction)  # user -> model frame
         return float(erob_arm3_clearance(axes[0][:, None], axes[1][None, :]).min())
 
-    def keeps_clearance(self, lo: np.ndarray, hi: np.ndarray) -> bool:
+    def keeps_clearance(self, lo: Sequence[float], hi: Sequence[float]) -> bool:
         """Whether every pose with joint2, joint3 (user frame, rad) in ``[lo, hi]`` keeps
         :attr:`CLEARANCE`; the same answer as ``clearance(lo, hi) >= CLEARANCE``, usually without
         its grid: around the box's centre a link point moves at most ``ARM3_REACH * |dq2| +

@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 import os
 import platform
+import sys
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -26,31 +27,46 @@ from typing import Any
 __all__ = ["ENV_ROWS", "Row", "pin_one_core", "run"]
 
 #: the env rows: (gymnasium id, goal of substeps/s / raw mj_step/s)
-ENV_ROWS = (("joints/ErobReach-v0", 0.6), ("joints/ErobArmReach-v0", 0.5), ("joints/DiffDriveGoal-v0", 0.5))
+ENV_ROWS = (("joints/ErobReach-v0", 0.6), ("joints/ErobArmReach-v0", 0.5), ("joints/DiffDriveGoal-v0", 0.6))
+#: the shipped config (``joints/configs/<stem>.toml``) of each env row
+SHIPPED_CONFIGS = {"joints/ErobReach-v0": "erob_reach", "joints/ErobArmReach-v0": "erob_arm_reach",
+                   "joints/DiffDriveGoal-v0": "zlac_diffdrive"}
+#: the goals of the Python overhead per env step [s]: the step's wall time less its substeps of raw mj_step
+OVERHEAD_GOALS = {"joints/ErobReach-v0": 30e-6, "joints/ErobArmReach-v0": 75e-6}
+#: the control period the speed goals were first measured at [s] (issue 23): rows at this period too,
+#: on a bus that carries it, so that a longer shipped period (more substeps per step) is not counted as speed
+BASELINE_PERIOD = 0.02
+#: the reference env from gymnasium's own MuJoCo suite (no drive emulation), measured in the same run
+REFERENCE_ENV = "Reacher-v5"
 WORLD_GOAL = 0.8
 CODEC_GOAL = 3.0
 BATCH_GOAL = 0.6
-BATCH_RIGS = 16
+BATCH_RIGS = (16, 256)
 ENV_MODULE = "envs"  #: the module that registers the ``joints/`` env ids
 
 
 @dataclass
 class Row:
-    """One line of the table: a measured ratio against its goal (None: not measured)."""
+    """One line of the table: a measured figure against its goal (None: not measured); ``at_most``: the
+    goal is an upper bound (the overhead rows, in us), else a lower bound (the ratios)."""
 
     measure: str
     ratio: float | None
-    goal: float
+    goal: float | None
     detail: str = ""
+    at_most: bool = False
 
     @property
     def met(self) -> bool | None:
-        return None if self.ratio is None else self.ratio >= self.goal
+        if self.ratio is None or self.goal is None:
+            return None
+        return self.ratio <= self.goal if self.at_most else self.ratio >= self.goal
 
     def cells(self) -> tuple[str, str, str, str]:
-        ratio = "—" if self.ratio is None else f"{self.ratio:.2f}"
-        met = {None: "?", True: "met", False: "NOT met"}[self.met]
-        return self.measure, ratio, f">= {self.goal:g}", met
+        ratio = "—" if self.ratio is None else f"{self.ratio:.2f}" if not self.at_most else f"{self.ratio:.0f} us"
+        goal = "" if self.goal is None else f"<= {self.goal:g} us" if self.at_most else f">= {self.goal:g}"
+        met = {None: "" if self.goal is None else "?", True: "met", False: "NOT met"}[self.met]
+        return self.measure, ratio, goal, met
 
 
 def pin_one_core() -> tuple[int | None, set[int] | None]:
@@ -74,17 +90,26 @@ def best_of(fns: Sequence[Callable[[], float]], repeats: int) -> list[float]:
     return best
 
 
-def _raw(model: Any, steps: int) -> Callable[[], float]:
-    """``steps`` raw mj_step calls on ``model`` with a fresh MjData: the seconds they took."""
+def _raw(model: Any, steps: int, nstep: int = 1) -> Callable[[], float]:
+    """``steps`` raw mj_step substeps on ``model`` with a fresh MjData: the seconds they took. ``nstep``
+    1: one Python call per substep (the reference of the ratios); more: ``mj_step(model, data, nstep)``
+    calls of that many substeps each (the distance to C-level physics)."""
     import mujoco
+
+    calls = max(1, steps // nstep)
 
     def timed() -> float:
         data = mujoco.MjData(model)
         step = mujoco.mj_step
-        t = time.perf_counter()
-        for _ in range(steps):
-            step(model, data)
-        return time.perf_counter() - t
+        if nstep == 1:
+            t = time.perf_counter()
+            for _ in range(calls):
+                step(model, data)
+        else:
+            t = time.perf_counter()
+            for _ in range(calls):
+                step(model, data, nstep)
+        return (time.perf_counter() - t) * steps / (calls * nstep)
 
     return timed
 
@@ -102,75 +127,217 @@ def _raw_many(models: Sequence[Any], steps: int) -> Callable[[], float]:
         for _ in range(rounds):
             for m, d in pairs:
                 step(m, d)
-        return time.perf_counter() - t
+        return (time.perf_counter() - t) * steps / (rounds * len(models))
 
     return timed
 
 
-def _env_block(env: Any, steps: int, seed: int) -> Callable[[], float]:
-    """``steps`` env.step calls with uniform random actions from ``seed`` (resets untimed): seconds."""
+def _substep_counter(env: Any) -> Callable[[], int]:
+    """The physics substeps ``env`` (a joints env, a batched one, or a gymnasium MuJoCo env) has run so far."""
+    u = env.unwrapped
+    if hasattr(u, "envs"):  # batched: every rig's world
+        worlds = [e.rig.sim for e in u.envs]
+        return lambda: sum(w.steps for w in worlds)
+    if hasattr(u, "rig"):
+        world = u.rig.sim
+        return lambda: int(world.steps)
+    frames = int(u.frame_skip)  # gymnasium's MujocoEnv: frame_skip mj_step per step, no more
+    count = [0]
+    step = u.step
+
+    def counting(*args: Any, **kwargs: Any) -> Any:
+        count[0] += frames
+        return step(*args, **kwargs)
+
+    u.step = counting
+    return lambda: count[0]
+
+
+@dataclass
+class EnvTiming:
+    """What one block of env steps took: its wall time, the substeps they really ran, and the wall time
+    with the block's resets included (and the reset substeps left out of ``substeps``)."""
+
+    steps: int
+    seconds: float = math.inf
+    substeps: int = 0
+    with_resets: float = math.inf
+
+
+def _env_block(env: Any, steps: int, seed: int, out: EnvTiming | None = None) -> Callable[[], float]:
+    """``steps`` env.step calls with uniform random actions from ``seed`` (resets untimed): seconds.
+    ``out`` (kept from the best repeat): the substeps the steps ran and the seconds with resets timed."""
     import numpy as np
 
     space = env.action_space
     rng = np.random.default_rng(seed)
     actions = rng.uniform(space.low, space.high, (steps, *space.shape)).astype(space.dtype)
     env.reset(seed=seed)
+    count = _substep_counter(env)
 
     def timed() -> float:
         total = 0.0
+        resets = 0.0
+        substeps = 0
         step = env.step
+        clock = time.perf_counter
         for a in actions:
-            t = time.perf_counter()
+            n = count()
+            t = clock()
             _obs, _r, terminated, truncated, _info = step(a)
-            total += time.perf_counter() - t
+            total += clock() - t
+            substeps += count() - n
             if np.any(terminated) or np.any(truncated):
+                t = clock()
                 env.reset()
+                resets += clock() - t
+        if out is not None and total < out.seconds:
+            out.seconds, out.substeps, out.with_resets = total, substeps, total + resets
         return total
 
     return timed
 
 
+def _env_rows(name: str, env: Any, model: Any, nominal: int, steps: int, raw_steps: int, repeats: int, seed: int,
+              goal: float | None, overhead_goal: float | None, sim_dt: float, rigs: int = 1) -> Iterator[Row]:
+    """The rows of one env: substeps/s over raw mj_step/s (per Python call, and per ``nstep`` call), the same
+    with resets timed, and the Python overhead per env step."""
+    timing = EnvTiming(steps)
+    models = list(model) if isinstance(model, (list, tuple)) else [model]
+    fns = [_env_block(env, steps, seed, timing),
+           _raw(models[0], raw_steps) if len(models) == 1 else _raw_many(models, raw_steps),
+           _raw(models[0], raw_steps, nominal)]
+    t_env, t_raw, t_nstep = best_of(fns, repeats)
+    raw = t_raw / raw_steps  # s per substep, one Python call each
+    nstep = t_nstep / raw_steps  # s per substep in mj_step(model, data, nstep)
+    sub = timing.substeps
+    ratio = raw * sub / t_env
+    extra = sub / (steps * rigs) - nominal
+    overhead = (t_env - sub * raw) / steps  # per env step (per batch of ``rigs``)
+    yield Row(f"{name}: env substeps/s ÷ raw `mj_step`/s", ratio, goal,
+              f"{sub / t_env:,.0f} substeps/s vs raw {1 / raw:,.0f}/s ({ratio * nstep / raw:.2f} of "
+              f"`mj_step(m, d, nstep={nominal})`, {1 / nstep:,.0f}/s); {sub / (steps * rigs):.3f} substeps per "
+              f"step ({nominal} nominal{f', {extra:+.3f} beyond it' if abs(extra) > 1e-9 else ''}); "
+              f"{steps / t_env:,.0f} env steps/s, real-time factor {steps * rigs * sim_dt / t_env:,.0f}x")
+    yield Row(f"{name}: the same with resets timed", raw * sub / timing.with_resets, None,
+              f"{timing.with_resets - t_env:.3f} s of resets beside {t_env:.3f} s of steps (reset substeps not counted)")
+    yield Row(f"{name}: overhead per env step (wall time - substeps x raw `mj_step`)", overhead * 1e6,
+              None if overhead_goal is None else overhead_goal * 1e6,
+              f"{t_env / steps * 1e6:.1f} us per step - {sub / steps:.2f} x {raw * 1e6:.2f} us", at_most=True)
+
+
+def _baseline_config(env_id: str) -> tuple[Any, str] | None:
+    """The env's shipped config on a bus that carries :data:`BASELINE_PERIOD` (eRob: its CAN protocol at
+    1 Mbit/s), and that bus; None where the shipped bus already carries it or the family has no such bus."""
+    import copy
+    from importlib import resources
+
+    from joints import registry
+    from joints.errors import ConfigError
+
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover
+        import tomli as tomllib
+
+    stem = SHIPPED_CONFIGS.get(env_id)
+    if stem is None:
+        return None
+    cfg = tomllib.loads((resources.files("joints.configs") / f"{stem}.toml").read_text(encoding="utf-8"))
+    devices = {j["device"] for j in cfg["joints"].values()}
+    shipped = f"{next(iter(cfg['buses'].values()))['protocol']} as shipped"
+    for proto in registry.protocols():
+        if registry.PROTOCOLS[proto].medium != "can" or not all(proto in registry.family(d).protocols
+                                                                for d in devices):
+            continue
+        on_can = copy.deepcopy(cfg)
+        on_can["buses"] = {"can": {"protocol": proto, "bitrate": 1_000_000}}
+        for j in on_can["joints"].values():
+            j["bus"] = "can"
+        try:
+            check_rate(on_can, BASELINE_PERIOD)
+        except ConfigError:
+            continue
+        return on_can, f"{proto} at 1 Mbit/s"
+    return cfg, shipped  # the shipped bus at the baseline period (the env refuses it if it does not fit)
+
+
 def env_rows(*, steps: int, raw_steps: int, repeats: int, seed: int = 0) -> Iterator[Row]:
-    """Env substeps/s over raw mj_step/s on the same model, per registered env."""
+    """Env substeps/s over raw mj_step/s on the same model, per registered env, at its shipped rate and at
+    :data:`BASELINE_PERIOD`; then gymnasium's :data:`REFERENCE_ENV` by the same method."""
     import gymnasium as gym
 
     for env_id, goal in ENV_ROWS:
         env = gym.make(f"{ENV_MODULE}:{env_id}")
         try:
             u: Any = env.unwrapped
-            substeps = round(u.dt / u.model.opt.timestep)
-            t_env, t_raw = best_of([_env_block(env, steps, seed), _raw(u.model, raw_steps)], repeats)
-            sub_s = steps * substeps / t_env
-            raw_s = raw_steps / t_raw
-            rtf = steps * u.dt / t_env
-            yield Row(f"`{env_id}`: env substeps/s ÷ raw `mj_step`/s", sub_s / raw_s, goal,
-                      f"{sub_s:,.0f} substeps/s vs raw {raw_s:,.0f}/s; {steps / t_env:,.0f} env steps/s, "
-                      f"real-time factor {rtf:.0f}x")
+            hz = 1.0 / u.dt
+            yield from _env_rows(f"`{env_id}` ({hz:g} Hz)", env, u.model, round(u.dt / u.model.opt.timestep),
+                                 steps, raw_steps, repeats, seed, goal, OVERHEAD_GOALS.get(env_id), u.dt)
         finally:
             env.close()
+        if abs(u.dt - BASELINE_PERIOD) < 1e-9:
+            continue
+        found = _baseline_config(env_id)
+        if found is None:
+            continue
+        cfg, bus = found
+        env = gym.make(f"{ENV_MODULE}:{env_id}", config=cfg, control_period=BASELINE_PERIOD)
+        try:
+            u = env.unwrapped
+            yield from _env_rows(f"`{env_id}` ({1 / BASELINE_PERIOD:g} Hz, {bus})", env, u.model,
+                                 round(u.dt / u.model.opt.timestep), steps, raw_steps, repeats, seed, goal,
+                                 OVERHEAD_GOALS.get(env_id), u.dt)
+        finally:
+            env.close()
+    yield from reference_rows(steps=steps, raw_steps=raw_steps, repeats=repeats, seed=seed)
 
 
-def batched_row(*, steps: int, raw_steps: int, repeats: int, rigs: int = BATCH_RIGS, seed: int = 0) -> Row:
+def reference_rows(*, steps: int, raw_steps: int, repeats: int, seed: int = 0) -> Iterator[Row]:
+    """Gymnasium's :data:`REFERENCE_ENV` (its MuJoCo suite, no drive emulation) by the env rows' method."""
+    import gymnasium as gym
+
+    name = f"`{REFERENCE_ENV}` (gymnasium, reference)"
+    try:
+        env = gym.make(REFERENCE_ENV)
+    except Exception as exc:  # noqa: BLE001 - any missing piece of gymnasium[mujoco] means: not measured
+        yield Row(name, None, None, f"not available: {type(exc).__name__}: {exc}")
+        return
+    try:
+        u: Any = env.unwrapped
+        yield from _env_rows(name, env, u.model, int(u.frame_skip), steps, raw_steps, repeats, seed, None, None, u.dt)
+    finally:
+        env.close()
+
+
+def batched_rows(*, steps: int, raw_steps: int, repeats: int, rigs: Sequence[int] = BATCH_RIGS,
+                 seed: int = 0) -> Iterator[Row]:
     """N rigs stepped by one batched env (gymnasium's vector entry point) against raw mj_step of N models."""
+    for n in rigs:
+        yield from batched_row(steps=steps, raw_steps=raw_steps, repeats=repeats, rigs=n, seed=seed)
+
+
+def batched_row(*, steps: int, raw_steps: int, repeats: int, rigs: int = BATCH_RIGS[0],
+                seed: int = 0) -> Iterator[Row]:
+    """``rigs`` rigs of the first env row in one batched env (gymnasium's vector entry point)."""
     import gymnasium as gym
 
     env_id = ENV_ROWS[0][0]
-    name = f"{rigs} rigs batched in one process (`{env_id}`), substeps/s ÷ raw `mj_step`/s of {rigs} models"
+    name = f"{rigs} rigs batched in one process (`{env_id}`)"
     try:
         vec = gym.make_vec(f"{ENV_MODULE}:{env_id}", num_envs=rigs, vectorization_mode="vector_entry_point")
     except (gym.error.Error, ValueError, TypeError, AttributeError) as exc:
-        return Row(name, None, BATCH_GOAL, f"no batched env: {exc}")
+        yield Row(name, None, BATCH_GOAL, f"no batched env: {exc}")
+        return
     try:
         u: Any = vec.unwrapped
         models = list(u.models)
-        substeps = round(u.dt / models[0].opt.timestep)
-        blocks = max(1, steps // rigs)
-        t_env, t_raw = best_of([_env_block(vec, blocks, seed), _raw_many(models, raw_steps)], repeats)
-        sub_s = blocks * rigs * substeps / t_env
-        raw_s = max(1, raw_steps // rigs) * rigs / t_raw
-        rtf = blocks * rigs * u.dt / t_env
-        return Row(name, sub_s / raw_s, BATCH_GOAL,
-                   f"{sub_s:,.0f} substeps/s vs raw {raw_s:,.0f}/s; real-time factor {rtf:.0f}x (all rigs)")
+        blocks = max(2, steps // rigs)
+        rows = list(_env_rows(name, vec, models, round(u.dt / models[0].opt.timestep), blocks,
+                              max(raw_steps, 2 * rigs), repeats, seed, BATCH_GOAL, None, u.dt, rigs))
+        yield rows[0]
+        yield Row(f"{name}: overhead per rig step", rows[2].ratio / rigs if rows[2].ratio is not None else None,
+                  None, rows[2].detail + f" (per batch of {rigs})", at_most=True)
     finally:
         vec.close()
 
@@ -567,7 +734,7 @@ def _run(quick: bool, config: str | None, rate: float | None, out: Callable[[str
     rows = list(env_rows(steps=steps, raw_steps=raw_steps, repeats=repeats))
     rows.append(world_row(raw_steps=raw_steps, repeats=repeats))
     rows.append(codec_row(repeats=repeats, min_time=min_time))
-    rows.append(batched_row(steps=steps * 4, raw_steps=raw_steps, repeats=repeats))
+    rows += batched_rows(steps=steps * 4, raw_steps=raw_steps, repeats=repeats)
     out(table(rows))
     if config is not None:
         _print_plan(config, rate, out)

@@ -228,7 +228,7 @@ class ErobFirmware(Firmware):
     """
 
     #: the kernel rows this twin steps (see :mod:`joints.sim.stepping`)
-    KERNEL = "erob"
+    KERNEL = K.KIND
 
     #: motion commands: the drive acts on them ``command_delay`` (the profile's) after they arrive
     DELAYED = frozenset((

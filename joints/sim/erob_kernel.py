@@ -30,6 +30,9 @@ from joints.sim.kernel import jitable
 
 Row = MutableSequence[float]
 
+#: this kernel's kind: the code of its rows in :attr:`joints.sim.stepping.Group.adr` (a twin's ``KERNEL``)
+KIND = 1
+
 COUNTS_PER_RAD = COUNTS_PER_REV / (2.0 * math.pi)
 SUPERVISION_PERIOD = 0.002  #: s between the drive's slow tasks (stall, thermal, settle timer)
 ARRIVAL_WINDOW = 1.0  #: counts: a move closer than this at a speed one period can stop has arrived

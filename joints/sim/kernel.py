@@ -4,7 +4,7 @@ Rule: a twin's loops are plain Python functions over rows of a table (one row of
 or channel: its working state, its loop settings and the parameters the loops read), written in
 the subset of Python that numba compiles. With numba installed (the ``fast`` extra) the entry
 points are compiled (:func:`compiled`) and the helpers they call are compiled into them
-(:func:`jitable`); without it - or with ``JOINTS_JIT=0`` - the very same functions run as Python,
+(:func:`jitable`); without it - or with ``JOINTS_COMPILED=0`` (the old ``JOINTS_JIT=0`` too) - the very same functions run as Python,
 on tables of Python lists instead of numpy arrays (plain floats are what Python is fast with).
 Both give the same bits: only IEEE double arithmetic, no fused multiply-add, no fast-math.
 
@@ -44,9 +44,19 @@ register_jitable: Any = _extending.register_jitable if _extending is not None el
 AVAILABLE = numba is not None
 
 
+#: the environment variable that turns the compiled path off (``0``) for new worlds; :data:`OLD_SWITCH`, its
+#: earlier name, is still read when it is unset
+SWITCH = "JOINTS_COMPILED"
+OLD_SWITCH = "JOINTS_JIT"
+
+
 def default_mode() -> bool:
-    """Whether new worlds run compiled kernels: numba installed and ``JOINTS_JIT`` not ``0``."""
-    return AVAILABLE and os.environ.get("JOINTS_JIT", "1") != "0"
+    """Whether new worlds run compiled kernels: numba installed and ``JOINTS_COMPILED`` (or, unset, the old
+    ``JOINTS_JIT``) not ``0``."""
+    value = os.environ.get(SWITCH)
+    if value is None:
+        value = os.environ.get(OLD_SWITCH, "1")
+    return AVAILABLE and value != "0"
 
 
 def jitable(fn: F) -> F:

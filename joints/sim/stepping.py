@@ -23,11 +23,11 @@ from typing import Any
 from joints.sim import erob_kernel, kernel, zlac_kernel
 from joints.sim.kernel import jitable
 
-__all__ = ["CHUNK", "KINDS", "Group", "step_row", "substep"]
+__all__ = ["CHUNK", "KINDS", "Group", "has_kernel", "step_row", "substep"]
 
-#: kernel kinds: a twin's ``KERNEL`` name -> code in the adr table
-KINDS = {"erob": 1, "zlac": 2}
-EROB, ZLAC = 1, 2
+#: the kernel kinds (each kernel module's ``KIND``; a kernel-backed twin's ``KERNEL`` is one of them)
+EROB, ZLAC = erob_kernel.KIND, zlac_kernel.KIND
+KINDS = (EROB, ZLAC)
 #: columns of :attr:`Group.adr`
 KIND, QPOS, DOF, ACT, WORLD, A, B, C = range(8)
 ADR_WIDTH = 8
@@ -40,6 +40,11 @@ CHUNK = 50
 #: an mju_error (arena overflow with many contacts) would end the process; the per-substep path raises
 #: mujoco.FatalError instead, which the rig's exit handling survives
 ARENA_GUARD = 0.25
+
+
+def has_kernel(twin: Any) -> bool:
+    """Whether ``twin`` runs its loops as kernel rows (its ``KERNEL`` is one of :data:`KINDS`)."""
+    return getattr(twin, "KERNEL", None) in KINDS
 
 
 @jitable
@@ -133,7 +138,7 @@ class Group:
                         ratio.append(1.0)
                     self._owners.append((twin, first))
                 i = first + twin.kernel_row(b.channel)
-                adr[i] = [KINDS[twin.KERNEL], b.qadr, b.dadr, b.aid, w, first, 0, 0]
+                adr[i] = [twin.KERNEL, b.qadr, b.dadr, b.aid, w, first, 0, 0]
                 ratio[i] = b.ratio  # motor rad per joint unit (a slide on a lead screw)
                 self._row_of[(w, b.name)] = i
         width = max([len(r) for r in rows], default=1)
@@ -143,6 +148,11 @@ class Group:
         for twin, first in self._owners:
             twin.adopt(self.table, first)
         self.dts = [w.timestep for w in self.worlds]
+        #: the Python path's per-substep inputs, kept: (active flags, step counts) and the worlds' arrays
+        #: (views of each world's one MjData)
+        self._flags = ([0] * len(self.worlds), [0] * len(self.worlds))
+        self._arrays = ([w.data.qpos for w in self.worlds], [w.data.qvel for w in self.worlds],
+                        [w.data.ctrl for w in self.worlds])
         self.mj_step = kernel.mj_step_address() if self.compiled else None
         if self.compiled:
             table = []
@@ -214,11 +224,10 @@ class Group:
             _run_compiled(1, 0, 0, self.table, self.adr, self.ratio, self.order, table,  # type: ignore[misc]
                           self.dts_array)
             return
-        active = [0] * len(self.worlds)
-        steps = [0] * len(self.worlds)
+        active, steps = self._flags
         for w in worlds:
             active[w] = 1
             steps[w] = self.worlds[w].steps
-        substep(self.table, self.adr, self.ratio, self.order, active, steps, self.dts,
-                [w.data.qpos for w in self.worlds], [w.data.qvel for w in self.worlds],
-                [w.data.ctrl for w in self.worlds])
+        substep(self.table, self.adr, self.ratio, self.order, active, steps, self.dts, *self._arrays)
+        for w in worlds:
+            active[w] = 0

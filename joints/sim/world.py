@@ -314,6 +314,7 @@ class World:
         #: per joint unit)
         self._bind = [(b.stepper.step, b.qadr, b.dadr, b.aid, b.ratio) for b in self._bound]
         self._bind_seen = list(self._bind)
+        self._python_bind = self._stepped_in_python()
         timed = [bus for bus in self.buses.values() if isinstance(bus, TimedDeviceBus)]
         for bus in timed:
             bus.bind_clock(self.clock)
@@ -393,7 +394,7 @@ class World:
     # -- how the drives are stepped ---------------------------------------------------------------
     def kernel_joints(self) -> list[_Bound]:
         """The joints whose twin runs its loops as kernel rows (:mod:`joints.sim.stepping`)."""
-        return [b for b in self._bound if getattr(b.emulator, "KERNEL", None) in stepping.KINDS]
+        return [b for b in self._bound if stepping.has_kernel(b.emulator)]
 
     def kernel_stepped(self, b: _Bound) -> bool:
         """Whether joint ``b`` is stepped by its kernel row (not by a function put in its place)."""
@@ -416,7 +417,7 @@ class World:
         """Whether N substeps can run in one compiled call: every drive a kernel row, no timed bus, an arena
         with room (the compiled call cannot turn MuJoCo's fatal errors into exceptions)."""
         return not self._unfused and not self._ticks and all(self.kernel_stepped(b) for b in self._bound
-                                       if getattr(b.emulator, "KERNEL", None) in stepping.KINDS) \
+                                       if stepping.has_kernel(b.emulator)) \
             and len(self.kernel_joints()) == len(self._bound)
 
     def _switches(self, joint: str, qadr: int, ratio: float) -> tuple[float | None, float | None]:
@@ -476,7 +477,13 @@ class World:
         """Before stepping: a joint whose stepping was replaced (tests) leaves its kernel row."""
         if self._bind != self._bind_seen:
             self._bind_seen = list(self._bind)
+            self._python_bind = self._stepped_in_python()
             self.group.replan()
+
+    def _stepped_in_python(self) -> list[tuple[Any, ...]]:
+        """The joints this world steps from Python (no kernel row, or its stepping replaced): their bindings."""
+        kernel = self.kernel_joints()
+        return [self._bind[i] for i, b in enumerate(self._bound) if b not in kernel or not self.kernel_stepped(b)]
 
     def _step(self, n: int) -> None:
         group = self.group
@@ -490,8 +497,7 @@ class World:
         m, d = self.model, self.data
         qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
         dt = self.timestep
-        python = [self._bind[i] for i, b in enumerate(self._bound) if b not in self.kernel_joints()
-                  or not self.kernel_stepped(b)]
+        python = self._python_bind
         kernel_rows = len(python) < len(self._bound)
         ticks = self._ticks
         me = [self.group_index]

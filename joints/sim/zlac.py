@@ -573,7 +573,7 @@ class ZlacFirmware(Firmware):
 
     # -- the rows ----------------------------------------------------------------------------------
     #: the kernel rows this twin steps (see :mod:`joints.sim.stepping`): drive, left, right
-    KERNEL = "zlac"
+    KERNEL = Z.KIND
 
     def _bind_rows(self, table: Any, first: int) -> None:
         self._table: Any = table

@@ -27,6 +27,8 @@ from joints.sim.kernel import jitable
 Row = MutableSequence[float]
 Table = Sequence[Row]
 
+#: this kernel's kind: the code of its rows in :attr:`joints.sim.stepping.Group.adr` (a twin's ``KERNEL``)
+KIND = 2
 TWO_PI = 2.0 * math.pi
 RPM = TWO_PI / 60.0  #: rad/s per r/min
 THERMAL_RISE = 60.0  #: K above ambient at the motor's rated current (EST)

@@ -36,7 +36,6 @@ Time model (docs/timing.md):
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -120,6 +119,8 @@ class TimedSerialLine(ByteTransport):
         if baudrate <= 0:
             raise ValueError(f"baudrate must be > 0, got {baudrate}")
         self.peer = peer
+        self._peer_seen: Any = None  #: the peer whose :class:`TimedFrames` check is in ``_peer_timed``
+        self._peer_timed = False
         self.clock = clock
         self.baudrate = baudrate
         self.char_time = bits_per_char / baudrate
@@ -127,7 +128,10 @@ class TimedSerialLine(ByteTransport):
         self.adapter_latency = adapter_latency
         self.gap = gap
         self.log: list[Transmission] = []
-        self._since_reset = 0  #: index in :attr:`log` of the first frame since the clock last went back
+        #: per logged frame, the latest end of it and every frame logged before it since the epoch: a new
+        #: frame's overlap check stops where nothing older can reach it
+        self._latest_end: list[float] = []
+        self._epoch = 0  #: the first frame of the line's present timeline (after the clock last went back)
         self.collisions = 0
         self._pending: list[Transmission] = []  #: on the line, not yet acted on / seen
         self._rx = bytearray()
@@ -169,7 +173,7 @@ class TimedSerialLine(ByteTransport):
             self._pending.clear()
             self._rx.clear()
             self._free = {"host": -math.inf, "device": -math.inf}
-            self._since_reset = len(self.log)  # frames before a reset never overlap the ones after it
+            self._epoch = len(self.log)  # frames of the old timeline never overlap the new one's
             self.now = self._clock_seen = c
         elif c > self._clock_seen:
             self._clock_seen = c
@@ -208,14 +212,22 @@ class TimedSerialLine(ByteTransport):
             due = end + self.gap + self.adapter_latency
         tx = Transmission(start, end, side, bytes(data), due=due, size=n, handler=handler, payload=payload)
         self._free[side] = end + self.gap
-        for other in itertools.islice(reversed(self.log), len(self.log) - self._since_reset):
+        log, latest = self.log, self._latest_end
+        if len(latest) != len(log):  # the log was edited from outside: check every frame of it from now on
+            latest[:] = [math.inf] * len(log)
+            self._epoch = min(self._epoch, len(log))
+        for k in range(len(log) - 1, self._epoch - 1, -1):
+            if latest[k] <= start:
+                break  # no frame up to this one ends after the new one starts: none of them overlaps it
+            other = log[k]
             if other.end <= start - 1.0:
                 break  # older than any frame still able to overlap
             if other.side != side and other.start < tx.end and start < other.end:
                 if not (other.corrupted and tx.corrupted):
                     self.collisions += 1
                 other.corrupted = tx.corrupted = True
-        self.log.append(tx)
+        latest.append(max(end, latest[-1]) if len(log) > self._epoch else end)
+        log.append(tx)
         self._pending.append(tx)
         return tx
 
@@ -223,7 +235,9 @@ class TimedSerialLine(ByteTransport):
         """Everything that happens on the line up to ``until`` (the clock's time), in time order."""
         while True:
             peer = self.peer
-            if isinstance(peer, TimedFrames):
+            if peer is not self._peer_seen:  # a Protocol isinstance costs ~60 us: once per peer
+                self._peer_seen, self._peer_timed = peer, isinstance(peer, TimedFrames)
+            if self._peer_timed:
                 for at, data in peer.take_frames(until):
                     self._put("device", at, data)
             due = [tx for tx in self._pending if tx.due <= until + 1e-12]

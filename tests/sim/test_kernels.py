@@ -112,3 +112,16 @@ def test_zlac_kernel_compiled_is_python(script: list[tuple[int, int, float, floa
                 assert tau_p == tau_c
         for r in range(3):
             assert _equal(py._table[r], nb._table[r].tolist())
+
+
+@pytest.mark.parametrize(("compiled", "jit", "expected"), [
+    (None, None, True), ("0", None, False), (None, "0", False), ("1", "0", True), ("0", "1", False)])
+def test_one_switch_for_the_compiled_path_and_its_old_name(monkeypatch: pytest.MonkeyPatch, compiled: str | None,
+                                                           jit: str | None, expected: bool) -> None:
+    """``JOINTS_COMPILED=0`` turns the compiled kernels off; the old ``JOINTS_JIT`` still does where it is unset."""
+    for name, value in ((kernel.SWITCH, compiled), (kernel.OLD_SWITCH, jit)):
+        if value is None:
+            monkeypatch.delenv(name, raising=False)
+        else:
+            monkeypatch.setenv(name, value)
+    assert kernel.default_mode() is (expected and kernel.AVAILABLE)

@@ -126,3 +126,19 @@ def test_mks_driver_survives_collisions_on_the_half_duplex_line(tmp_path: Path) 
         assert reads > 300
     finally:
         rig.close()
+
+
+def test_frames_before_the_clock_went_back_never_collide_with_later_ones() -> None:
+    """A reset takes the clock back: the line's old timeline is over, its frames overlap nothing of the new one
+    (a frame of the old timeline at the same instant once corrupted the new request)."""
+    clock = ManualClock()
+    completion = mks.encode(mks.RunReply(1, 0xFD, mks.RunStatus.COMPLETE))
+    reply = mks.encode(mks.SpeedReply(1, 7))
+    device = Echo(reply, own=[(0.0, completion)])
+    line = TimedSerialLine(device, baudrate=38400, clock=clock)
+    clock.advance(0.01)
+    assert line.read(0.0) == completion  # the drive's own frame at 0 s of the first timeline
+    clock.set(0.0)  # a reset: the world and its clock start again
+    line.write(mks.encode(mks.ReadSpeed(1)))  # at 0 s again, when the old completion frame was on the wire
+    assert line.read(0.05) == reply
+    assert line.collisions == 0 and not any(tx.corrupted for tx in line.log)
