@@ -316,7 +316,7 @@ class ErobCanopenDriver(ErobDriver):
                 self.velocity = round((pos - self._prev_position[1]) / (t - self._prev_position[0]))
             self._prev_position = (t, pos)
             self.statusword, self.position, self.status_time = sw, pos, t
-            self.status_cycle = self.group.cycles
+            self.status_cycle = self.group.answered(self)
         elif len(self._tpdos) > 1:
             try:
                 self.velocity, self.current = co.unpack_pdo(self._tpdos[1].entries, msg.data)
