@@ -34,6 +34,11 @@ class CyclicNode(Protocol):
     @property
     def cyclic(self) -> bool: ...
 
+    @property
+    def answers_sync(self) -> bool:
+        """OPERATIONAL with its cyclic TPDO1 synchronous: it answers every SYNC on the bus."""
+        ...
+
     def cycle_send(self, target: int) -> None: ...
 
     def on_tpdo(self, msg: co.Pdo) -> None: ...
@@ -108,8 +113,14 @@ class SyncCycle:
         self.cycles += 1
         self.next_due = due
         self._expect = list(targets)
-        for d in targets:
-            self._asked.setdefault(d.node, deque()).append((self.cycles, self.sync_time))
+        self.synced(self.sync_time)
+
+    def synced(self, at: float) -> None:
+        """A SYNC went out at ``at`` (the cycle's, or one a driver sent for a state read): each node that
+        answers SYNCs owes a TPDO1 for it, which counts for the present cycle."""
+        for d in self.drivers:
+            if d.answers_sync:
+                self._asked.setdefault(d.node, deque()).append((self.cycles, at))
 
     def answered(self, node: CyclicNode) -> int:
         """The cycle a TPDO1 of ``node`` that has just come answers: its oldest SYNC not yet answered (a
