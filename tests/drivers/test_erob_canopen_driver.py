@@ -314,3 +314,23 @@ def test_a_slow_adapter_makes_1khz_late() -> None:
     assert late[0.00005] == 0, late
     for latency in (0.0002, 0.0005):  # node guarding's frames shift a few cycles' TPDOs: 3 % of the cycles
         assert abs(late[latency] - expected[latency]) <= 0.03 * cycles, (late, expected)
+
+def test_state_reads_between_cycles_keep_the_late_count() -> None:
+    """Each node answers every SYNC on the bus, the cycle's and those of state reads alike: behind a 0.5 ms
+    adapter every TPDO1 reaches the host after the 1 ms period (tpdo_arrivals), also after states were read
+    between cycles - the answers to the reads' SYNCs must not pass for the cycles' own."""
+    period, cycles, latency = 0.001, 100, 0.0005
+    with joints.open(arm(adapter_latency=latency)) as rig:
+        for j in rig.joints.values():
+            j.enable()
+        start = {n: j.state().position for n, j in rig.joints.items()}
+        assert all(a > period for a in tpdo_arrivals(rig, start, latency))
+        for _ in range(10):
+            rig.cycle(start)
+        for j in rig.joints.values():
+            j.state()  # a SYNC each, outside the cycle
+        late0 = rig.cycle_late()
+        for _ in range(cycles):
+            rig.cycle(start)
+        late = rig.cycle_late() - late0
+    assert abs(late - 3 * cycles) <= 0.03 * cycles, late
