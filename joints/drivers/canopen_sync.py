@@ -7,6 +7,7 @@ Rule: one per bus, held by the bus's link (:attr:`joints.link.canopen.CanopenLin
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Mapping
 from typing import Any, Protocol
 
@@ -33,6 +34,11 @@ class CyclicNode(Protocol):
     @property
     def cyclic(self) -> bool: ...
 
+    @property
+    def answers_sync(self) -> bool:
+        """OPERATIONAL with its cyclic TPDO1 synchronous: it answers every SYNC on the bus."""
+        ...
+
     def cycle_send(self, target: int) -> None: ...
 
     def on_tpdo(self, msg: co.Pdo) -> None: ...
@@ -51,6 +57,10 @@ class SyncCycle:
     set-points and the SYNC; :meth:`collect` returns as soon as every joint's TPDO1 of the cycle
     is in, or at the end of the period: a TPDO that has not come by then is late (:attr:`late`
     counts them) and the joint's last values stand.
+
+    A node answers the SYNCs in order, one TPDO1 each, so a TPDO1 answers the oldest SYNC of that
+    node still unanswered (:meth:`answered`): behind a slow adapter the answer to the previous
+    SYNC may reach the host after this cycle's SYNC, and it is late, not this cycle's.
     """
 
     def __init__(self, link: Any, period: float, *, current: bool | None = None) -> None:
@@ -66,6 +76,7 @@ class SyncCycle:
         self.sync_time = 0.0
         self.drivers: list[CyclicNode] = []
         self._expect: list[CyclicNode] = []
+        self._asked: dict[int, deque[tuple[int, float]]] = {}  #: node -> (cycle, SYNC time) not yet answered
 
     @classmethod
     def of(cls, link: Any, period: float) -> SyncCycle:
@@ -102,6 +113,26 @@ class SyncCycle:
         self.cycles += 1
         self.next_due = due
         self._expect = list(targets)
+        self.synced(self.sync_time)
+
+    def synced(self, at: float) -> None:
+        """A SYNC went out at ``at`` (the cycle's, or one a driver sent for a state read): each node that
+        answers SYNCs owes a TPDO1 for it, which counts for the present cycle."""
+        for d in self.drivers:
+            if d.answers_sync:
+                self._asked.setdefault(d.node, deque()).append((self.cycles, at))
+
+    def answered(self, node: CyclicNode) -> int:
+        """The cycle a TPDO1 of ``node`` that has just come answers: its oldest SYNC not yet answered (a
+        SYNC unanswered for longer than the link's reply timeout counts as missed), else the present cycle
+        (an answer to a SYNC sent outside the cycle)."""
+        asked = self._asked.get(node.node)
+        if not asked:
+            return self.cycles
+        oldest = self.link.bus_now() - self.link.policy.timeout
+        while len(asked) > 1 and asked[0][1] < oldest:
+            asked.popleft()
+        return asked.popleft()[0]
 
     def collect(self) -> dict[CyclicNode, RawState]:
         link = self.link
@@ -116,7 +147,10 @@ class SyncCycle:
                 msg = link.wait_for(lambda m: isinstance(m, co.Pdo) and m.cob_id in waiting, left)
             except ReplyTimeout:
                 break
-            waiting.pop(msg.cob_id).on_tpdo(msg)
+            d = waiting[msg.cob_id]
+            d.on_tpdo(msg)  # its values stand either way: the freshest the host has
+            if d.status_cycle >= cycle:  # else it answered an earlier SYNC: this cycle's is still to come
+                del waiting[msg.cob_id]
         self.late += len(waiting)
         out: dict[CyclicNode, RawState] = {}
         for d in self._expect:

@@ -205,6 +205,11 @@ class ErobCanopenDriver(ErobDriver):
         return self.mode.cyclic
 
     @property
+    def answers_sync(self) -> bool:
+        """OPERATIONAL in a cyclic mode: its TPDO1 answers every SYNC (the SYNC cycle counts them)."""
+        return self._up is not None and self._up.cyclic
+
+    @property
     def cycle_kind(self) -> str:
         """What :meth:`joints.rig.Rig.cycle` sends this joint: "position", "velocity" or "torque"."""
         kind = _CYCLIC_KIND.get(self.mode)
@@ -316,7 +321,7 @@ class ErobCanopenDriver(ErobDriver):
                 self.velocity = round((pos - self._prev_position[1]) / (t - self._prev_position[0]))
             self._prev_position = (t, pos)
             self.statusword, self.position, self.status_time = sw, pos, t
-            self.status_cycle = self.group.cycles
+            self.status_cycle = self.group.answered(self)
         elif len(self._tpdos) > 1:
             try:
                 self.velocity, self.current = co.unpack_pdo(self._tpdos[1].entries, msg.data)
@@ -343,6 +348,7 @@ class ErobCanopenDriver(ErobDriver):
         link = self.link
         link.poll(0.0)
         link.sync()
+        self.group.synced(link.bus_now())  # every node in a cyclic mode answers it: the SYNC cycle keeps count
         want = {c for c in (self.tpdo1_cob, self.tpdo2_cob)[:len(self._tpdos)]}
         deadline = link.clock.now() + link.policy.timeout
         while want:
