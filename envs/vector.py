@@ -56,6 +56,7 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
     def __init__(self, env: str | Callable[..., gym.Env[Any, Any]], num_envs: int, *,
                  max_episode_steps: int | None = None,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, **kwargs: Any) -> None:
+        self.envs: list[Any] = []  # first: close() (gymnasium calls it from __del__) works on a half-built env
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         if max_episode_steps is not None and (not isinstance(max_episode_steps, int) or max_episode_steps < 1):
@@ -63,13 +64,13 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
         self.autoreset_mode = AutoresetMode(autoreset_mode)
         self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}
         make = _load(env)
-        self.envs: list[Any] = []
         try:
             for _ in range(num_envs):
                 self.envs.append(make(**kwargs))
         except BaseException:
             for e in self.envs:
                 e.close()
+            self.envs = []
             raise
         first = self.envs[0]
         self.num_envs = num_envs
