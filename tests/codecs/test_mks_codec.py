@@ -379,9 +379,11 @@ def _request_strategy(cls: type) -> st.SearchStrategy[Any]:
 requests = st.one_of([_request_strategy(c) for c in mks.REQUEST_TYPES.values()])
 #: what fits a 10-byte long-packet slot (0x46's 34 data bytes do not)
 slot_requests = st.one_of([_request_strategy(c) for c in mks.REQUEST_TYPES.values() if c is not mks.WriteAllParameters])
+#: codes no request type of the codec has (0x46-0x48 became known with V1.0.6)
+unknown_codes = st.integers(0x42, 0x7F).filter(lambda c: c not in mks.REQUEST_TYPES)
 long_packets = st.builds(
     lambda cmds: mks.LongPacket(tuple(cmds)),
-    st.lists(st.none() | slot_requests | st.builds(mks.UnknownRequest, u8, st.integers(0x42, 0x7F),
+    st.lists(st.none() | slot_requests | st.builds(mks.UnknownRequest, u8, unknown_codes,
                                               st.binary(min_size=8, max_size=8)), max_size=5),
 )
 downlink = st.one_of(requests, long_packets)
