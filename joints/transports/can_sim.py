@@ -46,19 +46,12 @@ import can
 
 from joints.errors import TransportError
 from joints.transports.can_timing import STUFFING, frame_bits
+from joints.transports.simclock import ClockDriven, ClockLike
 
 __all__ = ["INTERFACE", "BusLoad", "CanMedium", "ClockLike", "FramePeer", "LockstepCanBus"]
 
 #: the python-can interface name of :class:`LockstepCanBus` (pyproject: ``[project.entry-points."can.interface"]``)
 INTERFACE = "joints-sim"
-
-
-class ClockLike(Protocol):
-    """What the medium needs of a clock (``joints.clock.Clock``)."""
-
-    def now(self) -> float: ...
-
-    def sleep(self, seconds: float) -> None: ...
 
 
 class _OwnClock:
@@ -135,7 +128,7 @@ def _priority(frame: can.Message) -> tuple[int, int, int]:
 _MEDIA: weakref.WeakValueDictionary[str, CanMedium] = weakref.WeakValueDictionary()
 
 
-class CanMedium:
+class CanMedium(ClockDriven):
     """The wire of one in-process CAN bus (see the module docstring)."""
 
     def __init__(self, channel: str | None = None, *, bitrate: int = 1_000_000, stuffing: str = "worst",
@@ -242,19 +235,6 @@ class CanMedium:
         if self._cap is None and t > self.now:
             self.now = t
             self._clock_seen = max(self._clock_seen, t)
-
-    def _wait_until(self, t: float) -> None:
-        """Let time pass until ``t``: sleep the clock if it is behind, process frames up to ``t``."""
-        behind = t - self.clock.now()
-        if behind > 0:
-            self._cap = t
-            try:
-                self.clock.sleep(behind)
-            finally:
-                self._cap = None
-            self._clock_seen = self.clock.now()
-        self._run(t)
-        self.now = max(self.now, t)
 
     def _next_event(self) -> float:
         if self._wire is not None:

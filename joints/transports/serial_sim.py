@@ -43,18 +43,13 @@ from typing import Any, Protocol, runtime_checkable
 
 from joints.errors import TransportError
 from joints.transports.base import ByteTransport
+from joints.transports.simclock import ClockDriven, ClockLike
 
 __all__ = ["LinePeer", "Ticking", "TimedFrames", "TimedSerialLine", "Transmission"]
 
 #: s the line waits at most in one step while nothing is on it (frames a device sends by itself are
 #: picked up at least this often)
 IDLE_STEP = 0.001
-
-
-class ClockLike(Protocol):
-    def now(self) -> float: ...
-
-    def sleep(self, seconds: float) -> None: ...
 
 
 class LinePeer(Protocol):
@@ -108,7 +103,7 @@ def _garbled(data: bytes) -> bytes:
     return bytes(b ^ 0xFF for b in data)
 
 
-class TimedSerialLine(ByteTransport):
+class TimedSerialLine(ByteTransport, ClockDriven):
     """The host's end of a simulated half-duplex RS485 line (see the module docstring)."""
 
     def __init__(self, peer: Any, *, baudrate: int, clock: ClockLike, turnaround: float = 0.0,
@@ -181,19 +176,6 @@ class TimedSerialLine(ByteTransport):
                 self._run(c)
                 self.now = c
         return self.now
-
-    def _wait_until(self, t: float) -> None:
-        """Let time pass until ``t``: sleep the clock if it is behind, run the line up to ``t``."""
-        behind = t - self.clock.now()
-        if behind > 0:
-            self._cap = t
-            try:
-                self.clock.sleep(behind)
-            finally:
-                self._cap = None
-            self._clock_seen = self.clock.now()
-        self._run(t)
-        self.now = max(self.now, t)
 
     # -- the line ---------------------------------------------------------------------------------
     def _device_turnaround(self, data: bytes) -> float:
