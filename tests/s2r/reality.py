@@ -176,3 +176,33 @@ def _serve(argv: list[str]) -> None:
 
 if __name__ == "__main__":
     _serve(sys.argv[1:])
+
+
+def chirp_currents(torque_constant: float, peak: float, seconds: float = 8.0, dt: float = 0.001) -> list[int]:
+    """A held-out trajectory (not the identification's multi-sine): raw target currents [mA] of a chirp
+    0.1 -> 2 Hz, peak ``peak`` N*m by ``torque_constant`` [N*m/A]."""
+    out = []
+    for k in range(round(seconds / dt)):
+        t = k * dt
+        env = min(1.0, t / 1.0, (seconds - t) / 0.5)
+        tau = peak * env * math.sin(2 * math.pi * (0.1 * t + 0.5 * (2.0 - 0.1) * t * t / seconds))
+        out.append(round(tau / torque_constant * 1000))
+    return out
+
+
+def drive(rig: joints.Rig, currents: list[int], *, measured: bool) -> Any:
+    """The same bus commands on any rig: torque mode, one raw current per substep; the positions as the
+    drive measures them (``measured``) or the true ones of the simulation."""
+    import numpy as np
+
+    j = rig.joints["joint1"]
+    j.enable()
+    rig.sleep(0.6)
+    j.set_torque(0.0)
+    q = []
+    for ma in currents:
+        j.write("target_current", ma)
+        q.append(j.state().position if measured else rig.sim.joint_position("joint1"))
+        rig.sleep(rig.sim.timestep)
+    j.stop()
+    return np.array(q)

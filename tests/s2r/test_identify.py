@@ -28,6 +28,9 @@ from joints.s2r.identify import (
 )
 from joints.sim.sensors import FIELDS
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from reality import chirp_currents, drive
+
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
@@ -109,47 +112,20 @@ def test_unperturbed_twin_identifies_as_its_profile() -> None:
     assert ident.delay == pytest.approx(0.0005, abs=2e-4)
 
 
-def chirp_currents(profile: Any, seconds: float = 8.0, dt: float = 0.001) -> list[int]:
-    """A held-out trajectory (not the identification's multi-sine): raw target currents [mA] of a chirp
-    0.1 -> 2 Hz, peak 18 N*m by the profile's torque constant."""
-    out = []
-    for k in range(round(seconds / dt)):
-        t = k * dt
-        env = min(1.0, t / 1.0, (seconds - t) / 0.5)
-        tau = 18.0 * env * math.sin(2 * math.pi * (0.1 * t + 0.5 * (2.0 - 0.1) * t * t / seconds))
-        out.append(round(tau / profile.torque_constant * 1000))
-    return out
-
-
-def drive(rig: joints.Rig, currents: list[int]) -> Any:
-    """The same bus commands on any rig: torque mode, one raw current per substep; the measured positions."""
-    j = rig.joints["joint1"]
-    j.enable()
-    rig.sleep(0.6)
-    j.set_torque(0.0)
-    q = []
-    for ma in currents:
-        j.write("target_current", ma)
-        q.append(j.state().position)
-        rig.sleep(rig.sim.timestep)
-    j.stop()
-    return np.array(q)
-
-
 def test_identified_overlay_tracks_the_perturbed_twin_on_a_held_out_trajectory(
         identified: tuple[Identification, Any], tmp_path: Path) -> None:
     ident, profile = identified
     overlay = write_overlay(tmp_path / "joint1.profile.toml", profile, ident, device="erob")
-    currents = chirp_currents(NOMINAL)
+    currents = chirp_currents(NOMINAL.torque_constant, peak=18.0)
     truth = perturbed_pendulum()
     try:
-        q_real = drive(truth, currents)
+        q_real = drive(truth, currents, measured=True)
     finally:
         truth.close()
     with joints.open(pendulum()) as nominal:
-        q_nominal = drive(nominal, currents)
+        q_nominal = drive(nominal, currents, measured=True)
     with joints.open(pendulum(profile_overlay=str(overlay))) as twin:
-        q_twin = drive(twin, currents)
+        q_twin = drive(twin, currents, measured=True)
     assert np.ptp(q_real) > 0.15  # the trajectory really moves the joint
     err_twin = math.degrees(float(np.abs(q_twin - q_real).max()))
     err_nominal = math.degrees(float(np.abs(q_nominal - q_real).max()))

@@ -6,7 +6,6 @@ What these tests assert is what holds on this branch; see docs/identification.md
 
 from __future__ import annotations
 
-import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -31,7 +30,7 @@ from joints.s2r.shadow import Shadow
 from joints.sim import sensors
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from reality import EROB80_100_M2, NOMINAL, PERTURBED, REALITIES, config, open_real
+from reality import EROB80_100_M2, NOMINAL, PERTURBED, REALITIES, chirp_currents, config, drive, open_real
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -117,47 +116,20 @@ def test_reality_twins_are_recovered(judged: tuple[Any, Identification, Identifi
     assert "identifiability" in str(got) and "load mass" in str(got)
 
 
-def chirp_currents(seconds: float = 8.0, dt: float = 0.001, peak: float = 30.0) -> list[int]:
-    """A held-out trajectory (not the identification's multi-sine): raw target currents [mA] of a chirp
-    0.1 -> 2 Hz, peak ``peak`` N*m by the profile's torque constant."""
-    out = []
-    for k in range(round(seconds / dt)):
-        t = k * dt
-        env = min(1.0, t / 1.0, (seconds - t) / 0.5)
-        tau = peak * env * math.sin(2 * math.pi * (0.1 * t + 0.5 * (2.0 - 0.1) * t * t / seconds))
-        out.append(round(tau / NOMINAL.torque_constant * 1000))
-    return out
-
-
-def drive(rig: joints.Rig, currents: list[int]) -> Any:
-    """The same bus commands on any rig: torque mode, one raw current per substep; the true positions."""
-    j = rig.joints["joint1"]
-    j.enable()
-    rig.sleep(0.6)
-    j.set_torque(0.0)
-    q = []
-    for ma in currents:
-        j.write("target_current", ma)
-        q.append(rig.sim.joint_position("joint1"))
-        rig.sleep(rig.sim.timestep)
-    j.stop()
-    return np.array(q)
-
-
 def test_identified_twin_tracks_the_reality_twin_on_a_held_out_chirp(
         judged: tuple[Any, Identification, Identification, Any], tmp_path: Path) -> None:
     reality, _, got, profile = judged
     overlay = write_overlay(tmp_path / "joint1.profile.toml", profile, got, device="erob")
-    currents = chirp_currents()
+    currents = chirp_currents(NOMINAL.torque_constant, peak=30.0)
     real = open_real(reality, seed=2)
     try:
-        q_real = drive(real, currents)
+        q_real = drive(real, currents, measured=False)
     finally:
         real.close()
     with joints.open(config()) as nominal:
-        q_nominal = drive(nominal, currents)
+        q_nominal = drive(nominal, currents, measured=False)
     with joints.open(config(profile_overlay=str(overlay))) as twin:
-        q_twin = drive(twin, currents)
+        q_twin = drive(twin, currents, measured=False)
     assert np.ptp(q_real) > 0.3  # the chirp really moves the joint
     rms_twin = float(np.sqrt(np.mean((q_twin - q_real) ** 2)))
     rms_nominal = float(np.sqrt(np.mean((q_nominal - q_real) ** 2)))
