@@ -12,10 +12,13 @@ never a real bus). Stops cleanly on SIGINT/SIGTERM or when ``stop`` is set.
 
 Timing (``timing``: bus name -> :class:`~joints.sim.served_timing.BusTiming`, which ``joints sim
 serve`` builds from the config): a request is held until the real bus would have carried it and
-the drive turned around, executed then (a state read samples the world at that instant, on the
-world's clock), and its reply leaves the pty (or goes onto the CAN channel) when the real bus and
-the host's adapter would have delivered it (:mod:`joints.sim.served_timing`). A bus without an
-entry (or ``timing = "ideal"``) is answered as soon as the request is read.
+the drive turned around, executed then on the world's clock (the rule of the in-process line: it
+acts on the world of the physics substep that ends at or after its instant, so a command takes
+effect and a state is sampled at the same substep as in process), and its reply leaves the pty (or
+goes onto the CAN channel) when the real bus and the host's adapter would have delivered it
+(:mod:`joints.sim.served_timing`): the loop sleeps until :data:`SPIN` s before that instant and
+waits out the rest awake, so the OS's timer slack does not make it late. A bus without an entry
+(or ``timing = "ideal"``) is answered as soon as the request is read.
 
 Options: ``realtime_factor`` runs the physics that many times faster (or slower) than the wall
 clock; ``log`` gets every frame in and out (bus, direction, bytes, CAN id); ``tick`` is called in
@@ -27,6 +30,7 @@ pseudo-terminal (a stable port name for configs).
 from __future__ import annotations
 
 import json
+import math
 import select
 import signal
 import threading
@@ -46,6 +50,11 @@ IDLE_FLUSH = 0.005  #: s of silence after which a partial frame is dropped (t3.5
 #: s of wall clock spent on physics at most between two looks at the ports: the longest a request
 #: waits before it is executed and answered (a drive answers within a few ms)
 SERVICE_PERIOD = 0.001
+#: s before a reply's instant the loop stops sleeping and waits awake (a sleep's wake-up is late by the
+#: OS's timer slack and scheduling: ~0.1 ms measured; a timed reply leaves within microseconds of its instant)
+SPIN = 0.0003
+#: a held request acts once the world's time has reached its instant (to rounding)
+_EPS = 1e-9
 
 
 class _Slices:
@@ -193,7 +202,7 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
         if next_send is not None:
             due.append(next_send)
         if due:
-            timeout = min(timeout, max(0.0, min(due) - time.monotonic()))
+            timeout = min(timeout, max(0.0, min(due) - SPIN - time.monotonic()))
         ready, _, _ = select.select(list(by_fd), [], [], timeout)
         now = time.monotonic()
         for fd in ready:
@@ -212,8 +221,8 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
                 reply(name, ep, world.buses[name].receive(data), now)
                 last_rx[name] = now
                 pending[name] = True
-        # requests whose instant the world has reached (to within half a substep) act now
-        act(sim_wall(world.time + dt / 2))
+        # requests whose instant the world has reached act now (on the substep ending at or after it)
+        act(sim_wall(world.time) + _EPS)
         for name, ep in endpoints.items():
             if pending[name] and now - last_rx[name] > IDLE_FLUSH and not inbox.get(name):
                 reply(name, ep, world.buses[name].silence(), now)
@@ -227,17 +236,22 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
             first = min((q[0][0] for q in inbox.values() if q), default=None)
             first = min((t for t in (first, *(c.first_act() for c in cans.values())) if t is not None),
                         default=None)
-            if first is not None:
-                n = max(1, min(n, round(((first - t0_wall) * factor - (world.time - t0_sim)) / dt)))
+            if first is not None:  # up to the substep that ends at or after its instant
+                n = max(1, min(n, math.ceil(((first - t0_wall) * factor - (world.time - t0_sim)) / dt - 1e-6)))
             started = time.monotonic()
             world.step(n)
             slices.measured(n, time.monotonic() - started)
-            act(sim_wall(world.time + dt / 2))
+            act(sim_wall(world.time) + _EPS)
             for name, ep in endpoints.items():
                 bus = world.buses[name]
                 if isinstance(bus, UnsolicitedPeer):
                     reply(name, ep, bus.take_unsolicited(), time.monotonic())
         now = time.monotonic()
+        soon = min((q[0][0] for q in outbox.values() if q), default=math.inf)
+        if next_send is not None:
+            soon = min(soon, next_send)
+        while now < soon <= now + SPIN:  # the last moments before a reply's instant: awake, not asleep
+            now = time.monotonic()
         for name, waiting in outbox.items():
             while waiting and waiting[0][0] <= now:
                 data = waiting.popleft()[1]
