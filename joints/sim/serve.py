@@ -42,7 +42,7 @@ from typing import Any, TextIO
 
 from joints.errors import TransportError
 from joints.sim.can_serve import CanEndpoint, FrameLog, ServedCan
-from joints.sim.served_timing import BusTiming, ServedLine
+from joints.sim.served_timing import BusTiming, ServedLine, substeps_to
 from joints.transports.loopback import UnsolicitedPeer
 from joints.transports.pty import PtyEndpoint
 
@@ -237,7 +237,7 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
             first = min((t for t in (first, *(c.first_act() for c in cans.values())) if t is not None),
                         default=None)
             if first is not None:  # up to the substep that ends at or after its instant
-                n = max(1, min(n, math.ceil(((first - t0_wall) * factor - (world.time - t0_sim)) / dt - 1e-6)))
+                n = max(1, min(n, substeps_to(t0_sim + (first - t0_wall) * factor, world.time, dt)))
             started = time.monotonic()
             world.step(n)
             slices.measured(n, time.monotonic() - started)

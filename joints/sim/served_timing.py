@@ -34,7 +34,16 @@ from typing import Any
 
 from joints.transports import can_timing, serial_timing
 
-__all__ = ["BusTiming", "ServedLine"]
+__all__ = ["BusTiming", "ServedLine", "substeps_to"]
+
+
+def substeps_to(instant: float, now: float, timestep: float) -> int:
+    """Whole physics substeps from world time ``now`` to the one that ends at or after ``instant`` (0: reached).
+
+    A served request acts on that substep's world, as on the in-process line (never on an earlier one:
+    a command does not take effect, nor is a state sampled, before its instant).
+    """
+    return max(0, math.ceil((instant - now) / timestep - 1e-6))
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ from typing import Any
 import can
 import pytest
 
-from joints.sim.served_timing import BusTiming, ServedLine
+from joints.sim.served_timing import BusTiming, ServedLine, substeps_to
 from joints.transports import can_timing
 
 BAUD = 115200
@@ -63,6 +63,17 @@ def test_turnaround_of_a_broadcast_is_the_slowest_drive_and_defaults() -> None:
     timing = BusTiming.serial(baudrate=BAUD, turnarounds={1: 0.001, 2: 0.003})
     assert timing.turnaround(None) == 0.003 and timing.turnaround(9) == 0.003 and timing.turnaround(1) == 0.001
     assert BusTiming.serial(baudrate=BAUD).turnaround(1) == 0.0  # no drive known: nothing to wait for
+
+
+def test_a_served_request_acts_on_the_substep_ending_at_or_after_its_instant() -> None:
+    """The in-process line's rule (never the nearest substep: a command would act up to half a substep early)."""
+    dt = 0.001
+    assert substeps_to(0.0031, 0.003, dt) == 1
+    assert substeps_to(0.0039, 0.003, dt) == 1
+    assert substeps_to(0.0041, 0.003, dt) == 2
+    assert substeps_to(0.003, 0.003, dt) == 0  # reached: acts now
+    assert substeps_to(0.0029999999999, 0.003, dt) == 0  # rounding of the clocks never costs a substep
+    assert substeps_to(0.001, 0.003, dt) == 0  # overdue: acts now
 
 
 class _Recorder:
@@ -156,7 +167,10 @@ def test_served_request_acts_at_arrival_plus_turnaround_and_its_reply_waits_for_
         thread.join(10)
     assert len(rec.acted) == len(arrived) == 15
     delay = 8 * char + t35 + 0.020
+    # never before its instant (the world was at or behind the wall clock when the request was read, and a request
+    # acts on the substep that ends at or after its instant, as on the in-process line), and soon after it
+    assert min(a - b for a, b in zip(rec.acted, arrived)) >= delay - 1e-9, (rec.acted, arrived, delay)
     waited = statistics.median(a - b for a, b in zip(rec.acted, arrived))
-    assert delay - 0.0015 <= waited <= delay + 0.003, (waited, delay)
+    assert delay <= waited <= delay + 0.003, (waited, delay)
     expected = delay + 9 * char + 0.010
     assert statistics.median(trips) == pytest.approx(expected, abs=0.004), (trips, expected)
