@@ -31,7 +31,8 @@ Time model (docs/timing.md):
   run after every physics substep, so frames arrive on time while the host does something else (a
   broadcast is executed while the host sleeps); otherwise the line runs at the host's reads and writes.
 
-:attr:`TimedSerialLine.log` keeps every transmission (time, side, bytes, corrupted): the wire trace.
+:attr:`TimedSerialLine.log` keeps the transmissions (time, side, bytes, corrupted): the wire trace, its
+latest :data:`LOG_KEEP` frames at least (older ones go in batches, once they can overlap no new frame).
 """
 
 from __future__ import annotations
@@ -50,6 +51,8 @@ __all__ = ["LinePeer", "Ticking", "TimedFrames", "TimedSerialLine", "Transmissio
 #: s the line waits at most in one step while nothing is on it (frames a device sends by itself are
 #: picked up at least this often)
 IDLE_STEP = 0.001
+#: transmissions :attr:`TimedSerialLine.log` keeps at least (at most twice as many): a long run's memory stays flat
+LOG_KEEP = 10_000
 
 
 class LinePeer(Protocol):
@@ -211,6 +214,11 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         latest.append(max(end, latest[-1]) if len(log) > self._epoch else end)
         log.append(tx)
         self._pending.append(tx)
+        if len(log) > 2 * LOG_KEEP:
+            cut = len(log) - LOG_KEEP  # the oldest frames go once none of them can overlap a new one
+            if cut <= self._epoch or latest[cut - 1] <= start - 1.0:
+                del log[:cut], latest[:cut]
+                self._epoch = max(0, self._epoch - cut)
         return tx
 
     def _run(self, until: float) -> None:

@@ -142,3 +142,31 @@ def test_frames_before_the_clock_went_back_never_collide_with_later_ones() -> No
     line.write(mks.encode(mks.ReadSpeed(1)))  # at 0 s again, when the old completion frame was on the wire
     assert line.read(0.05) == reply
     assert line.collisions == 0 and not any(tx.corrupted for tx in line.log)
+
+
+def test_the_log_stays_bounded_and_keeps_every_frame_that_can_still_overlap(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A long run's wire trace keeps its latest frames (at least LOG_KEEP), and a frame still on the line is never
+    dropped from the overlap check: collisions are found after the log was cut."""
+    from joints.transports import serial_sim
+
+    monkeypatch.setattr(serial_sim, "LOG_KEEP", 3)
+    clock = ManualClock()
+    request, reply = mks.encode(mks.ReadSpeed(1)), mks.encode(mks.SpeedReply(1, 7))
+    line = TimedSerialLine(Echo(reply), baudrate=38400, clock=clock, turnaround=0.0005)
+    for _ in range(5):  # within one second: every frame may still matter, nothing goes
+        line.write(request)
+        assert line.read(0.1) == reply
+    assert len(line.log) == 10
+    for _ in range(20):  # a second apart: the log is cut to the latest 3 whenever it passes 6
+        clock.advance(1.0)
+        line.write(request)
+        assert line.read(0.1) == reply
+    assert 3 <= len(line.log) <= 6 and line.log[-1].side == "device" and line.log[-1].data == reply
+    assert line.collisions == 0
+    completion = mks.encode(mks.RunReply(1, 0xFD, mks.RunStatus.COMPLETE))
+    device = Echo(reply, own=[(clock.now() + 1.5, completion)])
+    line.peer = device
+    clock.advance(1.5)
+    line.write(request)  # collides with the drive's own frame, as on a fresh line
+    line.read(0.05)
+    assert line.collisions == 1
