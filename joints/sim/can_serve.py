@@ -25,6 +25,9 @@ the bus in :class:`~joints.transports.can_echo.EchoFreeBus`.
 
 Frames the twins send by themselves (boot-ups, heartbeats, event TPDOs, EMCY) travel on the device
 bus's timed medium; :class:`CanEndpoint` taps the medium and forwards them, paced with the answers.
+With the real bus's time (:attr:`CanEndpoint.line`) they leave when the host's adapter would pass
+them on: their end on the medium (the world's clock, :attr:`CanEndpoint.wall_of` makes it wall
+time) plus the adapter latency, as the answers do.
 """
 
 from __future__ import annotations
@@ -183,6 +186,9 @@ class CanEndpoint:
         self.line: ServedLine | None = None
         self.held: deque[tuple[float, Any]] = deque()  #: requests waiting to act (wall time, frame)
         self.timed: deque[tuple[float, Any]] = deque()  #: answers waiting for the real bus (wall time, frame)
+        #: the wall time of a world time (the serving loop's); with :attr:`line`, frames the twins send by
+        #: themselves wait for the host's adapter too
+        self.wall_of: Callable[[float], float] | None = None
 
     def fileno(self) -> int:
         return int(self.transport.bus.fileno())
@@ -217,10 +223,19 @@ class CanEndpoint:
     def collect(self) -> None:
         """Queue what the twins sent by themselves on their medium since the last call."""
         tap = self._tap
+        line, wall_of = self.line, self.wall_of
         while tap is not None and tap.rx:
             f = tap.rx.popleft()
-            self.out.append(self._can.Message(arbitration_id=f.arbitration_id, is_extended_id=f.is_extended_id,
-                                        is_remote_frame=f.is_remote_frame, dlc=f.dlc, data=f.data))
+            msg = self._can.Message(arbitration_id=f.arbitration_id, is_extended_id=f.is_extended_id,
+                                    is_remote_frame=f.is_remote_frame, dlc=f.dlc, data=f.data)
+            if line is None or wall_of is None:
+                self.out.append(msg)
+                continue
+            due = line.sent(wall_of(f.timestamp))  # f.timestamp: its last bit on the medium (world time)
+            i = len(self.timed)
+            while i and self.timed[i - 1][0] > due:  # in time order with the answers waiting
+                i -= 1
+            self.timed.insert(i, (due, msg))
 
     def send_due(self, now: float) -> float | None:
         """Send what the pacing allows at wall time ``now``; the time of the next send, if any wait."""

@@ -191,6 +191,9 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
         """The wall time of simulated time ``t_sim``."""
         return float(t0_wall + (t_sim - t0_sim) / factor)
 
+    for can_ep in cans.values():
+        can_ep.wall_of = sim_wall
+
     while not stop.is_set():
         if tick is not None:
             tick()

@@ -114,6 +114,15 @@ class ServedLine:
         self.free = arrived
         return arrived + t.turnaround(address) * self.scale
 
+    def sent(self, end: float) -> float:
+        """A frame a drive sent by itself (a heartbeat, an event TPDO) whose last bit left the wire at ``end``
+        (its wire time was counted where it was sent): the time it reaches the host; the line was busy until then."""
+        t = self.timing
+        if t.ideal:
+            return end
+        self.free = max(self.free, end + t.silence * self.scale)
+        return end + t.adapter_latency * self.scale
+
     def reply(self, at: float, wire: float) -> float:
         """A reply of ``wire`` s the drive sends at ``at``: the time it reaches the host."""
         t = self.timing

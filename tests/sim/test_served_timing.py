@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import select
 import statistics
@@ -174,3 +175,77 @@ def test_served_request_acts_at_arrival_plus_turnaround_and_its_reply_waits_for_
     assert delay <= waited <= delay + 0.003, (waited, delay)
     expected = delay + 9 * char + 0.010
     assert statistics.median(trips) == pytest.approx(expected, abs=0.004), (trips, expected)
+
+
+def test_a_served_frame_a_drive_sends_by_itself_waits_for_the_host_adapter_like_an_answer() -> None:
+    """Over a served udp_multicast channel: a twin that sends a frame by itself 20 ms after any frame it gets (as a
+    CANopen drive sends its boot-up, a heartbeat or an event TPDO: on its timed medium, not as an answer) - the
+    frame reaches the client after the request's wire time, the 20 ms, its own wire time on the medium and the
+    bus's 30 ms adapter latency (before: without the adapter latency, ~20 ms). Medians, wall-clock bounds with room."""
+    from joints.sim.can_serve import client_bus, plan
+    from joints.sim.serve import serve
+    from joints.transports.can_sim import CanMedium
+
+    class TickingWorld(_World):
+        """Steps the twin's medium with its substeps (as the world ticks a timed device bus)."""
+
+        def now(self) -> float:
+            return self.time
+
+        def sleep(self, seconds: float) -> None:  # the medium's own waits (none here: the serving loop steps)
+            self.step(math.ceil(seconds / self.timestep))
+
+        def step(self, n: int = 1) -> None:
+            for _ in range(n):
+                self.steps += 1
+                twin.medium.tick(self.time)
+
+    class Twin:
+        def __init__(self) -> None:
+            self.medium = CanMedium(f"selfsent-{os.getpid()}", bitrate=1_000_000)
+            self.medium.bind_clock(world)
+            self.node = self.medium.attach_peer(self, name="twins")
+
+        def on_frame(self, frame: can.Message) -> list[can.Message]:
+            heartbeat = can.Message(arbitration_id=0x705, data=b"\x05", is_extended_id=False)
+            self.medium.send_at(self.node, heartbeat, self.medium.time() + 0.020)
+            return []
+
+    world = TickingWorld()
+    twin = Twin()
+    world.buses["can"] = twin
+    spec = plan("can", None, None, None)
+    timing = BusTiming.can(bitrate=1_000_000, adapter_latency=0.030)
+    ports: dict[str, Any] = {}
+    ready, stop = threading.Event(), threading.Event()
+
+    def on_ready(lines: dict[str, Any]) -> None:
+        ports.update(lines)
+        ready.set()
+
+    thread = threading.Thread(target=serve, args=(world, []), daemon=True,
+                              kwargs={"can_buses": {"can": spec}, "stop": stop, "on_ready": on_ready,
+                                      "install_signals": False, "timing": {"can": timing}})
+    thread.start()
+    assert ready.wait(30)
+    bus = client_bus(ports["can"])
+    trips: list[float] = []
+    try:
+        request = can.Message(arbitration_id=0x000, data=b"\x01\x00", is_extended_id=False)
+        for _ in range(7):
+            t = time.monotonic()
+            bus.send(request)
+            while True:
+                got = bus.recv(1.0)
+                assert got is not None, "no frame from the twin"
+                if got.arbitration_id == 0x705:
+                    break
+            trips.append(time.monotonic() - t)
+    finally:
+        bus.shutdown()
+        stop.set()
+        thread.join(10)
+    wire = timing.frame_time(request) + timing.frame_time(can.Message(arbitration_id=0x705, data=b"\x05",
+                                                                       is_extended_id=False))
+    expected = wire + 0.020 + 0.030
+    assert expected - 0.0015 <= statistics.median(trips) <= expected + 0.004, (trips, expected)
