@@ -259,7 +259,11 @@ def _baseline_config(env_id: str) -> tuple[Any, str] | None:
         except ConfigError:
             continue
         return on_can, f"{proto} at 1 Mbit/s"
-    return cfg, shipped  # the shipped bus at the baseline period (the env refuses it if it does not fit)
+    try:
+        check_rate(cfg, BASELINE_PERIOD)
+    except ConfigError:
+        return None  # no bus of this env carries the baseline period (the env would refuse it): no row
+    return cfg, shipped
 
 
 def env_rows(*, steps: int, raw_steps: int, repeats: int, seed: int = 0) -> Iterator[Row]:
@@ -547,17 +551,25 @@ class BusPlan:
 CYCLE_BUDGET = 0.8
 
 
-def _cycle(rig: Any, mode: str = "position") -> None:
-    """One control cycle of every joint as the envs run it: a command in ``mode``, then every joint's state."""
+#: the counted cycle's velocity commands, as a share of each joint's velocity limit: a change from the warm-up
+#: cycle's 0, as a policy's commands change every step (a drive that takes a ramp per change - the ZLAC's
+#: acceleration times - sends it too)
+PLAN_SPEED = 0.1
+
+
+def _cycle(rig: Any, mode: str = "position", speed: float = 0.0) -> None:
+    """One control cycle of every joint as the envs run it: a command in ``mode`` (velocities: ``speed`` x the
+    joint's velocity limit, 1 unit/s without one), then every joint's state."""
     from joints.drivers.capabilities import GroupedChannel, SyncVelocityGroup
 
     velocities = {}
     for name, j in rig.joints.items():
         d = j.driver
+        v = speed * (j.limits.velocity or 1.0)
         if isinstance(d, GroupedChannel) and isinstance(d.group, SyncVelocityGroup):
-            velocities[name] = 0.0  # wheels: both targets in one command (as the diffdrive env)
+            velocities[name] = v  # wheels: both targets in one command (as the diffdrive env)
         elif mode == "velocity":
-            j.set_velocity(0.0)
+            j.set_velocity(v)
         elif mode == "torque":
             j.set_torque(0.0)
         else:
@@ -670,7 +682,7 @@ def _measure(joints: Any, registry: Any, cfg: Any, mode: str) -> list[BusPlan]:
         _cycle(rig, mode)  # the first cycle also configures modes and profiles: not counted
         records: list[TraceRecord] = []
         rig.trace(records.append)
-        _cycle(rig, mode)
+        _cycle(rig, mode, PLAN_SPEED)
         rig.trace(None)
         out = []
         for name, b in rig.config.buses.items():

@@ -114,3 +114,27 @@ def test_sleep_together_argument_checks() -> None:
             joints.sleep_together([rig], [-1.0])
         joints.sleep_together([rig], 0.01)
         assert rig.time == pytest.approx(0.01)
+
+
+def test_diffdrive_cycle_counts_the_ramp_write_a_changing_command_sends() -> None:
+    """A policy's wheel speeds change every step, and the ZLAC driver then writes the ramp times (0x2080-0x2083,
+    one FC16) before the speeds: the planner counts that cycle (3 transactions, not the 2 of a repeated command),
+    so it agrees with what the env sends, and a 20 ms period that cycle does not fit is refused (before, the
+    planner's 16.0 ms let it through and the env overran every step by 3.5 ms)."""
+    with envs.config_path("zlac_diffdrive") as path:
+        p = joints.cycle_times(str(path), "velocity")["rs485"]
+    assert p.transactions == 3 and p.frames == 6
+    env = gym.make("joints/DiffDriveGoal-v0").unwrapped
+    try:
+        env.reset(seed=0)
+        link = env.rig.buses["rs485"].link
+        rng = np.random.default_rng(0)
+        for _ in range(10):
+            before = link.transactions
+            env.step(rng.uniform(-1, 1, (2,)).astype(np.float32))
+            assert link.transactions - before == p.transactions
+        assert env.overruns == 0  # 23.5 ms in the 50 ms period
+    finally:
+        env.close()
+    with pytest.raises(joints.ConfigError, match="does not fit"):
+        gym.make("joints/DiffDriveGoal-v0", control_period=0.02)
