@@ -201,11 +201,11 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
                 t0_wall, t0_sim = time.monotonic(), world.time
         sim_behind = (time.monotonic() - t0_wall) * factor - (world.time - t0_sim)
         timeout = max(0.0, dt - sim_behind) if sim_behind < dt else 0.0
-        due = [q[0][0] for q in outbox.values() if q]
-        if next_send is not None:
-            due.append(next_send)
-        if due:
-            timeout = min(timeout, max(0.0, min(due) - SPIN - time.monotonic()))
+        timed = [q[0][0] for q in (*outbox.values(), *(c.timed for c in cans.values())) if q]
+        if timed:  # a timed reply: wake SPIN before its instant (then wait awake, below)
+            timeout = min(timeout, max(0.0, min(timed) - SPIN - time.monotonic()))
+        if next_send is not None:  # the CAN channel's pacing
+            timeout = min(timeout, max(0.0, next_send - time.monotonic()))
         ready, _, _ = select.select(list(by_fd), [], [], timeout)
         now = time.monotonic()
         for fd in ready:
@@ -250,10 +250,9 @@ def _run(world: Any, endpoints: Mapping[str, PtyEndpoint], cans: Mapping[str, Ca
                 if isinstance(bus, UnsolicitedPeer):
                     reply(name, ep, bus.take_unsolicited(), time.monotonic())
         now = time.monotonic()
-        soon = min((q[0][0] for q in outbox.values() if q), default=math.inf)
-        if next_send is not None:
-            soon = min(soon, next_send)
-        while now < soon <= now + SPIN:  # the last moments before a reply's instant: awake, not asleep
+        # a timed reply's instant (not the CAN channel's pacing): the last moments before it awake, not asleep
+        soon = min((q[0][0] for q in (*outbox.values(), *(c.timed for c in cans.values())) if q), default=math.inf)
+        while now < soon <= now + SPIN:
             now = time.monotonic()
         for name, waiting in outbox.items():
             while waiting and waiting[0][0] <= now:
