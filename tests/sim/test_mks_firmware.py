@@ -109,6 +109,22 @@ def test_failed_fc06_and_fc16_are_answered_as_the_firmware_does_and_refused_by_t
         assert d.image.get("speed_mode_speed", 0) == 0  # a refused command is not remembered as sent
 
 
+@pytest.mark.parametrize("firmware", MKS_FIRMWARES)
+def test_a_raw_fc06_write_of_0xffff_the_drive_refuses_is_a_refusal_not_an_echo(tmp_path: Path, firmware: str) -> None:
+    """0xFFFF to 0x83 (working current 65535 mA): V1.0.6+ answer the failure reply, whose data equal the value
+    sent; the driver declared the slave's failure replies to the link, and no MKS register takes 0xFFFF."""
+    with open_motor(tmp_path, protocol="modbus-rtu", joint={"firmware": firmware}) as rig:
+        d = rig.joints["m1"].driver
+        fw = _twin(rig)
+        before = dict(fw.values)
+        with pytest.raises(DeviceRejected) as fc06:
+            d.link.write_register(1, 0x83, 0xFFFF)
+        with pytest.raises(DeviceRejected) as raw:
+            d.link.write_pdu(1, mb.WRITE_SINGLE_REGISTER, bytes.fromhex("0083FFFF"))
+        assert fw.values == before
+        assert fc06.value.code == raw.value.code == (3 if firmware == "v1.0.5" else 0)  # V1.0.5: exception 03
+
+
 @pytest.mark.parametrize("protocol", ["mks-serial", "modbus-rtu"])
 @pytest.mark.parametrize("firmware", MKS_FIRMWARES)
 def test_identity_reads_0x40_where_the_firmware_has_it(tmp_path: Path, protocol: str, firmware: str) -> None:
