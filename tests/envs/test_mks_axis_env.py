@@ -19,6 +19,7 @@ from gymnasium.utils.env_checker import check_env
 import envs
 from envs.mks_axis import MksAxisPositionEnv
 
+pytestmark = pytest.mark.mks_firmware
 ENV_ID = "joints/MksAxisPosition-v0"
 
 

@@ -11,6 +11,7 @@ from typing import Any
 import pytest
 
 pytest.importorskip("mujoco")
+pytestmark = pytest.mark.mks_firmware
 
 from mkskit import open_motor
 
@@ -259,9 +260,8 @@ def test_the_0x90_quirk_is_accepted_exactly_and_recorded_other_counts_get_except
         assert bus.receive(append_crc(bytes.fromhex("01 04 00 35 00 01"))) == mb.encode(mb.ExceptionReply(1, 4, 2))
 
 
-@pytest.mark.parametrize("firmware", MKS_FIRMWARES)
-def test_part8_refusals_native_mode_and_range(tmp_path: Path, firmware: str) -> None:
-    with open_motor(tmp_path, protocol="modbus-rtu", joint={"firmware": firmware}) as rig:
+def test_part8_refusals_native_mode_and_range(tmp_path: Path, mks_firmware: str) -> None:
+    with open_motor(tmp_path, protocol="modbus-rtu", joint={"firmware": mks_firmware}) as rig:
         bus = rig.world.buses["rs485"]
         # the twin is in CR_vFOC (factory): a run command cannot execute; 10000 mA is out of range.
         # V1.0.5 documents no failure reply (exceptions 04 / 03, our choice); V1.0.6+ answer FC16 with
@@ -269,7 +269,7 @@ def test_part8_refusals_native_mode_and_range(tmp_path: Path, firmware: str) -> 
         run = append_crc(bytes((1, 0x10)) + MKS_MODBUS.block(0x10, 0xF6).request_pdu(
             {"speed_mode_direction": 0, "speed_mode_acc": 2, "speed_mode_speed": 100}))
         current = append_crc(bytes.fromhex("01 06 00 83 27 10"))
-        if firmware == "v1.0.5":
+        if mks_firmware == "v1.0.5":
             assert bus.receive(run) == mb.encode(mb.ExceptionReply(1, 0x10, 4))
             assert bus.receive(current) == mb.encode(mb.ExceptionReply(1, 6, 3))
         else:
