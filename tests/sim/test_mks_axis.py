@@ -15,7 +15,6 @@ from mkskit import axis_config
 import joints
 from joints.codecs import mks
 from joints.devices.mks.state import MotorStatus
-from joints.devices.quirks import MKS_FIRMWARES
 from joints.errors import ConfigError, LimitError
 
 LEAD = 0.008

@@ -15,7 +15,6 @@ from mkskit import open_motor
 
 from joints.codecs import modbus as mb
 from joints.devices.mks.state import MotorStatus, WorkMode
-from joints.devices.quirks import MKS_FIRMWARES
 from joints.drivers.capabilities import CommunicationWatchdog
 from joints.errors import DeviceRejected, RegisterError
 from joints.sim.mks import MksFirmware

@@ -20,7 +20,6 @@ from joints.codecs import modbus as mb
 from joints.codecs.crc import append_crc
 from joints.devices.mks.modbus import MKS_MODBUS
 from joints.devices.mks.state import WorkMode
-from joints.devices.quirks import MKS_FIRMWARES
 from joints.sim import sensors
 from testdata import by_id, sequences, vectors
 

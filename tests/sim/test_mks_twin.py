@@ -17,7 +17,6 @@ from mkskit import open_motor
 
 from joints.codecs import mks
 from joints.devices.mks.state import MotorStatus, WorkMode
-from joints.devices.quirks import MKS_FIRMWARES
 from joints.errors import DeviceRejected
 from joints.sim.mks import MksFirmware
 
