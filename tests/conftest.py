@@ -29,7 +29,6 @@ with contextlib.suppress(ImportError):
     _hypothesis_settings.load_profile("joints")
 
 
-
 # --- MKS firmware profiles ------------------------------------------------------------------------------------
 # ``@pytest.mark.mks_firmware`` (on a test or a module): the test runs once per MKS firmware profile
 # (joints.devices.quirks.MKS_FIRMWARES), ``@pytest.mark.mks_firmware("v1.0.6", "v1.0.9")`` on the ones named (a
