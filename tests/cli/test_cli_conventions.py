@@ -15,6 +15,7 @@ from typing import Any
 import pytest
 from clikit import joints_cmd
 
+import joints
 from joints.cli import build_parser, main
 
 
@@ -227,6 +228,8 @@ def test_send_of_a_refused_fc06_0xffff_to_the_mks_reports_the_refusal(sim: Path,
     rc, out, err = run(capsys, "send", sim, "--bus", "rs485", "04 06 00 83 FF FF", "--confirm")
     assert rc == 1 and "slave 4 re" in err, (rc, out, err)  # "refused" / "rejected"
     assert ("failure reply" in err) == (mks_firmware != "v1.0.5") != ("exception 0x03" in err)
+    with joints.open(sim) as rig:  # the eRobs (1, 2) and the ZLAC (3) on the same bus declare no failure replies
+        assert set(rig.buses["rs485"].link.rule.failure_replies) == ({4} if mks_firmware != "v1.0.5" else set())
 
 
 def test_replay_of_a_recorded_log_gives_the_same_replies(sim: Path, tmp_path: Path,
