@@ -312,6 +312,7 @@ def _joint(r: _Reader, name: str, j: Mapping[str, Any], buses: Mapping[str, BusC
             fam.firmware_profile(firmware)
         except ConfigError as exc:
             raise r.err(f"{key}.firmware", exc.message, exc.allowed) from None
+    eds = _eds(r, j.get("eds"), f"{key}.eds", protocol in fam.eds, base_dir)
     modes = fam.modes.get(protocol, ())
     mode = j.get("mode")
     if mode is not None and not modes:
@@ -347,7 +348,24 @@ def _joint(r: _Reader, name: str, j: Mapping[str, Any], buses: Mapping[str, BusC
         sync_period=sync_period,
         profile_overlay=overlay,
         firmware=firmware,
+        eds=eds,
     )
+
+
+def _eds(r: _Reader, value: Any, key: str, takes_eds: bool, base_dir: Path | None) -> str | None:
+    """A joint's ``eds``: a vendor EDS file (relative to the config's directory) for a CANopen driver."""
+    if value is None:
+        return None
+    if not takes_eds:
+        raise r.err(key, "only a CANopen joint has an object dictionary (EDS); remove the key")
+    if not isinstance(value, str) or not value:
+        raise r.err(key, f"expected the path of an EDS file, got {value!r}")
+    path = (base_dir or Path.cwd()) / value
+    if not path.is_file():
+        raise r.err(key, f"{path} does not exist: give the path of the drive's EDS file relative to the config "
+                         "file's directory (the vendor's, or one written by `joints sim eds`), or remove the key "
+                         "to use the built-in dictionary")
+    return str(path)
 
 
 def _protocol(name: str) -> registry.BusProtocol | None:

@@ -85,6 +85,7 @@ class JointConfig:
     sync_period: float | None = None  #: CANopen: s between two SYNCs (the bus's; set it on the bus or here)
     profile_overlay: str | None = None  #: the identified-profile file whose ``[profile]`` was merged into ``profile``
     firmware: str | None = None  #: the drive's firmware profile (its quirks: joints.devices.quirks); None: default
+    eds: str | None = None  #: CANopen: the drive's EDS file as the driver's object dictionary (resolved path)
 
 
 @dataclass(frozen=True)

@@ -371,7 +371,7 @@ def _erob_canopen_driver(cfg: JointConfig, link: Any, clock: Clock, shared: dict
     period = cfg.sync_period or link.sync_period or 0.001
     cycle = SyncCycle.of(link, period)  # the bus's, held by its link
     return ErobCanopenDriver(link, cfg.address, profile=FAMILIES["erob"].config_profile(cfg), clock=clock,
-                             name=cfg.name, mode=cfg.mode, sync_period=cycle.period, cycle=cycle)
+                             name=cfg.name, mode=cfg.mode, sync_period=cycle.period, cycle=cycle, eds=cfg.eds)
 
 
 def _erob_canopen_table() -> Any:

@@ -28,6 +28,48 @@ with contextlib.suppress(ImportError):
     _hypothesis_settings.register_profile("joints", derandomize=True, database=None)
     _hypothesis_settings.load_profile("joints")
 
+
+# --- MKS firmware profiles ------------------------------------------------------------------------------------
+# ``@pytest.mark.mks_firmware`` (on a test or a module): the test runs once per MKS firmware profile
+# (joints.devices.quirks.MKS_FIRMWARES), ``@pytest.mark.mks_firmware("v1.0.6", "v1.0.9")`` on the ones named (a
+# test of a later firmware's feature). While it runs, that profile is the MKS family's default, so every driver
+# and twin built without a ``firmware`` (registry, config, direct construction) has it; the ``mks_firmware``
+# fixture names it (None in unmarked tests) for what the default cannot reach (a config served by another process).
+# ``mks_firmware(None)``: a test that names its firmware per case itself (runs once, as written).
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "mks_firmware(*profiles): run once per MKS firmware profile (default: all), "
+                                       "that profile being the MKS default (fixture mks_firmware)")
+
+
+def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
+    marker = metafunc.definition.get_closest_marker("mks_firmware")
+    if marker is not None and marker.args != (None,):
+        from joints.devices.quirks import MKS_FIRMWARES
+
+        unknown = set(marker.args) - set(MKS_FIRMWARES)
+        assert not unknown, f"mks_firmware names no profile {sorted(unknown)}: {MKS_FIRMWARES}"
+        metafunc.parametrize("mks_firmware", marker.args or MKS_FIRMWARES)
+
+
+@pytest.fixture
+def mks_firmware() -> str | None:
+    """The MKS firmware profile of a test marked ``mks_firmware`` (None elsewhere)."""
+    return None
+
+
+@pytest.fixture(autouse=True)
+def _mks_default_firmware(request: pytest.FixtureRequest, mks_firmware: str | None) -> None:
+    if mks_firmware is not None:
+        from types import MappingProxyType
+
+        from joints.devices import quirks
+
+        default = MappingProxyType({**quirks.DEFAULT_FIRMWARE, "mks": mks_firmware})
+        request.getfixturevalue("monkeypatch").setattr(quirks, "DEFAULT_FIRMWARE", default)
+
+
 # Headless rendering for every test module, whichever imports MuJoCo first (envs does the same on import).
 if sys.platform.startswith("linux") and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
     os.environ.setdefault("MUJOCO_GL", "egl")

@@ -24,7 +24,7 @@ from joints.devices.mks.modbus import FC_READ, FC_WRITE_MULTIPLE, FC_WRITE_SINGL
 from joints.devices.mks.params import model_params
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import ParamSet
-from joints.devices.quirks import FirmwareProfile
+from joints.devices.quirks import MKS_FAILURE_REPLIES, FirmwareProfile
 from joints.drivers.mks import MksAccess, MksDriver, MksHeartbeat
 from joints.errors import CommandError, RegisterError
 from joints.link.modbus import ModbusLink
@@ -62,6 +62,20 @@ class MksModbusAccess(MksAccess):
     def where(self, name: str) -> str:
         f = self.map.get(name)
         return f"FC{f.function:02d} 0x{f.address:04X}"
+
+    def holds_failed_value(self, address: int) -> bool | None:
+        """After an FC06 write of 0xFFFF to ``address`` answered with 0xFFFF (the failure reply, V1.0.6+): False
+        where the parameter cannot take that value (the answer is the refusal), else None - no Part 8 read
+        returns an FC06 setting, so the outcome cannot be told (no FC06 parameter takes 0xFFFF today)."""
+        block = self.map.find(FC_WRITE_SINGLE, address)
+        if block is None:
+            return None  # a register this map does not know: whether it takes 0xFFFF is unknown
+        ((name, value),) = block.decode_words((_FAILED,)).items()
+        try:
+            self.params[name].check(value)
+        except CommandError:
+            return False
+        return None
 
     def read_version(self, *, retry: bool = True) -> int:
         """FC04 0x0040 (V1.0.9) version word; ``retry=False``: one attempt (a probe)."""
@@ -144,6 +158,8 @@ class MksModbusDriver(MksDriver):
         super().__init__(MksModbusAccess(link, slave, model_params(device)), device=device, profile=profile,
                          clock=clock or link.clock, name=name or f"{device}@{slave}", work_mode=work_mode,
                          microsteps=microsteps, firmware=firmware)
+        if MKS_FAILURE_REPLIES in self.firmware.features:
+            link.failure_replies(slave, self.access.holds_failed_value)
 
 
 class MksModbusHeartbeatDriver(MksHeartbeat, MksModbusDriver):

@@ -8,6 +8,14 @@ announces 3 registers and 5 bytes, ERRATA DOC-MKS-5) is reached by sending that 
 ordinary write reply to its address (and count). Only reads and writes marked idempotent are retried, so a lost reply to "start" can
 never start a motion twice. Frames that arrive while no request is outstanding (a reply too late
 for a request that timed out) are unsolicited: logged and traced, never taken as an answer.
+
+Failure replies are per slave: a device that answers a write it refuses with an ordinary-looking
+reply - FC06 with register data 0xFFFF, FC16 with register quantity 0 (MKS V1.0.6+: "If write
+fails") - is declared by its driver (:meth:`ModbusLink.failure_replies`), and for it such a reply
+is :class:`~joints.errors.DeviceRejected` (``code=0``), decided before the echo check. An FC06
+write of 0xFFFF itself is answered alike whether taken or refused: the device's own answer decides
+(read back, or the register cannot hold 0xFFFF), else :class:`~joints.errors.OutcomeUnknown`.
+Other slaves' replies are judged as Modbus has them (a mismatch is :class:`UnexpectedReply`).
 """
 
 from __future__ import annotations
@@ -18,7 +26,7 @@ from typing import Any, Protocol
 from joints.clock import Clock
 from joints.codecs import modbus as mb
 from joints.codecs.crc import append_crc, crc_ok
-from joints.errors import DeviceRejected, EncodeError, UnexpectedReply
+from joints.errors import DeviceRejected, EncodeError, OutcomeUnknown, UnexpectedReply
 from joints.link.base import DirectFraming, Framing, Link, RetryPolicy, Rule, StreamFraming, parse_one
 from joints.link.trace import TraceRecord
 from joints.transports.base import ByteTransport
@@ -27,6 +35,11 @@ BROADCAST = 0
 _READS = (mb.ReadHoldingRegisters, mb.ReadInputRegisters)
 #: 8-byte frames besides the reads: address, function, two words, CRC
 _FIXED = (mb.WriteSingleRegister, mb.WriteSingleRegisterReply, mb.WriteMultipleRegistersReply)
+#: FC06 register data of a failure reply (FC16's: register quantity 0)
+FAILED_VALUE = 0xFFFF
+#: after an FC06 write of 0xFFFF to ``address`` answered with 0xFFFF: does the register hold 0xFFFF now?
+#: True (taken), False (refused), None (the device cannot tell)
+HoldsFailedValue = Callable[[int], "bool | None"]
 
 
 def _describe(msg: object) -> str:
@@ -40,6 +53,8 @@ class ModbusRule(Rule[Any]):
 
     def __init__(self, *, echo: bool = False) -> None:
         self.echo = echo  #: the RS485 adapter hears its own transmission: skip that copy
+        #: slaves that answer refused writes with failure replies (their drivers declare them)
+        self.failure_replies: dict[int, HoldsFailedValue] = {}
 
     def encode(self, message: Any) -> bytes:
         frame = mb.encode(message)
@@ -119,6 +134,8 @@ class ModbusRule(Rule[Any]):
                 code=reply.code,
                 function=reply.function,
             )
+        if request.slave in self.failure_replies and _single_write(request) != FAILED_VALUE:
+            _failure_reply(request, reply)
         if isinstance(request, _READS):
             if (isinstance(reply, mb.ReadRegistersReply) and reply.function == request.function
                     and len(reply.values) == request.count):
@@ -140,19 +157,32 @@ class ModbusRule(Rule[Any]):
                             and reply.address == address and reply.value == second)
             if answered:
                 return True
-        _failure_reply(request, reply)
         raise UnexpectedReply(f"reply {_describe(reply)} does not answer {_describe(request)}")
+
+
+def _address(request: Any) -> int | None:
+    if isinstance(request, mb.UnsupportedRequest):
+        return int.from_bytes(request.pdu[0:2], "big") if len(request.pdu) >= 2 else None
+    return getattr(request, "address", None)
+
+
+def _single_write(request: Any) -> int | None:
+    """The value of an FC06 write (also one sent as a raw PDU), else None."""
+    if isinstance(request, mb.WriteSingleRegister):
+        return request.value
+    if isinstance(request, mb.UnsupportedRequest) and request.function == mb.WRITE_SINGLE_REGISTER \
+            and len(request.pdu) == 4:
+        return int.from_bytes(request.pdu[2:4], "big")
+    return None
 
 
 def _failure_reply(request: Any, reply: Any) -> None:
     """A write answered at its own address with register data 0xFFFF (FC06) or register quantity 0
-    (FC16) is the drive's refusal where a firmware documents it so (MKS V1.0.6+: "If write fails"):
-    :class:`~joints.errors.DeviceRejected` with ``code=0``, like a native MKS status 0."""
-    address = getattr(request, "address", None)
-    if isinstance(request, mb.UnsupportedRequest) and len(request.pdu) >= 2:
-        address = int.from_bytes(request.pdu[0:2], "big")
+    (FC16), by a slave declared to answer refusals so: :class:`~joints.errors.DeviceRejected` with
+    ``code=0``, like a native MKS status 0."""
+    address = _address(request)
     failed = (isinstance(reply, mb.WriteSingleRegisterReply) and request.function == mb.WRITE_SINGLE_REGISTER
-              and reply.address == address and reply.value == 0xFFFF) or (
+              and reply.address == address and reply.value == FAILED_VALUE) or (
         isinstance(reply, mb.WriteMultipleRegistersReply) and request.function == mb.WRITE_MULTIPLE_REGISTERS
         and reply.address == address and reply.count == 0)
     if failed:
@@ -186,8 +216,36 @@ class ModbusLink(Link[Any]):
         clock = clock or MonotonicClock()
         framing: Framing[Any] = (StreamFraming(transport, mb.ModbusRtuCodec(mb.Role.HOST), clock) if peer is None
                                  else DirectFraming(peer, transport, mb.as_received))
-        super().__init__(framing, ModbusRule(echo=echo), policy=policy, clock=clock, trace=trace, name=name)
+        rule = ModbusRule(echo=echo)
+        super().__init__(framing, rule, policy=policy, clock=clock, trace=trace, name=name)
         self.echo = echo
+        self._failure_replies = rule.failure_replies
+
+    def failure_replies(self, slave: int, holds: HoldsFailedValue) -> None:
+        """Declare that ``slave`` answers a write it refuses with FC06 register data 0xFFFF / FC16 register
+        quantity 0 (its driver knows, from its family and firmware). ``holds(address)`` decides an FC06
+        write of 0xFFFF answered with 0xFFFF: True taken, False refused, None cannot tell."""
+        self._failure_replies[slave] = holds
+
+    def request(self, request: Any, *, idempotent: bool = False) -> Any:
+        """:meth:`Link.request`; an FC06 write of 0xFFFF to a slave with failure replies is decided by
+        the slave's ``holds`` (see :meth:`failure_replies`)."""
+        reply = super().request(request, idempotent=idempotent)
+        holds = self._failure_replies.get(getattr(request, "slave", None))  # type: ignore[arg-type]
+        if holds is None or _single_write(request) != FAILED_VALUE:
+            return reply
+        address = _address(request)
+        assert address is not None
+        held = holds(address)
+        if held is None:
+            raise OutcomeUnknown(f"slave {request.slave} answered {_describe(request)} with {_describe(reply)}, which "
+                                 "is also its failure reply, and cannot report the register: the write's outcome is "
+                                 "unknown - read back what matters before acting on it")
+        if not held:
+            raise DeviceRejected(f"slave {request.slave} refused {_describe(request)}: failure reply "
+                                 f"{_describe(reply)} (0x{address:04X} does not hold 0xFFFF)", code=0,
+                                 function=mb.WRITE_SINGLE_REGISTER)
+        return reply
 
     def read_registers(self, slave: int, address: int, count: int, *, input_registers: bool = False) -> tuple[int, ...]:
         """FC03 (or FC04) read of ``count`` registers from ``address``."""
@@ -211,4 +269,4 @@ class ModbusLink(Link[Any]):
         self.request(mb.UnsupportedRequest(slave, function, bytes(pdu)), idempotent=idempotent)
 
 
-__all__ = ["BROADCAST", "MessagePeer", "ModbusLink", "ModbusRule", "RetryPolicy"]
+__all__ = ["BROADCAST", "FAILED_VALUE", "HoldsFailedValue", "MessagePeer", "ModbusLink", "ModbusRule", "RetryPolicy"]

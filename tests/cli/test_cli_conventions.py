@@ -15,6 +15,7 @@ from typing import Any
 import pytest
 from clikit import joints_cmd
 
+import joints
 from joints.cli import build_parser, main
 
 
@@ -210,12 +211,25 @@ def test_other_cia402_modes(sim: Path, capsys: pytest.CaptureFixture[str]) -> No
     assert rc == 2 and "--torque" in err
 
 
+@pytest.mark.mks_firmware
 def test_mks_pulse_moves(sim: Path, capsys: pytest.CaptureFixture[str]) -> None:
     rc, out, err = run(capsys, "move", sim, "n", "1600", "--pulses", "--relative", "--json")
     assert rc == 0, err
     assert json.loads(out)["position"] == pytest.approx(3.14159, abs=0.01)  # 1600 of 3200 pulses: half a turn
     rc, _, err = run(capsys, "move", sim, "a", "1600", "--pulses")
     assert rc == 2 and "no pulse position modes" in err
+
+
+@pytest.mark.mks_firmware
+def test_send_of_a_refused_fc06_0xffff_to_the_mks_reports_the_refusal(sim: Path, mks_firmware: str,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """0xFFFF to 0x83 (working current) of the MKS at 4: refused by every profile (V1.0.6+: the failure reply, whose
+    data equal the value sent; V1.0.5: exception 03), never reported as written."""
+    rc, out, err = run(capsys, "send", sim, "--bus", "rs485", "04 06 00 83 FF FF", "--confirm")
+    assert rc == 1 and "slave 4 re" in err, (rc, out, err)  # "refused" / "rejected"
+    assert ("failure reply" in err) == (mks_firmware != "v1.0.5") != ("exception 0x03" in err)
+    with joints.open(sim) as rig:  # the eRobs (1, 2) and the ZLAC (3) on the same bus declare no failure replies
+        assert set(rig.buses["rs485"].link.rule.failure_replies) == ({4} if mks_firmware != "v1.0.5" else set())
 
 
 def test_replay_of_a_recorded_log_gives_the_same_replies(sim: Path, tmp_path: Path,

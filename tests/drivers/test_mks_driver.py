@@ -14,6 +14,7 @@ from joints.codecs import modbus as mb
 from joints.devices.mks import blocks
 from joints.devices.mks.params import DANGEROUS, MKS_PARAMS
 from joints.devices.mks.state import MotorStatus
+from joints.devices.quirks import MKS_ALL_PARAMETERS, MKS_VERSION, firmware_profile
 from joints.drivers.mks_modbus import MksModbusDriver
 from joints.drivers.mks_native import MksNativeDriver
 from joints.errors import ConfigError, ConfirmationRequired, OutcomeUnknown, RegisterError
@@ -24,13 +25,16 @@ from joints.link.modbus import ModbusLink
 from joints.transports.loopback import LoopbackTransport
 from testdata import by_id
 
+pytestmark = pytest.mark.mks_firmware
 ADDRESS = 1
 
 
 class Drive:
-    """A scripted native drive: answers every command with success; ``hook`` may replace an answer."""
+    """A scripted native drive of the default firmware profile (the test's): answers every command it has with
+    success (0x40 from V1.0.9, 0x47 from V1.0.6; none before); ``hook`` may replace an answer."""
 
     def __init__(self, hook: Callable[[Any], bytes | None] | None = None) -> None:
+        self.features = firmware_profile("mks").features
         self.codec = mks.MksCodec(mks.Role.DEVICE)
         self.requests: list[Any] = []
         self.hook = hook
@@ -48,6 +52,9 @@ class Drive:
         return out
 
     def answer(self, msg: Any) -> bytes:
+        if isinstance(msg, (mks.ReadVersion, mks.ReadAllParameters)) and (
+                (MKS_VERSION if isinstance(msg, mks.ReadVersion) else MKS_ALL_PARAMETERS) not in self.features):
+            return b""  # a command of a later firmware: no answer
         if isinstance(msg, mks.ReadVersion):  # a V1.0.9 drive, calibrated, S42D_485
             return mks.encode(mks.VersionReply(msg.address, 0x11_01_00_09))
         if isinstance(msg, mks.ReadAllParameters):  # 0x47: what the drive holds (factory settings + held)
@@ -108,10 +115,9 @@ def test_dangerous_parameters_by_name_need_confirm_through_the_joint_too() -> No
     assert drive.requests == [mks.Calibrate(ADDRESS)]
 
 
+@pytest.mark.mks_firmware("v1.0.5")  # from V1.0.6: the next test
 def test_write_only_settings_are_remembered_not_read() -> None:
-    drive = Drive()
-    link = MksLink(LoopbackTransport(drive), clock=ManualClock(), policy=RetryPolicy(timeout=0.05, retries=2))
-    driver = MksNativeDriver(link, ADDRESS, device="mks-servo42d", firmware="v1.0.5")
+    driver, drive = native()
     with pytest.raises(RegisterError, match="cannot be read"):
         driver.read("working_current")
     assert drive.requests == []
@@ -120,8 +126,9 @@ def test_write_only_settings_are_remembered_not_read() -> None:
     assert drive.requests == [mks.SetWorkingCurrent(ADDRESS, 1200)]
 
 
+@pytest.mark.mks_firmware("v1.0.6", "v1.0.9")
 def test_from_v106_write_only_settings_are_read_by_0x47() -> None:
-    driver, drive = native()  # v1.0.9
+    driver, drive = native()
     drive.held = {"working_current": 1400}
     assert driver.read("working_current") == 1400
     assert drive.requests == [mks.ReadAllParameters(ADDRESS)]
@@ -142,10 +149,9 @@ def test_multi_field_commands_send_all_their_fields() -> None:
     assert len(drive.requests) == 4
 
 
+@pytest.mark.mks_firmware("v1.0.5")  # from V1.0.6: the next test
 def test_enable_sets_serial_mode_subdivision_respond_active_once() -> None:
-    drive = Drive(lambda m: b"" if isinstance(m, mks.ReadVersion) else None)  # a V1.0.5 drive: no 0x40, no 0x47
-    link = MksLink(LoopbackTransport(drive), clock=ManualClock(), policy=RetryPolicy(timeout=0.05, retries=2))
-    driver = MksNativeDriver(link, ADDRESS, device="mks-servo42d", firmware="v1.0.5")
+    driver, drive = native()  # no 0x40, no 0x47
     driver.enable()
     assert drive.requests == [mks.ReadVersion(ADDRESS), mks.SetWorkMode(ADDRESS, 5), mks.SetSubdivision(ADDRESS, 16),
                               mks.SetRespondActive(ADDRESS, 1, 1), mks.EnableMotor(ADDRESS, 1)]
@@ -154,6 +160,7 @@ def test_enable_sets_serial_mode_subdivision_respond_active_once() -> None:
     assert drive.requests[-2:] == [mks.EnableMotor(ADDRESS, 0), mks.EnableMotor(ADDRESS, 1)]
 
 
+@pytest.mark.mks_firmware("v1.0.6", "v1.0.9")
 def test_v106_enable_reads_what_the_drive_holds_and_writes_only_what_differs() -> None:
     driver, drive = native()
     drive.held = {"microsteps": 32, "work_mode": 5}  # set on the drive's menu
@@ -302,10 +309,12 @@ def _versioned(word: int | None) -> Callable[[Any], bytes | None]:
 
 def _driver(firmware: str, word: int | None) -> tuple[MksNativeDriver, Drive]:
     drive = Drive(_versioned(word))
+    drive.features = firmware_profile("mks", firmware).features
     link = MksLink(LoopbackTransport(drive), clock=ManualClock(), policy=RetryPolicy(timeout=0.05, retries=2))
     return MksNativeDriver(link, ADDRESS, device="mks-servo42d", firmware=firmware), drive
 
 
+@pytest.mark.mks_firmware(None)  # each case names its firmware
 @pytest.mark.parametrize("firmware,word,refused", [
     ("v1.0.9", 0x11_01_00_09, None),
     ("v1.0.9", 0x11_01_00_0A, "reports firmware v1.0.10, the config says v1.0.9"),
@@ -332,6 +341,7 @@ def test_the_first_enable_checks_the_configured_firmware_against_0x40(firmware: 
         assert all(isinstance(r, mks.ReadVersion) for r in drive.requests)  # nothing else was sent
 
 
+@pytest.mark.mks_firmware(None)  # names its firmware: v1.0.6, then v1.0.9
 def test_commands_of_a_later_firmware_are_refused_before_anything_is_sent() -> None:
     driver, drive = _driver("v1.0.6", None)
     with pytest.raises(RegisterError, match="v1.0.9"):
@@ -346,6 +356,7 @@ def test_commands_of_a_later_firmware_are_refused_before_anything_is_sent() -> N
         (sum(bytes.fromhex("FA 01 98 00 00 03 E8")) & 0xFF,))
 
 
+@pytest.mark.mks_firmware("v1.0.6", "v1.0.9")
 def test_v106_failure_replies_are_refusals_and_an_echo_of_0xffff_is_never_sent() -> None:
     """FC06 data 0xFFFF / FC16 quantity 0 (V1.0.6+ "If write fails") -> DeviceRejected code 0, not retried."""
     from joints.errors import DeviceRejected
@@ -361,7 +372,7 @@ def test_v106_failure_replies_are_refusals_and_an_echo_of_0xffff_is_never_sent()
 
     drive = Failing()
     link = ModbusLink(LoopbackTransport(drive), clock=ManualClock(), policy=RetryPolicy(timeout=0.05, retries=2))
-    driver = MksModbusDriver(link, 1, device="mks-servo42d", firmware="v1.0.6")
+    driver = MksModbusDriver(link, 1, device="mks-servo42d")
     with pytest.raises(DeviceRejected, match="failure reply") as fc06:
         driver.set_working_current(1000)
     with pytest.raises(DeviceRejected, match="failure reply") as fc16:

@@ -376,6 +376,7 @@ def test_every_registered_env_and_mode_is_covered() -> None:
     assert ("joints/MksAxisPosition-v0", "position") in cases and ("joints/MksAxisPosition-v0", "velocity") in cases
 
 
+@pytest.mark.mks_firmware
 @pytest.mark.parametrize("mode", ["velocity", "position"])
 @pytest.mark.parametrize(("start", "goal"), [(-0.05, 0.059), (0.05, -0.059)])
 def test_axis_reaches_goals_at_both_ends(mode: str, start: float, goal: float) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager as ContextManager
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -18,7 +19,9 @@ from gymnasium.utils.env_checker import check_env
 
 import envs
 from envs.mks_axis import MksAxisPositionEnv
+from joints.cli.tomlout import dumps
 
+pytestmark = pytest.mark.mks_firmware
 ENV_ID = "joints/MksAxisPosition-v0"
 
 
@@ -129,12 +132,19 @@ def test_leaving_the_limits_terminates_and_stops_the_axis() -> None:
 
 
 @pytest.fixture
-def served(serve_shipped: Callable[[str], ContextManager[str]]) -> Iterator[str]:
-    """``joints sim serve`` of the shipped MksAxisPosition config in another process; yields the pty port."""
-    with serve_shipped("mks_axis") as port:
+def served(tmp_path: Path, sim_server: Callable[[Path], ContextManager[str]], mks_firmware: str) -> Iterator[str]:
+    """``joints sim serve`` of the shipped MksAxisPosition config with the test's firmware profile (the served
+    process has its own default) in another process; yields the pty port."""
+    pytest.importorskip("serial")
+    cfg = envs.default_config("mks_axis")
+    cfg["joints"]["carriage"]["firmware"] = mks_firmware
+    path = tmp_path / "served.toml"
+    path.write_text(dumps(cfg))
+    with sim_server(path) as port:
         yield port
 
 
+@pytest.mark.mks_firmware("v1.0.5", "v1.0.9")  # wall clock: the profiles without and with 0x40 and the heartbeat
 def test_same_pd_policy_reaches_the_goal_through_the_hardware_backend(served: str) -> None:
     cfg = envs.default_config("mks_axis")
     cfg["buses"]["rs485"]["port"] = served

@@ -22,6 +22,7 @@ from joints.sim.modbus_front import ModbusDeviceBus
 SEED = 20240618
 FRAMES = 3000
 CALLS = 1000
+MKS_SETUPS = ["mks/mks-serial", "mks/modbus-rtu"]
 
 
 def violations(report: Report) -> dict[str, dict[str, int]]:
@@ -66,6 +67,18 @@ def test_transactions_under_ten_percent_faults_keep_every_invariant() -> None:
         assert t.checks["wrong-value"] > CALLS // 4 and t.checks["write-lost-but-ok"] > CALLS // 10, name
         assert t.checks["write-not-outcome-unknown"] > 0, name  # the line did lose answers to writes
         assert t.checks["executed-twice"] > 0, name
+
+
+@pytest.mark.mks_firmware("v1.0.5", "v1.0.6")  # v1.0.9, the default, is in the two slices above
+def test_the_mks_slice_keeps_every_invariant_on_the_older_firmware_profiles(mks_firmware: str) -> None:
+    report = Report(SEED)
+    endpoint_fuzz.run(report, MKS_SETUPS, FRAMES, SEED)
+    transactions.run(report, MKS_SETUPS, CALLS, SEED)
+    assert violations(report) == {}, "\n".join(report.lines())
+    assert all(t.units >= FRAMES if n.startswith("endpoint") else t.units >= CALLS // 2 for n, t in report.targets.items())
+    assert len(report.targets) == 4
+    failed = report.targets["endpoint mks/modbus-rtu"].checks["failed-but-written"]
+    assert (failed > 10) == (mks_firmware != "v1.0.5")  # the failure replies came with V1.0.6
 
 
 def test_the_command_runs_and_exits_zero(capsys: pytest.CaptureFixture[str]) -> None:
@@ -139,9 +152,7 @@ def test_it_sees_a_timed_out_write_reported_as_a_plain_failure(undo: pytest.Monk
 
 # --- reads serve changing values (issue 28: the MKS status reads served one value each) ------------------
 
-MKS_SETUPS = ["mks/mks-serial", "mks/modbus-rtu"]
-
-
+@pytest.mark.mks_firmware
 @pytest.mark.parametrize("name", MKS_SETUPS)
 def test_every_read_parameter_serves_a_new_value_after_every_read(name: str, undo: pytest.MonkeyPatch) -> None:
     truths: list[transactions.Truth] = []
@@ -160,6 +171,7 @@ def test_every_read_parameter_serves_a_new_value_after_every_read(name: str, und
     assert set(served) >= set(reads) and all(served[n] > 50 for n in reads), served  # distinct values per name
 
 
+@pytest.mark.mks_firmware
 @pytest.mark.parametrize("name", MKS_SETUPS)
 def test_it_sees_a_read_answered_by_the_previous_reply(name: str, undo: pytest.MonkeyPatch) -> None:
     request = Link.request
@@ -194,6 +206,7 @@ class _Misplaced:
         return dict(zip(got, values[1:] + values[:1]))
 
 
+@pytest.mark.mks_firmware
 @pytest.mark.parametrize("name", MKS_SETUPS)
 def test_it_sees_a_value_read_into_the_wrong_parameter(name: str, undo: pytest.MonkeyPatch) -> None:
     make = transactions.in_process

@@ -13,7 +13,7 @@ import pytest
 
 from joints.clock import ManualClock
 from joints.codecs import modbus as mb
-from joints.codecs.crc import crc_ok
+from joints.codecs.crc import append_crc, crc_ok
 from joints.devices.erob.params import EROB_PARAMS
 from joints.devices.erob.registers import EROB_MODBUS
 from joints.errors import (
@@ -161,6 +161,65 @@ def test_exception_reply_is_device_rejected(bus: ModbusDeviceBus, clock: ManualC
         link.write_register(SLAVE, 0x0040, 7)  # operation mode 7 does not exist
     assert info.value.code == 0x03 and info.value.function == 0x06
     assert peer.calls == 2  # a refusal is an answer: no retry
+
+
+# ------------------------------------------------------------------ failure replies (per slave)
+
+
+class WithFailureReplies:
+    """The eRob register file answering a refused FC06 write with register data 0xFFFF, as an MKS V1.0.6+
+    does ("If write fails"): a device built for these tests - no MKS register takes 0xFFFF or can be read
+    back, and the eRob answers exceptions - so that a register that takes 0xFFFF (0x0030, an unbounded
+    gain) and one that does not (0x0002, at most 4000 ms) can both be read back by FC03."""
+
+    def __init__(self, bus: ModbusDeviceBus) -> None:
+        self.bus = bus
+        self.requests: list[bytes] = []
+
+    def __call__(self, data: bytes) -> bytes:
+        self.requests.append(data)
+        answer = self.bus.receive(data)
+        if answer and answer[1] == 0x86:  # exception to an FC06 write: the failure reply instead
+            return append_crc(data[:4] + b"\xff\xff")
+        return answer
+
+
+def test_a_declared_slaves_failure_reply_is_a_refusal_and_0xffff_is_read_back(
+        bus: ModbusDeviceBus, slave: Firmware, clock: ManualClock) -> None:
+    peer = WithFailureReplies(bus)
+    link = make_link(peer, clock)
+    link.failure_replies(SLAVE, lambda address: link.read_registers(SLAVE, address, 1) == (0xFFFF,))
+    with pytest.raises(DeviceRejected, match="failure reply") as info:
+        link.write_register(SLAVE, 0x0002, 5000)  # not an echo: refused at once
+    assert info.value.code == 0 and len(peer.requests) == 1
+    link.write_register(SLAVE, 0x0030, 0xFFFF)  # taken: its answer is also the failure reply; read back
+    assert slave.get("position_loop_gain") == 0xFFFF and len(peer.requests) == 3
+    with pytest.raises(DeviceRejected, match="does not hold 0xFFFF") as info:
+        link.write_register(SLAVE, 0x0002, 0xFFFF)  # refused: the echo looks the same, the read back tells
+    assert info.value.code == 0 and slave.get("modbus_communication_timeout_duration") == 0
+    with pytest.raises(DeviceRejected, match="does not hold"):  # a raw FC06 PDU is judged alike
+        link.write_pdu(SLAVE, mb.WRITE_SINGLE_REGISTER, bytes.fromhex("0002FFFF"))
+    link.failure_replies(SLAVE, lambda address: None)  # a device that cannot read the register back
+    with pytest.raises(OutcomeUnknown, match="outcome is unknown"):
+        link.write_register(SLAVE, 0x0030, 0xFFFF)
+
+
+def test_undeclared_slaves_are_judged_by_modbus_alone(bus: ModbusDeviceBus, slave: Firmware,
+                                                      clock: ManualClock) -> None:
+    """The eRob and ZLAC declare no failure replies: their writes of 0xFFFF are answered by the echo, with no read
+    back; the same link declares another slave (an MKS V1.0.6+ at 1); a reply with data 0xFFFF to another value
+    from an undeclared slave does not answer the write."""
+    peer = Counting(bus)
+    link = make_link(peer, clock)
+    link.failure_replies(1, lambda address: False)
+    link.write_register(SLAVE, 0x0030, 0xFFFF)
+    assert slave.get("position_loop_gain") == 0xFFFF and peer.calls == 1
+    with pytest.raises(DeviceRejected) as info:
+        link.write_register(SLAVE, 0x0002, 0xFFFF)
+    assert info.value.code == 0x03 and peer.calls == 2  # its own exception, as before
+    link = make_link(WithFailureReplies(bus), clock)
+    with pytest.raises(UnexpectedReply):
+        link.write_register(SLAVE, 0x0002, 5000, idempotent=False)
 
 
 def test_no_peer_times_out_without_waiting(clock: ManualClock) -> None:

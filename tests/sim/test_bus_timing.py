@@ -102,6 +102,7 @@ def test_a_state_is_sampled_inside_its_own_transaction() -> None:
         assert before < s.time <= rig.time
 
 
+@pytest.mark.mks_firmware
 def test_mks_native_bus_takes_its_wire_time_without_t35() -> None:
     cfg = default_config("mks_axis")
     bus = cfg["buses"][next(iter(cfg["buses"]))]

@@ -8,13 +8,13 @@ import math
 import pytest
 
 pytest.importorskip("mujoco")
+pytestmark = pytest.mark.mks_firmware
 
 from mkskit import axis_config
 
 import joints
 from joints.codecs import mks
 from joints.devices.mks.state import MotorStatus
-from joints.devices.quirks import MKS_FIRMWARES
 from joints.errors import ConfigError, LimitError
 
 LEAD = 0.008
@@ -31,11 +31,10 @@ def _script(rig: joints.Rig) -> int:
     return j.read("encoder_addition")
 
 
-@pytest.mark.parametrize("firmware", MKS_FIRMWARES)
-def test_same_script_on_the_native_protocol_and_modbus_ends_within_one_count(firmware: str) -> None:
+def test_same_script_on_the_native_protocol_and_modbus_ends_within_one_count(mks_firmware: str) -> None:
     ends = {}
     for protocol in ("mks-serial", "modbus-rtu", "modbus-rtu direct"):
-        cfg = axis_config(protocol=protocol.split()[0], firmware=firmware)
+        cfg = axis_config(protocol=protocol.split()[0], firmware=mks_firmware)
         cfg["sim"]["direct"] = protocol.endswith("direct")  # Modbus's no-bytes path: the same results
         with joints.open(cfg) as rig:
             ends[protocol] = _script(rig)

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 pytest.importorskip("mujoco")
+pytestmark = pytest.mark.mks_firmware
 
 from mkskit import motor_config, motor_model, open_motor
 
@@ -38,9 +39,9 @@ def test_the_manuals_0x46_example_decodes_to_the_documented_defaults() -> None:
     assert blocks.pack(blocks.ALL_PARAMETERS, values, 34) == msg.params
 
 
-@pytest.mark.parametrize("firmware", ["v1.0.6", "v1.0.9"])
-def test_read_and_write_all_parameters_round_trip_with_the_twin(tmp_path: Path, firmware: str) -> None:
-    with open_motor(tmp_path, joint={"firmware": firmware}) as rig:
+@pytest.mark.mks_firmware("v1.0.6", "v1.0.9")
+def test_read_and_write_all_parameters_round_trip_with_the_twin(tmp_path: Path, mks_firmware: str) -> None:
+    with open_motor(tmp_path, joint={"firmware": mks_firmware}) as rig:
         d = rig.joints["m1"].driver
         fw = rig.world.drives["m1"]
         got = d.read_all_parameters()
@@ -60,18 +61,19 @@ def test_read_and_write_all_parameters_round_trip_with_the_twin(tmp_path: Path, 
         assert {k: status[k] for k in singles} == singles
 
 
+@pytest.mark.mks_firmware("v1.0.5")
 def test_before_v106_the_blocks_are_refused_and_the_twin_ignores_them(tmp_path: Path) -> None:
-    with open_motor(tmp_path, joint={"firmware": "v1.0.5"}) as rig:
+    with open_motor(tmp_path) as rig:
         d = rig.joints["m1"].driver
         with pytest.raises(RegisterError, match="v1.0.6"):
             d.read_all_parameters()
         assert rig.world.buses["rs485"].receive(mks.encode(mks.ReadAllParameters(1))) == b""
 
 
-@pytest.mark.parametrize("firmware,readable", [("v1.0.5", False), ("v1.0.9", True)])
 def test_params_dump_reads_the_write_only_settings_by_0x47_where_the_firmware_has_it(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str], firmware: str, readable: bool) -> None:
-    cfg = motor_config(motor_model(tmp_path), joint={"firmware": firmware})
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], mks_firmware: str) -> None:
+    readable = mks_firmware != "v1.0.5"  # 0x47 came with V1.0.6
+    cfg = motor_config(motor_model(tmp_path))
     path = tmp_path / "mks.toml"
     path.write_text(dumps(cfg))
     assert main(["params", "dump", str(path), "m1", "--json"]) == 0
@@ -84,9 +86,10 @@ def test_params_dump_reads_the_write_only_settings_by_0x47_where_the_firmware_ha
         assert data["not_readable"]["working_current"] == "not readable"
 
 
+@pytest.mark.mks_firmware("v1.0.6", "v1.0.9")
 def test_params_load_with_confirm_writes_the_differences_in_one_0x46(tmp_path: Path,
                                                                      capsys: pytest.CaptureFixture[str]) -> None:
-    cfg = motor_config(motor_model(tmp_path), joint={"firmware": "v1.0.9"})
+    cfg = motor_config(motor_model(tmp_path))
     path = tmp_path / "mks.toml"
     path.write_text(dumps(cfg))
     dump = tmp_path / "m1.toml"

@@ -9,12 +9,12 @@ from pathlib import Path
 import pytest
 
 pytest.importorskip("mujoco")
+pytestmark = pytest.mark.mks_firmware
 
 from mkskit import open_motor
 
 from joints.codecs import modbus as mb
 from joints.devices.mks.state import MotorStatus, WorkMode
-from joints.devices.quirks import MKS_FIRMWARES
 from joints.drivers.capabilities import CommunicationWatchdog
 from joints.errors import DeviceRejected, RegisterError
 from joints.sim.mks import MksFirmware
@@ -30,10 +30,11 @@ def _twin(rig) -> MksFirmware:  # type: ignore[no-untyped-def]
     return fw
 
 
+@pytest.mark.mks_firmware("v1.0.9")  # before: no watchdog (the next test)
 @pytest.mark.parametrize("protocol", ["mks-serial", "modbus-rtu"])
 def test_v109_silent_host_leaves_the_axis_stopped_within_the_heartbeat_plus_one_frame(tmp_path: Path,
                                                                                        protocol: str) -> None:
-    with open_motor(tmp_path, protocol=protocol, joint={"firmware": "v1.0.9"}) as rig:
+    with open_motor(tmp_path, protocol=protocol) as rig:
         j = rig.joints["m1"]
         fw = _twin(rig)
         assert isinstance(j.driver, CommunicationWatchdog)
@@ -55,10 +56,10 @@ def test_v109_silent_host_leaves_the_axis_stopped_within_the_heartbeat_plus_one_
         assert fw.values["heartbeat_protection_time"] == 0  # put back on disable
 
 
-@pytest.mark.parametrize("firmware", ["v1.0.5", "v1.0.6"])
+@pytest.mark.mks_firmware("v1.0.5", "v1.0.6")
 def test_before_v109_there_is_no_watchdog_and_a_silent_host_leaves_the_axis_running(tmp_path: Path,
-                                                                                   firmware: str) -> None:
-    with open_motor(tmp_path, joint={"firmware": firmware}) as rig:
+                                                                                   mks_firmware: str) -> None:
+    with open_motor(tmp_path, joint={"firmware": mks_firmware}) as rig:
         j = rig.joints["m1"]
         assert not isinstance(j.driver, CommunicationWatchdog) and j.watchdog_ms is None
         j.enable()
@@ -69,12 +70,11 @@ def test_before_v109_there_is_no_watchdog_and_a_silent_host_leaves_the_axis_runn
             j.driver.write_param("heartbeat_protection_time", 500)
 
 
-@pytest.mark.parametrize("firmware", MKS_FIRMWARES)
 def test_failed_fc06_and_fc16_are_answered_as_the_firmware_does_and_refused_by_the_driver(tmp_path: Path,
-                                                                                        firmware: str) -> None:
+                                                                                        mks_firmware: str) -> None:
     """0xF6 while disabled (FC16) and 0xF3 enable in a pulse work mode (FC06): V1.0.6+ answer with the
     manuals' failure replies, V1.0.5 with exceptions 04; the driver raises DeviceRejected either way."""
-    with open_motor(tmp_path, protocol="modbus-rtu", joint={"firmware": firmware}) as rig:
+    with open_motor(tmp_path, protocol="modbus-rtu", joint={"firmware": mks_firmware}) as rig:
         j = rig.joints["m1"]
         d = j.driver
         j.enable()
@@ -99,7 +99,7 @@ def test_failed_fc06_and_fc16_are_answered_as_the_firmware_does_and_refused_by_t
             d.write_param("motor_enable", 1)
         answers.append(replies[-1])
         assert fw.values == before and not fw.enabled
-        if firmware == "v1.0.5":
+        if mks_firmware == "v1.0.5":
             assert answers == [mb.ExceptionReply(1, 0x10, 4), mb.ExceptionReply(1, 0x06, 4)]
             assert (fc16.value.code, fc06.value.code) == (4, 4)
         else:
@@ -109,24 +109,45 @@ def test_failed_fc06_and_fc16_are_answered_as_the_firmware_does_and_refused_by_t
         assert d.image.get("speed_mode_speed", 0) == 0  # a refused command is not remembered as sent
 
 
+def test_a_raw_fc06_write_of_0xffff_the_drive_refuses_is_a_refusal_not_an_echo(tmp_path: Path, mks_firmware: str) -> None:
+    """0xFFFF to 0x83 (working current 65535 mA): V1.0.6+ answer the failure reply, whose data equal the value
+    sent; the driver declared the slave's failure replies to the link, and no MKS register takes 0xFFFF."""
+    with open_motor(tmp_path, protocol="modbus-rtu", joint={"firmware": mks_firmware}) as rig:
+        d = rig.joints["m1"].driver
+        fw = _twin(rig)
+        before = dict(fw.values)
+        with pytest.raises(DeviceRejected) as fc06:
+            d.link.write_register(1, 0x83, 0xFFFF)
+        with pytest.raises(DeviceRejected) as raw:
+            d.link.write_pdu(1, mb.WRITE_SINGLE_REGISTER, bytes.fromhex("0083FFFF"))
+        assert fw.values == before
+        assert fc06.value.code == raw.value.code == (3 if mks_firmware == "v1.0.5" else 0)  # V1.0.5: exception 03
+
+
 @pytest.mark.parametrize("protocol", ["mks-serial", "modbus-rtu"])
-@pytest.mark.parametrize("firmware", MKS_FIRMWARES)
-def test_identity_reads_0x40_where_the_firmware_has_it(tmp_path: Path, protocol: str, firmware: str) -> None:
-    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware}) as rig:
+def test_identity_reads_0x40_where_the_firmware_has_it(tmp_path: Path, protocol: str, mks_firmware: str) -> None:
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": mks_firmware}) as rig:
         ident = rig.joints["m1"].driver.identity()
-        if firmware == "v1.0.9":
+        if mks_firmware == "v1.0.9":
             assert ident == {"firmware_version": "v1.0.9", "hardware_version": "S42D_485", "calibrated": True}
         else:
             assert "older than v1.0.9" in str(ident["firmware_version"])
         rig.joints["m1"].enable()  # the configured firmware agrees with the drive's
 
 
-def test_v109_timed_returns_arrive_unsolicited_through_the_links_subscriptions(tmp_path: Path) -> None:
+def test_v109_timed_returns_arrive_unsolicited_through_the_links_subscriptions(tmp_path: Path,
+                                                                                mks_firmware: str) -> None:
     from joints.codecs import mks
 
-    with open_motor(tmp_path, joint={"firmware": "v1.0.9", "watchdog_ms": 0}) as rig:
+    with open_motor(tmp_path, joint={"watchdog_ms": 0}) as rig:
         j = rig.joints["m1"]
         d = j.driver
+        if mks_firmware != "v1.0.9":
+            sent = d.link.transactions
+            with pytest.raises(RegisterError, match="v1.0.9"):
+                d.timed_return("encoder_addition", 100)
+            assert d.link.transactions == sent  # refused before anything was sent
+            return
         got: list[tuple[float, int]] = []
         j.enable()
         j.set_velocity(2 * 3.141592653589793)  # one turn per second: 16384 counts/s
@@ -150,18 +171,12 @@ def test_v109_timed_returns_arrive_unsolicited_through_the_links_subscriptions(t
         assert mks.encode(mks.TimedReturnReply(1, 0x31, mks.SetStatus.SUCCESS)) == bytes.fromhex("FB 01 01 31 01 2F")
 
 
-def test_timed_returns_need_v109(tmp_path: Path) -> None:
-    with open_motor(tmp_path, joint={"firmware": "v1.0.6"}) as rig, pytest.raises(RegisterError, match="v1.0.9"):
-        rig.joints["m1"].driver.timed_return("encoder_addition", 100)
-
-
-@pytest.mark.parametrize("firmware", MKS_FIRMWARES)
-def test_raw_encoder_counts_from_power_on_whatever_zero_was_set(tmp_path: Path, firmware: str) -> None:
+def test_raw_encoder_counts_from_power_on_whatever_zero_was_set(tmp_path: Path, mks_firmware: str) -> None:
     """0x35 (V1.0.6): the accumulated encoder since power-on; 0x92 set zero moves 0x31's zero, not 0x35's."""
-    with open_motor(tmp_path, joint={"firmware": firmware}) as rig:
+    with open_motor(tmp_path, joint={"firmware": mks_firmware}) as rig:
         j = rig.joints["m1"]
         d = j.driver
-        if firmware == "v1.0.5":
+        if mks_firmware == "v1.0.5":
             with pytest.raises(RegisterError, match="v1.0.6"):
                 d.read("raw_encoder_value")
             return

@@ -11,6 +11,7 @@ from typing import Any
 import pytest
 
 pytest.importorskip("mujoco")
+pytestmark = pytest.mark.mks_firmware
 
 from mkskit import open_motor
 
@@ -19,7 +20,6 @@ from joints.codecs import modbus as mb
 from joints.codecs.crc import append_crc
 from joints.devices.mks.modbus import MKS_MODBUS
 from joints.devices.mks.state import WorkMode
-from joints.devices.quirks import MKS_FIRMWARES
 from joints.sim import sensors
 from testdata import by_id, sequences, vectors
 
@@ -167,6 +167,7 @@ def test_group_example_5_2_16_on_six_twins(tmp_path: Path) -> None:
         assert [rig.joints[f"m{i}"].driver.completions for i in range(1, 7)] == [1, 0, 0, 0, 0, 0]
 
 
+@pytest.mark.mks_firmware("v1.0.5", "v1.0.9")  # 33 s simulated; no profile's additions take part: the two ends
 def test_long_packet_5_7_moves_five_twins_differently_and_nobody_answers(tmp_path: Path) -> None:
     packet = _hex(RECORDS["mks-native-5.7-longpacket-send"])
     assert len(packet) == 52
@@ -259,9 +260,8 @@ def test_the_0x90_quirk_is_accepted_exactly_and_recorded_other_counts_get_except
         assert bus.receive(append_crc(bytes.fromhex("01 04 00 35 00 01"))) == mb.encode(mb.ExceptionReply(1, 4, 2))
 
 
-@pytest.mark.parametrize("firmware", MKS_FIRMWARES)
-def test_part8_refusals_native_mode_and_range(tmp_path: Path, firmware: str) -> None:
-    with open_motor(tmp_path, protocol="modbus-rtu", joint={"firmware": firmware}) as rig:
+def test_part8_refusals_native_mode_and_range(tmp_path: Path, mks_firmware: str) -> None:
+    with open_motor(tmp_path, protocol="modbus-rtu", joint={"firmware": mks_firmware}) as rig:
         bus = rig.world.buses["rs485"]
         # the twin is in CR_vFOC (factory): a run command cannot execute; 10000 mA is out of range.
         # V1.0.5 documents no failure reply (exceptions 04 / 03, our choice); V1.0.6+ answer FC16 with
@@ -269,7 +269,7 @@ def test_part8_refusals_native_mode_and_range(tmp_path: Path, firmware: str) -> 
         run = append_crc(bytes((1, 0x10)) + MKS_MODBUS.block(0x10, 0xF6).request_pdu(
             {"speed_mode_direction": 0, "speed_mode_acc": 2, "speed_mode_speed": 100}))
         current = append_crc(bytes.fromhex("01 06 00 83 27 10"))
-        if firmware == "v1.0.5":
+        if mks_firmware == "v1.0.5":
             assert bus.receive(run) == mb.encode(mb.ExceptionReply(1, 0x10, 4))
             assert bus.receive(current) == mb.encode(mb.ExceptionReply(1, 6, 3))
         else:

@@ -17,7 +17,11 @@ import pytest
 
 pytest.importorskip("mujoco")
 pytest.importorskip("serial")
-pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals need POSIX")
+# The served process is told the profile (it has its own default). These wall-clock tests run on the oldest and the
+# newest profile, whose behaviour differs for them (no version, no watchdog / 0x40 and the heartbeat); V1.0.6's
+# additions (0x47 at enable, Modbus failure replies) are exercised in process.
+pytestmark = [pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals need POSIX"),
+              pytest.mark.mks_firmware("v1.0.5", "v1.0.9")]
 
 from mkskit import axis_config
 
@@ -49,9 +53,9 @@ def _toml(cfg: dict[str, object]) -> str:
 
 
 @pytest.fixture
-def served_native(tmp_path: Path, sim_server) -> Iterator[str]:  # type: ignore[no-untyped-def]
+def served_native(tmp_path: Path, sim_server, mks_firmware: str) -> Iterator[str]:  # type: ignore[no-untyped-def]
     cfg = tmp_path / "axis.toml"
-    cfg.write_text(_toml(axis_config()))
+    cfg.write_text(_toml(axis_config(firmware=mks_firmware)))
     with sim_server(cfg) as port:
         yield port
 
@@ -60,7 +64,8 @@ def _hardware(port: str, protocol: str = "mks-serial") -> dict[str, object]:
     return axis_config(backend="hardware", port=port, protocol=protocol, timeout=0.5)
 
 
-def test_move_in_active_mode_over_a_pty_completion_arrives_while_the_encoder_is_polled(served_native: str) -> None:
+def test_move_in_active_mode_over_a_pty_completion_arrives_while_the_encoder_is_polled(served_native: str,
+                                                                                       mks_firmware: str) -> None:
     trace = Trace()
     with joints.open(_hardware(served_native)) as rig:
         assert rig.backend == "hardware"
@@ -92,16 +97,18 @@ def test_move_in_active_mode_over_a_pty_completion_arrives_while_the_encoder_is_
     rx = [r for r in records if r.direction == "rx"]
     completions = [r for r in rx if "unsolicited" in r.meaning]
     assert len(completions) == 1 and "COMPLETE" in completions[0].meaning
-    assert len(rx) == len(tx) + 1  # every request got its reply, plus the one completion frame
+    assert sum(r.data[2] == 0x40 for r in tx) == 1  # the version probe, once: a drive before V1.0.9 leaves it
+    assert len(rx) == len(tx) - (mks_firmware != "v1.0.9") + 1  # unanswered; all else answered, plus the completion
     moves = [r for r in tx if r.data[2] == 0xFD]
     assert [r.data for r in moves] == [mks.encode(mks.RunRelativePulses(1, mks.RunDirection.CCW, 120,
                                                                         d.acc_for(1000), 6400))]
 
 
-def test_independent_modbus_master_drives_the_served_modbus_mode_twin(tmp_path: Path, sim_server) -> None:  # type: ignore[no-untyped-def]
+def test_independent_modbus_master_drives_the_served_modbus_mode_twin(tmp_path: Path, sim_server,  # type: ignore[no-untyped-def]
+                                                                       mks_firmware: str) -> None:
     minimalmodbus = pytest.importorskip("minimalmodbus")
     cfg = tmp_path / "modbus.toml"
-    cfg.write_text(_toml(axis_config(protocol="modbus-rtu")))
+    cfg.write_text(_toml(axis_config(protocol="modbus-rtu", firmware=mks_firmware)))
     with sim_server(cfg) as port:
         inst = minimalmodbus.Instrument(port, 1, mode=minimalmodbus.MODE_RTU)
         inst.serial.baudrate = 38400
@@ -127,7 +134,7 @@ CLIENT = """
 import sys, time, joints
 sys.path.insert(0, {tests!r})
 from mkskit import axis_config
-cfg = axis_config(backend="hardware", port={port!r}, timeout=0.5)
+cfg = axis_config(backend="hardware", port={port!r}, timeout=0.5, firmware={firmware!r})
 rig = joints.open(cfg)
 j = rig.joints["carriage"]
 j.enable()
@@ -141,8 +148,9 @@ while True:  # the process dies here, the axis still running
 """
 
 
-def test_sigterm_to_a_process_whose_axis_runs_in_speed_mode_leaves_the_axis_stopped(served_native: str) -> None:
-    script = CLIENT.format(tests=str(ROOT / "tests"), port=served_native)
+def test_sigterm_to_a_process_whose_axis_runs_in_speed_mode_leaves_the_axis_stopped(served_native: str,
+                                                                                    mks_firmware: str) -> None:
+    script = CLIENT.format(tests=str(ROOT / "tests"), port=served_native, firmware=mks_firmware)
     proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, cwd=ROOT)
     try:

@@ -11,12 +11,12 @@ from typing import Any
 import pytest
 
 pytest.importorskip("mujoco")
+pytestmark = pytest.mark.mks_firmware
 
 from mkskit import open_motor
 
 from joints.codecs import mks
 from joints.devices.mks.state import MotorStatus, WorkMode
-from joints.devices.quirks import MKS_FIRMWARES
 from joints.errors import DeviceRejected
 from joints.sim.mks import MksFirmware
 
@@ -271,10 +271,9 @@ def test_emergency_stop_stops_at_once_without_completion(tmp_path: Path) -> None
         assert d.completions == before
 
 
-@pytest.mark.parametrize("firmware", MKS_FIRMWARES)
-def test_completion_frames_tell_the_driver_the_move_ended_without_polling(tmp_path: Path, firmware: str) -> None:
+def test_completion_frames_tell_the_driver_the_move_ended_without_polling(tmp_path: Path, mks_firmware: str) -> None:
     # watchdog 0: no keep-alive reads of a V1.0.9 heartbeat (they are its food, not a poll for the end)
-    with open_motor(tmp_path, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+    with open_motor(tmp_path, joint={"firmware": mks_firmware, "watchdog_ms": 0}) as rig:
         j = rig.joints["m1"]
         d = j.driver
         j.enable()
@@ -288,11 +287,10 @@ def test_completion_frames_tell_the_driver_the_move_ended_without_polling(tmp_pa
         assert rig.time < 1.5
 
 
-@pytest.mark.parametrize("firmware", MKS_FIRMWARES)
 @pytest.mark.parametrize("protocol", ["mks-serial", "modbus-rtu"])
 def test_run_commands_fail_while_disabled_or_in_a_pulse_work_mode(tmp_path: Path, protocol: str,
-                                                                  firmware: str) -> None:
-    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware}) as rig:
+                                                                  mks_firmware: str) -> None:
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": mks_firmware}) as rig:
         j = rig.joints["m1"]
         d = j.driver
         j.enable()

@@ -92,6 +92,7 @@ def test_reads_wait_on_the_clock_and_return_at_the_deadline() -> None:
     assert clock.now() == pytest.approx(0.02)
 
 
+@pytest.mark.mks_firmware
 def test_mks_driver_survives_collisions_on_the_half_duplex_line(tmp_path: Path) -> None:
     pytest.importorskip("mujoco")
     from mkskit import motor_config, motor_model
