@@ -12,9 +12,9 @@ import pytest
 pytest.importorskip("mujoco")
 gym = pytest.importorskip("gymnasium")
 
-import envs  # noqa: E402,F401 - registers the joints/ ids
-from joints.bench import _baseline_config  # noqa: E402
-from joints.sim import kernel  # noqa: E402
+import envs  # noqa: F401 - registers the joints/ ids
+from joints.bench import _baseline_config
+from joints.sim import kernel
 
 MODES = ["compiled", "per-substep", "python"] if kernel.AVAILABLE else ["python"]
 
