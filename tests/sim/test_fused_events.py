@@ -12,9 +12,9 @@ import pytest
 pytest.importorskip("mujoco")
 gym = pytest.importorskip("gymnasium")
 
-import envs  # noqa: F401 - registers the joints/ ids
+import envs  # registers the joints/ ids
 from joints.bench import _baseline_config
-from joints.sim import kernel
+from joints.sim import kernel, stepping
 
 MODES = ["compiled", "per-substep", "python"] if kernel.AVAILABLE else ["python"]
 
@@ -80,3 +80,35 @@ def test_a_can_bus_with_nothing_queued_costs_nothing_per_substep(monkeypatch: py
         assert runs == [100] and ticks == [world.time], (runs, ticks)  # one call, one tick at its end
     finally:
         env.close()
+
+
+def test_rigs_sleeping_together_tick_their_announced_events_as_each_alone() -> None:
+    import joints
+    from joints.sim.world import join
+
+    cfg = envs.default_config("erob_reach")
+    rigs = [joints.open(cfg) for _ in range(3)]
+    alone = joints.open(cfg)
+    try:
+        for r in (*rigs, alone):
+            r.joints["joint1"].enable()
+            r.sleep(0.6)
+        for r in (rigs[1], alone):  # motion commands act 50 ms after they arrive: a pending write to tick
+            r.sim.perturb("joint1", command_delay=0.05)
+        for r in (*rigs, alone):
+            r.joints["joint1"].set_velocity(1.5)
+        assert rigs[1].sim.drives["joint1"].pending and alone.sim.drives["joint1"].pending
+        assert all(r._keepalive_due()[0] > r.time + 0.2 for r in rigs)  # no rig sleeps on its own for its watchdog
+        joints.sleep_together(rigs, [0.1, 0.2, 0.05])
+        alone.sleep(0.2)
+        group = join([r.sim for r in rigs])
+        assert group.compiled == kernel.AVAILABLE and all(group.fusable) == kernel.AVAILABLE
+        assert rigs[1].time == alone.time
+        assert np.array_equal(rigs[1].sim.data.qpos, alone.sim.data.qpos)
+        assert np.array_equal(rigs[1].sim.data.qvel, alone.sim.data.qvel)
+        assert rigs[1].joints["joint1"].state().position == alone.joints["joint1"].state().position
+        order, worlds = group._plan((1,))  # what one rig's call steps: its rows and its world, no other
+        assert list(worlds) == [1] and {int(group.adr[i][stepping.WORLD]) for i in order} == {1}
+    finally:
+        for r in (*rigs, alone):
+            r.close()
