@@ -40,6 +40,7 @@ Behaviour that is the CAN protocol's own:
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Iterable, Sequence
 from typing import Any
@@ -322,6 +323,13 @@ class ErobCanBus:
     # -- the world's clock (joints.sim.world.TimedDeviceBus) ------------------------------------
     def bind_clock(self, clock: ClockLike) -> None:
         self.medium.bind_clock(clock)
+
+    def next_event(self) -> float:
+        """When a tick next has work (:class:`joints.sim.world.Announcing`): the medium's next frame edge; every
+        substep while a front holds a set-point (it acts once the motor is ready)."""
+        if any(f.held is not None for f in self.fronts):
+            return -math.inf
+        return self.medium.next_event()
 
     def tick(self, t: float) -> None:
         if t < self._last_tick:  # the world was reset: the drives were power-cycled

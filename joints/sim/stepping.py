@@ -2,9 +2,11 @@
 
 Rule: one table holds the rows of every kernel-backed twin (:mod:`joints.sim.kernel`) of a group
 of worlds (one world, or the N rigs of a batched env). :func:`step_row` is the one dispatch from
-a row to its drive's loops. Compiled, :func:`run` runs N substeps of the active worlds - every
-row's loops, then MuJoCo's ``mj_step`` of each world - without returning to Python, reading the
-joints from and writing the torques into the worlds' ``MjData`` by address. Without a compiler
+a row to its drive's loops. Compiled, :meth:`Group.run` runs N substeps of some of the worlds -
+their rows' loops, then MuJoCo's ``mj_step`` of each of them - without returning to Python, reading
+the joints from and writing the torques into the worlds' ``MjData`` by address. A call touches only
+the rows and worlds it steps (a plan per set of worlds, kept), so stepping one rig of N costs what
+stepping a lone rig does. Without a compiler
 (or for a world whose drives are not all kernel rows, or that ticks a timed CAN bus after every
 substep) the world steps substep by substep from Python: :func:`substep` runs the same rows
 through the same :func:`step_row`. Every path gives the same bits.
@@ -12,7 +14,7 @@ through the same :func:`step_row`. Every path gives the same bits.
 Rows are stepped in the order of the worlds' joints (as a world has always stepped its drives);
 each stepped row's kind, MuJoCo addresses, world and the rows its loops reach besides its own
 are in :attr:`Group.adr` (columns :data:`KIND` ... :data:`C`); each world's addresses and
-step count in :attr:`Group.worlds_table` (columns :data:`ACTIVE` ... :data:`NU`).
+step count in :attr:`Group.worlds_table` (columns :data:`STEPS` ... :data:`NU`).
 """
 
 from __future__ import annotations
@@ -32,8 +34,8 @@ KINDS = (EROB, ZLAC)
 KIND, QPOS, DOF, ACT, WORLD, A, B, C = range(8)
 ADR_WIDTH = 8
 #: columns of :attr:`Group.worlds_table`
-ACTIVE, STEPS, MODEL, DATA, QPOS_AT, NQ, QVEL_AT, NV, CTRL_AT, NU = range(10)
-WORLD_WIDTH = 10
+STEPS, MODEL, DATA, QPOS_AT, NQ, QVEL_AT, NV, CTRL_AT, NU = range(9)
+WORLD_WIDTH = 9
 #: substeps per compiled call at most (a KeyboardInterrupt lands between calls)
 CHUNK = 50
 #: a world whose MuJoCo arena was ever this full leaves the fused path for good: inside the compiled call
@@ -60,14 +62,12 @@ def step_row(table: Any, adr: Any, i: int, t: float, dt: float, q: float, qd: fl
     return 0.0
 
 
-def substep(table: Any, adr: Any, ratio: Sequence[float], order: Any, active: Sequence[int], steps: Sequence[int],
+def substep(table: Any, adr: Any, ratio: Sequence[float], order: Any, steps: Sequence[int],
             dts: Sequence[float], qpos: Sequence[Any], qvel: Sequence[Any], ctrl: Sequence[Any]) -> None:
-    """One substep of the rows in ``order`` whose world is active (Python: the worlds' arrays)."""
+    """One substep of the rows in ``order`` (Python: the worlds' arrays)."""
     for i in order:
         a = adr[i]
         w = a[WORLD]
-        if not active[w]:
-            continue
         dt = dts[w]
         t = (steps[w] + 1) * dt
         r = ratio[i]
@@ -75,9 +75,9 @@ def substep(table: Any, adr: Any, ratio: Sequence[float], order: Any, active: Se
 
 
 def _run(n: int, physics: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any, worlds: Any,
-         dts: Any) -> None:
-    """``n`` substeps of the active worlds: every row's loops, then (``physics``) each world's
-    ``mj_step`` (compiled only: the worlds' arrays are reached by address)."""
+         dts: Any, active: Any) -> None:
+    """``n`` substeps of the ``active`` worlds: the loops of the rows in ``order`` (theirs), then
+    (``physics``) each active world's ``mj_step`` (compiled only: the worlds' arrays are reached by address)."""
     doubles, call = kernel.doubles, kernel.call
     for k in range(n):
         for j in range(len(order)):
@@ -85,8 +85,6 @@ def _run(n: int, physics: int, mj_step: int, table: Any, adr: Any, ratio: Any, o
             a = adr[i]
             w = a[WORLD]
             row = worlds[w]
-            if row[ACTIVE] == 0:
-                continue
             dt = dts[w]
             t = (row[STEPS] + k + 1) * dt
             r = ratio[i]
@@ -94,10 +92,9 @@ def _run(n: int, physics: int, mj_step: int, table: Any, adr: Any, ratio: Any, o
             qd = doubles(row[QVEL_AT], row[NV])[a[DOF]] * r
             doubles(row[CTRL_AT], row[NU])[a[ACT]] = step_row(table, adr, i, t, dt, q, qd)
         if physics:
-            for w in range(len(worlds)):
-                row = worlds[w]
-                if row[ACTIVE] != 0:
-                    call(mj_step, row[MODEL], row[DATA])
+            for j in range(len(active)):
+                row = worlds[active[j]]
+                call(mj_step, row[MODEL], row[DATA])
 
 
 _run_compiled = kernel.compiled(_run) if kernel.AVAILABLE else None
@@ -148,9 +145,11 @@ class Group:
         for twin, first in self._owners:
             twin.adopt(self.table, first)
         self.dts = [w.timestep for w in self.worlds]
-        #: the Python path's per-substep inputs, kept: (active flags, step counts) and the worlds' arrays
-        #: (views of each world's one MjData)
-        self._flags = ([0] * len(self.worlds), [0] * len(self.worlds))
+        #: per world, the arena use (bytes) above which it leaves the fused path (:data:`ARENA_GUARD`)
+        self._arena_limits = [ARENA_GUARD * w.model.narena for w in self.worlds]
+        #: the Python path's per-substep inputs, kept: step counts and the worlds' arrays (views of each
+        #: world's one MjData)
+        self._steps = [0] * len(self.worlds)
         self._arrays = ([w.data.qpos for w in self.worlds], [w.data.qvel for w in self.worlds],
                         [w.data.ctrl for w in self.worlds])
         self.mj_step = kernel.mj_step_address() if self.compiled else None
@@ -158,28 +157,50 @@ class Group:
             table = []
             for world in self.worlds:
                 m, d = world.model, world.data
-                table.append([0, 0, m._address, d._address, d.qpos.ctypes.data, m.nq, d.qvel.ctypes.data, m.nv,
+                table.append([0, m._address, d._address, d.qpos.ctypes.data, m.nq, d.qvel.ctypes.data, m.nv,
                               d.ctrl.ctypes.data, m.nu])
             self.worlds_table = np.array(table, dtype=np.int64).reshape(len(self.worlds), WORLD_WIDTH)
             self.dts_array = np.array(self.dts)
         self.order: Any = None
         self.fusable: list[bool] = []
-        self._active: tuple[int, ...] = ()  #: the worlds whose ACTIVE flag is set in worlds_table
+        self._world_order: list[list[int]] = []  #: per world, its stepped rows in joint order
+        #: per set of worlds stepped together: (the rows they step, the worlds) as the compiled call takes them
+        self._plans: dict[tuple[int, ...], tuple[Any, Any]] = {}
         self.replan()
         if self.compiled:
             _warm()
-            _run_compiled(0, 0, 0, self.table, self.adr, self.ratio, self.order,  # type: ignore[misc]
-                          self.worlds_table, self.dts_array)  # compiled now, not in the first (paced) step
+            order, active = self._plan((0,))
+            _run_compiled(0, 0, 0, self.table, self.adr, self.ratio, order,  # type: ignore[misc]
+                          self.worlds_table, self.dts_array, active)  # compiled now, not in the first (paced) step
 
     def replan(self) -> None:
         """Which rows step, in joint order (a world's joints stepped in Python are left out), and
         which worlds can run N substeps in one call."""
         import numpy as np
 
-        order = [self._row_of[(w, b.name)] for w, world in enumerate(self.worlds) for b in world.kernel_joints()
-                 if world.kernel_stepped(b)]
+        self._world_order = [[self._row_of[(w, b.name)] for b in world.kernel_joints() if world.kernel_stepped(b)]
+                             for w, world in enumerate(self.worlds)]
+        order = [i for rows in self._world_order for i in rows]
         self.order = np.array(order, dtype=np.int64) if self.compiled else order
+        self._plans.clear()
         self.fusable = [self.mj_step is not None and w.fusable() for w in self.worlds]
+
+    def _plan(self, worlds: tuple[int, ...]) -> tuple[Any, Any]:
+        """The rows ``worlds`` (ascending indices) step, in joint order, and the worlds, as the stepping takes
+        them (int64 arrays compiled, lists in Python); kept until the next :meth:`replan`."""
+        plan = self._plans.get(worlds)
+        if plan is None:
+            order = [i for w in worlds for i in self._world_order[w]]
+            if self.compiled:
+                import numpy as np
+
+                plan = (np.array(order, dtype=np.int64), np.array(worlds, dtype=np.int64))
+            else:
+                plan = (order, list(worlds))
+            if len(self._plans) >= 256:  # the sets a batch steps together vary little; never grow without bound
+                self._plans.clear()
+            self._plans[worlds] = plan
+        return plan
 
     def run(self, worlds: Sequence[int], n: int) -> None:
         """``n`` substeps of ``worlds`` (indices, all fusable) in compiled calls of at most
@@ -187,21 +208,18 @@ class Group:
         table = self.worlds_table
         all_worlds = self.worlds
         active = tuple(worlds)
-        if active != self._active:  # the active worlds' flags (kept while the same worlds run)
-            table[:, ACTIVE] = 0
-            for w in active:
-                table[w, ACTIVE] = 1
-            self._active = active
+        order, indices = self._plan(active)
         while n > 0:
             m = min(n, CHUNK)
             for w in active:
                 table[w, STEPS] = all_worlds[w].steps
-            _run_compiled(m, 1, self.mj_step or 0, self.table, self.adr, self.ratio, self.order,  # type: ignore[misc]
-                          table, self.dts_array)
+            _run_compiled(m, 1, self.mj_step or 0, self.table, self.adr, self.ratio, order,  # type: ignore[misc]
+                          table, self.dts_array, indices)
             for w in active:
                 all_worlds[w].steps += m
             n -= m
-            crowded = [w for w in active if all_worlds[w].arena_crowded(ARENA_GUARD)]
+            limits = self._arena_limits  # as World.arena_crowded(ARENA_GUARD), without a call per world
+            crowded = [w for w in active if all_worlds[w].data.maxuse_arena > limits[w]]
             if crowded:
                 for w in crowded:
                     all_worlds[w].leave_fused_path()
@@ -211,23 +229,19 @@ class Group:
                 active = tuple(w for w in active if w not in crowded)
                 if not active:
                     return
+                order, indices = self._plan(active)
 
     def substep(self, worlds: Sequence[int]) -> None:
         """The kernel loops of ``worlds`` for their next substep (torques into ``ctrl``; no physics)."""
+        order, indices = self._plan(tuple(worlds))
         if self.compiled:
             table = self.worlds_table
-            table[:, ACTIVE] = 0
-            self._active = ()
             for w in worlds:
-                table[w, ACTIVE] = 1
                 table[w, STEPS] = self.worlds[w].steps
-            _run_compiled(1, 0, 0, self.table, self.adr, self.ratio, self.order, table,  # type: ignore[misc]
-                          self.dts_array)
+            _run_compiled(1, 0, 0, self.table, self.adr, self.ratio, order, table,  # type: ignore[misc]
+                          self.dts_array, indices)
             return
-        active, steps = self._flags
+        steps = self._steps
         for w in worlds:
-            active[w] = 1
             steps[w] = self.worlds[w].steps
-        substep(self.table, self.adr, self.ratio, self.order, active, steps, self.dts, *self._arrays)
-        for w in worlds:
-            active[w] = 0
+        substep(self.table, self.adr, self.ratio, order, steps, self.dts, *self._arrays)

@@ -37,7 +37,7 @@ from typing import Any, Protocol, runtime_checkable
 
 from joints.clock import ManualClock
 from joints.errors import ConfigError, MissingDependencyError
-from joints.sim import kernel, stepping
+from joints.sim import firmware, kernel, stepping
 
 #: s a measured joint's last measurement is extrapolated at its velocity (then it is held)
 KINEMATIC_HORIZON = 0.05
@@ -136,6 +136,17 @@ class TimedDeviceBus(Protocol):
         ...
 
 
+@runtime_checkable
+class Announcing(Protocol):
+    """A timed device bus that says when its next tick has work: the world runs the substeps before it in
+    one compiled call and ticks once (ticks before it would only move the bus's time)."""
+
+    def next_event(self) -> float:
+        """The earliest substep end ``t`` at which ``tick(t)`` acts (``math.inf``: none is queued;
+        ``-math.inf``: tick every substep)."""
+        ...
+
+
 @dataclass(frozen=True)
 class DriveSpec:
     """One emulated joint: which bus/address (and channel) answers for it and which MJCF joint it drives."""
@@ -209,6 +220,19 @@ def _ratio(mj: Any, jnt: Any, d: DriveSpec) -> float:
         return 2.0 * math.pi / d.lead
     raise ConfigError(f"MJCF joint {d.mjcf_joint!r} must be a hinge (or a slide with a lead)",
                       key=f"joints.{d.name}.mjcf_joint")
+
+
+def _pending_due(emu: Any) -> Callable[[], float] | None:
+    """When a drive with delayed commands next acts (:meth:`joints.sim.firmware.Firmware.tick`: its oldest
+    pending write's time, less that tick's 1e-9 s tolerance); None for a twin whose tick does more."""
+    if type(emu).tick is not firmware.Firmware.tick:
+        return None
+
+    def due() -> float:
+        pending = emu.pending
+        return pending[0][0] - 1e-9 if pending else math.inf
+
+    return due
 
 
 def _make_twins(specs: Sequence[DriveSpec], inertia: Mapping[str, float]) -> dict[str, tuple[Any, Stepper]]:
@@ -319,9 +343,14 @@ class World:
         for bus in timed:
             bus.bind_clock(self.clock)
         self._bus_ticks = [bus.tick for bus in timed]
+        #: per timed bus, when its tick next has work (None: the bus does not say; it is ticked every substep)
+        self._bus_events: list[Callable[[], float] | None] = [
+            bus.next_event if isinstance(bus, Announcing) else None for bus in timed]
         #: what else runs after every substep (drives acting on delayed commands, kinematic joints)
         self._extra_ticks: list[Callable[[float], None]] = []
         self._ticks: list[Callable[[float], None]] = []
+        #: when each of ``_ticks`` next has work (None: one of them does not say, so every substep is ticked)
+        self._events: list[Callable[[], float]] | None = []
         self._unfused = False
         self._nominal_delay = {id(e): float(getattr(e, "command_delay", 0.0)) for e in self._emulators()}
         self._update_ticks()
@@ -352,6 +381,7 @@ class World:
         #: it is batched with: :func:`advance_together`), and this world's index in it
         self.group = stepping.Group([self], self.compiled)
         self.group_index = 0
+        self._me: tuple[int, ...] = (0,)  #: (group_index,): what this world's group steps for it
         if self.kinematic:
             self._extra_ticks.append(self._drive_kinematic)
             self._update_ticks()
@@ -383,10 +413,14 @@ class World:
                 qvel[da] = qd
 
     def _update_ticks(self) -> None:
-        """Who is called after every substep: timed buses, drives with a command delay, extra ticks."""
-        delayed = [e.tick for e in self._emulators()
+        """Who is called after substeps: timed buses, drives with a command delay, extra ticks; and whether
+        all of them say when they next have work (then only those substeps are ticked, see :meth:`_step`)."""
+        delayed = [e for e in self._emulators()
                    if getattr(e, "command_delay", 0.0) > 0 or getattr(e, "pending", None)]
-        self._ticks = [*self._bus_ticks, *delayed, *self._extra_ticks]
+        self._ticks = [*self._bus_ticks, *(e.tick for e in delayed), *self._extra_ticks]
+        events = [*self._bus_events, *(_pending_due(e) for e in delayed)]
+        self._events = None if self._extra_ticks or any(ev is None for ev in events) else \
+            [ev for ev in events if ev is not None]
         group = getattr(self, "group", None)
         if group is not None:  # who can run N substeps in one call changed
             group.replan()
@@ -414,9 +448,10 @@ class World:
                         self.path.name, round(100 * stepping.ARENA_GUARD))
 
     def fusable(self) -> bool:
-        """Whether N substeps can run in one compiled call: every drive a kernel row, no timed bus, an arena
-        with room (the compiled call cannot turn MuJoCo's fatal errors into exceptions)."""
-        return not self._unfused and not self._ticks and all(self.kernel_stepped(b) for b in self._bound
+        """Whether N substeps can run in one compiled call: every drive a kernel row, every tick announcing its
+        next work (timed buses, delayed commands), an arena with room (the compiled call cannot turn MuJoCo's
+        fatal errors into exceptions)."""
+        return not self._unfused and self._events is not None and all(self.kernel_stepped(b) for b in self._bound
                                        if stepping.has_kernel(b.emulator)) \
             and len(self.kernel_joints()) == len(self._bound)
 
@@ -464,7 +499,10 @@ class World:
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics substeps (drives' loops every substep), one caller at a time.
 
-        Timed device buses (a CAN medium) are ticked after every substep, with the clock at its end.
+        Timed device buses (a CAN medium) and drives with delayed commands are ticked with the clock at a
+        substep's end: after every substep, or - where each of them announces its next work
+        (:class:`Announcing`) - after the substep that reaches it and at the end, the substeps between run
+        in one compiled call (the same bits: a tick before its next work only moves its time).
         """
         with self.lock:
             try:
@@ -485,14 +523,50 @@ class World:
         kernel = self.kernel_joints()
         return [self._bind[i] for i, b in enumerate(self._bound) if b not in kernel or not self.kernel_stepped(b)]
 
+    def _until_event(self, n: int) -> int:
+        """Of ``n`` due substeps, how many run before a tick has work: up to the first substep end at or after
+        the earliest announced event (at least 1; ``n`` if nothing is announced)."""
+        events = self._events
+        if not events:
+            return n
+        e = min([ev() for ev in events])
+        if e == math.inf:
+            return n
+        dt, s = self.timestep, self.steps
+        if e <= (s + 1) * dt:
+            return 1
+        k = max(1, math.ceil(e / dt) - s)
+        while k > 1 and (s + k - 1) * dt >= e:  # the substep end exactly as the per-substep loop computes it
+            k -= 1
+        while (s + k) * dt < e:
+            k += 1
+        return min(k, n)
+
+    def _tick_now(self) -> None:
+        """The ticks, with the clock at the end of the last substep run."""
+        t = self.steps * self.timestep
+        self.clock.set(t)
+        for tick in self._ticks:
+            tick(t)
+
     def _step(self, n: int) -> None:
         group = self.group
         self._step_prepare()
         if n <= 0:
             return
-        if group.compiled and group.fusable[self.group_index]:
-            group.run([self.group_index], n)
-            return
+        me = self._me
+        index = self.group_index
+        if group.compiled and group.fusable[index]:
+            if not self._ticks:
+                group.run(me, n)
+                return
+            while n > 0 and group.fusable[index]:
+                k = self._until_event(n)
+                group.run(me, k)
+                n -= k
+                self._tick_now()
+            if n <= 0:
+                return
         mj_step = self.mujoco.mj_step
         m, d = self.model, self.data
         qpos, qvel, ctrl = d.qpos, d.qvel, d.ctrl
@@ -500,7 +574,6 @@ class World:
         python = self._python_bind
         kernel_rows = len(python) < len(self._bound)
         ticks = self._ticks
-        me = [self.group_index]
         for _ in range(n):
             t = (self.steps + 1) * dt
             if kernel_rows:
@@ -524,12 +597,17 @@ class World:
             return
         with self.lock:
             n = self._due(seconds)
+            if n <= 0:
+                return
             try:
-                if n > 0:
-                    self.step(n)
+                self._step(n)
             except BaseException:
                 self._target = self.time
+                self.clock.set(self._target)
                 raise
+            t = self.steps * self.timestep  # as step(): the clock where the physics is
+            self._target = max(self._target, t)
+            self.clock.set(t)
 
     def _due(self, seconds: float) -> int:
         """Book ``seconds`` more on the world's target time: the substeps that are now due."""
@@ -698,7 +776,7 @@ def join(worlds: Sequence[World]) -> stepping.Group:
         return group
     group = stepping.Group(worlds, all(w.compiled for w in worlds))
     for i, w in enumerate(worlds):
-        w.group, w.group_index = group, i
+        w.group, w.group_index, w._me = group, i, (i,)
     return group
 
 
@@ -707,9 +785,10 @@ def advance_together(worlds: Sequence[World], seconds: Sequence[float]) -> None:
 
     The worlds (separate models: N rigs of a batched env) join one stepping group; while all of
     them still have substeps due, one compiled call runs the loops of every drive and every
-    world's physics for as many substeps as they share. A world that cannot run fused (a timed
-    bus, a twin stepping in Python) advances on its own. The results are those of advancing each
-    world alone.
+    world's physics for as many substeps as they share, up to the next event a world's ticks
+    announce (then that world is ticked). A world that cannot run fused (a bus that does not
+    announce its events, a twin stepping in Python) advances on its own. The results are those of
+    advancing each world alone.
     """
     if len(worlds) != len(seconds):
         raise ValueError(f"{len(worlds)} worlds but {len(seconds)} times")
@@ -721,21 +800,22 @@ def advance_together(worlds: Sequence[World], seconds: Sequence[float]) -> None:
         group = join(worlds)
         due = [w._due(s) if s > 0 else 0 for w, s in zip(worlds, seconds)]
         try:
-            together = [i for i, w in enumerate(worlds) if group.compiled and group.fusable[w.group_index]]
-            for i, w in enumerate(worlds):
-                if i not in together and due[i] > 0:
-                    w.step(due[i])
-                    due[i] = 0
             while True:
-                left = [i for i in together if due[i] > 0]
+                for i, w in enumerate(worlds):  # on its own: a world that cannot (or no longer can) run fused
+                    if due[i] > 0 and not (group.compiled and group.fusable[w.group_index]):
+                        w.step(due[i])
+                        due[i] = 0
+                left = [i for i, d in enumerate(due) if d > 0]
                 if not left:
                     break
-                n = min(due[i] for i in left)
+                n = min([worlds[i]._until_event(due[i]) for i in left])
                 for i in left:
                     worlds[i]._step_prepare()
                 group.run([worlds[i].group_index for i in left], n)
                 for i in left:
                     due[i] -= n
+                    if worlds[i]._ticks:
+                        worlds[i]._tick_now()
         except BaseException:
             for w in worlds:
                 w._target = w.time

@@ -26,9 +26,11 @@ Nodes:
 Time model. The medium keeps its own time (``now``), exact to the frame edge. Waiting until a
 time the clock has not reached yet sleeps the clock (the world steps its physics up to or past
 it); frames delivered meanwhile are processed in time order. When the clock moves for another
-reason (the host sleeps, :meth:`CanMedium.tick` from the world each physics substep), the
+reason (the host sleeps, :meth:`CanMedium.tick` from the world), the
 medium processes its frames up to the clock's time, so a frame in flight reaches its peers at
-its own time even while nobody waits on the bus. A clock that goes back (world reset) drops the
+its own time even while nobody waits on the bus. The world ticks the medium at the end of the substep
+that reaches :meth:`CanMedium.next_event` (and after every stretch it runs), not every substep: a bus with
+nothing queued costs nothing per substep. A clock that goes back (world reset) drops the
 frames in flight and restarts the medium there.
 """
 
@@ -227,7 +229,8 @@ class CanMedium(ClockDriven):
                 self.now = c
 
     def tick(self, t: float) -> None:
-        """The clock reached ``t`` (the world calls this every physics substep): deliver what is due."""
+        """The clock reached ``t`` (the world calls this at substep ends, at least at each :meth:`next_event`):
+        deliver what is due."""
         if self._cap is not None:
             t = min(t, self._cap)
         if t > self.now and (self._pending or self._wire is not None):
@@ -242,6 +245,15 @@ class CanMedium(ClockDriven):
         if self._pending:
             return max(self._free, min(p.ready for p in self._pending))
         return math.inf
+
+    def next_event(self) -> float:
+        """The earliest ``t`` at which :meth:`tick` has work: a frame starts or ends (``math.inf``: nothing is
+        queued or on the wire, or - while the medium sleeps the clock itself - nothing before the instant it
+        waits for). Ticks before it only move ``now``, so the world may run the substeps up to it in one
+        call and tick once."""
+        e = self._next_event()
+        cap = self._cap
+        return math.inf if cap is not None and e > cap else e
 
     # -- the wire -------------------------------------------------------------------------
     def _bits(self, frame: can.Message) -> int:

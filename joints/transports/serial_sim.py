@@ -223,6 +223,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
 
     def _run(self, until: float) -> None:
         """Everything that happens on the line up to ``until`` (the clock's time), in time order."""
+        pending = self._pending
+        limit = until + 1e-12
         while True:
             peer = self.peer
             if peer is not self._peer_seen:  # a Protocol isinstance costs ~60 us: once per peer
@@ -230,11 +232,13 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             if self._peer_timed:
                 for at, data in peer.take_frames(until):
                     self._put("device", at, data)
-            due = [tx for tx in self._pending if tx.due <= until + 1e-12]
-            if not due:
+            tx = None  # the earliest due frame (the first of equals)
+            for p in pending:
+                if p.due <= limit and (tx is None or p.due < tx.due):
+                    tx = p
+            if tx is None:
                 return
-            tx = min(due, key=lambda x: x.due)
-            self._pending.remove(tx)
+            pending.remove(tx)
             tx.delivered = True
             if tx.side == "device":
                 if tx.handler is not None:  # the direct path: the reply message reaches the host
