@@ -171,7 +171,8 @@ def _serial_transport(cfg: BusConfig) -> Any:
 
     if cfg.port is None:  # e.g. a sim config opened with backend="hardware"
         raise ConfigError("is required for backend = \"hardware\" (e.g. \"/dev/ttyUSB0\")", key=f"buses.{cfg.name}.port")
-    return SerialTransport(cfg.port, cfg.baudrate, parity=cfg.parity, stopbits=cfg.stopbits)
+    return SerialTransport(cfg.port, cfg.baudrate, parity=cfg.parity, stopbits=cfg.stopbits,
+                           gap=None if protocol(cfg.protocol).silence else 0.0)
 
 
 def _modbus_device_bus(cfg: BusConfig) -> Any:

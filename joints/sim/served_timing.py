@@ -19,8 +19,8 @@ after the other, as on a half-duplex line):
 
 So one transaction takes ``wire + turnaround + adapter_latency`` from the host's write to the last
 byte of the reply, where ``wire`` is request + t3.5 + reply on Modbus RTU (request + reply
-elsewhere); ``joints bench --hardware`` measures the same sum on a real bus. The host's own RTU
-receiver then waits for the t3.5 silence after the reply (:class:`~joints.transports.serial.
+elsewhere); ``joints bench --hardware`` measures the same sum on a real bus. The host then keeps
+the t3.5 silence after the reply before its next request (:class:`~joints.transports.serial.
 SerialTransport` does), so a host loop runs at the planner's cycle: two t3.5 per transaction, as
 the in-process line counts them. ``timing = "ideal"`` holds nothing.
 """

@@ -2,10 +2,15 @@
 
 Rule: bytes only. ``silence`` is the Modbus RTU t3.5 inter-frame gap derived from the baud rate
 (3.5 character times of 11 bits; fixed 1.75 ms above 19200 bd, per the Modbus serial line spec).
+A read returns the bytes that have arrived as soon as any have (the codec above knows where a frame
+ends, so nothing waits for a silence after it); a write first keeps the line quiet for ``gap``
+seconds after the last byte received or sent (the t3.5 a Modbus RTU master keeps between frames;
+0 on protocols with no silence rule).
 """
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 from joints.errors import ConfigError, MissingDependencyError, TransportError
@@ -43,11 +48,16 @@ class SerialTransport(ByteTransport):
         stopbits: int = 1,
         bytesize: int = 8,
         exclusive: bool = True,
+        gap: float | None = None,
     ) -> None:
         if parity not in PARITIES:
             raise ConfigError(f"unknown parity {parity!r}", key="parity", allowed=sorted(PARITIES))
         serial = _pyserial()
         self.silence = t35(baudrate)
+        #: quiet time kept before each write (default: the t3.5 silence)
+        self.gap = self.silence if gap is None else max(float(gap), 0.0)
+        self._char = (1 + bytesize + (PARITIES[parity] != "N") + stopbits) / baudrate  #: s per character
+        self._quiet_from = 0.0  #: monotonic time the line went quiet (last byte in or out)
         self.port = port
         self.baudrate = baudrate
         try:
@@ -73,9 +83,15 @@ class SerialTransport(ByteTransport):
         return f"serial:{self.port}"
 
     def write(self, data: bytes) -> None:
+        if self.gap:
+            wait = self._quiet_from + self.gap - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
         try:
             self._ser.write(data)
             self._ser.flush()
+            # flush() returns when the OS has the bytes; the last one leaves the adapter later
+            self._quiet_from = time.monotonic() + len(data) * self._char
         except Exception as exc:
             raise TransportError(f"write to {self.port} failed: {exc}") from exc
 
@@ -86,15 +102,9 @@ class SerialTransport(ByteTransport):
             first = ser.read(1)
             if not first:
                 return b""
-            # Collect the rest of the burst: keep reading until the line is silent for t3.5.
-            out = bytearray(first)
-            ser.timeout = max(self.silence, 0.002)
-            while True:
-                waiting = ser.in_waiting
-                chunk = ser.read(waiting or 1)
-                if not chunk:
-                    break
-                out += chunk
+            waiting = ser.in_waiting
+            out = first + ser.read(waiting) if waiting else first
+            self._quiet_from = max(self._quiet_from, time.monotonic())
             return bytes(out)
         except Exception as exc:
             raise TransportError(f"read from {self.port} failed: {exc}") from exc

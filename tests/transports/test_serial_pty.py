@@ -73,3 +73,55 @@ def test_loopback_echo_and_inject() -> None:
     t.close()
     with pytest.raises(TransportError):
         t.write(b"x")
+
+
+class _FakeTime:
+    """The transport's clock: ``sleep`` advances it, nothing waits."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+        self.slept: list[float] = []
+
+    def monotonic(self) -> float:
+        return self.now
+
+    def sleep(self, s: float) -> None:
+        self.slept.append(s)
+        self.now += s
+
+
+@pytest.mark.parametrize("gap,expected", [(None, 0.00175), (0.0, 0.0)])
+def test_a_write_keeps_the_gap_after_the_last_byte_and_a_read_does_not_wait_for_silence(
+        monkeypatch: pytest.MonkeyPatch, gap: float | None, expected: float) -> None:
+    """A Modbus RTU master keeps t3.5 between the reply it read and its next request (``gap=None``);
+    the MKS protocol keeps none (``gap=0``). A read hands over a frame as soon as it is in, so the
+    host does not sit out a silence the codec does not need."""
+    import joints.transports.serial as serial_mod
+    from joints.transports.pty import PtyEndpoint
+
+    fake = _FakeTime()
+    monkeypatch.setattr(serial_mod, "time", fake)
+    ep = PtyEndpoint()
+    try:
+        with SerialTransport(ep.port, 115200, gap=gap) as port:
+            assert port.gap == pytest.approx(expected)
+            ep.write(b"\x02\x03\x04\x00\x07\xA1\x1F\x40\xAA")
+            got = port.read(timeout=2.0)
+            while len(got) < 9:
+                got += port.read(timeout=2.0)
+            assert got == bytes.fromhex("02 03 04 00 07 A1 1F 40 AA")
+            assert fake.slept == []  # nothing slept for silence on the way in
+            fake.now += 0.0005  # the host's own time after the reply
+            port.write(b"\x02\x03\x00\x66\x00\x02\x24\x27")
+            if expected:
+                assert fake.slept == [pytest.approx(expected - 0.0005)]
+            else:
+                assert fake.slept == []
+            # right after a write, the next one waits for the frame's characters and the gap
+            port.write(b"\x02\x03\x00\x66\x00\x02\x24\x27")
+            if expected:
+                assert fake.slept[-1] == pytest.approx(8 * 10 / 115200 + expected)
+            else:
+                assert fake.slept == []
+    finally:
+        ep.close()
