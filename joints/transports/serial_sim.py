@@ -15,8 +15,10 @@ Time model (docs/timing.md):
   (the peer's ``turnaround(frame)``, from the device profile), else the line's default; frames it
   sends by itself (:class:`TimedFrames`: MKS completion frames at the moment the motion ended)
   go out at their own time;
-* the host sees a device frame ``adapter_latency`` seconds after it ended (gap included): the
-  USB adapter's and the host's share of a transaction;
+* the host sees a device frame ``adapter_latency`` seconds after it ended (the USB adapter's and
+  the host's share of a transaction: the host's codec knows where a frame ends, so it does not wait
+  for the silence after it), and keeps the line quiet for ``gap`` from then before its next frame
+  (as :class:`~joints.transports.serial.SerialTransport` does);
 * the line keeps its own exact time (like :class:`~joints.transports.can_sim.CanMedium`): waiting
   sleeps the clock, the world steps whole physics substeps (so a frame instant sees the physics
   of the substep that ends at or after it), but bus time is never rounded to substeps;
@@ -194,7 +196,7 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         if side == "host":
             due = end + self.gap + (self._device_turnaround(data) if turnaround is None else turnaround)
         else:
-            due = end + self.gap + self.adapter_latency
+            due = end + self.adapter_latency
         tx = Transmission(start, end, side, bytes(data), due=due, size=n, handler=handler, payload=payload)
         self._free[side] = end + self.gap
         log, latest = self.log, self._latest_end
@@ -241,6 +243,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             pending.remove(tx)
             tx.delivered = True
             if tx.side == "device":
+                # the host saw it now; its next frame keeps the gap from here (its own t3.5)
+                self._free["host"] = max(self._free["host"], tx.due + self.gap)
                 if tx.handler is not None:  # the direct path: the reply message reaches the host
                     tx.handler(tx.payload)
                 else:
