@@ -309,6 +309,13 @@ class Identification:
         """The twin's command delay reproducing :attr:`delay` (its own feedback latency taken off)."""
         return None if self.delay is None else max(0.0, self.delay - self.feedback_latency)
 
+    def friction_at(self, speed: float) -> float:
+        """The friction torque [N*m] at ``speed`` [rad/s] with no torque transmitted: Coulomb + Stribeck + viscous."""
+        v = abs(speed)
+        excess = self.stribeck_friction * math.exp(-((v / self.stribeck_velocity) ** self.stribeck_exponent)) \
+            if self.stribeck_friction else 0.0
+        return self.coulomb_friction + excess + self.viscous_friction * v
+
     def inseparable(self) -> list[str]:
         """Pairs of parameters the data cannot tell apart well (|correlation| > :data:`CORRELATED`)."""
         return [k for k, c in self.correlations.items() if abs(c) > CORRELATED]
@@ -351,13 +358,13 @@ class Identification:
                  (f"  stribeck         {self.stribeck_friction:.5g} N*m{u('stribeck_friction')} more at standstill, "
                   f"v_s {self.stribeck_velocity:.3g} rad/s{u('stribeck_velocity')}, exponent "
                   f"{self.stribeck_exponent:g}" if self.stribeck_friction
-                  else "  stribeck         none seen (not significant)"),
+                  else "  stribeck         none seen"),
                  "  friction growing with torque: " + (", ".join(
                      f"{v:.4g}{u(k)} {unit}" for k, v, unit in (
                          ("load_friction", self.load_friction, "x |motor torque|"),
                          ("load_friction_quadratic", self.load_friction_quadratic, "N*m^-1 x motor torque^2"),
                          ("external_friction", self.external_friction, "x |external torque|")) if v)
-                     or "none seen (not significant)"),
+                     or "none seen"),
                  f"  torque scale     {self.torque_scale:.5g}{u('torque_scale')}"]
         if self.delay is not None:
             lines.append(f"  delay            {self.delay * 1e3:.2f} ms +-{self.std.get('delay', 0) * 1e3:.2f} ms "
@@ -726,18 +733,19 @@ def _named(x: Any, names: list[str], known_inertia: float | None) -> dict[str, f
 
 #: a friction term beyond Coulomb + viscous is kept when its estimate is this many standard errors above 0
 SIGNIFICANT = 3.0
+#: ... and when it lowers the fit's residual (sum of squares) by this fraction or more
+RELEVANT = 0.10
 
 
 def _model(reg: _Regression, known_inertia: float | None, max_delay: float, torque_mode: bool,
            extended: bool) -> tuple[float, Friction]:
     """The delay and the friction terms of the fit. Besides Coulomb + viscous: Stribeck friction (its velocity
     and exponent profiled by a search, the linear parameters solved at each) and friction growing with the
-    motor's and the external torque (:data:`FRICTION_TERMS`). Every combination of these terms is a candidate
-    (friction held >= 0); a candidate counts when each of its added terms is above :data:`SIGNIFICANT` standard
-    errors, and of those the one of lowest BIC wins (the windows overlap: the count of independent ones is
-    used). With no added term counting the fit is the Coulomb + viscous one."""
-    import itertools
-
+    motor's and the external torque (:data:`FRICTION_TERMS`; torque mode only: in speed mode the drive's own
+    torque stands for the command). Forward selection from Coulomb + viscous: the term that lowers the residual
+    most is added while it lowers it by :data:`RELEVANT` or more and every added term stays above
+    :data:`SIGNIFICANT` standard errors (friction held >= 0). Relevance, not only significance: on data whose
+    residual is the model's own error (current lag, ripple), not noise, a spurious term is always "significant"."""
     import numpy as np
 
     def delay_of(friction: Friction) -> float:
@@ -746,42 +754,41 @@ def _model(reg: _Regression, known_inertia: float | None, max_delay: float, torq
     d = delay_of(COULOMB_VISCOUS)
     if not extended:
         return d, COULOMB_VISCOUS
-    n_eff = reg.used / reg.overlap
 
-    def score(friction: Friction) -> float:
+    def rss_of(friction: Friction) -> float:
         A, y, names = reg.system(d, known_inertia, friction=friction)
         x, rss = _solve(A, y, None, names)
-        free = [i for i, k in enumerate(names) if not (k in NON_NEGATIVE and x[i] == 0.0)]
-        Af = A[:, free]
+        added = [i for i, k in enumerate(names) if k in NON_NEGATIVE and k != "coulomb_friction"]
+        if any(x[i] == 0.0 for i in added):
+            return math.inf  # an added term held at 0: the smaller model covers it
         try:
-            se = np.sqrt(np.clip(np.diag(rss / max(1, A.shape[0] - len(free)) * reg.overlap
-                                         * np.linalg.inv(Af.T @ Af)), 0, None))
+            se = np.sqrt(np.clip(np.diag(rss / max(1, A.shape[0] - A.shape[1]) * reg.overlap
+                                         * np.linalg.inv(A.T @ A)), 0, None))
         except np.linalg.LinAlgError:
             return math.inf
-        for j, i in enumerate(free):
-            if names[i] in NON_NEGATIVE and names[i] != "coulomb_friction" and not x[i] > SIGNIFICANT * se[j]:
-                return math.inf
-        if any(k != "coulomb_friction" and k in NON_NEGATIVE and x[i] == 0.0 for i, k in enumerate(names)):
-            return math.inf  # an added term held at 0: the smaller candidate covers it
-        return n_eff * math.log(rss / reg.used) + len(free) * math.log(n_eff)
+        return rss if all(x[i] > SIGNIFICANT * se[i] for i in added) else math.inf
 
-    best, best_score = COULOMB_VISCOUS, score(COULOMB_VISCOUS)
-    extra = FRICTION_TERMS[1:]
-    for stribeck in (False, True):
-        for r in range(len(extra) + 1):
-            for chosen in itertools.combinations(extra, r):
-                terms = ("coulomb_friction", *chosen)
-                if not stribeck and not chosen:
-                    continue
-                curve = _best_stribeck(reg, d, known_inertia, terms) if stribeck else None
-                if stribeck and curve is None:
-                    continue
-                friction: Friction = (curve, terms)
-                sc = score(friction)
-                if sc < best_score:
-                    best, best_score = friction, sc
-    vs, terms = best
-    d = delay_of(best)
+    vs: tuple[float, float] | None = None
+    terms: tuple[str, ...] = ("coulomb_friction",)
+    current = rss_of((vs, terms))
+    candidates = ["stribeck_friction", *(FRICTION_TERMS[1:] if torque_mode else ())]
+    while candidates:
+        tried: list[tuple[float, str, Friction]] = []
+        for k in candidates:
+            if k == "stribeck_friction":
+                curve = _best_stribeck(reg, d, known_inertia, terms)
+                if curve is not None:
+                    tried.append((rss_of((curve, terms)), k, (curve, terms)))
+            else:
+                tried.append((rss_of((vs, (*terms, k))), k, (vs, (*terms, k))))
+        if not tried:
+            break
+        rss, k, friction = min(tried, key=lambda c: c[0])
+        if not rss <= (1 - RELEVANT) * current:
+            break
+        current, (vs, terms) = rss, friction
+        candidates.remove(k)
+    d = delay_of((vs, terms))
     if vs is not None:
         vs = _best_stribeck(reg, d, known_inertia, terms, exponent=vs[1])
     return d, (vs, terms)

@@ -98,9 +98,23 @@ def check_recovery(reality: Any, ref: Identification, got: Identification, *, de
     assert not got.problems(), str(got)
     assert got.armature == pytest.approx(reality.armature, rel=0.10), str(got)
     assert got.torque_scale == pytest.approx(reality.torque_scale, rel=0.10), str(got)
-    assert got.coulomb_friction == pytest.approx(ref.coulomb_friction, rel=0.10), (str(got), str(ref))
-    assert got.viscous_friction == pytest.approx(ref.viscous_friction, rel=0.10), (str(got), str(ref))
+    check_friction(got, ref)
     assert got.delay is not None and abs(got.delay - reality.delay) <= 1e-3 + delay_slack, str(got)
+
+
+#: rad/s, where the friction curves are compared: from slow sliding to the speeds the excitation reaches
+SPEEDS = (0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.5)
+
+
+def check_friction(got: Identification, ref: Identification) -> None:
+    """Friction within 10 % of the reference: the viscous coefficient, and the friction curve (Coulomb + Stribeck
+    + viscous) at every speed of SPEEDS - with a Stribeck term the Coulomb and Stribeck levels trade off (the
+    report names them inseparable), the curve they make does not. Without one, the Coulomb level itself."""
+    assert got.viscous_friction == pytest.approx(ref.viscous_friction, rel=0.10), (str(got), str(ref))
+    for v in SPEEDS:
+        assert got.friction_at(v) == pytest.approx(ref.friction_at(v), rel=0.10), (v, str(got), str(ref))
+    if not (got.stribeck_friction or ref.stribeck_friction):
+        assert got.coulomb_friction == pytest.approx(ref.coulomb_friction, rel=0.10), (str(got), str(ref))
 
 
 def test_reality_twins_are_recovered(judged: tuple[Any, Identification, Identification, Any]) -> None:
@@ -133,11 +147,11 @@ def test_identified_twin_tracks_the_reality_twin_on_a_held_out_chirp(
     assert np.ptp(q_real) > 0.3  # the chirp really moves the joint
     rms_twin = float(np.sqrt(np.mean((q_twin - q_real) ** 2)))
     rms_nominal = float(np.sqrt(np.mean((q_nominal - q_real) ** 2)))
-    # The issue asks for 5x on every reality twin. It holds on (b); on BAM's M2/M6 (a) it does not (measured
-    # 4.2x and 2.4x): their Stribeck and load-dependent friction has no Coulomb + viscous equivalent over a
-    # chirp that sticks and slides, so the fitted form's own error dominates (docs/identification.md).
-    factor = 5.0 if reality is PERTURBED else 2.0
-    assert rms_nominal > factor * rms_twin, (rms_nominal, rms_twin)
+    # the issue's 5x on every reality twin: BAM's M2/M6 need the Stribeck and torque-dependent friction terms
+    # (Coulomb + viscous alone gave 4.2x and 2.4x)
+    print(f"{reality.name}: held-out RMS twin {rms_twin:.4f} rad, unidentified {rms_nominal:.4f} rad, "
+          f"{rms_nominal / rms_twin:.1f}x")
+    assert rms_nominal > 5.0 * rms_twin, (rms_nominal, rms_twin)
 
 
 def test_ten_times_the_drives_velocity_noise_stays_within_ten_percent_or_refuses() -> None:
