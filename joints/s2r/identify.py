@@ -449,9 +449,9 @@ def excite(rig: Any, name: str, excitation: Excitation, *, progress: Progress | 
             asked = rig.time
             s = j.state()
             q = (s.position - off) * d
-            t_.append(0.5 * (asked + s.time))  # the drive sampled between our request and its reply
-            rtt_.append(s.time - asked)
-            w_.append(now)
+            t_.append(s.time)  # the middle of its transaction (joints.drivers.base.sampled_at)
+            rtt_.append(2 * (s.time - asked))  # the transaction's length: how uncertain that time is
+            w_.append(0.5 * (now + asked))  # the drive took the command during its write, ending at `asked`
             u_.append(u)
             q_.append(q)
             v_.append(s.velocity * d)
