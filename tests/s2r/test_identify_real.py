@@ -256,15 +256,22 @@ def test_shadow_counts_twin_errors() -> None:
     assert {"mean", "std", "p5", "p95"} <= set(summary["joint1"]["position"])
 
 
+#: over the pty: a state every ~5-7 ms (two transactions per sample at the host's pace), so twice the duration
+#: of the in-process excitation: the fit's windows grow to 30 sampling periods and fewer of them slide
+PTY_EXCITATION = Excitation(duration=40.0, amplitude=32.0)
+
+
 @pytest.mark.slow
-def test_identification_over_the_pty_at_wall_clock_time() -> None:
-    """The reality twin (b) served on a pseudo-terminal in real time (wall clock), identified through the
-    serial port as on hardware: the parameters, not only the sampling period."""
+@pytest.mark.parametrize("reality", [EROB80_100_M2, PERTURBED], ids=lambda r: r.name.split()[-1])
+def test_identification_over_the_pty_at_wall_clock_time(reality: Any) -> None:
+    """A reality twin served on a pseudo-terminal in real time (wall clock), identified through the serial port
+    as on hardware: the parameters - armature and Kt within 10 % of the truth, friction within 10 % of the same
+    estimator on the same twin's noise-free readings sampled at the same period, the delay within 1 ms plus a
+    sampling period - and the fit meets its own thresholds."""
     pytest.importorskip("serial")
     import json
     import subprocess
 
-    reality = PERTURBED
     # a process of its own (as a real drive is): the served world does not share the host's interpreter
     server = subprocess.Popen([sys.executable, str(Path(__file__).resolve().parent / "reality.py"),
                                reality.name.split()[-1], "3"], stdout=subprocess.PIPE, text=True)
@@ -274,7 +281,7 @@ def test_identification_over_the_pty_at_wall_clock_time() -> None:
         cfg = config()
         cfg["buses"]["rs485"]["port"] = line["port"]
         with joints.open(cfg, backend="hardware") as rig:
-            got = identify(rig, "joint1", EXCITATION)
+            got = identify(rig, "joint1", PTY_EXCITATION)
     finally:
         server.terminate()
         server.wait(10)
@@ -282,19 +289,12 @@ def test_identification_over_the_pty_at_wall_clock_time() -> None:
     ref_rig = open_real(reality, noise=False)
     try:
         period = round(got.period / ref_rig.sim.timestep) * ref_rig.sim.timestep
-        ref = identify(ref_rig, "joint1", Excitation(duration=20.0, amplitude=32.0, period=max(period, 0.001)))
+        ref = identify(ref_rig, "joint1", Excitation(duration=PTY_EXCITATION.duration, amplitude=32.0,
+                                                     period=max(period, 0.001)))
     finally:
         ref_rig.close()
     print(got)
     print(ref)
-    assert got.period < 0.012, str(got)  # a state at least every 12 ms: 8 per 100 ms window
-    # Measured at ~5 ms per sample (an unloaded machine): Kt scale, friction and delay recovered; the
-    # armature came out -14.5 % with an uncertainty of 18 % and the fit refused. The Done-when's "armature
-    # within 10 % over the pty" does not hold on this branch: what holds is "within 10 % or refused".
-    assert got.torque_scale == pytest.approx(reality.torque_scale, rel=0.10), str(got)
-    assert got.coulomb_friction == pytest.approx(ref.coulomb_friction, rel=0.10), (str(got), str(ref))
-    assert got.viscous_friction == pytest.approx(ref.viscous_friction, rel=0.10), (str(got), str(ref))
-    assert got.delay is not None and abs(got.delay - reality.delay) <= 1e-3 + got.period, str(got)
-    arm_err = abs(got.armature / reality.armature - 1)
-    assert arm_err < 0.10 or any("armature" in p for p in got.problems()), str(got)
-    assert not (arm_err > 0.25 and got.std["armature"] < 0.05), str(got)
+    assert got.period < 0.012, str(got)  # a state at least every 12 ms
+    assert f"every {got.period * 1e3:.3f} ms" in str(got)
+    check_recovery(reality, ref, got, delay_slack=got.period)
