@@ -106,6 +106,9 @@ class Excitation:
     components: int = 15
     fade: float = 1.5  #: s of fade-in (and 2/3 of it fade-out)
     period: float | None = None  #: s between samples; None: 1 substep in sim, back to back on hardware
+    #: a command is written with every this-many-th state read (a slow bus: one transaction per sample instead
+    #: of two; the command is held in between, the fit integrates what was sent)
+    command_every: int = 1
 
     def __post_init__(self) -> None:
         if self.mode not in ("torque", "speed"):
@@ -118,6 +121,8 @@ class Excitation:
             raise ConfigError(f"f_min {self.f_min} Hz must be below f_max {self.f_max} Hz", key="f_min")
         if self.amplitude is not None and not (math.isfinite(self.amplitude) and self.amplitude > 0):
             raise ConfigError(f"amplitude must be > 0, got {self.amplitude!r}", key="amplitude")
+        if not (isinstance(self.command_every, int) and self.command_every >= 1):
+            raise ConfigError(f"command_every must be an integer >= 1, got {self.command_every!r}", key="command_every")
         if self.components < 1:
             raise ConfigError(f"components must be >= 1, got {self.components}", key="components")
         if self.duration < 3 * self.fade:
@@ -433,7 +438,13 @@ def excite(rig: Any, name: str, excitation: Excitation, *, progress: Progress | 
     else:
         def command(v: float) -> None:
             j.set_velocity(v, acceleration=acc)
-    t_, w_, u_, q_, v_, tau_, rtt_ = [], [], [], [], [], [], []
+    t_: list[float] = []
+    w_: list[float] = []
+    u_: list[float] = []
+    q_: list[float] = []
+    v_: list[float] = []
+    tau_: list[float] = []
+    rtt_: list[float] = []
     t0 = rig.time
     next_report = 0.0
     aborted: str | None = None
@@ -445,14 +456,17 @@ def excite(rig: Any, name: str, excitation: Excitation, *, progress: Progress | 
             if t >= excitation.duration:
                 break
             u = amplitude * shape(t)
-            command(u * d)
-            asked = rig.time
+            if len(t_) % excitation.command_every == 0:
+                command(u * d)
+                asked = rig.time
+                w_.append(0.5 * (now + asked))  # the drive took the command during its write, ending at `asked`
+                u_.append(u)
+            else:
+                asked = now
             s = j.state()
             q = (s.position - off) * d
             t_.append(s.time)  # the middle of its transaction (joints.drivers.base.sampled_at)
             rtt_.append(2 * (s.time - asked))  # the transaction's length: how uncertain that time is
-            w_.append(0.5 * (now + asked))  # the drive took the command during its write, ending at `asked`
-            u_.append(u)
             q_.append(q)
             v_.append(s.velocity * d)
             tau_.append(s.torque * d)
