@@ -13,18 +13,24 @@ What is identified (all at the joint's output, SI, in the model's joint frame):
                       lacks) - MuJoCo ``armature``
 ``coulomb_friction``  c [N*m] - MuJoCo ``frictionloss``
 ``viscous_friction``  b [N*m*s/rad] - MuJoCo ``damping``
+``stribeck_*``        where the data show it: f_s [N*m] more friction at standstill, fading as
+                      exp(-|v / v_s|^a) (``stribeck_velocity`` v_s, ``stribeck_exponent`` a)
+``*_friction``        where the data show them: friction per |motor torque| (``load_friction``),
+                      per motor torque^2 (``load_friction_quadratic``), per |external torque|
+                      (``external_friction``) - the eRob twin applies all of them
 ``torque_scale``      s = true torque / the torque the driver computes from current with the
                       profile's torque constant (1 = the profile is right)
 ``delay``             command -> feedback delay [s] the host observes (the drive acting on a
                       command late, plus its feedback being sampled late)
 ====================  ======================================================================
 
-Model: ``J dv/dt = s u(t - delay) - b v - c sign(v) - G(q)`` with u the commanded torque and G the
-gravity torque of the MJCF model at q (MuJoCo ``qfrc_bias`` at rest, other joints where they stood).
-It is fitted in integral form over short windows (``J (v_b - v_a) = s int u - b (q_b - q_a) - c
-int sign(v) - int G``: no differentiation of measured signals), on the samples where the joint moves
-(friction is only a sign function while it slides), by linear least squares for every candidate
-delay; the delay with the smallest residual wins.
+Model: ``J dv/dt = s u(t - delay) - b v - F sign(v) - G(q)`` with u the commanded torque, G the
+gravity torque of the MJCF model at q (MuJoCo ``qfrc_bias`` at rest, other joints where they stood)
+and F = c + the Stribeck and torque-dependent terms the data show (:func:`_model`: forward selection,
+each term kept when it lowers the residual by :data:`RELEVANT` and is :data:`SIGNIFICANT`). It is
+fitted in integral form over windows (:func:`fit`: no differentiation of measured signals), on the
+samples where the joint moves (friction is only a sign function while it slides), by linear least
+squares for every candidate delay (and Stribeck velocity and exponent); the smallest residual wins.
 
 What the data can tell (physics, not a choice): from current and motion alone every term scales
 with s - only J/s, b/s, c/s are known. A known torque fixes the scale: identification therefore
