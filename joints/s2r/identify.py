@@ -13,18 +13,24 @@ What is identified (all at the joint's output, SI, in the model's joint frame):
                       lacks) - MuJoCo ``armature``
 ``coulomb_friction``  c [N*m] - MuJoCo ``frictionloss``
 ``viscous_friction``  b [N*m*s/rad] - MuJoCo ``damping``
+``stribeck_*``        where the data show it: f_s [N*m] more friction at standstill, fading as
+                      exp(-|v / v_s|^a) (``stribeck_velocity`` v_s, ``stribeck_exponent`` a)
+``*_friction``        where the data show them: friction per |motor torque| (``load_friction``),
+                      per motor torque^2 (``load_friction_quadratic``), per |external torque|
+                      (``external_friction``) - the eRob twin applies all of them
 ``torque_scale``      s = true torque / the torque the driver computes from current with the
                       profile's torque constant (1 = the profile is right)
 ``delay``             command -> feedback delay [s] the host observes (the drive acting on a
                       command late, plus its feedback being sampled late)
 ====================  ======================================================================
 
-Model: ``J dv/dt = s u(t - delay) - b v - c sign(v) - G(q)`` with u the commanded torque and G the
-gravity torque of the MJCF model at q (MuJoCo ``qfrc_bias`` at rest, other joints where they stood).
-It is fitted in integral form over short windows (``J (v_b - v_a) = s int u - b (q_b - q_a) - c
-int sign(v) - int G``: no differentiation of measured signals), on the samples where the joint moves
-(friction is only a sign function while it slides), by linear least squares for every candidate
-delay; the delay with the smallest residual wins.
+Model: ``J dv/dt = s u(t - delay) - b v - F sign(v) - G(q)`` with u the commanded torque, G the
+gravity torque of the MJCF model at q (MuJoCo ``qfrc_bias`` at rest, other joints where they stood)
+and F = c + the Stribeck and torque-dependent terms the data show (:func:`_model`: forward selection,
+each term kept when it lowers the residual by :data:`RELEVANT` and is :data:`SIGNIFICANT`). It is
+fitted in integral form over windows (:func:`fit`: no differentiation of measured signals), on the
+samples where the joint moves (friction is only a sign function while it slides), by linear least
+squares for every candidate delay (and Stribeck velocity and exponent); the smallest residual wins.
 
 What the data can tell (physics, not a choice): from current and motion alone every term scales
 with s - only J/s, b/s, c/s are known. A known torque fixes the scale: identification therefore
@@ -106,6 +112,9 @@ class Excitation:
     components: int = 15
     fade: float = 1.5  #: s of fade-in (and 2/3 of it fade-out)
     period: float | None = None  #: s between samples; None: 1 substep in sim, back to back on hardware
+    #: a command is written with every this-many-th state read (a slow bus: one transaction per sample instead
+    #: of two; the command is held in between, the fit integrates what was sent)
+    command_every: int = 1
 
     def __post_init__(self) -> None:
         if self.mode not in ("torque", "speed"):
@@ -118,6 +127,8 @@ class Excitation:
             raise ConfigError(f"f_min {self.f_min} Hz must be below f_max {self.f_max} Hz", key="f_min")
         if self.amplitude is not None and not (math.isfinite(self.amplitude) and self.amplitude > 0):
             raise ConfigError(f"amplitude must be > 0, got {self.amplitude!r}", key="amplitude")
+        if not (isinstance(self.command_every, int) and self.command_every >= 1):
+            raise ConfigError(f"command_every must be an integer >= 1, got {self.command_every!r}", key="command_every")
         if self.components < 1:
             raise ConfigError(f"components must be >= 1, got {self.components}", key="components")
         if self.duration < 3 * self.fade:
@@ -244,8 +255,11 @@ class ModelTerms:
 #: refusal thresholds (docs/identification.md): the held-out equation error over the RMS torque impulse,
 #: and each parameter's relative uncertainty (the larger of the regression's and the held-out folds' spread)
 MAX_VALIDATION = 0.15
+#: ("friction": the friction curve Coulomb + Stribeck + viscous at the speeds the excitation reached, relative -
+#: with a Stribeck term the Coulomb and Stribeck levels trade off against each other, the curve they make does not;
+#: the Stribeck velocity and exponent and the torque-dependent terms are reported, never a reason to refuse)
 MAX_UNCERTAINTY: Mapping[str, float] = {"armature": 0.10, "torque_scale": 0.10, "viscous_friction": 0.15,
-                                        "coulomb_friction": 0.15}
+                                        "friction": 0.15}
 #: s of delay uncertainty above which the fit is refused
 MAX_DELAY_UNCERTAINTY = 0.002
 #: |correlation| of two parameters' estimates above which the data cannot tell them apart well
@@ -288,6 +302,13 @@ class Identification:
     load_mass: float = math.nan
     period_spread: float = math.nan  #: s, std of the sampling intervals
     window: float = math.nan  #: s, the modulating window's length
+    #: N*m more friction at standstill, fading as exp(-|v / stribeck_velocity|^stribeck_exponent) (0: none seen)
+    stribeck_friction: float = 0.0
+    stribeck_velocity: float = math.nan  #: rad/s (nan: no Stribeck term fitted)
+    stribeck_exponent: float = math.nan  #: of exp(-|v / stribeck_velocity|^this)
+    load_friction: float = 0.0  #: N*m of friction per N*m of motor torque (0: the data show none)
+    load_friction_quadratic: float = 0.0  #: N*m of friction per (N*m of motor torque)^2
+    external_friction: float = 0.0  #: N*m of friction per N*m of external (gravity) torque
 
     @property
     def armature(self) -> float:
@@ -298,6 +319,13 @@ class Identification:
     def command_delay(self) -> float | None:
         """The twin's command delay reproducing :attr:`delay` (its own feedback latency taken off)."""
         return None if self.delay is None else max(0.0, self.delay - self.feedback_latency)
+
+    def friction_at(self, speed: float) -> float:
+        """The friction torque [N*m] at ``speed`` [rad/s] with no torque transmitted: Coulomb + Stribeck + viscous."""
+        v = abs(speed)
+        excess = self.stribeck_friction * math.exp(-((v / self.stribeck_velocity) ** self.stribeck_exponent)) \
+            if self.stribeck_friction else 0.0
+        return self.coulomb_friction + excess + self.viscous_friction * v
 
     def inseparable(self) -> list[str]:
         """Pairs of parameters the data cannot tell apart well (|correlation| > :data:`CORRELATED`)."""
@@ -338,6 +366,16 @@ class Identification:
                   f"armature {self.armature:.5g}{u('armature')})"),
                  f"  coulomb friction {self.coulomb_friction:.5g} N*m{u('coulomb_friction')}",
                  f"  viscous friction {self.viscous_friction:.5g} N*m*s/rad{u('viscous_friction')}",
+                 (f"  stribeck         {self.stribeck_friction:.5g} N*m{u('stribeck_friction')} more at standstill, "
+                  f"v_s {self.stribeck_velocity:.3g} rad/s{u('stribeck_velocity')}, exponent "
+                  f"{self.stribeck_exponent:g}" if self.stribeck_friction
+                  else "  stribeck         none seen"),
+                 "  friction growing with torque: " + (", ".join(
+                     f"{v:.4g}{u(k)} {unit}" for k, v, unit in (
+                         ("load_friction", self.load_friction, "x |motor torque|"),
+                         ("load_friction_quadratic", self.load_friction_quadratic, "N*m^-1 x motor torque^2"),
+                         ("external_friction", self.external_friction, "x |external torque|")) if v)
+                     or "none seen"),
                  f"  torque scale     {self.torque_scale:.5g}{u('torque_scale')}"]
         if self.delay is not None:
             lines.append(f"  delay            {self.delay * 1e3:.2f} ms +-{self.std.get('delay', 0) * 1e3:.2f} ms "
@@ -406,7 +444,13 @@ def excite(rig: Any, name: str, excitation: Excitation, *, progress: Progress | 
     else:
         def command(v: float) -> None:
             j.set_velocity(v, acceleration=acc)
-    t_, w_, u_, q_, v_, tau_, rtt_ = [], [], [], [], [], [], []
+    t_: list[float] = []
+    w_: list[float] = []
+    u_: list[float] = []
+    q_: list[float] = []
+    v_: list[float] = []
+    tau_: list[float] = []
+    rtt_: list[float] = []
     t0 = rig.time
     next_report = 0.0
     aborted: str | None = None
@@ -418,14 +462,17 @@ def excite(rig: Any, name: str, excitation: Excitation, *, progress: Progress | 
             if t >= excitation.duration:
                 break
             u = amplitude * shape(t)
-            command(u * d)
-            asked = rig.time
+            if len(t_) % excitation.command_every == 0:
+                command(u * d)
+                asked = rig.time
+                w_.append(0.5 * (now + asked))  # the drive took the command during its write, ending at `asked`
+                u_.append(u)
+            else:
+                asked = now
             s = j.state()
             q = (s.position - off) * d
-            t_.append(0.5 * (asked + s.time))  # the drive sampled between our request and its reply
-            rtt_.append(s.time - asked)
-            w_.append(now)
-            u_.append(u)
+            t_.append(s.time)  # the middle of its transaction (joints.drivers.base.sampled_at)
+            rtt_.append(2 * (s.time - asked))  # the transaction's length: how uncertain that time is
             q_.append(q)
             v_.append(s.velocity * d)
             tau_.append(s.torque * d)
@@ -461,8 +508,14 @@ def excite(rig: Any, name: str, excitation: Excitation, *, progress: Progress | 
 
 # -- fit ----------------------------------------------------------------------------------------------
 
-#: s, the modulating window's default length (at least 8 sampling periods)
+#: a sampling interval longer than this many periods (the median) is a gap: no window that holds one is used
+GAP = 4.0
+#: s, the modulating window's default length ...
 WINDOW = 0.1
+#: ... and at least this many sampling periods: the fit integrates positions interpolated linearly between
+#: samples, an error of order (period / window)^2 on the inertia term (measured on the issue-24 reality twin
+#: sampled every 5 ms: armature -9 % +-12 % with a 100 ms window, -0.5 % +-4 % with 200 ms)
+WINDOW_PERIODS = 30
 #: held-out folds (contiguous blocks of the excitation)
 FOLDS = 5
 
@@ -484,11 +537,41 @@ def _window_kernels(length: float, h: float) -> tuple[Any, Any, Any, Any]:
     return phi, d1, d2, mid
 
 
+def _cubic(x: Any, t: Any, y: Any) -> Any:
+    """``y(t)`` at ``x`` by cubic Hermite interpolation with slopes from the neighbours (Catmull-Rom on any
+    spacing): an error of order period^3 where linear interpolation's is period^2 (held at the ends)."""
+    import numpy as np
+
+    if len(t) < 3 or not np.all(np.diff(t) > 0):
+        return np.interp(x, t, y)
+    m = np.gradient(y, t)
+    i = np.clip(np.searchsorted(t, x, side="right") - 1, 0, len(t) - 2)
+    h = t[i + 1] - t[i]
+    s = np.clip((x - t[i]) / h, 0.0, 1.0)
+    s2, s3 = s * s, s * s * s
+    return ((2 * s3 - 3 * s2 + 1) * y[i] + (s3 - 2 * s2 + s) * h * m[i] + (3 * s2 - 2 * s3) * y[i + 1]
+            + (s3 - s2) * h * m[i + 1])
+
+
 def _correlate(x: Any, kernel: Any, h: float) -> Any:
     """out[j] = sum_k x[j + k] kernel[k] h: the windows starting at each grid point."""
     import numpy as np
 
     return np.convolve(x, kernel[::-1], mode="valid") * h
+
+
+#: friction terms linear in their parameter, magnitudes x sign(v) (tau_m: the motor's torque at the output, the
+#: command in the fit; tau_e: the external torque, the model's gravity torque): the Coulomb level, friction per
+#: |tau_m| and per tau_m^2 (BAM's M6 form) and per |tau_e|
+FRICTION_TERMS = ("coulomb_friction", "load_friction", "load_friction_quadratic", "external_friction")
+#: the friction terms of one fit besides viscous: (Stribeck velocity [rad/s] and exponent, or None; the terms of
+#: FRICTION_TERMS it has - a Coulomb level the data put below 0 is 0: friction that falls to nothing with speed)
+Friction = tuple[tuple[float, float] | None, tuple[str, ...]]
+COULOMB_VISCOUS: Friction = (None, ("coulomb_friction",))
+#: parameters that are physical only >= 0: a least-squares value below 0 is held at 0 (its column left out)
+NON_NEGATIVE = (*FRICTION_TERMS, "stribeck_friction")
+#: how the fit's coefficient of a term scales with the torque scale s (it multiplies the command: k s, k s^2)
+SCALED = {"load_friction": 1, "load_friction_quadratic": 2}
 
 
 class _Regression:
@@ -501,7 +584,7 @@ class _Regression:
         dt = np.diff(t)
         self.period = float(np.median(dt))
         h = min(self.period, 1e-3) / 2  # the integration grid: at least 2 points per sample
-        L = max(window, 8 * self.period)
+        L = max(window, WINDOW_PERIODS * self.period)
         phi, d1, d2, mid = _window_kernels(L, h)
         self.length = L = (len(phi) - 1) * h
         m = len(phi) - 1
@@ -523,8 +606,8 @@ class _Regression:
         self.g0 = np.convolve(cells, mid[::-1], mode="valid") * h
         # the measured signals on the grid of the windows
         grid = t[0] + np.arange(int((t[-1] - t[0]) / h) + 1) * h
-        Q = np.interp(grid, t, q)
-        G = np.interp(grid, t, g)
+        Q = _cubic(grid, t, q)
+        G = _cubic(grid, t, g)
         s = max(0.005, 2 * self.period)  # velocity from positions (never the drive's noisy estimate): its sign
         vhat = (np.interp(grid + s, t, q) - np.interp(grid - s, t, q)) / (2 * s)
         slow = np.abs(vhat) <= moving
@@ -534,32 +617,72 @@ class _Regression:
         # windows where the joint slides (at most 10 % of the window slow: a reversal, not a stick)
         few_slow = (cs[m + 1: m + 1 + n_win] - cs[:n_win]) <= 0.1 * (m + 1)
         edge = (first - s >= t[0]) & (first + L + s <= t[-1])
-        ok = few_slow & edge
+        # windows without a gap in the sampling (a host that stalled: positions there are only interpolated)
+        gap = np.zeros(len(grid), dtype=bool)
+        for i in np.flatnonzero(dt > GAP * self.period):
+            gap[np.searchsorted(grid, t[i]): np.searchsorted(grid, t[i + 1])] = True
+        cg = np.concatenate([[0], np.cumsum(gap)])
+        self.gaps = int((dt > GAP * self.period).sum())  #: sampling intervals longer than GAP periods
+        ok = few_slow & edge & ((cg[m + 1: m + 1 + n_win] - cg[:n_win]) == 0)
         stride = max(1, m // 8)  # windows a stride apart (overlapping: the covariance says how much)
         sel = np.flatnonzero(ok)
         sel = sel[(sel % stride) == 0]
         self.x = first[sel]
         self.f1 = _correlate(Q, d2, h)[sel]
         self.f2 = _correlate(Q, d1, h)[sel]
-        self.f3 = _correlate(np.sign(vhat), phi, h)[sel]
+        sign = np.sign(vhat)
+        self.f3 = _correlate(sign, phi, h)[sel]
         self.f4 = _correlate(G, phi, h)[sel]
+        # friction growing with the transmitted torque: |command| (no delay: a few ms against the window) x sign
+        i = np.clip(np.searchsorted(w, grid, side="right") - 1, 0, len(w) - 1)
+        ua = np.where(grid < w[0], 0.0, np.abs(u[i]))
+        #: friction terms linear in their parameter: int (magnitude) sign(v) phi (see FRICTION_TERMS)
+        self.friction = {"coulomb_friction": self.f3,
+                         "load_friction": _correlate(ua * sign, phi, h)[sel],
+                         "load_friction_quadratic": _correlate(ua * ua * sign, phi, h)[sel],
+                         "external_friction": _correlate(np.abs(G) * sign, phi, h)[sel]}
         self.overlap = max(1.0, L / (2 * stride * h))  #: windows per independent one
         self.used = len(sel)
+        self._sliding = (vhat, sign, phi, h, sel)
+        self._stribeck: dict[tuple[float, float], Any] = {}
+        #: rad/s, the speeds the excitation reached (99th percentile): bounds the Stribeck-velocity search
+        self.speed = float(np.quantile(np.abs(vhat), 0.99)) if len(vhat) else 0.0
+
+    def stribeck(self, curve: tuple[float, float]) -> Any:
+        """int exp(-|v / vs|^a) sign(v) phi of each window, ``curve`` = (vs, a) (cached)."""
+        import numpy as np
+
+        out = self._stribeck.get(curve)
+        if out is None:
+            vhat, sign, phi, h, sel = self._sliding
+            vs, a = curve
+            out = self._stribeck[curve] = _correlate(np.exp(-np.abs(vhat / vs) ** a) * sign, phi, h)[sel]
+        return out
 
     def g(self, d: float) -> Any:
         import numpy as np
 
         return np.interp(self.x - d, self.g0_at, self.g0)
 
-    def system(self, d: float, known_inertia: float | None, f4_scale: float = 1.0) -> tuple[Any, Any, list[str]]:
+    def system(self, d: float, known_inertia: float | None, f4_scale: float = 1.0,
+               friction: Friction = COULOMB_VISCOUS) -> tuple[Any, Any, list[str]]:
+        """Regressors, target and parameter names (see :data:`Friction`). The coefficients of the terms that
+        multiply the command are the parameter x torque_scale^:data:`SCALED`."""
         import numpy as np
 
-        gd = self.g(d)
+        vs, terms = friction
+        cols, names = [-self.f2], ["viscous_friction"]
+        for k in terms:
+            cols.append(self.friction[k])
+            names.append(k)
+        if vs is not None:
+            cols.append(self.stribeck(vs))
+            names.append("stribeck_friction")
+        cols.append(-self.g(d))
+        names.append("torque_scale")
         if known_inertia is None:
-            return (np.stack([self.f1, -self.f2, self.f3, -gd], axis=1), -self.f4 * f4_scale,
-                    ["inertia", "viscous_friction", "coulomb_friction", "torque_scale"])
-        return (np.stack([-self.f2, self.f3, -gd], axis=1), -(known_inertia * self.f1 + self.f4 * f4_scale),
-                ["viscous_friction", "coulomb_friction", "torque_scale"])
+            return np.stack([self.f1, *cols], axis=1), -self.f4 * f4_scale, ["inertia", *names]
+        return np.stack(cols, axis=1), -(known_inertia * self.f1 + self.f4 * f4_scale), names
 
 
 def _certain(samples: Samples) -> Samples:
@@ -579,29 +702,74 @@ def _certain(samples: Samples) -> Samples:
                    samples.tau[keep], rtt[keep])
 
 
-def _solve(A: Any, y: Any, rows: Any = None) -> tuple[Any, float]:
+def _solve(A: Any, y: Any, rows: Any = None, names: list[str] | None = None) -> tuple[Any, float]:
+    """Least squares; with ``names``, the :data:`NON_NEGATIVE` parameters held >= 0 (the most negative one
+    left out until none is below 0)."""
     import numpy as np
 
     if rows is not None:
         A, y = A[rows], y[rows]
-    x, *_ = np.linalg.lstsq(A, y, rcond=None)
+    free = list(range(A.shape[1]))
+    x = np.zeros(A.shape[1])
+    while True:
+        x[:] = 0.0
+        x[free], *_ = np.linalg.lstsq(A[:, free], y, rcond=None)
+        below = [i for i in free if names is not None and names[i] in NON_NEGATIVE and x[i] < 0]
+        if not below:
+            break
+        free.remove(min(below, key=lambda i: x[i]))
     r = A @ x - y
     return x, float(r @ r)
 
 
-def _best_delay(reg: _Regression, known_inertia: float | None, max_delay: float, rows: Any = None) -> float:
+def _best_delay(reg: _Regression, known_inertia: float | None, max_delay: float, rows: Any = None,
+                friction: Friction = COULOMB_VISCOUS) -> float:
     import numpy as np
 
     step = max(reg.period / 4, 1e-4)
     grid = np.arange(0.0, max_delay + 1e-12, step)
     def cost(d: float) -> float:
-        A, y, _ = reg.system(d, known_inertia)
+        A, y, _ = reg.system(d, known_inertia, friction=friction)
         return _solve(A, y, rows)[1]
 
     costs = [cost(float(d)) for d in grid]
     i = int(np.argmin(costs))
     fine = np.linspace(grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)], 41)
     return float(fine[int(np.argmin([cost(float(d)) for d in fine]))])
+
+
+#: rad/s, the Stribeck velocities searched: from here to 3x the speeds the excitation reached (25 log steps)
+STRIBECK_MIN = 0.05
+#: a Stribeck curve must fall by this fraction within the speeds the excitation reached (else the data cannot
+#: tell it from Coulomb friction: it is not searched)
+STRIBECK_SEEN = 0.25
+#: the Stribeck curve's exponents searched (2: Gaussian; BAM's eRob80:100 fits use 3)
+STRIBECK_EXPONENTS = (1.0, 1.5, 2.0, 3.0, 4.0)
+
+
+def _best_stribeck(reg: _Regression, d: float, known_inertia: float | None, terms: tuple[str, ...],
+                   rows: Any = None, exponent: float | None = None) -> tuple[float, float] | None:
+    """The Stribeck curve (vs, exponent) of smallest residual (the linear parameters solved at each, friction
+    held >= 0): every exponent of :data:`STRIBECK_EXPONENTS` (or ``exponent``) on a log grid of vs from
+    :data:`STRIBECK_MIN` to 3x the speeds the excitation reached, vs refined around the best point."""
+    import numpy as np
+
+    grid = np.geomspace(STRIBECK_MIN, max(2 * STRIBECK_MIN, 3 * reg.speed), 25)
+
+    def cost(vs: float, a: float) -> float:
+        A, y, names = reg.system(d, known_inertia, friction=((vs, a), terms))
+        return _solve(A, y, rows, names)[1]
+
+    def seen(vs: float, a: float) -> bool:  # the curve falls by STRIBECK_SEEN within the speeds reached
+        return math.exp(-((reg.speed / vs) ** a)) <= 1 - STRIBECK_SEEN
+
+    best = min(((cost(float(v), a), i, a) for a in (STRIBECK_EXPONENTS if exponent is None else (exponent,))
+                for i, v in enumerate(grid) if seen(float(v), a)), default=None)
+    if best is None:
+        return None
+    _, i, a = best
+    fine = [v for v in np.geomspace(grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)], 13) if seen(float(v), a)]
+    return float(fine[int(np.argmin([cost(float(v), a) for v in fine]))]), a
 
 
 def _named(x: Any, names: list[str], known_inertia: float | None) -> dict[str, float]:
@@ -611,10 +779,73 @@ def _named(x: Any, names: list[str], known_inertia: float | None) -> dict[str, f
     return out
 
 
+#: a friction term beyond Coulomb + viscous is kept when its estimate is this many standard errors above 0
+SIGNIFICANT = 3.0
+#: ... and when it lowers the fit's residual (sum of squares) by this fraction or more
+RELEVANT = 0.10
+
+
+def _model(reg: _Regression, known_inertia: float | None, max_delay: float, torque_mode: bool,
+           extended: bool) -> tuple[float, Friction]:
+    """The delay and the friction terms of the fit. Besides Coulomb + viscous: Stribeck friction (its velocity
+    and exponent profiled by a search, the linear parameters solved at each) and friction growing with the
+    motor's and the external torque (:data:`FRICTION_TERMS`; torque mode only: in speed mode the drive's own
+    torque stands for the command). Forward selection from Coulomb + viscous: the term that lowers the residual
+    most is added while it lowers it by :data:`RELEVANT` or more and every added term stays above
+    :data:`SIGNIFICANT` standard errors (friction held >= 0). Relevance, not only significance: on data whose
+    residual is the model's own error (current lag, ripple), not noise, a spurious term is always "significant"."""
+    import numpy as np
+
+    def delay_of(friction: Friction) -> float:
+        return _best_delay(reg, known_inertia, max_delay, None, friction) if torque_mode else 0.0
+
+    d = delay_of(COULOMB_VISCOUS)
+    if not extended:
+        return d, COULOMB_VISCOUS
+
+    def rss_of(friction: Friction) -> float:
+        A, y, names = reg.system(d, known_inertia, friction=friction)
+        x, rss = _solve(A, y, None, names)
+        added = [i for i, k in enumerate(names) if k in NON_NEGATIVE and k != "coulomb_friction"]
+        if any(x[i] == 0.0 for i in added):
+            return math.inf  # an added term held at 0: the smaller model covers it
+        try:
+            se = np.sqrt(np.clip(np.diag(rss / max(1, A.shape[0] - A.shape[1]) * reg.overlap
+                                         * np.linalg.inv(A.T @ A)), 0, None))
+        except np.linalg.LinAlgError:
+            return math.inf
+        return rss if all(x[i] > SIGNIFICANT * se[i] for i in added) else math.inf
+
+    vs: tuple[float, float] | None = None
+    terms: tuple[str, ...] = ("coulomb_friction",)
+    current = rss_of((vs, terms))
+    candidates = ["stribeck_friction", *(FRICTION_TERMS[1:] if torque_mode else ())]
+    while candidates:
+        tried: list[tuple[float, str, Friction]] = []
+        for k in candidates:
+            if k == "stribeck_friction":
+                curve = _best_stribeck(reg, d, known_inertia, terms)
+                if curve is not None:
+                    tried.append((rss_of((curve, terms)), k, (curve, terms)))
+            else:
+                tried.append((rss_of((vs, (*terms, k))), k, (vs, (*terms, k))))
+        if not tried:
+            break
+        rss, k, friction = min(tried, key=lambda c: c[0])
+        if not rss <= (1 - RELEVANT) * current:
+            break
+        current, (vs, terms) = rss, friction
+        candidates.remove(k)
+    d = delay_of((vs, terms))
+    if vs is not None:
+        vs = _best_stribeck(reg, d, known_inertia, terms, exponent=vs[1])
+    return d, (vs, terms)
+
+
 def fit(samples: Samples, terms: ModelTerms | None, *, known_inertia: float | None = None,
         feedback_latency: float = 0.0, window: float | None = None, max_delay: float = 0.05,
         moving: float = MOVING, joint: str = "", excitation: Mapping[str, Any] | None = None,
-        folds: int = FOLDS) -> Identification:
+        folds: int = FOLDS, extended_friction: bool = True) -> Identification:
     """Fit inertia, friction, torque scale and delay to ``samples``.
 
     The model ``J q'' + b q' + c sign(q') + G(q) = s u(t - d)`` is multiplied by a smooth window
@@ -654,14 +885,17 @@ def fit(samples: Samples, terms: ModelTerms | None, *, known_inertia: float | No
             "are known only as a ratio; identify on a gravity-loaded stand (e.g. models/erob_pendulum.xml) or "
             "give the joint's whole inertia (known_inertia, joints identify --inertia)", key="known_inertia")
     torque_mode = samples.mode == "torque"
-    delay = _best_delay(reg, known_inertia, max_delay) if torque_mode else 0.0
-    A, y, names = reg.system(delay, known_inertia)
+    delay, friction = _model(reg, known_inertia, max_delay, torque_mode, extended_friction)
+    vs, extra = friction
+    A, y, names = reg.system(delay, known_inertia, friction=friction)
     x, rss = _solve(A, y)
     est = _named(x, names, known_inertia)
+    est.setdefault("coulomb_friction", 0.0)
     # the regression's standard errors (overlapping windows are not independent: inflate)
     dof = max(1, A.shape[0] - A.shape[1])
     scale = np.sqrt((A ** 2).sum(axis=0))
     As = A / scale
+    cov = np.full((len(names), len(names)), math.inf)
     try:
         inv = np.linalg.inv(As.T @ As)
         cov = rss / dof * reg.overlap * inv / np.outer(scale, scale)
@@ -674,7 +908,7 @@ def fit(samples: Samples, terms: ModelTerms | None, *, known_inertia: float | No
     condition = float(np.linalg.cond(As))
     correlations = {f"{names[i]}/{names[j]}": float(corr[i, j])
                     for i in range(len(names)) for j in range(i + 1, len(names))}
-    # held-out folds: contiguous blocks of the windows
+    # held-out folds: contiguous blocks of the windows (each refits the delay and the Stribeck velocity)
     block = np.minimum((np.arange(reg.used) * folds) // reg.used, folds - 1)
     fold_est: list[dict[str, float]] = []
     held_r, held_u = 0.0, 0.0
@@ -682,11 +916,14 @@ def fit(samples: Samples, terms: ModelTerms | None, *, known_inertia: float | No
         train, test = block != k, block == k
         if test.sum() == 0 or train.sum() < 20:
             continue
-        dk = _best_delay(reg, known_inertia, max_delay, train) if torque_mode else 0.0
-        Ak, yk, _ = reg.system(dk, known_inertia)
+        dk = _best_delay(reg, known_inertia, max_delay, train, friction) if torque_mode else 0.0
+        vk = _best_stribeck(reg, dk, known_inertia, extra, train, vs[1]) if vs is not None else None
+        Ak, yk, _ = reg.system(dk, known_inertia, friction=(vk, extra))
         xk, _ = _solve(Ak, yk, train)
         e = _named(xk, names, known_inertia)
         e["delay"] = dk
+        if vk is not None:
+            e["stribeck_velocity"] = vk[0]
         fold_est.append(e)
         r = Ak[test] @ xk - yk[test]
         held_r += float(r @ r)
@@ -699,9 +936,39 @@ def fit(samples: Samples, terms: ModelTerms | None, *, known_inertia: float | No
         return float(np.sqrt((kf - 1) / kf * ((vals - vals.mean()) ** 2).sum())) if kf > 1 else math.inf
 
     armature = est["inertia"] - body
+    # the Coulomb and Stribeck levels' uncertainties are stated relative to the friction at standstill (their sum):
+    # with a Stribeck term the Coulomb level alone can be near 0 (BAM's M2)
+    static = est["coulomb_friction"] + est.get("stribeck_friction", 0.0)
     std: dict[str, float] = {}
     for key in names:
-        std[key] = max(float(se[key]), jack(key, lambda e, k=key: e[k])) / abs(est[key]) if est[key] else math.inf
+        size = abs(static) if key in ("coulomb_friction", "stribeck_friction") else abs(est[key])
+        std[key] = max(float(se[key]), jack(key, lambda e, k=key: e[k])) / size if size else math.inf
+    # the friction curve at 10 speeds up to those the excitation reached: regression error and spread over folds
+    speeds = np.linspace(0.1, 1.0, 10) * max(reg.speed, 2 * moving)
+    grad = np.zeros((len(speeds), len(names)))
+    grad[:, names.index("viscous_friction")] = speeds
+    if "coulomb_friction" in names:
+        grad[:, names.index("coulomb_friction")] = 1.0
+    if vs is not None:
+        grad[:, names.index("stribeck_friction")] = np.exp(-np.abs(speeds / vs[0]) ** vs[1])
+
+    def curve(e: Mapping[str, float]) -> Any:
+        s_vs = e.get("stribeck_velocity", vs[0] if vs is not None else 1.0)
+        excess = e.get("stribeck_friction", 0.0) * np.exp(-np.abs(speeds / s_vs) ** (vs[1] if vs else 2.0))
+        return e.get("coulomb_friction", 0.0) + excess + e["viscous_friction"] * speeds
+
+    level = curve(est)
+    on_folds = np.array([curve(e) for e in fold_est])
+    jack_curve = np.sqrt((kf - 1) / kf * ((on_folds - on_folds.mean(axis=0)) ** 2).sum(axis=0)) if kf > 1 else math.inf
+    reg_curve = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", grad, cov, grad), 0, None))
+    std["friction"] = float(np.max(np.maximum(reg_curve, jack_curve) / np.abs(level)))
+    for key, power in SCALED.items():  # estimated as the parameter x torque scale^power
+        if key in est:
+            std[key] = max(std[key], power * std["torque_scale"])
+            est[key] /= est["torque_scale"] ** power
+    if vs is not None:  # the spread over the folds, at least the search's step
+        std["stribeck_velocity"] = max(jack("stribeck_velocity", lambda e: e["stribeck_velocity"]) / vs[0],
+                                       (3 * reg.speed / STRIBECK_MIN) ** (1 / 144) - 1)
     if known_inertia is None:
         arm_unc = max(float(se["inertia"]), jack("armature", lambda e: e["inertia"] - body))
         std["armature"] = arm_unc / abs(armature) if armature else math.inf
@@ -711,20 +978,24 @@ def fit(samples: Samples, terms: ModelTerms | None, *, known_inertia: float | No
     residual = math.sqrt(rss / reg.used) / impulse
     # load-mass sensitivity: refit with the model's load 1 % heavier (gravity and the bodies' inertia)
     sensitivity: dict[str, float] = {}
-    load, load_mass = "", math.nan
+    load_name, load_mass = "", math.nan
     if terms is not None:
-        load, load_mass = terms.load  # type: ignore[attr-defined]
+        load_name, load_mass = terms.load  # type: ignore[attr-defined]
         if load_mass > 0:
             heavier = ModelTerms(terms.path, terms.joint, terms.pose, load_factor=1.01)
             g2 = heavier.gravity(q)
             body2 = heavier.body_inertia(float(q[0]))
             ratio = float(np.sqrt(np.mean(g2 ** 2)) / (np.sqrt(np.mean(g ** 2)) or 1.0))
-            A2, y2, _ = reg.system(delay, known_inertia, f4_scale=ratio)
+            A2, y2, _ = reg.system(delay, known_inertia, f4_scale=ratio, friction=friction)
             x2, _ = _solve(A2, y2)
             e2 = _named(x2, names, known_inertia)
             e2["armature"] = e2["inertia"] - body2
+            for key, power in SCALED.items():
+                if key in e2:
+                    e2[key] /= e2["torque_scale"] ** power
             base = dict(est, armature=armature)
-            for key in ("armature", "inertia", "coulomb_friction", "viscous_friction", "torque_scale"):
+            for key in ("armature", "inertia", "coulomb_friction", "viscous_friction", "stribeck_friction",
+                        *FRICTION_TERMS[1:], "torque_scale"):
                 if key in e2 and base[key]:
                     sensitivity[key] = (e2[key] / base[key] - 1.0) / 0.01
     if est["torque_scale"] <= 0 or est["inertia"] <= 0:
@@ -738,8 +1009,11 @@ def fit(samples: Samples, terms: ModelTerms | None, *, known_inertia: float | No
         torque_scale=est["torque_scale"], delay=delay if torque_mode else None, feedback_latency=feedback_latency,
         gravity_loaded=known_inertia is None, samples=n, used=reg.used, period=reg.period, residual=residual,
         std=std, excitation=dict(excitation or {}), validation=validation, condition=condition,
-        correlations=correlations, load_sensitivity=sensitivity, load=load, load_mass=load_mass,
-        period_spread=spread, window=reg.length)
+        correlations=correlations, load_sensitivity=sensitivity, load=load_name, load_mass=load_mass,
+        period_spread=spread, window=reg.length, stribeck_friction=max(est.get("stribeck_friction", 0.0), 0.0),
+        stribeck_velocity=vs[0] if vs is not None else math.nan,
+        stribeck_exponent=vs[1] if vs is not None else math.nan,
+        **{k: max(est.get(k, 0.0), 0.0) for k in FRICTION_TERMS[1:]})
 
 
 # -- the whole procedure ------------------------------------------------------------------------------
@@ -817,6 +1091,14 @@ def overlay_values(profile: Any, ident: Identification) -> dict[str, float]:
         out["rotor_inertia"] = ident.armature / ratio ** 2
     out["coulomb_friction"] = ident.coulomb_friction
     out["viscous_friction"] = ident.viscous_friction
+    if "stribeck_friction" in names:  # 0 where the data showed none (it clears an older overlay's)
+        out["stribeck_friction"] = ident.stribeck_friction
+        if ident.stribeck_friction > 0:
+            out["stribeck_velocity"] = ident.stribeck_velocity
+            out["stribeck_exponent"] = ident.stribeck_exponent
+    for k in FRICTION_TERMS[1:]:
+        if k in names:
+            out[k] = getattr(ident, k)
     if "efficiency" in names and "motor_kt" in names:
         eff = float(profile.efficiency) * ident.torque_scale
         if not 0 < eff <= 1:
@@ -861,6 +1143,11 @@ def write_overlay(path: str | Path, profile: Any, ident: Identification, *, devi
                           f"{ident.feedback_latency * 1e3:.2f} ms"),
         "coulomb_friction": "N*m (MuJoCo frictionloss)",
         "viscous_friction": "N*m*s/rad (MuJoCo damping)",
+        "stribeck_friction": "N*m more at standstill, fading as exp(-|v / stribeck_velocity|^stribeck_exponent)",
+        "stribeck_velocity": "rad/s",
+        "load_friction": "N*m per N*m of motor torque",
+        "load_friction_quadratic": "N*m per (N*m of motor torque)^2",
+        "external_friction": "N*m per N*m of external (gravity) torque",
     }
     lines = [
         (f"# Device-profile overlay of joint {ident.joint!r}, written by `joints identify` "

@@ -79,6 +79,12 @@ def resolve_model(name: str | Path, base_dir: Path | None = None) -> Path:
 
 log = logging.getLogger("joints.sim")
 
+#: a profile's friction beyond Coulomb + viscous (optional fields; their defaults add nothing): Stribeck friction
+#: N*m at standstill, its velocity and exponent; friction per |motor torque|, per motor torque^2, per |external torque|
+STATE_FRICTION = {"stribeck_friction": 0.0, "stribeck_velocity": 1.0, "stribeck_exponent": 2.0, "load_friction": 0.0,
+                  "load_friction_quadratic": 0.0, "external_friction": 0.0}
+STATE_FRICTION_ON = ("stribeck_friction", "load_friction", "load_friction_quadratic", "external_friction")
+
 
 class JointProfile(Protocol):
     """What the world needs from a device profile to set up a joint and its motor."""
@@ -359,6 +365,17 @@ class World:
         m = self.model
         self._nominal = {"armature": m.dof_armature.copy(), "frictionloss": m.dof_frictionloss.copy(),
                          "damping": m.dof_damping.copy(), "gear": m.actuator_gear[:, 0].copy()}
+        #: friction that depends on the state (a profile's STATE_FRICTION fields, 0 by default: then nothing is
+        #: added): (dof, actuator, ratio, stribeck friction, velocity, exponent, load, quadratic, external) per
+        #: joint, and the Coulomb friction loss it adds to (perturb scales it)
+        self._state_friction = [(addr[d.name][1], addr[d.name][2], ratios[d.name],
+                                 *(float(getattr(d.profile, k, v)) for k, v in STATE_FRICTION.items()))
+                                for d in drives if any(getattr(d.profile, k, 0.0) for k in STATE_FRICTION_ON)]
+        self._coulomb = m.dof_frictionloss.copy()
+        if self._state_friction:
+            self._friction_tick(0.0)
+            self._extra_ticks.append(self._friction_tick)
+            self._update_ticks()
         self._nominal_gains: dict[str, dict[str, int]] = {}
         #: one caller steps the physics at a time (two threads sleeping on one rig must not share MjData)
         self.lock = threading.RLock()
@@ -411,6 +428,18 @@ class World:
             else:
                 qpos[qa] = q + qd * max(age, 0.0)
                 qvel[da] = qd
+
+    def _friction_tick(self, t: float) -> None:
+        """After every substep: the friction loss of joints with Stribeck or load friction, from the velocity
+        and the torques the substep ended with: ``coulomb + r excess exp(-|w / v_s|^a) + load |tau| + quadratic
+        tau^2 + external |tau_e|`` (w the motor's velocity, tau the actuator's force on the joint, tau_e the
+        joint's bias force: gravity and coupling)."""
+        m, d = self.model, self.data
+        for dof, aid, r, excess, vs, a, load, quadratic, external in self._state_friction:
+            w = abs(float(d.qvel[dof]) * r / vs)
+            tau = abs(float(d.actuator_force[aid]))
+            m.dof_frictionloss[dof] = (self._coulomb[dof] + r * excess * math.exp(-(w ** a)) + load * tau
+                                       + quadratic * tau * tau + external * abs(float(d.qfrc_bias[dof])))
 
     def _update_ticks(self) -> None:
         """Who is called after substeps: timed buses, drives with a command delay, extra ticks; and whether
@@ -633,6 +662,8 @@ class World:
             emu.time = 0.0
         for b in self._bound:
             b.stepper.place(float(self.data.qpos[b.qadr]) * b.ratio)
+        if self._state_friction:
+            self._friction_tick(0.0)
 
     def set_joint_positions(self, positions: Mapping[str, float]) -> None:
         """Place drives' joints at ``positions`` (joint name -> MJCF position: rad, m for a slide) at rest.
@@ -715,7 +746,7 @@ class World:
             emu.command_delay = delay
             self._update_ticks()
         m.dof_armature[j.dof] = nom["armature"][j.dof] * armature
-        m.dof_frictionloss[j.dof] = nom["frictionloss"][j.dof] * coulomb_friction
+        m.dof_frictionloss[j.dof] = self._coulomb[j.dof] = nom["frictionloss"][j.dof] * coulomb_friction
         m.dof_damping[j.dof] = nom["damping"][j.dof] * viscous_friction
         m.actuator_gear[j.actuator, 0] = nom["gear"][j.actuator] * torque_constant
         if gains:
@@ -748,7 +779,7 @@ class World:
         """Every joint's physics and loop gains back to their nominal values."""
         m, nom = self.model, self._nominal
         m.dof_armature[:] = nom["armature"]
-        m.dof_frictionloss[:] = nom["frictionloss"]
+        m.dof_frictionloss[:] = self._coulomb[:] = nom["frictionloss"]
         m.dof_damping[:] = nom["damping"]
         m.actuator_gear[:, 0] = nom["gear"]
         for name, gains in self._nominal_gains.items():

@@ -30,7 +30,17 @@ from joints.s2r.shadow import Shadow
 from joints.sim import sensors
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from reality import EROB80_100_M2, NOMINAL, PERTURBED, REALITIES, chirp_currents, config, drive, open_real
+from reality import (
+    EROB80_100_M2,
+    NOMINAL,
+    PERTURBED,
+    REALITIES,
+    chirp_currents,
+    config,
+    drive,
+    make_real,
+    open_real,
+)
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -98,9 +108,23 @@ def check_recovery(reality: Any, ref: Identification, got: Identification, *, de
     assert not got.problems(), str(got)
     assert got.armature == pytest.approx(reality.armature, rel=0.10), str(got)
     assert got.torque_scale == pytest.approx(reality.torque_scale, rel=0.10), str(got)
-    assert got.coulomb_friction == pytest.approx(ref.coulomb_friction, rel=0.10), (str(got), str(ref))
-    assert got.viscous_friction == pytest.approx(ref.viscous_friction, rel=0.10), (str(got), str(ref))
+    check_friction(got, ref)
     assert got.delay is not None and abs(got.delay - reality.delay) <= 1e-3 + delay_slack, str(got)
+
+
+#: rad/s, where the friction curves are compared: from slow sliding to the speeds the excitation reaches
+SPEEDS = (0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.5)
+
+
+def check_friction(got: Identification, ref: Identification) -> None:
+    """Friction within 10 % of the reference: the viscous coefficient, and the friction curve (Coulomb + Stribeck
+    + viscous) at every speed of SPEEDS - with a Stribeck term the Coulomb and Stribeck levels trade off (the
+    report names them inseparable), the curve they make does not. Without one, the Coulomb level itself."""
+    assert got.viscous_friction == pytest.approx(ref.viscous_friction, rel=0.10), (str(got), str(ref))
+    for v in SPEEDS:
+        assert got.friction_at(v) == pytest.approx(ref.friction_at(v), rel=0.10), (v, str(got), str(ref))
+    if not (got.stribeck_friction or ref.stribeck_friction):
+        assert got.coulomb_friction == pytest.approx(ref.coulomb_friction, rel=0.10), (str(got), str(ref))
 
 
 def test_reality_twins_are_recovered(judged: tuple[Any, Identification, Identification, Any]) -> None:
@@ -133,11 +157,11 @@ def test_identified_twin_tracks_the_reality_twin_on_a_held_out_chirp(
     assert np.ptp(q_real) > 0.3  # the chirp really moves the joint
     rms_twin = float(np.sqrt(np.mean((q_twin - q_real) ** 2)))
     rms_nominal = float(np.sqrt(np.mean((q_nominal - q_real) ** 2)))
-    # The issue asks for 5x on every reality twin. It holds on (b); on BAM's M2/M6 (a) it does not (measured
-    # 4.2x and 2.4x): their Stribeck and load-dependent friction has no Coulomb + viscous equivalent over a
-    # chirp that sticks and slides, so the fitted form's own error dominates (docs/identification.md).
-    factor = 5.0 if reality is PERTURBED else 2.0
-    assert rms_nominal > factor * rms_twin, (rms_nominal, rms_twin)
+    # the issue's 5x on every reality twin: BAM's M2/M6 need the Stribeck and torque-dependent friction terms
+    # (Coulomb + viscous alone gave 4.2x and 2.4x)
+    print(f"{reality.name}: held-out RMS twin {rms_twin:.4f} rad, unidentified {rms_nominal:.4f} rad, "
+          f"{rms_nominal / rms_twin:.1f}x")
+    assert rms_nominal > 5.0 * rms_twin, (rms_nominal, rms_twin)
 
 
 def test_ten_times_the_drives_velocity_noise_stays_within_ten_percent_or_refuses() -> None:
@@ -174,6 +198,25 @@ def test_a_weak_excitation_is_refused(tmp_path: Path) -> None:
     text = (tmp_path / "x.toml").read_text()
     assert "# WARNING: written with --force" in text
     assert tomllib.loads(text)["identification"]["warning"].startswith("forced:")
+
+
+def test_on_the_wire_timed_stand_a_command_every_fourth_state_identifies_all_but_the_delay() -> None:
+    """The stand's RS485 line with its wire time (115200 baud, turnaround, adapter latency): a command and a
+    state take ~19 ms; writing a command with every 4th state read only gives a state every ~12 ms. BAM's M2 is
+    then recovered within 10 % (armature, Kt), but a 12 ms sampling period cannot place the delay within the
+    2 ms threshold (its uncertainty is at least a quarter period): the fit refuses, for that reason only."""
+    cfg = config()
+    del cfg["buses"]["rs485"]["timing"]  # the line's own timing
+    rig = joints.open(cfg)
+    try:
+        make_real(rig.sim, EROB80_100_M2, seed=1)
+        got = identify(rig, "joint1", Excitation(duration=40.0, amplitude=32.0, command_every=4))
+    finally:
+        rig.close()
+    assert 0.010 < got.period < 0.014, str(got)
+    assert got.armature == pytest.approx(EROB80_100_M2.armature, rel=0.10), str(got)
+    assert got.torque_scale == pytest.approx(EROB80_100_M2.torque_scale, rel=0.10), str(got)
+    assert [p.split()[0] for p in got.problems()] == ["delay"], str(got)
 
 
 def test_load_mass_sensitivity_is_stated_and_true() -> None:
@@ -242,15 +285,22 @@ def test_shadow_counts_twin_errors() -> None:
     assert {"mean", "std", "p5", "p95"} <= set(summary["joint1"]["position"])
 
 
+#: over the pty: a state every ~5-7 ms (two transactions per sample at the host's pace), so twice the duration
+#: of the in-process excitation: the fit's windows grow to 30 sampling periods and fewer of them slide
+PTY_EXCITATION = Excitation(duration=40.0, amplitude=32.0)
+
+
 @pytest.mark.slow
-def test_identification_over_the_pty_at_wall_clock_time() -> None:
-    """The reality twin (b) served on a pseudo-terminal in real time (wall clock), identified through the
-    serial port as on hardware: the parameters, not only the sampling period."""
+@pytest.mark.parametrize("reality", [EROB80_100_M2, PERTURBED], ids=lambda r: r.name.split()[-1])
+def test_identification_over_the_pty_at_wall_clock_time(reality: Any) -> None:
+    """A reality twin served on a pseudo-terminal in real time (wall clock), identified through the serial port
+    as on hardware: the parameters - armature and Kt within 10 % of the truth, friction within 10 % of the same
+    estimator on the same twin's noise-free readings sampled at the same period, the delay within 1 ms plus a
+    sampling period - and the fit meets its own thresholds."""
     pytest.importorskip("serial")
     import json
     import subprocess
 
-    reality = PERTURBED
     # a process of its own (as a real drive is): the served world does not share the host's interpreter
     server = subprocess.Popen([sys.executable, str(Path(__file__).resolve().parent / "reality.py"),
                                reality.name.split()[-1], "3"], stdout=subprocess.PIPE, text=True)
@@ -260,7 +310,7 @@ def test_identification_over_the_pty_at_wall_clock_time() -> None:
         cfg = config()
         cfg["buses"]["rs485"]["port"] = line["port"]
         with joints.open(cfg, backend="hardware") as rig:
-            got = identify(rig, "joint1", EXCITATION)
+            got = identify(rig, "joint1", PTY_EXCITATION)
     finally:
         server.terminate()
         server.wait(10)
@@ -268,19 +318,12 @@ def test_identification_over_the_pty_at_wall_clock_time() -> None:
     ref_rig = open_real(reality, noise=False)
     try:
         period = round(got.period / ref_rig.sim.timestep) * ref_rig.sim.timestep
-        ref = identify(ref_rig, "joint1", Excitation(duration=20.0, amplitude=32.0, period=max(period, 0.001)))
+        ref = identify(ref_rig, "joint1", Excitation(duration=PTY_EXCITATION.duration, amplitude=32.0,
+                                                     period=max(period, 0.001)))
     finally:
         ref_rig.close()
     print(got)
     print(ref)
-    assert got.period < 0.012, str(got)  # a state at least every 12 ms: 8 per 100 ms window
-    # Measured at ~5 ms per sample (an unloaded machine): Kt scale, friction and delay recovered; the
-    # armature came out -14.5 % with an uncertainty of 18 % and the fit refused. The Done-when's "armature
-    # within 10 % over the pty" does not hold on this branch: what holds is "within 10 % or refused".
-    assert got.torque_scale == pytest.approx(reality.torque_scale, rel=0.10), str(got)
-    assert got.coulomb_friction == pytest.approx(ref.coulomb_friction, rel=0.10), (str(got), str(ref))
-    assert got.viscous_friction == pytest.approx(ref.viscous_friction, rel=0.10), (str(got), str(ref))
-    assert got.delay is not None and abs(got.delay - reality.delay) <= 1e-3 + got.period, str(got)
-    arm_err = abs(got.armature / reality.armature - 1)
-    assert arm_err < 0.10 or any("armature" in p for p in got.problems()), str(got)
-    assert not (arm_err > 0.25 and got.std["armature"] < 0.05), str(got)
+    assert got.period < 0.012, str(got)  # a state at least every 12 ms
+    assert f"every {got.period * 1e3:.3f} ms" in str(got)
+    check_recovery(reality, ref, got, delay_slack=got.period)

@@ -30,7 +30,10 @@ Conventions
       read; it is ``peak_torque / torque_constant``). Use it as the command current bound.
     * ``peak_torque`` is the repeated start/stop peak (the force limit for control);
       ``max_torque`` is the momentary maximum, for collision/gear-damage checks only.
-    * Friction model: ``tau_f = coulomb_friction * sign(w) + viscous_friction * w`` at the output.
+    * Friction model: ``tau_f = coulomb_friction * sign(w) + viscous_friction * w`` at the output,
+      plus (0 unless identified) ``(stribeck_friction * exp(-|w / stribeck_velocity|^stribeck_exponent) + load_friction
+      * |tau_m| + load_friction_quadratic * tau_m^2 + external_friction * |tau_e|) * sign(w)``: Stribeck friction
+      and friction growing with the motor's torque tau_m and the external (gravity) torque tau_e (BAM's M6 form).
     * ``command_delay`` is the time from a motion command's arrival at the drive to the drive
       acting on it (the twin reproduces it: :attr:`joints.sim.firmware.Firmware.command_delay`);
       0 unless identified (``joints identify`` writes it into a profile overlay).
@@ -94,8 +97,12 @@ _NON_NEGATIVE_FIELDS = ("coulomb_friction", "viscous_friction", "command_delay")
 # the sensor models (joints.sim.sensors): 0 switches a term off
 _SENSOR_FIELDS = ("velocity_window", "velocity_noise", "position_noise", "current_noise", "current_resolution",
                   "sample_jitter")
-_FLOAT_FIELDS: tuple[str, ...] = (*_FLOAT_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
-_NON_NEGATIVE_FIELDS: tuple[str, ...] = (*_NON_NEGATIVE_FIELDS, *_SENSOR_FIELDS)  # type: ignore[no-redef]
+# state-dependent friction (issue 30; joints identify writes them): 0 = none, today's Coulomb + viscous twin
+_FRICTION_FIELDS = ("stribeck_friction", "load_friction", "load_friction_quadratic", "external_friction")
+_FLOAT_FIELDS: tuple[str, ...] = (*_FLOAT_FIELDS, *_SENSOR_FIELDS, *_FRICTION_FIELDS,  # type: ignore[no-redef]
+                                  "stribeck_velocity", "stribeck_exponent")
+_NON_NEGATIVE_FIELDS: tuple[str, ...] = (*_NON_NEGATIVE_FIELDS, *_SENSOR_FIELDS,  # type: ignore[no-redef]
+                                         *_FRICTION_FIELDS)
 _SENSOR_SOURCES = {
     "velocity_window": ("EST: ZeroErr publishes no speed estimator; the status speed is taken as the 19-bit output "
                         "encoder's difference over one 1 kHz speed-loop period: steps of 0.012 rad/s, quantisation "
@@ -115,6 +122,14 @@ TURNAROUND = 0.0008
 TURNAROUND_SOURCE = ("EST: 0.8 ms - no eRob manual states a reply turnaround; a real ZLAC8015D log shows 1.8 ms "
                      "per transaction beyond bytes and t3.5, less 1 ms of USB adapter latency (docs/timing.md)")
 _TIMING_FIELDS = ("turnaround",)  # bus timing (issue 29): finite, >= 0
+_FRICTION_SOURCES = {
+    "stribeck_friction": "EST: 0 - not modelled unless identified (`joints identify`, profile overlay)",
+    "stribeck_velocity": "EST: 1 rad/s placeholder, used only when stribeck_friction > 0 (`joints identify`)",
+    "stribeck_exponent": "EST: 2 (Gaussian Stribeck curve), used only when stribeck_friction > 0 (`joints identify`)",
+    "load_friction": "EST: 0 - not modelled unless identified (`joints identify`, profile overlay)",
+    "load_friction_quadratic": "EST: 0 - not modelled unless identified (`joints identify`, profile overlay)",
+    "external_friction": "EST: 0 - not modelled unless identified (`joints identify`, profile overlay)",
+}
 
 
 @dataclass(frozen=True, slots=True)
@@ -146,6 +161,14 @@ class ErobProfile:
     current_noise: float = 0.02  #: A, std of the measured current
     current_resolution: float = 0.01  #: A, step of the current measurement
     sample_jitter: float = 0.0  #: s, age of a status value: uniform in [0, this]
+    # -- friction beyond Coulomb + viscous (the twin: joints.sim.world; 0 = none) --
+    #: N*m of friction at standstill above coulomb_friction, fading as exp(-|w / stribeck_velocity|^stribeck_exponent)
+    stribeck_friction: float = 0.0
+    stribeck_velocity: float = 1.0  #: rad/s (used only when stribeck_friction > 0)
+    stribeck_exponent: float = 2.0  #: (used only when stribeck_friction > 0)
+    load_friction: float = 0.0  #: N*m of friction per N*m of torque the motor transmits
+    load_friction_quadratic: float = 0.0  #: N*m of friction per (N*m of motor torque)^2
+    external_friction: float = 0.0  #: N*m of friction per N*m of external torque (gravity) on the output
     sources: Mapping[str, str] = field(default_factory=_empty_sources, compare=False, hash=False)
 
     def __post_init__(self) -> None:
@@ -392,6 +415,7 @@ def _build(size: int, ratio: int) -> ErobProfile:
         "coulomb_friction": coulomb_src,
         "viscous_friction": viscous_src,
         **_SENSOR_SOURCES,
+        **_FRICTION_SOURCES,
         "command_delay": ("EST: 0 - the twin acts on a command at its next substep; a real drive's delay comes "
                           "from `joints identify` (profile overlay)"),
         "turnaround": TURNAROUND_SOURCE,
