@@ -272,6 +272,9 @@ class JointsEnv(RigEnv):
             (:func:`joints.check_rate`, a :class:`~joints.errors.ConfigError` otherwise).
         raise_on_overrun: raise :class:`~joints.errors.OverrunError` when a step misses its tick
             (default: count it in ``overruns`` / ``overrun_time`` and show it as ``info["overrun"]``).
+        compiled_path: sim only - send the step's commands and state reads by the compiled path
+            (:mod:`joints.compiled_path`) where every joint is an in-process twin it knows (default);
+            ``False``: always the driver path. Both give the same bits.
         render_mode: ``None`` | ``"rgb_array"`` | ``"human"``.
         domain_randomization: sim only - ``False``, ``True`` (default ranges), a mapping of ranges,
             or a :class:`~envs.randomization.DomainRandomization`.
@@ -305,6 +308,7 @@ class JointsEnv(RigEnv):
         width: int = 480,
         height: int = 480,
         raise_on_overrun: bool = False,
+        compiled_path: bool = True,
     ) -> None:
         if action_mode not in ACTION_MODES:
             raise ValueError(f"action_mode {action_mode!r} is not one of {ACTION_MODES}")
@@ -328,6 +332,7 @@ class JointsEnv(RigEnv):
         self.reset_timeout = float(reset_timeout)
         self.reset_tolerance = float(reset_tolerance)
         self.width, self.height = int(width), int(height)
+        self._want_compiled = bool(compiled_path)
         self._start(config, backend, domain_randomization)
 
     # -- construction -----------------------------------------------------------------------
@@ -414,6 +419,8 @@ class JointsEnv(RigEnv):
         self.overruns = 0  #: steps whose tick had passed before their commands were sent
         self.overrun_time = 0.0  #: s, the total of those steps' lateness
         self._overrun = 0.0
+        #: the compiled command/state path (sim, every joint a twin it knows), else None: the driver path
+        self.compiled_path = joints.CompiledPath.build(self.joints) if self.sim and self._want_compiled else None
         self._check_rate(self.action_mode)
 
     def _select_joints(self, rig: joints.Rig) -> list[str]:
@@ -641,7 +648,8 @@ class JointsEnv(RigEnv):
         return obs, float(reward), bool(terminated), False, info
 
     def _read(self) -> list[joints.JointState]:
-        self._states = [j.state() for j in self.joints]
+        compiled = self.compiled_path
+        self._states = compiled.states() if compiled is not None else [j.state() for j in self.joints]
         return self._states
 
     def _observation(self, states: Sequence[joints.JointState], pos: np.ndarray | None = None) -> np.ndarray:
@@ -669,6 +677,10 @@ class JointsEnv(RigEnv):
         self._sent = self.safe_command(self.command_of(action))
         cmd = self._sent.tolist()
         mode = self.action_mode
+        compiled = self.compiled_path
+        if compiled is not None:  # faulted/disabled drives: the episode has ended; never command them
+            compiled.command(mode, cmd, [not j.enabled for j in self.joints])
+            return
         for j, c in zip(self.joints, cmd):
             if not j.enabled:  # faulted/disabled drive: the episode has ended; never command it
                 continue
