@@ -47,7 +47,7 @@ def _frames(link: Any) -> list[tuple[float, float, float, int, str]]:
 
 def _run(env_id: str, mode: str, steps: int, compiled: bool, trace: bool = False) -> dict[str, Any]:
     env = gym.make(env_id, action_mode=mode, compiled_path=compiled)
-    u = env.unwrapped
+    u: Any = env.unwrapped
     records: list[TraceRecord] = []
     try:
         if trace:
@@ -104,11 +104,11 @@ def test_a_trace_sees_the_same_frames_on_both_paths() -> None:
 
 def test_the_env_takes_the_compiled_path_only_where_every_joint_is_supported() -> None:
     with gym.make("joints/ErobReach-v0") as env:
-        u = env.unwrapped
+        u: Any = env.unwrapped
         assert isinstance(u.compiled_path, joints.CompiledPath)
         assert all(supported(j) for j in u.joints)
     with gym.make("joints/ErobReach-v0", compiled_path=False) as env:
-        assert env.unwrapped.compiled_path is None
+        assert getattr(env.unwrapped, "compiled_path") is None  # noqa: B009 - an env attribute mypy cannot see
     with pytest.raises(ValueError, match="cannot step"):
         joints.CompiledPath([_Unsupported()])  # type: ignore[list-item]
 
@@ -121,7 +121,7 @@ class _Unsupported:
 def test_a_refused_command_is_refused_the_same_way_and_sends_nothing() -> None:
     """The joint's own checks run first: a target outside the limits raises LimitError, no frame is sent."""
     with gym.make("joints/ErobReach-v0") as env:
-        u = env.unwrapped
+        u: Any = env.unwrapped
         env.reset(seed=0)
         link = _links(u)[0]
         before = link.transactions
