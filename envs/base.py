@@ -84,6 +84,15 @@ OBS_POSITION_MARGIN = 0.5
 LIMIT_INSET = 0.005
 
 
+def clip(value: float, low: float, high: float) -> float:
+    """``np.clip`` of one float (NaN stays NaN; a value equal to a bound is kept, as numpy 2 keeps it), the
+    same bits without an array's cost. Only a bound of signed zero could tell the tie rules of numpy
+    versions apart; the envs' bounds are nonzero limits."""
+    if math.isnan(value):
+        return value
+    return min(max(value, low), high)  # max/min keep their first argument on a tie
+
+
 def braking_speed(distance: np.ndarray, acceleration: np.ndarray, period: float,
                   speed: np.ndarray | float = 0.0) -> np.ndarray:
     """Fastest speed command ``v`` >= 0 towards a stop ``distance`` [rad] away that a joint moving
@@ -400,6 +409,9 @@ class JointsEnv(RigEnv):
         self._lo_stop = self.position_limits[:, 0] - LIMIT_MARGIN
         self._hi_stop = self.position_limits[:, 1] + LIMIT_MARGIN
         self._lo_list, self._hi_list = self._lo_stop.tolist(), self._hi_stop.tolist()
+        #: the limits as plain floats (per-step arithmetic on a few joints)
+        self._pos_lo, self._pos_hi = self.position_limits[:, 0].tolist(), self.position_limits[:, 1].tolist()
+        self._vel_list, self._torque_list = self.velocity_limits.tolist(), self.torque_limits.tolist()
 
         self._mjcf_joints = [rig.config.joints[nm].mjcf_joint or nm for nm in self.joint_names]
 
@@ -459,15 +471,13 @@ class JointsEnv(RigEnv):
 
     def command_of(self, action: Sequence[float] | np.ndarray) -> np.ndarray:
         """SI commands (rad | rad/s | N*m per the action mode) of a normalised action."""
-        a = np.asarray(action, dtype=np.float64).reshape(-1).clip(-1.0, 1.0)
-        if self.action_mode == "position":
-            lo, hi = self.position_limits[:, 0], self.position_limits[:, 1]
-            out: np.ndarray = (lo + (a + 1.0) * 0.5 * (hi - lo)).clip(lo, hi)
-        elif self.action_mode == "velocity":
-            out = a * self.velocity_limits
+        a = [clip(v, -1.0, 1.0) for v in np.asarray(action, dtype=np.float64).reshape(-1).tolist()]
+        if self.action_mode == "position":  # plain floats: the same IEEE operations as the arrays, the same bits
+            out = [clip(lo + (v + 1.0) * 0.5 * (hi - lo), lo, hi) for v, lo, hi in zip(a, self._pos_lo, self._pos_hi)]
         else:
-            out = a * self.torque_limits
-        return out
+            scale = self._vel_list if self.action_mode == "velocity" else self._torque_list
+            out = [v * s for v, s in zip(a, scale)]
+        return np.array(out)
 
     def action_of(self, command: Sequence[float] | np.ndarray) -> np.ndarray:
         """The normalised action (float32, clipped to [-1, 1]) for SI commands; inverse of :meth:`command_of`."""
@@ -493,15 +503,17 @@ class JointsEnv(RigEnv):
         to the torque limit. Then the task's rule (:meth:`_shield`) applies. Without a state yet
         (before ``reset``) only the limits apply.
         """
-        c: np.ndarray = np.asarray(command, dtype=np.float64).reshape(-1).copy()
-        if c.shape != (len(self.joints),) or not np.all(np.isfinite(c)):
+        values = np.asarray(command, dtype=np.float64).reshape(-1).tolist()
+        if len(values) != len(self.joints) or any(v - v != 0.0 for v in values):  # NaN or infinite
             raise ValueError(f"command must be one finite value per joint, got {command!r}")
-        if self.action_mode == "position":
-            np.clip(c, self.position_limits[:, 0], self.position_limits[:, 1], out=c)
-        elif self.action_mode == "velocity":
-            np.clip(c, -self.speed_cap, self.speed_cap, out=c)
+        mode = self.action_mode
+        if mode == "position":  # plain floats, np.clip's rule: the same bits as the arrays
+            values = [clip(v, lo, hi) for v, lo, hi in zip(values, self._pos_lo, self._pos_hi)]
         else:
-            np.clip(c, -self.torque_limits, self.torque_limits, out=c)
+            cap = self.speed_cap.tolist() if mode == "velocity" else self._torque_list
+            values = [clip(v, -m, m) for v, m in zip(values, cap)]
+        c: np.ndarray = np.array(values)
+        if mode == "torque":
             return c
         if not self._states:
             return c
