@@ -84,6 +84,15 @@ OBS_POSITION_MARGIN = 0.5
 LIMIT_INSET = 0.005
 
 
+def clip(value: float, low: float, high: float) -> float:
+    """``np.clip`` of one float (NaN stays NaN; a value equal to a bound is kept, as numpy 2 keeps it), the
+    same bits without an array's cost. Only a bound of signed zero could tell the tie rules of numpy
+    versions apart; the envs' bounds are nonzero limits."""
+    if math.isnan(value):
+        return value
+    return min(max(value, low), high)  # max/min keep their first argument on a tie
+
+
 def braking_speed(distance: np.ndarray, acceleration: np.ndarray, period: float,
                   speed: np.ndarray | float = 0.0) -> np.ndarray:
     """Fastest speed command ``v`` >= 0 towards a stop ``distance`` [rad] away that a joint moving
@@ -272,6 +281,9 @@ class JointsEnv(RigEnv):
             (:func:`joints.check_rate`, a :class:`~joints.errors.ConfigError` otherwise).
         raise_on_overrun: raise :class:`~joints.errors.OverrunError` when a step misses its tick
             (default: count it in ``overruns`` / ``overrun_time`` and show it as ``info["overrun"]``).
+        compiled_path: sim only - send the step's commands and state reads by the compiled path
+            (:mod:`joints.compiled_path`) where every joint is an in-process twin it knows (default);
+            ``False``: always the driver path. Both give the same bits.
         render_mode: ``None`` | ``"rgb_array"`` | ``"human"``.
         domain_randomization: sim only - ``False``, ``True`` (default ranges), a mapping of ranges,
             or a :class:`~envs.randomization.DomainRandomization`.
@@ -305,6 +317,7 @@ class JointsEnv(RigEnv):
         width: int = 480,
         height: int = 480,
         raise_on_overrun: bool = False,
+        compiled_path: bool = True,
     ) -> None:
         if action_mode not in ACTION_MODES:
             raise ValueError(f"action_mode {action_mode!r} is not one of {ACTION_MODES}")
@@ -328,6 +341,7 @@ class JointsEnv(RigEnv):
         self.reset_timeout = float(reset_timeout)
         self.reset_tolerance = float(reset_tolerance)
         self.width, self.height = int(width), int(height)
+        self._want_compiled = bool(compiled_path)
         self._start(config, backend, domain_randomization)
 
     # -- construction -----------------------------------------------------------------------
@@ -395,6 +409,9 @@ class JointsEnv(RigEnv):
         self._lo_stop = self.position_limits[:, 0] - LIMIT_MARGIN
         self._hi_stop = self.position_limits[:, 1] + LIMIT_MARGIN
         self._lo_list, self._hi_list = self._lo_stop.tolist(), self._hi_stop.tolist()
+        #: the limits as plain floats (per-step arithmetic on a few joints)
+        self._pos_lo, self._pos_hi = self.position_limits[:, 0].tolist(), self.position_limits[:, 1].tolist()
+        self._vel_list, self._torque_list = self.velocity_limits.tolist(), self.torque_limits.tolist()
 
         self._mjcf_joints = [rig.config.joints[nm].mjcf_joint or nm for nm in self.joint_names]
 
@@ -414,6 +431,8 @@ class JointsEnv(RigEnv):
         self.overruns = 0  #: steps whose tick had passed before their commands were sent
         self.overrun_time = 0.0  #: s, the total of those steps' lateness
         self._overrun = 0.0
+        #: the compiled command/state path (sim, every joint a twin it knows), else None: the driver path
+        self.compiled_path = joints.CompiledPath.build(self.joints) if self.sim and self._want_compiled else None
         self._check_rate(self.action_mode)
 
     def _select_joints(self, rig: joints.Rig) -> list[str]:
@@ -452,15 +471,13 @@ class JointsEnv(RigEnv):
 
     def command_of(self, action: Sequence[float] | np.ndarray) -> np.ndarray:
         """SI commands (rad | rad/s | N*m per the action mode) of a normalised action."""
-        a = np.asarray(action, dtype=np.float64).reshape(-1).clip(-1.0, 1.0)
-        if self.action_mode == "position":
-            lo, hi = self.position_limits[:, 0], self.position_limits[:, 1]
-            out: np.ndarray = (lo + (a + 1.0) * 0.5 * (hi - lo)).clip(lo, hi)
-        elif self.action_mode == "velocity":
-            out = a * self.velocity_limits
+        a = [clip(v, -1.0, 1.0) for v in np.asarray(action, dtype=np.float64).reshape(-1).tolist()]
+        if self.action_mode == "position":  # plain floats: the same IEEE operations as the arrays, the same bits
+            out = [clip(lo + (v + 1.0) * 0.5 * (hi - lo), lo, hi) for v, lo, hi in zip(a, self._pos_lo, self._pos_hi)]
         else:
-            out = a * self.torque_limits
-        return out
+            scale = self._vel_list if self.action_mode == "velocity" else self._torque_list
+            out = [v * s for v, s in zip(a, scale)]
+        return np.array(out)
 
     def action_of(self, command: Sequence[float] | np.ndarray) -> np.ndarray:
         """The normalised action (float32, clipped to [-1, 1]) for SI commands; inverse of :meth:`command_of`."""
@@ -486,15 +503,17 @@ class JointsEnv(RigEnv):
         to the torque limit. Then the task's rule (:meth:`_shield`) applies. Without a state yet
         (before ``reset``) only the limits apply.
         """
-        c: np.ndarray = np.asarray(command, dtype=np.float64).reshape(-1).copy()
-        if c.shape != (len(self.joints),) or not np.all(np.isfinite(c)):
+        values = np.asarray(command, dtype=np.float64).reshape(-1).tolist()
+        if len(values) != len(self.joints) or any(v - v != 0.0 for v in values):  # NaN or infinite
             raise ValueError(f"command must be one finite value per joint, got {command!r}")
-        if self.action_mode == "position":
-            np.clip(c, self.position_limits[:, 0], self.position_limits[:, 1], out=c)
-        elif self.action_mode == "velocity":
-            np.clip(c, -self.speed_cap, self.speed_cap, out=c)
+        mode = self.action_mode
+        if mode == "position":  # plain floats, np.clip's rule: the same bits as the arrays
+            values = [clip(v, lo, hi) for v, lo, hi in zip(values, self._pos_lo, self._pos_hi)]
         else:
-            np.clip(c, -self.torque_limits, self.torque_limits, out=c)
+            cap = self.speed_cap.tolist() if mode == "velocity" else self._torque_list
+            values = [clip(v, -m, m) for v, m in zip(values, cap)]
+        c: np.ndarray = np.array(values)
+        if mode == "torque":
             return c
         if not self._states:
             return c
@@ -641,7 +660,8 @@ class JointsEnv(RigEnv):
         return obs, float(reward), bool(terminated), False, info
 
     def _read(self) -> list[joints.JointState]:
-        self._states = [j.state() for j in self.joints]
+        compiled = self.compiled_path
+        self._states = compiled.states() if compiled is not None else [j.state() for j in self.joints]
         return self._states
 
     def _observation(self, states: Sequence[joints.JointState], pos: np.ndarray | None = None) -> np.ndarray:
@@ -669,6 +689,10 @@ class JointsEnv(RigEnv):
         self._sent = self.safe_command(self.command_of(action))
         cmd = self._sent.tolist()
         mode = self.action_mode
+        compiled = self.compiled_path
+        if compiled is not None:  # faulted/disabled drives: the episode has ended; never command them
+            compiled.command(mode, cmd, [not j.enabled for j in self.joints])
+            return
         for j, c in zip(self.joints, cmd):
             if not j.enabled:  # faulted/disabled drive: the episode has ended; never command it
                 continue

@@ -276,6 +276,8 @@ class ErobArmReachEnv(JointsEnv):
     MIN_RADIUS = 0.15  #: m, closest target to the base axis
     #: m the links keep from the floor, the base and link1 (:meth:`_shield`)
     CLEARANCE = 0.02
+    #: boxes :meth:`keeps_clearance` bounds before it evaluates the grid
+    BOUNDS = 16
     #: rad between the shoulder/elbow poses at which the clearance is checked (<= 9 mm of gap)
     GRID = 0.02
 
@@ -381,15 +383,30 @@ class ErobArmReachEnv(JointsEnv):
         :attr:`CLEARANCE`; the same answer as ``clearance(lo, hi) >= CLEARANCE``, usually without
         its grid: around the box's centre a link point moves at most ``ARM3_REACH * |dq2| +
         ARM3_FORE * |dq3|``, so the exact gap at the centre (a lower bound of the grid's sampled
-        one) minus that is a lower bound over the whole box; only where it cannot tell is the grid
-        evaluated."""
+        one) minus that is a lower bound over the whole box. Where that cannot tell, the box is halved
+        (along the joint that moves the links more) and each half bounded the same way, up to
+        :attr:`BOUNDS` bounds; only where they cannot tell either is the grid evaluated. A bound only
+        ever answers True where every grid pose keeps the gap, so the answer is the grid's."""
         j2, j3 = self.joints[1], self.joints[2]
-        q2 = ((lo[1] + hi[1]) / 2 - j2.offset) * j2.direction  # user -> model frame
-        q3 = ((lo[2] + hi[2]) / 2 - j3.offset) * j3.direction
-        moved = ARM3_REACH * abs(hi[1] - lo[1]) / 2 + ARM3_FORE * abs(hi[2] - lo[2]) / 2
-        if erob_arm3_clearance_bound(float(q2), float(q3)) - moved - 1e-9 >= self.CLEARANCE:
-            return True
-        return self.clearance(lo, hi) >= self.CLEARANCE
+        boxes = [(float(lo[1]), float(hi[1]), float(lo[2]), float(hi[2]))]
+        bounds = 0
+        while boxes:
+            a2, b2, a3, b3 = boxes.pop()
+            q2 = ((a2 + b2) / 2 - j2.offset) * j2.direction  # user -> model frame
+            q3 = ((a3 + b3) / 2 - j3.offset) * j3.direction
+            span2, span3 = ARM3_REACH * abs(b2 - a2), ARM3_FORE * abs(b3 - a3)
+            bounds += 1
+            if erob_arm3_clearance_bound(q2, q3) - (span2 / 2 + span3 / 2) - 1e-9 >= self.CLEARANCE:
+                continue
+            if bounds >= self.BOUNDS:
+                return self.clearance(lo, hi) >= self.CLEARANCE
+            if span2 >= span3:
+                m = (a2 + b2) / 2
+                boxes += [(a2, m, a3, b3), (m, b2, a3, b3)]
+            else:
+                m = (a3 + b3) / 2
+                boxes += [(a2, b2, a3, m), (a2, b2, m, b3)]
+        return True
 
     def _shield(self, command: np.ndarray) -> np.ndarray:
         """Keep the arm :attr:`CLEARANCE` off the floor and its base: the shoulder and elbow commands

@@ -8,6 +8,7 @@
 from __future__ import annotations
 
 from joints.bench import check_rate, cycle_times
+from joints.compiled_path import CompiledPath
 from joints.configtypes import Limits, Motion
 from joints.errors import (
     ConfigError,
@@ -23,6 +24,7 @@ from joints.rig import Rig, open, sleep_together
 __version__ = "0.1.0"
 
 __all__ = [
+    "CompiledPath",
     "ConfigError",
     "ConfirmationRequired",
     "DeviceFault",

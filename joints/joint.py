@@ -184,6 +184,11 @@ class Joint:
     def _contact(self) -> None:
         self.last_contact = self.clock.now()
 
+    def note_contact(self) -> None:
+        """A command reached the drive by another way than this joint's methods (the sim's compiled path,
+        :mod:`joints.compiled_path`): :attr:`last_contact` is now."""
+        self.last_contact = self.clock.now()
+
     # -- power ------------------------------------------------------------------------------
     def enable(self) -> None:
         """Enable the drive (brake releases): arms its watchdog and writes the limits into it.
@@ -255,6 +260,19 @@ class Joint:
         deceleration: float | None = None,
     ) -> None:
         """Move to ``position`` [rad] with the drive's own trapezoidal profile."""
+        target, speed, acc, dec = self.position_command(position, velocity, acceleration, deceleration)
+        self.driver.move_to(target, speed=speed, acceleration=acc, deceleration=dec)
+        self._contact()
+
+    def position_command(
+        self,
+        position: float,
+        velocity: float | None = None,
+        acceleration: float | None = None,
+        deceleration: float | None = None,
+    ) -> tuple[int, int, int, int]:
+        """Check a :meth:`move_to` against the limits, the last fault and the enable state; return it in
+        device units (target, profile speed, acceleration, deceleration). Nothing is sent."""
         position = self._finite("position", position)
         profile = (velocity, acceleration, deceleration)
         known = self._profiles.get(profile)
@@ -277,8 +295,7 @@ class Joint:
         self._refuse_if_faulted("move_to")
         self._require_enabled()
         speed, acc, dec = known[1]
-        self.driver.move_to(self._to_pos(position), speed=speed, acceleration=acc, deceleration=dec)
-        self._contact()
+        return self._to_pos(position), speed, acc, dec
 
     def move_by(self, delta: float, **kw: float) -> None:
         """Move by ``delta`` [rad] from the present position (checked against the limits)."""
@@ -304,12 +321,17 @@ class Joint:
 
     def set_torque(self, torque: float) -> None:
         """Apply ``torque`` [N*m] (current control through the device's torque constant)."""
+        self.driver.set_current(self.torque_command(torque))
+        self._contact()
+
+    def torque_command(self, torque: float) -> int:
+        """Check a :meth:`set_torque` against the limit, the last fault and the enable state; return it in the
+        driver's current units. Nothing is sent."""
         torque = self._finite("torque", torque)
         self._check_torque(torque)
         self._refuse_if_faulted("set_torque")
         self._require_enabled()
-        self.driver.set_current(self._to_current(torque))
-        self._contact()
+        return self._to_current(torque)
 
     def cycle_target(self, value: float, kind: str) -> int:
         """A cyclic set-point (``Rig.cycle``) in device units, checked against the limits first.

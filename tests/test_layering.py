@@ -39,6 +39,8 @@ ALLOWED: dict[str, frozenset[str]] = {
     "registry": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "sim",
                            "configtypes"}),
     "config": frozenset({"configtypes", "errors", "registry"}),
+    # the sim's compiled command/state path: joints and drivers of in-process twins, without the rig
+    "compiled_path": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint"}),
     # emulated drives: device semantics + transports to be served on; never the host side
     "sim": frozenset({"devices", "codecs", "transports", "clock", "errors"}),
     "rig": frozenset({"errors", "clock", "codecs", "devices", "transports", "link", "drivers", "joint",

@@ -12,6 +12,7 @@ import abc
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from joints.codecs import modbus as mb
 from joints.devices.params import Param, ParamSet
 from joints.devices.registers import RegisterTable
 from joints.errors import CommandError, RegisterError
@@ -82,10 +83,7 @@ class ModbusAccess(ParamAccess):
         return self.table.decode_block(start, self.link.read_registers(self.slave, start, count))
 
     def read_many(self, names: Sequence[str]) -> dict[str, int]:
-        key = names if type(names) is tuple else tuple(names)
-        plan = self._plans.get(key)
-        if plan is None:
-            plan = self._plans[key] = self._plan(names)
+        plan = self.block_plan(names)
         if len(plan) == 1:  # one block: its decoded registers as they come
             return self.read_block(*plan[0])
         out: dict[str, int] = {}
@@ -106,12 +104,23 @@ class ModbusAccess(ParamAccess):
         return tuple(blocks)
 
     def write(self, name: str, value: int, *, idempotent: bool = True) -> None:
+        self.link.request(self.write_request(name, value), idempotent=idempotent)
+
+    def write_request(self, name: str, value: int) -> mb.Request:
+        """The request :meth:`write` sends (range-checked): FC06 for one word, FC16 for a 32-bit pair."""
         reg = self.table.get(name)
         words = reg.to_words(value)
         if len(words) == 1:
-            self.link.write_register(self.slave, reg.address, words[0], idempotent=idempotent)
-        else:
-            self.link.write_registers(self.slave, reg.address, words, idempotent=idempotent)
+            return mb.WriteSingleRegister(self.slave, reg.address, words[0])
+        return mb.WriteMultipleRegisters(self.slave, reg.address, tuple(words))
+
+    def block_plan(self, names: Sequence[str]) -> tuple[tuple[int, int], ...]:
+        """The FC03 blocks (start, count) :meth:`read_many` reads for ``names`` (cached)."""
+        key = names if type(names) is tuple else tuple(names)
+        plan = self._plans.get(key)
+        if plan is None:
+            plan = self._plans[key] = self._plan(names)
+        return plan
 
     def write_many(self, values: Mapping[str, int], *, idempotent: bool = True) -> None:
         """One FC16 when the registers are contiguous, else one write each (all checked first)."""

@@ -145,6 +145,18 @@ class ErobDriver(JointDriver):
         self._command("enable_the_motor", 0)
         self._note_enable(False)
 
+    def _settled(self) -> bool:
+        """Enabled, and the manual's 500 ms after "enable" are over (a motion command needs no wait)."""
+        return self._enabled and self._enabled_at is not None and self._enabled_at + ENABLE_SETTLE - self.clock.now() <= 0
+
+    def _holds(self, settings: Mapping[str, int]) -> bool:
+        """Whether the drive holds every one of ``settings`` (the values we last wrote)."""
+        cache = self._cache
+        for name, value in settings.items():
+            if cache.get(name) != value:
+                return False
+        return True
+
     def _settle_after_enable(self) -> None:
         """Wait until 500 ms after "enable"; with the watchdog on, keep the bus alive meanwhile."""
         if not self._enabled or self._enabled_at is None:
@@ -188,14 +200,53 @@ class ErobDriver(JointDriver):
         Profile speed/acceleration/deceleration (0x0047..0x004C) go in one FC16 when all three
         are given; ``clear_relative`` writes Target Relative Position = 0 (5.1.1 step 7).
         """
-        self._operation_mode(OperationMode.POSITION)
-        self._set("control_source", 0)
-        self._set("motion_mode", int(motion))
+        head, tail = self._position_settings(motion, dwell, clear_relative)
+        for name, value in head.items():
+            self._set(name, value)
         self._set_many(self._profile(speed, acceleration, deceleration))
+        for name, value in tail.items():
+            self._set(name, value)
+
+    @staticmethod
+    def _position_settings(motion: MotionMode, dwell: int | None = None,
+                           clear_relative: bool = False) -> tuple[dict[str, int], dict[str, int]]:
+        """What :meth:`configure_position` writes one by one, before and after the profile (in order)."""
+        head = {"operation_mode": int(OperationMode.POSITION), "control_source": 0, "motion_mode": int(motion)}
+        tail: dict[str, int] = {}
         if dwell is not None:
-            self._set("dwell_time", dwell)
+            tail["dwell_time"] = dwell
         if clear_relative:
-            self._set("target_relative_position", 0)
+            tail["target_relative_position"] = 0
+        return head, tail
+
+    #: the settings speed and torque control write before their set-point (besides the ramps)
+    _SPEED_SETTINGS: Mapping[str, int] = {"operation_mode": int(OperationMode.SPEED), "control_source": 0}
+    _TORQUE_SETTINGS: Mapping[str, int] = {"operation_mode": int(OperationMode.TORQUE), "control_source": 0}
+
+    # -- the steady case (the sim's compiled path, joints.compiled_path) ----------------------
+    def steady_move(self, speed: int, acceleration: int, deceleration: int) -> bool:
+        """Whether :meth:`move_to` with this profile now writes nothing but its target and "start": the drive
+        holds the setup and the profile, and the 500 ms after "enable" are over."""
+        head, tail = self._position_settings(MotionMode.ABSOLUTE, clear_relative=True)
+        return (self._settled() and self._holds(head) and self._holds(tail)
+                and self._holds(self._profile(speed, acceleration, deceleration)))
+
+    def steady_velocity(self, acceleration: int, deceleration: int) -> bool:
+        """Whether :meth:`set_velocity` with these ramps now writes nothing but its target speed."""
+        return (self._settled() and self._holds(self._SPEED_SETTINGS)
+                and self._holds(self._profile(None, acceleration, deceleration)))
+
+    def steady_current(self) -> bool:
+        """Whether :meth:`set_current` now writes nothing but its target current."""
+        return self._settled() and self._holds(self._TORQUE_SETTINGS)
+
+    def validate(self, **values: int | None) -> None:
+        """The range checks a command makes before its first write (:meth:`_validate`)."""
+        self._validate(**values)
+
+    def note_written(self, name: str, value: int) -> None:
+        """``value`` was written to ``name`` by another way than :meth:`write_param` (the compiled path)."""
+        self._cache[name] = int(value)
 
     def configure_velocity(self, *, acceleration: int | None = None, deceleration: int | None = None) -> None:
         """Steps before "enable" in 5.2.2: speed mode, control source, ramps, target speed 0."""
@@ -221,12 +272,14 @@ class ErobDriver(JointDriver):
         deceleration: int | None = None,
     ) -> None:
         """Move Absolute (5.1.1): relative value 0, target absolute position, start."""
-        self._validate(target_absolute_position=position, profile_speed=speed,
-                       profile_acceleration=acceleration, profile_deceleration=deceleration)
-        self.configure_position(
-            MotionMode.ABSOLUTE, speed=speed, acceleration=acceleration, deceleration=deceleration,
-            clear_relative=True,
-        )
+        profile = self._profile(speed, acceleration, deceleration)
+        if self._holds(profile):  # the drive holds this profile: nothing of it to check or write
+            self._validate(target_absolute_position=position)
+            self.configure_position(MotionMode.ABSOLUTE, clear_relative=True)
+        else:
+            self._validate(target_absolute_position=position, **profile)
+            self.configure_position(MotionMode.ABSOLUTE, speed=speed, acceleration=acceleration,
+                                    deceleration=deceleration, clear_relative=True)
         self._settle_after_enable()
         self._set("target_absolute_position", position, force=True)
         self._start(position)
@@ -278,16 +331,21 @@ class ErobDriver(JointDriver):
         started (moving, or its setpoint already at ``target``) and send it again only if it did not."""
         try:
             self._command("start_operating", CMD_START)
-        except OutcomeUnknown:
-            v = self.access.read_many(self.start_check_names)
-            started = (v["motion_status"] != MotionStatus.STOP
-                       or v["status_of_achieving_position"] in (AchieveStatus.OPERATION, AchieveStatus.WAIT_TIME)
-                       or (target is not None and v.get("given_position") == target))
-            if started:
-                return
-            if target is None and v["status_of_achieving_position"] == AchieveStatus.TARGET_REACHED:
-                raise  # a short relative move may have run and ended already: unknown, do not repeat it
-            self._command("start_operating", CMD_START)
+        except OutcomeUnknown as exc:
+            self.start_unknown(target, exc)
+
+    def start_unknown(self, target: int | None, exc: OutcomeUnknown) -> None:
+        """The "Start Operating" write got no intact answer (``exc``): read back whether the drive started and send it
+        again only if it did not (see :meth:`_start`)."""
+        v = self.access.read_many(self.start_check_names)
+        started = (v["motion_status"] != MotionStatus.STOP
+                   or v["status_of_achieving_position"] in (AchieveStatus.OPERATION, AchieveStatus.WAIT_TIME)
+                   or (target is not None and v.get("given_position") == target))
+        if started:
+            return
+        if target is None and v["status_of_achieving_position"] == AchieveStatus.TARGET_REACHED:
+            raise exc  # a short relative move may have run and ended already: unknown, do not repeat it
+        self._command("start_operating", CMD_START)
 
     def stop_repetitive(self) -> None:
         """Stop Repetitive Motion (0x00F4): return to the start or stop at the target."""
@@ -297,8 +355,8 @@ class ErobDriver(JointDriver):
     def set_velocity(self, velocity: int, *, acceleration: int | None = None, deceleration: int | None = None) -> None:
         """Speed control: mode 2, profile acceleration/deceleration, target speed [count/s]."""
         self._validate(target_speed=velocity, profile_acceleration=acceleration, profile_deceleration=deceleration)
-        self._operation_mode(OperationMode.SPEED)
-        self._set("control_source", 0)
+        for name, value in self._SPEED_SETTINGS.items():
+            self._set(name, value)
         self._set_many(self._profile(None, acceleration, deceleration))
         self._settle_after_enable()
         self._set("target_speed", velocity, force=True)
@@ -316,8 +374,8 @@ class ErobDriver(JointDriver):
     def set_current(self, current: int) -> None:
         """Torque control: mode 1, target current [mA] (negative = reverse torque)."""
         self._validate(target_current=current)
-        self._operation_mode(OperationMode.TORQUE)
-        self._set("control_source", 0)
+        for name, value in self._TORQUE_SETTINGS.items():
+            self._set(name, value)
         self._settle_after_enable()
         self._set("target_current", current, force=True)
 

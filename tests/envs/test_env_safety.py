@@ -225,6 +225,42 @@ def test_shield_shortcut_answers_as_the_grid() -> None:
         env.close()
 
 
+def test_shield_halves_the_box_before_it_evaluates_the_grid() -> None:
+    """Boxes the centre bound cannot tell are halved and bounded again: of those that keep the gap, few need
+    the grid, and the answer stays the grid's (a wrong "keeps it" would show as a disagreement)."""
+    env = ErobArmReachEnv()
+    try:
+        rng = np.random.default_rng(5)
+        grid = env.clearance
+        used = [0]
+
+        def counted(lo: Any, hi: Any) -> float:
+            used[0] += 1
+            return grid(lo, hi)
+
+        env.clearance = counted  # type: ignore[method-assign]
+        lo_lim = np.array([j.limits.position[0] for j in env.joints])
+        hi_lim = np.array([j.limits.position[1] for j in env.joints])
+        undecided = agree = gridded = 0
+        for _ in range(1000):
+            mid = rng.uniform(lo_lim, hi_lim)
+            half = rng.uniform(0.0, 0.15, size=3)
+            lo, hi = mid - half, mid + half
+            j2, j3 = env.joints[1], env.joints[2]
+            centre = erob_arm3_clearance_bound((mid[1] - j2.offset) * j2.direction, (mid[2] - j3.offset) * j3.direction)
+            want = grid(lo, hi) >= env.CLEARANCE
+            before = used[0]
+            agree += env.keeps_clearance(lo, hi) == want
+            if want and centre - 0.55 * half[1] - 0.25 * half[2] - 1e-9 < env.CLEARANCE:
+                undecided += 1  # a box that keeps the gap which the centre bound alone cannot tell
+                gridded += used[0] - before
+        assert agree == 1000
+        assert undecided > 50
+        assert gridded < undecided / 4, (gridded, undecided)
+    finally:
+        env.close()
+
+
 @pytest.mark.parametrize("timing", ["wire", "ideal"])
 @pytest.mark.parametrize("mode", ["position", "velocity"])
 def test_arm_commanded_into_the_floor_stops_short_of_it(mode: str, timing: str) -> None:

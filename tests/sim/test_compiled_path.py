@@ -1,0 +1,130 @@
+"""The compiled command/state path (joints.compiled_path) gives the driver path's bits.
+
+For every env it supports and every action mode, the same seeds and actions run once on the compiled
+path and once on the driver path (``compiled_path=False``): observations, rewards, terminations, infos,
+every joint's last state (with its sample time and raw values) and last contact, every twin's register image, the link's transaction and direct-exchange counts, every frame instant on
+the simulated line, the rig's time and the world's substeps must be equal, and the compiled path must
+really have been taken.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import envs  # noqa: F401 - registers the joints/ envs
+import joints
+from joints.compiled_path import supported
+from joints.link.trace import TraceRecord
+
+#: env id -> steps per run (the arm steps at 10 Hz: fewer steps cover as much motion)
+SUPPORTED = {"joints/ErobReach-v0": 40, "joints/ErobArmReach-v0": 12}
+MODES = ("position", "velocity", "torque")
+
+
+def _links(env: Any) -> list[Any]:
+    seen: dict[int, Any] = {}
+    for j in env.joints:
+        link = j.driver.access.link
+        seen.setdefault(id(link), link)
+    return list(seen.values())
+
+
+def _images(env: Any) -> list[tuple[str, int, tuple[tuple[int, int], ...]]]:
+    out = []
+    for name, bus in sorted(env.rig.sim.buses.items()):
+        for address, front in sorted(bus.slaves.items()):
+            out.append((name, address, tuple(sorted(front.image().items()))))
+    return out
+
+
+def _frames(link: Any) -> list[tuple[float, float, float, int, str]]:
+    return [(tx.start, tx.end, tx.due, tx.size, tx.side) for tx in link.transport.log]
+
+
+def _run(env_id: str, mode: str, steps: int, compiled: bool, trace: bool = False) -> dict[str, Any]:
+    env = gym.make(env_id, action_mode=mode, compiled_path=compiled)
+    u: Any = env.unwrapped
+    records: list[TraceRecord] = []
+    try:
+        if trace:
+            u.rig.trace(records.append)
+        out: dict[str, Any] = {"steps": []}
+        obs, info = env.reset(seed=7)
+        out["reset"] = (obs.tobytes(), info["time"])
+        rng = np.random.default_rng(11)
+        for _ in range(steps):
+            action = rng.uniform(-1.0, 1.0, env.action_space.shape).astype(np.float32)
+            obs, reward, terminated, truncated, info = env.step(action)
+            out["steps"].append((obs.tobytes(), reward, terminated, truncated, info["time"], info["overrun"],
+                                 info["command"].tobytes(), info["limit_violation"], repr(info["faults"]),
+                                 [(repr(j.last_state), j.last_contact, j.enabled) for j in u.joints]))
+            if terminated or truncated:
+                obs, info = env.reset()
+                out["steps"].append(("reset", obs.tobytes(), info["time"]))
+        links = _links(u)
+        out["transactions"] = [(lk.transactions, lk.framing.exchanges, lk.retries_used) for lk in links]
+        out["frames"] = [_frames(lk) for lk in links]
+        out["images"] = _images(u)
+        out["time"] = (u.rig.time, u.rig.sim.steps)
+        out["trace"] = [(r.time, r.direction, r.data, r.meaning) for r in records]
+        out["taken"] = u.compiled_path.taken if u.compiled_path is not None else None
+        return out
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("env_id", sorted(SUPPORTED))
+def test_compiled_path_gives_the_driver_paths_bits(env_id: str, mode: str) -> None:
+    steps = SUPPORTED[env_id]
+    driver = _run(env_id, mode, steps, compiled=False)
+    compiled = _run(env_id, mode, steps, compiled=True)
+    assert driver["taken"] is None  # compiled_path=False: the driver path only
+    # the compiled path really sent the steps' commands (all but the joints of an ended episode)
+    assert compiled["taken"] >= steps
+    assert sum(t[0] for t in compiled["transactions"]) > 2 * steps
+    assert sum(len(f) for f in compiled["frames"]) > 4 * steps  # requests and replies on the timed line
+    for key in ("reset", "steps", "transactions", "frames", "images", "time"):
+        assert compiled[key] == driver[key], key
+
+
+def test_a_trace_sees_the_same_frames_on_both_paths() -> None:
+    """A hooked trace is honoured: the compiled path's requests go through the link, which feeds it."""
+    driver = _run("joints/ErobReach-v0", "position", 10, compiled=False, trace=True)
+    compiled = _run("joints/ErobReach-v0", "position", 10, compiled=True, trace=True)
+    assert compiled["taken"] == 10
+    assert len(compiled["trace"]) > 60  # tx and rx of about 3 transactions per step
+    assert compiled["trace"] == driver["trace"]
+    assert compiled["frames"] == driver["frames"]
+
+
+def test_the_env_takes_the_compiled_path_only_where_every_joint_is_supported() -> None:
+    with gym.make("joints/ErobReach-v0") as env:
+        u: Any = env.unwrapped
+        assert isinstance(u.compiled_path, joints.CompiledPath)
+        assert all(supported(j) for j in u.joints)
+    with gym.make("joints/ErobReach-v0", compiled_path=False) as env:
+        assert getattr(env.unwrapped, "compiled_path") is None  # noqa: B009 - an env attribute mypy cannot see
+    with pytest.raises(ValueError, match="cannot step"):
+        joints.CompiledPath([_Unsupported()])  # type: ignore[list-item]
+
+
+class _Unsupported:
+    name = "other"
+    driver = object()
+
+
+def test_a_refused_command_is_refused_the_same_way_and_sends_nothing() -> None:
+    """The joint's own checks run first: a target outside the limits raises LimitError, no frame is sent."""
+    with gym.make("joints/ErobReach-v0") as env:
+        u: Any = env.unwrapped
+        env.reset(seed=0)
+        link = _links(u)[0]
+        before = link.transactions
+        with pytest.raises(joints.JointsError, match="outside the limits"):
+            u.compiled_path.command("position", [10.0])
+        assert link.transactions == before
