@@ -113,6 +113,6 @@ def test_no_machine_paths(page: Path) -> None:
 
 
 def test_the_path_check_sees_machine_paths() -> None:
-    home = "/".join(("", "home", "someone", "manuals"))
+    home = "/".join(("", "home", "someone", "manuals"))  # noqa: FLY002 - this file spells no machine path
     assert MACHINE_PATHS.search(f"see {home}") and MACHINE_PATHS.search("../shared/vectors/ERRATA.md")
     assert not MACHINE_PATHS.search("port = /dev/ttyUSB0, --bind rs485=/tmp/ttyJOINTS0")
