@@ -293,11 +293,12 @@ SCENARIOS: dict[str, Callable[[Recorder], None]] = {
     "env_reach_torque_dr": _env("joints/ErobReach-v0", 300, action_mode="torque", domain_randomization=True),
     "env_arm_position_dr": _env("joints/ErobArmReach-v0", 300, domain_randomization=True),
     "env_arm_torque": _env("joints/ErobArmReach-v0", 200, action_mode="torque"),
-    # 150 steps: with MuJoCo 3.3.0 / numpy 1.24 the 300-step run departed from the 4.0.0 recording at step ~190
-    # (within 3e-7 of scale before it): a last-bit difference moves a discrete event - the ZLAC's velocity
+    # 150 steps: with MuJoCo 3.3.0 / numpy 1.24 the 300-step runs departed from the 4.0.0 recording at step ~190
+    # (within 3e-7 of scale before it; the randomised one too, once the RS485 host stopped waiting for the
+    # silence after each reply): a last-bit difference moves a discrete event - the ZLAC's velocity
     # estimate stepping by one encoder count - which the speed loop amplifies through the wheels' contacts
     "env_diffdrive": _env("joints/DiffDriveGoal-v0", 150),
-    "env_diffdrive_dr": _env("joints/DiffDriveGoal-v0", 300, domain_randomization=True),
+    "env_diffdrive_dr": _env("joints/DiffDriveGoal-v0", 150, domain_randomization=True),
 }
 
 
