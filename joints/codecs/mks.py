@@ -28,7 +28,9 @@ protection time (5.2.16; uint32 ms, 0 = off; answered by a set status). Manual V
 write all configuration parameters (34 data bytes; set status), 0x47 read all configuration
 parameters and 0x48 read all status parameters (replies of 34 and 28 data bytes): the codec keeps
 their data as bytes (``params``), :mod:`joints.devices.mks.blocks` names the fields; 0x35 reads the
-raw accumulated encoder value (int48 like 0x31). V1.0.9's
+raw accumulated encoder value (int48 like 0x31); 0x36 writes the IO port (1 data byte: b7-b6
+OUT2_mask, b5-b4 OUT1_mask, b3 OUT_2, b2 OUT_1, b1-b0 zero; a mask of 3 or a reserved bit set is a
+:class:`~joints.errors.FrameError`; set status). V1.0.9's
 0x01 (5.1.9) asks the drive to send one read command's reply every ``times`` ms (0 stops it):
 request code + uint16 times, reply code + status; the periodic frames are that command's ordinary
 replies (FB addr code param chk), arriving unsolicited.
@@ -548,6 +550,19 @@ class SetHeartbeat:
 
 
 @dataclass(frozen=True, slots=True)
+class WriteIoPort:
+    """0x36 write the IO port (V1.0.6): per output a mask (0 do not write, 1 write the value, 2 keep) and a
+    value 0/1; one byte b7-b6 OUT2_mask, b5-b4 OUT1_mask, b3 OUT_2, b2 OUT_1, b1-b0 0 -> set status."""
+
+    address: int
+    out2_mask: int
+    out1_mask: int
+    out2: int
+    out1: int
+    function: ClassVar[int] = 0x36
+
+
+@dataclass(frozen=True, slots=True)
 class WriteAllParameters:
     """0x46 write all configuration parameters (V1.0.6): the 34 bytes of 5.7.1 -> set status."""
 
@@ -713,6 +728,7 @@ Request = (
     | SetNoLimitHomeParameters | SetZeroMode | SetLimitPortRemap | QueryStatus | EnableMotor | EmergencyStop
     | RunSpeed | SaveCleanSpeedMode | RunRelativePulses | RunAbsolutePulses | RunRelativeAxis | RunAbsoluteAxis
     | ReadRawEncoder | SetTimedReturn | ReadVersion | SetHeartbeat | WriteAllParameters | ReadAllParameters | ReadAllStatus
+    | WriteIoPort
 )
 
 
@@ -1146,6 +1162,20 @@ def _raw(cls: type, size: int) -> _Spec:
     return _Spec(cls, size, pack, unpack)
 
 
+def _pack_write_io(msg: Any) -> bytes:
+    masks = [_check_int(f"WriteIoPort.{n}", getattr(msg, n), 0, 2) for n in ("out2_mask", "out1_mask")]
+    outs = [_check_int(f"WriteIoPort.{n}", getattr(msg, n), 0, 1) for n in ("out2", "out1")]
+    return bytes(((masks[0] << 6) | (masks[1] << 4) | (outs[0] << 3) | (outs[1] << 2),))
+
+
+def _unpack_write_io(address: int, function: int, data: bytes, frame: bytes) -> WriteIoPort:
+    b = data[0]
+    if b & 0x03 or (b >> 6) == 3 or ((b >> 4) & 3) == 3:
+        raise FrameError(f"0x36 write IO port: reserved bits b1-b0 set or a mask of 3 (0x{b:02X}): {frame.hex(' ')}",
+                         data=frame)
+    return WriteIoPort(address, b >> 6, (b >> 4) & 3, (b >> 3) & 1, (b >> 2) & 1)
+
+
 def _pack_timed_reply(msg: Any) -> bytes:
     try:
         return bytes((_check_u8("TimedReturnReply.code", msg.code), SetStatus(msg.status)))
@@ -1212,6 +1242,7 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _raw(WriteAllParameters, ALL_PARAMETERS_SIZE),
     _struct(ReadAllParameters),
     _struct(ReadAllStatus),
+    _Spec(WriteIoPort, 1, _pack_write_io, _unpack_write_io),
 )
 
 _REQUESTS: dict[int, _Spec] = {s.cls.function: s for s in _REQUEST_SPECS}  # type: ignore[attr-defined]
@@ -1221,7 +1252,7 @@ _REQUEST_BY_TYPE: dict[type, _Spec] = {s.cls: s for s in _REQUEST_SPECS}
 RUN_REPLY_FUNCTIONS = frozenset((0x91, 0xF4, 0xF5, 0xF6, 0xFD, 0xFE, 0xFF))
 SET_REPLY_FUNCTIONS = frozenset((0x3D, 0x3F, 0x41, 0x82, 0x83, 0x84, 0x85, 0x86, 0x87, 0x88, 0x89, 0x8A, 0x8B,
                                  0x8C, 0x8D, 0x8E, 0x8F, 0x90, 0x92, 0x94, 0x98, 0x9A, 0x9B, 0x9E, 0xF3, 0xF7,
-                                 0x46))
+                                 0x46, 0x36))
 
 _RUN_REPLY = _coded_spec(RunReply, RunStatus)
 _SET_REPLY = _coded_spec(SetReply, SetStatus)

@@ -570,6 +570,15 @@ class MksDriver(JointDriver):
         """0x3D release the locked-rotor protection."""
         self.clear_errors()
 
+    def write_io(self, *, out1: int | None = None, out2: int | None = None) -> None:
+        """0x36 (V1.0.6+; Modbus FC16 0x0036): set OUT_1 / OUT_2 to 0 or 1; a port given None is not written.
+        Read the levels back with ``read("io_status")`` (bit2 OUT_1, bit3 OUT_2)."""
+        if out1 is None and out2 is None:
+            raise CommandError(f"{self.name}: write_io needs out1 and/or out2 (0 or 1)")
+        self.access.write_many({"write_io_out1_mask": 0 if out1 is None else 1, "write_io_out1": out1 or 0,
+                                "write_io_out2_mask": 0 if out2 is None else 1, "write_io_out2": out2 or 0},
+                               idempotent=True)
+
     def set_home(self, *, trigger_level: int = 0, direction: int = 0, speed: int = 60, end_limit: int = 0) -> None:
         """0x90 home parameters: end-stop level (0 low), home direction (0 CW, 1 CCW), speed [rpm], EndLimit."""
         self.access.write_many({"home_trigger_level": trigger_level, "home_direction": direction,

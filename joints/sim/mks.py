@@ -63,6 +63,9 @@ Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; defa
     enabled and held). Like the other settings it is kept in flash (the manual does not say).
     V1.0.9's 0x01 timed returns sample the read's values every period on the simulated clock
     (:meth:`MksFirmware.set_timed_return`); the front sends them as that read's reply, unasked.
+    V1.0.6's 0x36 writes the outputs: a port the host wrote (mask 1) reads the written level in 0x34 from
+    then on (OUT_1 no longer shows the 57D's stall indication); masks 0 and 2 leave it (the manual's "do
+    not write" and "remains unchanged" do the same here); the written levels are lost at power-off.
     V1.0.6's 0x46/0x47/0x48 (:mod:`joints.devices.mks.blocks`) write/read the same settings and
     statuses as the single commands; a 0x46 with any value out of range changes nothing (status 0).
 
@@ -231,6 +234,7 @@ class MksFirmware(Firmware):
             Command.ENABLE_MOTOR: self._enable,
             Command.EMERGENCY_STOP: self._emergency_stop,
             Command.SAVE_CLEAN_SPEED_MODE: self._save_clean,
+            Command.WRITE_IO_PORT: self._write_io,
             **{code: self._run_command for code in _RUN_CODES},
         }
         self.q = 0.0
@@ -246,6 +250,7 @@ class MksFirmware(Firmware):
         v = self.values
         self.enabled = bool(v["motor_enable"])
         self.protected = False
+        self.outputs: dict[int, int] = {}  #: OUT_1 / OUT_2 levels the host wrote (0x36, V1.0.6)
         self.run_state = st.RunState.IDLE
         self.motion: _Motion | None = None
         self.speed = 0  #: present speed value of the reference (magnitude)
@@ -481,6 +486,12 @@ class MksFirmware(Firmware):
                                            int(_RUN.COMPLETE), answered))
         return int(_RUN.STARTED)
 
+    def _write_io(self, values: Mapping[str, int], answered: bool) -> int:
+        for port in (1, 2):
+            if values[f"write_io_out{port}_mask"] == 1:
+                self.outputs[port] = values[f"write_io_out{port}"]
+        return int(_SET.SUCCESS)
+
     def _can_run(self) -> bool:
         return self.mode.serial and self.enabled and not self.protected and self.calibrated \
             and self._calibrating_until < 0
@@ -640,9 +651,11 @@ class MksFirmware(Firmware):
         bits = level if left else 1 - level
         if self.profile.limit_inputs >= 2 or self.values["limit_port_remap"]:
             bits |= (level if right else 1 - level) << 1
-        if self.profile.limit_inputs >= 2:  # OUT_1 stall indication: 0 protected, 1 unprotected (57D only)
+        if 1 in self.outputs:  # written by the host (0x36, V1.0.6)
+            bits |= self.outputs[1] << 2
+        elif self.profile.limit_inputs >= 2:  # OUT_1 stall indication: 0 protected, 1 unprotected (57D only)
             bits |= (0 if self.protected else 1) << 2
-        return bits
+        return bits | self.outputs.get(2, 0) << 3
 
     def motor_status(self) -> st.MotorStatus:
         if self._calibrating_until >= 0:

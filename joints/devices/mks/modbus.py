@@ -243,6 +243,9 @@ _BLOCKS: tuple[ModbusBlock, ...] = (
     _read(0x40, 2, "V1.0.9 3.1.8 Read version information", ("version_information", 0, 4, "uint32")),
     _multi(0x98, 2, 4, "V1.0.9 3.2.14 Set heartbeat protection time", W,
            ("heartbeat_protection_time", 0, 4, "uint32")),
+    _multi(0x36, 2, 4, "V1.0.9 4.2 Write IO port data", C,
+           ("write_io_out2_mask", 0, 1, "uint8"), ("write_io_out2", 1, 1, "uint8"),
+           ("write_io_out1_mask", 2, 1, "uint8"), ("write_io_out1", 3, 1, "uint8")),
 )
 
 

@@ -43,6 +43,7 @@ class Command(enum.IntEnum):
     READ_NUMBER_OF_PULSES = 0x33
     READ_IO_PORTS_STATUS = 0x34
     READ_RAW_ENCODER_VALUE = 0x35
+    WRITE_IO_PORT = 0x36
     READ_ERROR_OF_ANGLE = 0x39
     READ_EN_PINS_STATUS = 0x3A
     READ_GO_BACK_TO_ZERO_STATUS = 0x3B
@@ -221,6 +222,10 @@ _KEYS: dict[str, NativeKey] = {
     "raw_encoder_value": NativeKey(C.READ_RAW_ENCODER_VALUE, "value"),
     "version_information": NativeKey(C.READ_VERSION_INFORMATION, "version"),
     "heartbeat_protection_time": NativeKey(C.SET_HEARTBEAT_PROTECTION_TIME, "times"),
+    "write_io_out2_mask": NativeKey(C.WRITE_IO_PORT, "out2_mask"),
+    "write_io_out1_mask": NativeKey(C.WRITE_IO_PORT, "out1_mask"),
+    "write_io_out2": NativeKey(C.WRITE_IO_PORT, "out2"),
+    "write_io_out1": NativeKey(C.WRITE_IO_PORT, "out1"),
 }
 del C
 

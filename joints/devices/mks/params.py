@@ -165,13 +165,22 @@ _PARAMS: tuple[Param, ...] = (
     # V1.0.9
     Param("version_information", "uint32", R, "", "0x40 version (V1.0.9): b31-b28 calibrated, b27-b24 hardware "
           "version, b23-b0 firmware version major.minor.patch"),
+    # 0x36 write the IO port (V1.0.6; RS485 6.3, Modbus 4.2): mask 1 writes the value, 0 / 2 leave the port
+    Param("write_io_out2_mask", "uint8", C, "", "0x36 OUT2_mask: 0 do not write OUT_2, 1 write, 2 keep (V1.0.6)",
+          0, 2, 0),
+    Param("write_io_out1_mask", "uint8", C, "", "0x36 OUT1_mask: 0 do not write OUT_1, 1 write, 2 keep (V1.0.6)",
+          0, 2, 0),
+    Param("write_io_out2", "uint8", C, "", "0x36 OUT_2 value (0/1) (V1.0.6)", 0, 1, 0),
+    Param("write_io_out1", "uint8", C, "", "0x36 OUT_1 value (0/1) (V1.0.6)", 0, 1, 0),
     Param("heartbeat_protection_time", "uint32", W, "ms", "0x98 heartbeat protection time (V1.0.9): no command "
           "for this long stops the motor urgently; 0 = off", 0, 0xFFFFFFFF, 0),
 )
 
 #: parameters a later firmware added -> the feature (joints.devices.quirks) a firmware profile needs for them
 FEATURE_OF: dict[str, str] = {"raw_encoder_value": "mks-all-parameters", "version_information": "mks-version",
-                              "heartbeat_protection_time": "mks-heartbeat"}
+                              "heartbeat_protection_time": "mks-heartbeat",
+                              **{n: "mks-write-io" for n in ("write_io_out2_mask", "write_io_out1_mask", "write_io_out2",
+                                                             "write_io_out1")}}
 
 MKS_PARAMS: ParamSet = ParamSet("mks-servo42d57d", _PARAMS)
 

@@ -1,0 +1,69 @@
+"""The MKS commands of firmware V1.0.6-V1.0.9 in the native codec and the Part 8 (Modbus) map: the manuals'
+example frames where they print them, round trips byte by byte, and the fields the wire cannot carry."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from joints.codecs import mks
+from joints.codecs import modbus as mb
+from joints.codecs.crc import crc16_modbus
+from joints.codecs.mks import Role
+from joints.devices.mks.modbus import FC_WRITE_MULTIPLE, MKS_MODBUS
+from joints.errors import EncodeError, FrameError
+
+
+def _decode(role: Role, frame: bytes) -> Any:
+    """One frame fed byte by byte (the codec must not need more than the frame, nor decode early)."""
+    codec = mks.MksCodec(role)
+    for i, b in enumerate(frame):
+        codec.feed(bytes((b,)))
+        msg = codec.next_message()
+        if i < len(frame) - 1:
+            assert msg is None, f"decoded after {i + 1} of {len(frame)} bytes"
+    assert msg is not None
+    return msg
+
+
+def _modbus_frame(pdu: bytes) -> bytes:
+    return pdu + crc16_modbus(pdu).to_bytes(2, "little")
+
+
+# -- 0x36 write the IO port (V1.0.6) ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("msg", "byte"), [
+    (mks.WriteIoPort(1, 1, 1, 1, 0), 0x58),  # b7-b6 OUT2_mask 1, b5-b4 OUT1_mask 1, b3 OUT_2 1, b2 OUT_1 0
+    (mks.WriteIoPort(1, 0, 1, 0, 1), 0x14),
+    (mks.WriteIoPort(1, 2, 2, 0, 0), 0xA0),
+])
+def test_write_io_port_packs_masks_and_levels_into_one_byte(msg: mks.WriteIoPort, byte: int) -> None:
+    frame = mks.encode(msg)
+    assert frame == mks.with_checksum(bytes((0xFA, 0x01, 0x36, byte)))
+    assert _decode(Role.DEVICE, frame) == msg
+    assert _decode(Role.HOST, mks.encode(mks.SetReply(1, 0x36, mks.SetStatus.SUCCESS))) == \
+        mks.SetReply(1, 0x36, mks.SetStatus.SUCCESS)
+
+
+@pytest.mark.parametrize("bad", [mks.WriteIoPort(1, 3, 0, 0, 0), mks.WriteIoPort(1, 0, 0, 2, 0)])
+def test_write_io_port_refuses_what_the_byte_cannot_carry(bad: mks.WriteIoPort) -> None:
+    with pytest.raises(EncodeError):
+        mks.encode(bad)
+
+
+@pytest.mark.parametrize("byte", [0xC0, 0x30, 0x01, 0x02])
+def test_write_io_port_with_a_mask_of_3_or_reserved_bits_is_rejected(byte: int) -> None:
+    with pytest.raises(FrameError):
+        _decode(Role.DEVICE, mks.with_checksum(bytes((0xFA, 0x01, 0x36, byte))))
+
+
+def test_write_io_port_over_modbus_is_fc16_0x36_and_the_manuals_reply() -> None:
+    """Modbus 4.2: 01 10 00 36 00 02 04 OUT2_mask OUT2 OUT1_mask OUT1; reply 01 10 00 36 00 02 A1 C6."""
+    block = MKS_MODBUS.block(FC_WRITE_MULTIPLE, 0x36)
+    words = block.words({"write_io_out2_mask": 1, "write_io_out2": 1, "write_io_out1_mask": 0, "write_io_out1": 0})
+    assert words == (0x0101, 0x0000)
+    assert mb.encode(mb.WriteMultipleRegistersReply(1, 0x36, 2)) == bytes.fromhex("01 10 00 36 00 02 A1 C6")
+    assert _modbus_frame(bytes.fromhex("01 10 00 36 00 02 04 01 01 00 00")) == \
+        mb.encode(mb.WriteMultipleRegisters(1, 0x36, words))
