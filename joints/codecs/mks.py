@@ -24,7 +24,8 @@ Frame length = 4 + the data length, which the head, the role and the function co
 Commands of later firmware (manual V1.0.9; a drive before it does not answer them): 0x40 read
 version information (5.1.11; reply: calibration status in b7-b4 and hardware version in b3-b0 of
 byte 4, firmware version in bytes 5-7 - read as major, minor, patch, our reading), 0x98 heartbeat
-protection time (5.2.16; uint32 ms, 0 = off; answered by a set status). Manual V1.0.6 added 0x46
+protection time (5.2.16; uint32 ms, 0 = off; answered by a set status); 0x9D sets the position-error protection (5 data bytes: b1 g0Enable En-triggered zero
+return and b0 enable, reserved b7-b2; uint16 Tim, uint16 Errors; set status). Manual V1.0.6 added 0x46
 write all configuration parameters (34 data bytes; set status), 0x47 read all configuration
 parameters and 0x48 read all status parameters (replies of 34 and 28 data bytes): the codec keeps
 their data as bytes (``params``), :mod:`joints.devices.mks.blocks` names the fields; 0x35 reads the
@@ -563,6 +564,19 @@ class WriteIoPort:
 
 
 @dataclass(frozen=True, slots=True)
+class SetPositionErrorProtection:
+    """0x9D (V1.0.6) position-error protection: byte 4 b1 g0Enable (En-triggered single-turn zero return),
+    b0 Enble (protection on), then Tim (uint16, ~15 ms each) and Errors (uint16, 28000 = 360 degrees)."""
+
+    address: int
+    en_zero_return: int
+    enable: int
+    time: int
+    errors: int
+    function: ClassVar[int] = 0x9D
+
+
+@dataclass(frozen=True, slots=True)
 class WriteAllParameters:
     """0x46 write all configuration parameters (V1.0.6): the 34 bytes of 5.7.1 -> set status."""
 
@@ -728,7 +742,7 @@ Request = (
     | SetNoLimitHomeParameters | SetZeroMode | SetLimitPortRemap | QueryStatus | EnableMotor | EmergencyStop
     | RunSpeed | SaveCleanSpeedMode | RunRelativePulses | RunAbsolutePulses | RunRelativeAxis | RunAbsoluteAxis
     | ReadRawEncoder | SetTimedReturn | ReadVersion | SetHeartbeat | WriteAllParameters | ReadAllParameters | ReadAllStatus
-    | WriteIoPort
+    | WriteIoPort | SetPositionErrorProtection
 )
 
 
@@ -1176,6 +1190,21 @@ def _unpack_write_io(address: int, function: int, data: bytes, frame: bytes) -> 
     return WriteIoPort(address, b >> 6, (b >> 4) & 3, (b >> 3) & 1, (b >> 2) & 1)
 
 
+def _pack_position_error(msg: Any) -> bytes:
+    flags = (_check_int("SetPositionErrorProtection.en_zero_return", msg.en_zero_return, 0, 1) << 1) | \
+        _check_int("SetPositionErrorProtection.enable", msg.enable, 0, 1)
+    return bytes((flags,)) + struct.pack(">HH", _check_int("SetPositionErrorProtection.time", msg.time, 0, 0xFFFF),
+                                         _check_int("SetPositionErrorProtection.errors", msg.errors, 0, 0xFFFF))
+
+
+def _unpack_position_error(address: int, function: int, data: bytes, frame: bytes) -> SetPositionErrorProtection:
+    if data[0] & 0xFC:
+        raise FrameError(f"0x9D: reserved bits b7-b2 of the enable byte are set (0x{data[0]:02X}): {frame.hex(' ')}",
+                         data=frame)
+    time, errors = struct.unpack_from(">HH", data, 1)
+    return SetPositionErrorProtection(address, (data[0] >> 1) & 1, data[0] & 1, time, errors)
+
+
 def _pack_timed_reply(msg: Any) -> bytes:
     try:
         return bytes((_check_u8("TimedReturnReply.code", msg.code), SetStatus(msg.status)))
@@ -1243,6 +1272,7 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _struct(ReadAllParameters),
     _struct(ReadAllStatus),
     _Spec(WriteIoPort, 1, _pack_write_io, _unpack_write_io),
+    _Spec(SetPositionErrorProtection, 5, _pack_position_error, _unpack_position_error),
 )
 
 _REQUESTS: dict[int, _Spec] = {s.cls.function: s for s in _REQUEST_SPECS}  # type: ignore[attr-defined]
@@ -1252,7 +1282,7 @@ _REQUEST_BY_TYPE: dict[type, _Spec] = {s.cls: s for s in _REQUEST_SPECS}
 RUN_REPLY_FUNCTIONS = frozenset((0x91, 0xF4, 0xF5, 0xF6, 0xFD, 0xFE, 0xFF))
 SET_REPLY_FUNCTIONS = frozenset((0x3D, 0x3F, 0x41, 0x82, 0x83, 0x84, 0x85, 0x86, 0x87, 0x88, 0x89, 0x8A, 0x8B,
                                  0x8C, 0x8D, 0x8E, 0x8F, 0x90, 0x92, 0x94, 0x98, 0x9A, 0x9B, 0x9E, 0xF3, 0xF7,
-                                 0x46, 0x36))
+                                 0x46, 0x36, 0x9D))
 
 _RUN_REPLY = _coded_spec(RunReply, RunStatus)
 _SET_REPLY = _coded_spec(SetReply, SetStatus)

@@ -494,8 +494,8 @@ class MksDriver(JointDriver):
 
     def fault_text(self, code: int) -> str:
         if code == LOCKED_ROTOR:
-            return ("motor shaft locked-rotor protection: the position error stayed too large (manual 3 #9, 5.2 #9); "
-                    "the drive released the shaft")
+            return ("motor shaft locked-rotor protection: the position error stayed too large (manual 3 #9, 5.2 #9; "
+                    "or the position-error protection 0x9D, V1.0.6+); the drive released the shaft")
         return f"unknown MKS fault code 0x{code:X}"
 
     def fault(self, code: int) -> Fault | None:
@@ -578,6 +578,22 @@ class MksDriver(JointDriver):
         self.access.write_many({"write_io_out1_mask": 0 if out1 is None else 1, "write_io_out1": out1 or 0,
                                 "write_io_out2_mask": 0 if out2 is None else 1, "write_io_out2": out2 or 0},
                                idempotent=True)
+
+    def set_position_error_protection(self, on: bool, *, window: float = 0.3, error: float = math.pi,
+                                      en_zero_return: bool = False, confirm: bool = False) -> None:
+        """0x9D (V1.0.6+; Modbus FC16 0x009D): protect (release the shaft, 0x3E = 1) when the position error
+        stays above ``error`` [rad, motor side] for ``window`` [s] (sent as Tim = window / 15 ms and Errors =
+        28000 per turn). ``en_zero_return`` (g0Enable) makes the motor MOVE to its 0_Mode zero on an En pulse
+        instead of at power-on: it needs ``confirm=True``. Release with ``clear_errors()`` (0x3D)."""
+        if en_zero_return:
+            self._confirm("0x9D g0Enable makes the motor move to its zero point on an En pulse", confirm)
+        tim = round(window / 0.015)
+        errors = round(abs(error) * 28000 / (2.0 * math.pi))
+        if not (0 <= tim <= 0xFFFF and 0 <= errors <= 0xFFFF):
+            raise CommandError(f"{self.name}: 0x9D window {window} s -> Tim {tim}, error {error} rad -> Errors "
+                               f"{errors}: each must fit 0..65535 (15 ms and 1/28000 turn per unit)")
+        self.access.write_many({"en_trigger_zero_return": int(en_zero_return), "position_error_protection": int(on),
+                                "position_error_time": tim, "position_error_count": errors})
 
     def set_home(self, *, trigger_level: int = 0, direction: int = 0, speed: int = 60, end_limit: int = 0) -> None:
         """0x90 home parameters: end-stop level (0 low), home direction (0 CW, 1 CCW), speed [rpm], EndLimit."""

@@ -66,6 +66,12 @@ Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; defa
     V1.0.6's 0x36 writes the outputs: a port the host wrote (mask 1) reads the written level in 0x34 from
     then on (OUT_1 no longer shows the 57D's stall indication); masks 0 and 2 leave it (the manual's "do
     not write" and "remains unchanged" do the same here); the written levels are lost at power-off.
+    V1.0.6's 0x9D position-error protection: when the position error stays above Errors (28000 per turn)
+    for Tim x 15 ms (closed modes, like the locked-rotor protection), the drive protects: the motion ends
+    without a completion frame (the state machine's PROTECTION), the shaft is released, 0x3E reads 1
+    (:attr:`MksFirmware.protection_cause` says which protection), 0x3D or an En pulse
+    (:meth:`MksFirmware.en_pulse`) releases it. g0Enable: the 0_Mode zero return no longer runs at
+    power-on but on an En pulse of about 200 ms in a pulse work mode.
     V1.0.6's 0x46/0x47/0x48 (:mod:`joints.devices.mks.blocks`) write/read the same settings and
     statuses as the single commands; a 0x46 with any value out of range changes nothing (status 0).
 
@@ -97,12 +103,19 @@ from joints.devices.mks.native import Command
 from joints.devices.mks.params import FEATURE_OF
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import Access, ParamSet
-from joints.devices.quirks import MKS_ALL_PARAMETERS, MKS_TIMED_RETURNS, FirmwareProfile, firmware_profile
+from joints.devices.quirks import (
+    MKS_ALL_PARAMETERS,
+    MKS_POSITION_ERROR_PROTECTION,
+    MKS_TIMED_RETURNS,
+    FirmwareProfile,
+    firmware_profile,
+)
 from joints.errors import CommandError
 from joints.sim.firmware import Firmware
 from joints.sim.sensors import Sensor, model_of
 
-__all__ = ["CALIBRATION_TIME", "FLASH_TIME", "SERVO_BANDWIDTH", "SPEED_MODE_LEAD", "ZERO_MODE_RPM", "Completion",
+__all__ = ["CALIBRATION_TIME", "EN_PULSE", "FLASH_TIME", "POSITION_ERROR_PER_TURN", "POSITION_ERROR_TICK",
+           "SERVO_BANDWIDTH", "SPEED_MODE_LEAD", "ZERO_MODE_RPM", "Completion",
            "MksFirmware", "TimedReturn"]
 
 TAU = 2.0 * math.pi
@@ -119,6 +132,9 @@ SETTLE_TIMEOUT = 0.3  #: s - or this long after its reference arrived (a load ma
 CALIBRATION_TIME = 2.0  #: s
 FLASH_TIME = 0.01  #: s from a save/clean reply to its completion
 ZERO_MODE_RPM = (15, 30, 60, 120, 240)  #: 0_Speed 0 (slowest) .. 4 (fastest)
+POSITION_ERROR_PER_TURN = 28000  #: 0x9D Errors: "When Errors = 28000, the motor is misaligned by 360 degrees"
+POSITION_ERROR_TICK = 0.015  #: s per 0x9D Tim unit ("approximately equal to 15 ms")
+EN_PULSE = (0.15, 0.3)  #: s: the En pulse that triggers the 0x9D zero return ("about 200 ms"; our window)
 _RUN_CODES = {int(c): c for c in (Command.SPEED_MODE, Command.POSITION_MODE1_RELATIVE_PULSES,
                                    Command.POSITION_MODE2_ABSOLUTE_PULSES, Command.POSITION_MODE3_RELATIVE_AXIS,
                                    Command.POSITION_MODE4_ABSOLUTE_AXIS)}
@@ -250,6 +266,8 @@ class MksFirmware(Firmware):
         v = self.values
         self.enabled = bool(v["motor_enable"])
         self.protected = False
+        self.protection_cause = ""  #: "locked-rotor" (0x88) or "position-error" (0x9D) while protected
+        self._perr_since = -1.0
         self.outputs: dict[int, int] = {}  #: OUT_1 / OUT_2 levels the host wrote (0x36, V1.0.6)
         self.run_state = st.RunState.IDLE
         self.motion: _Motion | None = None
@@ -304,7 +322,7 @@ class MksFirmware(Firmware):
             self.enabled = True
             self._start(_Motion("speed", Command.SPEED_MODE, False, goal=self._clamp_value(speed), acc=acc,
                                 direction=1 if direction == st.RunDirection.CCW else -1))
-        elif self.values["zero_mode"] and self.zero_point is not None:
+        elif self.values["zero_mode"] and self.zero_point is not None and not self.values["en_trigger_zero_return"]:
             self._zero_return()
 
     def set_end_stops(self, low: float | None, high: float | None) -> None:
@@ -424,6 +442,7 @@ class MksFirmware(Firmware):
     def _release(self, values: Mapping[str, int], answered: bool) -> int:
         if self.protected:
             self.protected = False
+            self.protection_cause = ""
             self._hold()
         return int(_SET.SUCCESS)
 
@@ -485,6 +504,26 @@ class MksFirmware(Firmware):
         self.completions.append(Completion(self.time + FLASH_TIME, Command.SAVE_CLEAN_SPEED_MODE,
                                            int(_RUN.COMPLETE), answered))
         return int(_RUN.STARTED)
+
+    def en_pulse(self, width: float = 0.2) -> bool:
+        """The En line pulsed for ``width`` s, ending now (a hardware input, like :meth:`set_end_stops`).
+
+        V1.0.6: a pulse releases a protection (version notes, "It can release the protection status by
+        En"); with 0x9D g0Enable on, in a pulse work mode (CR_*, where the En line rules), a pulse of
+        :data:`EN_PULSE` ("about 200 ms") starts the single-turn zero return of 0_Mode. Returns whether
+        it did anything. A firmware before V1.0.6 ignores it."""
+        if MKS_POSITION_ERROR_PROTECTION not in self.firmware.features:
+            return False
+        if self.protected:
+            self.protected = False
+            self.protection_cause = ""
+            self._hold()
+            return True
+        if (self.values["en_trigger_zero_return"] and not self.mode.serial and self.values["zero_mode"]
+                and self.zero_point is not None and EN_PULSE[0] <= width <= EN_PULSE[1] and self.motion is None):
+            self._zero_return()
+            return True
+        return False
 
     def _write_io(self, values: Mapping[str, int], answered: bool) -> int:
         for port in (1, 2):
@@ -595,6 +634,7 @@ class MksFirmware(Firmware):
         self.v_ref = 0.0
         self._integral = 0.0
         self._stall_since = -1.0
+        self._perr_since = -1.0
 
     def _clamp_value(self, value: int) -> int:
         """A speed value limited to the work mode's maximum speed (6.1)."""
@@ -880,18 +920,33 @@ class MksFirmware(Firmware):
         return max(-limit, min(limit, torque))
 
     def _protect(self, dt: float) -> None:
-        if not self.values["locked_rotor_protection"] or not self.mode.closed_loop:
-            self._stall_since = -1.0
-            return
-        if abs(self.r - self.q) > self.profile.stall_error:
+        """The locked-rotor protection (0x88) and the position-error protection (0x9D, V1.0.6): each watches
+        the position error on its own (closed modes only: OPEN has no position feedback)."""
+        error = abs(self.r - self.q)
+        v = self.values
+        if v["locked_rotor_protection"] and self.mode.closed_loop and error > self.profile.stall_error:
             if self._stall_since < 0:
                 self._stall_since = self.time
             elif self.time - self._stall_since >= self.profile.stall_time - 1e-9:
-                self.protected = True
-                self._end(st.RunEvent.PROTECTION)
-                self._hold()
+                self._protection("locked-rotor")
+                return
         else:
             self._stall_since = -1.0
+        if (v["position_error_protection"] and self.mode.closed_loop
+                and error * POSITION_ERROR_PER_TURN / TAU > v["position_error_count"]):
+            if self._perr_since < 0:
+                self._perr_since = self.time
+            if self.time - self._perr_since >= v["position_error_time"] * POSITION_ERROR_TICK - 1e-9:
+                self._protection("position-error")
+        else:
+            self._perr_since = -1.0
+
+    def _protection(self, cause: str) -> None:
+        self.protected = True
+        self.protection_cause = cause
+        self._end(st.RunEvent.PROTECTION)
+        self._hold()
+        self._perr_since = -1.0
 
     def take_completions(self, now: float) -> list[Completion]:
         """Completions due by ``now`` (the front turns them into frames)."""

@@ -89,7 +89,8 @@ def test_frame_lengths_follow_the_function_code() -> None:
                         **{c: 1 for c in (0x80, 0x82, 0x84, 0x85, 0x86, 0x87, 0x88, 0x89, 0x8A, 0x8B, 0x8D, 0x8E,
                                           0x8F, 0x9B, 0x9E, 0xF3, 0xFF)},
                         0x83: 2, 0x8C: 2, 0xF6: 3, 0x98: 4, 0x9A: 4, 0x90: 5, 0x46: 34, 0x01: 3,
-                        **{c: 7 for c in (0x94, 0xF4, 0xF5, 0xFD, 0xFE)}}
+                        **{c: 7 for c in (0x94, 0xF4, 0xF5, 0xFD, 0xFE)},
+                        0x36: 1, 0x9D: 5}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
     assert dict(mks.REQUEST_DATA_LENGTH) == expected_request
     expected_reply = {c: 1 for c in expected_request} | {0x30: 6, 0x31: 6, 0x32: 2, 0x33: 4, 0x39: 4, 0x40: 4,
                                                          0x47: 34, 0x48: 28, 0x01: 2, 0x35: 6}
@@ -359,12 +360,21 @@ _FIELD = {
     "params": st.binary(min_size=mks.ALL_PARAMETERS_SIZE, max_size=mks.ALL_PARAMETERS_SIZE),
 }
 _WIDE_SPEED = {mks.SetHomeParameters, mks.RunAbsolutePulses, mks.RunRelativeAxis, mks.RunAbsoluteAxis}
+#: fields of the V1.0.6-V1.0.9 commands narrower or wider than a byte (tests/codecs/test_mks_v109_commands.py)
+_NARROW: dict[tuple[type, str], st.SearchStrategy[Any]] = {
+    **{(mks.WriteIoPort, n): st.integers(0, 2) for n in ("out2_mask", "out1_mask")},
+    **{(mks.WriteIoPort, n): st.integers(0, 1) for n in ("out2", "out1")},
+    **{(mks.SetPositionErrorProtection, n): st.integers(0, 1) for n in ("en_zero_return", "enable")},
+    **{(mks.SetPositionErrorProtection, n): u16 for n in ("time", "errors")},
+}
 
 
 def _request_strategy(cls: type) -> st.SearchStrategy[Any]:
     kwargs: dict[str, st.SearchStrategy[Any]] = {}
     for f in dataclasses.fields(cls):
-        if f.name == "direction" and cls in (mks.RunSpeed, mks.RunRelativePulses):
+        if (cls, f.name) in _NARROW:
+            kwargs[f.name] = _NARROW[cls, f.name]
+        elif f.name == "direction" and cls in (mks.RunSpeed, mks.RunRelativePulses):
             kwargs[f.name] = st.sampled_from(mks.RunDirection)
         elif f.name == "times" and cls is mks.SetTimedReturn:
             kwargs[f.name] = u16

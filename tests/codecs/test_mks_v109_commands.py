@@ -67,3 +67,36 @@ def test_write_io_port_over_modbus_is_fc16_0x36_and_the_manuals_reply() -> None:
     assert mb.encode(mb.WriteMultipleRegistersReply(1, 0x36, 2)) == bytes.fromhex("01 10 00 36 00 02 A1 C6")
     assert _modbus_frame(bytes.fromhex("01 10 00 36 00 02 04 01 01 00 00")) == \
         mb.encode(mb.WriteMultipleRegisters(1, 0x36, words))
+
+
+# -- 0x9D position-error protection (V1.0.6) --------------------------------------------------------
+
+
+def test_position_error_protection_is_the_manuals_example() -> None:
+    """RS485 V1.0.9 5.4.2: "send FA 01 9D 01 00 14 36 B0 93, return FB 01 9D 01 9A" (enable, Tim 20, Errors
+    14000 = 180 degrees); the V1.0.6 table puts g0Enable in b1 of the same byte."""
+    msg = mks.SetPositionErrorProtection(1, 0, 1, 0x14, 0x36B0)
+    frame = bytes.fromhex("FA 01 9D 01 00 14 36 B0 93")
+    assert mks.encode(msg) == frame
+    assert _decode(Role.DEVICE, frame) == msg
+    assert _decode(Role.HOST, bytes.fromhex("FB 01 9D 01 9A")) == mks.SetReply(1, 0x9D, mks.SetStatus.SUCCESS)
+    both = mks.SetPositionErrorProtection(1, 1, 1, 0x14, 0x36B0)
+    assert mks.encode(both)[3] == 0x03 and _decode(Role.DEVICE, mks.encode(both)) == both
+
+
+def test_position_error_protection_reserved_bits_are_rejected() -> None:
+    with pytest.raises(FrameError):
+        _decode(Role.DEVICE, mks.with_checksum(bytes.fromhex("FA 01 9D 05 00 14 36 B0")))
+    with pytest.raises(EncodeError):
+        mks.encode(mks.SetPositionErrorProtection(1, 0, 2, 0, 0))
+
+
+def test_position_error_protection_over_modbus_is_fc16_0x9d_with_two_flag_bits() -> None:
+    """Modbus: 01 10 00 9D 00 03 06 | 00 (b1 g0Enable, b0 pEnable) | Tim | Errs; reply 01 10 00 9D 00 03 11 E6."""
+    block = MKS_MODBUS.block(FC_WRITE_MULTIPLE, 0x9D)
+    values = {"en_trigger_zero_return": 1, "position_error_protection": 1, "position_error_time": 0x14,
+              "position_error_count": 0x36B0}
+    assert block.words(values) == (0x0003, 0x0014, 0x36B0)
+    assert block.decode_words((0x0001, 0x0014, 0x36B0))["en_trigger_zero_return"] == 0
+    assert block.decode_words((0x0002, 0, 0))["en_trigger_zero_return"] == 1
+    assert mb.encode(mb.WriteMultipleRegistersReply(1, 0x9D, 3)) == bytes.fromhex("01 10 00 9D 00 03 11 E6")

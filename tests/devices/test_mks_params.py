@@ -20,7 +20,8 @@ MANUAL = manual("mks-servo42d-57d-rs485-manual-v1.0.5.txt")
 PARTS_5_6 = MANUAL[MANUAL.index("Part5. Serial command description"):MANUAL.index("Part7. Serial example")]
 PART_8 = MANUAL[MANUAL.index("Part8. MODBUS-RTU command description"):MANUAL.index("Part9. FAQ")]
 #: what V1.0.9 added (manuals V1.0.9: 0x40 read version 5.1.11 / 3.1.8, 0x98 heartbeat 5.2.16 / 3.2.14)
-LATER = {0x40, 0x98, 0x46, 0x47, 0x48, 0x01, 0x35}
+LATER = {0x40, 0x98, 0x46, 0x47, 0x48, 0x01, 0x35,
+         0x36, 0x9D}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
 
 
 # ------------------------------------------------------------------------------ parameters
@@ -56,9 +57,10 @@ def test_dangerous_commands_are_persistent() -> None:
         "save_clean_speed_mode_parameter",  # 0xFF
         "restore_default_parameters", "restart_motor",  # 0x3F, 0x41
         "set_current_axis_to_zero",  # 0x92
+        "en_trigger_zero_return",  # 0x9D g0Enable (V1.0.6): the motor moves on an En pulse
     }
     commands = {MKS_NATIVE.key(n).command for n in DANGEROUS}
-    assert commands == {0x80, 0x8A, 0x8B, 0x8E, 0x9A, 0xFF, 0x3F, 0x41, 0x92}
+    assert commands == {0x80, 0x8A, 0x8B, 0x8E, 0x9A, 0xFF, 0x3F, 0x41, 0x92, 0x9D}
 
 
 def test_documented_defaults_and_ranges() -> None:

@@ -35,6 +35,12 @@ The 0x90 quirk (ERRATA DOC-MKS-5, manual 8.2 #20, vector mks-modbus-8.2.20-recv)
     ``joints.codecs.modbus.UnsupportedRequest(slave, 16, pdu)``). The reply is an ordinary FC16
     reply for 3 registers (01 10 00 90 00 03 80 25).
 
+V1.0.6-V1.0.9 requests (Modbus-RTU manual V1.0.9; the RS485 manual V1.0.6 Part 8)
+    FC16 0x36 write IO port: OUT2_mask, OUT_2, OUT1_mask, OUT_1 (one byte each). FC16 0x9D position
+    error protection: byte 0 reserved (0), byte 1 b1 g0Enable (En-triggered zero return, V1.0.6's
+    table; V1.0.9 prints only pEnable in b0), b0 pEnable, then Tim and Errs (uint16 each): the two
+    flags are bit fields (:attr:`ModbusField.bit`).
+
 Other choices: ``slave_address`` is 1-247 over Modbus (the Modbus address range); microsteps are
 written as the count 1-256 (Part 8 shows a 16-bit value, unlike the native byte).
 """
@@ -70,6 +76,7 @@ class ModbusField:
     access: Access
     minimum: int | None = None  #: narrower bound than the parameter's, over Modbus only
     maximum: int | None = None
+    bit: int = -1  #: 0-7: the field is this one bit of the byte at ``offset`` (0x9D's flags); -1: whole bytes
 
     @property
     def signed(self) -> bool:
@@ -97,8 +104,14 @@ class ModbusBlock:
 
     def __post_init__(self) -> None:
         end = 0
+        bits: dict[int, set[int]] = {}
         for f in sorted(self.fields, key=lambda f: f.offset):
-            if f.offset < end or f.offset + f.size > self.byte_count:
+            if f.bit >= 0:  # flags sharing one byte: distinct bits, no byte field there
+                if f.size != 1 or f.bit > 7 or f.bit in bits.setdefault(f.offset, set()) or f.offset < end:
+                    raise ValueError(f"{self.title}: bit field {f.name} overlaps or is not one bit of one byte")
+                bits[f.offset].add(f.bit)
+                continue
+            if f.offset < end or f.offset in bits or f.offset + f.size > self.byte_count:
                 raise ValueError(f"{self.title}: field {f.name} overlaps or overruns the block")
             if TYPES[f.type][2] > f.size:
                 raise ValueError(f"{self.title}: {f.type} does not fit {f.size} bytes ({f.name})")
@@ -114,8 +127,8 @@ class ModbusBlock:
         """The block's data bytes -> {parameter name: value}."""
         if len(data) != self.byte_count:
             raise CommandError(f"{self.title}: expected {self.byte_count} data bytes, got {len(data)}")
-        return {f.name: int.from_bytes(data[f.offset:f.offset + f.size], "big", signed=f.signed)
-                for f in self.fields}
+        return {f.name: (data[f.offset] >> f.bit) & 1 if f.bit >= 0
+                else int.from_bytes(data[f.offset:f.offset + f.size], "big", signed=f.signed) for f in self.fields}
 
     def encode(self, values: Mapping[str, int]) -> bytes:
         """{parameter name: value} (every field of the block) -> the data bytes, range-checked."""
@@ -127,7 +140,11 @@ class ModbusBlock:
                                + (f"; not in this block: {', '.join(extra)}" if extra else ""))
         out = bytearray(self.byte_count)
         for f in self.fields:
-            out[f.offset:f.offset + f.size] = f.check(values[f.name]).to_bytes(f.size, "big", signed=f.signed)
+            v = f.check(values[f.name])
+            if f.bit >= 0:
+                out[f.offset] |= (v & 1) << f.bit
+            else:
+                out[f.offset:f.offset + f.size] = v.to_bytes(f.size, "big", signed=f.signed)
         return bytes(out)
 
     def words(self, values: Mapping[str, int]) -> tuple[int, ...]:
@@ -246,6 +263,11 @@ _BLOCKS: tuple[ModbusBlock, ...] = (
     _multi(0x36, 2, 4, "V1.0.9 4.2 Write IO port data", C,
            ("write_io_out2_mask", 0, 1, "uint8"), ("write_io_out2", 1, 1, "uint8"),
            ("write_io_out1_mask", 2, 1, "uint8"), ("write_io_out1", 3, 1, "uint8")),
+    ModbusBlock(FC_WRITE_MULTIPLE, 0x9D, 3, 6, "V1.0.9 3.4.2 Set position out-of-tolerance protection parameters",
+                (ModbusField("en_trigger_zero_return", FC_WRITE_MULTIPLE, 0x9D, 1, 1, "bool", W, bit=1),
+                 ModbusField("position_error_protection", FC_WRITE_MULTIPLE, 0x9D, 1, 1, "bool", W, bit=0),
+                 _f("position_error_time", FC_WRITE_MULTIPLE, 0x9D, 2, 2, "uint16", W),
+                 _f("position_error_count", FC_WRITE_MULTIPLE, 0x9D, 4, 2, "uint16", W))),
 )
 
 

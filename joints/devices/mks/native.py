@@ -77,6 +77,7 @@ class Command(enum.IntEnum):
     SET_HEARTBEAT_PROTECTION_TIME = 0x98
     SET_ZERO_MODE = 0x9A
     SET_HOLDING_CURRENT = 0x9B
+    SET_POSITION_ERROR_PROTECTION = 0x9D
     SET_LIMIT_PORT_REMAP = 0x9E
     QUERY_MOTOR_STATUS = 0xF1
     ENABLE_MOTOR = 0xF3
@@ -226,6 +227,10 @@ _KEYS: dict[str, NativeKey] = {
     "write_io_out1_mask": NativeKey(C.WRITE_IO_PORT, "out1_mask"),
     "write_io_out2": NativeKey(C.WRITE_IO_PORT, "out2"),
     "write_io_out1": NativeKey(C.WRITE_IO_PORT, "out1"),
+    "en_trigger_zero_return": NativeKey(C.SET_POSITION_ERROR_PROTECTION, "en_zero_return"),
+    "position_error_protection": NativeKey(C.SET_POSITION_ERROR_PROTECTION, "enable"),
+    "position_error_time": NativeKey(C.SET_POSITION_ERROR_PROTECTION, "time"),
+    "position_error_count": NativeKey(C.SET_POSITION_ERROR_PROTECTION, "errors"),
 }
 del C
 

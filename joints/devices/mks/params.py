@@ -172,6 +172,17 @@ _PARAMS: tuple[Param, ...] = (
           0, 2, 0),
     Param("write_io_out2", "uint8", C, "", "0x36 OUT_2 value (0/1) (V1.0.6)", 0, 1, 0),
     Param("write_io_out1", "uint8", C, "", "0x36 OUT_1 value (0/1) (V1.0.6)", 0, 1, 0),
+    # 0x9D position-error protection and En-triggered single-turn zero return (V1.0.6; RS485 V1.0.6 5.10,
+    # V1.0.9 5.4.2; Modbus V1.0.9 3.4.2)
+    Param("en_trigger_zero_return", "bool", W, "", "0x9D g0Enable: an En pulse of ~200 ms starts the single-turn "
+          "zero return (0_Mode), no more at power-on (the motor MOVES on the En line) (V1.0.6)", 0, 1, 0,
+          persistent=True),
+    Param("position_error_protection", "bool", W, "", "0x9D pEnable: position-error protection on (V1.0.6)",
+          0, 1, 0),
+    Param("position_error_time", "uint16", W, "15 ms", "0x9D Tim: the error statistics time, ~15 ms per unit "
+          "(V1.0.6)", 0, 0xFFFF, 20),
+    Param("position_error_count", "uint16", W, "1/28000 turn", "0x9D Errors: the position error that protects "
+          "(28000 = 360 degrees) (V1.0.6)", 0, 0xFFFF, 14000),
     Param("heartbeat_protection_time", "uint32", W, "ms", "0x98 heartbeat protection time (V1.0.9): no command "
           "for this long stops the motor urgently; 0 = off", 0, 0xFFFFFFFF, 0),
 )
@@ -180,7 +191,10 @@ _PARAMS: tuple[Param, ...] = (
 FEATURE_OF: dict[str, str] = {"raw_encoder_value": "mks-all-parameters", "version_information": "mks-version",
                               "heartbeat_protection_time": "mks-heartbeat",
                               **{n: "mks-write-io" for n in ("write_io_out2_mask", "write_io_out1_mask", "write_io_out2",
-                                                             "write_io_out1")}}
+                                                             "write_io_out1")},
+                              **{n: "mks-position-error-protection" for n in (
+                                  "en_trigger_zero_return", "position_error_protection", "position_error_time",
+                                  "position_error_count")}}
 
 MKS_PARAMS: ParamSet = ParamSet("mks-servo42d57d", _PARAMS)
 

@@ -1,0 +1,148 @@
+"""The MKS commands of firmware V1.0.6-V1.0.9, driver -> twin -> a state change observed, on both protocols
+(native RS485 and Modbus) where the manuals give both, over every firmware profile that has the command; an
+older profile refuses the call before anything is sent, naming the firmware that has it."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytest.importorskip("mujoco")
+
+from mkskit import open_motor
+
+from joints.devices.mks.state import MotorStatus
+from joints.devices.quirks import MKS_FIRMWARES, firmware_profile
+from joints.errors import ConfirmationRequired, RegisterError
+from joints.sim.mks import MksFirmware
+
+PROTOCOLS = ("mks-serial", "modbus-rtu")
+
+
+def _having(feature: str) -> list[str]:
+    return [f for f in MKS_FIRMWARES if feature in firmware_profile("mks", f).features]
+
+
+def _lacking(feature: str) -> list[str]:
+    return [f for f in MKS_FIRMWARES if feature not in firmware_profile("mks", f).features]
+
+
+def _twin(rig) -> MksFirmware:  # type: ignore[no-untyped-def]
+    fw = rig.world.drives["m1"]
+    assert isinstance(fw, MksFirmware)
+    return fw
+
+
+def _block(world: Any, damping: float = 1e4) -> float:
+    """Block the motor's shaft with a damping no motor torque can turn (or set it back); the one before."""
+    dof = world.joint("m1").dof
+    before = float(world.model.dof_damping[dof])
+    world.model.dof_damping[dof] = damping
+    return before
+
+
+# -- 0x36 write the IO port ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _having("mks-write-io"))
+def test_write_io_sets_the_outputs_the_io_status_reads(tmp_path: Path, protocol: str, firmware: str) -> None:
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware}) as rig:
+        d = rig.joints["m1"].driver
+        assert d.read("io_status") & 0x0C == 0  # a 42D: no output driven at power-on
+        d.write_io(out2=1)
+        assert d.read("io_status") & 0x0C == 0x08  # OUT_2 (bit3) high, OUT_1 untouched
+        d.write_io(out1=1)
+        assert d.read("io_status") & 0x0C == 0x0C  # OUT_2 kept (mask 0: not written)
+        d.write_io(out1=0, out2=0)
+        assert d.read("io_status") & 0x0C == 0
+        assert _twin(rig).outputs == {1: 0, 2: 0}
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _lacking("mks-write-io"))
+def test_write_io_needs_v106(tmp_path: Path, protocol: str, firmware: str) -> None:
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware}) as rig:
+        d = rig.joints["m1"].driver
+        sent = d.link.transactions
+        with pytest.raises(RegisterError, match="v1.0.6"):
+            d.write_io(out1=1)
+        assert d.link.transactions == sent  # nothing was sent
+
+
+# -- 0x9D position-error protection ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _having("mks-position-error-protection"))
+def test_position_error_protection_trips_after_its_window_and_0x3d_releases_it(tmp_path: Path, protocol: str,
+                                                                                firmware: str) -> None:
+    """0x9D with Tim = 10 (150 ms) and Errors = 7000 (90 degrees); the locked-rotor protection (0x88) stays off.
+    A blocked shaft under a 200 rpm speed command: the drive protects 150 ms after the error passed 90 degrees."""
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        j = rig.joints["m1"]
+        d = j.driver
+        fw = _twin(rig)
+        d.set_position_error_protection(True, window=0.15, error=math.pi / 2)
+        assert (fw.values["position_error_protection"], fw.values["position_error_time"],
+                fw.values["position_error_count"]) == (1, 10, 7000)
+        j.enable()
+        free = _block(rig.world)  # blocked before it moves (a sudden block of a turning rotor upsets MuJoCo)
+        d.set_velocity(200, acceleration=0)
+        big_at = tripped_at = None
+        for _ in range(300):  # the twin's own state every 1 ms (bus reads would blur the timing)
+            rig.clock.sleep(0.001)
+            if big_at is None and abs(fw.r - fw.q) > math.pi / 2:
+                big_at = rig.time
+            if fw.protected:
+                tripped_at = rig.time
+                break
+        assert big_at is not None and tripped_at is not None
+        assert tripped_at - big_at == pytest.approx(0.15, abs=0.003)
+        assert fw.protection_cause == "position-error" and not fw.values["locked_rotor_protection"]
+        assert d.protection_state()  # 0x3E reports it
+        s = j.state()
+        assert s.fault is not None and not s.enabled and d.motor_status() is MotorStatus.STOP
+        _block(rig.world, free)
+        j.clear_faults()  # 0x3D
+        assert not d.protection_state() and j.state().enabled
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+def test_position_error_protection_off_never_trips(tmp_path: Path, protocol: str) -> None:
+    with open_motor(tmp_path, protocol=protocol, joint={"watchdog_ms": 0}) as rig:
+        j = rig.joints["m1"]
+        d = j.driver
+        fw = _twin(rig)
+        d.set_position_error_protection(False, window=0.15, error=math.pi / 2)
+        j.enable()
+        _block(rig.world)
+        d.set_velocity(200, acceleration=0)
+        rig.sleep(0.6)
+        assert abs(fw.r - fw.q) > math.pi / 2 and not d.protection_state()
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+def test_en_triggered_zero_return_needs_confirm(tmp_path: Path, protocol: str) -> None:
+    with open_motor(tmp_path, protocol=protocol) as rig:
+        d = rig.joints["m1"].driver
+        sent = d.link.transactions
+        with pytest.raises(ConfirmationRequired):
+            d.set_position_error_protection(False, en_zero_return=True)
+        assert d.link.transactions == sent
+        d.set_position_error_protection(False, en_zero_return=True, confirm=True)
+        assert _twin(rig).values["en_trigger_zero_return"] == 1
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _lacking("mks-position-error-protection"))
+def test_position_error_protection_needs_v106(tmp_path: Path, protocol: str, firmware: str) -> None:
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware}) as rig:
+        d = rig.joints["m1"].driver
+        sent = d.link.transactions
+        with pytest.raises(RegisterError, match="v1.0.6"):
+            d.set_position_error_protection(True)
+        assert d.link.transactions == sent
