@@ -25,7 +25,8 @@ Commands of later firmware (manual V1.0.9; a drive before it does not answer the
 version information (5.1.11; reply: calibration status in b7-b4 and hardware version in b3-b0 of
 byte 4, firmware version in bytes 5-7 - read as major, minor, patch, our reading), 0x98 heartbeat
 protection time (5.2.16; uint32 ms, 0 = off; answered by a set status); 0x9D sets the position-error protection (5 data bytes: b1 g0Enable En-triggered zero
-return and b0 enable, reserved b7-b2; uint16 Tim, uint16 Errors; set status). Manual V1.0.6 added 0x46
+return and b0 enable, reserved b7-b2; uint16 Tim, uint16 Errors; set status). V1.0.8's 0x95 sets
+the position-reached threshold (enable byte, uint16 values; set status). Manual V1.0.6 added 0x46
 write all configuration parameters (34 data bytes; set status), 0x47 read all configuration
 parameters and 0x48 read all status parameters (replies of 34 and 28 data bytes): the codec keeps
 their data as bytes (``params``), :mod:`joints.devices.mks.blocks` names the fields; 0x35 reads the
@@ -577,6 +578,16 @@ class SetPositionErrorProtection:
 
 
 @dataclass(frozen=True, slots=True)
+class SetPositionThreshold:
+    """0x95 (V1.0.8) position-reached threshold: enable (1 default) and values (uint16, 65535 = 360 degrees)."""
+
+    address: int
+    enable: int
+    values: int
+    function: ClassVar[int] = 0x95
+
+
+@dataclass(frozen=True, slots=True)
 class WriteAllParameters:
     """0x46 write all configuration parameters (V1.0.6): the 34 bytes of 5.7.1 -> set status."""
 
@@ -742,7 +753,7 @@ Request = (
     | SetNoLimitHomeParameters | SetZeroMode | SetLimitPortRemap | QueryStatus | EnableMotor | EmergencyStop
     | RunSpeed | SaveCleanSpeedMode | RunRelativePulses | RunAbsolutePulses | RunRelativeAxis | RunAbsoluteAxis
     | ReadRawEncoder | SetTimedReturn | ReadVersion | SetHeartbeat | WriteAllParameters | ReadAllParameters | ReadAllStatus
-    | WriteIoPort | SetPositionErrorProtection
+    | WriteIoPort | SetPositionErrorProtection | SetPositionThreshold
 )
 
 
@@ -1273,6 +1284,7 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _struct(ReadAllStatus),
     _Spec(WriteIoPort, 1, _pack_write_io, _unpack_write_io),
     _Spec(SetPositionErrorProtection, 5, _pack_position_error, _unpack_position_error),
+    _struct(SetPositionThreshold, "BH", ("enable", "values")),
 )
 
 _REQUESTS: dict[int, _Spec] = {s.cls.function: s for s in _REQUEST_SPECS}  # type: ignore[attr-defined]
@@ -1282,7 +1294,7 @@ _REQUEST_BY_TYPE: dict[type, _Spec] = {s.cls: s for s in _REQUEST_SPECS}
 RUN_REPLY_FUNCTIONS = frozenset((0x91, 0xF4, 0xF5, 0xF6, 0xFD, 0xFE, 0xFF))
 SET_REPLY_FUNCTIONS = frozenset((0x3D, 0x3F, 0x41, 0x82, 0x83, 0x84, 0x85, 0x86, 0x87, 0x88, 0x89, 0x8A, 0x8B,
                                  0x8C, 0x8D, 0x8E, 0x8F, 0x90, 0x92, 0x94, 0x98, 0x9A, 0x9B, 0x9E, 0xF3, 0xF7,
-                                 0x46, 0x36, 0x9D))
+                                 0x46, 0x36, 0x9D, 0x95))
 
 _RUN_REPLY = _coded_spec(RunReply, RunStatus)
 _SET_REPLY = _coded_spec(SetReply, SetStatus)

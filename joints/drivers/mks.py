@@ -595,6 +595,17 @@ class MksDriver(JointDriver):
         self.access.write_many({"en_trigger_zero_return": int(en_zero_return), "position_error_protection": int(on),
                                 "position_error_time": tim, "position_error_count": errors})
 
+    def set_position_threshold(self, threshold: float | None) -> None:
+        """0x95 (V1.0.8+, native only): a position move completes only while its error is below ``threshold``
+        [rad, motor side; sent as 65536 per turn, the drive's default 200 = 1.1 degrees]; None switches the
+        check off."""
+        values = 0 if threshold is None else round(abs(threshold) * 65536 / (2.0 * math.pi))
+        if values > 0xFFFF:
+            raise CommandError(f"{self.name}: 0x95 threshold {threshold} rad is more than a turn (65535 max)")
+        self.access.write_many({"position_threshold_enable": int(threshold is not None),
+                                "position_threshold": values if threshold is not None else self.params[
+                                    "position_threshold"].default})
+
     def set_home(self, *, trigger_level: int = 0, direction: int = 0, speed: int = 60, end_limit: int = 0) -> None:
         """0x90 home parameters: end-stop level (0 low), home direction (0 CW, 1 CCW), speed [rpm], EndLimit."""
         self.access.write_many({"home_trigger_level": trigger_level, "home_direction": direction,

@@ -72,6 +72,10 @@ Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; defa
     (:attr:`MksFirmware.protection_cause` says which protection), 0x3D or an En pulse
     (:meth:`MksFirmware.en_pulse`) releases it. g0Enable: the 0_Mode zero return no longer runs at
     power-on but on an En pulse of about 200 ms in a pulse work mode.
+    V1.0.8's 0x95 (profile v1.0.9): a position move (0xFD/0xFE/0xF4/0xF5) in a closed mode completes only
+    while the position error is below the threshold (65536 per turn, default 200 = 1.1 degrees) - a
+    necessary condition on top of the settle rule above, so a shaft held off the target by more never
+    completes (the older profiles complete after the settle timeout); threshold off: the settle rule.
     V1.0.6's 0x46/0x47/0x48 (:mod:`joints.devices.mks.blocks`) write/read the same settings and
     statuses as the single commands; a 0x46 with any value out of range changes nothing (status 0).
 
@@ -106,6 +110,7 @@ from joints.devices.params import Access, ParamSet
 from joints.devices.quirks import (
     MKS_ALL_PARAMETERS,
     MKS_POSITION_ERROR_PROTECTION,
+    MKS_POSITION_THRESHOLD,
     MKS_TIMED_RETURNS,
     FirmwareProfile,
     firmware_profile,
@@ -115,6 +120,7 @@ from joints.sim.firmware import Firmware
 from joints.sim.sensors import Sensor, model_of
 
 __all__ = ["CALIBRATION_TIME", "EN_PULSE", "FLASH_TIME", "POSITION_ERROR_PER_TURN", "POSITION_ERROR_TICK",
+           "POSITION_THRESHOLD_PER_TURN",
            "SERVO_BANDWIDTH", "SPEED_MODE_LEAD", "ZERO_MODE_RPM", "Completion",
            "MksFirmware", "TimedReturn"]
 
@@ -134,6 +140,7 @@ FLASH_TIME = 0.01  #: s from a save/clean reply to its completion
 ZERO_MODE_RPM = (15, 30, 60, 120, 240)  #: 0_Speed 0 (slowest) .. 4 (fastest)
 POSITION_ERROR_PER_TURN = 28000  #: 0x9D Errors: "When Errors = 28000, the motor is misaligned by 360 degrees"
 POSITION_ERROR_TICK = 0.015  #: s per 0x9D Tim unit ("approximately equal to 15 ms")
+POSITION_THRESHOLD_PER_TURN = 65536  #: 0x95 values: "The maximum value is 65535, which is 360 degrees"
 EN_PULSE = (0.15, 0.3)  #: s: the En pulse that triggers the 0x9D zero return ("about 200 ms"; our window)
 _RUN_CODES = {int(c): c for c in (Command.SPEED_MODE, Command.POSITION_MODE1_RELATIVE_PULSES,
                                    Command.POSITION_MODE2_ABSOLUTE_PULSES, Command.POSITION_MODE3_RELATIVE_AXIS,
@@ -806,8 +813,7 @@ class MksFirmware(Firmware):
             if not self._advance(m, dt):
                 return
             m.arrived = self.time
-        if (self.mode.closed_loop and self.time - m.arrived < SETTLE_TIMEOUT
-                and (abs(self.r - self.q) > IN_POSITION or abs(self.qd) > IN_POSITION_SPEED)):
+        if self._settling(m):
             return  # the reference is there; the shaft settles into the window
         if m.kind == "zero":
             self.zero_status = int(st.GoBackToZeroStatus.SUCCESS)
@@ -815,6 +821,18 @@ class MksFirmware(Firmware):
             self.run_state = st.RunState.COMPLETE
         else:
             self._end(st.RunEvent.ARRIVED)
+
+    def _settling(self, m: _Motion) -> bool:
+        """Whether a move whose reference arrived still waits for the shaft before it completes."""
+        if not self.mode.closed_loop:
+            return False
+        error = abs(self.r - self.q)
+        if self.time - m.arrived < SETTLE_TIMEOUT and (error > IN_POSITION or abs(self.qd) > IN_POSITION_SPEED):
+            return True
+        v = self.values  # 0x95 (V1.0.8): never complete outside the threshold, not even after the settle timeout
+        return (MKS_POSITION_THRESHOLD in self.firmware.features and m.kind == "move"
+                and bool(v["position_threshold_enable"])
+                and error * POSITION_THRESHOLD_PER_TURN / TAU >= v["position_threshold"])
 
     def _advance(self, m: _Motion, dt: float) -> bool:
         """One substep of a move toward ``m.target``; True when the reference arrived (exactly)."""

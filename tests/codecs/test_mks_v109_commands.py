@@ -100,3 +100,17 @@ def test_position_error_protection_over_modbus_is_fc16_0x9d_with_two_flag_bits()
     assert block.decode_words((0x0001, 0x0014, 0x36B0))["en_trigger_zero_return"] == 0
     assert block.decode_words((0x0002, 0, 0))["en_trigger_zero_return"] == 1
     assert mb.encode(mb.WriteMultipleRegistersReply(1, 0x9D, 3)) == bytes.fromhex("01 10 00 9D 00 03 11 E6")
+
+
+# -- 0x95 position-reached threshold (V1.0.8) -------------------------------------------------------
+
+
+def test_position_threshold_frame() -> None:
+    """RS485 V1.0.9 5.2.17: FA addr 95 enable values(uint16) CRC; the default 01 00C8 (200)."""
+    msg = mks.SetPositionThreshold(1, 1, 200)
+    frame = mks.with_checksum(bytes.fromhex("FA 01 95 01 00 C8"))
+    assert mks.encode(msg) == frame
+    assert _decode(Role.DEVICE, frame) == msg
+    assert _decode(Role.HOST, mks.with_checksum(bytes.fromhex("FB 01 95 00"))) == \
+        mks.SetReply(1, 0x95, mks.SetStatus.FAIL)
+    assert MKS_MODBUS.find(FC_WRITE_MULTIPLE, 0x95) is None  # not in the Modbus-RTU manual

@@ -146,3 +146,60 @@ def test_position_error_protection_needs_v106(tmp_path: Path, protocol: str, fir
         with pytest.raises(RegisterError, match="v1.0.6"):
             d.set_position_error_protection(True)
         assert d.link.transactions == sent
+
+
+# -- 0x95 position-reached threshold (V1.0.8, native only) -------------------------------------------
+
+
+def _held_off_move(rig, threshold: float | None | str) -> tuple[float, bool]:  # type: ignore[no-untyped-def]
+    """A 3-degree move of a blocked shaft (error 546/65536 turn after the reference arrives); the time the
+    reference arrived and whether the move completed within a second after it."""
+    j = rig.joints["m1"]
+    d = j.driver
+    fw = _twin(rig)
+    if threshold != "default":
+        d.set_position_threshold(threshold)  # type: ignore[arg-type]
+    j.enable()
+    _block(rig.world)
+    d.move_by(round(16384 * 3 / 360), speed=60)
+    while fw.motion is not None and fw.motion.arrived < 0:
+        rig.clock.sleep(0.001)
+    arrived = rig.time
+    assert fw.motion is not None and abs(fw.r - fw.q) > math.radians(2.9)
+    rig.clock.sleep(1.0)
+    return arrived, d.motor_status() is MotorStatus.STOP
+
+
+@pytest.mark.parametrize("firmware", _having("mks-position-threshold"))
+@pytest.mark.parametrize(("threshold", "completes"), [("default", False), (math.radians(5), True), (None, True)])
+def test_position_threshold_holds_the_completion_while_the_error_is_larger(tmp_path: Path, firmware: str,
+                                                                          threshold: float | None | str,
+                                                                          completes: bool) -> None:
+    """Default 200 (1.1 degrees): a shaft held 3 degrees off never completes; a 5-degree threshold or the check
+    off: it completes after the settle timeout, as before V1.0.8."""
+    with open_motor(tmp_path, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        fw = _twin(rig)
+        _arrived, done = _held_off_move(rig, threshold)
+        assert done is completes
+        if threshold == math.radians(5):
+            assert (fw.values["position_threshold_enable"], fw.values["position_threshold"]) == (1, 910)
+        if threshold is None:
+            assert fw.values["position_threshold_enable"] == 0
+
+
+@pytest.mark.parametrize("firmware", _lacking("mks-position-threshold"))
+def test_position_threshold_needs_v109_and_older_drives_complete_after_the_settle_time(tmp_path: Path,
+                                                                                      firmware: str) -> None:
+    with open_motor(tmp_path, joint={"firmware": firmware}) as rig:
+        d = rig.joints["m1"].driver
+        sent = d.link.transactions
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.set_position_threshold(0.1)
+        assert d.link.transactions == sent
+        _arrived, done = _held_off_move(rig, "default")
+        assert done
+
+
+def test_position_threshold_is_native_only(tmp_path: Path) -> None:
+    with open_motor(tmp_path, protocol="modbus-rtu") as rig, pytest.raises(RegisterError, match="native"):
+        rig.joints["m1"].driver.set_position_threshold(0.1)

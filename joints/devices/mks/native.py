@@ -78,6 +78,7 @@ class Command(enum.IntEnum):
     SET_ZERO_MODE = 0x9A
     SET_HOLDING_CURRENT = 0x9B
     SET_POSITION_ERROR_PROTECTION = 0x9D
+    SET_POSITION_THRESHOLD = 0x95
     SET_LIMIT_PORT_REMAP = 0x9E
     QUERY_MOTOR_STATUS = 0xF1
     ENABLE_MOTOR = 0xF3
@@ -231,6 +232,8 @@ _KEYS: dict[str, NativeKey] = {
     "position_error_protection": NativeKey(C.SET_POSITION_ERROR_PROTECTION, "enable"),
     "position_error_time": NativeKey(C.SET_POSITION_ERROR_PROTECTION, "time"),
     "position_error_count": NativeKey(C.SET_POSITION_ERROR_PROTECTION, "errors"),
+    "position_threshold_enable": NativeKey(C.SET_POSITION_THRESHOLD, "enable"),
+    "position_threshold": NativeKey(C.SET_POSITION_THRESHOLD, "values"),
 }
 del C
 

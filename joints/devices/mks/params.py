@@ -183,6 +183,11 @@ _PARAMS: tuple[Param, ...] = (
           "(V1.0.6)", 0, 0xFFFF, 20),
     Param("position_error_count", "uint16", W, "1/28000 turn", "0x9D Errors: the position error that protects "
           "(28000 = 360 degrees) (V1.0.6)", 0, 0xFFFF, 14000),
+    # 0x95 position-reached threshold (V1.0.8; RS485 V1.0.9 5.2.17)
+    Param("position_threshold_enable", "bool", W, "", "0x95 enable: a position move completes only within the "
+          "threshold (V1.0.8)", 0, 1, 1),
+    Param("position_threshold", "uint16", W, "1/65536 turn", "0x95 values: the position-reached threshold "
+          "(65535 = 360 degrees) (V1.0.8)", 0, 0xFFFF, 200),
     Param("heartbeat_protection_time", "uint32", W, "ms", "0x98 heartbeat protection time (V1.0.9): no command "
           "for this long stops the motor urgently; 0 = off", 0, 0xFFFFFFFF, 0),
 )
@@ -194,7 +199,9 @@ FEATURE_OF: dict[str, str] = {"raw_encoder_value": "mks-all-parameters", "versio
                                                              "write_io_out1")},
                               **{n: "mks-position-error-protection" for n in (
                                   "en_trigger_zero_return", "position_error_protection", "position_error_time",
-                                  "position_error_count")}}
+                                  "position_error_count")},
+                              "position_threshold_enable": "mks-position-threshold",
+                              "position_threshold": "mks-position-threshold"}
 
 MKS_PARAMS: ParamSet = ParamSet("mks-servo42d57d", _PARAMS)
 
