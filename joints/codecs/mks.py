@@ -26,7 +26,9 @@ version information (5.1.11; reply: calibration status in b7-b4 and hardware ver
 byte 4, firmware version in bytes 5-7 - read as major, minor, patch, our reading), 0x98 heartbeat
 protection time (5.2.16; uint32 ms, 0 = off; answered by a set status); 0x9D sets the position-error protection (5 data bytes: b1 g0Enable En-triggered zero
 return and b0 enable, reserved b7-b2; uint16 Tim, uint16 Errors; set status). V1.0.8's 0x95 sets
-the position-reached threshold (enable byte, uint16 values; set status). Manual V1.0.6 added 0x46
+the position-reached threshold (enable byte, uint16 values; set status); 0x4A sets the synchronization
+flag (1 byte; set status) and 0x4B (no data, address 0, never answered) starts the held run commands,
+which a drive with the flag on answers with run status 5. Manual V1.0.6 added 0x46
 write all configuration parameters (34 data bytes; set status), 0x47 read all configuration
 parameters and 0x48 read all status parameters (replies of 34 and 28 data bytes): the codec keeps
 their data as bytes (``params``), :mod:`joints.devices.mks.blocks` names the fields; 0x35 reads the
@@ -185,6 +187,7 @@ class RunStatus(enum.IntEnum):
     STARTED = 1  #: run starting, stop starting, go home start, save start (immediate reply)
     COMPLETE = 2  #: run complete, stop complete, go home success, save success (later frame)
     END_LIMIT_STOP = 3  #: an end-limit switch stopped the motion (later frame)
+    SYNC_RECEIVED = 5  #: V1.0.8 (0x4A on): "Data has received for Synchronous mode" - held until 0x4B (immediate)
 
 
 class CalibrationStatus(enum.IntEnum):
@@ -588,6 +591,24 @@ class SetPositionThreshold:
 
 
 @dataclass(frozen=True, slots=True)
+class SetSync:
+    """0x4A (V1.0.8) synchronization flag: 1 = run commands wait for 0x4B (answered status 5) -> set status."""
+
+    address: int
+    enable: int
+    function: ClassVar[int] = 0x4A
+
+
+@dataclass(frozen=True, slots=True)
+class SyncExecute:
+    """0x4B (V1.0.8) synchronous execution: every drive starts its held run command; sent to address 0, no
+    reply ("Returned data: None")."""
+
+    address: int
+    function: ClassVar[int] = 0x4B
+
+
+@dataclass(frozen=True, slots=True)
 class WriteAllParameters:
     """0x46 write all configuration parameters (V1.0.6): the 34 bytes of 5.7.1 -> set status."""
 
@@ -753,7 +774,7 @@ Request = (
     | SetNoLimitHomeParameters | SetZeroMode | SetLimitPortRemap | QueryStatus | EnableMotor | EmergencyStop
     | RunSpeed | SaveCleanSpeedMode | RunRelativePulses | RunAbsolutePulses | RunRelativeAxis | RunAbsoluteAxis
     | ReadRawEncoder | SetTimedReturn | ReadVersion | SetHeartbeat | WriteAllParameters | ReadAllParameters | ReadAllStatus
-    | WriteIoPort | SetPositionErrorProtection | SetPositionThreshold
+    | WriteIoPort | SetPositionErrorProtection | SetPositionThreshold | SetSync | SyncExecute
 )
 
 
@@ -997,8 +1018,8 @@ class RunReply:
 
     @property
     def is_completion(self) -> bool:
-        """A completion frame (2 or 3), not the immediate answer to a command."""
-        return self.status >= RunStatus.COMPLETE
+        """A completion frame (2 or 3), not the immediate answer to a command (0, 1, 5)."""
+        return self.status in (RunStatus.COMPLETE, RunStatus.END_LIMIT_STOP)
 
 
 Reply = (
@@ -1285,6 +1306,8 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _Spec(WriteIoPort, 1, _pack_write_io, _unpack_write_io),
     _Spec(SetPositionErrorProtection, 5, _pack_position_error, _unpack_position_error),
     _struct(SetPositionThreshold, "BH", ("enable", "values")),
+    _struct(SetSync, "B", ("enable",)),
+    _struct(SyncExecute),
 )
 
 _REQUESTS: dict[int, _Spec] = {s.cls.function: s for s in _REQUEST_SPECS}  # type: ignore[attr-defined]
@@ -1294,7 +1317,8 @@ _REQUEST_BY_TYPE: dict[type, _Spec] = {s.cls: s for s in _REQUEST_SPECS}
 RUN_REPLY_FUNCTIONS = frozenset((0x91, 0xF4, 0xF5, 0xF6, 0xFD, 0xFE, 0xFF))
 SET_REPLY_FUNCTIONS = frozenset((0x3D, 0x3F, 0x41, 0x82, 0x83, 0x84, 0x85, 0x86, 0x87, 0x88, 0x89, 0x8A, 0x8B,
                                  0x8C, 0x8D, 0x8E, 0x8F, 0x90, 0x92, 0x94, 0x98, 0x9A, 0x9B, 0x9E, 0xF3, 0xF7,
-                                 0x46, 0x36, 0x9D, 0x95))
+                                 0x46, 0x36, 0x9D, 0x95, 0x4A,
+                                 0x4B))  # 0x4B is never answered (the layout keeps the table total)
 
 _RUN_REPLY = _coded_spec(RunReply, RunStatus)
 _SET_REPLY = _coded_spec(SetReply, SetStatus)

@@ -33,6 +33,8 @@ all status parameters, 0x35 raw encoder value (native protocol only).
 ``mks-timed-returns`` (V1.0.9): 0x01 - the drive sends a read command's reply every n ms, unasked.
 ``mks-write-io`` (V1.0.6+): 0x36 / FC16 0x0036 write the OUT_1 / OUT_2 ports.
 ``mks-position-threshold`` (V1.0.8+, profile v1.0.9): 0x95 the position-reached threshold (native only).
+``mks-sync`` (V1.0.8+, profile v1.0.9): 0x4A synchronization flag and 0x4B synchronous execution (Part 12.4,
+native only): a run command is held (status 5) until the broadcast 0x4B starts every held one at once.
 ``mks-position-error-protection`` (V1.0.6+): 0x9D / FC16 0x009D position-error protection (time window,
 error count) and the En-triggered single-turn zero return; an En pulse also releases the protection.
 """
@@ -47,7 +49,7 @@ from joints.errors import ConfigError
 
 __all__ = ["DEFAULT_FIRMWARE", "EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED", "FIRMWARES", "MKS_ALL_PARAMETERS",
            "MKS_FAILURE_REPLIES", "MKS_FIRMWARES", "MKS_HEARTBEAT", "MKS_POSITION_ERROR_PROTECTION",
-           "MKS_POSITION_THRESHOLD", "MKS_TIMED_RETURNS", "MKS_VERSION", "MKS_WRITE_IO",
+           "MKS_POSITION_THRESHOLD", "MKS_SYNC", "MKS_TIMED_RETURNS", "MKS_VERSION", "MKS_WRITE_IO",
            "QUIRKS",
            "ZLAC_SYNC_FLAG_AS_EXAMPLES", "FirmwareProfile", "Quirk", "firmware_profile"]
 
@@ -86,13 +88,15 @@ MKS_TIMED_RETURNS = "mks-timed-returns"
 MKS_WRITE_IO = "mks-write-io"
 MKS_POSITION_ERROR_PROTECTION = "mks-position-error-protection"
 MKS_POSITION_THRESHOLD = "mks-position-threshold"
+MKS_SYNC = "mks-sync"
 #: the MKS firmware profiles, oldest first (the last is the default)
 MKS_FIRMWARES = ("v1.0.5", "v1.0.6", "v1.0.9")
 _MKS_FEATURES = {
     "v1.0.5": frozenset(),
     "v1.0.6": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_WRITE_IO, MKS_POSITION_ERROR_PROTECTION}),
     "v1.0.9": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_VERSION, MKS_HEARTBEAT, MKS_TIMED_RETURNS,
-                         MKS_WRITE_IO, MKS_POSITION_ERROR_PROTECTION, MKS_POSITION_THRESHOLD}),
+                         MKS_WRITE_IO, MKS_POSITION_ERROR_PROTECTION, MKS_POSITION_THRESHOLD,
+                         MKS_SYNC}),
 }
 _MKS_TEXT = {
     "v1.0.5": "manual V1.0.5 (May 2024): no heartbeat, no version command; Modbus write failures undocumented",

@@ -76,6 +76,11 @@ Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; defa
     while the position error is below the threshold (65536 per turn, default 200 = 1.1 degrees) - a
     necessary condition on top of the settle rule above, so a shaft held off the target by more never
     completes (the older profiles complete after the settle timeout); threshold off: the settle rule.
+    V1.0.8's synchronization (Part 12.4, profile v1.0.9): with 0x4A on, a run command (not a stop) is
+    checked, its fields taken and the command held, answered with run status 5; the broadcast 0x4B
+    starts it (:meth:`MksFirmware.sync_execute`). A second run command before 0x4B replaces the held one
+    (the manual does not say; our choice); stops, 0xF7 and disabling act at once and drop it; a power cycle
+    drops it too (the flag itself is a setting, kept in flash).
     V1.0.6's 0x46/0x47/0x48 (:mod:`joints.devices.mks.blocks`) write/read the same settings and
     statuses as the single commands; a 0x46 with any value out of range changes nothing (status 0).
 
@@ -111,6 +116,7 @@ from joints.devices.quirks import (
     MKS_ALL_PARAMETERS,
     MKS_POSITION_ERROR_PROTECTION,
     MKS_POSITION_THRESHOLD,
+    MKS_SYNC,
     MKS_TIMED_RETURNS,
     FirmwareProfile,
     firmware_profile,
@@ -120,9 +126,8 @@ from joints.sim.firmware import Firmware
 from joints.sim.sensors import Sensor, model_of
 
 __all__ = ["CALIBRATION_TIME", "EN_PULSE", "FLASH_TIME", "POSITION_ERROR_PER_TURN", "POSITION_ERROR_TICK",
-           "POSITION_THRESHOLD_PER_TURN",
-           "SERVO_BANDWIDTH", "SPEED_MODE_LEAD", "ZERO_MODE_RPM", "Completion",
-           "MksFirmware", "TimedReturn"]
+           "POSITION_THRESHOLD_PER_TURN", "SERVO_BANDWIDTH", "SPEED_MODE_LEAD", "SYNC_RECEIVED", "ZERO_MODE_RPM",
+           "Completion", "MksFirmware", "TimedReturn"]
 
 TAU = 2.0 * math.pi
 RPM = TAU / 60.0
@@ -141,6 +146,7 @@ ZERO_MODE_RPM = (15, 30, 60, 120, 240)  #: 0_Speed 0 (slowest) .. 4 (fastest)
 POSITION_ERROR_PER_TURN = 28000  #: 0x9D Errors: "When Errors = 28000, the motor is misaligned by 360 degrees"
 POSITION_ERROR_TICK = 0.015  #: s per 0x9D Tim unit ("approximately equal to 15 ms")
 POSITION_THRESHOLD_PER_TURN = 65536  #: 0x95 values: "The maximum value is 65535, which is 360 degrees"
+SYNC_RECEIVED = int(st.RunStatus.SYNC_RECEIVED)  #: "Data has received for Synchronous mode" (0x4A on, V1.0.8)
 EN_PULSE = (0.15, 0.3)  #: s: the En pulse that triggers the 0x9D zero return ("about 200 ms"; our window)
 _RUN_CODES = {int(c): c for c in (Command.SPEED_MODE, Command.POSITION_MODE1_RELATIVE_PULSES,
                                    Command.POSITION_MODE2_ABSOLUTE_PULSES, Command.POSITION_MODE3_RELATIVE_AXIS,
@@ -276,6 +282,9 @@ class MksFirmware(Firmware):
         self.protection_cause = ""  #: "locked-rotor" (0x88) or "position-error" (0x9D) while protected
         self._perr_since = -1.0
         self.outputs: dict[int, int] = {}  #: OUT_1 / OUT_2 levels the host wrote (0x36, V1.0.6)
+        #: the run command 0x4A holds until 0x4B (V1.0.8): (code, its fields, answered); when 0x4B last started one
+        self.sync_held: tuple[int, dict[str, int], bool] | None = None
+        self.sync_started_at = -1.0
         self.run_state = st.RunState.IDLE
         self.motion: _Motion | None = None
         self.speed = 0  #: present speed value of the reference (magnitude)
@@ -431,6 +440,10 @@ class MksFirmware(Firmware):
             return refused
         if values:
             self.write_many(list(values.items()))
+        if (command in _PREFIX and MKS_SYNC in self.firmware.features and self.values["sync_enable"]
+                and self.values[f"{_PREFIX[command]}_speed"] != 0):
+            self.sync_held = (command, dict(values), answered)  # 0x4A on: wait for 0x4B (the last one wins)
+            return SYNC_RECEIVED
         handler = self._handlers.get(command)
         return handler(values, answered) if handler is not None else int(_SET.SUCCESS)
 
@@ -485,10 +498,12 @@ class MksFirmware(Firmware):
             self._hold()
         elif not on:
             self.enabled = False
+            self.sync_held = None
             self._end(st.RunEvent.EMERGENCY_STOP, quiet=True)
         return int(_SET.SUCCESS)
 
     def _emergency_stop(self, values: Mapping[str, int], answered: bool) -> int:
+        self.sync_held = None
         self._end(st.RunEvent.EMERGENCY_STOP)
         self._hold()
         return int(_SET.SUCCESS)
@@ -511,6 +526,18 @@ class MksFirmware(Firmware):
         self.completions.append(Completion(self.time + FLASH_TIME, Command.SAVE_CLEAN_SPEED_MODE,
                                            int(_RUN.COMPLETE), answered))
         return int(_RUN.STARTED)
+
+    def sync_execute(self) -> bool:
+        """0x4B (V1.0.8): start the run command held since 0x4A made it wait; whether one was held."""
+        held, self.sync_held = self.sync_held, None
+        if held is None or MKS_SYNC not in self.firmware.features:
+            return False
+        command, values, answered = held
+        if self._refusal(command, values) is not None:  # it cannot run now (disabled meanwhile ...)
+            return False
+        self.sync_started_at = self.time
+        self._run_command(values, answered)
+        return True
 
     def en_pulse(self, width: float = 0.2) -> bool:
         """The En line pulsed for ``width`` s, ending now (a hardware input, like :meth:`set_end_stops`).
@@ -599,6 +626,7 @@ class MksFirmware(Firmware):
     def _stop(self, acc: int, code: int, answered: bool) -> int:
         """A stop command (speed 0) of run command ``code``: it stops whatever runs; its completion carries
         ``code``."""
+        self.sync_held = None  # a stop also drops a run command held for 0x4B
         m = self.motion
         if acc == 0 or m is None or self.speed == 0:
             tr = st.step(self.run_state, st.RunEvent.STOP if m is None and acc else st.RunEvent.STOP_NOW)

@@ -112,8 +112,11 @@ class MksNativeFront:
 
     def _block(self, request: Any, answer: bool) -> Any:
         """0x46/0x47/0x48 (V1.0.6): all configuration parameters / all statuses at once; 0x01 (V1.0.9):
-        a read's timed return."""
+        a read's timed return; 0x4B (V1.0.8): start the run commands held for it."""
         fw = self.firmware
+        if isinstance(request, mks.SyncExecute):
+            fw.sync_execute()  # (a firmware without 0x4B ignores it)
+            return None  # never answered
         if isinstance(request, mks.SetTimedReturn):
             if MKS_TIMED_RETURNS not in fw.firmware.features:
                 return None  # unknown to this firmware

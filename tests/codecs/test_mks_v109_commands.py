@@ -114,3 +114,23 @@ def test_position_threshold_frame() -> None:
     assert _decode(Role.HOST, mks.with_checksum(bytes.fromhex("FB 01 95 00"))) == \
         mks.SetReply(1, 0x95, mks.SetStatus.FAIL)
     assert MKS_MODBUS.find(FC_WRITE_MULTIPLE, 0x95) is None  # not in the Modbus-RTU manual
+
+
+# -- 0x4A / 0x4B synchronous control (V1.0.8) --------------------------------------------------------
+
+
+def test_sync_frames_of_12_4() -> None:
+    """12.4.3 prints "FA 01 4A 01 CRC" and "FA 00 4B CRC" (checksums completed); 0x4B has no reply."""
+    assert mks.encode(mks.SetSync(1, 1)) == mks.with_checksum(bytes.fromhex("FA 01 4A 01"))
+    assert mks.encode(mks.SyncExecute(0)) == bytes.fromhex("FA 00 4B 45")
+    assert _decode(Role.DEVICE, bytes.fromhex("FA 00 4B 45")) == mks.SyncExecute(0)
+    assert _decode(Role.DEVICE, mks.with_checksum(bytes.fromhex("FA 05 4A 01"))) == mks.SetSync(5, 1)
+
+
+def test_run_status_5_is_an_immediate_reply_not_a_completion() -> None:
+    """10.1: "status = 5 Data has received for Synchronous mode" - the answer to the run command itself."""
+    reply = _decode(Role.HOST, mks.with_checksum(bytes.fromhex("FB 01 F6 05")))
+    assert reply == mks.RunReply(1, 0xF6, mks.RunStatus.SYNC_RECEIVED)
+    assert not reply.is_completion
+    assert mks.RunReply(1, 0xF6, mks.RunStatus.COMPLETE).is_completion
+    assert mks.RunReply(1, 0xF6, mks.RunStatus.END_LIMIT_STOP).is_completion

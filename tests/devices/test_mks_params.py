@@ -21,7 +21,7 @@ PARTS_5_6 = MANUAL[MANUAL.index("Part5. Serial command description"):MANUAL.inde
 PART_8 = MANUAL[MANUAL.index("Part8. MODBUS-RTU command description"):MANUAL.index("Part9. FAQ")]
 #: what V1.0.9 added (manuals V1.0.9: 0x40 read version 5.1.11 / 3.1.8, 0x98 heartbeat 5.2.16 / 3.2.14)
 LATER = {0x40, 0x98, 0x46, 0x47, 0x48, 0x01, 0x35,
-         0x36, 0x9D, 0x95}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
+         0x36, 0x9D, 0x95, 0x4A, 0x4B}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
 
 
 # ------------------------------------------------------------------------------ parameters
@@ -167,7 +167,7 @@ def test_reply_rules_follow_the_manual() -> None:
 
 
 def test_every_modbus_field_is_a_parameter_of_the_same_type_and_access() -> None:
-    assert len(MKS_MODBUS) == 58 + len(FEATURE_OF) - 3  # 0x35 and 0x95 (2 fields) are native only
+    assert len(MKS_MODBUS) == 58 + len(FEATURE_OF) - 4  # 0x35, 0x95 (2 fields), 0x4A are native only
     for f in MKS_MODBUS:
         p = MKS_PARAMS[f.name]
         assert (f.type, f.access) == (p.type, p.access), f.name
@@ -186,7 +186,7 @@ def test_modbus_and_native_reach_the_same_command() -> None:
             assert f.function == expected_fc
     assert NATIVE_ONLY == {"slave_respond", "slave_active", "group_address", "home_reverse_angle", "home_mode",
                            "home_current", "raw_encoder_value",  # 0x35: not in the Modbus-RTU manual V1.0.9
-                           "position_threshold_enable", "position_threshold"}  # 0x95: neither
+                           "position_threshold_enable", "position_threshold", "sync_enable"}  # 0x95, 0x4A: neither
     assert set(MKS_MODBUS.names()) | NATIVE_ONLY == set(MKS_PARAMS.names())
 
 

@@ -203,3 +203,52 @@ def test_position_threshold_needs_v109_and_older_drives_complete_after_the_settl
 def test_position_threshold_is_native_only(tmp_path: Path) -> None:
     with open_motor(tmp_path, protocol="modbus-rtu") as rig, pytest.raises(RegisterError, match="native"):
         rig.joints["m1"].driver.set_position_threshold(0.1)
+
+
+# -- 0x4A / 0x4B multi-motor synchronous control (V1.0.8, native only) ---------------------------------
+
+
+@pytest.mark.parametrize("firmware", _having("mks-sync"))
+def test_sync_holds_each_run_command_until_0x4b_starts_them_together(tmp_path: Path, firmware: str) -> None:
+    """12.4.3: motor 1 in speed mode, motor 2 a relative move; with 0x4A on each answers status 5 and waits;
+    one broadcast 0x4B starts both in the same instant."""
+    from joints.codecs import mks
+
+    with open_motor(tmp_path, n=2, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        j1, j2 = rig.joints["m1"], rig.joints["m2"]
+        d1, d2 = j1.driver, j2.driver
+        f1, f2 = rig.world.drives["m1"], rig.world.drives["m2"]
+        for j in (j1, j2):
+            j.enable()
+            j.driver.set_sync(True)
+        d1.set_velocity(60)
+        assert d1.access.last_reply == mks.RunReply(1, 0xF6, mks.RunStatus.SYNC_RECEIVED)
+        d2.move_by(16384, speed=120)
+        assert d2.access.last_reply == mks.RunReply(2, 0xF4, mks.RunStatus.SYNC_RECEIVED)
+        q1, q2 = d1.read("encoder_addition"), d2.read("encoder_addition")
+        rig.sleep(0.3)
+        assert (d1.read("encoder_addition"), d2.read("encoder_addition")) == (q1, q2)  # held, not moving
+        assert f1.motion is None and f2.motion is None
+        d1.sync_execute([d2])  # one broadcast frame, nobody answers
+        rig.sleep(0.01)  # (the frame's wire time)
+        assert f1.sync_started_at == f2.sync_started_at >= 0  # the same instant
+        rig.sleep(1.5)
+        assert d1.read("real_time_speed") == pytest.approx(60, abs=2)
+        assert abs(d2.read("encoder_addition") - q2 - 16384) <= 2  # the move ran to its end
+        d1.sync_execute()  # nothing held: nothing starts
+        assert f2.motion is None
+        j1.stop()  # a stop acts at once, also with 0x4A on
+        rig.sleep(0.5)
+        assert abs(d1.read("real_time_speed")) <= 1
+
+
+@pytest.mark.parametrize("firmware", _lacking("mks-sync"))
+def test_sync_needs_v109(tmp_path: Path, firmware: str) -> None:
+    with open_motor(tmp_path, joint={"firmware": firmware}) as rig:
+        d = rig.joints["m1"].driver
+        sent = d.link.transactions
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.set_sync(True)
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.sync_execute()
+        assert d.link.transactions == sent

@@ -55,6 +55,8 @@ class Command(enum.IntEnum):
     READ_ALL_PARAMETERS = 0x47
     READ_ALL_STATUS = 0x48
     RESTART_MOTOR = 0x41
+    SET_SYNC = 0x4A
+    SYNC_EXECUTE = 0x4B
     CALIBRATE_ENCODER = 0x80
     SET_WORK_MODE = 0x82
     SET_WORKING_CURRENT = 0x83
@@ -93,10 +95,10 @@ class Command(enum.IntEnum):
 
 LONG_PACKET = 0xFC  #: head of a long data package (not a function code)
 
-#: commands that carry no parameter's fields: whole blocks (joints.devices.mks.blocks, V1.0.6) and the timed
-#: return of another command's reply (0x01, V1.0.9)
+#: commands that carry no parameter's fields: whole blocks (joints.devices.mks.blocks, V1.0.6), the timed
+#: return of another command's reply (0x01, V1.0.9) and the synchronous execution (0x4B, V1.0.8; broadcast)
 BLOCK_COMMANDS = frozenset((Command.WRITE_ALL_PARAMETERS, Command.READ_ALL_PARAMETERS, Command.READ_ALL_STATUS,
-                            Command.SET_TIMED_RETURN))
+                            Command.SET_TIMED_RETURN, Command.SYNC_EXECUTE))
 
 #: run commands of Part 6 (0x8C respond/active applies to them)
 RUN_COMMANDS = frozenset((Command.SPEED_MODE, Command.POSITION_MODE1_RELATIVE_PULSES,
@@ -234,6 +236,7 @@ _KEYS: dict[str, NativeKey] = {
     "position_error_count": NativeKey(C.SET_POSITION_ERROR_PROTECTION, "errors"),
     "position_threshold_enable": NativeKey(C.SET_POSITION_THRESHOLD, "enable"),
     "position_threshold": NativeKey(C.SET_POSITION_THRESHOLD, "values"),
+    "sync_enable": NativeKey(C.SET_SYNC, "enable"),
 }
 del C
 

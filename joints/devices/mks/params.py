@@ -188,6 +188,9 @@ _PARAMS: tuple[Param, ...] = (
           "threshold (V1.0.8)", 0, 1, 1),
     Param("position_threshold", "uint16", W, "1/65536 turn", "0x95 values: the position-reached threshold "
           "(65535 = 360 degrees) (V1.0.8)", 0, 0xFFFF, 200),
+    # 0x4A synchronization flag (V1.0.8; RS485 V1.0.9 12.4.1)
+    Param("sync_enable", "bool", W, "", "0x4A synchronization: run commands wait for the broadcast 0x4B (V1.0.8)",
+          0, 1, 0),
     Param("heartbeat_protection_time", "uint32", W, "ms", "0x98 heartbeat protection time (V1.0.9): no command "
           "for this long stops the motor urgently; 0 = off", 0, 0xFFFFFFFF, 0),
 )
@@ -201,7 +204,7 @@ FEATURE_OF: dict[str, str] = {"raw_encoder_value": "mks-all-parameters", "versio
                                   "en_trigger_zero_return", "position_error_protection", "position_error_time",
                                   "position_error_count")},
                               "position_threshold_enable": "mks-position-threshold",
-                              "position_threshold": "mks-position-threshold"}
+                              "position_threshold": "mks-position-threshold", "sync_enable": "mks-sync"}
 
 MKS_PARAMS: ParamSet = ParamSet("mks-servo42d57d", _PARAMS)
 

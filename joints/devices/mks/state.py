@@ -210,6 +210,7 @@ class RunStatus(enum.IntEnum):
     STARTED = 1
     COMPLETE = 2
     END_LIMIT_STOP = 3
+    SYNC_RECEIVED = 5  #: V1.0.8: held for the synchronous execution (0x4A on, 0x4B starts it)
 
 
 class CalibrationStatus(enum.IntEnum):
