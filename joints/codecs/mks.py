@@ -38,6 +38,11 @@ OUT2_mask, b5-b4 OUT1_mask, b3 OUT_2, b2 OUT_1, b1-b0 zero; a mask of 3 or a res
 0x01 (5.1.9) asks the drive to send one read command's reply every ``times`` ms (0 stops it):
 request code + uint16 times, reply code + status; the periodic frames are that command's ordinary
 replies (FB addr code param chk), arriving unsolicited.
+* Two forms (V1.0.7): 0xF6 carries 3 data bytes, or 7 with a runTime (:data:`REQUEST_LONG_DATA_LENGTH`).
+  The device side takes the long form when its frame is there, checksum-valid and plausible (runTime
+  <= 0x0FFFFFFF: the next frame's head FA/FB/FC can never pass as its first byte), else the short
+  one: at once when its checksum byte cannot be a runTime's first byte (above 0x0F: 15 in 16 frames),
+  else at silence or once more bytes arrived (the twins' lines report silence after every frame).
 * long packet (FC): always 52 bytes: five 10-byte slots, each an ordinary command without head
   and checksum (address, code, data) padded with zeros; an all-zero slot is an unused slot (None).
 
@@ -669,12 +674,16 @@ class EmergencyStop:
 
 @dataclass(frozen=True, slots=True)
 class RunSpeed:
-    """0xF6 run in speed mode; speed 0 stops (acc 0: at once, else decelerating) -> :class:`RunReply`."""
+    """0xF6 run in speed mode; speed 0 stops (acc 0: at once, else decelerating) -> :class:`RunReply`.
+
+    ``run_time`` (V1.0.7, units of 10 ms, up to 0x0FFFFFFF): the drive stops by itself after it; 0 sends
+    the frame without it (a frame carrying runTime 0 decodes to 0 too)."""
 
     address: int
     direction: RunDirection
     speed: int  #: rpm (12 bits on the wire)
     acc: int
+    run_time: int = 0
     function: ClassVar[int] = 0xF6
 
     @property
@@ -1053,6 +1062,10 @@ class _Spec:
     size: int  #: data bytes
     pack: Callable[[Any], bytes]
     unpack: Callable[[int, int, bytes, bytes], Any]  #: (address, function, data, frame) -> message
+    long: int = 0  #: data bytes of the command's longer form (V1.0.7+; 0: one form), see REQUEST_LONG_DATA_LENGTH
+    plausible: Callable[[bytes], bool] | None = None  #: the longer form's data could be what it says
+    #: a valid short frame could also be the head of a long one (else the short form is taken at once)
+    could_grow: Callable[[bytes], bool] | None = None
 
 
 def _struct(cls: type, fmt: str = "", names: tuple[str, ...] = ()) -> _Spec:
@@ -1109,13 +1122,21 @@ def _split_dir_speed(data: bytes, frame: bytes) -> tuple[RunDirection, int]:
     return RunDirection(data[0] >> 7), ((data[0] & 0x0F) << 8) | data[1]
 
 
+RUN_TIME_MAX = 0x0FFFFFFF  #: 0xF6 runTime (V1.0.7), 10 ms units
+
+
 def _pack_run_speed(msg: Any) -> bytes:
-    return _dir_speed("RunSpeed", msg.direction, msg.speed) + bytes((_check_u8("RunSpeed.acc", msg.acc),))
+    head = _dir_speed("RunSpeed", msg.direction, msg.speed) + bytes((_check_u8("RunSpeed.acc", msg.acc),))
+    run_time = _check_int("RunSpeed.run_time", msg.run_time, 0, RUN_TIME_MAX)
+    return head + _U32.pack(run_time) if run_time else head
 
 
 def _unpack_run_speed(address: int, function: int, data: bytes, frame: bytes) -> RunSpeed:
     direction, speed = _split_dir_speed(data, frame)
-    return RunSpeed(address, direction, speed, data[2])
+    run_time = _U32.unpack_from(data, 3)[0] if len(data) > 3 else 0
+    if run_time > RUN_TIME_MAX:
+        raise FrameError(f"0xF6 runTime 0x{run_time:08X} is above 0x0FFFFFFF: {frame.hex(' ')}", data=frame)
+    return RunSpeed(address, direction, speed, data[2], run_time)
 
 
 _U32 = struct.Struct(">I")
@@ -1290,7 +1311,8 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _struct(QueryStatus),
     _struct(EnableMotor, "B", ("enable",)),
     _struct(EmergencyStop),
-    _Spec(RunSpeed, 3, _pack_run_speed, _unpack_run_speed),
+    _Spec(RunSpeed, 3, _pack_run_speed, _unpack_run_speed, 7, lambda d: d[3] <= RUN_TIME_MAX >> 24,
+          lambda f: f[-1] <= RUN_TIME_MAX >> 24),
     _struct(SaveCleanSpeedMode, "B", ("state",)),
     _Spec(RunRelativePulses, 7, _pack_relative_pulses, _unpack_relative_pulses),
     _struct(RunAbsolutePulses, "HBi", ("speed", "acc", "abs_pulses")),
@@ -1348,6 +1370,9 @@ _REPLY_BY_TYPE: dict[type, _Spec] = {s.cls: s for s in _FIXED_REPLY_SPECS}
 #: function code -> request class / data bytes of its downlink frame
 REQUEST_TYPES: Mapping[int, type] = MappingProxyType({f: s.cls for f, s in sorted(_REQUESTS.items())})
 REQUEST_DATA_LENGTH: Mapping[int, int] = MappingProxyType({f: s.size for f, s in sorted(_REQUESTS.items())})
+#: function code -> data bytes of the longer form of a command that has two (V1.0.7: 0xF6 with runTime)
+REQUEST_LONG_DATA_LENGTH: Mapping[int, int] = MappingProxyType({f: s.long for f, s in sorted(_REQUESTS.items())
+                                                                if s.long})
 #: function code -> reply class / data bytes of its uplink frame
 REPLY_TYPES: Mapping[int, type] = MappingProxyType({f: s.cls for f, s in sorted(_REPLIES.items())})
 REPLY_DATA_LENGTH: Mapping[int, int] = MappingProxyType({f: s.size for f, s in sorted(_REPLIES.items())})
@@ -1444,10 +1469,11 @@ def _decode_long(frame: bytes) -> LongPacket:
         if spec is None:
             cmds.append(UnknownRequest(address, function, bytes(slot[2:])))
             continue
-        if 2 + spec.size > LONG_PACKET_SLOT:
+        size = spec.long or spec.size  # a short form's absent field reads 0 from the padding
+        if 2 + size > LONG_PACKET_SLOT:
             raise FrameError(f"long packet slot {i + 1}: {spec.cls.__name__} does not fit a slot: {frame.hex(' ')}",
                              data=frame)
-        data, pad = slot[2:2 + spec.size], slot[2 + spec.size:]
+        data, pad = slot[2:2 + size], slot[2 + size:]
         if any(pad):
             raise FrameError(f"long packet slot {i + 1} ({spec.cls.__name__}) has non-zero padding "
                              f"{pad.hex(' ')}: {frame.hex(' ')}", data=frame)
@@ -1526,13 +1552,27 @@ class MksCodec:
             return 0
         if len(buf) < 3:
             return None
-        n = REQUEST_DATA_LENGTH.get(buf[2])
-        if n is None:
+        spec = _REQUESTS.get(buf[2])
+        if spec is None:
             found = _unknown_length(buf, MAX_UNKNOWN_FRAME)
             if found is None and self._silent:
                 return 0
             return found
-        return MIN_FRAME + n
+        if spec.long:
+            return self._two_forms(buf, spec)
+        return MIN_FRAME + spec.size
+
+    def _two_forms(self, buf: bytearray, spec: _Spec) -> int | None:
+        """A command with a short and a long form (see the module docstring): the long one if it is there
+        (checksum-valid, plausible), else the short one once the line went silent or more bytes came."""
+        short, long = MIN_FRAME + spec.size, MIN_FRAME + spec.long
+        if len(buf) >= long and checksum_ok(buf[:long]) and (
+                spec.plausible is None or spec.plausible(bytes(buf[3:long - 1]))):
+            return long
+        if len(buf) < long and not self._silent and (
+                len(buf) < short or spec.could_grow is None or spec.could_grow(bytes(buf[:short]))):
+            return None  # the long form may still be arriving
+        return short
 
     def _next_valid_offset(self, buf: bytearray) -> int:
         """Offset (>0) of the first complete, checksum-valid frame after the head, or 0."""

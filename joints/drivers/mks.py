@@ -69,7 +69,7 @@ from joints.devices.mks.params import FEATURE_OF
 from joints.devices.mks.profile import MksProfile
 from joints.devices.mks.profile import profile as lookup_profile
 from joints.devices.params import ParamSet
-from joints.devices.quirks import MKS_FIRMWARES, MKS_VERSION, FirmwareProfile, firmware_profile
+from joints.devices.quirks import MKS_FIRMWARES, MKS_TIMED_SPEED, MKS_VERSION, FirmwareProfile, firmware_profile
 from joints.drivers.access import ParamAccess
 from joints.drivers.base import JointDriver, RawState, Units
 from joints.errors import (
@@ -375,15 +375,31 @@ class MksDriver(JointDriver):
         self._run("abs_pulses", self._move_values("abs_pulses", pulses, speed, acceleration))
 
     def set_velocity(self, velocity: int, *, acceleration: int | None = None,
-                     deceleration: int | None = None) -> None:
-        """Speed mode (0xF6): ``velocity`` rpm, + CCW (0 = a decelerated stop with the same acc)."""
+                     deceleration: int | None = None, run_time: float | None = None) -> None:
+        """Speed mode (0xF6): ``velocity`` rpm, + CCW (0 = a decelerated stop with the same acc).
+
+        ``run_time`` [s] (V1.0.7+, profile v1.0.9; both protocols): the drive stops by itself after it
+        (sent in 10 ms units, at least one), decelerating with the same acc, and reports "run complete"."""
         acc = self.acc_for(acceleration)
         value = self.speed_value(abs(velocity))
         if value == 0 and velocity:
             value = 1  # a tiny non-zero command still runs (the value 0 would be a stop)
+        values = {"speed_mode_direction": int(st.RunDirection.CCW if velocity >= 0 else st.RunDirection.CW),
+                  "speed_mode_speed": value, "speed_mode_acc": acc}
+        if run_time is not None:
+            units = max(1, round(run_time / 0.01))
+            if run_time <= 0 or units > 0x0FFFFFFF:
+                raise CommandError(f"{self.name}: run_time must be > 0 s and at most 0x0FFFFFFF x 10 ms, got {run_time}")
+            values["speed_mode_run_time"] = units
         self._last_rpm, self._last_acc = float(abs(velocity)), acc
-        self._run("speed", {"speed_mode_direction": int(st.RunDirection.CCW if velocity >= 0 else st.RunDirection.CW),
-                            "speed_mode_speed": value, "speed_mode_acc": acc})
+        self._run("speed", self._untimed(values))
+
+    def _untimed(self, values: dict[str, int]) -> dict[str, int]:
+        """A speed-mode command without a run time says so where the firmware has one (the image's last run
+        time must not ride along)."""
+        if "speed_mode_speed" in values and MKS_TIMED_SPEED in self.firmware.features:
+            values.setdefault("speed_mode_run_time", 0)
+        return values
 
     def set_current(self, current: int) -> None:
         raise CommandError(f"{self.name}: the MKS has no torque/current mode over the serial interface "
@@ -398,7 +414,7 @@ class MksDriver(JointDriver):
         values = {speed_name: 0, acc_name: acc, target_name: 0}  # the manual's stop frames: dir 0, target 0
         if mode == "pulses":
             values["position_mode1_direction"] = 0
-        self.access.write_many(values, idempotent=True)  # a stop may be repeated: it never starts anything
+        self.access.write_many(self._untimed(values), idempotent=True)  # a stop may be repeated: it starts nothing
         self._running = None
 
     def stop_now(self) -> None:
@@ -409,7 +425,7 @@ class MksDriver(JointDriver):
         values = {speed_name: 0, acc_name: 0, target_name: 0}
         if mode == "pulses":
             values["position_mode1_direction"] = 0
-        self.access.write_many(values, idempotent=True)
+        self.access.write_many(self._untimed(values), idempotent=True)
         self._running = None
 
     def emergency_stop(self) -> None:

@@ -353,8 +353,9 @@ class MksNativeDriver(MksDriver):
     def plan_velocity(self, rpm: float, *, acceleration: int | None = None) -> Any:
         acc = self.acc_for(acceleration)
         value = self.speed_value(abs(rpm)) or (1 if rpm else 0)
-        return self.plan({"speed_mode_direction": int(st.RunDirection.CCW if rpm >= 0 else st.RunDirection.CW),
-                          "speed_mode_speed": value, "speed_mode_acc": acc})
+        return self.plan(self._untimed({"speed_mode_direction": int(st.RunDirection.CCW if rpm >= 0
+                                                                    else st.RunDirection.CW),
+                                        "speed_mode_speed": value, "speed_mode_acc": acc}))
 
     def plan_move_to(self, position: int, *, speed: int | None = None, acceleration: int | None = None) -> Any:
         return self.plan(self._move_values("abs_axis", position, speed, acceleration))

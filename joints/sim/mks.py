@@ -76,6 +76,9 @@ Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; defa
     while the position error is below the threshold (65536 per turn, default 200 = 1.1 degrees) - a
     necessary condition on top of the settle rule above, so a shaft held off the target by more never
     completes (the older profiles complete after the settle timeout); threshold off: the settle rule.
+    V1.0.7's 0xF6 run time (profile v1.0.9): the speed-mode motion stops by itself that long after the
+    command arrived, decelerating with the command's acc (acc 0: at once), and ends with the "run
+    complete" frame (status 2) like a stop command's.
     V1.0.8's synchronization (Part 12.4, profile v1.0.9): with 0x4A on, a run command (not a stop) is
     checked, its fields taken and the command held, answered with run status 5; the broadcast 0x4B
     starts it (:meth:`MksFirmware.sync_execute`). A second run command before 0x4B replaces the held one
@@ -126,7 +129,7 @@ from joints.sim.firmware import Firmware
 from joints.sim.sensors import Sensor, model_of
 
 __all__ = ["CALIBRATION_TIME", "EN_PULSE", "FLASH_TIME", "POSITION_ERROR_PER_TURN", "POSITION_ERROR_TICK",
-           "POSITION_THRESHOLD_PER_TURN", "SERVO_BANDWIDTH", "SPEED_MODE_LEAD", "SYNC_RECEIVED", "ZERO_MODE_RPM",
+           "POSITION_THRESHOLD_PER_TURN", "RUN_TIME_UNIT", "SERVO_BANDWIDTH", "SPEED_MODE_LEAD", "SYNC_RECEIVED", "ZERO_MODE_RPM",
            "Completion", "MksFirmware", "TimedReturn"]
 
 TAU = 2.0 * math.pi
@@ -146,6 +149,7 @@ ZERO_MODE_RPM = (15, 30, 60, 120, 240)  #: 0_Speed 0 (slowest) .. 4 (fastest)
 POSITION_ERROR_PER_TURN = 28000  #: 0x9D Errors: "When Errors = 28000, the motor is misaligned by 360 degrees"
 POSITION_ERROR_TICK = 0.015  #: s per 0x9D Tim unit ("approximately equal to 15 ms")
 POSITION_THRESHOLD_PER_TURN = 65536  #: 0x95 values: "The maximum value is 65535, which is 360 degrees"
+RUN_TIME_UNIT = 0.01  #: s per 0xF6 runTime unit (V1.0.7: "uints: 10ms")
 SYNC_RECEIVED = int(st.RunStatus.SYNC_RECEIVED)  #: "Data has received for Synchronous mode" (0x4A on, V1.0.8)
 EN_PULSE = (0.15, 0.3)  #: s: the En pulse that triggers the 0x9D zero return ("about 200 ms"; our window)
 _RUN_CODES = {int(c): c for c in (Command.SPEED_MODE, Command.POSITION_MODE1_RELATIVE_PULSES,
@@ -191,6 +195,7 @@ class _Motion:
     stopping: bool = False
     phase: str = ""  #: homing: "leave" | "seek" | "back"
     arrived: float = -1.0  #: when the reference reached the target (the rotor settles into the window)
+    until: float = math.inf  #: speed mode with a run time (0xF6, V1.0.7): when it stops by itself
 
 
 class MksFirmware(Firmware):
@@ -592,8 +597,10 @@ class MksFirmware(Firmware):
             return self._stop(acc, code, answered)
         goal = self._clamp_value(speed)
         if code == Command.SPEED_MODE:
+            run_time = values.get("speed_mode_run_time", 0)  # (a frame without it: 0, untimed)
             self._start(_Motion("speed", code, answered, goal=goal, acc=acc,
-                                direction=1 if v["speed_mode_direction"] == st.RunDirection.CCW else -1))
+                                direction=1 if v["speed_mode_direction"] == st.RunDirection.CCW else -1,
+                                until=self.time + run_time * RUN_TIME_UNIT if run_time else math.inf))
             return int(_RUN.STARTED)
         if code == Command.POSITION_MODE1_RELATIVE_PULSES:
             sign = 1 if v["position_mode1_direction"] == st.RunDirection.CCW else -1
@@ -816,6 +823,9 @@ class MksFirmware(Firmware):
             self._end_limits()
 
     def _speed_job(self, m: _Motion, dt: float) -> None:
+        if not m.stopping and self.time >= m.until - 1e-9:  # the run time is over: a stop with its own acc
+            self.run_state = st.step(self.run_state, st.RunEvent.STOP).state
+            m.stopping = True
         if m.stopping or (self.speed and m.direction != self.moving_dir):
             self._ramp(0, m.acc, dt)
         else:

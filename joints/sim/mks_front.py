@@ -30,7 +30,7 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from joints.codecs import mks
-from joints.devices.mks.native import BLOCK_COMMANDS, MKS_NATIVE, REPLY_RULES, Command, fields_of
+from joints.devices.mks.native import BLOCK_COMMANDS, MKS_NATIVE, OPTIONAL_FIELDS, REPLY_RULES, Command, fields_of
 from joints.devices.quirks import MKS_TIMED_RETURNS
 from joints.errors import FrameError, ParameterRefused
 from joints.sim.mks import MksFirmware
@@ -80,9 +80,10 @@ class MksNativeFront:
         code = request.function
         if code in BLOCK_COMMANDS:
             return self._block(request, answer)
-        names = fields_of(code)
+        names = tuple(n for n in fields_of(code) if fw.supports(n) or not (
+            n in OPTIONAL_FIELDS and getattr(request, MKS_NATIVE.key(n).field) == 0))  # the older, shorter frame
         if not all(fw.supports(n) for n in names):
-            return None  # a command of a later firmware: unknown to this one
+            return None  # a command (or a form of it) of a later firmware: unknown to this one
         if code in _READS:
             return self._read_reply(request.address, code, fw.read_many(names)) if answer else None
         given = {n: int(getattr(request, MKS_NATIVE.key(n).field)) for n in names if MKS_NATIVE.key(n).field}

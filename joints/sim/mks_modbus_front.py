@@ -86,8 +86,8 @@ class MksModbusFront:
                     return mb.WriteSingleRegisterReply(request.slave, request.address, FAILED_VALUE)
                 return mb.WriteSingleRegisterReply(request.slave, request.address, request.value)
             if isinstance(request, mb.WriteMultipleRegisters):
-                block = self._block(FC_WRITE_MULTIPLE, request.address)
                 n = len(request.values)
+                block = self._block(FC_WRITE_MULTIPLE, request.address, n)
                 if not block.accepts(n, 2 * n):
                     raise _Exception(ILLEGAL_DATA_VALUE)
                 try:
@@ -115,10 +115,13 @@ class MksModbusFront:
         return MKS_FAILURE_REPLIES in self.firmware.firmware.features
 
     # -- internals ----------------------------------------------------------------------------------
-    def _block(self, function: int, address: int) -> ModbusBlock:
+    def _block(self, function: int, address: int, count: int | None = None) -> ModbusBlock:
         block = self.map.find(function, address)
         if block is None or not all(self.firmware.supports(f.name) for f in block.fields):
             raise _Exception(ILLEGAL_DATA_ADDRESS)
+        longer = self.map.find(function, address, count) if count is not None else None
+        if longer is not None and all(self.firmware.supports(f.name) for f in longer.fields):
+            return longer  # a longer form this firmware has (V1.0.7's timed 0xF6)
         return block
 
     def _read(self, address: int, count: int) -> tuple[int, ...]:

@@ -134,3 +134,52 @@ def test_run_status_5_is_an_immediate_reply_not_a_completion() -> None:
     assert not reply.is_completion
     assert mks.RunReply(1, 0xF6, mks.RunStatus.COMPLETE).is_completion
     assert mks.RunReply(1, 0xF6, mks.RunStatus.END_LIMIT_STOP).is_completion
+
+
+# -- 0xF6 with a run time (V1.0.7) -------------------------------------------------------------------
+
+
+def test_speed_mode_has_a_short_and_a_long_form() -> None:
+    """10.1: FA addr F6 dir|speed speed acc [runTime(4)] CRC; the manual's untimed example stays 7 bytes."""
+    assert mks.encode(mks.RunSpeed(1, mks.RunDirection.CCW, 640, 2)) == bytes.fromhex("FA 01 F6 02 80 02 75")
+    timed = mks.RunSpeed(1, mks.RunDirection.CCW, 640, 2, 500)
+    frame = mks.encode(timed)
+    assert frame == mks.with_checksum(bytes.fromhex("FA 01 F6 02 80 02 00 00 01 F4"))
+    assert mks.REQUEST_DATA_LENGTH[0xF6] == 3 and mks.REQUEST_LONG_DATA_LENGTH[0xF6] == 7
+    codec = mks.MksCodec(Role.DEVICE)
+    codec.feed(frame + bytes.fromhex("FA 01 F6 02 80 02 75") + frame)
+    assert [codec.next_message() for _ in range(3)] == [timed, mks.RunSpeed(1, mks.RunDirection.CCW, 640, 2), timed]
+    with pytest.raises(EncodeError):
+        mks.encode(mks.RunSpeed(1, mks.RunDirection.CCW, 640, 2, 0x10000000))
+
+
+def test_a_short_speed_frame_whose_checksum_could_start_a_run_time_waits_for_silence() -> None:
+    """A short frame is taken at once unless its checksum byte (<= 0x0F) could be a runTime's first byte."""
+    short = mks.with_checksum(bytes.fromhex("FA 01 F6 00 0A 0B"))  # checksum 0x0E
+    assert short[-1] <= 0x0F
+    codec = mks.MksCodec(Role.DEVICE)
+    codec.feed(short)
+    assert codec.next_message() is None  # could still be a long frame
+    codec.flush()
+    assert codec.next_message() == mks.RunSpeed(1, mks.RunDirection.CCW, 10, 0x0B)
+    codec.feed(short + bytes.fromhex("FA 01 F1 EC"))
+    assert codec.next_message() == mks.RunSpeed(1, mks.RunDirection.CCW, 10, 0x0B)  # more bytes decided it
+    assert codec.next_message() == mks.QueryStatus(1)
+
+
+def test_a_timed_speed_command_in_a_long_packet_slot() -> None:
+    packet = mks.LongPacket((mks.RunSpeed(1, mks.RunDirection.CW, 100, 5, 300), mks.RunSpeed(2, mks.RunDirection.CCW,
+                                                                                             100, 5)))
+    assert _decode(Role.DEVICE, mks.encode(packet)) == packet
+
+
+def test_timed_speed_mode_over_modbus_is_fc16_0xf6_with_4_registers() -> None:
+    """Modbus 8.1: 01 10 00 F6 00 04 08 dir acc speed runTime (10 ms); the untimed form keeps 2 registers."""
+    from joints.devices.mks.modbus import TIMED_SPEED_MODE
+
+    assert MKS_MODBUS.find(FC_WRITE_MULTIPLE, 0xF6).count == 2  # type: ignore[union-attr]
+    assert MKS_MODBUS.find(FC_WRITE_MULTIPLE, 0xF6, 4) is TIMED_SPEED_MODE
+    assert MKS_MODBUS.block_of("speed_mode_run_time") is TIMED_SPEED_MODE
+    words = TIMED_SPEED_MODE.words({"speed_mode_direction": 1, "speed_mode_acc": 2, "speed_mode_speed": 640,
+                                    "speed_mode_run_time": 500})
+    assert words == (0x0102, 640, 0, 500)

@@ -252,3 +252,69 @@ def test_sync_needs_v109(tmp_path: Path, firmware: str) -> None:
         with pytest.raises(RegisterError, match="v1.0.9"):
             d.sync_execute()
         assert d.link.transactions == sent
+
+
+# -- 0xF6 with a run time (V1.0.7) ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _having("mks-timed-speed"))
+def test_speed_mode_with_a_run_time_stops_by_itself(tmp_path: Path, protocol: str, firmware: str) -> None:
+    """60 rpm for 0.5 s with acc 0: the drive stops at once 0.5 s after the command arrived; a later command
+    without a run time runs on (the last run time does not ride along)."""
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        j = rig.joints["m1"]
+        d = j.driver
+        fw = _twin(rig)
+        j.enable()
+        d.set_velocity(60, acceleration=0, run_time=0.5)
+        assert fw.motion is not None
+        until = fw.motion.until
+        assert fw.values["speed_mode_run_time"] == 50
+        rig.sleep(0.3)
+        assert d.read("real_time_speed") == pytest.approx(60, abs=2)
+        while fw.motion is not None:
+            rig.clock.sleep(0.001)
+        assert until <= rig.time <= until + 0.002  # stopped when its run time was over, not before
+        rig.sleep(0.3)
+        assert d.read("real_time_speed") == 0 and d.motor_status() is MotorStatus.STOP
+        d.set_velocity(60, acceleration=0)
+        rig.sleep(1.0)
+        assert d.read("real_time_speed") == pytest.approx(60, abs=2)  # untimed: still running
+        j.stop()
+
+
+def test_speed_mode_run_time_decelerates_with_the_commands_acc_and_completes(tmp_path: Path) -> None:
+    """Native, active on: the timed stop ends with the "run complete" frame (status 2), like a stop command."""
+    from joints.codecs import mks
+
+    with open_motor(tmp_path, joint={"watchdog_ms": 0}) as rig:
+        j = rig.joints["m1"]
+        d = j.driver
+        fw = _twin(rig)
+        j.enable()
+        d.set_velocity(300, acceleration=1000, run_time=0.5)  # 1000 rpm/s: 0.3 s up, 0.3 s down
+        until = fw.motion.until  # type: ignore[union-attr]
+        while fw.motion is not None:
+            rig.clock.sleep(0.001)
+        assert rig.time - until == pytest.approx(0.3, abs=0.02)  # the deceleration took its ramp
+        rig.sleep(0.05)
+        d.link.poll(0)
+        assert d.completion == mks.RunReply(1, 0xF6, mks.RunStatus.COMPLETE)
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _lacking("mks-timed-speed"))
+def test_speed_mode_run_time_needs_v109_and_plain_speed_mode_still_works(tmp_path: Path, protocol: str,
+                                                                         firmware: str) -> None:
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware}) as rig:
+        j = rig.joints["m1"]
+        d = j.driver
+        j.enable()
+        sent = d.link.transactions
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.set_velocity(60, run_time=0.5)
+        assert d.link.transactions == sent
+        d.set_velocity(60)
+        rig.sleep(1.0)
+        assert d.read("real_time_speed") == pytest.approx(60, abs=2)

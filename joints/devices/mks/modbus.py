@@ -39,7 +39,9 @@ V1.0.6-V1.0.9 requests (Modbus-RTU manual V1.0.9; the RS485 manual V1.0.6 Part 8
     FC16 0x36 write IO port: OUT2_mask, OUT_2, OUT1_mask, OUT_1 (one byte each). FC16 0x9D position
     error protection: byte 0 reserved (0), byte 1 b1 g0Enable (En-triggered zero return, V1.0.6's
     table; V1.0.9 prints only pEnable in b0), b0 pEnable, then Tim and Errs (uint16 each): the two
-    flags are bit fields (:attr:`ModbusField.bit`).
+    flags are bit fields (:attr:`ModbusField.bit`). FC16 0xF6 with a run time (V1.0.7): 4 registers, dir,
+    acc, speed, runTime (uint32, 10 ms) - a longer form of 8.3.3 #1 (:attr:`MksModbusMap.variants`,
+    :data:`TIMED_SPEED_MODE`).
 
 Other choices: ``slave_address`` is 1-247 over Modbus (the Modbus address range); microsteps are
 written as the count 1-256 (Part 8 shows a 16-bit value, unlike the native byte).
@@ -55,8 +57,8 @@ from joints.devices.mks.params import MKS_PARAMS
 from joints.devices.params import TYPES, Access, ParamMap, ParamSet, check_value, suggest
 from joints.errors import CommandError, RegisterError
 
-__all__ = ["FC_READ", "FC_WRITE_MULTIPLE", "FC_WRITE_SINGLE", "MKS_MODBUS", "NATIVE_ONLY", "MksModbusMap",
-           "ModbusBlock", "ModbusField"]
+__all__ = ["FC_READ", "FC_WRITE_MULTIPLE", "FC_WRITE_SINGLE", "MKS_MODBUS", "NATIVE_ONLY", "TIMED_SPEED_MODE",
+           "MksModbusMap", "ModbusBlock", "ModbusField"]
 
 FC_READ = 0x04  #: read input registers
 FC_WRITE_SINGLE = 0x06  #: write single register
@@ -278,6 +280,8 @@ class MksModbusMap:
     device: str
     params_all: ParamSet
     blocks: tuple[ModbusBlock, ...]
+    #: longer forms of a block (same function and address, more registers, more fields; V1.0.7's timed 0xF6)
+    variants: tuple[ModbusBlock, ...] = ()
     _by_name: Mapping[str, ModbusField] = field(init=False, repr=False, compare=False)
     _by_key: Mapping[tuple[int, int], ModbusBlock] = field(init=False, repr=False, compare=False)
     _block_of: Mapping[str, ModbusBlock] = field(init=False, repr=False, compare=False)
@@ -297,6 +301,14 @@ class MksModbusMap:
                     raise ValueError(f"{self.device}: Modbus field {f.name!r} is not a parameter")
                 by_name[f.name] = f
                 block_of[f.name] = b
+        for v in self.variants:
+            base = by_key.get((v.function, v.address))
+            if base is None or base.count == v.count or not {f.name for f in base.fields} < {f.name for f in v.fields}:
+                raise ValueError(f"{self.device}: {v.title} is no longer form of a block")
+            for f in v.fields:
+                if f.name not in by_name:
+                    by_name[f.name] = f
+                    block_of[f.name] = v
         object.__setattr__(self, "_by_name", MappingProxyType(by_name))
         object.__setattr__(self, "_by_key", MappingProxyType(by_key))
         object.__setattr__(self, "_block_of", MappingProxyType(block_of))
@@ -332,8 +344,17 @@ class MksModbusMap:
             raise RegisterError(f"{self.device}: no Part 8 request FC{function:02d} at 0x{address:04X}")
         return b
 
-    def find(self, function: int, address: int) -> ModbusBlock | None:
-        return self._by_key.get((function, address))
+    def find(self, function: int, address: int, count: int | None = None) -> ModbusBlock | None:
+        """The block at (function, address); with ``count``, the form announcing that many registers."""
+        base = self._by_key.get((function, address))
+        if count is None or base is None or base.count == count:
+            return base
+        return next((v for v in self.variants if (v.function, v.address, v.count) == (function, address, count)),
+                    None)
+
+    def base_of(self, block: ModbusBlock) -> ModbusBlock:
+        """The short form of a block (itself if it has no other)."""
+        return self._by_key[block.function, block.address]
 
     @property
     def params(self) -> ParamSet:
@@ -345,7 +366,12 @@ class MksModbusMap:
         return ParamMap("modbus-rtu", params or self.params_all, dict(self._by_name))
 
 
-MKS_MODBUS = MksModbusMap("mks-servo42d57d", MKS_PARAMS, _BLOCKS)
+#: V1.0.7's 0xF6 with a run time (Modbus V1.0.9 8.1: 4 registers, dir acc speed runTime)
+TIMED_SPEED_MODE = _multi(0xF6, 4, 8, "V1.0.9 8.1 Run the motor in speed mode with a run time", C,
+                          ("speed_mode_direction", 0, 1, "uint8"), ("speed_mode_acc", 1, 1, "uint8"),
+                          ("speed_mode_speed", 2, 2, "uint16"), ("speed_mode_run_time", 4, 4, "uint32"))
+
+MKS_MODBUS = MksModbusMap("mks-servo42d57d", MKS_PARAMS, _BLOCKS, (TIMED_SPEED_MODE,))
 
 #: parameters only the native protocol reaches
 NATIVE_ONLY: frozenset[str] = frozenset(p.name for p in MKS_PARAMS if p.name not in MKS_MODBUS)

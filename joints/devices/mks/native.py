@@ -27,7 +27,7 @@ from types import MappingProxyType
 from joints.devices.mks.params import MKS_PARAMS
 from joints.devices.params import ParamMap
 
-__all__ = ["BLOCK_COMMANDS", "BROADCAST", "MKS_NATIVE", "REPLY_RULES", "Command", "NativeKey", "ReplyRule", "expects_completion",
+__all__ = ["BLOCK_COMMANDS", "BROADCAST", "MKS_NATIVE", "OPTIONAL_FIELDS", "REPLY_RULES", "Command", "NativeKey", "ReplyRule", "expects_completion",
            "expects_reply"]
 
 BROADCAST = 0
@@ -99,6 +99,10 @@ LONG_PACKET = 0xFC  #: head of a long data package (not a function code)
 #: return of another command's reply (0x01, V1.0.9) and the synchronous execution (0x4B, V1.0.8; broadcast)
 BLOCK_COMMANDS = frozenset((Command.WRITE_ALL_PARAMETERS, Command.READ_ALL_PARAMETERS, Command.READ_ALL_STATUS,
                             Command.SET_TIMED_RETURN, Command.SYNC_EXECUTE))
+
+#: fields of a later firmware whose value 0 is the command's older, shorter frame (a drive without the feature
+#: takes the command when they are 0)
+OPTIONAL_FIELDS = frozenset(("speed_mode_run_time",))
 
 #: run commands of Part 6 (0x8C respond/active applies to them)
 RUN_COMMANDS = frozenset((Command.SPEED_MODE, Command.POSITION_MODE1_RELATIVE_PULSES,
@@ -209,6 +213,7 @@ _KEYS: dict[str, NativeKey] = {
     "speed_mode_direction": NativeKey(C.SPEED_MODE, "direction"),
     "speed_mode_speed": NativeKey(C.SPEED_MODE, "speed"),
     "speed_mode_acc": NativeKey(C.SPEED_MODE, "acc"),
+    "speed_mode_run_time": NativeKey(C.SPEED_MODE, "run_time"),
     "save_clean_speed_mode_parameter": NativeKey(C.SAVE_CLEAN_SPEED_MODE, "state"),
     "position_mode1_direction": NativeKey(C.POSITION_MODE1_RELATIVE_PULSES, "direction"),
     "position_mode1_speed": NativeKey(C.POSITION_MODE1_RELATIVE_PULSES, "speed"),
