@@ -37,6 +37,8 @@ all status parameters, 0x35 raw encoder value (native protocol only).
 native only): a run command is held (status 5) until the broadcast 0x4B starts every held one at once.
 ``mks-timed-speed`` (V1.0.7+, profile v1.0.9): 0xF6 / FC16 0x00F6 with a run time (10 ms units): the drive
 stops by itself after it.
+``mks-iap`` (V1.0.8+, profile v1.0.9): 0x50 / FC06 0x0050 IAP control: 01 enter the boot loader (IAP mode
+2), 02 / 03 enter / leave the silent state (only 0x50 is heard).
 ``mks-position-error-protection`` (V1.0.6+): 0x9D / FC16 0x009D position-error protection (time window,
 error count) and the En-triggered single-turn zero return; an En pulse also releases the protection.
 """
@@ -50,7 +52,7 @@ from types import MappingProxyType
 from joints.errors import ConfigError
 
 __all__ = ["DEFAULT_FIRMWARE", "EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED", "FIRMWARES", "MKS_ALL_PARAMETERS",
-           "MKS_FAILURE_REPLIES", "MKS_FIRMWARES", "MKS_HEARTBEAT", "MKS_POSITION_ERROR_PROTECTION",
+           "MKS_FAILURE_REPLIES", "MKS_FIRMWARES", "MKS_HEARTBEAT", "MKS_IAP", "MKS_POSITION_ERROR_PROTECTION",
            "MKS_POSITION_THRESHOLD", "MKS_SYNC", "MKS_TIMED_RETURNS", "MKS_TIMED_SPEED", "MKS_VERSION", "MKS_WRITE_IO",
            "QUIRKS",
            "ZLAC_SYNC_FLAG_AS_EXAMPLES", "FirmwareProfile", "Quirk", "firmware_profile"]
@@ -92,6 +94,7 @@ MKS_POSITION_ERROR_PROTECTION = "mks-position-error-protection"
 MKS_POSITION_THRESHOLD = "mks-position-threshold"
 MKS_SYNC = "mks-sync"
 MKS_TIMED_SPEED = "mks-timed-speed"
+MKS_IAP = "mks-iap"
 #: the MKS firmware profiles, oldest first (the last is the default)
 MKS_FIRMWARES = ("v1.0.5", "v1.0.6", "v1.0.9")
 _MKS_FEATURES = {
@@ -99,7 +102,7 @@ _MKS_FEATURES = {
     "v1.0.6": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_WRITE_IO, MKS_POSITION_ERROR_PROTECTION}),
     "v1.0.9": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_VERSION, MKS_HEARTBEAT, MKS_TIMED_RETURNS,
                          MKS_WRITE_IO, MKS_POSITION_ERROR_PROTECTION, MKS_POSITION_THRESHOLD,
-                         MKS_SYNC, MKS_TIMED_SPEED}),
+                         MKS_SYNC, MKS_TIMED_SPEED, MKS_IAP}),
 }
 _MKS_TEXT = {
     "v1.0.5": "manual V1.0.5 (May 2024): no heartbeat, no version command; Modbus write failures undocumented",

@@ -622,6 +622,26 @@ class MksDriver(JointDriver):
                                 "position_threshold": values if threshold is not None else self.params[
                                     "position_threshold"].default})
 
+    def enter_iap_boot(self, *, confirm: bool = False) -> None:
+        """0x50 01 (V1.0.8+; Modbus FC06 0x0050 = 1): the drive restarts into its IAP boot loader and waits for a
+        firmware file (MKS's upgrade tool and file format, not joints): this joint is lost until the upgrade
+        ends or the drive is power-cycled. Needs ``confirm=True``."""
+        self._confirm("0x50 01 restarts the drive into its firmware-upgrade boot loader (the joint is lost until "
+                      "an upgrade or a power cycle)", confirm)
+        self.write_param("iap_control", 1, idempotent=False)
+        self.forget()
+
+    def set_iap_silent(self, on: bool, *, confirm: bool = False) -> None:
+        """0x50 02 / 03 (V1.0.8+): the silent state, where the drive hears nothing but 0x50 - not even a stop
+        (entering it needs ``confirm=True``; use it on the drives that are not being upgraded)."""
+        if on:
+            self._confirm("0x50 02 makes the drive deaf to every command but 0x50, stops included", confirm)
+        self.access.require(("iap_control",))
+        if on:  # no answer is lost here: the drive answers 0x50 before it falls silent
+            self.write_param("iap_control", 2, idempotent=True)
+        else:
+            self.write_param("iap_control", 3, idempotent=True)
+
     def set_home(self, *, trigger_level: int = 0, direction: int = 0, speed: int = 60, end_limit: int = 0) -> None:
         """0x90 home parameters: end-stop level (0 low), home direction (0 CW, 1 CCW), speed [rpm], EndLimit."""
         self.access.write_many({"home_trigger_level": trigger_level, "home_direction": direction,

@@ -79,6 +79,12 @@ Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; defa
     V1.0.7's 0xF6 run time (profile v1.0.9): the speed-mode motion stops by itself that long after the
     command arrived, decelerating with the command's acc (acc 0: at once), and ends with the "run
     complete" frame (status 2) like a stop command's.
+    V1.0.8's IAP control (0x50, profile v1.0.9): 02 / 03 enter / leave the silent state (the drive neither
+    answers nor executes any command but 0x50: "does not respond", our reading). 01 answers status 1,
+    then the drive releases the shaft and sits in its boot loader (:attr:`MksFirmware.boot_loader`),
+    answering nothing: the upgrade file's protocol is in a separate MKS document, so the twin cannot
+    take a firmware file - a power cycle returns it to its firmware unchanged (a real drive after an
+    interrupted upgrade may not come back).
     V1.0.8's synchronization (Part 12.4, profile v1.0.9): with 0x4A on, a run command (not a stop) is
     checked, its fields taken and the command held, answered with run status 5; the broadcast 0x4B
     starts it (:meth:`MksFirmware.sync_execute`). A second run command before 0x4B replaces the held one
@@ -269,6 +275,7 @@ class MksFirmware(Firmware):
             Command.EMERGENCY_STOP: self._emergency_stop,
             Command.SAVE_CLEAN_SPEED_MODE: self._save_clean,
             Command.WRITE_IO_PORT: self._write_io,
+            Command.IAP_CONTROL: self._iap,
             **{code: self._run_command for code in _RUN_CODES},
         }
         self.q = 0.0
@@ -290,6 +297,8 @@ class MksFirmware(Firmware):
         #: the run command 0x4A holds until 0x4B (V1.0.8): (code, its fields, answered); when 0x4B last started one
         self.sync_held: tuple[int, dict[str, int], bool] | None = None
         self.sync_started_at = -1.0
+        self.silent = False  #: IAP silent state (0x50 02): only 0x50 is heard
+        self.boot_loader = False  #: in the IAP boot loader (0x50 01): hears nothing the twin can answer
         self.run_state = st.RunState.IDLE
         self.motion: _Motion | None = None
         self.speed = 0  #: present speed value of the reference (magnitude)
@@ -563,6 +572,20 @@ class MksFirmware(Firmware):
             self._zero_return()
             return True
         return False
+
+    def _iap(self, values: Mapping[str, int], answered: bool) -> int:
+        cmd = values["iap_control"]
+        if cmd == 1:  # "the motor will automatically restart and enter IAP mode 2, waiting to receive the file"
+            self.enabled = False
+            self._end(st.RunEvent.EMERGENCY_STOP, quiet=True)
+            self.boot_loader = True
+        else:
+            self.silent = cmd == 2
+        return int(_SET.SUCCESS)
+
+    def hears(self, command: int) -> bool:
+        """Whether a command reaches the firmware: not in the boot loader, only 0x50 in the silent state."""
+        return not self.boot_loader and (not self.silent or command == Command.IAP_CONTROL)
 
     def _write_io(self, values: Mapping[str, int], answered: bool) -> int:
         for port in (1, 2):

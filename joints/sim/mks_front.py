@@ -75,8 +75,8 @@ class MksNativeFront:
         fw = self.firmware
         self.frames += 1
         fw.frame_received()
-        if isinstance(request, mks.UnknownRequest):
-            return None
+        if isinstance(request, mks.UnknownRequest) or not fw.hears(request.function):
+            return None  # (the IAP boot loader or silent state: V1.0.8 0x50)
         code = request.function
         if code in BLOCK_COMMANDS:
             return self._block(request, answer)

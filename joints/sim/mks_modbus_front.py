@@ -74,6 +74,8 @@ class MksModbusFront:
         if not self.speaks:
             return None
         self.firmware.frame_received()
+        if not self.firmware.hears(getattr(request, "address", -1)):
+            return None  # the IAP boot loader or silent state (V1.0.8 0x50): no answer
         try:
             if isinstance(request, mb.ReadInputRegisters):
                 return mb.ReadRegistersReply(request.slave, request.function, self._read(request.address, request.count))

@@ -90,7 +90,7 @@ def test_frame_lengths_follow_the_function_code() -> None:
                                           0x8F, 0x9B, 0x9E, 0xF3, 0xFF)},
                         0x83: 2, 0x8C: 2, 0xF6: 3, 0x98: 4, 0x9A: 4, 0x90: 5, 0x46: 34, 0x01: 3,
                         **{c: 7 for c in (0x94, 0xF4, 0xF5, 0xFD, 0xFE)},
-                        0x36: 1, 0x9D: 5, 0x95: 3, 0x4A: 1, 0x4B: 0}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
+                        0x36: 1, 0x9D: 5, 0x95: 3, 0x4A: 1, 0x4B: 0, 0x50: 1}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
     assert dict(mks.REQUEST_DATA_LENGTH) == expected_request
     expected_reply = {c: 1 for c in expected_request} | {0x30: 6, 0x31: 6, 0x32: 2, 0x33: 4, 0x39: 4, 0x40: 4,
                                                          0x47: 34, 0x48: 28, 0x01: 2, 0x35: 6}
@@ -117,7 +117,7 @@ def test_long_packet_first_slot_for_an_address_wins() -> None:
 
 
 def test_long_packet_slot_with_unknown_code_keeps_its_8_bytes() -> None:
-    unknown = mks.UnknownRequest(7, 0x50, bytes(range(1, 9)))
+    unknown = mks.UnknownRequest(7, 0x51, bytes(range(1, 9)))
     pkt = mks.LongPacket((mks.QueryStatus(3), unknown))
     assert decode_one(Role.DEVICE, mks.encode(pkt)) == pkt
 
@@ -143,10 +143,10 @@ def test_long_packet_slot_with_unknown_code_keeps_its_8_bytes() -> None:
     mks.EnPinReply(1, 2),  # type: ignore[arg-type]
     mks.EncoderAdditionReply(1, 1 << 47),
     mks.UnknownRequest(1, 0x30, b""),  # a known code
-    mks.UnknownRequest(1, 0x50, bytes(8)),  # longer than any downlink frame
+    mks.UnknownRequest(1, 0x51, bytes(8)),  # longer than any downlink frame
     mks.LongPacket(tuple(mks.QueryStatus(i) for i in range(6))),
     mks.LongPacket((mks.UnknownRequest(0, 0x00, bytes(8)),)),  # reads as an empty slot
-    mks.LongPacket((mks.UnknownRequest(1, 0x50, bytes(9)),)),
+    mks.LongPacket((mks.UnknownRequest(1, 0x51, bytes(9)),)),
     "not a message",
 ])
 def test_encode_refuses_what_the_wire_cannot_carry(bad: Any) -> None:
@@ -314,15 +314,15 @@ def test_clear_drops_buffered_bytes() -> None:
 
 
 def test_device_frames_unknown_codes_by_their_checksum() -> None:
-    frame = mks.with_checksum(h("FA 01 50 11 22"))
+    frame = mks.with_checksum(h("FA 01 51 11 22"))
     assert decode_all(Role.DEVICE, frame + h("FA 01 F1 EC")) == [
-        mks.UnknownRequest(1, 0x50, h("11 22")), mks.QueryStatus(1)]
-    assert mks.encode(mks.UnknownRequest(1, 0x50, h("11 22"))) == frame
+        mks.UnknownRequest(1, 0x51, h("11 22")), mks.QueryStatus(1)]
+    assert mks.encode(mks.UnknownRequest(1, 0x51, h("11 22"))) == frame
 
 
 def test_device_waits_for_an_unknown_code_then_gives_up_at_eleven_bytes() -> None:
     codec = mks.MksCodec(Role.DEVICE)
-    codec.feed(h("FA 01 50 00 01"))  # no checksum match yet: might still come
+    codec.feed(h("FA 01 51 00 01"))  # no checksum match yet: might still come
     assert codec.next_message() is None and codec.buffered == 5
     codec.feed(h("02 03 04 05 06 07"))  # 11 bytes, no length 4..11 matched: garbage
     assert codec.next_message() is None
@@ -331,7 +331,7 @@ def test_device_waits_for_an_unknown_code_then_gives_up_at_eleven_bytes() -> Non
 
 def test_device_drops_unknown_code_at_silence() -> None:
     codec = mks.MksCodec(Role.DEVICE)
-    codec.feed(h("FA 01 50 00 01"))
+    codec.feed(h("FA 01 51 00 01"))
     codec.flush()
     assert codec.next_message() is None
     assert codec.buffered == 0 and codec.discarded == 5
@@ -339,7 +339,7 @@ def test_device_drops_unknown_code_at_silence() -> None:
 
 def test_host_skips_unknown_codes_without_waiting() -> None:
     codec = mks.MksCodec(Role.HOST)
-    codec.feed(h("FB 01 50") + h("FB 01 F6 01 F3"))
+    codec.feed(h("FB 01 51") + h("FB 01 F6 01 F3"))
     assert codec.next_message() == mks.RunReply(1, 0xF6, mks.RunStatus.STARTED)
     assert codec.discarded == 3
 

@@ -183,3 +183,18 @@ def test_timed_speed_mode_over_modbus_is_fc16_0xf6_with_4_registers() -> None:
     words = TIMED_SPEED_MODE.words({"speed_mode_direction": 1, "speed_mode_acc": 2, "speed_mode_speed": 640,
                                     "speed_mode_run_time": 500})
     assert words == (0x0102, 640, 0, 500)
+
+
+# -- 0x50 IAP control (V1.0.8) -------------------------------------------------------------------------
+
+
+def test_iap_control_frames() -> None:
+    """RS485 5.6: FA addr 50 cmd CRC (the silent state broadcast "FA 00 50 02 CRC"); Modbus 3.6:
+    01 06 00 50 00 cmd, the reply to cmd 01 is 01 06 00 50 00 01 48 1B."""
+    assert mks.encode(mks.IapControl(0, 2)) == mks.with_checksum(bytes.fromhex("FA 00 50 02"))
+    assert _decode(Role.DEVICE, mks.encode(mks.IapControl(1, 1))) == mks.IapControl(1, 1)
+    assert _decode(Role.HOST, mks.with_checksum(bytes.fromhex("FB 01 50 01"))) == \
+        mks.SetReply(1, 0x50, mks.SetStatus.SUCCESS)
+    block = MKS_MODBUS.block(0x06, 0x50)
+    assert block.words({"iap_control": 1}) == (1,)
+    assert mb.encode(mb.WriteSingleRegisterReply(1, 0x50, 1)) == bytes.fromhex("01 06 00 50 00 01 48 1B")

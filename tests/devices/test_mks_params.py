@@ -21,7 +21,7 @@ PARTS_5_6 = MANUAL[MANUAL.index("Part5. Serial command description"):MANUAL.inde
 PART_8 = MANUAL[MANUAL.index("Part8. MODBUS-RTU command description"):MANUAL.index("Part9. FAQ")]
 #: what V1.0.9 added (manuals V1.0.9: 0x40 read version 5.1.11 / 3.1.8, 0x98 heartbeat 5.2.16 / 3.2.14)
 LATER = {0x40, 0x98, 0x46, 0x47, 0x48, 0x01, 0x35,
-         0x36, 0x9D, 0x95, 0x4A, 0x4B}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
+         0x36, 0x9D, 0x95, 0x4A, 0x4B, 0x50}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
 
 
 # ------------------------------------------------------------------------------ parameters
@@ -58,9 +58,10 @@ def test_dangerous_commands_are_persistent() -> None:
         "restore_default_parameters", "restart_motor",  # 0x3F, 0x41
         "set_current_axis_to_zero",  # 0x92
         "en_trigger_zero_return",  # 0x9D g0Enable (V1.0.6): the motor moves on an En pulse
+        "iap_control",  # 0x50 (V1.0.8): boot loader, silent state
     }
     commands = {MKS_NATIVE.key(n).command for n in DANGEROUS}
-    assert commands == {0x80, 0x8A, 0x8B, 0x8E, 0x9A, 0xFF, 0x3F, 0x41, 0x92, 0x9D}
+    assert commands == {0x80, 0x8A, 0x8B, 0x8E, 0x9A, 0xFF, 0x3F, 0x41, 0x92, 0x9D, 0x50}
 
 
 def test_documented_defaults_and_ranges() -> None:
@@ -156,7 +157,7 @@ def test_reply_rules_follow_the_manual() -> None:
     assert native.expects_reply(Command.POSITION_MODE1_RELATIVE_PULSES, 1)
     assert not native.expects_reply(Command.SPEED_MODE, 1, respond=False)  # 0x8C respond off
     assert native.expects_reply(Command.READ_ENCODER_VALUE_ADDITION, 1, respond=False)  # queries still answer
-    assert not native.expects_reply(0x50, 1)  # unknown code
+    assert not native.expects_reply(0x51, 1)  # unknown code (0x50 is IAP from V1.0.8)
     assert native.expects_completion(Command.POSITION_MODE4_ABSOLUTE_AXIS, 1)
     assert not native.expects_completion(Command.POSITION_MODE4_ABSOLUTE_AXIS, 1, active=False)
     assert not native.expects_completion(Command.POSITION_MODE4_ABSOLUTE_AXIS, 1, respond=False)

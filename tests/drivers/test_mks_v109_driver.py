@@ -318,3 +318,62 @@ def test_speed_mode_run_time_needs_v109_and_plain_speed_mode_still_works(tmp_pat
         d.set_velocity(60)
         rig.sleep(1.0)
         assert d.read("real_time_speed") == pytest.approx(60, abs=2)
+
+
+# -- 0x50 IAP control (V1.0.8) --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _having("mks-iap"))
+def test_iap_silent_state_hears_only_0x50(tmp_path: Path, protocol: str, firmware: str) -> None:
+    from joints.errors import ReplyTimeout
+
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware}) as rig:
+        d = rig.joints["m1"].driver
+        fw = _twin(rig)
+        sent = d.link.transactions
+        with pytest.raises(ConfirmationRequired):
+            d.set_iap_silent(True)
+        assert d.link.transactions == sent and not fw.silent
+        d.set_iap_silent(True, confirm=True)
+        assert fw.silent
+        with pytest.raises(ReplyTimeout):
+            d.read("motor_status")  # deaf to everything else
+        d.set_iap_silent(False)
+        assert not fw.silent and d.read("motor_status") == 1
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _having("mks-iap"))
+def test_iap_boot_needs_confirm_and_leaves_the_drive_in_its_boot_loader_until_a_power_cycle(
+        tmp_path: Path, protocol: str, firmware: str) -> None:
+    from joints.errors import ReplyTimeout
+
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        j = rig.joints["m1"]
+        d = j.driver
+        fw = _twin(rig)
+        j.enable()
+        sent = d.link.transactions
+        with pytest.raises(ConfirmationRequired):
+            d.enter_iap_boot()
+        with pytest.raises(ConfirmationRequired):
+            j.write("iap_control", 1)  # by name too: a dangerous parameter
+        assert d.link.transactions == sent and not fw.boot_loader
+        d.enter_iap_boot(confirm=True)
+        assert fw.boot_loader and not fw.enabled  # the shaft is released
+        with pytest.raises(ReplyTimeout):
+            d.read("motor_status")
+        rig.reset()  # a power cycle: back in the (unchanged) firmware
+        assert not fw.boot_loader and d.read("motor_status") == 1
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _lacking("mks-iap"))
+def test_iap_needs_v109(tmp_path: Path, protocol: str, firmware: str) -> None:
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware}) as rig:
+        d = rig.joints["m1"].driver
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.enter_iap_boot(confirm=True)
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.set_iap_silent(True, confirm=True)

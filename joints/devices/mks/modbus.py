@@ -265,6 +265,7 @@ _BLOCKS: tuple[ModbusBlock, ...] = (
     _multi(0x36, 2, 4, "V1.0.9 4.2 Write IO port data", C,
            ("write_io_out2_mask", 0, 1, "uint8"), ("write_io_out2", 1, 1, "uint8"),
            ("write_io_out1_mask", 2, 1, "uint8"), ("write_io_out1", 3, 1, "uint8")),
+    _write(0x50, "iap_control", "uint8", C, "V1.0.9 3.6 IAP firmware online upgrade"),
     ModbusBlock(FC_WRITE_MULTIPLE, 0x9D, 3, 6, "V1.0.9 3.4.2 Set position out-of-tolerance protection parameters",
                 (ModbusField("en_trigger_zero_return", FC_WRITE_MULTIPLE, 0x9D, 1, 1, "bool", W, bit=1),
                  ModbusField("position_error_protection", FC_WRITE_MULTIPLE, 0x9D, 1, 1, "bool", W, bit=0),

@@ -56,6 +56,7 @@ class Command(enum.IntEnum):
     READ_ALL_STATUS = 0x48
     RESTART_MOTOR = 0x41
     SET_SYNC = 0x4A
+    IAP_CONTROL = 0x50
     SYNC_EXECUTE = 0x4B
     CALIBRATE_ENCODER = 0x80
     SET_WORK_MODE = 0x82
@@ -242,6 +243,7 @@ _KEYS: dict[str, NativeKey] = {
     "position_threshold_enable": NativeKey(C.SET_POSITION_THRESHOLD, "enable"),
     "position_threshold": NativeKey(C.SET_POSITION_THRESHOLD, "values"),
     "sync_enable": NativeKey(C.SET_SYNC, "enable"),
+    "iap_control": NativeKey(C.IAP_CONTROL, "cmd"),
 }
 del C
 

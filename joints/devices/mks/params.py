@@ -191,6 +191,9 @@ _PARAMS: tuple[Param, ...] = (
     # 0xF6 with a run time (V1.0.7; RS485 V1.0.9 10.1, Modbus V1.0.9 8.1)
     Param("speed_mode_run_time", "uint32", C, "10 ms", "0xF6 runTime: stop by itself after this long; 0 = the "
           "frame without it (V1.0.7)", 0, 0x0FFFFFFF, 0),
+    # 0x50 IAP control (V1.0.8; RS485 V1.0.9 5.6, Modbus V1.0.9 3.6)
+    Param("iap_control", "uint8", C, "", "0x50 IAP: 1 enter the boot loader (the drive restarts and waits for a "
+          "firmware file), 2 enter / 3 leave the silent state (V1.0.8)", 1, 3, 3, persistent=True),
     # 0x4A synchronization flag (V1.0.8; RS485 V1.0.9 12.4.1)
     Param("sync_enable", "bool", W, "", "0x4A synchronization: run commands wait for the broadcast 0x4B (V1.0.8)",
           0, 1, 0),
@@ -207,7 +210,7 @@ FEATURE_OF: dict[str, str] = {"raw_encoder_value": "mks-all-parameters", "versio
                                   "en_trigger_zero_return", "position_error_protection", "position_error_time",
                                   "position_error_count")},
                               "position_threshold_enable": "mks-position-threshold",
-                              "position_threshold": "mks-position-threshold", "sync_enable": "mks-sync",
+                              "position_threshold": "mks-position-threshold", "sync_enable": "mks-sync", "iap_control": "mks-iap",
                               "speed_mode_run_time": "mks-timed-speed"}
 
 MKS_PARAMS: ParamSet = ParamSet("mks-servo42d57d", _PARAMS)
