@@ -622,6 +622,15 @@ class MksDriver(JointDriver):
                                 "position_threshold": values if threshold is not None else self.params[
                                     "position_threshold"].default})
 
+    def set_pid(self, mode: str, kp: int, ki: int, kd: int, kv: int, *, confirm: bool = False) -> None:
+        """0x96 (``mode="vfoc"``) / 0x97 (``"close"``) PID parameters, 0-1024 each (V1.0.8+; Modbus FC16
+        0x0096 / 0x0097). The manual advises against changing the factory tuning ("to avoid damaging the
+        motor"): needs ``confirm=True``. The twin keeps them but its servo is its own model (docs)."""
+        if mode not in ("vfoc", "close"):
+            raise CommandError(f"{self.name}: PID mode must be 'vfoc' (0x96) or 'close' (0x97), got {mode!r}")
+        self._confirm(f"0x{0x96 if mode == 'vfoc' else 0x97:02X} changes the factory PID tuning", confirm)
+        self.access.write_many({f"{mode}_kp": kp, f"{mode}_ki": ki, f"{mode}_kd": kd, f"{mode}_kv": kv})
+
     def enter_iap_boot(self, *, confirm: bool = False) -> None:
         """0x50 01 (V1.0.8+; Modbus FC06 0x0050 = 1): the drive restarts into its IAP boot loader and waits for a
         firmware file (MKS's upgrade tool and file format, not joints): this joint is lost until the upgrade

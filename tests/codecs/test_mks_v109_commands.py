@@ -198,3 +198,18 @@ def test_iap_control_frames() -> None:
     block = MKS_MODBUS.block(0x06, 0x50)
     assert block.words({"iap_control": 1}) == (1,)
     assert mb.encode(mb.WriteSingleRegisterReply(1, 0x50, 1)) == bytes.fromhex("01 06 00 50 00 01 48 1B")
+
+
+# -- 0x96 / 0x97 PID parameters (V1.0.8) ---------------------------------------------------------------
+
+
+def test_pid_frames_and_the_modbus_reply() -> None:
+    """RS485 5.3: FA addr 96 Kp Ki Kd Kv CRC (uint16 each); Modbus 3.3.1 reply 01 10 00 96 00 04 21 E6."""
+    msg = mks.SetVfocPid(1, 0xDC, 0x64, 0x10E, 0x140)
+    frame = mks.with_checksum(bytes.fromhex("FA 01 96 00 DC 00 64 01 0E 01 40"))
+    assert mks.encode(msg) == frame and _decode(Role.DEVICE, frame) == msg
+    assert _decode(Role.DEVICE, mks.encode(mks.SetClosePid(2, 0xC8, 0x50, 0xFA, 0x12C))) == \
+        mks.SetClosePid(2, 0xC8, 0x50, 0xFA, 0x12C)
+    assert mb.encode(mb.WriteMultipleRegistersReply(1, 0x96, 4)) == bytes.fromhex("01 10 00 96 00 04 21 E6")
+    assert MKS_MODBUS.block(FC_WRITE_MULTIPLE, 0x97).words(
+        {"close_kp": 0xC8, "close_ki": 0x50, "close_kd": 0xFA, "close_kv": 0x12C}) == (0xC8, 0x50, 0xFA, 0x12C)

@@ -21,7 +21,7 @@ PARTS_5_6 = MANUAL[MANUAL.index("Part5. Serial command description"):MANUAL.inde
 PART_8 = MANUAL[MANUAL.index("Part8. MODBUS-RTU command description"):MANUAL.index("Part9. FAQ")]
 #: what V1.0.9 added (manuals V1.0.9: 0x40 read version 5.1.11 / 3.1.8, 0x98 heartbeat 5.2.16 / 3.2.14)
 LATER = {0x40, 0x98, 0x46, 0x47, 0x48, 0x01, 0x35,
-         0x36, 0x9D, 0x95, 0x4A, 0x4B, 0x50}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
+         0x36, 0x9D, 0x95, 0x4A, 0x4B, 0x50, 0x96, 0x97}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
 
 
 # ------------------------------------------------------------------------------ parameters
@@ -59,9 +59,10 @@ def test_dangerous_commands_are_persistent() -> None:
         "set_current_axis_to_zero",  # 0x92
         "en_trigger_zero_return",  # 0x9D g0Enable (V1.0.6): the motor moves on an En pulse
         "iap_control",  # 0x50 (V1.0.8): boot loader, silent state
+        *(f"{m}_{k}" for m in ("vfoc", "close") for k in ("kp", "ki", "kd", "kv")),  # 0x96 / 0x97 PID (V1.0.8)
     }
     commands = {MKS_NATIVE.key(n).command for n in DANGEROUS}
-    assert commands == {0x80, 0x8A, 0x8B, 0x8E, 0x9A, 0xFF, 0x3F, 0x41, 0x92, 0x9D, 0x50}
+    assert commands == {0x80, 0x8A, 0x8B, 0x8E, 0x9A, 0xFF, 0x3F, 0x41, 0x92, 0x9D, 0x50, 0x96, 0x97}
 
 
 def test_documented_defaults_and_ranges() -> None:

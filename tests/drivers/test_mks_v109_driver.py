@@ -16,7 +16,7 @@ from mkskit import open_motor
 
 from joints.devices.mks.state import MotorStatus
 from joints.devices.quirks import MKS_FIRMWARES, firmware_profile
-from joints.errors import ConfirmationRequired, RegisterError
+from joints.errors import CommandError, ConfirmationRequired, RegisterError
 from joints.sim.mks import MksFirmware
 
 PROTOCOLS = ("mks-serial", "modbus-rtu")
@@ -377,3 +377,34 @@ def test_iap_needs_v109(tmp_path: Path, protocol: str, firmware: str) -> None:
             d.enter_iap_boot(confirm=True)
         with pytest.raises(RegisterError, match="v1.0.9"):
             d.set_iap_silent(True, confirm=True)
+
+
+# -- 0x96 / 0x97 PID parameters (V1.0.8) ---------------------------------------------------------------
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _having("mks-pid"))
+def test_pid_parameters_need_confirm_and_are_kept_in_flash(tmp_path: Path, protocol: str, firmware: str) -> None:
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware}) as rig:
+        d = rig.joints["m1"].driver
+        fw = _twin(rig)
+        assert [fw.values[f"vfoc_{k}"] for k in ("kp", "ki", "kd", "kv")] == [0xDC, 0x64, 0x10E, 0x140]  # 5.3.1
+        sent = d.link.transactions
+        with pytest.raises(ConfirmationRequired):
+            d.set_pid("vfoc", 300, 120, 250, 400)
+        assert d.link.transactions == sent
+        d.set_pid("vfoc", 300, 120, 250, 400, confirm=True)
+        d.set_pid("close", 210, 90, 260, 310, confirm=True)
+        rig.reset()  # a power cycle: settings live in flash
+        assert [fw.values[f"vfoc_{k}"] for k in ("kp", "ki", "kd", "kv")] == [300, 120, 250, 400]
+        assert [fw.values[f"close_{k}"] for k in ("kp", "ki", "kd", "kv")] == [210, 90, 260, 310]
+        with pytest.raises(CommandError, match="1024"):
+            d.set_pid("close", 2000, 0, 0, 0, confirm=True)  # out of range: refused before anything is sent
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _lacking("mks-pid"))
+def test_pid_parameters_need_v109(tmp_path: Path, protocol: str, firmware: str) -> None:
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware}) as rig, \
+            pytest.raises(RegisterError, match="v1.0.9"):
+        rig.joints["m1"].driver.set_pid("vfoc", 300, 120, 250, 400, confirm=True)

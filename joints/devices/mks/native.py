@@ -82,6 +82,8 @@ class Command(enum.IntEnum):
     SET_HOLDING_CURRENT = 0x9B
     SET_POSITION_ERROR_PROTECTION = 0x9D
     SET_POSITION_THRESHOLD = 0x95
+    SET_VFOC_PID = 0x96
+    SET_CLOSE_PID = 0x97
     SET_LIMIT_PORT_REMAP = 0x9E
     QUERY_MOTOR_STATUS = 0xF1
     ENABLE_MOTOR = 0xF3
@@ -244,6 +246,8 @@ _KEYS: dict[str, NativeKey] = {
     "position_threshold": NativeKey(C.SET_POSITION_THRESHOLD, "values"),
     "sync_enable": NativeKey(C.SET_SYNC, "enable"),
     "iap_control": NativeKey(C.IAP_CONTROL, "cmd"),
+    **{f"vfoc_{k}": NativeKey(C.SET_VFOC_PID, k) for k in ("kp", "ki", "kd", "kv")},
+    **{f"close_{k}": NativeKey(C.SET_CLOSE_PID, k) for k in ("kp", "ki", "kd", "kv")},
 }
 del C
 

@@ -194,6 +194,13 @@ _PARAMS: tuple[Param, ...] = (
     # 0x50 IAP control (V1.0.8; RS485 V1.0.9 5.6, Modbus V1.0.9 3.6)
     Param("iap_control", "uint8", C, "", "0x50 IAP: 1 enter the boot loader (the drive restarts and waits for a "
           "firmware file), 2 enter / 3 leave the silent state (V1.0.8)", 1, 3, 3, persistent=True),
+    # 0x96 / 0x97 PID parameters (V1.0.8; RS485 V1.0.9 5.3, Modbus V1.0.9 3.3): "users are advised against
+    # adjusting the PID parameters ... to avoid damaging the motor" - persistent, confirm
+    *(Param(f"{mode}_{k}", "uint16", W, "", f"0x{code:02X} {mode.upper()} mode PID {k.capitalize()} (0-1024) "
+            "(V1.0.8)", 0, 1024, default, persistent=True)
+      for mode, code, gains in (("vfoc", 0x96, (("kp", 0xDC), ("ki", 0x64), ("kd", 0x10E), ("kv", 0x140))),
+                                ("close", 0x97, (("kp", 0xC8), ("ki", 0x50), ("kd", 0xFA), ("kv", 0x12C))))
+      for k, default in gains),
     # 0x4A synchronization flag (V1.0.8; RS485 V1.0.9 12.4.1)
     Param("sync_enable", "bool", W, "", "0x4A synchronization: run commands wait for the broadcast 0x4B (V1.0.8)",
           0, 1, 0),
@@ -211,6 +218,7 @@ FEATURE_OF: dict[str, str] = {"raw_encoder_value": "mks-all-parameters", "versio
                                   "position_error_count")},
                               "position_threshold_enable": "mks-position-threshold",
                               "position_threshold": "mks-position-threshold", "sync_enable": "mks-sync", "iap_control": "mks-iap",
+                              **{f"{m}_{k}": "mks-pid" for m in ("vfoc", "close") for k in ("kp", "ki", "kd", "kv")},
                               "speed_mode_run_time": "mks-timed-speed"}
 
 MKS_PARAMS: ParamSet = ParamSet("mks-servo42d57d", _PARAMS)
