@@ -39,7 +39,9 @@ OUT2_mask, b5-b4 OUT1_mask, b3 OUT_2, b2 OUT_1, b1-b0 zero; a mask of 3 or a res
 0x01 (5.1.9) asks the drive to send one read command's reply every ``times`` ms (0 stops it):
 request code + uint16 times, reply code + status; the periodic frames are that command's ordinary
 replies (FB addr code param chk), arriving unsolicited.
-* Two forms (V1.0.7): 0xF6 carries 3 data bytes, or 7 with a runTime (:data:`REQUEST_LONG_DATA_LENGTH`).
+* Two forms (V1.0.7): 0xF6 carries 3 data bytes, or 7 with a runTime; 0x83 2, or 3 with a trailing 00
+  (the current changed while running, not saved; answered with status 2, which no other set command
+  has) (:data:`REQUEST_LONG_DATA_LENGTH`).
   The device side takes the long form when its frame is there, checksum-valid and plausible (runTime
   <= 0x0FFFFFFF: the next frame's head FA/FB/FC can never pass as its first byte), else the short
   one: at once when its checksum byte cannot be a runTime's first byte (above 0x0F: 15 in 16 frames),
@@ -184,6 +186,7 @@ class SetStatus(enum.IntEnum):
 
     FAIL = 0
     SUCCESS = 1
+    SUCCESS_UNSAVED = 2  #: 0x83 only (V1.0.7): the working current changed, not saved
 
 
 class RunStatus(enum.IntEnum):
@@ -349,10 +352,12 @@ class SetWorkMode:
 
 @dataclass(frozen=True, slots=True)
 class SetWorkingCurrent:
-    """0x83 set the working current "Ma" [mA] (uint16)."""
+    """0x83 set the working current "Ma" [mA] (uint16). ``unsaved`` (V1.0.7): the frame carries a trailing
+    00 - change the current while running, not saved (answered with status 2)."""
 
     address: int
     current: int
+    unsaved: int = 0
     function: ClassVar[int] = 0x83
 
 
@@ -1135,6 +1140,17 @@ def _unpack_calibrate(address: int, function: int, data: bytes, frame: bytes) ->
     return Calibrate(address)
 
 
+def _pack_working_current(msg: Any) -> bytes:
+    current = _check_int("SetWorkingCurrent.current", msg.current, 0, 0xFFFF).to_bytes(2, "big")
+    return current + b"\x00" if _check_int("SetWorkingCurrent.unsaved", msg.unsaved, 0, 1) else current
+
+
+def _unpack_working_current(address: int, function: int, data: bytes, frame: bytes) -> SetWorkingCurrent:
+    if len(data) > 2 and data[2]:
+        raise FrameError(f"0x83: the byte after the current must be 00 (not saved), got {frame.hex(' ')}", data=frame)
+    return SetWorkingCurrent(address, int.from_bytes(data[:2], "big"), int(len(data) > 2))
+
+
 def _pack_subdivision(msg: Any) -> bytes:
     n = _check_int("SetSubdivision.microsteps", msg.microsteps, 1, 256)
     return bytes((n & 0xFF,))
@@ -1324,7 +1340,8 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _struct(ReleaseProtection), _struct(ReadProtectionState), _struct(RestoreDefaults), _struct(Restart),
     _Spec(Calibrate, 1, _pack_calibrate, _unpack_calibrate),
     _struct(SetWorkMode, "B", ("mode",)),
-    _struct(SetWorkingCurrent, "H", ("current",)),
+    _Spec(SetWorkingCurrent, 2, _pack_working_current, _unpack_working_current, 3, lambda d: d[2] == 0,
+          lambda f: f[-1] == 0),
     _struct(SetHoldingCurrent, "B", ("hold",)),
     _Spec(SetSubdivision, 1, _pack_subdivision, _unpack_subdivision),
     _struct(SetEnActive, "B", ("level",)),
@@ -1382,7 +1399,23 @@ SET_REPLY_FUNCTIONS = frozenset((0x3D, 0x3F, 0x41, 0x82, 0x83, 0x84, 0x85, 0x86,
                                  0x4B))  # 0x4B is never answered (the layout keeps the table total)
 
 _RUN_REPLY = _coded_spec(RunReply, RunStatus)
-_SET_REPLY = _coded_spec(SetReply, SetStatus)
+_SET_REPLY_ANY = _coded_spec(SetReply, SetStatus)
+
+
+def _unpack_set_reply(address: int, function: int, data: bytes, frame: bytes) -> SetReply:
+    reply: SetReply = _SET_REPLY_ANY.unpack(address, function, data, frame)
+    if reply.status is SetStatus.SUCCESS_UNSAVED and function != 0x83:
+        raise FrameError(f"SetReply to 0x{function:02X}: undocumented value 2 in {frame.hex(' ')}", data=frame)
+    return reply
+
+
+def _pack_set_reply(msg: Any) -> bytes:
+    if msg.status == SetStatus.SUCCESS_UNSAVED and msg.function != 0x83:
+        raise EncodeError(f"status 2 (success without saved) answers 0x83 only, not 0x{msg.function:02X}")
+    return _SET_REPLY_ANY.pack(msg)
+
+
+_SET_REPLY = _Spec(SetReply, 1, _pack_set_reply, _unpack_set_reply)
 _FIXED_REPLY_SPECS: tuple[_Spec, ...] = (
     _struct(EncoderCarryReply, "iH", ("carry", "value")),
     _Spec(EncoderAdditionReply, 6, _pack_int48, _unpack_int48),

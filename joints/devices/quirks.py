@@ -41,6 +41,8 @@ stops by itself after it.
 2), 02 / 03 enter / leave the silent state (only 0x50 is heard).
 ``mks-pid`` (V1.0.8+, profile v1.0.9): 0x96 / 0x97 (FC16 0x0096 / 0x0097) set the vFOC / CLOSE mode PID
 parameters Kp, Ki, Kd, Kv.
+``mks-current-unsaved`` (V1.0.7+, profile v1.0.9): 0x83 with a trailing 00 / FC06 0x0083 with bit 15 set:
+change the working current while running, not saved (status 2).
 ``mks-position-error-protection`` (V1.0.6+): 0x9D / FC16 0x009D position-error protection (time window,
 error count) and the En-triggered single-turn zero return; an En pulse also releases the protection.
 """
@@ -54,6 +56,7 @@ from types import MappingProxyType
 from joints.errors import ConfigError
 
 __all__ = ["DEFAULT_FIRMWARE", "EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED", "FIRMWARES", "MKS_ALL_PARAMETERS",
+           "MKS_CURRENT_UNSAVED",
            "MKS_FAILURE_REPLIES", "MKS_FIRMWARES", "MKS_HEARTBEAT", "MKS_IAP", "MKS_PID", "MKS_POSITION_ERROR_PROTECTION",
            "MKS_POSITION_THRESHOLD", "MKS_SYNC", "MKS_TIMED_RETURNS", "MKS_TIMED_SPEED", "MKS_VERSION", "MKS_WRITE_IO",
            "QUIRKS",
@@ -98,6 +101,7 @@ MKS_SYNC = "mks-sync"
 MKS_TIMED_SPEED = "mks-timed-speed"
 MKS_IAP = "mks-iap"
 MKS_PID = "mks-pid"
+MKS_CURRENT_UNSAVED = "mks-current-unsaved"
 #: the MKS firmware profiles, oldest first (the last is the default)
 MKS_FIRMWARES = ("v1.0.5", "v1.0.6", "v1.0.9")
 _MKS_FEATURES = {
@@ -105,7 +109,7 @@ _MKS_FEATURES = {
     "v1.0.6": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_WRITE_IO, MKS_POSITION_ERROR_PROTECTION}),
     "v1.0.9": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_VERSION, MKS_HEARTBEAT, MKS_TIMED_RETURNS,
                          MKS_WRITE_IO, MKS_POSITION_ERROR_PROTECTION, MKS_POSITION_THRESHOLD,
-                         MKS_SYNC, MKS_TIMED_SPEED, MKS_IAP, MKS_PID}),
+                         MKS_SYNC, MKS_TIMED_SPEED, MKS_IAP, MKS_PID, MKS_CURRENT_UNSAVED}),
 }
 _MKS_TEXT = {
     "v1.0.5": "manual V1.0.5 (May 2024): no heartbeat, no version command; Modbus write failures undocumented",

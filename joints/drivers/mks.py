@@ -65,6 +65,7 @@ from typing import TypeVar
 from joints.clock import Clock, MonotonicClock
 from joints.devices.faults import DEFINED_BY_JOINTS, HOST_DEFINED, Fault
 from joints.devices.mks import state as st
+from joints.devices.mks.native import OPTIONAL_FIELDS
 from joints.devices.mks.params import FEATURE_OF
 from joints.devices.mks.profile import MksProfile
 from joints.devices.mks.profile import profile as lookup_profile
@@ -148,8 +149,8 @@ class MksAccess(ParamAccess):
     def merged(self, names: Sequence[str], given: Mapping[str, int]) -> dict[str, int]:
         """Every field of one command: ``given`` values, else the image, else the defaults (range-checked)."""
         out: dict[str, int] = {}
-        for n in names:
-            value = given[n] if n in given else self.image.get(n, self.params[n].default)
+        for n in names:  # a later firmware's optional field not given: 0, the command's older form
+            value = given[n] if n in given else 0 if n in OPTIONAL_FIELDS else self.image.get(n, self.params[n].default)
             out[n] = self.params[n].check(value)
         return out
 
@@ -558,9 +559,13 @@ class MksDriver(JointDriver):
         """0x82 work mode (serial motion needs SR_OPEN 3, SR_CLOSE 4 or SR_vFOC 5)."""
         self.write_param("work_mode", int(mode))
 
-    def set_working_current(self, milliamps: int) -> None:
-        """0x83 working current Ma [mA] (42D 0-3000, 57D 0-5200)."""
-        self.write_param("working_current", milliamps)
+    def set_working_current(self, milliamps: int, *, save: bool = True) -> None:
+        """0x83 working current Ma [mA] (42D 0-3000, 57D 0-5200). ``save=False`` (V1.0.7+, profile v1.0.9; both
+        protocols): change it now, while running, without saving it (the drive answers status 2)."""
+        if save:
+            self.write_param("working_current", milliamps)
+        else:
+            self.access.write_many({"working_current": milliamps, "working_current_unsaved": 1})
 
     def set_holding_current(self, code: int) -> None:
         """0x9B holding current: 0 = 10 % ... 8 = 90 % of Ma (OPEN/CLOSE modes)."""

@@ -85,6 +85,8 @@ Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; defa
     answering nothing: the upgrade file's protocol is in a separate MKS document, so the twin cannot
     take a firmware file - a power cycle returns it to its firmware unchanged (a real drive after an
     interrupted upgrade may not come back).
+    V1.0.7's 0x83 not saved (trailing 00; Modbus bit 15): the working current changes at once (the torque
+    the motor has), flash keeps the last saved one, so a power cycle brings that back; status 2.
     V1.0.8's synchronization (Part 12.4, profile v1.0.9): with 0x4A on, a run command (not a stop) is
     checked, its fields taken and the command held, answered with run status 5; the broadcast 0x4B
     starts it (:meth:`MksFirmware.sync_execute`). A second run command before 0x4B replaces the held one
@@ -436,7 +438,7 @@ class MksFirmware(Firmware):
         return (int(self.calibrated) << 28) | (hardware << 24) | (major << 16) | (minor << 8) | patch
 
     def on_write(self, name: str, value: int) -> None:
-        if name in self._persistent:
+        if name in self._persistent and name != "working_current_unsaved":
             self.saved[name] = value  # the drive keeps its menu settings in flash
         if name in ("work_mode", "microsteps", "working_current"):
             self._cache()
@@ -452,8 +454,15 @@ class MksFirmware(Firmware):
         refused = self._refusal(command, values)
         if refused is not None:
             return refused
+        flash = self.saved.get("working_current")
         if values:
             self.write_many(list(values.items()))
+        if values.get("working_current_unsaved"):  # 0x83 while running, not saved (V1.0.7)
+            if flash is None:
+                self.saved.pop("working_current", None)
+            else:
+                self.saved["working_current"] = flash
+            return int(_SET.SUCCESS_UNSAVED)
         if (command in _PREFIX and MKS_SYNC in self.firmware.features and self.values["sync_enable"]
                 and self.values[f"{_PREFIX[command]}_speed"] != 0):
             self.sync_held = (command, dict(values), answered)  # 0x4A on: wait for 0x4B (the last one wins)

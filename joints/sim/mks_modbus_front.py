@@ -28,7 +28,7 @@ from typing import Any
 
 from joints.codecs import modbus as mb
 from joints.devices.mks.modbus import FC_READ, FC_WRITE_MULTIPLE, FC_WRITE_SINGLE, MKS_MODBUS, ModbusBlock
-from joints.devices.mks.native import Command
+from joints.devices.mks.native import OPTIONAL_FIELDS, Command
 from joints.devices.quirks import MKS_FAILURE_REPLIES
 from joints.errors import CommandError, ParameterRefused
 from joints.sim.mks import MksFirmware
@@ -119,7 +119,8 @@ class MksModbusFront:
     # -- internals ----------------------------------------------------------------------------------
     def _block(self, function: int, address: int, count: int | None = None) -> ModbusBlock:
         block = self.map.find(function, address)
-        if block is None or not all(self.firmware.supports(f.name) for f in block.fields):
+        if block is None or not all(self.firmware.supports(f.name) for f in block.fields
+                                    if f.name not in OPTIONAL_FIELDS):
             raise _Exception(ILLEGAL_DATA_ADDRESS)
         longer = self.map.find(function, address, count) if count is not None else None
         if longer is not None and all(self.firmware.supports(f.name) for f in longer.fields):
@@ -145,6 +146,9 @@ class MksModbusFront:
                 f.check(values[f.name])
         except CommandError:
             raise _Failed(ILLEGAL_DATA_VALUE) from None
+        for name in [n for n in values if not self.firmware.supports(n)]:  # a later firmware's optional field:
+            if values.pop(name):  # an older one knows only its 0 (0x83 with bit 15 before V1.0.7: out of range)
+                raise _Failed(ILLEGAL_DATA_VALUE)
         try:
             status = self.firmware.execute(block.address, values)
         except ParameterRefused:

@@ -368,6 +368,7 @@ _NARROW: dict[tuple[type, str], st.SearchStrategy[Any]] = {
     **{(mks.SetPositionErrorProtection, n): st.integers(0, 1) for n in ("en_zero_return", "enable")},
     **{(mks.SetPositionErrorProtection, n): u16 for n in ("time", "errors")},
     (mks.SetPositionThreshold, "values"): u16,
+    (mks.SetWorkingCurrent, "unsaved"): st.integers(0, 1),
 }
 
 
@@ -412,7 +413,9 @@ replies = st.one_of(
     st.builds(mks.ProtectionStateReply, u8, st.booleans()),
     st.builds(mks.CalibrationReply, u8, st.sampled_from(mks.CalibrationStatus)),
     st.builds(mks.MotorStatusReply, u8, st.sampled_from(mks.MotorStatus)),
-    st.builds(mks.SetReply, u8, st.sampled_from(sorted(mks.SET_REPLY_FUNCTIONS)), st.sampled_from(mks.SetStatus)),
+    st.builds(mks.SetReply, u8, st.sampled_from(sorted(mks.SET_REPLY_FUNCTIONS)),
+              st.sampled_from((mks.SetStatus.FAIL, mks.SetStatus.SUCCESS))),
+    st.builds(mks.SetReply, u8, st.just(0x83), st.just(mks.SetStatus.SUCCESS_UNSAVED)),  # 0x83 only (V1.0.7)
     st.builds(mks.RunReply, u8, st.sampled_from(sorted(mks.RUN_REPLY_FUNCTIONS)), st.sampled_from(mks.RunStatus)),
     st.builds(mks.VersionReply, u8, u32),
     st.builds(mks.TimedReturnReply, u8, u8, st.sampled_from(mks.SetStatus)),

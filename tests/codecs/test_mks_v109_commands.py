@@ -213,3 +213,32 @@ def test_pid_frames_and_the_modbus_reply() -> None:
     assert mb.encode(mb.WriteMultipleRegistersReply(1, 0x96, 4)) == bytes.fromhex("01 10 00 96 00 04 21 E6")
     assert MKS_MODBUS.block(FC_WRITE_MULTIPLE, 0x97).words(
         {"close_kp": 0xC8, "close_ki": 0x50, "close_kd": 0xFA, "close_kv": 0x12C}) == (0xC8, 0x50, 0xFA, 0x12C)
+
+
+# -- 0x83 while running, not saved (V1.0.7) -------------------------------------------------------------
+
+
+def test_working_current_has_a_saved_and_an_unsaved_form() -> None:
+    """RS485 5.2.3: FA addr 83 current [00] CRC - the trailing 00 means "without saving"; status 2 answers it
+    and no other set command."""
+    saved, unsaved = mks.SetWorkingCurrent(1, 1600), mks.SetWorkingCurrent(1, 1600, 1)
+    assert mks.encode(saved) == mks.with_checksum(bytes.fromhex("FA 01 83 06 40"))
+    assert mks.encode(unsaved) == mks.with_checksum(bytes.fromhex("FA 01 83 06 40 00"))
+    codec = mks.MksCodec(Role.DEVICE)
+    codec.feed(mks.encode(unsaved) + mks.encode(saved) + mks.encode(unsaved))
+    assert [codec.next_message() for _ in range(3)] == [unsaved, saved, unsaved]
+    assert _decode(Role.HOST, mks.with_checksum(bytes.fromhex("FB 01 83 02"))) == \
+        mks.SetReply(1, 0x83, mks.SetStatus.SUCCESS_UNSAVED)
+    with pytest.raises(FrameError):
+        _decode(Role.HOST, mks.with_checksum(bytes.fromhex("FB 01 82 02")))
+    with pytest.raises(EncodeError):
+        mks.encode(mks.SetReply(1, 0x82, mks.SetStatus.SUCCESS_UNSAVED))
+
+
+def test_working_current_unsaved_over_modbus_is_bit_15() -> None:
+    """Modbus 3.2.3: "If the highest bit of Current is 1, only the current value will be changed, and it will
+    not be saved"."""
+    block = MKS_MODBUS.block(0x06, 0x83)
+    assert block.words({"working_current": 1600, "working_current_unsaved": 1}) == (0x8640,)
+    assert block.words({"working_current": 1600, "working_current_unsaved": 0}) == (0x0640,)
+    assert block.decode_words((0x8640,)) == {"working_current": 1600, "working_current_unsaved": 1}

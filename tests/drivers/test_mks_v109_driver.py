@@ -408,3 +408,48 @@ def test_pid_parameters_need_v109(tmp_path: Path, protocol: str, firmware: str) 
     with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware}) as rig, \
             pytest.raises(RegisterError, match="v1.0.9"):
         rig.joints["m1"].driver.set_pid("vfoc", 300, 120, 250, 400, confirm=True)
+
+
+# -- 0x83 while running, not saved (V1.0.7) --------------------------------------------------------------
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _having("mks-current-unsaved"))
+def test_working_current_changed_while_running_is_not_saved(tmp_path: Path, protocol: str, firmware: str) -> None:
+    """The unsaved current takes effect at once (the torque the motor has: a lower current, a lower speed under
+    a load that needs more); after a power cycle the saved current is back."""
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        j = rig.joints["m1"]
+        d = j.driver
+        fw = _twin(rig)
+        d.set_working_current(1200)  # saved
+        j.enable()
+        d.set_velocity(300, acceleration=1000)
+        rig.sleep(0.5)
+        assert fw.available_torque() > 0.0
+        torque_1200 = fw.available_torque()
+        d.set_working_current(400, save=False)
+        if protocol == "mks-serial":
+            from joints.codecs import mks
+            assert d.access.last_reply == mks.SetReply(1, 0x83, mks.SetStatus.SUCCESS_UNSAVED)
+        rig.sleep(0.05)
+        assert fw.values["working_current"] == 400 and fw.current == pytest.approx(0.4)
+        assert fw.available_torque() == pytest.approx(torque_1200 / 3, rel=0.05)  # while running
+        assert d.read("real_time_speed") == pytest.approx(300, abs=3)  # still running
+        j.stop()
+        rig.reset()  # power cycle: flash has 1200
+        assert fw.values["working_current"] == 1200
+        d.set_working_current(1000)  # a later plain write is saved (the unsaved flag does not ride along)
+        rig.reset()
+        assert fw.values["working_current"] == 1000
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _lacking("mks-current-unsaved"))
+def test_working_current_unsaved_needs_v109(tmp_path: Path, protocol: str, firmware: str) -> None:
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware}) as rig:
+        d = rig.joints["m1"].driver
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.set_working_current(400, save=False)
+        d.set_working_current(400)  # the saved form still works
+        assert _twin(rig).values["working_current"] == 400

@@ -108,12 +108,12 @@ class ModbusBlock:
         end = 0
         bits: dict[int, set[int]] = {}
         for f in sorted(self.fields, key=lambda f: f.offset):
-            if f.bit >= 0:  # flags sharing one byte: distinct bits, no byte field there
-                if f.size != 1 or f.bit > 7 or f.bit in bits.setdefault(f.offset, set()) or f.offset < end:
+            if f.bit >= 0:  # flags: distinct bits of one byte (also the free top bit of a value: 0x83)
+                if f.size != 1 or f.bit > 7 or f.bit in bits.setdefault(f.offset, set()):
                     raise ValueError(f"{self.title}: bit field {f.name} overlaps or is not one bit of one byte")
                 bits[f.offset].add(f.bit)
                 continue
-            if f.offset < end or f.offset in bits or f.offset + f.size > self.byte_count:
+            if f.offset < end or f.offset + f.size > self.byte_count:
                 raise ValueError(f"{self.title}: field {f.name} overlaps or overruns the block")
             if TYPES[f.type][2] > f.size:
                 raise ValueError(f"{self.title}: {f.type} does not fit {f.size} bytes ({f.name})")
@@ -129,8 +129,12 @@ class ModbusBlock:
         """The block's data bytes -> {parameter name: value}."""
         if len(data) != self.byte_count:
             raise CommandError(f"{self.title}: expected {self.byte_count} data bytes, got {len(data)}")
+        plain = bytearray(data)
+        for f in self.fields:  # a value field does not see the flag bits inside it
+            if f.bit >= 0:
+                plain[f.offset] &= ~(1 << f.bit) & 0xFF
         return {f.name: (data[f.offset] >> f.bit) & 1 if f.bit >= 0
-                else int.from_bytes(data[f.offset:f.offset + f.size], "big", signed=f.signed) for f in self.fields}
+                else int.from_bytes(plain[f.offset:f.offset + f.size], "big", signed=f.signed) for f in self.fields}
 
     def encode(self, values: Mapping[str, int]) -> bytes:
         """{parameter name: value} (every field of the block) -> the data bytes, range-checked."""
@@ -141,9 +145,11 @@ class ModbusBlock:
                                + (f"; missing {', '.join(missing)}" if missing else "")
                                + (f"; not in this block: {', '.join(extra)}" if extra else ""))
         out = bytearray(self.byte_count)
-        for f in self.fields:
+        for f in sorted(self.fields, key=lambda f: f.bit):  # values first, then the flags into their bits
             v = f.check(values[f.name])
             if f.bit >= 0:
+                if out[f.offset] >> f.bit & 1:
+                    raise CommandError(f"{self.title}: a value uses bit {f.bit} of byte {f.offset}, {f.name}'s flag")
                 out[f.offset] |= (v & 1) << f.bit
             else:
                 out[f.offset:f.offset + f.size] = v.to_bytes(f.size, "big", signed=f.signed)
@@ -218,7 +224,9 @@ _BLOCKS: tuple[ModbusBlock, ...] = (
     _write(0x41, "restart_motor", "bool", C, "8.2 #3 Restart the motor"),
     _write(0x80, "calibrate", "bool", C, "8.2 #4 Calibrate the motor"),
     _write(0x82, "work_mode", "uint8", W, "8.2 #5 Set the work mode"),
-    _write(0x83, "working_current", "uint16", W, "8.2 #6 Set the work current"),
+    ModbusBlock(FC_WRITE_SINGLE, 0x83, 1, 2, "8.2 #6 Set the work current",  # V1.0.9 3.2.3: bit 15 = not saved
+                (_f("working_current", FC_WRITE_SINGLE, 0x83, 0, 2, "uint16", W),
+                 ModbusField("working_current_unsaved", FC_WRITE_SINGLE, 0x83, 0, 1, "bool", W, bit=7))),
     _write(0x9B, "holding_current", "uint8", W, "8.2 #7 Set the holding current percentage"),
     _write(0x84, "microsteps", "uint16", W, "8.2 #8 Set subdivision"),
     _write(0x85, "en_active_level", "uint8", W, "8.2 #9 Set the active of the En pin"),

@@ -105,7 +105,7 @@ BLOCK_COMMANDS = frozenset((Command.WRITE_ALL_PARAMETERS, Command.READ_ALL_PARAM
 
 #: fields of a later firmware whose value 0 is the command's older, shorter frame (a drive without the feature
 #: takes the command when they are 0)
-OPTIONAL_FIELDS = frozenset(("speed_mode_run_time",))
+OPTIONAL_FIELDS = frozenset(("speed_mode_run_time", "working_current_unsaved"))
 
 #: run commands of Part 6 (0x8C respond/active applies to them)
 RUN_COMMANDS = frozenset((Command.SPEED_MODE, Command.POSITION_MODE1_RELATIVE_PULSES,
@@ -186,6 +186,7 @@ _KEYS: dict[str, NativeKey] = {
     "emergency_stop": NativeKey(C.EMERGENCY_STOP),
     "work_mode": NativeKey(C.SET_WORK_MODE, "mode"),
     "working_current": NativeKey(C.SET_WORKING_CURRENT, "current"),
+    "working_current_unsaved": NativeKey(C.SET_WORKING_CURRENT, "unsaved"),
     "holding_current": NativeKey(C.SET_HOLDING_CURRENT, "hold"),
     "microsteps": NativeKey(C.SET_SUBDIVISION, "microsteps"),
     "en_active_level": NativeKey(C.SET_EN_PIN_ACTIVE, "level"),

@@ -203,6 +203,7 @@ def holding_current_percent(hold: int) -> int:
 class SetStatus(enum.IntEnum):
     FAIL = 0
     SUCCESS = 1
+    SUCCESS_UNSAVED = 2  #: 0x83 only (V1.0.7): "Set success without saved"
 
 
 class RunStatus(enum.IntEnum):
