@@ -39,6 +39,8 @@ OUT2_mask, b5-b4 OUT1_mask, b3 OUT_2, b2 OUT_1, b1-b0 zero; a mask of 3 or a res
 0x01 (5.1.9) asks the drive to send one read command's reply every ``times`` ms (0 stops it):
 request code + uint16 times, reply code + status; the periodic frames are that command's ordinary
 replies (FB addr code param chk), arriving unsolicited.
+* The 0x3B reply carries one status (before V1.0.7) or two (single-turn, then homing): told apart by
+  the values (statuses are 0-2, see :func:`_zero_status_length`).
 * Two forms (V1.0.7): 0xF6 carries 3 data bytes, or 7 with a runTime; 0x83 2, or 3 with a trailing 00
   (the current changed while running, not saved; answered with status 2, which no other set command
   has) (:data:`REQUEST_LONG_DATA_LENGTH`).
@@ -947,10 +949,12 @@ class EnPinReply:
 
 @dataclass(frozen=True, slots=True)
 class GoBackToZeroStatusReply:
-    """0x3B: status of the power-on go back to zero."""
+    """0x3B: status of the power-on (single-turn) go back to zero; ``homing`` (V1.0.7, a second byte): the
+    non-single-turn zero return (go home 0x91), None in the older one-byte reply."""
 
     address: int
     status: GoBackToZeroStatus
+    homing: GoBackToZeroStatus | None = None
     function: ClassVar[int] = 0x3B
 
 
@@ -1310,6 +1314,35 @@ def _unpack_position_error(address: int, function: int, data: bytes, frame: byte
     return SetPositionErrorProtection(address, (data[0] >> 1) & 1, data[0] & 1, time, errors)
 
 
+def _pack_zero_status(msg: Any) -> bytes:
+    try:
+        statuses = (msg.status,) if msg.homing is None else (msg.status, msg.homing)
+        return bytes(GoBackToZeroStatus(s) for s in statuses)
+    except (ValueError, TypeError):
+        raise EncodeError(f"GoBackToZeroStatusReply statuses must be GoBackToZeroStatus: {msg!r}") from None
+
+
+def _unpack_zero_status(address: int, function: int, data: bytes, frame: bytes) -> GoBackToZeroStatusReply:
+    status = _enum_value(GoBackToZeroStatus, data[0], "GoBackToZeroStatusReply.status", frame)
+    homing = _enum_value(GoBackToZeroStatus, data[1], "GoBackToZeroStatusReply.homing", frame) if len(data) > 1 \
+        else None
+    return GoBackToZeroStatusReply(address, status, homing)
+
+
+def _zero_status_length(buf: bytearray, silent: bool) -> int | None:
+    """0x3B reply: 5 bytes (one status, before V1.0.7) or 6 (two). Byte 4 is the short frame's checksum or the
+    second status (0-2): a checksum above 2 decides at once; otherwise the sixth byte must be the long frame's
+    checksum (addresses 0xC8-0xCC with some statuses: the host may wait for it until silence)."""
+    if len(buf) < 5:
+        return None
+    short_ok = sum(buf[:4]) & 0xFF == buf[4]
+    if not short_ok or buf[4] > 2:
+        return 6 if not short_ok and buf[4] <= 2 else 5
+    if len(buf) < 6:
+        return 5 if silent else None
+    return 6 if sum(buf[:5]) & 0xFF == buf[5] else 5
+
+
 def _pack_timed_reply(msg: Any) -> bytes:
     try:
         return bytes((_check_u8("TimedReturnReply.code", msg.code), SetStatus(msg.status)))
@@ -1424,7 +1457,7 @@ _FIXED_REPLY_SPECS: tuple[_Spec, ...] = (
     _struct(IoStatusReply, "B", ("status",)),
     _struct(AngleErrorReply, "i", ("error",)),
     _flag_spec(EnPinReply, "enabled"),
-    _status_spec(GoBackToZeroStatusReply, "status", GoBackToZeroStatus),
+    _Spec(GoBackToZeroStatusReply, 1, _pack_zero_status, _unpack_zero_status),
     _flag_spec(ProtectionStateReply, "protected"),
     _status_spec(CalibrationReply, "status", CalibrationStatus),
     _status_spec(MotorStatusReply, "status", MotorStatus),
@@ -1616,6 +1649,8 @@ class MksCodec:
                 return 0
             if len(buf) < 3:
                 return None
+            if buf[2] == 0x3B:  # one or two statuses (V1.0.7)
+                return _zero_status_length(buf, self._silent)
             n = REPLY_DATA_LENGTH.get(buf[2])
             return 0 if n is None else MIN_FRAME + n
         if head == HEAD_LONG:

@@ -43,6 +43,8 @@ stops by itself after it.
 parameters Kp, Ki, Kd, Kv.
 ``mks-current-unsaved`` (V1.0.7+, profile v1.0.9): 0x83 with a trailing 00 / FC06 0x0083 with bit 15 set:
 change the working current while running, not saved (status 2).
+``mks-homing-status`` (V1.0.7+, profile v1.0.9): the 0x3B reply's second byte, the homing (0x91) status
+(native only: see docs/mks-firmware.md for the Modbus layout).
 ``mks-position-error-protection`` (V1.0.6+): 0x9D / FC16 0x009D position-error protection (time window,
 error count) and the En-triggered single-turn zero return; an En pulse also releases the protection.
 """
@@ -57,7 +59,8 @@ from joints.errors import ConfigError
 
 __all__ = ["DEFAULT_FIRMWARE", "EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED", "FIRMWARES", "MKS_ALL_PARAMETERS",
            "MKS_CURRENT_UNSAVED",
-           "MKS_FAILURE_REPLIES", "MKS_FIRMWARES", "MKS_HEARTBEAT", "MKS_IAP", "MKS_PID", "MKS_POSITION_ERROR_PROTECTION",
+           "MKS_FAILURE_REPLIES", "MKS_FIRMWARES", "MKS_HEARTBEAT", "MKS_HOMING_STATUS", "MKS_IAP",
+           "MKS_PID", "MKS_POSITION_ERROR_PROTECTION",
            "MKS_POSITION_THRESHOLD", "MKS_SYNC", "MKS_TIMED_RETURNS", "MKS_TIMED_SPEED", "MKS_VERSION", "MKS_WRITE_IO",
            "QUIRKS",
            "ZLAC_SYNC_FLAG_AS_EXAMPLES", "FirmwareProfile", "Quirk", "firmware_profile"]
@@ -102,6 +105,7 @@ MKS_TIMED_SPEED = "mks-timed-speed"
 MKS_IAP = "mks-iap"
 MKS_PID = "mks-pid"
 MKS_CURRENT_UNSAVED = "mks-current-unsaved"
+MKS_HOMING_STATUS = "mks-homing-status"
 #: the MKS firmware profiles, oldest first (the last is the default)
 MKS_FIRMWARES = ("v1.0.5", "v1.0.6", "v1.0.9")
 _MKS_FEATURES = {
@@ -109,7 +113,8 @@ _MKS_FEATURES = {
     "v1.0.6": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_WRITE_IO, MKS_POSITION_ERROR_PROTECTION}),
     "v1.0.9": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_VERSION, MKS_HEARTBEAT, MKS_TIMED_RETURNS,
                          MKS_WRITE_IO, MKS_POSITION_ERROR_PROTECTION, MKS_POSITION_THRESHOLD,
-                         MKS_SYNC, MKS_TIMED_SPEED, MKS_IAP, MKS_PID, MKS_CURRENT_UNSAVED}),
+                         MKS_SYNC, MKS_TIMED_SPEED, MKS_IAP, MKS_PID, MKS_CURRENT_UNSAVED,
+                         MKS_HOMING_STATUS}),
 }
 _MKS_TEXT = {
     "v1.0.5": "manual V1.0.5 (May 2024): no heartbeat, no version command; Modbus write failures undocumented",

@@ -87,6 +87,9 @@ Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; defa
     interrupted upgrade may not come back).
     V1.0.7's 0x83 not saved (trailing 00; Modbus bit 15): the working current changes at once (the torque
     the motor has), flash keeps the last saved one, so a power cycle brings that back; status 2.
+    V1.0.7's 0x3B second status (homing): 2 until the first go home (0x91; the Modbus manual: "not
+    returned to zero"), 0 while it runs, 1 once homed, 2 when a stop, 0xF7, a disable or a protection
+    ended it first.
     V1.0.8's synchronization (Part 12.4, profile v1.0.9): with 0x4A on, a run command (not a stop) is
     checked, its fields taken and the command held, answered with run status 5; the broadcast 0x4B
     starts it (:meth:`MksFirmware.sync_execute`). A second run command before 0x4B replaces the held one
@@ -253,6 +256,7 @@ class MksFirmware(Firmware):
             "angle_error": lambda: round((self.r - self.q) * st.ANGLE_ERROR_PER_TURN / TAU),
             "en_pin_status": lambda: int(self.enabled),
             "go_back_to_zero_status": lambda: self.zero_status,
+            "homing_status": lambda: self.home_status,
             "protection_state": lambda: int(self.protected),
             "motor_status": lambda: int(self.motor_status()),
             "version_information": self.version_information,
@@ -314,6 +318,7 @@ class MksFirmware(Firmware):
         self._calibrating_until = -1.0
         self._reboot_at: float | None = None
         self.zero_status = int(st.GoBackToZeroStatus.SUCCESS)
+        self.home_status = int(st.GoBackToZeroStatus.FAIL)  #: 0x3B status2 (V1.0.7): 2 "not returned to zero" yet
         self._power_on = True  #: the axis zero and the power-on jobs wait for the first shaft angle
         self.completions.clear()
         self._cache()
@@ -610,6 +615,7 @@ class MksFirmware(Firmware):
         v = self.values  # (the drive can run: :meth:`_refusal`)
         home = -1 if v["home_direction"] == st.MotorDirection.CW else 1
         job = _Motion("home", Command.GO_HOME, answered, goal=self._clamp_value(max(1, v["home_speed"])), acc=0)
+        self.home_status = int(st.GoBackToZeroStatus.GOING)
         if v["home_mode"] == st.HomeMode.NO_LIMIT:
             job.phase, job.direction = "seek", home
         elif self._home_switch():
@@ -667,6 +673,8 @@ class MksFirmware(Firmware):
         ``code``."""
         self.sync_held = None  # a stop also drops a run command held for 0x4B
         m = self.motion
+        if m is not None and m.kind == "home":
+            self.home_status = int(st.GoBackToZeroStatus.FAIL)  # stopped before it homed
         if acc == 0 or m is None or self.speed == 0:
             tr = st.step(self.run_state, st.RunEvent.STOP if m is None and acc else st.RunEvent.STOP_NOW)
             self.motion = None
@@ -685,6 +693,8 @@ class MksFirmware(Firmware):
     def _start(self, job: _Motion) -> None:
         """A new job replaces the running one (no completion for the replaced, state.py)."""
         self.run_state = st.step(self.run_state, st.RunEvent.START).state
+        if self.motion is not None and self.motion.kind == "home" and job.kind != "home":
+            self.home_status = int(st.GoBackToZeroStatus.FAIL)  # replaced before it homed
         if self.motion is None or self.speed == 0:
             self._ramp_t = 0.0
         self.motion = job
@@ -695,6 +705,9 @@ class MksFirmware(Firmware):
         tr = st.step(self.run_state, event)
         self.run_state = tr.state
         self.motion = None
+        if m is not None and m.kind == "home":  # 0x3B status2 (V1.0.7): homed, or stopped before it was
+            self.home_status = int(st.GoBackToZeroStatus.SUCCESS if event is st.RunEvent.ARRIVED
+                                   else st.GoBackToZeroStatus.FAIL)
         self.speed = 0
         self.v_ref = 0.0
         if m is not None and tr.completion is not None and not quiet:

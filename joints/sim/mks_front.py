@@ -80,11 +80,11 @@ class MksNativeFront:
         code = request.function
         if code in BLOCK_COMMANDS:
             return self._block(request, answer)
-        names = tuple(n for n in fields_of(code) if fw.supports(n) or not (
-            n in OPTIONAL_FIELDS and getattr(request, MKS_NATIVE.key(n).field) == 0))  # the older, shorter frame
-        if not all(fw.supports(n) for n in names):
+        names = tuple(n for n in fields_of(code) if fw.supports(n) or (code not in _READS and not (
+            n in OPTIONAL_FIELDS and getattr(request, MKS_NATIVE.key(n).field) == 0)))  # the older, shorter frame
+        if not all(fw.supports(n) for n in names) or (fields_of(code) and not names):
             return None  # a command (or a form of it) of a later firmware: unknown to this one
-        if code in _READS:
+        if code in _READS:  # (a reply of the older form carries only what this firmware has: 0x3B)
             return self._read_reply(request.address, code, fw.read_many(names)) if answer else None
         given = {n: int(getattr(request, MKS_NATIVE.key(n).field)) for n in names if MKS_NATIVE.key(n).field}
         if not given:
@@ -108,7 +108,7 @@ class MksNativeFront:
         fields: dict[str, Any] = {}
         for n, v in zip(fields_of(code), values):
             f = MKS_NATIVE.key(n).field
-            fields[f] = bool(v) if f in _FLAGS else _ENUMS[cls](v) if cls in _ENUMS else v
+            fields[f] = bool(v) if f in _FLAGS else _ENUMS[cls](v) if cls in _ENUMS else v  # (0x3B: both statuses)
         return cls(address, **fields)
 
     def _block(self, request: Any, answer: bool) -> Any:

@@ -242,3 +242,29 @@ def test_working_current_unsaved_over_modbus_is_bit_15() -> None:
     assert block.words({"working_current": 1600, "working_current_unsaved": 1}) == (0x8640,)
     assert block.words({"working_current": 1600, "working_current_unsaved": 0}) == (0x0640,)
     assert block.decode_words((0x8640,)) == {"working_current": 1600, "working_current_unsaved": 1}
+
+
+# -- 0x3B: one status or two (V1.0.7) -------------------------------------------------------------------
+
+
+def test_go_back_to_zero_reply_with_one_or_two_statuses_decodes_at_every_address() -> None:
+    """RS485 5.1.8: FB addr 3B status1 status2 CRC (V1.0.7+) or FB addr 3B status CRC (before); the host tells
+    them apart by the values (statuses are 0-2), at once or, for a few addresses, at the next byte / silence."""
+    z = mks.GoBackToZeroStatus
+    waited = set()
+    for address in range(1, 256):
+        for s1 in z:
+            short = mks.GoBackToZeroStatusReply(address, s1)
+            for s2 in z:
+                long = mks.GoBackToZeroStatusReply(address, s1, s2)
+                codec = mks.MksCodec(Role.HOST)
+                codec.feed(mks.encode(long) + mks.encode(short) + mks.encode(long))
+                codec.flush()
+                assert [codec.next_message() for _ in range(3)] == [long, short, long]
+            codec = mks.MksCodec(Role.HOST)
+            codec.feed(mks.encode(short))
+            if codec.next_message() is None:  # ambiguous: could be the head of a two-status reply
+                waited.add(address)
+                codec.flush()
+                assert codec.next_message() == short
+    assert waited == set(range(0xC8, 0xCD))  # (0xFB + addr + 0x3B + status) & 0xFF <= 2

@@ -83,7 +83,8 @@ def test_documented_defaults_and_ranges() -> None:
     readable = {x.name for x in p if x.access is Access.R}
     assert readable == {"encoder_carry", "encoder_value", "encoder_addition", "real_time_speed", "number_of_pulses",
                         "io_status", "angle_error", "en_pin_status", "go_back_to_zero_status", "protection_state",
-                        "motor_status", "version_information", "raw_encoder_value"}
+                        "motor_status", "version_information", "raw_encoder_value",
+                        "homing_status"}  # 0x3B status2 (V1.0.7)
     assert p["heartbeat_protection_time"].default == 0  # "Default: 0" (off), V1.0.9 5.2.16
     assert not any(x.access is Access.RW for x in p)  # the MKS reports no setting back
 
@@ -143,8 +144,9 @@ def test_every_command_of_parts_5_and_6_is_in_the_manual_and_the_map() -> None:
     codes = {int(c, 16) for c in re.findall(r"\|\s*FA\s*\|\s*(?:01|addr)\s*\|\s*([0-9A-F]{2})\s*\|", PARTS_5_6)}
     codes |= {int(c, 16) for c in re.findall(r"FA 01 ([0-9A-F]{2}) CRC", PARTS_5_6)}
     assert codes == {int(c) for c in Command} - LATER
-    assert {int(MKS_NATIVE.key(n).command) for n in FEATURE_OF if n not in native.OPTIONAL_FIELDS} \
-        | set(native.BLOCK_COMMANDS) == LATER  # (an optional field makes a longer form of an old command)
+    assert {int(MKS_NATIVE.key(n).command) for n in FEATURE_OF
+            if n not in native.OPTIONAL_FIELDS and n != "homing_status"} \
+        | set(native.BLOCK_COMMANDS) == LATER  # (optional fields and 0x3B's second status: longer forms)
     assert "| Head | 0xFC |" in PARTS_5_6  # the long data package head
     used = {MKS_NATIVE.key(n).command for n in MKS_NATIVE}
     assert used == set(Command) - native.BLOCK_COMMANDS  # the blocks carry many (joints.devices.mks.blocks)
@@ -170,7 +172,7 @@ def test_reply_rules_follow_the_manual() -> None:
 
 
 def test_every_modbus_field_is_a_parameter_of_the_same_type_and_access() -> None:
-    assert len(MKS_MODBUS) == 58 + len(FEATURE_OF) - 4  # 0x35, 0x95 (2 fields), 0x4A are native only
+    assert len(MKS_MODBUS) == 58 + len(FEATURE_OF) - 5  # 0x35, 0x95 (2 fields), 0x4A, 0x3B status2: native only
     for f in MKS_MODBUS:
         p = MKS_PARAMS[f.name]
         assert (f.type, f.access) == (p.type, p.access), f.name
@@ -189,7 +191,8 @@ def test_modbus_and_native_reach_the_same_command() -> None:
             assert f.function == expected_fc
     assert NATIVE_ONLY == {"slave_respond", "slave_active", "group_address", "home_reverse_angle", "home_mode",
                            "home_current", "raw_encoder_value",  # 0x35: not in the Modbus-RTU manual V1.0.9
-                           "position_threshold_enable", "position_threshold", "sync_enable"}  # 0x95, 0x4A: neither
+                           "position_threshold_enable", "position_threshold", "sync_enable",  # 0x95, 0x4A: neither
+                           "homing_status"}  # 0x3B status2: the V1.0.9 Modbus layout contradicts V1.0.5 (docs)
     assert set(MKS_MODBUS.names()) | NATIVE_ONLY == set(MKS_PARAMS.names())
 
 

@@ -453,3 +453,46 @@ def test_working_current_unsaved_needs_v109(tmp_path: Path, protocol: str, firmw
             d.set_working_current(400, save=False)
         d.set_working_current(400)  # the saved form still works
         assert _twin(rig).values["working_current"] == 400
+
+
+# -- 0x3B second status: homing (V1.0.7, native) -------------------------------------------------------
+
+
+@pytest.mark.parametrize("firmware", _having("mks-homing-status"))
+def test_homing_status_follows_go_home(tmp_path: Path, firmware: str) -> None:
+    """'noLimit' homing against a blocked shaft: 2 (not homed) -> 0 (going) -> 1 (homed); a stop during it: 2."""
+    with open_motor(tmp_path, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        j = rig.joints["m1"]
+        d = j.driver
+        assert d.read("homing_status") == 2 and d.read("go_back_to_zero_status") == 1
+        j.enable()
+        d.set_nolimit_home(reverse_angle=0x1000, mode=1, current=400)
+        d.go_home()
+        rig.sleep(0.05)
+        assert d.read("homing_status") == 0  # going
+        j.stop()
+        rig.sleep(0.05)
+        assert d.read("homing_status") == 2  # stopped before it homed
+        d.go_home()
+        rig.sleep(0.1)
+        _block(rig.world)  # the mechanical end: the 'noLimit' homing stalls there, backs off, zeroes
+        d.wait_motion(10)
+        assert d.read("homing_status") == 1
+
+
+@pytest.mark.parametrize("firmware", _lacking("mks-homing-status"))
+def test_homing_status_needs_v109_and_older_drives_send_one_byte(tmp_path: Path, firmware: str) -> None:
+    from joints.codecs import mks
+
+    with open_motor(tmp_path, joint={"firmware": firmware}) as rig:
+        d = rig.joints["m1"].driver
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.read("homing_status")
+        assert d.read("go_back_to_zero_status") == 1
+        reply = d.link.request(mks.ReadGoBackToZeroStatus(1), idempotent=True)
+        assert reply == mks.GoBackToZeroStatusReply(1, mks.GoBackToZeroStatus.SUCCESS)  # homing None: one byte
+
+
+def test_homing_status_is_native_only(tmp_path: Path) -> None:
+    with open_motor(tmp_path, protocol="modbus-rtu") as rig, pytest.raises(RegisterError, match="native"):
+        rig.joints["m1"].driver.read("homing_status")

@@ -175,6 +175,7 @@ _KEYS: dict[str, NativeKey] = {
     "angle_error": NativeKey(C.READ_ERROR_OF_ANGLE, "error"),
     "en_pin_status": NativeKey(C.READ_EN_PINS_STATUS, "enabled"),
     "go_back_to_zero_status": NativeKey(C.READ_GO_BACK_TO_ZERO_STATUS, "status"),
+    "homing_status": NativeKey(C.READ_GO_BACK_TO_ZERO_STATUS, "homing"),
     "protection_state": NativeKey(C.READ_PROTECTION_STATE, "protected"),
     "motor_status": NativeKey(C.QUERY_MOTOR_STATUS, "status"),
     "release_protection": NativeKey(C.RELEASE_PROTECTION_STATE),

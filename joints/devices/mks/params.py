@@ -204,6 +204,9 @@ _PARAMS: tuple[Param, ...] = (
     # 0x83 while running, not saved (V1.0.7; RS485 V1.0.9 5.2.3, Modbus V1.0.9 3.2.3)
     Param("working_current_unsaved", "bool", W, "", "0x83 with the trailing 00 (Modbus: bit 15 of Current): change "
           "the working current now, do not save it (V1.0.7)", 0, 1, 0),
+    # 0x3B's second status (V1.0.7; RS485 V1.0.9 5.1.8)
+    Param("homing_status", "uint8", R, "", "0x3B status2: the non-single-turn zero return (go home 0x91): 0 going, "
+          "1 success, 2 not homed or failed (V1.0.7)", 0, 2),
     # 0x4A synchronization flag (V1.0.8; RS485 V1.0.9 12.4.1)
     Param("sync_enable", "bool", W, "", "0x4A synchronization: run commands wait for the broadcast 0x4B (V1.0.8)",
           0, 1, 0),
@@ -221,7 +224,7 @@ FEATURE_OF: dict[str, str] = {"raw_encoder_value": "mks-all-parameters", "versio
                                   "position_error_count")},
                               "position_threshold_enable": "mks-position-threshold",
                               "position_threshold": "mks-position-threshold", "sync_enable": "mks-sync", "iap_control": "mks-iap",
-                              "working_current_unsaved": "mks-current-unsaved",
+                              "working_current_unsaved": "mks-current-unsaved", "homing_status": "mks-homing-status",
                               **{f"{m}_{k}": "mks-pid" for m in ("vfoc", "close") for k in ("kp", "ki", "kd", "kv")},
                               "speed_mode_run_time": "mks-timed-speed"}
 
