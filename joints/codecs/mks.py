@@ -24,14 +24,30 @@ Frame length = 4 + the data length, which the head, the role and the function co
 Commands of later firmware (manual V1.0.9; a drive before it does not answer them): 0x40 read
 version information (5.1.11; reply: calibration status in b7-b4 and hardware version in b3-b0 of
 byte 4, firmware version in bytes 5-7 - read as major, minor, patch, our reading), 0x98 heartbeat
-protection time (5.2.16; uint32 ms, 0 = off; answered by a set status). Manual V1.0.6 added 0x46
+protection time (5.2.16; uint32 ms, 0 = off; answered by a set status); 0x9D sets the position-error protection (5 data bytes: b1 g0Enable En-triggered zero
+return and b0 enable, reserved b7-b2; uint16 Tim, uint16 Errors; set status). V1.0.8's 0x95 sets
+the position-reached threshold (enable byte, uint16 values; set status); 0x4A sets the synchronization
+flag (1 byte; set status) and 0x4B (no data, address 0, never answered) starts the held run commands,
+which a drive with the flag on answers with run status 5. 0x50 IAP control (1 byte cmd; set status). 0x96 / 0x97
+PID parameters (4 x uint16; set status). Manual V1.0.6 added 0x46
 write all configuration parameters (34 data bytes; set status), 0x47 read all configuration
 parameters and 0x48 read all status parameters (replies of 34 and 28 data bytes): the codec keeps
 their data as bytes (``params``), :mod:`joints.devices.mks.blocks` names the fields; 0x35 reads the
-raw accumulated encoder value (int48 like 0x31). V1.0.9's
+raw accumulated encoder value (int48 like 0x31); 0x36 writes the IO port (1 data byte: b7-b6
+OUT2_mask, b5-b4 OUT1_mask, b3 OUT_2, b2 OUT_1, b1-b0 zero; a mask of 3 or a reserved bit set is a
+:class:`~joints.errors.FrameError`; set status). V1.0.9's
 0x01 (5.1.9) asks the drive to send one read command's reply every ``times`` ms (0 stops it):
 request code + uint16 times, reply code + status; the periodic frames are that command's ordinary
 replies (FB addr code param chk), arriving unsolicited.
+* The 0x3B reply carries one status (before V1.0.7) or two (single-turn, then homing): told apart by
+  the values (statuses are 0-2, see :func:`_zero_status_length`).
+* Two forms (V1.0.7): 0xF6 carries 3 data bytes, or 7 with a runTime; 0x83 2, or 3 with a trailing 00
+  (the current changed while running, not saved; answered with status 2, which no other set command
+  has) (:data:`REQUEST_LONG_DATA_LENGTH`).
+  The device side takes the long form when its frame is there, checksum-valid and plausible (runTime
+  <= 0x0FFFFFFF: the next frame's head FA/FB/FC can never pass as its first byte), else the short
+  one: at once when its checksum byte cannot be a runTime's first byte (above 0x0F: 15 in 16 frames),
+  else at silence or once more bytes arrived (the twins' lines report silence after every frame).
 * long packet (FC): always 52 bytes: five 10-byte slots, each an ordinary command without head
   and checksum (address, code, data) padded with zeros; an all-zero slot is an unused slot (None).
 
@@ -172,6 +188,7 @@ class SetStatus(enum.IntEnum):
 
     FAIL = 0
     SUCCESS = 1
+    SUCCESS_UNSAVED = 2  #: 0x83 only (V1.0.7): the working current changed, not saved
 
 
 class RunStatus(enum.IntEnum):
@@ -181,6 +198,7 @@ class RunStatus(enum.IntEnum):
     STARTED = 1  #: run starting, stop starting, go home start, save start (immediate reply)
     COMPLETE = 2  #: run complete, stop complete, go home success, save success (later frame)
     END_LIMIT_STOP = 3  #: an end-limit switch stopped the motion (later frame)
+    SYNC_RECEIVED = 5  #: V1.0.8 (0x4A on): "Data has received for Synchronous mode" - held until 0x4B (immediate)
 
 
 class CalibrationStatus(enum.IntEnum):
@@ -336,10 +354,12 @@ class SetWorkMode:
 
 @dataclass(frozen=True, slots=True)
 class SetWorkingCurrent:
-    """0x83 set the working current "Ma" [mA] (uint16)."""
+    """0x83 set the working current "Ma" [mA] (uint16). ``unsaved`` (V1.0.7): the frame carries a trailing
+    00 - change the current while running, not saved (answered with status 2)."""
 
     address: int
     current: int
+    unsaved: int = 0
     function: ClassVar[int] = 0x83
 
 
@@ -548,6 +568,94 @@ class SetHeartbeat:
 
 
 @dataclass(frozen=True, slots=True)
+class WriteIoPort:
+    """0x36 write the IO port (V1.0.6): per output a mask (0 do not write, 1 write the value, 2 keep) and a
+    value 0/1; one byte b7-b6 OUT2_mask, b5-b4 OUT1_mask, b3 OUT_2, b2 OUT_1, b1-b0 0 -> set status."""
+
+    address: int
+    out2_mask: int
+    out1_mask: int
+    out2: int
+    out1: int
+    function: ClassVar[int] = 0x36
+
+
+@dataclass(frozen=True, slots=True)
+class SetPositionErrorProtection:
+    """0x9D (V1.0.6) position-error protection: byte 4 b1 g0Enable (En-triggered single-turn zero return),
+    b0 Enble (protection on), then Tim (uint16, ~15 ms each) and Errors (uint16, 28000 = 360 degrees)."""
+
+    address: int
+    en_zero_return: int
+    enable: int
+    time: int
+    errors: int
+    function: ClassVar[int] = 0x9D
+
+
+@dataclass(frozen=True, slots=True)
+class SetPositionThreshold:
+    """0x95 (V1.0.8) position-reached threshold: enable (1 default) and values (uint16, 65535 = 360 degrees)."""
+
+    address: int
+    enable: int
+    values: int
+    function: ClassVar[int] = 0x95
+
+
+@dataclass(frozen=True, slots=True)
+class SetSync:
+    """0x4A (V1.0.8) synchronization flag: 1 = run commands wait for 0x4B (answered status 5) -> set status."""
+
+    address: int
+    enable: int
+    function: ClassVar[int] = 0x4A
+
+
+@dataclass(frozen=True, slots=True)
+class SyncExecute:
+    """0x4B (V1.0.8) synchronous execution: every drive starts its held run command; sent to address 0, no
+    reply ("Returned data: None")."""
+
+    address: int
+    function: ClassVar[int] = 0x4B
+
+
+@dataclass(frozen=True, slots=True)
+class IapControl:
+    """0x50 (V1.0.8) IAP control: cmd 1 enter the boot loader, 2 enter / 3 leave the silent state -> set status
+    (0 "reset failed", 1 "reset successful")."""
+
+    address: int
+    cmd: int
+    function: ClassVar[int] = 0x50
+
+
+@dataclass(frozen=True, slots=True)
+class SetVfocPid:
+    """0x96 (V1.0.8) vFOC mode PID parameters Kp Ki Kd Kv (uint16 each, 0-1024) -> set status."""
+
+    address: int
+    kp: int
+    ki: int
+    kd: int
+    kv: int
+    function: ClassVar[int] = 0x96
+
+
+@dataclass(frozen=True, slots=True)
+class SetClosePid:
+    """0x97 (V1.0.8) CLOSE mode PID parameters Kp Ki Kd Kv (uint16 each, 0-1024) -> set status."""
+
+    address: int
+    kp: int
+    ki: int
+    kd: int
+    kv: int
+    function: ClassVar[int] = 0x97
+
+
+@dataclass(frozen=True, slots=True)
 class WriteAllParameters:
     """0x46 write all configuration parameters (V1.0.6): the 34 bytes of 5.7.1 -> set status."""
 
@@ -608,12 +716,16 @@ class EmergencyStop:
 
 @dataclass(frozen=True, slots=True)
 class RunSpeed:
-    """0xF6 run in speed mode; speed 0 stops (acc 0: at once, else decelerating) -> :class:`RunReply`."""
+    """0xF6 run in speed mode; speed 0 stops (acc 0: at once, else decelerating) -> :class:`RunReply`.
+
+    ``run_time`` (V1.0.7, units of 10 ms, up to 0x0FFFFFFF): the drive stops by itself after it; 0 sends
+    the frame without it (a frame carrying runTime 0 decodes to 0 too)."""
 
     address: int
     direction: RunDirection
     speed: int  #: rpm (12 bits on the wire)
     acc: int
+    run_time: int = 0
     function: ClassVar[int] = 0xF6
 
     @property
@@ -713,6 +825,8 @@ Request = (
     | SetNoLimitHomeParameters | SetZeroMode | SetLimitPortRemap | QueryStatus | EnableMotor | EmergencyStop
     | RunSpeed | SaveCleanSpeedMode | RunRelativePulses | RunAbsolutePulses | RunRelativeAxis | RunAbsoluteAxis
     | ReadRawEncoder | SetTimedReturn | ReadVersion | SetHeartbeat | WriteAllParameters | ReadAllParameters | ReadAllStatus
+    | WriteIoPort | SetPositionErrorProtection | SetPositionThreshold | SetSync | SyncExecute | IapControl
+    | SetVfocPid | SetClosePid
 )
 
 
@@ -835,10 +949,12 @@ class EnPinReply:
 
 @dataclass(frozen=True, slots=True)
 class GoBackToZeroStatusReply:
-    """0x3B: status of the power-on go back to zero."""
+    """0x3B: status of the power-on (single-turn) go back to zero; ``homing`` (V1.0.7, a second byte): the
+    non-single-turn zero return (go home 0x91), None in the older one-byte reply."""
 
     address: int
     status: GoBackToZeroStatus
+    homing: GoBackToZeroStatus | None = None
     function: ClassVar[int] = 0x3B
 
 
@@ -956,8 +1072,8 @@ class RunReply:
 
     @property
     def is_completion(self) -> bool:
-        """A completion frame (2 or 3), not the immediate answer to a command."""
-        return self.status >= RunStatus.COMPLETE
+        """A completion frame (2 or 3), not the immediate answer to a command (0, 1, 5)."""
+        return self.status in (RunStatus.COMPLETE, RunStatus.END_LIMIT_STOP)
 
 
 Reply = (
@@ -991,6 +1107,10 @@ class _Spec:
     size: int  #: data bytes
     pack: Callable[[Any], bytes]
     unpack: Callable[[int, int, bytes, bytes], Any]  #: (address, function, data, frame) -> message
+    long: int = 0  #: data bytes of the command's longer form (V1.0.7+; 0: one form), see REQUEST_LONG_DATA_LENGTH
+    plausible: Callable[[bytes], bool] | None = None  #: the longer form's data could be what it says
+    #: a valid short frame could also be the head of a long one (else the short form is taken at once)
+    could_grow: Callable[[bytes], bool] | None = None
 
 
 def _struct(cls: type, fmt: str = "", names: tuple[str, ...] = ()) -> _Spec:
@@ -1024,6 +1144,17 @@ def _unpack_calibrate(address: int, function: int, data: bytes, frame: bytes) ->
     return Calibrate(address)
 
 
+def _pack_working_current(msg: Any) -> bytes:
+    current = _check_int("SetWorkingCurrent.current", msg.current, 0, 0xFFFF).to_bytes(2, "big")
+    return current + b"\x00" if _check_int("SetWorkingCurrent.unsaved", msg.unsaved, 0, 1) else current
+
+
+def _unpack_working_current(address: int, function: int, data: bytes, frame: bytes) -> SetWorkingCurrent:
+    if len(data) > 2 and data[2]:
+        raise FrameError(f"0x83: the byte after the current must be 00 (not saved), got {frame.hex(' ')}", data=frame)
+    return SetWorkingCurrent(address, int.from_bytes(data[:2], "big"), int(len(data) > 2))
+
+
 def _pack_subdivision(msg: Any) -> bytes:
     n = _check_int("SetSubdivision.microsteps", msg.microsteps, 1, 256)
     return bytes((n & 0xFF,))
@@ -1047,13 +1178,21 @@ def _split_dir_speed(data: bytes, frame: bytes) -> tuple[RunDirection, int]:
     return RunDirection(data[0] >> 7), ((data[0] & 0x0F) << 8) | data[1]
 
 
+RUN_TIME_MAX = 0x0FFFFFFF  #: 0xF6 runTime (V1.0.7), 10 ms units
+
+
 def _pack_run_speed(msg: Any) -> bytes:
-    return _dir_speed("RunSpeed", msg.direction, msg.speed) + bytes((_check_u8("RunSpeed.acc", msg.acc),))
+    head = _dir_speed("RunSpeed", msg.direction, msg.speed) + bytes((_check_u8("RunSpeed.acc", msg.acc),))
+    run_time = _check_int("RunSpeed.run_time", msg.run_time, 0, RUN_TIME_MAX)
+    return head + _U32.pack(run_time) if run_time else head
 
 
 def _unpack_run_speed(address: int, function: int, data: bytes, frame: bytes) -> RunSpeed:
     direction, speed = _split_dir_speed(data, frame)
-    return RunSpeed(address, direction, speed, data[2])
+    run_time = _U32.unpack_from(data, 3)[0] if len(data) > 3 else 0
+    if run_time > RUN_TIME_MAX:
+        raise FrameError(f"0xF6 runTime 0x{run_time:08X} is above 0x0FFFFFFF: {frame.hex(' ')}", data=frame)
+    return RunSpeed(address, direction, speed, data[2], run_time)
 
 
 _U32 = struct.Struct(">I")
@@ -1146,6 +1285,64 @@ def _raw(cls: type, size: int) -> _Spec:
     return _Spec(cls, size, pack, unpack)
 
 
+def _pack_write_io(msg: Any) -> bytes:
+    masks = [_check_int(f"WriteIoPort.{n}", getattr(msg, n), 0, 2) for n in ("out2_mask", "out1_mask")]
+    outs = [_check_int(f"WriteIoPort.{n}", getattr(msg, n), 0, 1) for n in ("out2", "out1")]
+    return bytes(((masks[0] << 6) | (masks[1] << 4) | (outs[0] << 3) | (outs[1] << 2),))
+
+
+def _unpack_write_io(address: int, function: int, data: bytes, frame: bytes) -> WriteIoPort:
+    b = data[0]
+    if b & 0x03 or (b >> 6) == 3 or ((b >> 4) & 3) == 3:
+        raise FrameError(f"0x36 write IO port: reserved bits b1-b0 set or a mask of 3 (0x{b:02X}): {frame.hex(' ')}",
+                         data=frame)
+    return WriteIoPort(address, b >> 6, (b >> 4) & 3, (b >> 3) & 1, (b >> 2) & 1)
+
+
+def _pack_position_error(msg: Any) -> bytes:
+    flags = (_check_int("SetPositionErrorProtection.en_zero_return", msg.en_zero_return, 0, 1) << 1) | \
+        _check_int("SetPositionErrorProtection.enable", msg.enable, 0, 1)
+    return bytes((flags,)) + struct.pack(">HH", _check_int("SetPositionErrorProtection.time", msg.time, 0, 0xFFFF),
+                                         _check_int("SetPositionErrorProtection.errors", msg.errors, 0, 0xFFFF))
+
+
+def _unpack_position_error(address: int, function: int, data: bytes, frame: bytes) -> SetPositionErrorProtection:
+    if data[0] & 0xFC:
+        raise FrameError(f"0x9D: reserved bits b7-b2 of the enable byte are set (0x{data[0]:02X}): {frame.hex(' ')}",
+                         data=frame)
+    time, errors = struct.unpack_from(">HH", data, 1)
+    return SetPositionErrorProtection(address, (data[0] >> 1) & 1, data[0] & 1, time, errors)
+
+
+def _pack_zero_status(msg: Any) -> bytes:
+    try:
+        statuses = (msg.status,) if msg.homing is None else (msg.status, msg.homing)
+        return bytes(GoBackToZeroStatus(s) for s in statuses)
+    except (ValueError, TypeError):
+        raise EncodeError(f"GoBackToZeroStatusReply statuses must be GoBackToZeroStatus: {msg!r}") from None
+
+
+def _unpack_zero_status(address: int, function: int, data: bytes, frame: bytes) -> GoBackToZeroStatusReply:
+    status = _enum_value(GoBackToZeroStatus, data[0], "GoBackToZeroStatusReply.status", frame)
+    homing = _enum_value(GoBackToZeroStatus, data[1], "GoBackToZeroStatusReply.homing", frame) if len(data) > 1 \
+        else None
+    return GoBackToZeroStatusReply(address, status, homing)
+
+
+def _zero_status_length(buf: bytearray, silent: bool) -> int | None:
+    """0x3B reply: 5 bytes (one status, before V1.0.7) or 6 (two). Byte 4 is the short frame's checksum or the
+    second status (0-2): a checksum above 2 decides at once; otherwise the sixth byte must be the long frame's
+    checksum (addresses 0xC8-0xCC with some statuses: the host may wait for it until silence)."""
+    if len(buf) < 5:
+        return None
+    short_ok = sum(buf[:4]) & 0xFF == buf[4]
+    if not short_ok or buf[4] > 2:
+        return 6 if not short_ok and buf[4] <= 2 else 5
+    if len(buf) < 6:
+        return 5 if silent else None
+    return 6 if sum(buf[:5]) & 0xFF == buf[5] else 5
+
+
 def _pack_timed_reply(msg: Any) -> bytes:
     try:
         return bytes((_check_u8("TimedReturnReply.code", msg.code), SetStatus(msg.status)))
@@ -1176,7 +1373,8 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _struct(ReleaseProtection), _struct(ReadProtectionState), _struct(RestoreDefaults), _struct(Restart),
     _Spec(Calibrate, 1, _pack_calibrate, _unpack_calibrate),
     _struct(SetWorkMode, "B", ("mode",)),
-    _struct(SetWorkingCurrent, "H", ("current",)),
+    _Spec(SetWorkingCurrent, 2, _pack_working_current, _unpack_working_current, 3, lambda d: d[2] == 0,
+          lambda f: f[-1] == 0),
     _struct(SetHoldingCurrent, "B", ("hold",)),
     _Spec(SetSubdivision, 1, _pack_subdivision, _unpack_subdivision),
     _struct(SetEnActive, "B", ("level",)),
@@ -1199,7 +1397,8 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _struct(QueryStatus),
     _struct(EnableMotor, "B", ("enable",)),
     _struct(EmergencyStop),
-    _Spec(RunSpeed, 3, _pack_run_speed, _unpack_run_speed),
+    _Spec(RunSpeed, 3, _pack_run_speed, _unpack_run_speed, 7, lambda d: d[3] <= RUN_TIME_MAX >> 24,
+          lambda f: f[-1] <= RUN_TIME_MAX >> 24),
     _struct(SaveCleanSpeedMode, "B", ("state",)),
     _Spec(RunRelativePulses, 7, _pack_relative_pulses, _unpack_relative_pulses),
     _struct(RunAbsolutePulses, "HBi", ("speed", "acc", "abs_pulses")),
@@ -1212,6 +1411,14 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _raw(WriteAllParameters, ALL_PARAMETERS_SIZE),
     _struct(ReadAllParameters),
     _struct(ReadAllStatus),
+    _Spec(WriteIoPort, 1, _pack_write_io, _unpack_write_io),
+    _Spec(SetPositionErrorProtection, 5, _pack_position_error, _unpack_position_error),
+    _struct(SetPositionThreshold, "BH", ("enable", "values")),
+    _struct(SetSync, "B", ("enable",)),
+    _struct(SyncExecute),
+    _struct(IapControl, "B", ("cmd",)),
+    _struct(SetVfocPid, "HHHH", ("kp", "ki", "kd", "kv")),
+    _struct(SetClosePid, "HHHH", ("kp", "ki", "kd", "kv")),
 )
 
 _REQUESTS: dict[int, _Spec] = {s.cls.function: s for s in _REQUEST_SPECS}  # type: ignore[attr-defined]
@@ -1221,10 +1428,27 @@ _REQUEST_BY_TYPE: dict[type, _Spec] = {s.cls: s for s in _REQUEST_SPECS}
 RUN_REPLY_FUNCTIONS = frozenset((0x91, 0xF4, 0xF5, 0xF6, 0xFD, 0xFE, 0xFF))
 SET_REPLY_FUNCTIONS = frozenset((0x3D, 0x3F, 0x41, 0x82, 0x83, 0x84, 0x85, 0x86, 0x87, 0x88, 0x89, 0x8A, 0x8B,
                                  0x8C, 0x8D, 0x8E, 0x8F, 0x90, 0x92, 0x94, 0x98, 0x9A, 0x9B, 0x9E, 0xF3, 0xF7,
-                                 0x46))
+                                 0x46, 0x36, 0x9D, 0x95, 0x4A, 0x50, 0x96, 0x97,
+                                 0x4B))  # 0x4B is never answered (the layout keeps the table total)
 
 _RUN_REPLY = _coded_spec(RunReply, RunStatus)
-_SET_REPLY = _coded_spec(SetReply, SetStatus)
+_SET_REPLY_ANY = _coded_spec(SetReply, SetStatus)
+
+
+def _unpack_set_reply(address: int, function: int, data: bytes, frame: bytes) -> SetReply:
+    reply: SetReply = _SET_REPLY_ANY.unpack(address, function, data, frame)
+    if reply.status is SetStatus.SUCCESS_UNSAVED and function != 0x83:
+        raise FrameError(f"SetReply to 0x{function:02X}: undocumented value 2 in {frame.hex(' ')}", data=frame)
+    return reply
+
+
+def _pack_set_reply(msg: Any) -> bytes:
+    if msg.status == SetStatus.SUCCESS_UNSAVED and msg.function != 0x83:
+        raise EncodeError(f"status 2 (success without saved) answers 0x83 only, not 0x{msg.function:02X}")
+    return _SET_REPLY_ANY.pack(msg)
+
+
+_SET_REPLY = _Spec(SetReply, 1, _pack_set_reply, _unpack_set_reply)
 _FIXED_REPLY_SPECS: tuple[_Spec, ...] = (
     _struct(EncoderCarryReply, "iH", ("carry", "value")),
     _Spec(EncoderAdditionReply, 6, _pack_int48, _unpack_int48),
@@ -1233,7 +1457,7 @@ _FIXED_REPLY_SPECS: tuple[_Spec, ...] = (
     _struct(IoStatusReply, "B", ("status",)),
     _struct(AngleErrorReply, "i", ("error",)),
     _flag_spec(EnPinReply, "enabled"),
-    _status_spec(GoBackToZeroStatusReply, "status", GoBackToZeroStatus),
+    _Spec(GoBackToZeroStatusReply, 1, _pack_zero_status, _unpack_zero_status),
     _flag_spec(ProtectionStateReply, "protected"),
     _status_spec(CalibrationReply, "status", CalibrationStatus),
     _status_spec(MotorStatusReply, "status", MotorStatus),
@@ -1251,6 +1475,9 @@ _REPLY_BY_TYPE: dict[type, _Spec] = {s.cls: s for s in _FIXED_REPLY_SPECS}
 #: function code -> request class / data bytes of its downlink frame
 REQUEST_TYPES: Mapping[int, type] = MappingProxyType({f: s.cls for f, s in sorted(_REQUESTS.items())})
 REQUEST_DATA_LENGTH: Mapping[int, int] = MappingProxyType({f: s.size for f, s in sorted(_REQUESTS.items())})
+#: function code -> data bytes of the longer form of a command that has two (V1.0.7: 0xF6 with runTime)
+REQUEST_LONG_DATA_LENGTH: Mapping[int, int] = MappingProxyType({f: s.long for f, s in sorted(_REQUESTS.items())
+                                                                if s.long})
 #: function code -> reply class / data bytes of its uplink frame
 REPLY_TYPES: Mapping[int, type] = MappingProxyType({f: s.cls for f, s in sorted(_REPLIES.items())})
 REPLY_DATA_LENGTH: Mapping[int, int] = MappingProxyType({f: s.size for f, s in sorted(_REPLIES.items())})
@@ -1347,10 +1574,11 @@ def _decode_long(frame: bytes) -> LongPacket:
         if spec is None:
             cmds.append(UnknownRequest(address, function, bytes(slot[2:])))
             continue
-        if 2 + spec.size > LONG_PACKET_SLOT:
+        size = spec.long or spec.size  # a short form's absent field reads 0 from the padding
+        if 2 + size > LONG_PACKET_SLOT:
             raise FrameError(f"long packet slot {i + 1}: {spec.cls.__name__} does not fit a slot: {frame.hex(' ')}",
                              data=frame)
-        data, pad = slot[2:2 + spec.size], slot[2 + spec.size:]
+        data, pad = slot[2:2 + size], slot[2 + size:]
         if any(pad):
             raise FrameError(f"long packet slot {i + 1} ({spec.cls.__name__}) has non-zero padding "
                              f"{pad.hex(' ')}: {frame.hex(' ')}", data=frame)
@@ -1421,6 +1649,8 @@ class MksCodec:
                 return 0
             if len(buf) < 3:
                 return None
+            if buf[2] == 0x3B:  # one or two statuses (V1.0.7)
+                return _zero_status_length(buf, self._silent)
             n = REPLY_DATA_LENGTH.get(buf[2])
             return 0 if n is None else MIN_FRAME + n
         if head == HEAD_LONG:
@@ -1429,13 +1659,27 @@ class MksCodec:
             return 0
         if len(buf) < 3:
             return None
-        n = REQUEST_DATA_LENGTH.get(buf[2])
-        if n is None:
+        spec = _REQUESTS.get(buf[2])
+        if spec is None:
             found = _unknown_length(buf, MAX_UNKNOWN_FRAME)
             if found is None and self._silent:
                 return 0
             return found
-        return MIN_FRAME + n
+        if spec.long:
+            return self._two_forms(buf, spec)
+        return MIN_FRAME + spec.size
+
+    def _two_forms(self, buf: bytearray, spec: _Spec) -> int | None:
+        """A command with a short and a long form (see the module docstring): the long one if it is there
+        (checksum-valid, plausible), else the short one once the line went silent or more bytes came."""
+        short, long = MIN_FRAME + spec.size, MIN_FRAME + spec.long
+        if len(buf) >= long and checksum_ok(buf[:long]) and (
+                spec.plausible is None or spec.plausible(bytes(buf[3:long - 1]))):
+            return long
+        if len(buf) < long and not self._silent and (
+                len(buf) < short or spec.could_grow is None or spec.could_grow(bytes(buf[:short]))):
+            return None  # the long form may still be arriving
+        return short
 
     def _next_valid_offset(self, buf: bytearray) -> int:
         """Offset (>0) of the first complete, checksum-valid frame after the head, or 0."""

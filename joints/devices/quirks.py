@@ -31,6 +31,22 @@ all status parameters, 0x35 raw encoder value (native protocol only).
 ``mks-version`` (V1.0.9): 0x40 reads calibration state, hardware and firmware version.
 ``mks-heartbeat`` (V1.0.9): 0x98 heartbeat protection time - the communication watchdog.
 ``mks-timed-returns`` (V1.0.9): 0x01 - the drive sends a read command's reply every n ms, unasked.
+``mks-write-io`` (V1.0.6+): 0x36 / FC16 0x0036 write the OUT_1 / OUT_2 ports.
+``mks-position-threshold`` (V1.0.8+, profile v1.0.9): 0x95 the position-reached threshold (native only).
+``mks-sync`` (V1.0.8+, profile v1.0.9): 0x4A synchronization flag and 0x4B synchronous execution (Part 12.4,
+native only): a run command is held (status 5) until the broadcast 0x4B starts every held one at once.
+``mks-timed-speed`` (V1.0.7+, profile v1.0.9): 0xF6 / FC16 0x00F6 with a run time (10 ms units): the drive
+stops by itself after it.
+``mks-iap`` (V1.0.8+, profile v1.0.9): 0x50 / FC06 0x0050 IAP control: 01 enter the boot loader (IAP mode
+2), 02 / 03 enter / leave the silent state (only 0x50 is heard).
+``mks-pid`` (V1.0.8+, profile v1.0.9): 0x96 / 0x97 (FC16 0x0096 / 0x0097) set the vFOC / CLOSE mode PID
+parameters Kp, Ki, Kd, Kv.
+``mks-current-unsaved`` (V1.0.7+, profile v1.0.9): 0x83 with a trailing 00 / FC06 0x0083 with bit 15 set:
+change the working current while running, not saved (status 2).
+``mks-homing-status`` (V1.0.7+, profile v1.0.9): the 0x3B reply's second byte, the homing (0x91) status
+(native only: see docs/mks-firmware.md for the Modbus layout).
+``mks-position-error-protection`` (V1.0.6+): 0x9D / FC16 0x009D position-error protection (time window,
+error count) and the En-triggered single-turn zero return; an En pulse also releases the protection.
 """
 
 from __future__ import annotations
@@ -42,7 +58,11 @@ from types import MappingProxyType
 from joints.errors import ConfigError
 
 __all__ = ["DEFAULT_FIRMWARE", "EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED", "FIRMWARES", "MKS_ALL_PARAMETERS",
-           "MKS_FAILURE_REPLIES", "MKS_FIRMWARES", "MKS_HEARTBEAT", "MKS_TIMED_RETURNS", "MKS_VERSION", "QUIRKS",
+           "MKS_CURRENT_UNSAVED",
+           "MKS_FAILURE_REPLIES", "MKS_FIRMWARES", "MKS_HEARTBEAT", "MKS_HOMING_STATUS", "MKS_IAP",
+           "MKS_PID", "MKS_POSITION_ERROR_PROTECTION",
+           "MKS_POSITION_THRESHOLD", "MKS_SYNC", "MKS_TIMED_RETURNS", "MKS_TIMED_SPEED", "MKS_VERSION", "MKS_WRITE_IO",
+           "QUIRKS",
            "ZLAC_SYNC_FLAG_AS_EXAMPLES", "FirmwareProfile", "Quirk", "firmware_profile"]
 
 
@@ -77,12 +97,24 @@ MKS_ALL_PARAMETERS = "mks-all-parameters"
 MKS_VERSION = "mks-version"
 MKS_HEARTBEAT = "mks-heartbeat"
 MKS_TIMED_RETURNS = "mks-timed-returns"
+MKS_WRITE_IO = "mks-write-io"
+MKS_POSITION_ERROR_PROTECTION = "mks-position-error-protection"
+MKS_POSITION_THRESHOLD = "mks-position-threshold"
+MKS_SYNC = "mks-sync"
+MKS_TIMED_SPEED = "mks-timed-speed"
+MKS_IAP = "mks-iap"
+MKS_PID = "mks-pid"
+MKS_CURRENT_UNSAVED = "mks-current-unsaved"
+MKS_HOMING_STATUS = "mks-homing-status"
 #: the MKS firmware profiles, oldest first (the last is the default)
 MKS_FIRMWARES = ("v1.0.5", "v1.0.6", "v1.0.9")
 _MKS_FEATURES = {
     "v1.0.5": frozenset(),
-    "v1.0.6": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS}),
-    "v1.0.9": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_VERSION, MKS_HEARTBEAT, MKS_TIMED_RETURNS}),
+    "v1.0.6": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_WRITE_IO, MKS_POSITION_ERROR_PROTECTION}),
+    "v1.0.9": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_VERSION, MKS_HEARTBEAT, MKS_TIMED_RETURNS,
+                         MKS_WRITE_IO, MKS_POSITION_ERROR_PROTECTION, MKS_POSITION_THRESHOLD,
+                         MKS_SYNC, MKS_TIMED_SPEED, MKS_IAP, MKS_PID, MKS_CURRENT_UNSAVED,
+                         MKS_HOMING_STATUS}),
 }
 _MKS_TEXT = {
     "v1.0.5": "manual V1.0.5 (May 2024): no heartbeat, no version command; Modbus write failures undocumented",

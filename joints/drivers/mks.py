@@ -65,11 +65,12 @@ from typing import TypeVar
 from joints.clock import Clock, MonotonicClock
 from joints.devices.faults import DEFINED_BY_JOINTS, HOST_DEFINED, Fault
 from joints.devices.mks import state as st
+from joints.devices.mks.native import OPTIONAL_FIELDS
 from joints.devices.mks.params import FEATURE_OF
 from joints.devices.mks.profile import MksProfile
 from joints.devices.mks.profile import profile as lookup_profile
 from joints.devices.params import ParamSet
-from joints.devices.quirks import MKS_FIRMWARES, MKS_VERSION, FirmwareProfile, firmware_profile
+from joints.devices.quirks import MKS_FIRMWARES, MKS_TIMED_SPEED, MKS_VERSION, FirmwareProfile, firmware_profile
 from joints.drivers.access import ParamAccess
 from joints.drivers.base import JointDriver, RawState, Units
 from joints.errors import (
@@ -148,8 +149,8 @@ class MksAccess(ParamAccess):
     def merged(self, names: Sequence[str], given: Mapping[str, int]) -> dict[str, int]:
         """Every field of one command: ``given`` values, else the image, else the defaults (range-checked)."""
         out: dict[str, int] = {}
-        for n in names:
-            value = given[n] if n in given else self.image.get(n, self.params[n].default)
+        for n in names:  # a later firmware's optional field not given: 0, the command's older form
+            value = given[n] if n in given else 0 if n in OPTIONAL_FIELDS else self.image.get(n, self.params[n].default)
             out[n] = self.params[n].check(value)
         return out
 
@@ -375,15 +376,31 @@ class MksDriver(JointDriver):
         self._run("abs_pulses", self._move_values("abs_pulses", pulses, speed, acceleration))
 
     def set_velocity(self, velocity: int, *, acceleration: int | None = None,
-                     deceleration: int | None = None) -> None:
-        """Speed mode (0xF6): ``velocity`` rpm, + CCW (0 = a decelerated stop with the same acc)."""
+                     deceleration: int | None = None, run_time: float | None = None) -> None:
+        """Speed mode (0xF6): ``velocity`` rpm, + CCW (0 = a decelerated stop with the same acc).
+
+        ``run_time`` [s] (V1.0.7+, profile v1.0.9; both protocols): the drive stops by itself after it
+        (sent in 10 ms units, at least one), decelerating with the same acc, and reports "run complete"."""
         acc = self.acc_for(acceleration)
         value = self.speed_value(abs(velocity))
         if value == 0 and velocity:
             value = 1  # a tiny non-zero command still runs (the value 0 would be a stop)
+        values = {"speed_mode_direction": int(st.RunDirection.CCW if velocity >= 0 else st.RunDirection.CW),
+                  "speed_mode_speed": value, "speed_mode_acc": acc}
+        if run_time is not None:
+            units = max(1, round(run_time / 0.01))
+            if run_time <= 0 or units > 0x0FFFFFFF:
+                raise CommandError(f"{self.name}: run_time must be > 0 s and at most 0x0FFFFFFF x 10 ms, got {run_time}")
+            values["speed_mode_run_time"] = units
         self._last_rpm, self._last_acc = float(abs(velocity)), acc
-        self._run("speed", {"speed_mode_direction": int(st.RunDirection.CCW if velocity >= 0 else st.RunDirection.CW),
-                            "speed_mode_speed": value, "speed_mode_acc": acc})
+        self._run("speed", self._untimed(values))
+
+    def _untimed(self, values: dict[str, int]) -> dict[str, int]:
+        """A speed-mode command without a run time says so where the firmware has one (the image's last run
+        time must not ride along)."""
+        if "speed_mode_speed" in values and MKS_TIMED_SPEED in self.firmware.features:
+            values.setdefault("speed_mode_run_time", 0)
+        return values
 
     def set_current(self, current: int) -> None:
         raise CommandError(f"{self.name}: the MKS has no torque/current mode over the serial interface "
@@ -398,7 +415,7 @@ class MksDriver(JointDriver):
         values = {speed_name: 0, acc_name: acc, target_name: 0}  # the manual's stop frames: dir 0, target 0
         if mode == "pulses":
             values["position_mode1_direction"] = 0
-        self.access.write_many(values, idempotent=True)  # a stop may be repeated: it never starts anything
+        self.access.write_many(self._untimed(values), idempotent=True)  # a stop may be repeated: it starts nothing
         self._running = None
 
     def stop_now(self) -> None:
@@ -409,7 +426,7 @@ class MksDriver(JointDriver):
         values = {speed_name: 0, acc_name: 0, target_name: 0}
         if mode == "pulses":
             values["position_mode1_direction"] = 0
-        self.access.write_many(values, idempotent=True)
+        self.access.write_many(self._untimed(values), idempotent=True)
         self._running = None
 
     def emergency_stop(self) -> None:
@@ -494,8 +511,8 @@ class MksDriver(JointDriver):
 
     def fault_text(self, code: int) -> str:
         if code == LOCKED_ROTOR:
-            return ("motor shaft locked-rotor protection: the position error stayed too large (manual 3 #9, 5.2 #9); "
-                    "the drive released the shaft")
+            return ("motor shaft locked-rotor protection: the position error stayed too large (manual 3 #9, 5.2 #9; "
+                    "or the position-error protection 0x9D, V1.0.6+); the drive released the shaft")
         return f"unknown MKS fault code 0x{code:X}"
 
     def fault(self, code: int) -> Fault | None:
@@ -542,9 +559,13 @@ class MksDriver(JointDriver):
         """0x82 work mode (serial motion needs SR_OPEN 3, SR_CLOSE 4 or SR_vFOC 5)."""
         self.write_param("work_mode", int(mode))
 
-    def set_working_current(self, milliamps: int) -> None:
-        """0x83 working current Ma [mA] (42D 0-3000, 57D 0-5200)."""
-        self.write_param("working_current", milliamps)
+    def set_working_current(self, milliamps: int, *, save: bool = True) -> None:
+        """0x83 working current Ma [mA] (42D 0-3000, 57D 0-5200). ``save=False`` (V1.0.7+, profile v1.0.9; both
+        protocols): change it now, while running, without saving it (the drive answers status 2)."""
+        if save:
+            self.write_param("working_current", milliamps)
+        else:
+            self.access.write_many({"working_current": milliamps, "working_current_unsaved": 1})
 
     def set_holding_current(self, code: int) -> None:
         """0x9B holding current: 0 = 10 % ... 8 = 90 % of Ma (OPEN/CLOSE modes)."""
@@ -569,6 +590,71 @@ class MksDriver(JointDriver):
     def release_protection(self) -> None:
         """0x3D release the locked-rotor protection."""
         self.clear_errors()
+
+    def write_io(self, *, out1: int | None = None, out2: int | None = None) -> None:
+        """0x36 (V1.0.6+; Modbus FC16 0x0036): set OUT_1 / OUT_2 to 0 or 1; a port given None is not written.
+        Read the levels back with ``read("io_status")`` (bit2 OUT_1, bit3 OUT_2)."""
+        if out1 is None and out2 is None:
+            raise CommandError(f"{self.name}: write_io needs out1 and/or out2 (0 or 1)")
+        self.access.write_many({"write_io_out1_mask": 0 if out1 is None else 1, "write_io_out1": out1 or 0,
+                                "write_io_out2_mask": 0 if out2 is None else 1, "write_io_out2": out2 or 0},
+                               idempotent=True)
+
+    def set_position_error_protection(self, on: bool, *, window: float = 0.3, error: float = math.pi,
+                                      en_zero_return: bool = False, confirm: bool = False) -> None:
+        """0x9D (V1.0.6+; Modbus FC16 0x009D): protect (release the shaft, 0x3E = 1) when the position error
+        stays above ``error`` [rad, motor side] for ``window`` [s] (sent as Tim = window / 15 ms and Errors =
+        28000 per turn). ``en_zero_return`` (g0Enable) makes the motor MOVE to its 0_Mode zero on an En pulse
+        instead of at power-on: it needs ``confirm=True``. Release with ``clear_errors()`` (0x3D)."""
+        if en_zero_return:
+            self._confirm("0x9D g0Enable makes the motor move to its zero point on an En pulse", confirm)
+        tim = round(window / 0.015)
+        errors = round(abs(error) * 28000 / (2.0 * math.pi))
+        if not (0 <= tim <= 0xFFFF and 0 <= errors <= 0xFFFF):
+            raise CommandError(f"{self.name}: 0x9D window {window} s -> Tim {tim}, error {error} rad -> Errors "
+                               f"{errors}: each must fit 0..65535 (15 ms and 1/28000 turn per unit)")
+        self.access.write_many({"en_trigger_zero_return": int(en_zero_return), "position_error_protection": int(on),
+                                "position_error_time": tim, "position_error_count": errors})
+
+    def set_position_threshold(self, threshold: float | None) -> None:
+        """0x95 (V1.0.8+, native only): a position move completes only while its error is below ``threshold``
+        [rad, motor side; sent as 65536 per turn, the drive's default 200 = 1.1 degrees]; None switches the
+        check off."""
+        values = 0 if threshold is None else round(abs(threshold) * 65536 / (2.0 * math.pi))
+        if values > 0xFFFF:
+            raise CommandError(f"{self.name}: 0x95 threshold {threshold} rad is more than a turn (65535 max)")
+        self.access.write_many({"position_threshold_enable": int(threshold is not None),
+                                "position_threshold": values if threshold is not None else self.params[
+                                    "position_threshold"].default})
+
+    def set_pid(self, mode: str, kp: int, ki: int, kd: int, kv: int, *, confirm: bool = False) -> None:
+        """0x96 (``mode="vfoc"``) / 0x97 (``"close"``) PID parameters, 0-1024 each (V1.0.8+; Modbus FC16
+        0x0096 / 0x0097). The manual advises against changing the factory tuning ("to avoid damaging the
+        motor"): needs ``confirm=True``. The twin keeps them but its servo is its own model (docs)."""
+        if mode not in ("vfoc", "close"):
+            raise CommandError(f"{self.name}: PID mode must be 'vfoc' (0x96) or 'close' (0x97), got {mode!r}")
+        self._confirm(f"0x{0x96 if mode == 'vfoc' else 0x97:02X} changes the factory PID tuning", confirm)
+        self.access.write_many({f"{mode}_kp": kp, f"{mode}_ki": ki, f"{mode}_kd": kd, f"{mode}_kv": kv})
+
+    def enter_iap_boot(self, *, confirm: bool = False) -> None:
+        """0x50 01 (V1.0.8+; Modbus FC06 0x0050 = 1): the drive restarts into its IAP boot loader and waits for a
+        firmware file (MKS's upgrade tool and file format, not joints): this joint is lost until the upgrade
+        ends or the drive is power-cycled. Needs ``confirm=True``."""
+        self._confirm("0x50 01 restarts the drive into its firmware-upgrade boot loader (the joint is lost until "
+                      "an upgrade or a power cycle)", confirm)
+        self.write_param("iap_control", 1, idempotent=False)
+        self.forget()
+
+    def set_iap_silent(self, on: bool, *, confirm: bool = False) -> None:
+        """0x50 02 / 03 (V1.0.8+): the silent state, where the drive hears nothing but 0x50 - not even a stop
+        (entering it needs ``confirm=True``; use it on the drives that are not being upgraded)."""
+        if on:
+            self._confirm("0x50 02 makes the drive deaf to every command but 0x50, stops included", confirm)
+        self.access.require(("iap_control",))
+        if on:  # no answer is lost here: the drive answers 0x50 before it falls silent
+            self.write_param("iap_control", 2, idempotent=True)
+        else:
+            self.write_param("iap_control", 3, idempotent=True)
 
     def set_home(self, *, trigger_level: int = 0, direction: int = 0, speed: int = 60, end_limit: int = 0) -> None:
         """0x90 home parameters: end-stop level (0 low), home direction (0 CW, 1 CCW), speed [rpm], EndLimit."""

@@ -105,14 +105,23 @@ class MksModbusAccess(MksAccess):
         """One request per block, every field of it sent; all values checked before anything is sent."""
         self.require(values)
         groups: dict[tuple[int, int], dict[str, int]] = {}
+        forms: dict[tuple[int, int], ModbusBlock] = {}
         for n, v in values.items():
             block = self.map.block_of(n)
             if block.function == FC_READ:
                 raise RegisterError(f"{self.params.device}: {n} is read-only")
-            groups.setdefault((block.function, block.address), {})[n] = v
+            key = (block.function, block.address)
+            groups.setdefault(key, {})[n] = v
+            if block.count > forms.get(key, block).count or key not in forms:
+                forms[key] = block  # a longer form (V1.0.7's timed 0xF6) when one of its own fields is given
         planned = []
-        for (fc, address), given in groups.items():
-            block = self.map.block(fc, address)
+        for key, given in groups.items():
+            block = forms[key]
+            base = self.map.base_of(block)
+            if block is not base and not any(given.get(f.name, 0) for f in block.fields
+                                             if f.name not in {g.name for g in base.fields}):
+                block = base  # its own fields are all 0: the short form says the same
+                given = {n: v for n, v in given.items() if n in {g.name for g in base.fields}}
             full = self.merged([f.name for f in block.fields], given)
             block.encode(full)  # range-checked for the wire too
             planned.append((block, full))

@@ -353,8 +353,9 @@ class MksNativeDriver(MksDriver):
     def plan_velocity(self, rpm: float, *, acceleration: int | None = None) -> Any:
         acc = self.acc_for(acceleration)
         value = self.speed_value(abs(rpm)) or (1 if rpm else 0)
-        return self.plan({"speed_mode_direction": int(st.RunDirection.CCW if rpm >= 0 else st.RunDirection.CW),
-                          "speed_mode_speed": value, "speed_mode_acc": acc})
+        return self.plan(self._untimed({"speed_mode_direction": int(st.RunDirection.CCW if rpm >= 0
+                                                                    else st.RunDirection.CW),
+                                        "speed_mode_speed": value, "speed_mode_acc": acc}))
 
     def plan_move_to(self, position: int, *, speed: int | None = None, acceleration: int | None = None) -> Any:
         return self.plan(self._move_values("abs_axis", position, speed, acceleration))
@@ -384,6 +385,25 @@ class MksNativeDriver(MksDriver):
         self.link.broadcast(request)
         for d in drivers:
             d.note_sent(request)
+
+    def set_sync(self, on: bool) -> None:
+        """0x4A (V1.0.8+): with ``on`` the drive holds each run command (reply status 5) until
+        :meth:`sync_execute`; stops and 0xF7 still act at once."""
+        self.write_param("sync_enable", int(on))
+
+    def sync_execute(self, drivers: Sequence[MksNativeDriver] = (), *, repeat: int = 1) -> None:
+        """0x4B (V1.0.8+) to address 0: every drive with 0x4A on starts its held run command; nobody answers.
+        The manual suggests repeating it about 1 ms apart on a noisy bus (``repeat``); a repeat starts
+        nothing new. ``drivers``: the drives it starts (they note the start time)."""
+        self.access.require(("sync_enable",))
+        for i in range(max(1, repeat)):
+            if i:
+                self.clock.sleep(0.001)
+            self.link.broadcast(mks.SyncExecute(0))
+        now = self.clock.now()
+        for d in (self, *drivers):
+            if d._running is not None:
+                d._sent_at = now
 
     def send_group(self, group: int, request: Any, drivers: Sequence[MksNativeDriver] = ()) -> None:
         """Send ``request`` to a group address; ``drivers`` (the group's) note it."""

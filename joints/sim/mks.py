@@ -63,6 +63,38 @@ Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; defa
     enabled and held). Like the other settings it is kept in flash (the manual does not say).
     V1.0.9's 0x01 timed returns sample the read's values every period on the simulated clock
     (:meth:`MksFirmware.set_timed_return`); the front sends them as that read's reply, unasked.
+    V1.0.6's 0x36 writes the outputs: a port the host wrote (mask 1) reads the written level in 0x34 from
+    then on (OUT_1 no longer shows the 57D's stall indication); masks 0 and 2 leave it (the manual's "do
+    not write" and "remains unchanged" do the same here); the written levels are lost at power-off.
+    V1.0.6's 0x9D position-error protection: when the position error stays above Errors (28000 per turn)
+    for Tim x 15 ms (closed modes, like the locked-rotor protection), the drive protects: the motion ends
+    without a completion frame (the state machine's PROTECTION), the shaft is released, 0x3E reads 1
+    (:attr:`MksFirmware.protection_cause` says which protection), 0x3D or an En pulse
+    (:meth:`MksFirmware.en_pulse`) releases it. g0Enable: the 0_Mode zero return no longer runs at
+    power-on but on an En pulse of about 200 ms in a pulse work mode.
+    V1.0.8's 0x95 (profile v1.0.9): a position move (0xFD/0xFE/0xF4/0xF5) in a closed mode completes only
+    while the position error is below the threshold (65536 per turn, default 200 = 1.1 degrees) - a
+    necessary condition on top of the settle rule above, so a shaft held off the target by more never
+    completes (the older profiles complete after the settle timeout); threshold off: the settle rule.
+    V1.0.7's 0xF6 run time (profile v1.0.9): the speed-mode motion stops by itself that long after the
+    command arrived, decelerating with the command's acc (acc 0: at once), and ends with the "run
+    complete" frame (status 2) like a stop command's.
+    V1.0.8's IAP control (0x50, profile v1.0.9): 02 / 03 enter / leave the silent state (the drive neither
+    answers nor executes any command but 0x50: "does not respond", our reading). 01 answers status 1,
+    then the drive releases the shaft and sits in its boot loader (:attr:`MksFirmware.boot_loader`),
+    answering nothing: the upgrade file's protocol is in a separate MKS document, so the twin cannot
+    take a firmware file - a power cycle returns it to its firmware unchanged (a real drive after an
+    interrupted upgrade may not come back).
+    V1.0.7's 0x83 not saved (trailing 00; Modbus bit 15): the working current changes at once (the torque
+    the motor has), flash keeps the last saved one, so a power cycle brings that back; status 2.
+    V1.0.7's 0x3B second status (homing): 2 until the first go home (0x91; the Modbus manual: "not
+    returned to zero"), 0 while it runs, 1 once homed, 2 when a stop, 0xF7, a disable or a protection
+    ended it first.
+    V1.0.8's synchronization (Part 12.4, profile v1.0.9): with 0x4A on, a run command (not a stop) is
+    checked, its fields taken and the command held, answered with run status 5; the broadcast 0x4B
+    starts it (:meth:`MksFirmware.sync_execute`). A second run command before 0x4B replaces the held one
+    (the manual does not say; our choice); stops, 0xF7 and disabling act at once and drop it; a power cycle
+    drops it too (the flag itself is a setting, kept in flash).
     V1.0.6's 0x46/0x47/0x48 (:mod:`joints.devices.mks.blocks`) write/read the same settings and
     statuses as the single commands; a 0x46 with any value out of range changes nothing (status 0).
 
@@ -94,13 +126,22 @@ from joints.devices.mks.native import Command
 from joints.devices.mks.params import FEATURE_OF
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import Access, ParamSet
-from joints.devices.quirks import MKS_ALL_PARAMETERS, MKS_TIMED_RETURNS, FirmwareProfile, firmware_profile
+from joints.devices.quirks import (
+    MKS_ALL_PARAMETERS,
+    MKS_POSITION_ERROR_PROTECTION,
+    MKS_POSITION_THRESHOLD,
+    MKS_SYNC,
+    MKS_TIMED_RETURNS,
+    FirmwareProfile,
+    firmware_profile,
+)
 from joints.errors import CommandError
 from joints.sim.firmware import Firmware
 from joints.sim.sensors import Sensor, model_of
 
-__all__ = ["CALIBRATION_TIME", "FLASH_TIME", "SERVO_BANDWIDTH", "SPEED_MODE_LEAD", "ZERO_MODE_RPM", "Completion",
-           "MksFirmware", "TimedReturn"]
+__all__ = ["CALIBRATION_TIME", "EN_PULSE", "FLASH_TIME", "POSITION_ERROR_PER_TURN", "POSITION_ERROR_TICK",
+           "POSITION_THRESHOLD_PER_TURN", "RUN_TIME_UNIT", "SERVO_BANDWIDTH", "SPEED_MODE_LEAD", "SYNC_RECEIVED", "ZERO_MODE_RPM",
+           "Completion", "MksFirmware", "TimedReturn"]
 
 TAU = 2.0 * math.pi
 RPM = TAU / 60.0
@@ -116,6 +157,12 @@ SETTLE_TIMEOUT = 0.3  #: s - or this long after its reference arrived (a load ma
 CALIBRATION_TIME = 2.0  #: s
 FLASH_TIME = 0.01  #: s from a save/clean reply to its completion
 ZERO_MODE_RPM = (15, 30, 60, 120, 240)  #: 0_Speed 0 (slowest) .. 4 (fastest)
+POSITION_ERROR_PER_TURN = 28000  #: 0x9D Errors: "When Errors = 28000, the motor is misaligned by 360 degrees"
+POSITION_ERROR_TICK = 0.015  #: s per 0x9D Tim unit ("approximately equal to 15 ms")
+POSITION_THRESHOLD_PER_TURN = 65536  #: 0x95 values: "The maximum value is 65535, which is 360 degrees"
+RUN_TIME_UNIT = 0.01  #: s per 0xF6 runTime unit (V1.0.7: "uints: 10ms")
+SYNC_RECEIVED = int(st.RunStatus.SYNC_RECEIVED)  #: "Data has received for Synchronous mode" (0x4A on, V1.0.8)
+EN_PULSE = (0.15, 0.3)  #: s: the En pulse that triggers the 0x9D zero return ("about 200 ms"; our window)
 _RUN_CODES = {int(c): c for c in (Command.SPEED_MODE, Command.POSITION_MODE1_RELATIVE_PULSES,
                                    Command.POSITION_MODE2_ABSOLUTE_PULSES, Command.POSITION_MODE3_RELATIVE_AXIS,
                                    Command.POSITION_MODE4_ABSOLUTE_AXIS)}
@@ -159,6 +206,7 @@ class _Motion:
     stopping: bool = False
     phase: str = ""  #: homing: "leave" | "seek" | "back"
     arrived: float = -1.0  #: when the reference reached the target (the rotor settles into the window)
+    until: float = math.inf  #: speed mode with a run time (0xF6, V1.0.7): when it stops by itself
 
 
 class MksFirmware(Firmware):
@@ -208,6 +256,7 @@ class MksFirmware(Firmware):
             "angle_error": lambda: round((self.r - self.q) * st.ANGLE_ERROR_PER_TURN / TAU),
             "en_pin_status": lambda: int(self.enabled),
             "go_back_to_zero_status": lambda: self.zero_status,
+            "homing_status": lambda: self.home_status,
             "protection_state": lambda: int(self.protected),
             "motor_status": lambda: int(self.motor_status()),
             "version_information": self.version_information,
@@ -231,6 +280,8 @@ class MksFirmware(Firmware):
             Command.ENABLE_MOTOR: self._enable,
             Command.EMERGENCY_STOP: self._emergency_stop,
             Command.SAVE_CLEAN_SPEED_MODE: self._save_clean,
+            Command.WRITE_IO_PORT: self._write_io,
+            Command.IAP_CONTROL: self._iap,
             **{code: self._run_command for code in _RUN_CODES},
         }
         self.q = 0.0
@@ -246,6 +297,14 @@ class MksFirmware(Firmware):
         v = self.values
         self.enabled = bool(v["motor_enable"])
         self.protected = False
+        self.protection_cause = ""  #: "locked-rotor" (0x88) or "position-error" (0x9D) while protected
+        self._perr_since = -1.0
+        self.outputs: dict[int, int] = {}  #: OUT_1 / OUT_2 levels the host wrote (0x36, V1.0.6)
+        #: the run command 0x4A holds until 0x4B (V1.0.8): (code, its fields, answered); when 0x4B last started one
+        self.sync_held: tuple[int, dict[str, int], bool] | None = None
+        self.sync_started_at = -1.0
+        self.silent = False  #: IAP silent state (0x50 02): only 0x50 is heard
+        self.boot_loader = False  #: in the IAP boot loader (0x50 01): hears nothing the twin can answer
         self.run_state = st.RunState.IDLE
         self.motion: _Motion | None = None
         self.speed = 0  #: present speed value of the reference (magnitude)
@@ -259,6 +318,7 @@ class MksFirmware(Firmware):
         self._calibrating_until = -1.0
         self._reboot_at: float | None = None
         self.zero_status = int(st.GoBackToZeroStatus.SUCCESS)
+        self.home_status = int(st.GoBackToZeroStatus.FAIL)  #: 0x3B status2 (V1.0.7): 2 "not returned to zero" yet
         self._power_on = True  #: the axis zero and the power-on jobs wait for the first shaft angle
         self.completions.clear()
         self._cache()
@@ -299,7 +359,7 @@ class MksFirmware(Firmware):
             self.enabled = True
             self._start(_Motion("speed", Command.SPEED_MODE, False, goal=self._clamp_value(speed), acc=acc,
                                 direction=1 if direction == st.RunDirection.CCW else -1))
-        elif self.values["zero_mode"] and self.zero_point is not None:
+        elif self.values["zero_mode"] and self.zero_point is not None and not self.values["en_trigger_zero_return"]:
             self._zero_return()
 
     def set_end_stops(self, low: float | None, high: float | None) -> None:
@@ -383,7 +443,7 @@ class MksFirmware(Firmware):
         return (int(self.calibrated) << 28) | (hardware << 24) | (major << 16) | (minor << 8) | patch
 
     def on_write(self, name: str, value: int) -> None:
-        if name in self._persistent:
+        if name in self._persistent and name != "working_current_unsaved":
             self.saved[name] = value  # the drive keeps its menu settings in flash
         if name in ("work_mode", "microsteps", "working_current"):
             self._cache()
@@ -399,8 +459,19 @@ class MksFirmware(Firmware):
         refused = self._refusal(command, values)
         if refused is not None:
             return refused
+        flash = self.saved.get("working_current")
         if values:
             self.write_many(list(values.items()))
+        if values.get("working_current_unsaved"):  # 0x83 while running, not saved (V1.0.7)
+            if flash is None:
+                self.saved.pop("working_current", None)
+            else:
+                self.saved["working_current"] = flash
+            return int(_SET.SUCCESS_UNSAVED)
+        if (command in _PREFIX and MKS_SYNC in self.firmware.features and self.values["sync_enable"]
+                and self.values[f"{_PREFIX[command]}_speed"] != 0):
+            self.sync_held = (command, dict(values), answered)  # 0x4A on: wait for 0x4B (the last one wins)
+            return SYNC_RECEIVED
         handler = self._handlers.get(command)
         return handler(values, answered) if handler is not None else int(_SET.SUCCESS)
 
@@ -419,6 +490,7 @@ class MksFirmware(Firmware):
     def _release(self, values: Mapping[str, int], answered: bool) -> int:
         if self.protected:
             self.protected = False
+            self.protection_cause = ""
             self._hold()
         return int(_SET.SUCCESS)
 
@@ -454,10 +526,12 @@ class MksFirmware(Firmware):
             self._hold()
         elif not on:
             self.enabled = False
+            self.sync_held = None
             self._end(st.RunEvent.EMERGENCY_STOP, quiet=True)
         return int(_SET.SUCCESS)
 
     def _emergency_stop(self, values: Mapping[str, int], answered: bool) -> int:
+        self.sync_held = None
         self._end(st.RunEvent.EMERGENCY_STOP)
         self._hold()
         return int(_SET.SUCCESS)
@@ -481,6 +555,58 @@ class MksFirmware(Firmware):
                                            int(_RUN.COMPLETE), answered))
         return int(_RUN.STARTED)
 
+    def sync_execute(self) -> bool:
+        """0x4B (V1.0.8): start the run command held since 0x4A made it wait; whether one was held."""
+        held, self.sync_held = self.sync_held, None
+        if held is None or MKS_SYNC not in self.firmware.features:
+            return False
+        command, values, answered = held
+        if self._refusal(command, values) is not None:  # it cannot run now (disabled meanwhile ...)
+            return False
+        self.sync_started_at = self.time
+        self._run_command(values, answered)
+        return True
+
+    def en_pulse(self, width: float = 0.2) -> bool:
+        """The En line pulsed for ``width`` s, ending now (a hardware input, like :meth:`set_end_stops`).
+
+        V1.0.6: a pulse releases a protection (version notes, "It can release the protection status by
+        En"); with 0x9D g0Enable on, in a pulse work mode (CR_*, where the En line rules), a pulse of
+        :data:`EN_PULSE` ("about 200 ms") starts the single-turn zero return of 0_Mode. Returns whether
+        it did anything. A firmware before V1.0.6 ignores it."""
+        if MKS_POSITION_ERROR_PROTECTION not in self.firmware.features:
+            return False
+        if self.protected:
+            self.protected = False
+            self.protection_cause = ""
+            self._hold()
+            return True
+        if (self.values["en_trigger_zero_return"] and not self.mode.serial and self.values["zero_mode"]
+                and self.zero_point is not None and EN_PULSE[0] <= width <= EN_PULSE[1] and self.motion is None):
+            self._zero_return()
+            return True
+        return False
+
+    def _iap(self, values: Mapping[str, int], answered: bool) -> int:
+        cmd = values["iap_control"]
+        if cmd == 1:  # "the motor will automatically restart and enter IAP mode 2, waiting to receive the file"
+            self.enabled = False
+            self._end(st.RunEvent.EMERGENCY_STOP, quiet=True)
+            self.boot_loader = True
+        else:
+            self.silent = cmd == 2
+        return int(_SET.SUCCESS)
+
+    def hears(self, command: int) -> bool:
+        """Whether a command reaches the firmware: not in the boot loader, only 0x50 in the silent state."""
+        return not self.boot_loader and (not self.silent or command == Command.IAP_CONTROL)
+
+    def _write_io(self, values: Mapping[str, int], answered: bool) -> int:
+        for port in (1, 2):
+            if values[f"write_io_out{port}_mask"] == 1:
+                self.outputs[port] = values[f"write_io_out{port}"]
+        return int(_SET.SUCCESS)
+
     def _can_run(self) -> bool:
         return self.mode.serial and self.enabled and not self.protected and self.calibrated \
             and self._calibrating_until < 0
@@ -489,6 +615,7 @@ class MksFirmware(Firmware):
         v = self.values  # (the drive can run: :meth:`_refusal`)
         home = -1 if v["home_direction"] == st.MotorDirection.CW else 1
         job = _Motion("home", Command.GO_HOME, answered, goal=self._clamp_value(max(1, v["home_speed"])), acc=0)
+        self.home_status = int(st.GoBackToZeroStatus.GOING)
         if v["home_mode"] == st.HomeMode.NO_LIMIT:
             job.phase, job.direction = "seek", home
         elif self._home_switch():
@@ -508,8 +635,10 @@ class MksFirmware(Firmware):
             return self._stop(acc, code, answered)
         goal = self._clamp_value(speed)
         if code == Command.SPEED_MODE:
+            run_time = values.get("speed_mode_run_time", 0)  # (a frame without it: 0, untimed)
             self._start(_Motion("speed", code, answered, goal=goal, acc=acc,
-                                direction=1 if v["speed_mode_direction"] == st.RunDirection.CCW else -1))
+                                direction=1 if v["speed_mode_direction"] == st.RunDirection.CCW else -1,
+                                until=self.time + run_time * RUN_TIME_UNIT if run_time else math.inf))
             return int(_RUN.STARTED)
         if code == Command.POSITION_MODE1_RELATIVE_PULSES:
             sign = 1 if v["position_mode1_direction"] == st.RunDirection.CCW else -1
@@ -542,7 +671,10 @@ class MksFirmware(Firmware):
     def _stop(self, acc: int, code: int, answered: bool) -> int:
         """A stop command (speed 0) of run command ``code``: it stops whatever runs; its completion carries
         ``code``."""
+        self.sync_held = None  # a stop also drops a run command held for 0x4B
         m = self.motion
+        if m is not None and m.kind == "home":
+            self.home_status = int(st.GoBackToZeroStatus.FAIL)  # stopped before it homed
         if acc == 0 or m is None or self.speed == 0:
             tr = st.step(self.run_state, st.RunEvent.STOP if m is None and acc else st.RunEvent.STOP_NOW)
             self.motion = None
@@ -561,6 +693,8 @@ class MksFirmware(Firmware):
     def _start(self, job: _Motion) -> None:
         """A new job replaces the running one (no completion for the replaced, state.py)."""
         self.run_state = st.step(self.run_state, st.RunEvent.START).state
+        if self.motion is not None and self.motion.kind == "home" and job.kind != "home":
+            self.home_status = int(st.GoBackToZeroStatus.FAIL)  # replaced before it homed
         if self.motion is None or self.speed == 0:
             self._ramp_t = 0.0
         self.motion = job
@@ -571,6 +705,9 @@ class MksFirmware(Firmware):
         tr = st.step(self.run_state, event)
         self.run_state = tr.state
         self.motion = None
+        if m is not None and m.kind == "home":  # 0x3B status2 (V1.0.7): homed, or stopped before it was
+            self.home_status = int(st.GoBackToZeroStatus.SUCCESS if event is st.RunEvent.ARRIVED
+                                   else st.GoBackToZeroStatus.FAIL)
         self.speed = 0
         self.v_ref = 0.0
         if m is not None and tr.completion is not None and not quiet:
@@ -584,6 +721,7 @@ class MksFirmware(Firmware):
         self.v_ref = 0.0
         self._integral = 0.0
         self._stall_since = -1.0
+        self._perr_since = -1.0
 
     def _clamp_value(self, value: int) -> int:
         """A speed value limited to the work mode's maximum speed (6.1)."""
@@ -640,9 +778,11 @@ class MksFirmware(Firmware):
         bits = level if left else 1 - level
         if self.profile.limit_inputs >= 2 or self.values["limit_port_remap"]:
             bits |= (level if right else 1 - level) << 1
-        if self.profile.limit_inputs >= 2:  # OUT_1 stall indication: 0 protected, 1 unprotected (57D only)
+        if 1 in self.outputs:  # written by the host (0x36, V1.0.6)
+            bits |= self.outputs[1] << 2
+        elif self.profile.limit_inputs >= 2:  # OUT_1 stall indication: 0 protected, 1 unprotected (57D only)
             bits |= (0 if self.protected else 1) << 2
-        return bits
+        return bits | self.outputs.get(2, 0) << 3
 
     def motor_status(self) -> st.MotorStatus:
         if self._calibrating_until >= 0:
@@ -728,6 +868,9 @@ class MksFirmware(Firmware):
             self._end_limits()
 
     def _speed_job(self, m: _Motion, dt: float) -> None:
+        if not m.stopping and self.time >= m.until - 1e-9:  # the run time is over: a stop with its own acc
+            self.run_state = st.step(self.run_state, st.RunEvent.STOP).state
+            m.stopping = True
         if m.stopping or (self.speed and m.direction != self.moving_dir):
             self._ramp(0, m.acc, dt)
         else:
@@ -753,8 +896,7 @@ class MksFirmware(Firmware):
             if not self._advance(m, dt):
                 return
             m.arrived = self.time
-        if (self.mode.closed_loop and self.time - m.arrived < SETTLE_TIMEOUT
-                and (abs(self.r - self.q) > IN_POSITION or abs(self.qd) > IN_POSITION_SPEED)):
+        if self._settling(m):
             return  # the reference is there; the shaft settles into the window
         if m.kind == "zero":
             self.zero_status = int(st.GoBackToZeroStatus.SUCCESS)
@@ -762,6 +904,18 @@ class MksFirmware(Firmware):
             self.run_state = st.RunState.COMPLETE
         else:
             self._end(st.RunEvent.ARRIVED)
+
+    def _settling(self, m: _Motion) -> bool:
+        """Whether a move whose reference arrived still waits for the shaft before it completes."""
+        if not self.mode.closed_loop:
+            return False
+        error = abs(self.r - self.q)
+        if self.time - m.arrived < SETTLE_TIMEOUT and (error > IN_POSITION or abs(self.qd) > IN_POSITION_SPEED):
+            return True
+        v = self.values  # 0x95 (V1.0.8): never complete outside the threshold, not even after the settle timeout
+        return (MKS_POSITION_THRESHOLD in self.firmware.features and m.kind == "move"
+                and bool(v["position_threshold_enable"])
+                and error * POSITION_THRESHOLD_PER_TURN / TAU >= v["position_threshold"])
 
     def _advance(self, m: _Motion, dt: float) -> bool:
         """One substep of a move toward ``m.target``; True when the reference arrived (exactly)."""
@@ -867,18 +1021,33 @@ class MksFirmware(Firmware):
         return max(-limit, min(limit, torque))
 
     def _protect(self, dt: float) -> None:
-        if not self.values["locked_rotor_protection"] or not self.mode.closed_loop:
-            self._stall_since = -1.0
-            return
-        if abs(self.r - self.q) > self.profile.stall_error:
+        """The locked-rotor protection (0x88) and the position-error protection (0x9D, V1.0.6): each watches
+        the position error on its own (closed modes only: OPEN has no position feedback)."""
+        error = abs(self.r - self.q)
+        v = self.values
+        if v["locked_rotor_protection"] and self.mode.closed_loop and error > self.profile.stall_error:
             if self._stall_since < 0:
                 self._stall_since = self.time
             elif self.time - self._stall_since >= self.profile.stall_time - 1e-9:
-                self.protected = True
-                self._end(st.RunEvent.PROTECTION)
-                self._hold()
+                self._protection("locked-rotor")
+                return
         else:
             self._stall_since = -1.0
+        if (v["position_error_protection"] and self.mode.closed_loop
+                and error * POSITION_ERROR_PER_TURN / TAU > v["position_error_count"]):
+            if self._perr_since < 0:
+                self._perr_since = self.time
+            if self.time - self._perr_since >= v["position_error_time"] * POSITION_ERROR_TICK - 1e-9:
+                self._protection("position-error")
+        else:
+            self._perr_since = -1.0
+
+    def _protection(self, cause: str) -> None:
+        self.protected = True
+        self.protection_cause = cause
+        self._end(st.RunEvent.PROTECTION)
+        self._hold()
+        self._perr_since = -1.0
 
     def take_completions(self, now: float) -> list[Completion]:
         """Completions due by ``now`` (the front turns them into frames)."""

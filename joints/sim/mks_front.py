@@ -30,7 +30,7 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from joints.codecs import mks
-from joints.devices.mks.native import BLOCK_COMMANDS, MKS_NATIVE, REPLY_RULES, Command, fields_of
+from joints.devices.mks.native import BLOCK_COMMANDS, MKS_NATIVE, OPTIONAL_FIELDS, REPLY_RULES, Command, fields_of
 from joints.devices.quirks import MKS_TIMED_RETURNS
 from joints.errors import FrameError, ParameterRefused
 from joints.sim.mks import MksFirmware
@@ -75,15 +75,16 @@ class MksNativeFront:
         fw = self.firmware
         self.frames += 1
         fw.frame_received()
-        if isinstance(request, mks.UnknownRequest):
-            return None
+        if isinstance(request, mks.UnknownRequest) or not fw.hears(request.function):
+            return None  # (the IAP boot loader or silent state: V1.0.8 0x50)
         code = request.function
         if code in BLOCK_COMMANDS:
             return self._block(request, answer)
-        names = fields_of(code)
-        if not all(fw.supports(n) for n in names):
-            return None  # a command of a later firmware: unknown to this one
-        if code in _READS:
+        names = tuple(n for n in fields_of(code) if fw.supports(n) or (code not in _READS and not (
+            n in OPTIONAL_FIELDS and getattr(request, MKS_NATIVE.key(n).field) == 0)))  # the older, shorter frame
+        if not all(fw.supports(n) for n in names) or (fields_of(code) and not names):
+            return None  # a command (or a form of it) of a later firmware: unknown to this one
+        if code in _READS:  # (a reply of the older form carries only what this firmware has: 0x3B)
             return self._read_reply(request.address, code, fw.read_many(names)) if answer else None
         given = {n: int(getattr(request, MKS_NATIVE.key(n).field)) for n in names if MKS_NATIVE.key(n).field}
         if not given:
@@ -107,13 +108,16 @@ class MksNativeFront:
         fields: dict[str, Any] = {}
         for n, v in zip(fields_of(code), values):
             f = MKS_NATIVE.key(n).field
-            fields[f] = bool(v) if f in _FLAGS else _ENUMS[cls](v) if cls in _ENUMS else v
+            fields[f] = bool(v) if f in _FLAGS else _ENUMS[cls](v) if cls in _ENUMS else v  # (0x3B: both statuses)
         return cls(address, **fields)
 
     def _block(self, request: Any, answer: bool) -> Any:
         """0x46/0x47/0x48 (V1.0.6): all configuration parameters / all statuses at once; 0x01 (V1.0.9):
-        a read's timed return."""
+        a read's timed return; 0x4B (V1.0.8): start the run commands held for it."""
         fw = self.firmware
+        if isinstance(request, mks.SyncExecute):
+            fw.sync_execute()  # (a firmware without 0x4B ignores it)
+            return None  # never answered
         if isinstance(request, mks.SetTimedReturn):
             if MKS_TIMED_RETURNS not in fw.firmware.features:
                 return None  # unknown to this firmware

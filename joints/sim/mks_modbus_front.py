@@ -28,7 +28,7 @@ from typing import Any
 
 from joints.codecs import modbus as mb
 from joints.devices.mks.modbus import FC_READ, FC_WRITE_MULTIPLE, FC_WRITE_SINGLE, MKS_MODBUS, ModbusBlock
-from joints.devices.mks.native import Command
+from joints.devices.mks.native import OPTIONAL_FIELDS, Command
 from joints.devices.quirks import MKS_FAILURE_REPLIES
 from joints.errors import CommandError, ParameterRefused
 from joints.sim.mks import MksFirmware
@@ -74,6 +74,8 @@ class MksModbusFront:
         if not self.speaks:
             return None
         self.firmware.frame_received()
+        if not self.firmware.hears(getattr(request, "address", -1)):
+            return None  # the IAP boot loader or silent state (V1.0.8 0x50): no answer
         try:
             if isinstance(request, mb.ReadInputRegisters):
                 return mb.ReadRegistersReply(request.slave, request.function, self._read(request.address, request.count))
@@ -86,8 +88,8 @@ class MksModbusFront:
                     return mb.WriteSingleRegisterReply(request.slave, request.address, FAILED_VALUE)
                 return mb.WriteSingleRegisterReply(request.slave, request.address, request.value)
             if isinstance(request, mb.WriteMultipleRegisters):
-                block = self._block(FC_WRITE_MULTIPLE, request.address)
                 n = len(request.values)
+                block = self._block(FC_WRITE_MULTIPLE, request.address, n)
                 if not block.accepts(n, 2 * n):
                     raise _Exception(ILLEGAL_DATA_VALUE)
                 try:
@@ -115,10 +117,14 @@ class MksModbusFront:
         return MKS_FAILURE_REPLIES in self.firmware.firmware.features
 
     # -- internals ----------------------------------------------------------------------------------
-    def _block(self, function: int, address: int) -> ModbusBlock:
+    def _block(self, function: int, address: int, count: int | None = None) -> ModbusBlock:
         block = self.map.find(function, address)
-        if block is None or not all(self.firmware.supports(f.name) for f in block.fields):
+        if block is None or not all(self.firmware.supports(f.name) for f in block.fields
+                                    if f.name not in OPTIONAL_FIELDS):
             raise _Exception(ILLEGAL_DATA_ADDRESS)
+        longer = self.map.find(function, address, count) if count is not None else None
+        if longer is not None and all(self.firmware.supports(f.name) for f in longer.fields):
+            return longer  # a longer form this firmware has (V1.0.7's timed 0xF6)
         return block
 
     def _read(self, address: int, count: int) -> tuple[int, ...]:
@@ -140,6 +146,9 @@ class MksModbusFront:
                 f.check(values[f.name])
         except CommandError:
             raise _Failed(ILLEGAL_DATA_VALUE) from None
+        for name in [n for n in values if not self.firmware.supports(n)]:  # a later firmware's optional field:
+            if values.pop(name):  # an older one knows only its 0 (0x83 with bit 15 before V1.0.7: out of range)
+                raise _Failed(ILLEGAL_DATA_VALUE)
         try:
             status = self.firmware.execute(block.address, values)
         except ParameterRefused:

@@ -89,7 +89,9 @@ def test_frame_lengths_follow_the_function_code() -> None:
                         **{c: 1 for c in (0x80, 0x82, 0x84, 0x85, 0x86, 0x87, 0x88, 0x89, 0x8A, 0x8B, 0x8D, 0x8E,
                                           0x8F, 0x9B, 0x9E, 0xF3, 0xFF)},
                         0x83: 2, 0x8C: 2, 0xF6: 3, 0x98: 4, 0x9A: 4, 0x90: 5, 0x46: 34, 0x01: 3,
-                        **{c: 7 for c in (0x94, 0xF4, 0xF5, 0xFD, 0xFE)}}
+                        **{c: 7 for c in (0x94, 0xF4, 0xF5, 0xFD, 0xFE)},
+                        0x36: 1, 0x9D: 5, 0x95: 3, 0x4A: 1, 0x4B: 0, 0x50: 1,
+                        0x96: 8, 0x97: 8}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
     assert dict(mks.REQUEST_DATA_LENGTH) == expected_request
     expected_reply = {c: 1 for c in expected_request} | {0x30: 6, 0x31: 6, 0x32: 2, 0x33: 4, 0x39: 4, 0x40: 4,
                                                          0x47: 34, 0x48: 28, 0x01: 2, 0x35: 6}
@@ -116,7 +118,7 @@ def test_long_packet_first_slot_for_an_address_wins() -> None:
 
 
 def test_long_packet_slot_with_unknown_code_keeps_its_8_bytes() -> None:
-    unknown = mks.UnknownRequest(7, 0x50, bytes(range(1, 9)))
+    unknown = mks.UnknownRequest(7, 0x51, bytes(range(1, 9)))
     pkt = mks.LongPacket((mks.QueryStatus(3), unknown))
     assert decode_one(Role.DEVICE, mks.encode(pkt)) == pkt
 
@@ -142,10 +144,10 @@ def test_long_packet_slot_with_unknown_code_keeps_its_8_bytes() -> None:
     mks.EnPinReply(1, 2),  # type: ignore[arg-type]
     mks.EncoderAdditionReply(1, 1 << 47),
     mks.UnknownRequest(1, 0x30, b""),  # a known code
-    mks.UnknownRequest(1, 0x50, bytes(8)),  # longer than any downlink frame
+    mks.UnknownRequest(1, 0x51, bytes(8)),  # longer than any downlink frame
     mks.LongPacket(tuple(mks.QueryStatus(i) for i in range(6))),
     mks.LongPacket((mks.UnknownRequest(0, 0x00, bytes(8)),)),  # reads as an empty slot
-    mks.LongPacket((mks.UnknownRequest(1, 0x50, bytes(9)),)),
+    mks.LongPacket((mks.UnknownRequest(1, 0x51, bytes(9)),)),
     "not a message",
 ])
 def test_encode_refuses_what_the_wire_cannot_carry(bad: Any) -> None:
@@ -313,15 +315,15 @@ def test_clear_drops_buffered_bytes() -> None:
 
 
 def test_device_frames_unknown_codes_by_their_checksum() -> None:
-    frame = mks.with_checksum(h("FA 01 50 11 22"))
+    frame = mks.with_checksum(h("FA 01 51 11 22"))
     assert decode_all(Role.DEVICE, frame + h("FA 01 F1 EC")) == [
-        mks.UnknownRequest(1, 0x50, h("11 22")), mks.QueryStatus(1)]
-    assert mks.encode(mks.UnknownRequest(1, 0x50, h("11 22"))) == frame
+        mks.UnknownRequest(1, 0x51, h("11 22")), mks.QueryStatus(1)]
+    assert mks.encode(mks.UnknownRequest(1, 0x51, h("11 22"))) == frame
 
 
 def test_device_waits_for_an_unknown_code_then_gives_up_at_eleven_bytes() -> None:
     codec = mks.MksCodec(Role.DEVICE)
-    codec.feed(h("FA 01 50 00 01"))  # no checksum match yet: might still come
+    codec.feed(h("FA 01 51 00 01"))  # no checksum match yet: might still come
     assert codec.next_message() is None and codec.buffered == 5
     codec.feed(h("02 03 04 05 06 07"))  # 11 bytes, no length 4..11 matched: garbage
     assert codec.next_message() is None
@@ -330,7 +332,7 @@ def test_device_waits_for_an_unknown_code_then_gives_up_at_eleven_bytes() -> Non
 
 def test_device_drops_unknown_code_at_silence() -> None:
     codec = mks.MksCodec(Role.DEVICE)
-    codec.feed(h("FA 01 50 00 01"))
+    codec.feed(h("FA 01 51 00 01"))
     codec.flush()
     assert codec.next_message() is None
     assert codec.buffered == 0 and codec.discarded == 5
@@ -338,7 +340,7 @@ def test_device_drops_unknown_code_at_silence() -> None:
 
 def test_host_skips_unknown_codes_without_waiting() -> None:
     codec = mks.MksCodec(Role.HOST)
-    codec.feed(h("FB 01 50") + h("FB 01 F6 01 F3"))
+    codec.feed(h("FB 01 51") + h("FB 01 F6 01 F3"))
     assert codec.next_message() == mks.RunReply(1, 0xF6, mks.RunStatus.STARTED)
     assert codec.discarded == 3
 
@@ -359,12 +361,23 @@ _FIELD = {
     "params": st.binary(min_size=mks.ALL_PARAMETERS_SIZE, max_size=mks.ALL_PARAMETERS_SIZE),
 }
 _WIDE_SPEED = {mks.SetHomeParameters, mks.RunAbsolutePulses, mks.RunRelativeAxis, mks.RunAbsoluteAxis}
+#: fields of the V1.0.6-V1.0.9 commands narrower or wider than a byte (tests/codecs/test_mks_v109_commands.py)
+_NARROW: dict[tuple[type, str], st.SearchStrategy[Any]] = {
+    **{(mks.WriteIoPort, n): st.integers(0, 2) for n in ("out2_mask", "out1_mask")},
+    **{(mks.WriteIoPort, n): st.integers(0, 1) for n in ("out2", "out1")},
+    **{(mks.SetPositionErrorProtection, n): st.integers(0, 1) for n in ("en_zero_return", "enable")},
+    **{(mks.SetPositionErrorProtection, n): u16 for n in ("time", "errors")},
+    (mks.SetPositionThreshold, "values"): u16,
+    (mks.SetWorkingCurrent, "unsaved"): st.integers(0, 1),
+}
 
 
 def _request_strategy(cls: type) -> st.SearchStrategy[Any]:
     kwargs: dict[str, st.SearchStrategy[Any]] = {}
     for f in dataclasses.fields(cls):
-        if f.name == "direction" and cls in (mks.RunSpeed, mks.RunRelativePulses):
+        if (cls, f.name) in _NARROW:
+            kwargs[f.name] = _NARROW[cls, f.name]
+        elif f.name == "direction" and cls in (mks.RunSpeed, mks.RunRelativePulses):
             kwargs[f.name] = st.sampled_from(mks.RunDirection)
         elif f.name == "times" and cls is mks.SetTimedReturn:
             kwargs[f.name] = u16
@@ -400,7 +413,9 @@ replies = st.one_of(
     st.builds(mks.ProtectionStateReply, u8, st.booleans()),
     st.builds(mks.CalibrationReply, u8, st.sampled_from(mks.CalibrationStatus)),
     st.builds(mks.MotorStatusReply, u8, st.sampled_from(mks.MotorStatus)),
-    st.builds(mks.SetReply, u8, st.sampled_from(sorted(mks.SET_REPLY_FUNCTIONS)), st.sampled_from(mks.SetStatus)),
+    st.builds(mks.SetReply, u8, st.sampled_from(sorted(mks.SET_REPLY_FUNCTIONS)),
+              st.sampled_from((mks.SetStatus.FAIL, mks.SetStatus.SUCCESS))),
+    st.builds(mks.SetReply, u8, st.just(0x83), st.just(mks.SetStatus.SUCCESS_UNSAVED)),  # 0x83 only (V1.0.7)
     st.builds(mks.RunReply, u8, st.sampled_from(sorted(mks.RUN_REPLY_FUNCTIONS)), st.sampled_from(mks.RunStatus)),
     st.builds(mks.VersionReply, u8, u32),
     st.builds(mks.TimedReturnReply, u8, u8, st.sampled_from(mks.SetStatus)),

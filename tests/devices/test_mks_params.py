@@ -20,7 +20,8 @@ MANUAL = manual("mks-servo42d-57d-rs485-manual-v1.0.5.txt")
 PARTS_5_6 = MANUAL[MANUAL.index("Part5. Serial command description"):MANUAL.index("Part7. Serial example")]
 PART_8 = MANUAL[MANUAL.index("Part8. MODBUS-RTU command description"):MANUAL.index("Part9. FAQ")]
 #: what V1.0.9 added (manuals V1.0.9: 0x40 read version 5.1.11 / 3.1.8, 0x98 heartbeat 5.2.16 / 3.2.14)
-LATER = {0x40, 0x98, 0x46, 0x47, 0x48, 0x01, 0x35}
+LATER = {0x40, 0x98, 0x46, 0x47, 0x48, 0x01, 0x35,
+         0x36, 0x9D, 0x95, 0x4A, 0x4B, 0x50, 0x96, 0x97}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
 
 
 # ------------------------------------------------------------------------------ parameters
@@ -56,9 +57,12 @@ def test_dangerous_commands_are_persistent() -> None:
         "save_clean_speed_mode_parameter",  # 0xFF
         "restore_default_parameters", "restart_motor",  # 0x3F, 0x41
         "set_current_axis_to_zero",  # 0x92
+        "en_trigger_zero_return",  # 0x9D g0Enable (V1.0.6): the motor moves on an En pulse
+        "iap_control",  # 0x50 (V1.0.8): boot loader, silent state
+        *(f"{m}_{k}" for m in ("vfoc", "close") for k in ("kp", "ki", "kd", "kv")),  # 0x96 / 0x97 PID (V1.0.8)
     }
     commands = {MKS_NATIVE.key(n).command for n in DANGEROUS}
-    assert commands == {0x80, 0x8A, 0x8B, 0x8E, 0x9A, 0xFF, 0x3F, 0x41, 0x92}
+    assert commands == {0x80, 0x8A, 0x8B, 0x8E, 0x9A, 0xFF, 0x3F, 0x41, 0x92, 0x9D, 0x50, 0x96, 0x97}
 
 
 def test_documented_defaults_and_ranges() -> None:
@@ -79,7 +83,8 @@ def test_documented_defaults_and_ranges() -> None:
     readable = {x.name for x in p if x.access is Access.R}
     assert readable == {"encoder_carry", "encoder_value", "encoder_addition", "real_time_speed", "number_of_pulses",
                         "io_status", "angle_error", "en_pin_status", "go_back_to_zero_status", "protection_state",
-                        "motor_status", "version_information", "raw_encoder_value"}
+                        "motor_status", "version_information", "raw_encoder_value",
+                        "homing_status"}  # 0x3B status2 (V1.0.7)
     assert p["heartbeat_protection_time"].default == 0  # "Default: 0" (off), V1.0.9 5.2.16
     assert not any(x.access is Access.RW for x in p)  # the MKS reports no setting back
 
@@ -139,7 +144,9 @@ def test_every_command_of_parts_5_and_6_is_in_the_manual_and_the_map() -> None:
     codes = {int(c, 16) for c in re.findall(r"\|\s*FA\s*\|\s*(?:01|addr)\s*\|\s*([0-9A-F]{2})\s*\|", PARTS_5_6)}
     codes |= {int(c, 16) for c in re.findall(r"FA 01 ([0-9A-F]{2}) CRC", PARTS_5_6)}
     assert codes == {int(c) for c in Command} - LATER
-    assert {int(MKS_NATIVE.key(n).command) for n in FEATURE_OF} | set(native.BLOCK_COMMANDS) == LATER
+    assert {int(MKS_NATIVE.key(n).command) for n in FEATURE_OF
+            if n not in native.OPTIONAL_FIELDS and n != "homing_status"} \
+        | set(native.BLOCK_COMMANDS) == LATER  # (optional fields and 0x3B's second status: longer forms)
     assert "| Head | 0xFC |" in PARTS_5_6  # the long data package head
     used = {MKS_NATIVE.key(n).command for n in MKS_NATIVE}
     assert used == set(Command) - native.BLOCK_COMMANDS  # the blocks carry many (joints.devices.mks.blocks)
@@ -153,7 +160,7 @@ def test_reply_rules_follow_the_manual() -> None:
     assert native.expects_reply(Command.POSITION_MODE1_RELATIVE_PULSES, 1)
     assert not native.expects_reply(Command.SPEED_MODE, 1, respond=False)  # 0x8C respond off
     assert native.expects_reply(Command.READ_ENCODER_VALUE_ADDITION, 1, respond=False)  # queries still answer
-    assert not native.expects_reply(0x50, 1)  # unknown code
+    assert not native.expects_reply(0x51, 1)  # unknown code (0x50 is IAP from V1.0.8)
     assert native.expects_completion(Command.POSITION_MODE4_ABSOLUTE_AXIS, 1)
     assert not native.expects_completion(Command.POSITION_MODE4_ABSOLUTE_AXIS, 1, active=False)
     assert not native.expects_completion(Command.POSITION_MODE4_ABSOLUTE_AXIS, 1, respond=False)
@@ -165,7 +172,7 @@ def test_reply_rules_follow_the_manual() -> None:
 
 
 def test_every_modbus_field_is_a_parameter_of_the_same_type_and_access() -> None:
-    assert len(MKS_MODBUS) == 58 + len(FEATURE_OF) - 1  # 0x35 is native only
+    assert len(MKS_MODBUS) == 58 + len(FEATURE_OF) - 5  # 0x35, 0x95 (2 fields), 0x4A, 0x3B status2: native only
     for f in MKS_MODBUS:
         p = MKS_PARAMS[f.name]
         assert (f.type, f.access) == (p.type, p.access), f.name
@@ -183,7 +190,9 @@ def test_modbus_and_native_reach_the_same_command() -> None:
         if expected_fc:
             assert f.function == expected_fc
     assert NATIVE_ONLY == {"slave_respond", "slave_active", "group_address", "home_reverse_angle", "home_mode",
-                           "home_current", "raw_encoder_value"}  # 0x35: not in the Modbus-RTU manual V1.0.9
+                           "home_current", "raw_encoder_value",  # 0x35: not in the Modbus-RTU manual V1.0.9
+                           "position_threshold_enable", "position_threshold", "sync_enable",  # 0x95, 0x4A: neither
+                           "homing_status"}  # 0x3B status2: the V1.0.9 Modbus layout contradicts V1.0.5 (docs)
     assert set(MKS_MODBUS.names()) | NATIVE_ONLY == set(MKS_PARAMS.names())
 
 

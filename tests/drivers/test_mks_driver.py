@@ -103,7 +103,9 @@ def test_each_dangerous_command_refuses_without_confirm_and_sends_nothing(what: 
 def test_dangerous_parameters_by_name_need_confirm_through_the_joint_too() -> None:
     assert DANGEROUS == {"calibrate", "baud_rate", "slave_address", "modbus_rtu", "zero_mode", "zero_mode_set_zero",
                          "zero_mode_speed", "zero_mode_direction", "save_clean_speed_mode_parameter",
-                         "restore_default_parameters", "restart_motor", "set_current_axis_to_zero"}
+                         "restore_default_parameters", "restart_motor", "set_current_axis_to_zero",
+                         "en_trigger_zero_return", "iap_control",  # 0x9D g0Enable (V1.0.6), 0x50 IAP (V1.0.8)
+                         *(f"{m}_{k}" for m in ("vfoc", "close") for k in ("kp", "ki", "kd", "kv"))}  # 0x96/0x97
     driver, drive = native()
     joint = Joint("axis", driver, clock=driver.clock)
     for name in sorted(DANGEROUS):

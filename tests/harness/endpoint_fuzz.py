@@ -572,7 +572,8 @@ class MksAdapter(StreamAdapter):
 
     def probe(self, t: Target) -> None:
         mks, rng, ledger = self.mks, self.rng, self.ledger
-        speaking = [f for f in self.ep.bus.fronts if f.speaks]
+        # (a drive the fuzzer sent into its IAP boot loader or silent state, 0x50 of V1.0.8, hears no read)
+        speaking = [f for f in self.ep.bus.fronts if f.speaks and f.firmware.hears(mks.ReadEncoderCarry.function)]
         addresses = [f.address for f in speaking]
         groups = {f.group for f in self.ep.bus.fronts if f.group}
         unique = [a for a in addresses if addresses.count(a) == 1 and a not in groups and a != mks.BROADCAST]

@@ -35,6 +35,14 @@ The 0x90 quirk (ERRATA DOC-MKS-5, manual 8.2 #20, vector mks-modbus-8.2.20-recv)
     ``joints.codecs.modbus.UnsupportedRequest(slave, 16, pdu)``). The reply is an ordinary FC16
     reply for 3 registers (01 10 00 90 00 03 80 25).
 
+V1.0.6-V1.0.9 requests (Modbus-RTU manual V1.0.9; the RS485 manual V1.0.6 Part 8)
+    FC16 0x36 write IO port: OUT2_mask, OUT_2, OUT1_mask, OUT_1 (one byte each). FC16 0x9D position
+    error protection: byte 0 reserved (0), byte 1 b1 g0Enable (En-triggered zero return, V1.0.6's
+    table; V1.0.9 prints only pEnable in b0), b0 pEnable, then Tim and Errs (uint16 each): the two
+    flags are bit fields (:attr:`ModbusField.bit`). FC16 0xF6 with a run time (V1.0.7): 4 registers, dir,
+    acc, speed, runTime (uint32, 10 ms) - a longer form of 8.3.3 #1 (:attr:`MksModbusMap.variants`,
+    :data:`TIMED_SPEED_MODE`).
+
 Other choices: ``slave_address`` is 1-247 over Modbus (the Modbus address range); microsteps are
 written as the count 1-256 (Part 8 shows a 16-bit value, unlike the native byte).
 """
@@ -49,8 +57,8 @@ from joints.devices.mks.params import MKS_PARAMS
 from joints.devices.params import TYPES, Access, ParamMap, ParamSet, check_value, suggest
 from joints.errors import CommandError, RegisterError
 
-__all__ = ["FC_READ", "FC_WRITE_MULTIPLE", "FC_WRITE_SINGLE", "MKS_MODBUS", "NATIVE_ONLY", "MksModbusMap",
-           "ModbusBlock", "ModbusField"]
+__all__ = ["FC_READ", "FC_WRITE_MULTIPLE", "FC_WRITE_SINGLE", "MKS_MODBUS", "NATIVE_ONLY", "TIMED_SPEED_MODE",
+           "MksModbusMap", "ModbusBlock", "ModbusField"]
 
 FC_READ = 0x04  #: read input registers
 FC_WRITE_SINGLE = 0x06  #: write single register
@@ -70,6 +78,7 @@ class ModbusField:
     access: Access
     minimum: int | None = None  #: narrower bound than the parameter's, over Modbus only
     maximum: int | None = None
+    bit: int = -1  #: 0-7: the field is this one bit of the byte at ``offset`` (0x9D's flags); -1: whole bytes
 
     @property
     def signed(self) -> bool:
@@ -97,7 +106,13 @@ class ModbusBlock:
 
     def __post_init__(self) -> None:
         end = 0
+        bits: dict[int, set[int]] = {}
         for f in sorted(self.fields, key=lambda f: f.offset):
+            if f.bit >= 0:  # flags: distinct bits of one byte (also the free top bit of a value: 0x83)
+                if f.size != 1 or f.bit > 7 or f.bit in bits.setdefault(f.offset, set()):
+                    raise ValueError(f"{self.title}: bit field {f.name} overlaps or is not one bit of one byte")
+                bits[f.offset].add(f.bit)
+                continue
             if f.offset < end or f.offset + f.size > self.byte_count:
                 raise ValueError(f"{self.title}: field {f.name} overlaps or overruns the block")
             if TYPES[f.type][2] > f.size:
@@ -114,8 +129,12 @@ class ModbusBlock:
         """The block's data bytes -> {parameter name: value}."""
         if len(data) != self.byte_count:
             raise CommandError(f"{self.title}: expected {self.byte_count} data bytes, got {len(data)}")
-        return {f.name: int.from_bytes(data[f.offset:f.offset + f.size], "big", signed=f.signed)
-                for f in self.fields}
+        plain = bytearray(data)
+        for f in self.fields:  # a value field does not see the flag bits inside it
+            if f.bit >= 0:
+                plain[f.offset] &= ~(1 << f.bit) & 0xFF
+        return {f.name: (data[f.offset] >> f.bit) & 1 if f.bit >= 0
+                else int.from_bytes(plain[f.offset:f.offset + f.size], "big", signed=f.signed) for f in self.fields}
 
     def encode(self, values: Mapping[str, int]) -> bytes:
         """{parameter name: value} (every field of the block) -> the data bytes, range-checked."""
@@ -126,8 +145,14 @@ class ModbusBlock:
                                + (f"; missing {', '.join(missing)}" if missing else "")
                                + (f"; not in this block: {', '.join(extra)}" if extra else ""))
         out = bytearray(self.byte_count)
-        for f in self.fields:
-            out[f.offset:f.offset + f.size] = f.check(values[f.name]).to_bytes(f.size, "big", signed=f.signed)
+        for f in sorted(self.fields, key=lambda f: f.bit):  # values first, then the flags into their bits
+            v = f.check(values[f.name])
+            if f.bit >= 0:
+                if out[f.offset] >> f.bit & 1:
+                    raise CommandError(f"{self.title}: a value uses bit {f.bit} of byte {f.offset}, {f.name}'s flag")
+                out[f.offset] |= (v & 1) << f.bit
+            else:
+                out[f.offset:f.offset + f.size] = v.to_bytes(f.size, "big", signed=f.signed)
         return bytes(out)
 
     def words(self, values: Mapping[str, int]) -> tuple[int, ...]:
@@ -199,7 +224,9 @@ _BLOCKS: tuple[ModbusBlock, ...] = (
     _write(0x41, "restart_motor", "bool", C, "8.2 #3 Restart the motor"),
     _write(0x80, "calibrate", "bool", C, "8.2 #4 Calibrate the motor"),
     _write(0x82, "work_mode", "uint8", W, "8.2 #5 Set the work mode"),
-    _write(0x83, "working_current", "uint16", W, "8.2 #6 Set the work current"),
+    ModbusBlock(FC_WRITE_SINGLE, 0x83, 1, 2, "8.2 #6 Set the work current",  # V1.0.9 3.2.3: bit 15 = not saved
+                (_f("working_current", FC_WRITE_SINGLE, 0x83, 0, 2, "uint16", W),
+                 ModbusField("working_current_unsaved", FC_WRITE_SINGLE, 0x83, 0, 1, "bool", W, bit=7))),
     _write(0x9B, "holding_current", "uint8", W, "8.2 #7 Set the holding current percentage"),
     _write(0x84, "microsteps", "uint16", W, "8.2 #8 Set subdivision"),
     _write(0x85, "en_active_level", "uint8", W, "8.2 #9 Set the active of the En pin"),
@@ -243,6 +270,18 @@ _BLOCKS: tuple[ModbusBlock, ...] = (
     _read(0x40, 2, "V1.0.9 3.1.8 Read version information", ("version_information", 0, 4, "uint32")),
     _multi(0x98, 2, 4, "V1.0.9 3.2.14 Set heartbeat protection time", W,
            ("heartbeat_protection_time", 0, 4, "uint32")),
+    _multi(0x36, 2, 4, "V1.0.9 4.2 Write IO port data", C,
+           ("write_io_out2_mask", 0, 1, "uint8"), ("write_io_out2", 1, 1, "uint8"),
+           ("write_io_out1_mask", 2, 1, "uint8"), ("write_io_out1", 3, 1, "uint8")),
+    _write(0x50, "iap_control", "uint8", C, "V1.0.9 3.6 IAP firmware online upgrade"),
+    *(_multi(code, 4, 8, title, W, *((f"{mode}_{k}", 2 * i, 2, "uint16") for i, k in enumerate(("kp", "ki", "kd", "kv"))))
+      for code, mode, title in ((0x96, "vfoc", "V1.0.9 3.3.1 Set PID parameters for vFOC mode"),
+                                (0x97, "close", "V1.0.9 3.3.2 Set CLOSE mode PID parameters"))),
+    ModbusBlock(FC_WRITE_MULTIPLE, 0x9D, 3, 6, "V1.0.9 3.4.2 Set position out-of-tolerance protection parameters",
+                (ModbusField("en_trigger_zero_return", FC_WRITE_MULTIPLE, 0x9D, 1, 1, "bool", W, bit=1),
+                 ModbusField("position_error_protection", FC_WRITE_MULTIPLE, 0x9D, 1, 1, "bool", W, bit=0),
+                 _f("position_error_time", FC_WRITE_MULTIPLE, 0x9D, 2, 2, "uint16", W),
+                 _f("position_error_count", FC_WRITE_MULTIPLE, 0x9D, 4, 2, "uint16", W))),
 )
 
 
@@ -253,6 +292,8 @@ class MksModbusMap:
     device: str
     params_all: ParamSet
     blocks: tuple[ModbusBlock, ...]
+    #: longer forms of a block (same function and address, more registers, more fields; V1.0.7's timed 0xF6)
+    variants: tuple[ModbusBlock, ...] = ()
     _by_name: Mapping[str, ModbusField] = field(init=False, repr=False, compare=False)
     _by_key: Mapping[tuple[int, int], ModbusBlock] = field(init=False, repr=False, compare=False)
     _block_of: Mapping[str, ModbusBlock] = field(init=False, repr=False, compare=False)
@@ -272,6 +313,14 @@ class MksModbusMap:
                     raise ValueError(f"{self.device}: Modbus field {f.name!r} is not a parameter")
                 by_name[f.name] = f
                 block_of[f.name] = b
+        for v in self.variants:
+            base = by_key.get((v.function, v.address))
+            if base is None or base.count == v.count or not {f.name for f in base.fields} < {f.name for f in v.fields}:
+                raise ValueError(f"{self.device}: {v.title} is no longer form of a block")
+            for f in v.fields:
+                if f.name not in by_name:
+                    by_name[f.name] = f
+                    block_of[f.name] = v
         object.__setattr__(self, "_by_name", MappingProxyType(by_name))
         object.__setattr__(self, "_by_key", MappingProxyType(by_key))
         object.__setattr__(self, "_block_of", MappingProxyType(block_of))
@@ -307,8 +356,17 @@ class MksModbusMap:
             raise RegisterError(f"{self.device}: no Part 8 request FC{function:02d} at 0x{address:04X}")
         return b
 
-    def find(self, function: int, address: int) -> ModbusBlock | None:
-        return self._by_key.get((function, address))
+    def find(self, function: int, address: int, count: int | None = None) -> ModbusBlock | None:
+        """The block at (function, address); with ``count``, the form announcing that many registers."""
+        base = self._by_key.get((function, address))
+        if count is None or base is None or base.count == count:
+            return base
+        return next((v for v in self.variants if (v.function, v.address, v.count) == (function, address, count)),
+                    None)
+
+    def base_of(self, block: ModbusBlock) -> ModbusBlock:
+        """The short form of a block (itself if it has no other)."""
+        return self._by_key[block.function, block.address]
 
     @property
     def params(self) -> ParamSet:
@@ -320,7 +378,12 @@ class MksModbusMap:
         return ParamMap("modbus-rtu", params or self.params_all, dict(self._by_name))
 
 
-MKS_MODBUS = MksModbusMap("mks-servo42d57d", MKS_PARAMS, _BLOCKS)
+#: V1.0.7's 0xF6 with a run time (Modbus V1.0.9 8.1: 4 registers, dir acc speed runTime)
+TIMED_SPEED_MODE = _multi(0xF6, 4, 8, "V1.0.9 8.1 Run the motor in speed mode with a run time", C,
+                          ("speed_mode_direction", 0, 1, "uint8"), ("speed_mode_acc", 1, 1, "uint8"),
+                          ("speed_mode_speed", 2, 2, "uint16"), ("speed_mode_run_time", 4, 4, "uint32"))
+
+MKS_MODBUS = MksModbusMap("mks-servo42d57d", MKS_PARAMS, _BLOCKS, (TIMED_SPEED_MODE,))
 
 #: parameters only the native protocol reaches
 NATIVE_ONLY: frozenset[str] = frozenset(p.name for p in MKS_PARAMS if p.name not in MKS_MODBUS)

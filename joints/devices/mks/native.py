@@ -27,7 +27,7 @@ from types import MappingProxyType
 from joints.devices.mks.params import MKS_PARAMS
 from joints.devices.params import ParamMap
 
-__all__ = ["BLOCK_COMMANDS", "BROADCAST", "MKS_NATIVE", "REPLY_RULES", "Command", "NativeKey", "ReplyRule", "expects_completion",
+__all__ = ["BLOCK_COMMANDS", "BROADCAST", "MKS_NATIVE", "OPTIONAL_FIELDS", "REPLY_RULES", "Command", "NativeKey", "ReplyRule", "expects_completion",
            "expects_reply"]
 
 BROADCAST = 0
@@ -43,6 +43,7 @@ class Command(enum.IntEnum):
     READ_NUMBER_OF_PULSES = 0x33
     READ_IO_PORTS_STATUS = 0x34
     READ_RAW_ENCODER_VALUE = 0x35
+    WRITE_IO_PORT = 0x36
     READ_ERROR_OF_ANGLE = 0x39
     READ_EN_PINS_STATUS = 0x3A
     READ_GO_BACK_TO_ZERO_STATUS = 0x3B
@@ -54,6 +55,9 @@ class Command(enum.IntEnum):
     READ_ALL_PARAMETERS = 0x47
     READ_ALL_STATUS = 0x48
     RESTART_MOTOR = 0x41
+    SET_SYNC = 0x4A
+    IAP_CONTROL = 0x50
+    SYNC_EXECUTE = 0x4B
     CALIBRATE_ENCODER = 0x80
     SET_WORK_MODE = 0x82
     SET_WORKING_CURRENT = 0x83
@@ -76,6 +80,10 @@ class Command(enum.IntEnum):
     SET_HEARTBEAT_PROTECTION_TIME = 0x98
     SET_ZERO_MODE = 0x9A
     SET_HOLDING_CURRENT = 0x9B
+    SET_POSITION_ERROR_PROTECTION = 0x9D
+    SET_POSITION_THRESHOLD = 0x95
+    SET_VFOC_PID = 0x96
+    SET_CLOSE_PID = 0x97
     SET_LIMIT_PORT_REMAP = 0x9E
     QUERY_MOTOR_STATUS = 0xF1
     ENABLE_MOTOR = 0xF3
@@ -90,10 +98,14 @@ class Command(enum.IntEnum):
 
 LONG_PACKET = 0xFC  #: head of a long data package (not a function code)
 
-#: commands that carry no parameter's fields: whole blocks (joints.devices.mks.blocks, V1.0.6) and the timed
-#: return of another command's reply (0x01, V1.0.9)
+#: commands that carry no parameter's fields: whole blocks (joints.devices.mks.blocks, V1.0.6), the timed
+#: return of another command's reply (0x01, V1.0.9) and the synchronous execution (0x4B, V1.0.8; broadcast)
 BLOCK_COMMANDS = frozenset((Command.WRITE_ALL_PARAMETERS, Command.READ_ALL_PARAMETERS, Command.READ_ALL_STATUS,
-                            Command.SET_TIMED_RETURN))
+                            Command.SET_TIMED_RETURN, Command.SYNC_EXECUTE))
+
+#: fields of a later firmware whose value 0 is the command's older, shorter frame (a drive without the feature
+#: takes the command when they are 0)
+OPTIONAL_FIELDS = frozenset(("speed_mode_run_time", "working_current_unsaved"))
 
 #: run commands of Part 6 (0x8C respond/active applies to them)
 RUN_COMMANDS = frozenset((Command.SPEED_MODE, Command.POSITION_MODE1_RELATIVE_PULSES,
@@ -163,6 +175,7 @@ _KEYS: dict[str, NativeKey] = {
     "angle_error": NativeKey(C.READ_ERROR_OF_ANGLE, "error"),
     "en_pin_status": NativeKey(C.READ_EN_PINS_STATUS, "enabled"),
     "go_back_to_zero_status": NativeKey(C.READ_GO_BACK_TO_ZERO_STATUS, "status"),
+    "homing_status": NativeKey(C.READ_GO_BACK_TO_ZERO_STATUS, "homing"),
     "protection_state": NativeKey(C.READ_PROTECTION_STATE, "protected"),
     "motor_status": NativeKey(C.QUERY_MOTOR_STATUS, "status"),
     "release_protection": NativeKey(C.RELEASE_PROTECTION_STATE),
@@ -174,6 +187,7 @@ _KEYS: dict[str, NativeKey] = {
     "emergency_stop": NativeKey(C.EMERGENCY_STOP),
     "work_mode": NativeKey(C.SET_WORK_MODE, "mode"),
     "working_current": NativeKey(C.SET_WORKING_CURRENT, "current"),
+    "working_current_unsaved": NativeKey(C.SET_WORKING_CURRENT, "unsaved"),
     "holding_current": NativeKey(C.SET_HOLDING_CURRENT, "hold"),
     "microsteps": NativeKey(C.SET_SUBDIVISION, "microsteps"),
     "en_active_level": NativeKey(C.SET_EN_PIN_ACTIVE, "level"),
@@ -204,6 +218,7 @@ _KEYS: dict[str, NativeKey] = {
     "speed_mode_direction": NativeKey(C.SPEED_MODE, "direction"),
     "speed_mode_speed": NativeKey(C.SPEED_MODE, "speed"),
     "speed_mode_acc": NativeKey(C.SPEED_MODE, "acc"),
+    "speed_mode_run_time": NativeKey(C.SPEED_MODE, "run_time"),
     "save_clean_speed_mode_parameter": NativeKey(C.SAVE_CLEAN_SPEED_MODE, "state"),
     "position_mode1_direction": NativeKey(C.POSITION_MODE1_RELATIVE_PULSES, "direction"),
     "position_mode1_speed": NativeKey(C.POSITION_MODE1_RELATIVE_PULSES, "speed"),
@@ -221,6 +236,20 @@ _KEYS: dict[str, NativeKey] = {
     "raw_encoder_value": NativeKey(C.READ_RAW_ENCODER_VALUE, "value"),
     "version_information": NativeKey(C.READ_VERSION_INFORMATION, "version"),
     "heartbeat_protection_time": NativeKey(C.SET_HEARTBEAT_PROTECTION_TIME, "times"),
+    "write_io_out2_mask": NativeKey(C.WRITE_IO_PORT, "out2_mask"),
+    "write_io_out1_mask": NativeKey(C.WRITE_IO_PORT, "out1_mask"),
+    "write_io_out2": NativeKey(C.WRITE_IO_PORT, "out2"),
+    "write_io_out1": NativeKey(C.WRITE_IO_PORT, "out1"),
+    "en_trigger_zero_return": NativeKey(C.SET_POSITION_ERROR_PROTECTION, "en_zero_return"),
+    "position_error_protection": NativeKey(C.SET_POSITION_ERROR_PROTECTION, "enable"),
+    "position_error_time": NativeKey(C.SET_POSITION_ERROR_PROTECTION, "time"),
+    "position_error_count": NativeKey(C.SET_POSITION_ERROR_PROTECTION, "errors"),
+    "position_threshold_enable": NativeKey(C.SET_POSITION_THRESHOLD, "enable"),
+    "position_threshold": NativeKey(C.SET_POSITION_THRESHOLD, "values"),
+    "sync_enable": NativeKey(C.SET_SYNC, "enable"),
+    "iap_control": NativeKey(C.IAP_CONTROL, "cmd"),
+    **{f"vfoc_{k}": NativeKey(C.SET_VFOC_PID, k) for k in ("kp", "ki", "kd", "kv")},
+    **{f"close_{k}": NativeKey(C.SET_CLOSE_PID, k) for k in ("kp", "ki", "kd", "kv")},
 }
 del C
 

@@ -165,13 +165,68 @@ _PARAMS: tuple[Param, ...] = (
     # V1.0.9
     Param("version_information", "uint32", R, "", "0x40 version (V1.0.9): b31-b28 calibrated, b27-b24 hardware "
           "version, b23-b0 firmware version major.minor.patch"),
+    # 0x36 write the IO port (V1.0.6; RS485 6.3, Modbus 4.2): mask 1 writes the value, 0 / 2 leave the port
+    Param("write_io_out2_mask", "uint8", C, "", "0x36 OUT2_mask: 0 do not write OUT_2, 1 write, 2 keep (V1.0.6)",
+          0, 2, 0),
+    Param("write_io_out1_mask", "uint8", C, "", "0x36 OUT1_mask: 0 do not write OUT_1, 1 write, 2 keep (V1.0.6)",
+          0, 2, 0),
+    Param("write_io_out2", "uint8", C, "", "0x36 OUT_2 value (0/1) (V1.0.6)", 0, 1, 0),
+    Param("write_io_out1", "uint8", C, "", "0x36 OUT_1 value (0/1) (V1.0.6)", 0, 1, 0),
+    # 0x9D position-error protection and En-triggered single-turn zero return (V1.0.6; RS485 V1.0.6 5.10,
+    # V1.0.9 5.4.2; Modbus V1.0.9 3.4.2)
+    Param("en_trigger_zero_return", "bool", W, "", "0x9D g0Enable: an En pulse of ~200 ms starts the single-turn "
+          "zero return (0_Mode), no more at power-on (the motor MOVES on the En line) (V1.0.6)", 0, 1, 0,
+          persistent=True),
+    Param("position_error_protection", "bool", W, "", "0x9D pEnable: position-error protection on (V1.0.6)",
+          0, 1, 0),
+    Param("position_error_time", "uint16", W, "15 ms", "0x9D Tim: the error statistics time, ~15 ms per unit "
+          "(V1.0.6)", 0, 0xFFFF, 20),
+    Param("position_error_count", "uint16", W, "1/28000 turn", "0x9D Errors: the position error that protects "
+          "(28000 = 360 degrees) (V1.0.6)", 0, 0xFFFF, 14000),
+    # 0x95 position-reached threshold (V1.0.8; RS485 V1.0.9 5.2.17)
+    Param("position_threshold_enable", "bool", W, "", "0x95 enable: a position move completes only within the "
+          "threshold (V1.0.8)", 0, 1, 1),
+    Param("position_threshold", "uint16", W, "1/65536 turn", "0x95 values: the position-reached threshold "
+          "(65535 = 360 degrees) (V1.0.8)", 0, 0xFFFF, 200),
+    # 0xF6 with a run time (V1.0.7; RS485 V1.0.9 10.1, Modbus V1.0.9 8.1)
+    Param("speed_mode_run_time", "uint32", C, "10 ms", "0xF6 runTime: stop by itself after this long; 0 = the "
+          "frame without it (V1.0.7)", 0, 0x0FFFFFFF, 0),
+    # 0x50 IAP control (V1.0.8; RS485 V1.0.9 5.6, Modbus V1.0.9 3.6)
+    Param("iap_control", "uint8", C, "", "0x50 IAP: 1 enter the boot loader (the drive restarts and waits for a "
+          "firmware file), 2 enter / 3 leave the silent state (V1.0.8)", 1, 3, 3, persistent=True),
+    # 0x96 / 0x97 PID parameters (V1.0.8; RS485 V1.0.9 5.3, Modbus V1.0.9 3.3): "users are advised against
+    # adjusting the PID parameters ... to avoid damaging the motor" - persistent, confirm
+    *(Param(f"{mode}_{k}", "uint16", W, "", f"0x{code:02X} {mode.upper()} mode PID {k.capitalize()} (0-1024) "
+            "(V1.0.8)", 0, 1024, default, persistent=True)
+      for mode, code, gains in (("vfoc", 0x96, (("kp", 0xDC), ("ki", 0x64), ("kd", 0x10E), ("kv", 0x140))),
+                                ("close", 0x97, (("kp", 0xC8), ("ki", 0x50), ("kd", 0xFA), ("kv", 0x12C))))
+      for k, default in gains),
+    # 0x83 while running, not saved (V1.0.7; RS485 V1.0.9 5.2.3, Modbus V1.0.9 3.2.3)
+    Param("working_current_unsaved", "bool", W, "", "0x83 with the trailing 00 (Modbus: bit 15 of Current): change "
+          "the working current now, do not save it (V1.0.7)", 0, 1, 0),
+    # 0x3B's second status (V1.0.7; RS485 V1.0.9 5.1.8)
+    Param("homing_status", "uint8", R, "", "0x3B status2: the non-single-turn zero return (go home 0x91): 0 going, "
+          "1 success, 2 not homed or failed (V1.0.7)", 0, 2),
+    # 0x4A synchronization flag (V1.0.8; RS485 V1.0.9 12.4.1)
+    Param("sync_enable", "bool", W, "", "0x4A synchronization: run commands wait for the broadcast 0x4B (V1.0.8)",
+          0, 1, 0),
     Param("heartbeat_protection_time", "uint32", W, "ms", "0x98 heartbeat protection time (V1.0.9): no command "
           "for this long stops the motor urgently; 0 = off", 0, 0xFFFFFFFF, 0),
 )
 
 #: parameters a later firmware added -> the feature (joints.devices.quirks) a firmware profile needs for them
 FEATURE_OF: dict[str, str] = {"raw_encoder_value": "mks-all-parameters", "version_information": "mks-version",
-                              "heartbeat_protection_time": "mks-heartbeat"}
+                              "heartbeat_protection_time": "mks-heartbeat",
+                              **{n: "mks-write-io" for n in ("write_io_out2_mask", "write_io_out1_mask", "write_io_out2",
+                                                             "write_io_out1")},
+                              **{n: "mks-position-error-protection" for n in (
+                                  "en_trigger_zero_return", "position_error_protection", "position_error_time",
+                                  "position_error_count")},
+                              "position_threshold_enable": "mks-position-threshold",
+                              "position_threshold": "mks-position-threshold", "sync_enable": "mks-sync", "iap_control": "mks-iap",
+                              "working_current_unsaved": "mks-current-unsaved", "homing_status": "mks-homing-status",
+                              **{f"{m}_{k}": "mks-pid" for m in ("vfoc", "close") for k in ("kp", "ki", "kd", "kv")},
+                              "speed_mode_run_time": "mks-timed-speed"}
 
 MKS_PARAMS: ParamSet = ParamSet("mks-servo42d57d", _PARAMS)
 

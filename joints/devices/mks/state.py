@@ -203,6 +203,7 @@ def holding_current_percent(hold: int) -> int:
 class SetStatus(enum.IntEnum):
     FAIL = 0
     SUCCESS = 1
+    SUCCESS_UNSAVED = 2  #: 0x83 only (V1.0.7): "Set success without saved"
 
 
 class RunStatus(enum.IntEnum):
@@ -210,6 +211,7 @@ class RunStatus(enum.IntEnum):
     STARTED = 1
     COMPLETE = 2
     END_LIMIT_STOP = 3
+    SYNC_RECEIVED = 5  #: V1.0.8: held for the synchronous execution (0x4A on, 0x4B starts it)
 
 
 class CalibrationStatus(enum.IntEnum):
