@@ -70,11 +70,11 @@ class MksModbusAccess(MksAccess):
         block = self.map.find(FC_WRITE_SINGLE, address)
         if block is None:
             return None  # a register this map does not know: whether it takes 0xFFFF is unknown
-        ((name, value),) = block.decode_words((_FAILED,)).items()
-        try:
-            self.params[name].check(value)
-        except CommandError:
-            return False
+        for name, value in block.decode_words((_FAILED,)).items():  # a register may carry flag bits beside a value
+            try:
+                self.params[name].check(value)
+            except CommandError:
+                return False
         return None
 
     def read_version(self, *, retry: bool = True) -> int:
