@@ -18,6 +18,7 @@ import pytest
 import envs  # noqa: F401 - registers the joints/ envs
 import joints
 from joints.compiled_path import supported
+from joints.errors import LimitError
 from joints.link.trace import TraceRecord
 
 #: env id -> steps per run (the arm steps at 10 Hz: fewer steps cover as much motion)
@@ -141,3 +142,34 @@ def test_a_refused_command_is_refused_the_same_way_and_sends_nothing() -> None:
         with pytest.raises(joints.JointsError, match="outside the limits"):
             u.compiled_path.command("position", [10.0])
         assert link.transactions == before
+
+
+@pytest.mark.parametrize("values", [[100.0, 0.0], [0.0, -100.0]])
+def test_a_refused_wheel_speed_is_refused_and_sends_nothing(values: list[float]) -> None:
+    """Both wheels' checks run before the drive's one FC16: either wheel over its limit sends nothing."""
+    with gym.make("joints/DiffDriveGoal-v0") as env:
+        u: Any = env.unwrapped
+        env.reset(seed=0)
+        link = _links(u)[0]
+        before = link.transactions
+        with pytest.raises(LimitError, match="exceeds the limit"):
+            u.compiled_path.command("velocity", values)
+        assert link.transactions == before
+
+
+def test_one_wheel_alone_is_commanded_as_the_rig_commands_it() -> None:
+    """A skipped wheel leaves the other to the driver's own set_velocity, as rig.set_velocities of one wheel."""
+    runs = []
+    for compiled in (True, False):
+        with gym.make("joints/DiffDriveGoal-v0", compiled_path=compiled) as env:
+            u: Any = env.unwrapped
+            env.reset(seed=0)
+            if compiled:
+                u.compiled_path.command("velocity", [2.5, 0.0], [False, True])
+                assert u.compiled_path.taken == 0
+            else:
+                u.rig.set_velocities({u.wheel_names[0]: 2.5})
+            u.rig.sleep(0.05)
+            runs.append((_frames(_links(u)[0]), _images(u), _links(u)[0].transactions, u.rig.time))
+    assert runs[0] == runs[1]
+    assert runs[0][2] > 0
