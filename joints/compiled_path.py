@@ -32,7 +32,7 @@ prebuilt FC03 decoded once. Its other commands, and a command to one wheel only,
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, TypeGuard
 
 from joints.codecs import modbus as mb
 from joints.drivers.access import ModbusAccess
@@ -66,7 +66,6 @@ class _ErobModbus:
         self.status_start = start
         self.decode = access.table.decode_block
         self.start = access.write_request("start_operating", CMD_START)  # a constant command
-        self.joints = (joint,)
         self.taken = 0
 
     def command_all(self, mode: str, values: Sequence[float], skip: Sequence[bool]) -> None:
@@ -196,7 +195,8 @@ class _ZlacModbus:
 _Stepper = _ErobModbus | _ZlacModbus
 
 
-def _direct(access: object) -> bool:
+def _direct(access: object) -> TypeGuard[ModbusAccess]:
+    """Modbus RTU parameters on a link that hands requests to an in-process twin as objects."""
     return isinstance(access, ModbusAccess) and isinstance(access.link.framing, DirectFraming)
 
 
@@ -204,7 +204,7 @@ def _stepper(joint: Joint) -> _ErobModbus | None:
     driver = joint.driver
     if isinstance(driver, ErobModbusDriver):
         access = driver.access
-        if isinstance(access, ModbusAccess) and _direct(access):
+        if _direct(access):
             return _ErobModbus(joint, driver, access)
     return None
 
