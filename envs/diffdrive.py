@@ -198,7 +198,7 @@ class DiffDriveGoalEnv(RigEnv):
     render_mode=None, domain_randomization=False, goal_distance=(0.5, 2.0), success_distance=0.1,
     success_heading=0.2, terminate_on_success=True, progress_weight=10.0, heading_weight=0.2,
     heading_scale=0.3, action_weight=0.01, success_bonus=5.0, arena=4.0, wheel_radius=0.1016,
-    track=0.40, reset_timeout=10.0, width=480, height=480)``
+    track=0.40, reset_timeout=10.0, width=480, height=480, raise_on_overrun=False, compiled_path=True)``
 
     - ``config``: joints config (TOML path or dict) with the two wheels of a ZLAC8015D
       (``device = "zlac8015d"``, ``channel = "left"`` / ``"right"``), each with a velocity limit; default
@@ -212,6 +212,9 @@ class DiffDriveGoalEnv(RigEnv):
       sees; ``latency`` delays actions by whole periods).
     - ``wheel_radius``, ``track`` [m]: the odometry's geometry (measure your base).
     - ``reset_timeout`` [s]: hardware reset, time for the wheels to come to rest.
+    - ``compiled_path``: sim only - send each step's wheel speeds and read the states by the compiled path
+      (:mod:`joints.compiled_path`: the same frames as ``rig.set_velocities`` / ``rig.read_states``, less
+      Python; default); False: the driver path.
 
     ## Version History
     - v0: initial version (ZLAC8015D over Modbus RTU; sim and hardware backends).
@@ -244,6 +247,7 @@ class DiffDriveGoalEnv(RigEnv):
         width: int = 480,
         height: int = 480,
         raise_on_overrun: bool = False,
+        compiled_path: bool = True,
     ) -> None:
         if isinstance(control_period, bool) or not isinstance(control_period, (int, float)) \
                 or not math.isfinite(control_period) or control_period <= 0:
@@ -279,6 +283,7 @@ class DiffDriveGoalEnv(RigEnv):
         self.arena = float(arena)
         self.reset_timeout = float(reset_timeout)
         self.width, self.height = int(width), int(height)
+        self._want_compiled = bool(compiled_path)
         self._start(config, backend, domain_randomization)
 
     # -- construction -----------------------------------------------------------------------
@@ -333,6 +338,9 @@ class DiffDriveGoalEnv(RigEnv):
         self.observation_space = spaces.Box(low, -low, dtype=np.float64)
         self._obs_low, self._obs_high = low, -low
 
+        #: the compiled command/state path (sim, both wheels a twin it knows, read in the rig's order), else None
+        compiled = self.sim and self._want_compiled and self.wheel_names == list(rig.joints)
+        self.compiled_path = joints.CompiledPath.build(self.wheels) if compiled else None
         self._mjcf = [rig.config.joints[n].mjcf_joint or n for n in self.wheel_names]
         self._site = -1
         if self.sim:
@@ -560,7 +568,11 @@ class DiffDriveGoalEnv(RigEnv):
 
     # -- bus --------------------------------------------------------------------------------
     def _read(self) -> dict[str, joints.JointState]:
-        self._states = self.rig.read_states()  # one FC03 per drive
+        compiled = self.compiled_path
+        if compiled is not None:  # the same FC03, read as rig.read_states reads it
+            self._states = dict(zip(self.wheel_names, compiled.states()))
+        else:
+            self._states = self.rig.read_states()  # one FC03 per drive
         self._last_io = self.rig.time
         angles = np.array([self._states[n].position for n in self.wheel_names])
         if self._noise_rng is not None and self._noise > 0:
@@ -572,6 +584,10 @@ class DiffDriveGoalEnv(RigEnv):
         if not all(j.enabled for j in self.wheels):  # faulted/disabled drive: the episode has ended
             return
         cmd = self.command_of(action)
+        compiled = self.compiled_path
+        if compiled is not None:  # the same FC16(s), sent as rig.set_velocities sends them
+            compiled.command("velocity", cmd.tolist())
+            return
         self.rig.set_velocities({n: float(c) for n, c in zip(self.wheel_names, cmd)})  # one FC16
 
     def _watchdog_tripped(self) -> bool:

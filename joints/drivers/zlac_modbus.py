@@ -120,6 +120,10 @@ class ZlacDrive:
         self.access.write_many(values)
         self._cache.update(values)
 
+    def note_written(self, values: Mapping[str, int]) -> None:
+        """``values`` were written by another way than :meth:`set_block` (the compiled path)."""
+        self._cache.update(values)
+
     def control(self, word: zr.ControlWord) -> None:
         """Write the control word (commands are never retried). From then on this host knows the state
         it put the drive in; before, "enabled" is taken from the drive's status."""
@@ -233,6 +237,14 @@ class ZlacDrive:
     def set_channel_velocities(self, commands: Mapping[str, tuple[int, int]]) -> None:
         """Rig.set_velocities: side -> (velocity [0.1 r/min], ramp [0.1 r/min/s]); ramps as needed,
         then both targets in one FC16."""
+        ramps, targets = self.velocity_plan(commands)
+        if ramps is not None:
+            self.set_block(ramps)  # 0x2080..0x2083 are contiguous: one FC16
+        self.set_block(targets)
+
+    def velocity_plan(self, commands: Mapping[str, tuple[int, int]]) -> tuple[dict[str, int] | None, dict[str, int]]:
+        """What :meth:`set_channel_velocities` writes, after its checks and the mode (which it sets if needed):
+        (the four ramp times if they change, else None; both target velocities [r/min])."""
         rpm = {side: round(commands[side][0] / 10.0) for side in SIDES}
         for side in SIDES:
             self.table[f"target_velocity_{side}"].check(rpm[side])
@@ -245,9 +257,8 @@ class ZlacDrive:
             for stem in ("acceleration_time", "deceleration_time"):
                 name = f"{stem}_{side}"
                 ramps[name] = self._cache.get(name, 500) if ms is None else ms
-        if any(self._cache.get(k) != v for k, v in ramps.items()):
-            self.set_block(ramps)  # 0x2080..0x2083 are contiguous: one FC16
-        self.set_block({"target_velocity_left": rpm["left"], "target_velocity_right": rpm["right"]})
+        changed = any(self._cache.get(k) != v for k, v in ramps.items())
+        return (ramps if changed else None), {"target_velocity_left": rpm["left"], "target_velocity_right": rpm["right"]}
 
     def set_torques(self, left: int, right: int) -> None:
         """Both target torques [mA] in one FC16 (torque mode)."""

@@ -18,16 +18,24 @@ import pytest
 import envs  # noqa: F401 - registers the joints/ envs
 import joints
 from joints.compiled_path import supported
+from joints.errors import LimitError
 from joints.link.trace import TraceRecord
 
 #: env id -> steps per run (the arm steps at 10 Hz: fewer steps cover as much motion)
-SUPPORTED = {"joints/ErobReach-v0": 40, "joints/ErobArmReach-v0": 12}
+SUPPORTED = {"joints/ErobReach-v0": 40, "joints/ErobArmReach-v0": 12, "joints/DiffDriveGoal-v0": 60}
 MODES = ("position", "velocity", "torque")
+#: env id -> its action modes (None: the env has one, wheel speeds, and no action_mode argument)
+ENV_MODES: dict[str, tuple[str | None, ...]] = {"joints/DiffDriveGoal-v0": (None,)}
+CASES = [(env_id, mode) for env_id in sorted(SUPPORTED) for mode in ENV_MODES.get(env_id, MODES)]
+
+
+def _joints(env: Any) -> list[Any]:
+    return list(env.rig.joints.values())
 
 
 def _links(env: Any) -> list[Any]:
     seen: dict[int, Any] = {}
-    for j in env.joints:
+    for j in _joints(env):
         link = j.driver.access.link
         seen.setdefault(id(link), link)
     return list(seen.values())
@@ -45,8 +53,14 @@ def _frames(link: Any) -> list[tuple[float, float, float, int, str]]:
     return [(tx.start, tx.end, tx.due, tx.size, tx.side) for tx in link.transport.log]
 
 
-def _run(env_id: str, mode: str, steps: int, compiled: bool, trace: bool = False) -> dict[str, Any]:
-    env = gym.make(env_id, action_mode=mode, compiled_path=compiled)
+def _info(info: dict[str, Any]) -> list[tuple[str, Any]]:
+    """Every info entry, bit for bit (arrays as bytes, floats by their exact repr)."""
+    return [(k, (v.dtype.str, v.tobytes()) if isinstance(v, np.ndarray) else repr(v)) for k, v in sorted(info.items())]
+
+
+def _run(env_id: str, mode: str | None, steps: int, compiled: bool, trace: bool = False) -> dict[str, Any]:
+    kwargs: dict[str, Any] = {} if mode is None else {"action_mode": mode}
+    env = gym.make(env_id, compiled_path=compiled, **kwargs)
     u: Any = env.unwrapped
     records: list[TraceRecord] = []
     try:
@@ -54,17 +68,16 @@ def _run(env_id: str, mode: str, steps: int, compiled: bool, trace: bool = False
             u.rig.trace(records.append)
         out: dict[str, Any] = {"steps": []}
         obs, info = env.reset(seed=7)
-        out["reset"] = (obs.tobytes(), info["time"])
+        out["reset"] = (obs.tobytes(), _info(info))
         rng = np.random.default_rng(11)
         for _ in range(steps):
             action = rng.uniform(-1.0, 1.0, env.action_space.shape).astype(np.float32)
             obs, reward, terminated, truncated, info = env.step(action)
-            out["steps"].append((obs.tobytes(), reward, terminated, truncated, info["time"], info["overrun"],
-                                 info["command"].tobytes(), info["limit_violation"], repr(info["faults"]),
-                                 [(repr(j.last_state), j.last_contact, j.enabled) for j in u.joints]))
+            out["steps"].append((obs.tobytes(), reward, terminated, truncated, _info(info),
+                                 [(repr(j.last_state), j.last_contact, j.enabled) for j in _joints(u)]))
             if terminated or truncated:
                 obs, info = env.reset()
-                out["steps"].append(("reset", obs.tobytes(), info["time"]))
+                out["steps"].append(("reset", obs.tobytes(), _info(info)))
         links = _links(u)
         out["transactions"] = [(lk.transactions, lk.framing.exchanges, lk.retries_used) for lk in links]
         out["frames"] = [_frames(lk) for lk in links]
@@ -77,9 +90,8 @@ def _run(env_id: str, mode: str, steps: int, compiled: bool, trace: bool = False
         env.close()
 
 
-@pytest.mark.parametrize("mode", MODES)
-@pytest.mark.parametrize("env_id", sorted(SUPPORTED))
-def test_compiled_path_gives_the_driver_paths_bits(env_id: str, mode: str) -> None:
+@pytest.mark.parametrize(("env_id", "mode"), CASES)
+def test_compiled_path_gives_the_driver_paths_bits(env_id: str, mode: str | None) -> None:
     steps = SUPPORTED[env_id]
     driver = _run(env_id, mode, steps, compiled=False)
     compiled = _run(env_id, mode, steps, compiled=True)
@@ -92,12 +104,14 @@ def test_compiled_path_gives_the_driver_paths_bits(env_id: str, mode: str) -> No
         assert compiled[key] == driver[key], key
 
 
-def test_a_trace_sees_the_same_frames_on_both_paths() -> None:
+@pytest.mark.parametrize(("env_id", "mode", "joints_"), [("joints/ErobReach-v0", "position", 1),
+                                                        ("joints/DiffDriveGoal-v0", None, 2)])
+def test_a_trace_sees_the_same_frames_on_both_paths(env_id: str, mode: str | None, joints_: int) -> None:
     """A hooked trace is honoured: the compiled path's requests go through the link, which feeds it."""
-    driver = _run("joints/ErobReach-v0", "position", 10, compiled=False, trace=True)
-    compiled = _run("joints/ErobReach-v0", "position", 10, compiled=True, trace=True)
-    assert compiled["taken"] == 10
-    assert len(compiled["trace"]) > 60  # tx and rx of about 3 transactions per step
+    driver = _run(env_id, mode, 10, compiled=False, trace=True)
+    compiled = _run(env_id, mode, 10, compiled=True, trace=True)
+    assert compiled["taken"] == 10 * joints_
+    assert len(compiled["trace"]) > 40  # tx and rx of 2-3 transactions per step
     assert compiled["trace"] == driver["trace"]
     assert compiled["frames"] == driver["frames"]
 
@@ -128,3 +142,34 @@ def test_a_refused_command_is_refused_the_same_way_and_sends_nothing() -> None:
         with pytest.raises(joints.JointsError, match="outside the limits"):
             u.compiled_path.command("position", [10.0])
         assert link.transactions == before
+
+
+@pytest.mark.parametrize("values", [[100.0, 0.0], [0.0, -100.0]])
+def test_a_refused_wheel_speed_is_refused_and_sends_nothing(values: list[float]) -> None:
+    """Both wheels' checks run before the drive's one FC16: either wheel over its limit sends nothing."""
+    with gym.make("joints/DiffDriveGoal-v0") as env:
+        u: Any = env.unwrapped
+        env.reset(seed=0)
+        link = _links(u)[0]
+        before = link.transactions
+        with pytest.raises(LimitError, match="exceeds the limit"):
+            u.compiled_path.command("velocity", values)
+        assert link.transactions == before
+
+
+def test_one_wheel_alone_is_commanded_as_the_rig_commands_it() -> None:
+    """A skipped wheel leaves the other to the driver's own set_velocity, as rig.set_velocities of one wheel."""
+    runs = []
+    for compiled in (True, False):
+        with gym.make("joints/DiffDriveGoal-v0", compiled_path=compiled) as env:
+            u: Any = env.unwrapped
+            env.reset(seed=0)
+            if compiled:
+                u.compiled_path.command("velocity", [2.5, 0.0], [False, True])
+                assert u.compiled_path.taken == 0
+            else:
+                u.rig.set_velocities({u.wheel_names[0]: 2.5})
+            u.rig.sleep(0.05)
+            runs.append((_frames(_links(u)[0]), _images(u), _links(u)[0].transactions, u.rig.time))
+    assert runs[0] == runs[1]
+    assert runs[0][2] > 0
