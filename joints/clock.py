@@ -33,10 +33,16 @@ class MonotonicClock:
 
 
 class ManualClock:
-    """A clock that only moves when told to; ``advance`` callbacks let a simulation step with it."""
+    """A clock that only moves when told to; ``advance`` callbacks let a simulation step with it.
+
+    :attr:`epoch` counts restarts (:meth:`restart`: a simulation reset): who keeps time of its own on
+    this clock (a simulated medium) starts again when it changes - a clock that merely shows an earlier
+    time than it did is not a reset.
+    """
 
     def __init__(self, start: float = 0.0) -> None:
         self._t = start
+        self.epoch = 0  #: bumped by :meth:`restart`
         self._on_sleep: Callable[[float], None] | None = None
 
     def bind(self, on_sleep: Callable[[float], None] | None) -> None:
@@ -55,6 +61,11 @@ class ManualClock:
 
     def set(self, t: float) -> None:
         self._t = t
+
+    def restart(self, t: float = 0.0) -> None:
+        """Time starts again at ``t`` (a reset): a new :attr:`epoch`."""
+        self._t = t
+        self.epoch += 1
 
     def sleep(self, seconds: float) -> None:
         if not math.isfinite(seconds):

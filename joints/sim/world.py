@@ -572,7 +572,8 @@ class World:
         return min(k, n)
 
     def _tick_now(self) -> None:
-        """The ticks, with the clock at the end of the last substep run."""
+        """The ticks, with the clock at the end of the last substep run (an advance then shows the clock at the
+        instant it booked)."""
         t = self.steps * self.timestep
         self.clock.set(t)
         for tick in self._ticks:
@@ -617,7 +618,9 @@ class World:
                     tick(t)
 
     def advance(self, seconds: float) -> None:
-        """Advance simulated time by ``seconds`` (rounded up to whole substeps, no drift).
+        """Advance simulated time by ``seconds``: the clock shows the exact instant booked (no drift), the
+        physics runs the substeps that end at or before it and the one that reaches it (so it stands up to
+        one substep ahead of the clock; docs/timing.md).
 
         Interrupted (KeyboardInterrupt, a signal), the world stops where it got to: the next
         advance starts from there, never from the interrupted target.
@@ -626,17 +629,14 @@ class World:
             return
         with self.lock:
             n = self._due(seconds)
-            if n <= 0:
-                return
-            try:
-                self._step(n)
-            except BaseException:
-                self._target = self.time
-                self.clock.set(self._target)
-                raise
-            t = self.steps * self.timestep  # as step(): the clock where the physics is
-            self._target = max(self._target, t)
-            self.clock.set(t)
+            if n > 0:
+                try:
+                    self._step(n)
+                except BaseException:
+                    self._target = self.time
+                    self.clock.set(self._target)
+                    raise
+            self.clock.set(self._target)
 
     def _due(self, seconds: float) -> int:
         """Book ``seconds`` more on the world's target time: the substeps that are now due."""
@@ -656,7 +656,7 @@ class World:
         mj.mj_forward(self.model, self.data)
         self.steps = 0
         self._target = 0.0
-        self.clock.set(0.0)
+        self.clock.restart(0.0)  # a new epoch: the media drop what was in flight
         for emu in self._emulators():
             emu.power_cycle()
             emu.time = 0.0
@@ -853,5 +853,4 @@ def advance_together(worlds: Sequence[World], seconds: Sequence[float]) -> None:
             raise
         finally:
             for w in worlds:
-                w._target = max(w._target, w.time)
-                w.clock.set(w.time)
+                w.clock.set(w._target)  # as World.advance: the exact instant booked

@@ -139,6 +139,7 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         self._closed = False
         self.now = clock.now()  #: the line's exact time (the clock may be up to a substep ahead)
         self._clock_seen = self.now
+        self._see_epoch()
         self._cap: float | None = None  #: while the line sleeps the clock itself: run no further than this
         self._turnaround_of: Callable[[bytes], float | None] | None = getattr(peer, "turnaround", None)
         if not callable(self._turnaround_of):
@@ -158,6 +159,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
     def _tick(self, t: float) -> None:
         if self._closed:
             return
+        if self._epoch_seen is not None and self._restarted(self.clock.now()):
+            self._new_timeline(self.clock.now())
         if self._cap is not None:
             t = min(t, self._cap)
         if t > self.now:
@@ -167,20 +170,24 @@ class TimedSerialLine(ByteTransport, ClockDriven):
                 self._clock_seen = max(self._clock_seen, t)
 
     def _sync(self) -> float:
-        """Catch up with a clock that moved without the line (the host slept) or went back (a reset)."""
+        """Catch up with a clock that moved without the line (the host slept) or restarted (a reset)."""
         c = self.clock.now()
-        if c < self._clock_seen - 1e-12:
-            self._pending.clear()
-            self._rx.clear()
-            self._free = {"host": -math.inf, "device": -math.inf}
-            self._epoch = len(self.log)  # frames of the old timeline never overlap the new one's
-            self.now = self._clock_seen = c
+        if self._restarted(c):
+            self._new_timeline(c)
         elif c > self._clock_seen:
             self._clock_seen = c
             if c > self.now:
                 self._run(c)
                 self.now = c
         return self.now
+
+    def _new_timeline(self, c: float) -> None:
+        """The clock restarted at ``c`` (a reset): what was in flight is gone."""
+        self._pending.clear()
+        self._rx.clear()
+        self._free = {"host": -math.inf, "device": -math.inf}
+        self._epoch = len(self.log)  # frames of the old timeline never overlap the new one's
+        self.now = self._clock_seen = c
 
     # -- the line ---------------------------------------------------------------------------------
     def _device_turnaround(self, data: bytes) -> float:
