@@ -53,13 +53,18 @@ class ClockDriven:
         """Process the medium's frames up to ``until``."""
         raise NotImplementedError
 
-    def _wait_until(self, t: float) -> None:
-        """Let time pass until ``t``: sleep the clock if it is behind, process frames up to ``t``."""
+    def _wait_until(self, t: float, lazy: bool = False) -> None:
+        """Let time pass until ``t``: sleep the clock if it is behind, process frames up to ``t``. ``lazy``:
+        nothing acts on a drive up to ``t``, so a clock that can (``book``) books the time without physics."""
         behind = t - self.clock.now()
         if behind > 0:
             self._cap = t
             try:
-                self.clock.sleep(behind)
+                book = getattr(self.clock, "book", None) if lazy else None
+                if book is not None:
+                    book(behind)
+                else:
+                    self.clock.sleep(behind)
             finally:
                 self._cap = None
             self._clock_seen = self.clock.now()
