@@ -828,6 +828,7 @@ class World:
         effects the twin's model lacks (a test's reality twin: current-loop lag, torque ripple, friction that
         depends on state) go between the drive and the joint. The joint then steps in Python (same results,
         off the fused compiled path)."""
+        self.sync()  # booked time runs with the step it was booked under
         for i, b in enumerate(self._bound):
             if b.name == name:
                 step, qa, da, aid, r = self._bind[i]
