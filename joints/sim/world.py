@@ -268,6 +268,7 @@ class World:
                  timestep: float = 0.001, base_dir: Path | None = None,
                  kinematic: Mapping[str, str] | None = None, jit: bool | None = None) -> None:
         mj = _mujoco()
+        self._booked = False  #: time is booked on the clock that the physics has not run yet (:meth:`book`)
         #: the drives' loops run compiled (numba; :mod:`joints.sim.kernel`) - default: when installed
         self.compiled = kernel.default_mode() if jit is None else bool(jit and kernel.AVAILABLE)
         self.mujoco = mj
@@ -302,14 +303,14 @@ class World:
             act.gear[0] = r  # ctrl is the motor torque; the slide gets r x torque
             act.ctrllimited = 1
             act.ctrlrange = [-prof.max_torque, prof.max_torque]
-        self.model = spec.compile()
-        self.data = mj.MjData(self.model)
+        self._model = spec.compile()
+        self._data = mj.MjData(self._model)
         self.timestep = float(self.model.opt.timestep)
         mj.mj_forward(self.model, self.data)
         self.steps = 0
         self._target = 0.0
         self.clock = ManualClock()
-        self.clock.bind(self.advance)
+        self.clock.bind(self.advance, on_book=self.book, on_settle=self.sync)
         addr: dict[str, tuple[int, int, int]] = {}
         ratios: dict[str, float] = {}
         for d in drives:
@@ -320,14 +321,14 @@ class World:
         # the inertia each drive sees at its motor (joint-space inertia / r^2)
         inertia = {name: self._dof_inertia(dof) / ratios[name] ** 2 for name, (_qa, dof, _aid) in addr.items()}
         made = _make_twins(drives, inertia)
-        self.drives: dict[str, Any] = {}  #: joint name -> its drive's twin (shared by channels)
+        self._drives: dict[str, Any] = {}  #: joint name -> its drive's twin (shared by channels)
         self.bus_specs = dict(buses)
         self.buses: dict[str, Any] = {name: b.device_bus() for name, b in self.bus_specs.items()}
         self._bound: list[_Bound] = []
         fronts: set[tuple[str, int]] = set()
         for d in drives:
             twin, stepper = made[d.name]
-            self.drives[d.name] = twin
+            self._drives[d.name] = twin
             if (d.bus, d.address) not in fronts:
                 self.buses[d.bus].add(d.maker.front(d.protocol, twin, d.address))
                 fronts.add((d.bus, d.address))
@@ -516,8 +517,64 @@ class World:
 
     @property
     def time(self) -> float:
-        """Simulated seconds since the last reset."""
+        """Simulated seconds of the physics since the last reset (it first catches up with booked time)."""
+        if self._booked:
+            self.sync()
         return self.steps * self.timestep
+
+    # -- lazy physics: the one rule for reaching the physics or the twins ---------------------------
+    @property
+    def model(self) -> Any:
+        """The MuJoCo model (the physics first catches up with booked time: :meth:`sync`)."""
+        if self._booked:
+            self.sync()
+        return self._model
+
+    @property
+    def data(self) -> Any:
+        """The MuJoCo data (the physics first catches up with booked time: :meth:`sync`)."""
+        if self._booked:
+            self.sync()
+        return self._data
+
+    @property
+    def drives(self) -> dict[str, Any]:
+        """Joint name -> its drive's twin (shared by channels; the physics first catches up: :meth:`sync`)."""
+        if self._booked:
+            self.sync()
+        return self._drives
+
+    def book(self, seconds: float) -> None:
+        """Let ``seconds`` pass while nothing acts on the drives (a reply travelling to the host): the clock
+        shows the booked instant, the physics runs later - at :meth:`sync` (before anything reads or writes
+        the physics or a twin: :attr:`model`, :attr:`data`, :attr:`drives`, a medium about to hand a frame to
+        a drive) or at the next :meth:`advance` - in one compiled call with what follows. A world with ticks
+        (timed device buses, delayed commands, measured joints, state friction) steps at once."""
+        if seconds <= 0:
+            return
+        if self._ticks:
+            self.advance(seconds)
+            return
+        with self.lock:
+            self._target += seconds
+            self._booked = True
+            self.clock.set(self._target)
+
+    def sync(self) -> None:
+        """Run the physics up to booked time: the substeps that end at or before it and the one that reaches
+        it (as :meth:`advance` would have)."""
+        with self.lock:
+            if not self._booked:
+                return
+            self._booked = False
+            n = math.ceil((self._target - self.time) / self.timestep - 1e-9)
+            if n > 0:
+                try:
+                    self._step(n)
+                except BaseException:
+                    self._target = self.time
+                    self.clock.set(self._target)
+                    raise
 
     def transport(self, bus: str) -> Any:
         """An in-process transport whose peer is every emulated drive on ``bus``."""
@@ -534,6 +591,7 @@ class World:
         in one compiled call (the same bits: a tick before its next work only moves its time).
         """
         with self.lock:
+            self.sync()
             try:
                 self._step(n)
             finally:  # an interrupted step leaves the clock where the physics is
@@ -572,7 +630,8 @@ class World:
         return min(k, n)
 
     def _tick_now(self) -> None:
-        """The ticks, with the clock at the end of the last substep run."""
+        """The ticks, with the clock at the end of the last substep run (an advance then shows the clock at the
+        instant it booked)."""
         t = self.steps * self.timestep
         self.clock.set(t)
         for tick in self._ticks:
@@ -617,7 +676,9 @@ class World:
                     tick(t)
 
     def advance(self, seconds: float) -> None:
-        """Advance simulated time by ``seconds`` (rounded up to whole substeps, no drift).
+        """Advance simulated time by ``seconds``: the clock shows the exact instant booked (no drift), the
+        physics runs the substeps that end at or before it and the one that reaches it (so it stands up to
+        one substep ahead of the clock; docs/timing.md).
 
         Interrupted (KeyboardInterrupt, a signal), the world stops where it got to: the next
         advance starts from there, never from the interrupted target.
@@ -625,18 +686,16 @@ class World:
         if seconds <= 0:
             return
         with self.lock:
+            self._booked = False  # booked time runs now, with this
             n = self._due(seconds)
-            if n <= 0:
-                return
-            try:
-                self._step(n)
-            except BaseException:
-                self._target = self.time
-                self.clock.set(self._target)
-                raise
-            t = self.steps * self.timestep  # as step(): the clock where the physics is
-            self._target = max(self._target, t)
-            self.clock.set(t)
+            if n > 0:
+                try:
+                    self._step(n)
+                except BaseException:
+                    self._target = self.time
+                    self.clock.set(self._target)
+                    raise
+            self.clock.set(self._target)
 
     def _due(self, seconds: float) -> int:
         """Book ``seconds`` more on the world's target time: the substeps that are now due."""
@@ -651,12 +710,13 @@ class World:
 
     def reset(self) -> None:
         """Physics to the model's initial state, every drive to its power-on state (saved settings kept)."""
+        self._booked = False  # booked time of the old episode never runs
         mj = self.mujoco
         mj.mj_resetData(self.model, self.data)
         mj.mj_forward(self.model, self.data)
         self.steps = 0
         self._target = 0.0
-        self.clock.set(0.0)
+        self.clock.restart(0.0)  # a new epoch: the media drop what was in flight
         for emu in self._emulators():
             emu.power_cycle()
             emu.time = 0.0
@@ -768,6 +828,7 @@ class World:
         effects the twin's model lacks (a test's reality twin: current-loop lag, torque ripple, friction that
         depends on state) go between the drive and the joint. The joint then steps in Python (same results,
         off the fused compiled path)."""
+        self.sync()  # booked time runs with the step it was booked under
         for i, b in enumerate(self._bound):
             if b.name == name:
                 step, qa, da, aid, r = self._bind[i]
@@ -805,6 +866,8 @@ def join(worlds: Sequence[World]) -> stepping.Group:
     group = worlds[0].group
     if all(w.group is group for w in worlds):
         return group
+    for w in worlds:  # booked time runs on the tables the drives are in now, before they move to the new one
+        w.sync()
     group = stepping.Group(worlds, all(w.compiled for w in worlds))
     for i, w in enumerate(worlds):
         w.group, w.group_index, w._me = group, i, (i,)
@@ -829,6 +892,8 @@ def advance_together(worlds: Sequence[World], seconds: Sequence[float]) -> None:
         for w in sorted(worlds, key=id):  # one order for every caller: no lock-order deadlock
             stack.enter_context(w.lock)
         group = join(worlds)
+        for w in worlds:
+            w._booked = False  # booked time runs now, with this
         due = [w._due(s) if s > 0 else 0 for w, s in zip(worlds, seconds)]
         try:
             while True:
@@ -853,5 +918,4 @@ def advance_together(worlds: Sequence[World], seconds: Sequence[float]) -> None:
             raise
         finally:
             for w in worlds:
-                w._target = max(w._target, w.time)
-                w.clock.set(w.time)
+                w.clock.set(w._target)  # as World.advance: the exact instant booked

@@ -30,7 +30,7 @@ reason (the host sleeps, :meth:`CanMedium.tick` from the world), the
 medium processes its frames up to the clock's time, so a frame in flight reaches its peers at
 its own time even while nobody waits on the bus. The world ticks the medium at the end of the substep
 that reaches :meth:`CanMedium.next_event` (and after every stretch it runs), not every substep: a bus with
-nothing queued costs nothing per substep. A clock that goes back (world reset) drops the
+nothing queued costs nothing per substep. A clock that restarts (world reset) drops the
 frames in flight and restarts the medium there.
 """
 
@@ -145,6 +145,7 @@ class CanMedium(ClockDriven):
         self.clock: ClockLike = clock or _OwnClock()
         self.now = self.clock.now()
         self._clock_seen = self.now
+        self._see_epoch()
         self._cap: float | None = None  # while we sleep the clock ourselves: process no further than this
         self._delivering: float | None = None  # the time of the frame being delivered (peers answer then)
         self._nodes: list[_Node] = []
@@ -206,6 +207,7 @@ class CanMedium(ClockDriven):
     def bind_clock(self, clock: ClockLike) -> None:
         """Run on ``clock`` from now on (the simulated world's clock); the medium restarts at its time."""
         self.clock = clock
+        self._see_epoch()
         self._restart(clock.now())
 
     def _restart(self, t: float) -> None:
@@ -218,9 +220,9 @@ class CanMedium(ClockDriven):
         self._mark = (t, self.frames, self.bits, self.busy)
 
     def _sync(self) -> None:
-        """Catch up with a clock that moved without us (the host slept) or went back (reset)."""
+        """Catch up with a clock that moved without us (the host slept) or restarted (reset)."""
         c = self.clock.now()
-        if c < self._clock_seen - 1e-12:
+        if self._restarted(c):
             self._restart(c)
         elif c > self._clock_seen:
             self._clock_seen = c
@@ -231,6 +233,8 @@ class CanMedium(ClockDriven):
     def tick(self, t: float) -> None:
         """The clock reached ``t`` (the world calls this at substep ends, at least at each :meth:`next_event`):
         deliver what is due."""
+        if self._epoch_seen is not None and self._restarted(self.clock.now()):
+            self._restart(self.clock.now())
         if self._cap is not None:
             t = min(t, self._cap)
         if t > self.now and (self._pending or self._wire is not None):

@@ -21,7 +21,10 @@ Time model (docs/timing.md):
   (as :class:`~joints.transports.serial.SerialTransport` does);
 * the line keeps its own exact time (like :class:`~joints.transports.can_sim.CanMedium`): waiting
   sleeps the clock, the world steps whole physics substeps (so a frame instant sees the physics
-  of the substep that ends at or after it), but bus time is never rounded to substeps;
+  of the substep that ends at or after it), but bus time is never rounded to substeps; a wait in
+  which nothing acts on a drive (a reply travelling to the host) only books the time on the clock
+  (``clock.book``), and the line settles the clock (``clock.settle``: the physics catches up)
+  before the device side acts;
 * RS485 is half duplex and neither side listens before talking: when a host frame and a device
   frame overlap in time BOTH arrive corrupted (every byte inverted - the receivers' codecs see
   garbage and checksum errors), and :attr:`TimedSerialLine.collisions` counts it;
@@ -139,12 +142,15 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         self._closed = False
         self.now = clock.now()  #: the line's exact time (the clock may be up to a substep ahead)
         self._clock_seen = self.now
+        self._see_epoch()
         self._cap: float | None = None  #: while the line sleeps the clock itself: run no further than this
         self._turnaround_of: Callable[[bytes], float | None] | None = getattr(peer, "turnaround", None)
         if not callable(self._turnaround_of):
             self._turnaround_of = None
         if isinstance(peer, Ticking):
             peer.on_tick(self._tick)
+        #: the clock's "the physics catches up" (a world that books waits lazily): before the device side acts
+        self._settle: Callable[[], None] | None = getattr(clock, "settle", None)
 
     @property
     def name(self) -> str:
@@ -158,6 +164,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
     def _tick(self, t: float) -> None:
         if self._closed:
             return
+        if self._epoch_seen is not None and self._restarted(self.clock.now()):
+            self._new_timeline(self.clock.now())
         if self._cap is not None:
             t = min(t, self._cap)
         if t > self.now:
@@ -167,20 +175,24 @@ class TimedSerialLine(ByteTransport, ClockDriven):
                 self._clock_seen = max(self._clock_seen, t)
 
     def _sync(self) -> float:
-        """Catch up with a clock that moved without the line (the host slept) or went back (a reset)."""
+        """Catch up with a clock that moved without the line (the host slept) or restarted (a reset)."""
         c = self.clock.now()
-        if c < self._clock_seen - 1e-12:
-            self._pending.clear()
-            self._rx.clear()
-            self._free = {"host": -math.inf, "device": -math.inf}
-            self._epoch = len(self.log)  # frames of the old timeline never overlap the new one's
-            self.now = self._clock_seen = c
+        if self._restarted(c):
+            self._new_timeline(c)
         elif c > self._clock_seen:
             self._clock_seen = c
             if c > self.now:
                 self._run(c)
                 self.now = c
         return self.now
+
+    def _new_timeline(self, c: float) -> None:
+        """The clock restarted at ``c`` (a reset): what was in flight is gone."""
+        self._pending.clear()
+        self._rx.clear()
+        self._free = {"host": -math.inf, "device": -math.inf}
+        self._epoch = len(self.log)  # frames of the old timeline never overlap the new one's
+        self.now = self._clock_seen = c
 
     # -- the line ---------------------------------------------------------------------------------
     def _device_turnaround(self, data: bytes) -> float:
@@ -231,7 +243,10 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             peer = self.peer
             if peer is not self._peer_seen:  # a Protocol isinstance costs ~60 us: once per peer
                 self._peer_seen, self._peer_timed = peer, isinstance(peer, TimedFrames)
+            settle = self._settle
             if self._peer_timed:
+                if settle is not None:
+                    settle()
                 for at, data in peer.take_frames(until):
                     self._put("device", at, data)
             tx = None  # the earliest due frame (the first of equals)
@@ -250,6 +265,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
                 else:
                     self._rx += _garbled(tx.data) if tx.corrupted else tx.data
                 continue
+            if settle is not None:  # the drive acts now: on the physics of the substep that reaches now
+                settle()
             if tx.handler is not None:  # the direct path: the drive acts on the message now
                 reply, size, receiver = tx.handler()
                 if reply is not None:
@@ -262,6 +279,14 @@ class TimedSerialLine(ByteTransport, ClockDriven):
 
     def _next_due(self) -> float | None:
         return min((tx.due for tx in self._pending), default=None)
+
+    def _quiet_until(self, t: float) -> bool:
+        """Whether nothing acts on a drive up to ``t`` (no host frame due, no device sending by itself): a wait
+        until ``t`` needs the clock, not the physics (the world books it: :meth:`joints.clock.ManualClock.book`)."""
+        if self._peer_timed:
+            return False
+        limit = t + 1e-12
+        return not any(p.side == "host" and p.due <= limit for p in self._pending)
 
     # -- the direct path (message objects, the same time as their bytes) ---------------------------
     def transact(self, size: int, act: Callable[[], Any], reply_size: Callable[[Any], int],
@@ -288,7 +313,7 @@ class TimedSerialLine(ByteTransport, ClockDriven):
                                                          for p in self._pending)):
                 return None  # the device stays silent
             assert nxt is not None
-            self._wait_until(nxt)
+            self._wait_until(nxt, self._quiet_until(nxt))
         return got[1]
 
     def post(self, size: int, act: Callable[[], Any], reply_size: Callable[[Any], int],
@@ -333,7 +358,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             if now >= deadline - 1e-12:
                 return b""
             nxt = self._next_due()
-            self._wait_until(min(deadline, nxt if nxt is not None and nxt > now else now + IDLE_STEP))
+            until = min(deadline, nxt if nxt is not None and nxt > now else now + IDLE_STEP)
+            self._wait_until(until, self._quiet_until(until))
 
     def reset_input(self) -> None:
         self._rx.clear()

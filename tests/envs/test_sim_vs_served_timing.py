@@ -123,7 +123,8 @@ def test_sim_and_served_twin_keep_the_same_time(port: str) -> None:
     # - the sim's host takes no time, so it waits the whole t3.5 between a reply and its next request; the
     #   served host's own Python (0.6-1 ms per step) passes inside that wait, so a step the OS did not
     #   delay can be up to 2 x t3.5 = 3.5 ms shorter than the sim's (2 of the 3 requests follow a reply);
-    #   the sim's host clock also rounds each wait up to whole 1 ms substeps;
+    #   the sim's host clock shows the exact bus time (22.83 ms per step; 23.00 ms when it rounded waits up to
+    #   whole 1 ms substeps);
     # - steps the OS delays either process (load 3-7 on 2 cores: 1-5 ms late wake-ups in 10-20 % of
     #   transactions) are longer. Measured 2026-11-26 at load 3.0-3.6, 3 runs: sim 23.00 ms, served median
     #   +8.7 %, +14.3 %, +15.4 %, quietest step -4.7 %, -5.5 %, -13.0 %.

@@ -234,3 +234,17 @@ def test_the_zlac_log_loop_takes_what_the_real_drive_took() -> None:
             link.read_registers(address, 0x20AB, 1)  # actual velocity (left)
         per_loop = (rig.time - t0) / 100
     assert per_loop == pytest.approx(10.005854807 / 753, rel=0.02)
+
+
+def test_the_host_clock_shows_bus_time_exactly() -> None:
+    """Bus time is not rounded to physics substeps: n read_states take exactly the planner's time on the host's
+    clock, and the physics stands at the end of the substep that reaches the clock (at most one substep ahead)."""
+    elapsed, frames = _reads(_arm(True), 10)
+    latency = registry.ADAPTER_LATENCY["serial"]
+    assert elapsed == pytest.approx(_expected(frames, 10, turnaround=0.0008, latency=latency, gap=T35),
+                                    rel=1e-9)
+    with joints.open(_arm(True)) as rig:
+        rig.read_states()
+        world = rig.sim
+        assert world.time - world.timestep < rig.time <= world.time
+        assert 1e-6 < rig.time % world.timestep < world.timestep - 1e-6  # between substep ends

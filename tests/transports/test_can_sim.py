@@ -180,7 +180,7 @@ def test_a_clock_going_back_drops_frames_in_flight() -> None:
     bus = LockstepCanBus(medium=medium)
     clock.set(1.0)
     bus.send(msg(0x641, b"\x00\x02"))
-    clock.set(0.0)  # world reset
+    clock.restart(0.0)  # world reset
     assert bus.recv(0.01) is None
     assert medium.now == pytest.approx(0.01)
     bus.shutdown()
@@ -255,3 +255,18 @@ def test_the_pyproject_entry_point_opens_the_bus_by_name(tmp_path: Path) -> None
                           check=False)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.split() == ["LockstepCanBus", "0x123", "b'hi'"]
+
+
+def test_a_clock_behind_the_media_ticks_is_not_a_reset() -> None:
+    """The world's clock shows the exact instant the host waited for while the physics - and the ticks it gives
+    the media - stand up to a substep ahead: only a restart (a new epoch) drops the frames in flight."""
+    clock = ManualClock()
+    medium = CanMedium(clock=clock)
+    medium.attach_peer(Echo(medium))
+    bus = LockstepCanBus(medium=medium)
+    bus.send(msg(0x641, b"\x00\x02"))
+    medium.tick(0.001)  # the world ran the substep ending at 1 ms: request and reply went over the wire
+    clock.set(0.0004)  # the instant the host booked, inside that substep
+    reply = bus.recv(0.0)
+    assert reply is not None and reply.timestamp == pytest.approx(180 * US)
+    bus.shutdown()

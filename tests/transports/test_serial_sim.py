@@ -71,13 +71,13 @@ def test_frames_from_before_a_clock_reset_never_collide_with_later_ones() -> Non
     device = Echo(reply)
     line = TimedSerialLine(device, baudrate=38400, clock=clock, turnaround=0.0005)
     for start in (0.0, 0.002):  # the second episode's requests go out while the first's replies were on the line
-        clock.set(start)
+        clock.restart(start)
         for _ in range(3):
             line.write(request)
             assert line.read(0.1) == reply
     assert line.collisions == 0 and not any(tx.corrupted for tx in line.log)
     assert len(line.log) == 12  # the trace keeps both episodes
-    clock.set(0.0)  # a real overlap after a reset still collides
+    clock.restart(0.0)  # a real overlap after a reset still collides
     device.own.append((0.0005, mks.encode(mks.RunReply(1, 0xFD, mks.RunStatus.COMPLETE))))
     clock.advance(0.0005)
     line.write(request)
@@ -139,7 +139,7 @@ def test_frames_before_the_clock_went_back_never_collide_with_later_ones() -> No
     line = TimedSerialLine(device, baudrate=38400, clock=clock)
     clock.advance(0.01)
     assert line.read(0.0) == completion  # the drive's own frame at 0 s of the first timeline
-    clock.set(0.0)  # a reset: the world and its clock start again
+    clock.restart(0.0)  # a reset: the world and its clock start again
     line.write(mks.encode(mks.ReadSpeed(1)))  # at 0 s again, when the old completion frame was on the wire
     assert line.read(0.05) == reply
     assert line.collisions == 0 and not any(tx.corrupted for tx in line.log)

@@ -1,0 +1,86 @@
+"""Issue 32: physics only where it is needed. A wait in which nothing acts on a drive (a reply travelling to
+the host) books the time on the clock; the physics catches up - in one compiled call with what follows -
+before anything reads or writes it or a twin (World.model / data / drives / time, a medium handing a frame
+to a drive). The trajectories are those of stepping at once (tests/sim/test_twin_golden.py)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+pytest.importorskip("mujoco")
+
+import joints
+from envs.configs import default_config
+from joints.sim import stepping
+
+
+def _arm() -> dict[str, Any]:
+    cfg = default_config("erob_arm_reach")
+    cfg["sim"]["direct"] = True
+    return cfg
+
+
+def _behind(world: Any, clock: Any) -> bool:
+    """Whether the physics stands behind the host's clock (``steps`` reads no property: it never syncs)."""
+    return bool(world.steps * world.timestep < clock.now() - 1e-12)
+
+
+def test_a_reply_in_flight_books_time_without_physics() -> None:
+    with joints.open(_arm()) as rig:
+        world = rig.sim
+        rig.read_states()
+        assert _behind(world, rig.clock)  # the last reply travelled to the host: booked, not stepped
+        rig.read_states()  # the next request acts on the drives: the physics caught up first
+        assert world.time - world.timestep < rig.time <= world.time
+
+
+ACCESS: dict[str, Callable[[Any], object]] = {
+    "data": lambda w: w.data.qpos[0],
+    "model": lambda w: w.model.opt.timestep,
+    "drives": lambda w: w.drives,
+    "time": lambda w: w.time,
+    "joint_position": lambda w: w.joint_position("joint1"),
+}
+
+
+@pytest.mark.parametrize("what", list(ACCESS))
+def test_every_access_to_the_physics_or_a_twin_runs_the_booked_time_first(what: str) -> None:
+    with joints.open(_arm()) as rig:
+        world = rig.sim
+        rig.read_states()
+        assert _behind(world, rig.clock)
+        ACCESS[what](world)
+        assert not _behind(world, rig.clock)
+        assert world.steps * world.timestep - world.timestep < rig.time
+
+
+def test_an_env_step_runs_one_compiled_call_per_drive_action(monkeypatch: pytest.MonkeyPatch) -> None:
+    """ErobReach-v0: three transactions (the drive acts on each request) and the period hold: four calls
+    (seven when every frame instant stepped the physics)."""
+    import gymnasium as gym
+    import numpy as np
+
+    import envs  # noqa: F401 - registers the ids
+
+    calls = [0]
+    run = stepping.Group.run
+
+    def counted(self: Any, *a: Any, **k: Any) -> Any:
+        calls[0] += 1
+        return run(self, *a, **k)
+
+    monkeypatch.setattr(stepping.Group, "run", counted)
+    env = gym.make("joints/ErobReach-v0")
+    try:
+        env.reset(seed=1)
+        rng = np.random.default_rng(0)
+        space = env.action_space
+        calls[0] = 0
+        for _ in range(20):
+            env.step(rng.uniform(space.low, space.high).astype(space.dtype))
+        assert calls[0] == 4 * 20
+    finally:
+        env.close()
