@@ -279,7 +279,9 @@ def test_speed_mode_with_a_run_time_stops_by_itself(tmp_path: Path, protocol: st
             if fw.motion is None:
                 break
             rig.clock.sleep(0.001)
-        assert until <= rig.time <= until + 0.002  # stopped when its run time was over, not before
+        # stopped when its run time was over, not before (the host's exact clock may stand up to one 1 ms
+        # substep behind the physics that stopped it)
+        assert until - 0.001 <= rig.time <= until + 0.002
         rig.sleep(0.3)
         assert d.read("real_time_speed") == 0 and d.motor_status() is MotorStatus.STOP
         d.set_velocity(60, acceleration=0)
