@@ -43,7 +43,8 @@ replies (FB addr code param chk), arriving unsolicited.
   the values (statuses are 0-2, see :func:`_zero_status_length`).
 * Two forms (V1.0.7): 0xF6 carries 3 data bytes, or 7 with a runTime; 0x83 2, or 3 with a trailing 00
   (the current changed while running, not saved; answered with status 2, which no other set command
-  has) (:data:`REQUEST_LONG_DATA_LENGTH`).
+  has); 0x91 none, or 1 goZeroMode (V1.0.9: 00 origin homing, as without it; 01 coordinate homing)
+  (:data:`REQUEST_LONG_DATA_LENGTH`).
   The device side takes the long form when its frame is there, checksum-valid and plausible (runTime
   <= 0x0FFFFFFF: the next frame's head FA/FB/FC can never pass as its first byte), else the short
   one: at once when its checksum byte cannot be a runTime's first byte (above 0x0F: 15 in 16 frames),
@@ -495,9 +496,11 @@ class SetHomeParameters:
 
 @dataclass(frozen=True, slots=True)
 class GoHome:
-    """0x91 go home -> :class:`RunReply` (1 start, later 2 success)."""
+    """0x91 go home -> :class:`RunReply` (1 start, later 2 success). ``mode`` (goZeroMode, V1.0.9 7.3.6): 0
+    "origin homing" (the frame without the byte, or with 00), 1 "coordinate homing" (``FA 01 91 01 8D``)."""
 
     address: int
+    mode: int = 0
     function: ClassVar[int] = 0x91
 
 
@@ -1155,6 +1158,16 @@ def _unpack_working_current(address: int, function: int, data: bytes, frame: byt
     return SetWorkingCurrent(address, int.from_bytes(data[:2], "big"), int(len(data) > 2))
 
 
+def _pack_go_home(msg: Any) -> bytes:
+    return bytes((1,)) if _check_int("GoHome.mode", msg.mode, 0, 1) else b""
+
+
+def _unpack_go_home(address: int, function: int, data: bytes, frame: bytes) -> GoHome:
+    if data and data[0] > 1:
+        raise FrameError(f"0x91: goZeroMode must be 00 or 01, got {frame.hex(' ')}", data=frame)
+    return GoHome(address, data[0] if data else 0)
+
+
 def _pack_subdivision(msg: Any) -> bytes:
     n = _check_int("SetSubdivision.microsteps", msg.microsteps, 1, 256)
     return bytes((n & 0xFF,))
@@ -1389,7 +1402,7 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _struct(SetModbusRtu, "B", ("enable",)),
     _struct(SetKeyLock, "B", ("lock",)),
     _struct(SetHomeParameters, "BBHB", ("trigger_level", "direction", "speed", "end_limit")),
-    _struct(GoHome),
+    _Spec(GoHome, 0, _pack_go_home, _unpack_go_home, 1, lambda d: d[0] <= 1, lambda f: f[-1] <= 1),
     _struct(SetAxisZero),
     _struct(SetNoLimitHomeParameters, "IBH", ("reverse_angle", "mode", "current")),
     _struct(SetZeroMode, "BBBB", ("mode", "set_zero", "speed", "direction")),

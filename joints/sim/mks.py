@@ -613,6 +613,10 @@ class MksFirmware(Firmware):
 
     def _go_home(self, values: Mapping[str, int], answered: bool) -> int:
         v = self.values  # (the drive can run: :meth:`_refusal`)
+        if values.get("go_home_mode"):  # coordinate homing (V1.0.9): straight to axis 0 at HmSpeed, no search
+            self._start(_Motion("move", Command.GO_HOME, answered, goal=self._clamp_value(max(1, v["home_speed"])),
+                                acc=0, target=self.enc_zero))
+            return int(_RUN.STARTED)
         home = -1 if v["home_direction"] == st.MotorDirection.CW else 1
         job = _Motion("home", Command.GO_HOME, answered, goal=self._clamp_value(max(1, v["home_speed"])), acc=0)
         self.home_status = int(st.GoBackToZeroStatus.GOING)

@@ -268,3 +268,38 @@ def test_go_back_to_zero_reply_with_one_or_two_statuses_decodes_at_every_address
                 codec.flush()
                 assert codec.next_message() == short
     assert waited == set(range(0xC8, 0xCD))  # (0xFB + addr + 0x3B + status) & 0xFF <= 2
+
+
+# -- 0x91 goZeroMode (V1.0.9): coordinate homing ------------------------------------------------------
+
+
+def test_coordinate_homing_frames_are_the_manuals_examples() -> None:
+    """RS485 V1.0.9 7.7 ``FA 01 91 01 8D``; 7.3.6: ``FA 01 91 8C`` and ``FA 01 91 00 8C`` are the same origin
+    homing; Modbus V1.0.9 5.7 ``01 06 00 91 00 02 59 E6`` (goZeroMode 2), 5.3.6's reply ``01 06 00 91 00 01 19 E7``
+    (goZeroMode 1)."""
+    assert mks.encode(mks.GoHome(1, 1)) == bytes.fromhex("FA 01 91 01 8D")
+    assert mks.encode(mks.GoHome(1)) == bytes.fromhex("FA 01 91 8C")
+    assert _decode(Role.DEVICE, bytes.fromhex("FA 01 91 01 8D")) == mks.GoHome(1, 1)
+    assert _decode(Role.DEVICE, bytes.fromhex("FA 01 91 00 8C")) == mks.GoHome(1, 0)
+    codec = mks.MksCodec(Role.DEVICE)
+    codec.feed(bytes.fromhex("FA 01 91 8C"))
+    codec.flush()  # the short frame at silence
+    assert codec.next_message() == mks.GoHome(1, 0)
+    block = MKS_MODBUS.block_of("go_home_mode")
+    assert _modbus_frame(bytes((1, 6)) + (0x91).to_bytes(2, "big")
+                         + block.words({"go_home": 1, "go_home_mode": 1})[0].to_bytes(2, "big")) == \
+        bytes.fromhex("01 06 00 91 00 02 59 E6")
+    assert block.words({"go_home": 1, "go_home_mode": 0}) == (1,)
+    assert _modbus_frame(bytes.fromhex("01 06 00 91 00 01")) == bytes.fromhex("01 06 00 91 00 01 19 E7")
+    assert block.decode_words([2]) == {"go_home": 1, "go_home_mode": 1}
+
+
+@pytest.mark.parametrize("byte", [0x02, 0xFF])
+def test_coordinate_homing_mode_other_than_0_or_1_is_not_taken(byte: int) -> None:
+    with pytest.raises(EncodeError):
+        mks.encode(mks.GoHome(1, 2))
+    codec = mks.MksCodec(Role.DEVICE)
+    codec.feed(mks.with_checksum(bytes((0xFA, 0x01, 0x91, byte))))
+    codec.flush()
+    with pytest.raises(FrameError):
+        codec.next_message()

@@ -502,3 +502,46 @@ def test_homing_status_needs_v109_and_older_drives_send_one_byte(tmp_path: Path,
 def test_homing_status_is_native_only(tmp_path: Path) -> None:
     with open_motor(tmp_path, protocol="modbus-rtu") as rig, pytest.raises(RegisterError, match="native"):
         rig.joints["m1"].driver.read("homing_status")
+
+
+# -- 0x91 goZeroMode 01: coordinate homing (V1.0.9) ----------------------------------------------------
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _having("mks-coordinate-homing"))
+def test_coordinate_homing_runs_back_to_the_coordinate_zero_without_a_search(tmp_path: Path, protocol: str,
+                                                                             firmware: str) -> None:
+    """Away from axis 0 by a move, coordinate homing runs the shaft back to it (RS485 7.7: "return to the zero
+    point position at the zero-point speed") and ends with go home's completion; the zero is not moved."""
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        j = rig.joints["m1"]
+        d = j.driver
+        fw = _twin(rig)
+        j.enable()
+        d.move_by(3200, speed=300)
+        d.wait_motion(10)
+        away = d.read("encoder_addition")
+        assert abs(away) > 3000
+        zero = fw.enc_zero
+        d.coordinate_home()
+        d.wait_motion(10)
+        assert abs(d.read("encoder_addition")) <= 2
+        assert fw.enc_zero == zero and abs(fw.q - zero) < 2 * math.tau / 0x4000  # the shaft moved, not the zero
+        assert d.motor_status() is MotorStatus.STOP
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _lacking("mks-coordinate-homing"))
+def test_coordinate_homing_needs_v109_and_go_home_keeps_its_older_form(tmp_path: Path, protocol: str,
+                                                                      firmware: str) -> None:
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        j = rig.joints["m1"]
+        d = j.driver
+        j.enable()
+        sent = d.link.transactions
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.coordinate_home()
+        assert d.link.transactions == sent  # nothing was sent
+        d.go_home()  # the older frame (FA 01 91 8C / register 1) still homes
+        assert _twin(rig).motion is not None and _twin(rig).motion.kind == "home"
+        j.stop()

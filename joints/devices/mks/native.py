@@ -105,7 +105,7 @@ BLOCK_COMMANDS = frozenset((Command.WRITE_ALL_PARAMETERS, Command.READ_ALL_PARAM
 
 #: fields of a later firmware whose value 0 is the command's older, shorter frame (a drive without the feature
 #: takes the command when they are 0)
-OPTIONAL_FIELDS = frozenset(("speed_mode_run_time", "working_current_unsaved"))
+OPTIONAL_FIELDS = frozenset(("speed_mode_run_time", "working_current_unsaved", "go_home_mode"))
 
 #: run commands of Part 6 (0x8C respond/active applies to them)
 RUN_COMMANDS = frozenset((Command.SPEED_MODE, Command.POSITION_MODE1_RELATIVE_PULSES,
@@ -183,6 +183,7 @@ _KEYS: dict[str, NativeKey] = {
     "restart_motor": NativeKey(C.RESTART_MOTOR),
     "calibrate": NativeKey(C.CALIBRATE_ENCODER),
     "go_home": NativeKey(C.GO_HOME),
+    "go_home_mode": NativeKey(C.GO_HOME, "mode"),
     "set_current_axis_to_zero": NativeKey(C.SET_CURRENT_AXIS_TO_ZERO),
     "emergency_stop": NativeKey(C.EMERGENCY_STOP),
     "work_mode": NativeKey(C.SET_WORK_MODE, "mode"),
