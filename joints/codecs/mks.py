@@ -146,6 +146,7 @@ __all__ = [
     "checksum",
     "checksum_ok",
     "encode",
+    "parameter_request",
     "with_checksum",
 ]
 
@@ -554,6 +555,16 @@ class SetTimedReturn:
 
 
 @dataclass(frozen=True, slots=True)
+class ReadParameter:
+    """0x00 read a configuration parameter (V1.0.8, 5.1.10): ``code`` is the set command's function code ->
+    :class:`ParameterReply` headed by ``code`` (the host codec must be told: :meth:`MksCodec.expect_parameter`)."""
+
+    address: int
+    code: int
+    function: ClassVar[int] = 0x00
+
+
+@dataclass(frozen=True, slots=True)
 class ReadVersion:
     """0x40 read version information (V1.0.9) -> :class:`VersionReply`."""
 
@@ -829,7 +840,7 @@ Request = (
     | RunSpeed | SaveCleanSpeedMode | RunRelativePulses | RunAbsolutePulses | RunRelativeAxis | RunAbsoluteAxis
     | ReadRawEncoder | SetTimedReturn | ReadVersion | SetHeartbeat | WriteAllParameters | ReadAllParameters | ReadAllStatus
     | WriteIoPort | SetPositionErrorProtection | SetPositionThreshold | SetSync | SyncExecute | IapControl
-    | SetVfocPid | SetClosePid
+    | SetVfocPid | SetClosePid | ReadParameter
 )
 
 
@@ -993,6 +1004,17 @@ class MotorStatusReply:
 
 
 @dataclass(frozen=True, slots=True)
+class ParameterReply:
+    """Reply to 0x00 (V1.0.8): ``FB addr code param chk``, ``param`` laid out as the set command ``code``'s
+    data (its shorter form); ``param`` None: the drive answered ``FF FF``, "this parameter does not support
+    reading"."""
+
+    address: int
+    function: int  #: the code of the parameter read (not 0x00)
+    param: bytes | None
+
+
+@dataclass(frozen=True, slots=True)
 class VersionReply:
     """0x40 (V1.0.9): the four data bytes as one big-endian ``version`` (uint32): b31-b28 calibration
     status, b27-b24 hardware version (1 S42D_485, 2 S42D_CAN, 3 S57D_485, 4 S57D_CAN ...), b23-b0 the
@@ -1083,6 +1105,7 @@ Reply = (
     EncoderCarryReply | EncoderAdditionReply | SpeedReply | PulsesReply | IoStatusReply | AngleErrorReply
     | EnPinReply | GoBackToZeroStatusReply | ProtectionStateReply | CalibrationReply | MotorStatusReply | SetReply
     | RunReply | VersionReply | AllParametersReply | AllStatusReply | TimedReturnReply | RawEncoderReply
+    | ParameterReply
 )
 Message = Request | UnknownRequest | LongPacket | Reply
 
@@ -1419,6 +1442,7 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _struct(RunAbsoluteAxis, "HBi", ("speed", "acc", "abs_axis")),
     _struct(ReadRawEncoder),
     _struct(SetTimedReturn, "BH", ("code", "times")),
+    _struct(ReadParameter, "B", ("code",)),
     _struct(ReadVersion),
     _struct(SetHeartbeat, "I", ("times",)),
     _raw(WriteAllParameters, ALL_PARAMETERS_SIZE),
@@ -1495,7 +1519,9 @@ REQUEST_LONG_DATA_LENGTH: Mapping[int, int] = MappingProxyType({f: s.long for f,
 REPLY_TYPES: Mapping[int, type] = MappingProxyType({f: s.cls for f, s in sorted(_REPLIES.items())})
 REPLY_DATA_LENGTH: Mapping[int, int] = MappingProxyType({f: s.size for f, s in sorted(_REPLIES.items())})
 
-assert set(REQUEST_TYPES) == set(REPLY_TYPES), "every command has a reply layout"
+assert set(REQUEST_TYPES) - {ReadParameter.function} == set(REPLY_TYPES), "every command has a reply layout"
+#: 0x00's reply is headed by the parameter's code, its data laid out as that set command's (shorter form)
+NOT_READABLE = b"\xff\xff"
 
 
 # --- encoding --------------------------------------------------------------------------------
@@ -1549,6 +1575,13 @@ def encode(message: Message) -> bytes:
         spec = _SET_REPLY if isinstance(message, SetReply) else _RUN_REPLY
         return with_checksum(bytes((HEAD_UPLINK, _check_u8("address", message.address), function))
                              + spec.pack(message))
+    if isinstance(message, ParameterReply):
+        function = _check_u8("function", message.function)
+        param = NOT_READABLE if message.param is None else bytes(message.param)
+        if message.param is not None and len(param) != REQUEST_DATA_LENGTH.get(function, -1):
+            raise EncodeError(f"ParameterReply: 0x{function:02X}'s parameter is "
+                              f"{REQUEST_DATA_LENGTH.get(function)} bytes, got {param.hex(' ')}")
+        return with_checksum(bytes((HEAD_UPLINK, _check_u8("address", message.address), function)) + param)
     reply_spec = _REPLY_BY_TYPE.get(type(message))
     if reply_spec is not None:
         return with_checksum(bytes((HEAD_UPLINK, _check_u8("address", message.address),
@@ -1567,6 +1600,14 @@ def _decode_request(frame: bytes) -> Request | UnknownRequest:
     if spec is None:
         return UnknownRequest(address, function, frame[3:-1])
     return spec.unpack(address, function, frame[3:-1], frame)  # type: ignore[no-any-return]
+
+
+def parameter_request(reply: ParameterReply) -> Request:
+    """The set command whose data a 0x00 reply carries, decoded as that command (its fields, by name)."""
+    spec = _REQUESTS.get(reply.function)
+    if reply.param is None or spec is None or len(reply.param) != spec.size:
+        raise FrameError(f"not a readable parameter's reply: {reply!r}", data=encode(reply))
+    return spec.unpack(reply.address, reply.function, reply.param, encode(reply))  # type: ignore[no-any-return]
 
 
 def _decode_reply(frame: bytes) -> Reply:
@@ -1621,6 +1662,7 @@ class MksCodec:
         self.role = role
         self._buf = bytearray()
         self._echo: bytes | None = None
+        self._parameter: tuple[int, int] | None = None  #: (address, code) of an open 0x00 read (host role)
         self._silent = False
         self.discarded = 0  #: bytes dropped while resynchronising (garbage, bad frames, other direction)
 
@@ -1649,6 +1691,13 @@ class MksCodec:
         """Skip this exact frame once if it arrives first (RS485 adapter local echo)."""
         self._echo = bytes(frame)
 
+    def expect_parameter(self, request: ReadParameter | None) -> None:
+        """The open request is a 0x00 read (or None: it is not): its reply, headed by the parameter's code
+        from that address, is framed as a :class:`ParameterReply` (the host cannot know it otherwise)."""
+        if request is not None and request.code not in SET_REPLY_FUNCTIONS:
+            raise EncodeError(f"0x00 reads a set command's parameter; 0x{request.code:02X} is none")
+        self._parameter = None if request is None else (request.address, request.code)
+
     # -- output --
     @staticmethod
     def encode(message: Message) -> bytes:
@@ -1662,6 +1711,8 @@ class MksCodec:
                 return 0
             if len(buf) < 3:
                 return None
+            if self._parameter is not None and (buf[1], buf[2]) == self._parameter:
+                return self._parameter_length(buf)
             if buf[2] == 0x3B:  # one or two statuses (V1.0.7)
                 return _zero_status_length(buf, self._silent)
             n = REPLY_DATA_LENGTH.get(buf[2])
@@ -1681,6 +1732,15 @@ class MksCodec:
         if spec.long:
             return self._two_forms(buf, spec)
         return MIN_FRAME + spec.size
+
+    def _parameter_length(self, buf: bytearray) -> int | None:
+        """A 0x00 reply: the parameter's data, or FF FF ("not readable") when that frame is there and valid."""
+        value, refused = MIN_FRAME + REQUEST_DATA_LENGTH[buf[2]], MIN_FRAME + len(NOT_READABLE)
+        if len(buf) >= refused and buf[3:5] == NOT_READABLE and checksum_ok(buf[:refused]):
+            return refused
+        if len(buf) >= value and checksum_ok(buf[:value]):
+            return value
+        return None if len(buf) < max(value, refused) and not self._silent else value
 
     def _two_forms(self, buf: bytearray, spec: _Spec) -> int | None:
         """A command with a short and a long form (see the module docstring): the long one if it is there
@@ -1751,6 +1811,11 @@ class MksCodec:
                 )
             del buf[:length]
             if self.role is Role.HOST:
+                if self._parameter is not None and (frame[1], frame[2]) == self._parameter:
+                    self._parameter = None
+                    param = frame[3:-1]
+                    return ParameterReply(frame[1], frame[2], None if len(param) != REQUEST_DATA_LENGTH[frame[2]]
+                                          or (len(param) == len(NOT_READABLE) and param == NOT_READABLE) else param)
                 return _decode_reply(frame)
             if frame[0] == HEAD_LONG:
                 return _decode_long(frame)

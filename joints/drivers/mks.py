@@ -627,6 +627,20 @@ class MksDriver(JointDriver):
                                 "position_threshold": values if threshold is not None else self.params[
                                     "position_threshold"].default})
 
+    def read_parameter(self, key: str | int) -> dict[str, int]:
+        """0x00 (V1.0.8+): read back the setting(s) of the set command that carries ``key``. The Modbus-RTU
+        manual has no such request: over Modbus it raises :class:`RegisterError`."""
+        raise RegisterError(f"{self.name}: reading a configuration parameter (0x00) is native-protocol only; the "
+                            "Modbus-RTU manual has no such request")
+
+    def read_pid(self, mode: str) -> tuple[int, int, int, int]:
+        """Kp, Ki, Kd, Kv of 0x96 (``mode="vfoc"``) / 0x97 (``"close"``), read back by 0x00 (V1.0.8+, native)."""
+        if mode not in ("vfoc", "close"):
+            raise CommandError(f"{self.name}: PID mode must be 'vfoc' (0x96) or 'close' (0x97), got {mode!r}")
+        values = self.read_parameter(f"{mode}_kp")
+        kp, ki, kd, kv = (values[f"{mode}_{k}"] for k in ("kp", "ki", "kd", "kv"))
+        return kp, ki, kd, kv
+
     def set_pid(self, mode: str, kp: int, ki: int, kd: int, kv: int, *, confirm: bool = False) -> None:
         """0x96 (``mode="vfoc"``) / 0x97 (``"close"``) PID parameters, 0-1024 each (V1.0.8+; Modbus FC16
         0x0096 / 0x0097). The manual advises against changing the factory tuning ("to avoid damaging the

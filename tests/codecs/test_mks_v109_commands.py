@@ -303,3 +303,65 @@ def test_coordinate_homing_mode_other_than_0_or_1_is_not_taken(byte: int) -> Non
     codec.flush()
     with pytest.raises(FrameError):
         codec.next_message()
+
+
+# -- 0x00 read a configuration parameter (V1.0.8) ------------------------------------------------------
+
+
+def _host_expecting(request: mks.ReadParameter, frame: bytes) -> Any:
+    codec = mks.MksCodec(Role.HOST)
+    codec.expect_parameter(request)
+    for i, b in enumerate(frame):
+        codec.feed(bytes((b,)))
+        msg = codec.next_message()
+        if i < len(frame) - 1:
+            assert msg is None, f"decoded after {i + 1} of {len(frame)} bytes"
+    return msg
+
+
+def test_read_parameter_frames_are_the_manuals_example() -> None:
+    """RS485 V1.0.9 5.1.10: ``FA 01 00 82 7D`` reads the work mode, ``FB 01 82 05 83`` answers 5 (SR_vFOC)."""
+    request = mks.ReadParameter(1, 0x82)
+    assert mks.encode(request) == bytes.fromhex("FA 01 00 82 7D")
+    assert _decode(Role.DEVICE, bytes.fromhex("FA 01 00 82 7D")) == request
+    reply = _host_expecting(request, bytes.fromhex("FB 01 82 05 83"))
+    assert reply == mks.ParameterReply(1, 0x82, b"\x05")
+    assert mks.encode(reply) == bytes.fromhex("FB 01 82 05 83")
+    assert mks.parameter_request(reply) == mks.SetWorkMode(1, 5)
+    with pytest.raises(FrameError):  # without the open request, the same bytes are a set reply of status 5
+        _decode(Role.HOST, bytes.fromhex("FB 01 82 05 83"))
+
+
+@pytest.mark.parametrize(("code", "param", "request_"), [
+    (0x83, bytes.fromhex("04 D2"), mks.SetWorkingCurrent(1, 1234)),
+    (0x96, bytes.fromhex("00 DC 00 64 01 0E 01 40"), mks.SetVfocPid(1, 0xDC, 0x64, 0x10E, 0x140)),
+])
+def test_read_parameter_reply_has_the_parameters_length(code: int, param: bytes, request_: Any) -> None:
+    frame = mks.with_checksum(bytes((0xFB, 0x01, code)) + param)
+    reply = _host_expecting(mks.ReadParameter(1, code), frame)
+    assert reply == mks.ParameterReply(1, code, param)
+    assert mks.parameter_request(reply) == request_
+
+
+@pytest.mark.parametrize("code", [0x82, 0x83, 0x96])
+def test_read_parameter_ff_ff_is_not_readable(code: int) -> None:
+    frame = mks.with_checksum(bytes((0xFB, 0x01, code, 0xFF, 0xFF)))
+    codec = mks.MksCodec(Role.HOST)
+    codec.expect_parameter(mks.ReadParameter(1, code))
+    codec.feed(frame)
+    codec.flush()
+    assert codec.next_message() == mks.ParameterReply(1, code, None)
+    assert mks.encode(mks.ParameterReply(1, code, None)) == frame
+
+
+def test_read_parameter_expectation_is_for_one_reply_and_one_address() -> None:
+    codec = mks.MksCodec(Role.HOST)
+    codec.expect_parameter(mks.ReadParameter(1, 0x83))
+    codec.feed(mks.encode(mks.SetReply(2, 0x83, mks.SetStatus.SUCCESS)))  # another drive's set reply
+    assert codec.next_message() == mks.SetReply(2, 0x83, mks.SetStatus.SUCCESS)
+    codec.feed(mks.with_checksum(bytes.fromhex("FB 01 83 04 D2")))
+    assert codec.next_message() == mks.ParameterReply(1, 0x83, bytes.fromhex("04 D2"))
+    codec.feed(mks.encode(mks.SetReply(1, 0x83, mks.SetStatus.SUCCESS)))  # the next one is a set reply again
+    assert codec.next_message() == mks.SetReply(1, 0x83, mks.SetStatus.SUCCESS)
+    with pytest.raises(EncodeError):
+        codec.expect_parameter(mks.ReadParameter(1, 0x31))  # a read, not a set command's parameter

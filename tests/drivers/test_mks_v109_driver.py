@@ -545,3 +545,42 @@ def test_coordinate_homing_needs_v109_and_go_home_keeps_its_older_form(tmp_path:
         d.go_home()  # the older frame (FA 01 91 8C / register 1) still homes
         assert _twin(rig).motion is not None and _twin(rig).motion.kind == "home"
         j.stop()
+
+
+# -- 0x00 read a configuration parameter (V1.0.8, profile v1.0.9, native only) ----------------------------
+
+
+@pytest.mark.parametrize("firmware", _having("mks-read-parameter"))
+def test_read_parameter_reads_back_what_was_written_the_pid_gains_included(tmp_path: Path, firmware: str) -> None:
+    """0x00's reply is headed by the parameter's code with that parameter's length (1 byte for 0x82, 2 for 0x83,
+    8 for 0x96): the link tells the host codec which request is open, else none of these could be framed."""
+    with open_motor(tmp_path, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        d = rig.joints["m1"].driver
+        fw = _twin(rig)
+        assert d.read_parameter("work_mode") == {"work_mode": fw.values["work_mode"]}
+        d.set_working_current(1234)
+        assert d.read_parameter("working_current") == {"working_current": 1234}
+        assert d.read_pid("vfoc") == (0xDC, 0x64, 0x10E, 0x140)  # the manual's defaults
+        d.set_pid("close", 100, 90, 80, 70, confirm=True)
+        assert d.read_pid("close") == (100, 90, 80, 70)
+        assert d.read_pid("vfoc") == (0xDC, 0x64, 0x10E, 0x140)
+        assert d.read("encoder_addition") is not None  # the ordinary replies are framed as before
+        with pytest.raises(RegisterError, match="FF FF"):
+            d.read_parameter("emergency_stop")  # a command, no setting: the twin answers FF FF
+
+
+@pytest.mark.parametrize("firmware", _lacking("mks-read-parameter"))
+def test_read_parameter_needs_v109(tmp_path: Path, firmware: str) -> None:
+    with open_motor(tmp_path, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        d = rig.joints["m1"].driver
+        sent = d.link.transactions
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.read_parameter("work_mode")
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.read_pid("vfoc")
+        assert d.link.transactions == sent  # nothing was sent
+
+
+def test_read_parameter_is_native_only(tmp_path: Path) -> None:
+    with open_motor(tmp_path, protocol="modbus-rtu") as rig, pytest.raises(RegisterError, match="native"):
+        rig.joints["m1"].driver.read_pid("vfoc")

@@ -37,6 +37,7 @@ class Command(enum.IntEnum):
     """Function codes of Parts 5 and 6 (names after the manual's section titles)."""
 
     SET_TIMED_RETURN = 0x01
+    READ_CONFIGURATION_PARAMETER = 0x00
     READ_ENCODER_VALUE_CARRY = 0x30
     READ_ENCODER_VALUE_ADDITION = 0x31
     READ_REAL_TIME_SPEED = 0x32
@@ -99,9 +100,9 @@ class Command(enum.IntEnum):
 LONG_PACKET = 0xFC  #: head of a long data package (not a function code)
 
 #: commands that carry no parameter's fields: whole blocks (joints.devices.mks.blocks, V1.0.6), the timed
-#: return of another command's reply (0x01, V1.0.9) and the synchronous execution (0x4B, V1.0.8; broadcast)
+#: return of another command's reply (0x01, V1.0.9), the read of another command's parameter (0x00, V1.0.8) and the synchronous execution (0x4B, V1.0.8; broadcast)
 BLOCK_COMMANDS = frozenset((Command.WRITE_ALL_PARAMETERS, Command.READ_ALL_PARAMETERS, Command.READ_ALL_STATUS,
-                            Command.SET_TIMED_RETURN, Command.SYNC_EXECUTE))
+                            Command.SET_TIMED_RETURN, Command.SYNC_EXECUTE, Command.READ_CONFIGURATION_PARAMETER))
 
 #: fields of a later firmware whose value 0 is the command's older, shorter frame (a drive without the feature
 #: takes the command when they are 0)
