@@ -100,7 +100,8 @@ class MksRule(Rule[Any]):
             if self.echo:
                 framing.codec.expect_echo(frame)
             # 0x00 (V1.0.8): its reply is headed by the parameter's code, with that parameter's length
-            framing.codec.expect_parameter(request if isinstance(request, mks.ReadParameter) else None)
+            framing.codec.expect_parameter(request if isinstance(request, mks.ReadParameter)
+                                           and request.code in mks.SET_REPLY_FUNCTIONS else None)
 
     def describe(self, message: Any) -> str:
         return repr(message)
