@@ -557,11 +557,21 @@ class SetTimedReturn:
 @dataclass(frozen=True, slots=True)
 class ReadParameter:
     """0x00 read a configuration parameter (V1.0.8, 5.1.10): ``code`` is the set command's function code ->
-    :class:`ParameterReply` headed by ``code`` (the host codec must be told: :meth:`MksCodec.expect_parameter`)."""
+    :class:`ParameterReply` headed by ``code`` (the host codec must be told: :meth:`MksCodec.expect_reply`)."""
 
     address: int
     code: int
     function: ClassVar[int] = 0x00
+
+
+@dataclass(frozen=True, slots=True)
+class UserId:
+    """0x42 user ID (V1.0.9, 5.1.12): ``id`` None reads it (no data) -> :class:`UserIdReply`; a uint32 writes
+    it (4 data bytes) -> set status. The host codec is told which (:meth:`MksCodec.expect_reply`)."""
+
+    address: int
+    id: int | None = None
+    function: ClassVar[int] = 0x42
 
 
 @dataclass(frozen=True, slots=True)
@@ -840,7 +850,7 @@ Request = (
     | RunSpeed | SaveCleanSpeedMode | RunRelativePulses | RunAbsolutePulses | RunRelativeAxis | RunAbsoluteAxis
     | ReadRawEncoder | SetTimedReturn | ReadVersion | SetHeartbeat | WriteAllParameters | ReadAllParameters | ReadAllStatus
     | WriteIoPort | SetPositionErrorProtection | SetPositionThreshold | SetSync | SyncExecute | IapControl
-    | SetVfocPid | SetClosePid | ReadParameter
+    | SetVfocPid | SetClosePid | ReadParameter | UserId
 )
 
 
@@ -1004,6 +1014,15 @@ class MotorStatusReply:
 
 
 @dataclass(frozen=True, slots=True)
+class UserIdReply:
+    """0x42 read (V1.0.9): the user ID, uint32 big-endian."""
+
+    address: int
+    id: int
+    function: ClassVar[int] = 0x42
+
+
+@dataclass(frozen=True, slots=True)
 class ParameterReply:
     """Reply to 0x00 (V1.0.8): ``FB addr code param chk``, ``param`` laid out as the set command ``code``'s
     data (its shorter form); ``param`` None: the drive answered ``FF FF``, "this parameter does not support
@@ -1105,7 +1124,7 @@ Reply = (
     EncoderCarryReply | EncoderAdditionReply | SpeedReply | PulsesReply | IoStatusReply | AngleErrorReply
     | EnPinReply | GoBackToZeroStatusReply | ProtectionStateReply | CalibrationReply | MotorStatusReply | SetReply
     | RunReply | VersionReply | AllParametersReply | AllStatusReply | TimedReturnReply | RawEncoderReply
-    | ParameterReply
+    | ParameterReply | UserIdReply
 )
 Message = Request | UnknownRequest | LongPacket | Reply
 
@@ -1179,6 +1198,14 @@ def _unpack_working_current(address: int, function: int, data: bytes, frame: byt
     if len(data) > 2 and data[2]:
         raise FrameError(f"0x83: the byte after the current must be 00 (not saved), got {frame.hex(' ')}", data=frame)
     return SetWorkingCurrent(address, int.from_bytes(data[:2], "big"), int(len(data) > 2))
+
+
+def _pack_user_id(msg: Any) -> bytes:
+    return b"" if msg.id is None else _check_int("UserId.id", msg.id, 0, 0xFFFFFFFF).to_bytes(4, "big")
+
+
+def _unpack_user_id(address: int, function: int, data: bytes, frame: bytes) -> UserId:
+    return UserId(address, int.from_bytes(data, "big") if data else None)
 
 
 def _pack_go_home(msg: Any) -> bytes:
@@ -1443,6 +1470,7 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _struct(ReadRawEncoder),
     _struct(SetTimedReturn, "BH", ("code", "times")),
     _struct(ReadParameter, "B", ("code",)),
+    _Spec(UserId, 0, _pack_user_id, _unpack_user_id, 4, None, lambda f: True),
     _struct(ReadVersion),
     _struct(SetHeartbeat, "I", ("times",)),
     _raw(WriteAllParameters, ALL_PARAMETERS_SIZE),
@@ -1466,7 +1494,11 @@ RUN_REPLY_FUNCTIONS = frozenset((0x91, 0xF4, 0xF5, 0xF6, 0xFD, 0xFE, 0xFF))
 SET_REPLY_FUNCTIONS = frozenset((0x3D, 0x3F, 0x41, 0x82, 0x83, 0x84, 0x85, 0x86, 0x87, 0x88, 0x89, 0x8A, 0x8B,
                                  0x8C, 0x8D, 0x8E, 0x8F, 0x90, 0x92, 0x94, 0x98, 0x9A, 0x9B, 0x9E, 0xF3, 0xF7,
                                  0x46, 0x36, 0x9D, 0x95, 0x4A, 0x50, 0x96, 0x97,
-                                 0x4B))  # 0x4B is never answered (the layout keeps the table total)
+                                 0x4B, 0x42))  # 0x4B is never answered (the layout keeps the table total)
+#: 0x42 (V1.0.9) answers a write with a set status (above), a read with the ID (UserIdReply: the host is told)
+_USER_ID_REPLY = _struct(UserIdReply, "I", ("id",))
+#: the codes 0x00 (V1.0.8) may read: the set commands (0x42 has its own read)
+PARAMETER_CODES = SET_REPLY_FUNCTIONS - {UserId.function}
 
 _RUN_REPLY = _coded_spec(RunReply, RunStatus)
 _SET_REPLY_ANY = _coded_spec(SetReply, SetStatus)
@@ -1575,6 +1607,9 @@ def encode(message: Message) -> bytes:
         spec = _SET_REPLY if isinstance(message, SetReply) else _RUN_REPLY
         return with_checksum(bytes((HEAD_UPLINK, _check_u8("address", message.address), function))
                              + spec.pack(message))
+    if isinstance(message, UserIdReply):
+        return with_checksum(bytes((HEAD_UPLINK, _check_u8("address", message.address), UserId.function))
+                             + _USER_ID_REPLY.pack(message))
     if isinstance(message, ParameterReply):
         function = _check_u8("function", message.function)
         param = NOT_READABLE if message.param is None else bytes(message.param)
@@ -1663,6 +1698,7 @@ class MksCodec:
         self._buf = bytearray()
         self._echo: bytes | None = None
         self._parameter: tuple[int, int] | None = None  #: (address, code) of an open 0x00 read (host role)
+        self._user_id_read: int | None = None  #: address of an open 0x42 read (host role)
         self._silent = False
         self.discarded = 0  #: bytes dropped while resynchronising (garbage, bad frames, other direction)
 
@@ -1691,12 +1727,15 @@ class MksCodec:
         """Skip this exact frame once if it arrives first (RS485 adapter local echo)."""
         self._echo = bytes(frame)
 
-    def expect_parameter(self, request: ReadParameter | None) -> None:
-        """The open request is a 0x00 read (or None: it is not): its reply, headed by the parameter's code
-        from that address, is framed as a :class:`ParameterReply` (the host cannot know it otherwise)."""
-        if request is not None and request.code not in SET_REPLY_FUNCTIONS:
+    def expect_reply(self, request: object) -> None:
+        """The request now open (host role), for the replies whose layout the request decides: a 0x00 read's
+        reply, headed by the parameter's code from that address, is a :class:`ParameterReply`; 0x42 without
+        an ID is answered by a :class:`UserIdReply`, with one by a set status. Any other request (or None)
+        clears it."""
+        self._user_id_read = request.address if isinstance(request, UserId) and request.id is None else None
+        if isinstance(request, ReadParameter) and request.code not in PARAMETER_CODES:
             raise EncodeError(f"0x00 reads a set command's parameter; 0x{request.code:02X} is none")
-        self._parameter = None if request is None else (request.address, request.code)
+        self._parameter = (request.address, request.code) if isinstance(request, ReadParameter) else None
 
     # -- output --
     @staticmethod
@@ -1713,6 +1752,8 @@ class MksCodec:
                 return None
             if self._parameter is not None and (buf[1], buf[2]) == self._parameter:
                 return self._parameter_length(buf)
+            if buf[2] == UserId.function and buf[1] == self._user_id_read:
+                return MIN_FRAME + _USER_ID_REPLY.size
             if buf[2] == 0x3B:  # one or two statuses (V1.0.7)
                 return _zero_status_length(buf, self._silent)
             n = REPLY_DATA_LENGTH.get(buf[2])
@@ -1816,6 +1857,9 @@ class MksCodec:
                     param = frame[3:-1]
                     return ParameterReply(frame[1], frame[2], None if len(param) != REQUEST_DATA_LENGTH[frame[2]]
                                           or (len(param) == len(NOT_READABLE) and param == NOT_READABLE) else param)
+                if frame[2] == UserId.function and frame[1] == self._user_id_read:
+                    self._user_id_read = None
+                    return _USER_ID_REPLY.unpack(frame[1], frame[2], frame[3:-1], frame)  # type: ignore[no-any-return]
                 return _decode_reply(frame)
             if frame[0] == HEAD_LONG:
                 return _decode_long(frame)

@@ -281,7 +281,7 @@ class MksNativeDriver(MksDriver):
                                 f"(V1.0.8); the joint's firmware is {self.firmware.firmware}")
         name = self.access.resolve(key)
         code = int(MKS_NATIVE.key(name).command)
-        if code not in mks.SET_REPLY_FUNCTIONS:
+        if code not in mks.PARAMETER_CODES:
             raise RegisterError(f"{self.name}: {name} (0x{code:02X}) is not a configuration parameter; read it "
                                 "with read()")
         reply = self.link.request(mks.ReadParameter(self.address, code), idempotent=True)

@@ -16,7 +16,8 @@ Rule (manual Parts 4-6, 5.2 #13 and #16, 5.7):
   tells it after the drive confirmed the setting.
 * 0x00 read a configuration parameter (V1.0.8): the reply is headed by the parameter's code and has its
   length, so the rule tells the host codec which request is open (:meth:`MksRule.before_send`) and
-  matches the reply by that code.
+  matches the reply by that code. 0x42 user ID (V1.0.9): a read is answered by the ID, a write by a
+  status; the codec is told the same way.
 * Timed returns (V1.0.9 0x01): the drive sends a read's reply every n ms, unasked; one that does
   not answer the outstanding request goes to the subscribers (:meth:`MksLink.subscribe_returns`).
 * A status 0 ("set fail", "run fail", "query fail") is the drive's refusal:
@@ -53,7 +54,7 @@ _REPLIES = (mks.EncoderCarryReply, mks.EncoderAdditionReply, mks.SpeedReply, mks
             mks.AngleErrorReply, mks.EnPinReply, mks.GoBackToZeroStatusReply, mks.ProtectionStateReply,
             mks.CalibrationReply, mks.MotorStatusReply, mks.SetReply, mks.RunReply, mks.VersionReply,
             mks.AllParametersReply, mks.AllStatusReply, mks.TimedReturnReply,
-            mks.RawEncoderReply, mks.ParameterReply)
+            mks.RawEncoderReply, mks.ParameterReply, mks.UserIdReply)
 
 
 def is_completion(message: Any) -> bool:
@@ -99,9 +100,10 @@ class MksRule(Rule[Any]):
         if isinstance(framing, StreamFraming):
             if self.echo:
                 framing.codec.expect_echo(frame)
-            # 0x00 (V1.0.8): its reply is headed by the parameter's code, with that parameter's length
-            framing.codec.expect_parameter(request if isinstance(request, mks.ReadParameter)
-                                           and request.code in mks.SET_REPLY_FUNCTIONS else None)
+            # 0x00 (V1.0.8): its reply is headed by the parameter's code, with that parameter's length; 0x42
+            # (V1.0.9): a read is answered by the ID, a write by a status
+            framing.codec.expect_reply(None if isinstance(request, mks.ReadParameter)
+                                       and request.code not in mks.PARAMETER_CODES else request)
 
     def describe(self, message: Any) -> str:
         return repr(message)

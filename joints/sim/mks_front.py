@@ -79,6 +79,9 @@ class MksNativeFront:
         if isinstance(request, mks.UnknownRequest) or not fw.hears(request.function):
             return None  # (the IAP boot loader or silent state: V1.0.8 0x50)
         code = request.function
+        if isinstance(request, mks.UserId) and request.id is None:  # 0x42 read (V1.0.9); a write goes on below
+            return mks.UserIdReply(request.address, fw.values["user_id"]) if fw.supports("user_id") and answer \
+                else None
         if code in BLOCK_COMMANDS:
             return self._block(request, answer)
         names = tuple(n for n in fields_of(code) if fw.supports(n) or (code not in _READS and not (
@@ -116,7 +119,7 @@ class MksNativeFront:
         """0x00 (V1.0.8): set command ``code``'s data as it would write what the drive holds now (its shorter
         form); None (FF FF) for a command that sets no stored setting (our reading of "parameter-only")."""
         fw = self.firmware
-        names = fields_of(code) if code in mks.SET_REPLY_FUNCTIONS and code in mks.REQUEST_TYPES else ()
+        names = fields_of(code) if code in mks.PARAMETER_CODES and code in mks.REQUEST_TYPES else ()
         kept = [n for n in names if n not in OPTIONAL_FIELDS]
         if not kept or not all(fw.supports(n) and fw.params[n].access is not Access.COMMAND
                                and MKS_NATIVE.key(n).field for n in kept):

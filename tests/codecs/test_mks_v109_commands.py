@@ -310,7 +310,7 @@ def test_coordinate_homing_mode_other_than_0_or_1_is_not_taken(byte: int) -> Non
 
 def _host_expecting(request: mks.ReadParameter, frame: bytes) -> Any:
     codec = mks.MksCodec(Role.HOST)
-    codec.expect_parameter(request)
+    codec.expect_reply(request)
     for i, b in enumerate(frame):
         codec.feed(bytes((b,)))
         msg = codec.next_message()
@@ -347,7 +347,7 @@ def test_read_parameter_reply_has_the_parameters_length(code: int, param: bytes,
 def test_read_parameter_ff_ff_is_not_readable(code: int) -> None:
     frame = mks.with_checksum(bytes((0xFB, 0x01, code, 0xFF, 0xFF)))
     codec = mks.MksCodec(Role.HOST)
-    codec.expect_parameter(mks.ReadParameter(1, code))
+    codec.expect_reply(mks.ReadParameter(1, code))
     codec.feed(frame)
     codec.flush()
     assert codec.next_message() == mks.ParameterReply(1, code, None)
@@ -356,7 +356,7 @@ def test_read_parameter_ff_ff_is_not_readable(code: int) -> None:
 
 def test_read_parameter_expectation_is_for_one_reply_and_one_address() -> None:
     codec = mks.MksCodec(Role.HOST)
-    codec.expect_parameter(mks.ReadParameter(1, 0x83))
+    codec.expect_reply(mks.ReadParameter(1, 0x83))
     codec.feed(mks.encode(mks.SetReply(2, 0x83, mks.SetStatus.SUCCESS)))  # another drive's set reply
     assert codec.next_message() == mks.SetReply(2, 0x83, mks.SetStatus.SUCCESS)
     codec.feed(mks.with_checksum(bytes.fromhex("FB 01 83 04 D2")))
@@ -364,4 +364,30 @@ def test_read_parameter_expectation_is_for_one_reply_and_one_address() -> None:
     codec.feed(mks.encode(mks.SetReply(1, 0x83, mks.SetStatus.SUCCESS)))  # the next one is a set reply again
     assert codec.next_message() == mks.SetReply(1, 0x83, mks.SetStatus.SUCCESS)
     with pytest.raises(EncodeError):
-        codec.expect_parameter(mks.ReadParameter(1, 0x31))  # a read, not a set command's parameter
+        codec.expect_reply(mks.ReadParameter(1, 0x31))  # a read, not a set command's parameter
+
+
+# -- 0x42 user ID (V1.0.9) -------------------------------------------------------------------------------
+
+
+def test_user_id_read_and_write_forms() -> None:
+    """RS485 V1.0.9 5.1.12: ``FA addr 42 chk`` reads, ``FA addr 42 ID[4] chk`` writes; the read's reply
+    carries the ID, the write's a status."""
+    assert mks.encode(mks.UserId(1)) == bytes.fromhex("FA 01 42 3D")
+    write = mks.with_checksum(bytes.fromhex("FA 01 42 12 34 56 78"))
+    assert mks.encode(mks.UserId(1, 0x12345678)) == write
+    codec = mks.MksCodec(Role.DEVICE)
+    codec.feed(bytes.fromhex("FA 01 42 3D"))
+    codec.flush()  # the short form at silence
+    assert codec.next_message() == mks.UserId(1)
+    codec.feed(write)
+    assert codec.next_message() == mks.UserId(1, 0x12345678)
+    host = mks.MksCodec(Role.HOST)
+    host.expect_reply(mks.UserId(1))
+    reply = mks.encode(mks.UserIdReply(1, 0x12345678))
+    assert reply == mks.with_checksum(bytes.fromhex("FB 01 42 12 34 56 78"))
+    host.feed(reply)
+    assert host.next_message() == mks.UserIdReply(1, 0x12345678)
+    host.expect_reply(mks.UserId(1, 5))
+    host.feed(mks.encode(mks.SetReply(1, 0x42, mks.SetStatus.SUCCESS)))
+    assert host.next_message() == mks.SetReply(1, 0x42, mks.SetStatus.SUCCESS)

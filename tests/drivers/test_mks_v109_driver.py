@@ -584,3 +584,35 @@ def test_read_parameter_needs_v109(tmp_path: Path, firmware: str) -> None:
 def test_read_parameter_is_native_only(tmp_path: Path) -> None:
     with open_motor(tmp_path, protocol="modbus-rtu") as rig, pytest.raises(RegisterError, match="native"):
         rig.joints["m1"].driver.read_pid("vfoc")
+
+
+# -- 0x42 user ID (V1.0.9, native only) ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("firmware", _having("mks-user-id"))
+def test_user_id_is_written_and_read_back(tmp_path: Path, firmware: str) -> None:
+    """A read (no data) is answered by the 4-byte ID, a write (4 bytes) by a status: the link tells the codec."""
+    with open_motor(tmp_path, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        d = rig.joints["m1"].driver
+        assert d.read("user_id") == 0
+        d.write_param("user_id", 0x12345678)
+        assert _twin(rig).values["user_id"] == 0x12345678
+        assert d.read("user_id") == 0x12345678
+        assert d.read("encoder_addition") is not None  # the next reads are framed as before
+
+
+@pytest.mark.parametrize("firmware", _lacking("mks-user-id"))
+def test_user_id_needs_v109(tmp_path: Path, firmware: str) -> None:
+    with open_motor(tmp_path, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        d = rig.joints["m1"].driver
+        sent = d.link.transactions
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.read("user_id")
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.write_param("user_id", 7)
+        assert d.link.transactions == sent  # nothing was sent
+
+
+def test_user_id_is_native_only(tmp_path: Path) -> None:
+    with open_motor(tmp_path, protocol="modbus-rtu") as rig, pytest.raises(RegisterError):
+        rig.joints["m1"].driver.read("user_id")

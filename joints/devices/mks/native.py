@@ -56,6 +56,7 @@ class Command(enum.IntEnum):
     READ_ALL_PARAMETERS = 0x47
     READ_ALL_STATUS = 0x48
     RESTART_MOTOR = 0x41
+    USER_ID = 0x42
     SET_SYNC = 0x4A
     IAP_CONTROL = 0x50
     SYNC_EXECUTE = 0x4B
@@ -237,6 +238,7 @@ _KEYS: dict[str, NativeKey] = {
     "position_mode4_abs_axis": NativeKey(C.POSITION_MODE4_ABSOLUTE_AXIS, "abs_axis"),
     "raw_encoder_value": NativeKey(C.READ_RAW_ENCODER_VALUE, "value"),
     "version_information": NativeKey(C.READ_VERSION_INFORMATION, "version"),
+    "user_id": NativeKey(C.USER_ID, "id"),
     "heartbeat_protection_time": NativeKey(C.SET_HEARTBEAT_PROTECTION_TIME, "times"),
     "write_io_out2_mask": NativeKey(C.WRITE_IO_PORT, "out2_mask"),
     "write_io_out1_mask": NativeKey(C.WRITE_IO_PORT, "out1_mask"),
