@@ -43,8 +43,11 @@ replies (FB addr code param chk), arriving unsolicited.
   the values (statuses are 0-2, see :func:`_zero_status_length`).
 * Two forms (V1.0.7): 0xF6 carries 3 data bytes, or 7 with a runTime; 0x83 2, or 3 with a trailing 00
   (the current changed while running, not saved; answered with status 2, which no other set command
-  has); 0x91 none, or 1 goZeroMode (V1.0.9: 00 origin homing, as without it; 01 coordinate homing)
-  (:data:`REQUEST_LONG_DATA_LENGTH`).
+  has); 0x91 none, or 1 goZeroMode (V1.0.9: 00 origin homing, as without it; 01 coordinate homing);
+  0x42 none (read the user ID) or 4 (write it) (:data:`REQUEST_LONG_DATA_LENGTH`).
+* Replies the request decides (host role, :meth:`MksCodec.expect_reply`, told by the link): 0x00's
+  (V1.0.8) is headed by the code of the parameter read, with that set command's data (or FF FF, "not
+  readable"): :class:`ParameterReply`; 0x42's is the 4-byte ID after a read, a set status after a write.
   The device side takes the long form when its frame is there, checksum-valid and plausible (runTime
   <= 0x0FFFFFFF: the next frame's head FA/FB/FC can never pass as its first byte), else the short
   one: at once when its checksum byte cannot be a runTime's first byte (above 0x0F: 15 in 16 frames),
@@ -1586,6 +1589,8 @@ def _encode_long(msg: LongPacket) -> bytes:
             continue
         if isinstance(cmd, LongPacket):
             raise EncodeError("a long packet cannot contain a long packet")
+        if isinstance(cmd, UserId) and cmd.id is None:  # (a slot's padding would read as the ID 0: a write)
+            raise EncodeError(f"long packet slot {i + 1}: a 0x42 read gets no answer in a long packet")
         inner = _inner(cmd, LONG_PACKET_SLOT - 2)
         if len(inner) > LONG_PACKET_SLOT:
             raise EncodeError(f"long packet slot {i + 1}: {type(cmd).__name__} does not fit {LONG_PACKET_SLOT} bytes")
