@@ -678,6 +678,9 @@ class MksDriver(JointDriver):
     def go_home(self) -> None:
         """0x91 go home (limit switch, or 'noLimit' per 0x94); the end comes as a completion / status 1."""
         self.write_param("go_home", 1, idempotent=False)
+        self._sent_count = self.completions
+        self._running = "home"
+        self._sent_at = self.clock.now()
 
     def coordinate_home(self) -> None:
         """0x91 goZeroMode 01 / FC06 0x0091 = 2 (V1.0.9): run to the coordinate zero point (the one the last
