@@ -245,7 +245,8 @@ class MksFirmware(Firmware):
         self.end_stops: tuple[float | None, float | None] = (None, None)  #: trigger angles [rad]
         #: completion statuses waiting for a front
         self.completions: deque[Completion] = deque()
-        self._persistent = frozenset(p.name for p in params if p.access is Access.W and p.name != "motor_enable")
+        self._persistent = frozenset(p.name for p in params if p.access in (Access.W, Access.RW)  # (RW: 0x42 user ID)
+                                     and p.name != "motor_enable")
         self.computed.update({
             "encoder_carry": lambda: self._sensed_counts() // COUNTS,
             "encoder_value": lambda: self._sensed_counts() % COUNTS,
