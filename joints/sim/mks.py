@@ -95,6 +95,10 @@ Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; defa
     starts it (:meth:`MksFirmware.sync_execute`). A second run command before 0x4B replaces the held one
     (the manual does not say; our choice); stops, 0xF7 and disabling act at once and drop it; a power cycle
     drops it too (the flag itself is a setting, kept in flash).
+    V1.0.9's coordinate homing (0x91 goZeroMode 01, FC06 0x0091 = 2) is a position move to axis 0 at
+    HmSpeed without a search (the manuals' "directly runs to the coordinate zero point"); it ends with go
+    home's completion and leaves the zero where it is. V1.0.9's user ID (0x42) is kept in flash. V1.0.8's
+    0x00 answers a set command's data from what the twin holds (the front), FF FF for a command.
     V1.0.6's 0x46/0x47/0x48 (:mod:`joints.devices.mks.blocks`) write/read the same settings and
     statuses as the single commands; a 0x46 with any value out of range changes nothing (status 0).
 
