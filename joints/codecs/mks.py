@@ -43,7 +43,11 @@ replies (FB addr code param chk), arriving unsolicited.
   the values (statuses are 0-2, see :func:`_zero_status_length`).
 * Two forms (V1.0.7): 0xF6 carries 3 data bytes, or 7 with a runTime; 0x83 2, or 3 with a trailing 00
   (the current changed while running, not saved; answered with status 2, which no other set command
-  has) (:data:`REQUEST_LONG_DATA_LENGTH`).
+  has); 0x91 none, or 1 goZeroMode (V1.0.9: 00 origin homing, as without it; 01 coordinate homing);
+  0x42 none (read the user ID) or 4 (write it) (:data:`REQUEST_LONG_DATA_LENGTH`).
+* Replies the request decides (host role, :meth:`MksCodec.expect_reply`, told by the link): 0x00's
+  (V1.0.8) is headed by the code of the parameter read, with that set command's data (or FF FF, "not
+  readable"): :class:`ParameterReply`; 0x42's is the 4-byte ID after a read, a set status after a write.
   The device side takes the long form when its frame is there, checksum-valid and plausible (runTime
   <= 0x0FFFFFFF: the next frame's head FA/FB/FC can never pass as its first byte), else the short
   one: at once when its checksum byte cannot be a runTime's first byte (above 0x0F: 15 in 16 frames),
@@ -145,6 +149,7 @@ __all__ = [
     "checksum",
     "checksum_ok",
     "encode",
+    "parameter_request",
     "with_checksum",
 ]
 
@@ -495,9 +500,11 @@ class SetHomeParameters:
 
 @dataclass(frozen=True, slots=True)
 class GoHome:
-    """0x91 go home -> :class:`RunReply` (1 start, later 2 success)."""
+    """0x91 go home -> :class:`RunReply` (1 start, later 2 success). ``mode`` (goZeroMode, V1.0.9 7.3.6): 0
+    "origin homing" (the frame without the byte, or with 00), 1 "coordinate homing" (``FA 01 91 01 8D``)."""
 
     address: int
+    mode: int = 0
     function: ClassVar[int] = 0x91
 
 
@@ -548,6 +555,26 @@ class SetTimedReturn:
     code: int
     times: int
     function: ClassVar[int] = 0x01
+
+
+@dataclass(frozen=True, slots=True)
+class ReadParameter:
+    """0x00 read a configuration parameter (V1.0.8, 5.1.10): ``code`` is the set command's function code ->
+    :class:`ParameterReply` headed by ``code`` (the host codec must be told: :meth:`MksCodec.expect_reply`)."""
+
+    address: int
+    code: int
+    function: ClassVar[int] = 0x00
+
+
+@dataclass(frozen=True, slots=True)
+class UserId:
+    """0x42 user ID (V1.0.9, 5.1.12): ``id`` None reads it (no data) -> :class:`UserIdReply`; a uint32 writes
+    it (4 data bytes) -> set status. The host codec is told which (:meth:`MksCodec.expect_reply`)."""
+
+    address: int
+    id: int | None = None
+    function: ClassVar[int] = 0x42
 
 
 @dataclass(frozen=True, slots=True)
@@ -826,7 +853,7 @@ Request = (
     | RunSpeed | SaveCleanSpeedMode | RunRelativePulses | RunAbsolutePulses | RunRelativeAxis | RunAbsoluteAxis
     | ReadRawEncoder | SetTimedReturn | ReadVersion | SetHeartbeat | WriteAllParameters | ReadAllParameters | ReadAllStatus
     | WriteIoPort | SetPositionErrorProtection | SetPositionThreshold | SetSync | SyncExecute | IapControl
-    | SetVfocPid | SetClosePid
+    | SetVfocPid | SetClosePid | ReadParameter | UserId
 )
 
 
@@ -990,6 +1017,26 @@ class MotorStatusReply:
 
 
 @dataclass(frozen=True, slots=True)
+class UserIdReply:
+    """0x42 read (V1.0.9): the user ID, uint32 big-endian."""
+
+    address: int
+    id: int
+    function: ClassVar[int] = 0x42
+
+
+@dataclass(frozen=True, slots=True)
+class ParameterReply:
+    """Reply to 0x00 (V1.0.8): ``FB addr code param chk``, ``param`` laid out as the set command ``code``'s
+    data (its shorter form); ``param`` None: the drive answered ``FF FF``, "this parameter does not support
+    reading"."""
+
+    address: int
+    function: int  #: the code of the parameter read (not 0x00)
+    param: bytes | None
+
+
+@dataclass(frozen=True, slots=True)
 class VersionReply:
     """0x40 (V1.0.9): the four data bytes as one big-endian ``version`` (uint32): b31-b28 calibration
     status, b27-b24 hardware version (1 S42D_485, 2 S42D_CAN, 3 S57D_485, 4 S57D_CAN ...), b23-b0 the
@@ -1080,6 +1127,7 @@ Reply = (
     EncoderCarryReply | EncoderAdditionReply | SpeedReply | PulsesReply | IoStatusReply | AngleErrorReply
     | EnPinReply | GoBackToZeroStatusReply | ProtectionStateReply | CalibrationReply | MotorStatusReply | SetReply
     | RunReply | VersionReply | AllParametersReply | AllStatusReply | TimedReturnReply | RawEncoderReply
+    | ParameterReply | UserIdReply
 )
 Message = Request | UnknownRequest | LongPacket | Reply
 
@@ -1153,6 +1201,24 @@ def _unpack_working_current(address: int, function: int, data: bytes, frame: byt
     if len(data) > 2 and data[2]:
         raise FrameError(f"0x83: the byte after the current must be 00 (not saved), got {frame.hex(' ')}", data=frame)
     return SetWorkingCurrent(address, int.from_bytes(data[:2], "big"), int(len(data) > 2))
+
+
+def _pack_user_id(msg: Any) -> bytes:
+    return b"" if msg.id is None else _check_int("UserId.id", msg.id, 0, 0xFFFFFFFF).to_bytes(4, "big")
+
+
+def _unpack_user_id(address: int, function: int, data: bytes, frame: bytes) -> UserId:
+    return UserId(address, int.from_bytes(data, "big") if data else None)
+
+
+def _pack_go_home(msg: Any) -> bytes:
+    return bytes((1,)) if _check_int("GoHome.mode", msg.mode, 0, 1) else b""
+
+
+def _unpack_go_home(address: int, function: int, data: bytes, frame: bytes) -> GoHome:
+    if data and data[0] > 1:
+        raise FrameError(f"0x91: goZeroMode must be 00 or 01, got {frame.hex(' ')}", data=frame)
+    return GoHome(address, data[0] if data else 0)
 
 
 def _pack_subdivision(msg: Any) -> bytes:
@@ -1389,7 +1455,7 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _struct(SetModbusRtu, "B", ("enable",)),
     _struct(SetKeyLock, "B", ("lock",)),
     _struct(SetHomeParameters, "BBHB", ("trigger_level", "direction", "speed", "end_limit")),
-    _struct(GoHome),
+    _Spec(GoHome, 0, _pack_go_home, _unpack_go_home, 1, lambda d: d[0] <= 1, lambda f: f[-1] <= 1),
     _struct(SetAxisZero),
     _struct(SetNoLimitHomeParameters, "IBH", ("reverse_angle", "mode", "current")),
     _struct(SetZeroMode, "BBBB", ("mode", "set_zero", "speed", "direction")),
@@ -1406,6 +1472,8 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _struct(RunAbsoluteAxis, "HBi", ("speed", "acc", "abs_axis")),
     _struct(ReadRawEncoder),
     _struct(SetTimedReturn, "BH", ("code", "times")),
+    _struct(ReadParameter, "B", ("code",)),
+    _Spec(UserId, 0, _pack_user_id, _unpack_user_id, 4, None, lambda f: True),
     _struct(ReadVersion),
     _struct(SetHeartbeat, "I", ("times",)),
     _raw(WriteAllParameters, ALL_PARAMETERS_SIZE),
@@ -1429,7 +1497,11 @@ RUN_REPLY_FUNCTIONS = frozenset((0x91, 0xF4, 0xF5, 0xF6, 0xFD, 0xFE, 0xFF))
 SET_REPLY_FUNCTIONS = frozenset((0x3D, 0x3F, 0x41, 0x82, 0x83, 0x84, 0x85, 0x86, 0x87, 0x88, 0x89, 0x8A, 0x8B,
                                  0x8C, 0x8D, 0x8E, 0x8F, 0x90, 0x92, 0x94, 0x98, 0x9A, 0x9B, 0x9E, 0xF3, 0xF7,
                                  0x46, 0x36, 0x9D, 0x95, 0x4A, 0x50, 0x96, 0x97,
-                                 0x4B))  # 0x4B is never answered (the layout keeps the table total)
+                                 0x4B, 0x42))  # 0x4B is never answered (the layout keeps the table total)
+#: 0x42 (V1.0.9) answers a write with a set status (above), a read with the ID (UserIdReply: the host is told)
+_USER_ID_REPLY = _struct(UserIdReply, "I", ("id",))
+#: the codes 0x00 (V1.0.8) may read: the set commands (0x42 has its own read)
+PARAMETER_CODES = SET_REPLY_FUNCTIONS - {UserId.function}
 
 _RUN_REPLY = _coded_spec(RunReply, RunStatus)
 _SET_REPLY_ANY = _coded_spec(SetReply, SetStatus)
@@ -1482,7 +1554,9 @@ REQUEST_LONG_DATA_LENGTH: Mapping[int, int] = MappingProxyType({f: s.long for f,
 REPLY_TYPES: Mapping[int, type] = MappingProxyType({f: s.cls for f, s in sorted(_REPLIES.items())})
 REPLY_DATA_LENGTH: Mapping[int, int] = MappingProxyType({f: s.size for f, s in sorted(_REPLIES.items())})
 
-assert set(REQUEST_TYPES) == set(REPLY_TYPES), "every command has a reply layout"
+assert set(REQUEST_TYPES) - {ReadParameter.function} == set(REPLY_TYPES), "every command has a reply layout"
+#: 0x00's reply is headed by the parameter's code, its data laid out as that set command's (shorter form)
+NOT_READABLE = b"\xff\xff"
 
 
 # --- encoding --------------------------------------------------------------------------------
@@ -1515,6 +1589,8 @@ def _encode_long(msg: LongPacket) -> bytes:
             continue
         if isinstance(cmd, LongPacket):
             raise EncodeError("a long packet cannot contain a long packet")
+        if isinstance(cmd, UserId) and cmd.id is None:  # (a slot's padding would read as the ID 0: a write)
+            raise EncodeError(f"long packet slot {i + 1}: a 0x42 read gets no answer in a long packet")
         inner = _inner(cmd, LONG_PACKET_SLOT - 2)
         if len(inner) > LONG_PACKET_SLOT:
             raise EncodeError(f"long packet slot {i + 1}: {type(cmd).__name__} does not fit {LONG_PACKET_SLOT} bytes")
@@ -1536,6 +1612,16 @@ def encode(message: Message) -> bytes:
         spec = _SET_REPLY if isinstance(message, SetReply) else _RUN_REPLY
         return with_checksum(bytes((HEAD_UPLINK, _check_u8("address", message.address), function))
                              + spec.pack(message))
+    if isinstance(message, UserIdReply):
+        return with_checksum(bytes((HEAD_UPLINK, _check_u8("address", message.address), UserId.function))
+                             + _USER_ID_REPLY.pack(message))
+    if isinstance(message, ParameterReply):
+        function = _check_u8("function", message.function)
+        param = NOT_READABLE if message.param is None else bytes(message.param)
+        if message.param is not None and len(param) != REQUEST_DATA_LENGTH.get(function, -1):
+            raise EncodeError(f"ParameterReply: 0x{function:02X}'s parameter is "
+                              f"{REQUEST_DATA_LENGTH.get(function)} bytes, got {param.hex(' ')}")
+        return with_checksum(bytes((HEAD_UPLINK, _check_u8("address", message.address), function)) + param)
     reply_spec = _REPLY_BY_TYPE.get(type(message))
     if reply_spec is not None:
         return with_checksum(bytes((HEAD_UPLINK, _check_u8("address", message.address),
@@ -1554,6 +1640,14 @@ def _decode_request(frame: bytes) -> Request | UnknownRequest:
     if spec is None:
         return UnknownRequest(address, function, frame[3:-1])
     return spec.unpack(address, function, frame[3:-1], frame)  # type: ignore[no-any-return]
+
+
+def parameter_request(reply: ParameterReply) -> Request:
+    """The set command whose data a 0x00 reply carries, decoded as that command (its fields, by name)."""
+    spec = _REQUESTS.get(reply.function)
+    if reply.param is None or spec is None or len(reply.param) != spec.size:
+        raise FrameError(f"not a readable parameter's reply: {reply!r}", data=encode(reply))
+    return spec.unpack(reply.address, reply.function, reply.param, encode(reply))  # type: ignore[no-any-return]
 
 
 def _decode_reply(frame: bytes) -> Reply:
@@ -1608,6 +1702,8 @@ class MksCodec:
         self.role = role
         self._buf = bytearray()
         self._echo: bytes | None = None
+        self._parameter: tuple[int, int] | None = None  #: (address, code) of an open 0x00 read (host role)
+        self._user_id_read: int | None = None  #: address of an open 0x42 read (host role)
         self._silent = False
         self.discarded = 0  #: bytes dropped while resynchronising (garbage, bad frames, other direction)
 
@@ -1636,6 +1732,16 @@ class MksCodec:
         """Skip this exact frame once if it arrives first (RS485 adapter local echo)."""
         self._echo = bytes(frame)
 
+    def expect_reply(self, request: object) -> None:
+        """The request now open (host role), for the replies whose layout the request decides: a 0x00 read's
+        reply, headed by the parameter's code from that address, is a :class:`ParameterReply`; 0x42 without
+        an ID is answered by a :class:`UserIdReply`, with one by a set status. Any other request (or None)
+        clears it."""
+        self._user_id_read = request.address if isinstance(request, UserId) and request.id is None else None
+        if isinstance(request, ReadParameter) and request.code not in PARAMETER_CODES:
+            raise EncodeError(f"0x00 reads a set command's parameter; 0x{request.code:02X} is none")
+        self._parameter = (request.address, request.code) if isinstance(request, ReadParameter) else None
+
     # -- output --
     @staticmethod
     def encode(message: Message) -> bytes:
@@ -1649,6 +1755,10 @@ class MksCodec:
                 return 0
             if len(buf) < 3:
                 return None
+            if self._parameter is not None and (buf[1], buf[2]) == self._parameter:
+                return self._parameter_length(buf)
+            if buf[2] == UserId.function and buf[1] == self._user_id_read:
+                return MIN_FRAME + _USER_ID_REPLY.size
             if buf[2] == 0x3B:  # one or two statuses (V1.0.7)
                 return _zero_status_length(buf, self._silent)
             n = REPLY_DATA_LENGTH.get(buf[2])
@@ -1668,6 +1778,15 @@ class MksCodec:
         if spec.long:
             return self._two_forms(buf, spec)
         return MIN_FRAME + spec.size
+
+    def _parameter_length(self, buf: bytearray) -> int | None:
+        """A 0x00 reply: the parameter's data, or FF FF ("not readable") when that frame is there and valid."""
+        value, refused = MIN_FRAME + REQUEST_DATA_LENGTH[buf[2]], MIN_FRAME + len(NOT_READABLE)
+        if len(buf) >= refused and buf[3:5] == NOT_READABLE and checksum_ok(buf[:refused]):
+            return refused
+        if len(buf) >= value and checksum_ok(buf[:value]):
+            return value
+        return None if len(buf) < max(value, refused) and not self._silent else value
 
     def _two_forms(self, buf: bytearray, spec: _Spec) -> int | None:
         """A command with a short and a long form (see the module docstring): the long one if it is there
@@ -1738,6 +1857,14 @@ class MksCodec:
                 )
             del buf[:length]
             if self.role is Role.HOST:
+                if self._parameter is not None and (frame[1], frame[2]) == self._parameter:
+                    self._parameter = None
+                    param = frame[3:-1]
+                    return ParameterReply(frame[1], frame[2], None if len(param) != REQUEST_DATA_LENGTH[frame[2]]
+                                          or (len(param) == len(NOT_READABLE) and param == NOT_READABLE) else param)
+                if frame[2] == UserId.function and frame[1] == self._user_id_read:
+                    self._user_id_read = None
+                    return _USER_ID_REPLY.unpack(frame[1], frame[2], frame[3:-1], frame)  # type: ignore[no-any-return]
                 return _decode_reply(frame)
             if frame[0] == HEAD_LONG:
                 return _decode_long(frame)

@@ -45,6 +45,10 @@ parameters Kp, Ki, Kd, Kv.
 change the working current while running, not saved (status 2).
 ``mks-homing-status`` (V1.0.7+, profile v1.0.9): the 0x3B reply's second byte, the homing (0x91) status
 (native only: see docs/mks-firmware.md for the Modbus layout).
+``mks-read-parameter`` (V1.0.8+, profile v1.0.9): 0x00 reads back one set command's parameter (native only).
+``mks-user-id`` (V1.0.9): 0x42 read / write a user ID (native only).
+``mks-coordinate-homing`` (V1.0.9): 0x91 with goZeroMode 01 / FC06 0x0091 = 2: run to the coordinate zero
+point without a search.
 ``mks-position-error-protection`` (V1.0.6+): 0x9D / FC16 0x009D position-error protection (time window,
 error count) and the En-triggered single-turn zero return; an En pulse also releases the protection.
 """
@@ -58,10 +62,10 @@ from types import MappingProxyType
 from joints.errors import ConfigError
 
 __all__ = ["DEFAULT_FIRMWARE", "EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED", "FIRMWARES", "MKS_ALL_PARAMETERS",
-           "MKS_CURRENT_UNSAVED",
+           "MKS_COORDINATE_HOMING", "MKS_CURRENT_UNSAVED",
            "MKS_FAILURE_REPLIES", "MKS_FIRMWARES", "MKS_HEARTBEAT", "MKS_HOMING_STATUS", "MKS_IAP",
            "MKS_PID", "MKS_POSITION_ERROR_PROTECTION",
-           "MKS_POSITION_THRESHOLD", "MKS_SYNC", "MKS_TIMED_RETURNS", "MKS_TIMED_SPEED", "MKS_VERSION", "MKS_WRITE_IO",
+           "MKS_POSITION_THRESHOLD", "MKS_READ_PARAMETER", "MKS_SYNC", "MKS_TIMED_RETURNS", "MKS_TIMED_SPEED", "MKS_USER_ID", "MKS_VERSION", "MKS_WRITE_IO",
            "QUIRKS",
            "ZLAC_SYNC_FLAG_AS_EXAMPLES", "FirmwareProfile", "Quirk", "firmware_profile"]
 
@@ -106,6 +110,9 @@ MKS_IAP = "mks-iap"
 MKS_PID = "mks-pid"
 MKS_CURRENT_UNSAVED = "mks-current-unsaved"
 MKS_HOMING_STATUS = "mks-homing-status"
+MKS_COORDINATE_HOMING = "mks-coordinate-homing"
+MKS_READ_PARAMETER = "mks-read-parameter"
+MKS_USER_ID = "mks-user-id"
 #: the MKS firmware profiles, oldest first (the last is the default)
 MKS_FIRMWARES = ("v1.0.5", "v1.0.6", "v1.0.9")
 _MKS_FEATURES = {
@@ -114,7 +121,8 @@ _MKS_FEATURES = {
     "v1.0.9": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_VERSION, MKS_HEARTBEAT, MKS_TIMED_RETURNS,
                          MKS_WRITE_IO, MKS_POSITION_ERROR_PROTECTION, MKS_POSITION_THRESHOLD,
                          MKS_SYNC, MKS_TIMED_SPEED, MKS_IAP, MKS_PID, MKS_CURRENT_UNSAVED,
-                         MKS_HOMING_STATUS}),
+                         MKS_HOMING_STATUS, MKS_COORDINATE_HOMING, MKS_READ_PARAMETER,
+                         MKS_USER_ID}),
 }
 _MKS_TEXT = {
     "v1.0.5": "manual V1.0.5 (May 2024): no heartbeat, no version command; Modbus write failures undocumented",

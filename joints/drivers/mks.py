@@ -627,6 +627,20 @@ class MksDriver(JointDriver):
                                 "position_threshold": values if threshold is not None else self.params[
                                     "position_threshold"].default})
 
+    def read_parameter(self, key: str | int) -> dict[str, int]:
+        """0x00 (V1.0.8+): read back the setting(s) of the set command that carries ``key``. The Modbus-RTU
+        manual has no such request: over Modbus it raises :class:`RegisterError`."""
+        raise RegisterError(f"{self.name}: reading a configuration parameter (0x00) is native-protocol only; the "
+                            "Modbus-RTU manual has no such request")
+
+    def read_pid(self, mode: str) -> tuple[int, int, int, int]:
+        """Kp, Ki, Kd, Kv of 0x96 (``mode="vfoc"``) / 0x97 (``"close"``), read back by 0x00 (V1.0.8+, native)."""
+        if mode not in ("vfoc", "close"):
+            raise CommandError(f"{self.name}: PID mode must be 'vfoc' (0x96) or 'close' (0x97), got {mode!r}")
+        values = self.read_parameter(f"{mode}_kp")
+        kp, ki, kd, kv = (values[f"{mode}_{k}"] for k in ("kp", "ki", "kd", "kv"))
+        return kp, ki, kd, kv
+
     def set_pid(self, mode: str, kp: int, ki: int, kd: int, kv: int, *, confirm: bool = False) -> None:
         """0x96 (``mode="vfoc"``) / 0x97 (``"close"``) PID parameters, 0-1024 each (V1.0.8+; Modbus FC16
         0x0096 / 0x0097). The manual advises against changing the factory tuning ("to avoid damaging the
@@ -664,6 +678,14 @@ class MksDriver(JointDriver):
     def go_home(self) -> None:
         """0x91 go home (limit switch, or 'noLimit' per 0x94); the end comes as a completion / status 1."""
         self.write_param("go_home", 1, idempotent=False)
+        self._sent_count = self.completions
+        self._running = "home"
+        self._sent_at = self.clock.now()
+
+    def coordinate_home(self) -> None:
+        """0x91 goZeroMode 01 / FC06 0x0091 = 2 (V1.0.9): run to the coordinate zero point (the one the last
+        origin homing, 0x92 or the single-turn zero set) at HmSpeed, without a search; ends like go home."""
+        self.access.write_many({"go_home": 1, "go_home_mode": 1}, idempotent=False)
         self._sent_count = self.completions
         self._running = "home"
         self._sent_at = self.clock.now()

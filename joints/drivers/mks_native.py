@@ -29,11 +29,11 @@ from joints.clock import Clock
 from joints.codecs import mks
 from joints.devices.mks import blocks
 from joints.devices.mks import state as st
-from joints.devices.mks.native import MKS_NATIVE, fields_of
+from joints.devices.mks.native import MKS_NATIVE, OPTIONAL_FIELDS, fields_of
 from joints.devices.mks.params import model_params
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import ParamSet
-from joints.devices.quirks import MKS_ALL_PARAMETERS, MKS_TIMED_RETURNS, FirmwareProfile
+from joints.devices.quirks import MKS_ALL_PARAMETERS, MKS_READ_PARAMETER, MKS_TIMED_RETURNS, FirmwareProfile
 from joints.drivers.mks import RUN_GROUPS, MksAccess, MksDriver, MksHeartbeat
 from joints.errors import CommandError, ConfirmationRequired, MotionTimeout, RegisterError
 from joints.link.base import Subscription
@@ -270,6 +270,29 @@ class MksNativeDriver(MksDriver):
             held = self.read_all_parameters()
             if not self.microsteps_given:
                 self.microsteps = held["microsteps"]
+
+    # -- read a configuration parameter (V1.0.8, 5.1.10) ------------------------------------------------
+    def read_parameter(self, key: str | int) -> dict[str, int]:
+        """0x00: the values the drive holds for the set command that carries ``key`` (all of its settings, by
+        name; a later firmware's optional field is not part of the reply). They fill the image. A parameter
+        the drive cannot read back (it answers FF FF) raises :class:`RegisterError`."""
+        if MKS_READ_PARAMETER not in self.firmware.features:
+            raise RegisterError(f"{self.name}: reading a configuration parameter (0x00) needs firmware v1.0.9 "
+                                f"(V1.0.8); the joint's firmware is {self.firmware.firmware}")
+        name = self.access.resolve(key)
+        code = int(MKS_NATIVE.key(name).command)
+        if code not in mks.PARAMETER_CODES:
+            raise RegisterError(f"{self.name}: {name} (0x{code:02X}) is not a configuration parameter; read it "
+                                "with read()")
+        reply = self.link.request(mks.ReadParameter(self.address, code), idempotent=True)
+        if not isinstance(reply, mks.ParameterReply):
+            raise CommandError(f"{self.name}: no reply to 0x00 0x{code:02X}")
+        if reply.param is None:
+            raise RegisterError(f"{self.name}: the drive cannot read back 0x{code:02X} (it answered FF FF)")
+        values = {n: v for n, v in _fields_of_request(mks.parameter_request(reply)).items()
+                  if n not in OPTIONAL_FIELDS}
+        self.access.remember(values)
+        return values
 
     # -- timed returns (V1.0.9, 5.1.9) -----------------------------------------------------------------
     def timed_return(self, name: str, milliseconds: int, callback: Callable[[dict[str, int]], None] | None = None,

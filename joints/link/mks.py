@@ -14,6 +14,10 @@ Rule (manual Parts 4-6, 5.2 #13 and #16, 5.7):
   its run commands (0xF4, 0xF5, 0xF6, 0xFD, 0xFE), while every query still answers. The link
   learns both from the driver (:meth:`MksLink.note_respond`, :meth:`MksLink.note_group`), which
   tells it after the drive confirmed the setting.
+* 0x00 read a configuration parameter (V1.0.8): the reply is headed by the parameter's code and has its
+  length, so the rule tells the host codec which request is open (:meth:`MksRule.before_send`) and
+  matches the reply by that code. 0x42 user ID (V1.0.9): a read is answered by the ID, a write by a
+  status; the codec is told the same way.
 * Timed returns (V1.0.9 0x01): the drive sends a read's reply every n ms, unasked; one that does
   not answer the outstanding request goes to the subscribers (:meth:`MksLink.subscribe_returns`).
 * A status 0 ("set fail", "run fail", "query fail") is the drive's refusal:
@@ -45,12 +49,12 @@ RUN_FUNCTIONS = frozenset((0xF4, 0xF5, 0xF6, 0xFD, 0xFE))
 #: requests that change nothing on the drive (5.1 reads and the 0xF1 query)
 _READS = (mks.ReadEncoderCarry, mks.ReadEncoderAddition, mks.ReadSpeed, mks.ReadPulses, mks.ReadIoStatus,
           mks.ReadAngleError, mks.ReadEnPin, mks.ReadGoBackToZeroStatus, mks.ReadProtectionState, mks.QueryStatus,
-          mks.ReadVersion, mks.ReadAllParameters, mks.ReadAllStatus, mks.ReadRawEncoder)
+          mks.ReadVersion, mks.ReadAllParameters, mks.ReadAllStatus, mks.ReadRawEncoder, mks.ReadParameter)
 _REPLIES = (mks.EncoderCarryReply, mks.EncoderAdditionReply, mks.SpeedReply, mks.PulsesReply, mks.IoStatusReply,
             mks.AngleErrorReply, mks.EnPinReply, mks.GoBackToZeroStatusReply, mks.ProtectionStateReply,
             mks.CalibrationReply, mks.MotorStatusReply, mks.SetReply, mks.RunReply, mks.VersionReply,
             mks.AllParametersReply, mks.AllStatusReply, mks.TimedReturnReply,
-            mks.RawEncoderReply)
+            mks.RawEncoderReply, mks.ParameterReply, mks.UserIdReply)
 
 
 def is_completion(message: Any) -> bool:
@@ -93,8 +97,13 @@ class MksRule(Rule[Any]):
         return not isinstance(request, _READS)
 
     def before_send(self, framing: Framing[Any], request: Any, frame: Any) -> None:
-        if self.echo and isinstance(framing, StreamFraming):
-            framing.codec.expect_echo(frame)
+        if isinstance(framing, StreamFraming):
+            if self.echo:
+                framing.codec.expect_echo(frame)
+            # 0x00 (V1.0.8): its reply is headed by the parameter's code, with that parameter's length; 0x42
+            # (V1.0.9): a read is answered by the ID, a write by a status
+            framing.codec.expect_reply(None if isinstance(request, mks.ReadParameter)
+                                       and request.code not in mks.PARAMETER_CODES else request)
 
     def describe(self, message: Any) -> str:
         return repr(message)
@@ -122,7 +131,10 @@ class MksRule(Rule[Any]):
     def is_reply(self, request: Any, message: Any) -> bool:
         if not isinstance(message, _REPLIES) or is_completion(message):
             return False
-        if message.address != request.address or message.function != request.function:
+        if isinstance(request, mks.ReadParameter) != isinstance(message, mks.ParameterReply):
+            return False
+        function = request.code if isinstance(request, mks.ReadParameter) else request.function
+        if message.address != request.address or message.function != function:
             return False  # not for this request: unsolicited (a late reply of another exchange)
         status = getattr(message, "status", None)
         if isinstance(message, (mks.SetReply, mks.RunReply, mks.MotorStatusReply, mks.TimedReturnReply)) and status == 0:

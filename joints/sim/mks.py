@@ -95,6 +95,10 @@ Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; defa
     starts it (:meth:`MksFirmware.sync_execute`). A second run command before 0x4B replaces the held one
     (the manual does not say; our choice); stops, 0xF7 and disabling act at once and drop it; a power cycle
     drops it too (the flag itself is a setting, kept in flash).
+    V1.0.9's coordinate homing (0x91 goZeroMode 01, FC06 0x0091 = 2) is a position move to axis 0 at
+    HmSpeed without a search (the manuals' "directly runs to the coordinate zero point"); it ends with go
+    home's completion and leaves the zero where it is. V1.0.9's user ID (0x42) is kept in flash. V1.0.8's
+    0x00 answers a set command's data from what the twin holds (the front), FF FF for a command.
     V1.0.6's 0x46/0x47/0x48 (:mod:`joints.devices.mks.blocks`) write/read the same settings and
     statuses as the single commands; a 0x46 with any value out of range changes nothing (status 0).
 
@@ -245,7 +249,8 @@ class MksFirmware(Firmware):
         self.end_stops: tuple[float | None, float | None] = (None, None)  #: trigger angles [rad]
         #: completion statuses waiting for a front
         self.completions: deque[Completion] = deque()
-        self._persistent = frozenset(p.name for p in params if p.access is Access.W and p.name != "motor_enable")
+        self._persistent = frozenset(p.name for p in params if p.access in (Access.W, Access.RW)  # (RW: 0x42 user ID)
+                                     and p.name != "motor_enable")
         self.computed.update({
             "encoder_carry": lambda: self._sensed_counts() // COUNTS,
             "encoder_value": lambda: self._sensed_counts() % COUNTS,
@@ -613,6 +618,10 @@ class MksFirmware(Firmware):
 
     def _go_home(self, values: Mapping[str, int], answered: bool) -> int:
         v = self.values  # (the drive can run: :meth:`_refusal`)
+        if values.get("go_home_mode"):  # coordinate homing (V1.0.9): straight to axis 0 at HmSpeed, no search
+            self._start(_Motion("move", Command.GO_HOME, answered, goal=self._clamp_value(max(1, v["home_speed"])),
+                                acc=0, target=self.enc_zero))
+            return int(_RUN.STARTED)
         home = -1 if v["home_direction"] == st.MotorDirection.CW else 1
         job = _Motion("home", Command.GO_HOME, answered, goal=self._clamp_value(max(1, v["home_speed"])), acc=0)
         self.home_status = int(st.GoBackToZeroStatus.GOING)

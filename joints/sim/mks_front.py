@@ -31,7 +31,8 @@ from typing import Any
 
 from joints.codecs import mks
 from joints.devices.mks.native import BLOCK_COMMANDS, MKS_NATIVE, OPTIONAL_FIELDS, REPLY_RULES, Command, fields_of
-from joints.devices.quirks import MKS_TIMED_RETURNS
+from joints.devices.params import Access
+from joints.devices.quirks import MKS_READ_PARAMETER, MKS_TIMED_RETURNS
 from joints.errors import FrameError, ParameterRefused
 from joints.sim.mks import MksFirmware
 
@@ -78,6 +79,9 @@ class MksNativeFront:
         if isinstance(request, mks.UnknownRequest) or not fw.hears(request.function):
             return None  # (the IAP boot loader or silent state: V1.0.8 0x50)
         code = request.function
+        if isinstance(request, mks.UserId) and request.id is None:  # 0x42 read (V1.0.9); a write goes on below
+            return mks.UserIdReply(request.address, fw.values["user_id"]) if fw.supports("user_id") and answer \
+                else None
         if code in BLOCK_COMMANDS:
             return self._block(request, answer)
         names = tuple(n for n in fields_of(code) if fw.supports(n) or (code not in _READS and not (
@@ -111,6 +115,18 @@ class MksNativeFront:
             fields[f] = bool(v) if f in _FLAGS else _ENUMS[cls](v) if cls in _ENUMS else v  # (0x3B: both statuses)
         return cls(address, **fields)
 
+    def _parameter(self, address: int, code: int) -> bytes | None:
+        """0x00 (V1.0.8): set command ``code``'s data as it would write what the drive holds now (its shorter
+        form); None (FF FF) for a command that sets no stored setting (our reading of "parameter-only")."""
+        fw = self.firmware
+        names = fields_of(code) if code in mks.PARAMETER_CODES and code in mks.REQUEST_TYPES else ()
+        kept = [n for n in names if n not in OPTIONAL_FIELDS]
+        if not kept or not all(fw.supports(n) and fw.params[n].access is not Access.COMMAND
+                               and MKS_NATIVE.key(n).field for n in kept):
+            return None
+        request = mks.REQUEST_TYPES[code](address, **{MKS_NATIVE.key(n).field: fw.values[n] for n in kept})
+        return mks.encode(request)[3:-1]
+
     def _block(self, request: Any, answer: bool) -> Any:
         """0x46/0x47/0x48 (V1.0.6): all configuration parameters / all statuses at once; 0x01 (V1.0.9):
         a read's timed return; 0x4B (V1.0.8): start the run commands held for it."""
@@ -118,6 +134,10 @@ class MksNativeFront:
         if isinstance(request, mks.SyncExecute):
             fw.sync_execute()  # (a firmware without 0x4B ignores it)
             return None  # never answered
+        if isinstance(request, mks.ReadParameter):
+            if MKS_READ_PARAMETER not in fw.firmware.features or not answer:
+                return None  # unknown to this firmware (or not for this drive alone)
+            return mks.ParameterReply(request.address, request.code, self._parameter(request.address, request.code))
         if isinstance(request, mks.SetTimedReturn):
             if MKS_TIMED_RETURNS not in fw.firmware.features:
                 return None  # unknown to this firmware

@@ -91,9 +91,9 @@ def test_frame_lengths_follow_the_function_code() -> None:
                         0x83: 2, 0x8C: 2, 0xF6: 3, 0x98: 4, 0x9A: 4, 0x90: 5, 0x46: 34, 0x01: 3,
                         **{c: 7 for c in (0x94, 0xF4, 0xF5, 0xFD, 0xFE)},
                         0x36: 1, 0x9D: 5, 0x95: 3, 0x4A: 1, 0x4B: 0, 0x50: 1,
-                        0x96: 8, 0x97: 8}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
+                        0x96: 8, 0x97: 8, 0x00: 1, 0x42: 0}  # V1.0.6-V1.0.9: tests/codecs/test_mks_v109_commands.py
     assert dict(mks.REQUEST_DATA_LENGTH) == expected_request
-    expected_reply = {c: 1 for c in expected_request} | {0x30: 6, 0x31: 6, 0x32: 2, 0x33: 4, 0x39: 4, 0x40: 4,
+    expected_reply = {c: 1 for c in expected_request if c != 0x00} | {0x30: 6, 0x31: 6, 0x32: 2, 0x33: 4, 0x39: 4, 0x40: 4,
                                                          0x47: 34, 0x48: 28, 0x01: 2, 0x35: 6}
     assert dict(mks.REPLY_DATA_LENGTH) == expected_reply
     assert max(expected_request.values()) + 4 == mks.MAX_DOWNLINK_FRAME
@@ -201,7 +201,8 @@ def test_run_replies_share_one_type_and_completion_is_the_status() -> None:
 
 
 def test_every_function_code_has_a_request_and_a_reply_type() -> None:
-    assert set(mks.REQUEST_TYPES) == set(mks.REPLY_TYPES)
+    # (0x00's reply is headed by the code of the parameter it read: tests/codecs/test_mks_v109_commands.py)
+    assert set(mks.REQUEST_TYPES) - {0x00} == set(mks.REPLY_TYPES)
     for code, cls in mks.REQUEST_TYPES.items():
         assert getattr(cls, "function") == code  # noqa: B009
     for code in mks.SET_REPLY_FUNCTIONS:
@@ -369,6 +370,8 @@ _NARROW: dict[tuple[type, str], st.SearchStrategy[Any]] = {
     **{(mks.SetPositionErrorProtection, n): u16 for n in ("time", "errors")},
     (mks.SetPositionThreshold, "values"): u16,
     (mks.SetWorkingCurrent, "unsaved"): st.integers(0, 1),
+    (mks.GoHome, "mode"): st.integers(0, 1),
+    (mks.UserId, "id"): st.integers(0, 0xFFFFFFFF),  # (the read's short frame is tested on its own)
 }
 
 

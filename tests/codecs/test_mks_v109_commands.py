@@ -268,3 +268,126 @@ def test_go_back_to_zero_reply_with_one_or_two_statuses_decodes_at_every_address
                 codec.flush()
                 assert codec.next_message() == short
     assert waited == set(range(0xC8, 0xCD))  # (0xFB + addr + 0x3B + status) & 0xFF <= 2
+
+
+# -- 0x91 goZeroMode (V1.0.9): coordinate homing ------------------------------------------------------
+
+
+def test_coordinate_homing_frames_are_the_manuals_examples() -> None:
+    """RS485 V1.0.9 7.7 ``FA 01 91 01 8D``; 7.3.6: ``FA 01 91 8C`` and ``FA 01 91 00 8C`` are the same origin
+    homing; Modbus V1.0.9 5.7 ``01 06 00 91 00 02 59 E6`` (goZeroMode 2), 5.3.6's reply ``01 06 00 91 00 01 19 E7``
+    (goZeroMode 1)."""
+    assert mks.encode(mks.GoHome(1, 1)) == bytes.fromhex("FA 01 91 01 8D")
+    assert mks.encode(mks.GoHome(1)) == bytes.fromhex("FA 01 91 8C")
+    assert _decode(Role.DEVICE, bytes.fromhex("FA 01 91 01 8D")) == mks.GoHome(1, 1)
+    assert _decode(Role.DEVICE, bytes.fromhex("FA 01 91 00 8C")) == mks.GoHome(1, 0)
+    codec = mks.MksCodec(Role.DEVICE)
+    codec.feed(bytes.fromhex("FA 01 91 8C"))
+    codec.flush()  # the short frame at silence
+    assert codec.next_message() == mks.GoHome(1, 0)
+    block = MKS_MODBUS.block_of("go_home_mode")
+    assert _modbus_frame(bytes((1, 6)) + (0x91).to_bytes(2, "big")
+                         + block.words({"go_home": 1, "go_home_mode": 1})[0].to_bytes(2, "big")) == \
+        bytes.fromhex("01 06 00 91 00 02 59 E6")
+    assert block.words({"go_home": 1, "go_home_mode": 0}) == (1,)
+    assert _modbus_frame(bytes.fromhex("01 06 00 91 00 01")) == bytes.fromhex("01 06 00 91 00 01 19 E7")
+    assert block.decode_words([2]) == {"go_home": 1, "go_home_mode": 1}
+
+
+@pytest.mark.parametrize("byte", [0x02, 0xFF])
+def test_coordinate_homing_mode_other_than_0_or_1_is_not_taken(byte: int) -> None:
+    with pytest.raises(EncodeError):
+        mks.encode(mks.GoHome(1, 2))
+    codec = mks.MksCodec(Role.DEVICE)
+    codec.feed(mks.with_checksum(bytes((0xFA, 0x01, 0x91, byte))))
+    codec.flush()
+    with pytest.raises(FrameError):
+        codec.next_message()
+
+
+# -- 0x00 read a configuration parameter (V1.0.8) ------------------------------------------------------
+
+
+def _host_expecting(request: mks.ReadParameter, frame: bytes) -> Any:
+    codec = mks.MksCodec(Role.HOST)
+    codec.expect_reply(request)
+    for i, b in enumerate(frame):
+        codec.feed(bytes((b,)))
+        msg = codec.next_message()
+        if i < len(frame) - 1:
+            assert msg is None, f"decoded after {i + 1} of {len(frame)} bytes"
+    return msg
+
+
+def test_read_parameter_frames_are_the_manuals_example() -> None:
+    """RS485 V1.0.9 5.1.10: ``FA 01 00 82 7D`` reads the work mode, ``FB 01 82 05 83`` answers 5 (SR_vFOC)."""
+    request = mks.ReadParameter(1, 0x82)
+    assert mks.encode(request) == bytes.fromhex("FA 01 00 82 7D")
+    assert _decode(Role.DEVICE, bytes.fromhex("FA 01 00 82 7D")) == request
+    reply = _host_expecting(request, bytes.fromhex("FB 01 82 05 83"))
+    assert reply == mks.ParameterReply(1, 0x82, b"\x05")
+    assert mks.encode(reply) == bytes.fromhex("FB 01 82 05 83")
+    assert mks.parameter_request(reply) == mks.SetWorkMode(1, 5)
+    with pytest.raises(FrameError):  # without the open request, the same bytes are a set reply of status 5
+        _decode(Role.HOST, bytes.fromhex("FB 01 82 05 83"))
+
+
+@pytest.mark.parametrize(("code", "param", "request_"), [
+    (0x83, bytes.fromhex("04 D2"), mks.SetWorkingCurrent(1, 1234)),
+    (0x96, bytes.fromhex("00 DC 00 64 01 0E 01 40"), mks.SetVfocPid(1, 0xDC, 0x64, 0x10E, 0x140)),
+])
+def test_read_parameter_reply_has_the_parameters_length(code: int, param: bytes, request_: Any) -> None:
+    frame = mks.with_checksum(bytes((0xFB, 0x01, code)) + param)
+    reply = _host_expecting(mks.ReadParameter(1, code), frame)
+    assert reply == mks.ParameterReply(1, code, param)
+    assert mks.parameter_request(reply) == request_
+
+
+@pytest.mark.parametrize("code", [0x82, 0x83, 0x96])
+def test_read_parameter_ff_ff_is_not_readable(code: int) -> None:
+    frame = mks.with_checksum(bytes((0xFB, 0x01, code, 0xFF, 0xFF)))
+    codec = mks.MksCodec(Role.HOST)
+    codec.expect_reply(mks.ReadParameter(1, code))
+    codec.feed(frame)
+    codec.flush()
+    assert codec.next_message() == mks.ParameterReply(1, code, None)
+    assert mks.encode(mks.ParameterReply(1, code, None)) == frame
+
+
+def test_read_parameter_expectation_is_for_one_reply_and_one_address() -> None:
+    codec = mks.MksCodec(Role.HOST)
+    codec.expect_reply(mks.ReadParameter(1, 0x83))
+    codec.feed(mks.encode(mks.SetReply(2, 0x83, mks.SetStatus.SUCCESS)))  # another drive's set reply
+    assert codec.next_message() == mks.SetReply(2, 0x83, mks.SetStatus.SUCCESS)
+    codec.feed(mks.with_checksum(bytes.fromhex("FB 01 83 04 D2")))
+    assert codec.next_message() == mks.ParameterReply(1, 0x83, bytes.fromhex("04 D2"))
+    codec.feed(mks.encode(mks.SetReply(1, 0x83, mks.SetStatus.SUCCESS)))  # the next one is a set reply again
+    assert codec.next_message() == mks.SetReply(1, 0x83, mks.SetStatus.SUCCESS)
+    with pytest.raises(EncodeError):
+        codec.expect_reply(mks.ReadParameter(1, 0x31))  # a read, not a set command's parameter
+
+
+# -- 0x42 user ID (V1.0.9) -------------------------------------------------------------------------------
+
+
+def test_user_id_read_and_write_forms() -> None:
+    """RS485 V1.0.9 5.1.12: ``FA addr 42 chk`` reads, ``FA addr 42 ID[4] chk`` writes; the read's reply
+    carries the ID, the write's a status."""
+    assert mks.encode(mks.UserId(1)) == bytes.fromhex("FA 01 42 3D")
+    write = mks.with_checksum(bytes.fromhex("FA 01 42 12 34 56 78"))
+    assert mks.encode(mks.UserId(1, 0x12345678)) == write
+    codec = mks.MksCodec(Role.DEVICE)
+    codec.feed(bytes.fromhex("FA 01 42 3D"))
+    codec.flush()  # the short form at silence
+    assert codec.next_message() == mks.UserId(1)
+    codec.feed(write)
+    assert codec.next_message() == mks.UserId(1, 0x12345678)
+    host = mks.MksCodec(Role.HOST)
+    host.expect_reply(mks.UserId(1))
+    reply = mks.encode(mks.UserIdReply(1, 0x12345678))
+    assert reply == mks.with_checksum(bytes.fromhex("FB 01 42 12 34 56 78"))
+    host.feed(reply)
+    assert host.next_message() == mks.UserIdReply(1, 0x12345678)
+    host.expect_reply(mks.UserId(1, 5))
+    host.feed(mks.encode(mks.SetReply(1, 0x42, mks.SetStatus.SUCCESS)))
+    assert host.next_message() == mks.SetReply(1, 0x42, mks.SetStatus.SUCCESS)

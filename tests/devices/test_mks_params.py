@@ -21,7 +21,7 @@ PARTS_5_6 = MANUAL[MANUAL.index("Part5. Serial command description"):MANUAL.inde
 PART_8 = MANUAL[MANUAL.index("Part8. MODBUS-RTU command description"):MANUAL.index("Part9. FAQ")]
 #: what V1.0.9 added (manuals V1.0.9: 0x40 read version 5.1.11 / 3.1.8, 0x98 heartbeat 5.2.16 / 3.2.14)
 LATER = {0x40, 0x98, 0x46, 0x47, 0x48, 0x01, 0x35,
-         0x36, 0x9D, 0x95, 0x4A, 0x4B, 0x50, 0x96, 0x97}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
+         0x36, 0x9D, 0x95, 0x4A, 0x4B, 0x50, 0x96, 0x97, 0x00, 0x42}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
 
 
 # ------------------------------------------------------------------------------ parameters
@@ -86,7 +86,8 @@ def test_documented_defaults_and_ranges() -> None:
                         "motor_status", "version_information", "raw_encoder_value",
                         "homing_status"}  # 0x3B status2 (V1.0.7)
     assert p["heartbeat_protection_time"].default == 0  # "Default: 0" (off), V1.0.9 5.2.16
-    assert not any(x.access is Access.RW for x in p)  # the MKS reports no setting back
+    # the MKS reports no setting back, but for the user ID (0x42, V1.0.9: read without data, written with it)
+    assert {x.name for x in p if x.access is Access.RW} == {"user_id"}
 
 
 def test_model_params_keep_the_names_and_narrow_the_currents() -> None:
@@ -121,8 +122,9 @@ def test_native_fields_are_fields_of_the_codec_messages() -> None:
         fields = [f.name for f in dataclasses.fields(cls) if f.name not in ("address", "function")]
         if key.field:
             assert key.field in fields, (name, cls.__name__)
-        else:  # a command without data
-            assert fields == [], (name, cls.__name__)
+        else:  # a command without data (a later firmware's optional field aside: 0x91's goZeroMode)
+            optional = {MKS_NATIVE.key(n).field for n in native.fields_of(key.command) if n in native.OPTIONAL_FIELDS}
+            assert set(fields) == optional, (name, cls.__name__)
     # every data field of every request is some parameter (a driver can build each command)
     for code, cls in codec.REQUEST_TYPES.items():
         for f in dataclasses.fields(cls):
@@ -172,11 +174,12 @@ def test_reply_rules_follow_the_manual() -> None:
 
 
 def test_every_modbus_field_is_a_parameter_of_the_same_type_and_access() -> None:
-    assert len(MKS_MODBUS) == 58 + len(FEATURE_OF) - 5  # 0x35, 0x95 (2 fields), 0x4A, 0x3B status2: native only
+    # 0x35, 0x95 (2 fields), 0x4A, 0x3B status2, 0x42: native only
+    assert len(MKS_MODBUS) == 58 + len(FEATURE_OF) - 6
     for f in MKS_MODBUS:
         p = MKS_PARAMS[f.name]
         assert (f.type, f.access) == (p.type, p.access), f.name
-        assert TYPES[f.type][2] <= f.size
+        assert TYPES[f.type][2] <= f.size or f.size == 0  # (0: implied by the request, 0x91's go_home)
         if f.maximum is not None:  # narrower over Modbus only
             assert p.maximum is None or f.maximum <= p.maximum
     assert MKS_MODBUS.get("slave_address").maximum == 247
@@ -192,7 +195,8 @@ def test_modbus_and_native_reach_the_same_command() -> None:
     assert NATIVE_ONLY == {"slave_respond", "slave_active", "group_address", "home_reverse_angle", "home_mode",
                            "home_current", "raw_encoder_value",  # 0x35: not in the Modbus-RTU manual V1.0.9
                            "position_threshold_enable", "position_threshold", "sync_enable",  # 0x95, 0x4A: neither
-                           "homing_status"}  # 0x3B status2: the V1.0.9 Modbus layout contradicts V1.0.5 (docs)
+                           "homing_status",  # 0x3B status2: the V1.0.9 Modbus layout contradicts V1.0.5 (docs)
+                           "user_id"}  # 0x42: not in the Modbus-RTU manual V1.0.9
     assert set(MKS_MODBUS.names()) | NATIVE_ONLY == set(MKS_PARAMS.names())
 
 

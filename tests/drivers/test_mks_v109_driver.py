@@ -504,3 +504,117 @@ def test_homing_status_needs_v109_and_older_drives_send_one_byte(tmp_path: Path,
 def test_homing_status_is_native_only(tmp_path: Path) -> None:
     with open_motor(tmp_path, protocol="modbus-rtu") as rig, pytest.raises(RegisterError, match="native"):
         rig.joints["m1"].driver.read("homing_status")
+
+
+# -- 0x91 goZeroMode 01: coordinate homing (V1.0.9) ----------------------------------------------------
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _having("mks-coordinate-homing"))
+def test_coordinate_homing_runs_back_to_the_coordinate_zero_without_a_search(tmp_path: Path, protocol: str,
+                                                                             firmware: str) -> None:
+    """Away from axis 0 by a move, coordinate homing runs the shaft back to it (RS485 7.7: "return to the zero
+    point position at the zero-point speed") and ends with go home's completion; the zero is not moved."""
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        j = rig.joints["m1"]
+        d = j.driver
+        fw = _twin(rig)
+        j.enable()
+        d.move_by(3200, speed=300)
+        d.wait_motion(10)
+        away = d.read("encoder_addition")
+        assert abs(away) > 3000
+        zero = fw.enc_zero
+        d.coordinate_home()
+        d.wait_motion(10)
+        assert abs(d.read("encoder_addition")) <= 2
+        assert fw.enc_zero == zero and abs(fw.q - zero) < 2 * math.tau / 0x4000  # the shaft moved, not the zero
+        assert d.motor_status() is MotorStatus.STOP
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _lacking("mks-coordinate-homing"))
+def test_coordinate_homing_needs_v109_and_go_home_keeps_its_older_form(tmp_path: Path, protocol: str,
+                                                                      firmware: str) -> None:
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        j = rig.joints["m1"]
+        d = j.driver
+        j.enable()
+        sent = d.link.transactions
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.coordinate_home()
+        assert d.link.transactions == sent  # nothing was sent
+        d.go_home()  # the older frame (FA 01 91 8C / register 1) still homes
+        assert _twin(rig).motion is not None and _twin(rig).motion.kind == "home"
+        j.stop()
+
+
+# -- 0x00 read a configuration parameter (V1.0.8, profile v1.0.9, native only) ----------------------------
+
+
+@pytest.mark.parametrize("firmware", _having("mks-read-parameter"))
+def test_read_parameter_reads_back_what_was_written_the_pid_gains_included(tmp_path: Path, firmware: str) -> None:
+    """0x00's reply is headed by the parameter's code with that parameter's length (1 byte for 0x82, 2 for 0x83,
+    8 for 0x96): the link tells the host codec which request is open, else none of these could be framed."""
+    with open_motor(tmp_path, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        d = rig.joints["m1"].driver
+        fw = _twin(rig)
+        assert d.read_parameter("work_mode") == {"work_mode": fw.values["work_mode"]}
+        d.set_working_current(1234)
+        assert d.read_parameter("working_current") == {"working_current": 1234}
+        assert d.read_pid("vfoc") == (0xDC, 0x64, 0x10E, 0x140)  # the manual's defaults
+        d.set_pid("close", 100, 90, 80, 70, confirm=True)
+        assert d.read_pid("close") == (100, 90, 80, 70)
+        assert d.read_pid("vfoc") == (0xDC, 0x64, 0x10E, 0x140)
+        assert d.read("encoder_addition") is not None  # the ordinary replies are framed as before
+        with pytest.raises(RegisterError, match="FF FF"):
+            d.read_parameter("emergency_stop")  # a command, no setting: the twin answers FF FF
+
+
+@pytest.mark.parametrize("firmware", _lacking("mks-read-parameter"))
+def test_read_parameter_needs_v109(tmp_path: Path, firmware: str) -> None:
+    with open_motor(tmp_path, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        d = rig.joints["m1"].driver
+        sent = d.link.transactions
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.read_parameter("work_mode")
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.read_pid("vfoc")
+        assert d.link.transactions == sent  # nothing was sent
+
+
+def test_read_parameter_is_native_only(tmp_path: Path) -> None:
+    with open_motor(tmp_path, protocol="modbus-rtu") as rig, pytest.raises(RegisterError, match="native"):
+        rig.joints["m1"].driver.read_pid("vfoc")
+
+
+# -- 0x42 user ID (V1.0.9, native only) ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("firmware", _having("mks-user-id"))
+def test_user_id_is_written_and_read_back(tmp_path: Path, firmware: str) -> None:
+    """A read (no data) is answered by the 4-byte ID, a write (4 bytes) by a status: the link tells the codec."""
+    with open_motor(tmp_path, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        d = rig.joints["m1"].driver
+        assert d.read("user_id") == 0
+        d.write_param("user_id", 0x12345678)
+        assert _twin(rig).values["user_id"] == 0x12345678
+        assert d.read("user_id") == 0x12345678
+        assert d.read("encoder_addition") is not None  # the next reads are framed as before
+
+
+@pytest.mark.parametrize("firmware", _lacking("mks-user-id"))
+def test_user_id_needs_v109(tmp_path: Path, firmware: str) -> None:
+    with open_motor(tmp_path, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        d = rig.joints["m1"].driver
+        sent = d.link.transactions
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.read("user_id")
+        with pytest.raises(RegisterError, match="v1.0.9"):
+            d.write_param("user_id", 7)
+        assert d.link.transactions == sent  # nothing was sent
+
+
+def test_user_id_is_native_only(tmp_path: Path) -> None:
+    with open_motor(tmp_path, protocol="modbus-rtu") as rig, pytest.raises(RegisterError):
+        rig.joints["m1"].driver.read("user_id")

@@ -80,3 +80,35 @@ def test_an_en_pulse_releases_the_protection_from_v106(tmp_path: Path, firmware:
         assert d.protection_state()
         assert fw.en_pulse(0.2) is released
         assert d.protection_state() is not released
+
+
+@pytest.mark.parametrize("firmware", ["v1.0.5", "v1.0.6"])
+def test_a_coordinate_homing_frame_is_unknown_to_firmware_before_v109(tmp_path: Path, firmware: str) -> None:
+    """Sent raw (the driver refuses it first): native ``FA 01 91 01 8D`` gets no answer and nothing moves;
+    Modbus FC06 0x0091 = 2 is a value the older register does not take (V1.0.5 exception 03, V1.0.6 the
+    failure reply); = 1 still homes."""
+    from joints.codecs import mks
+    from joints.errors import DeviceRejected, ReplyTimeout
+
+    with open_motor(tmp_path, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        rig.joints["m1"].enable()
+        with pytest.raises(ReplyTimeout):
+            rig.joints["m1"].driver.link.request(mks.GoHome(1, 1))
+        assert _twin(rig).motion is None
+    with open_motor(tmp_path, protocol="modbus-rtu", joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        rig.joints["m1"].enable()
+        link = rig.joints["m1"].driver.link
+        with pytest.raises(DeviceRejected) as refused:
+            link.write_register(1, 0x91, 2)
+        assert refused.value.code == (3 if firmware == "v1.0.5" else 0) and _twin(rig).motion is None
+        link.write_register(1, 0x91, 1)
+        assert _twin(rig).motion is not None and _twin(rig).motion.kind == "home"
+
+
+def test_the_user_id_is_kept_at_power_off(tmp_path: Path) -> None:
+    with open_motor(tmp_path, joint={"firmware": "v1.0.9", "watchdog_ms": 0}) as rig:
+        d = rig.joints["m1"].driver
+        d.write_param("user_id", 4711)
+        rig.reset()
+        rig.sleep(0.5)
+        assert d.read("user_id") == 4711

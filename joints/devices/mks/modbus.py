@@ -79,6 +79,9 @@ class ModbusField:
     minimum: int | None = None  #: narrower bound than the parameter's, over Modbus only
     maximum: int | None = None
     bit: int = -1  #: 0-7: the field is this one bit of the byte at ``offset`` (0x9D's flags); -1: whole bytes
+    #: the wire value is the parameter's plus this (0x91 goZeroMode: Modbus 1 / 2 where native has 0 / 1);
+    #: a field of size 0 is implied by the request itself (a native command without data: its value is 1)
+    bias: int = 0
 
     @property
     def signed(self) -> bool:
@@ -113,6 +116,8 @@ class ModbusBlock:
                     raise ValueError(f"{self.title}: bit field {f.name} overlaps or is not one bit of one byte")
                 bits[f.offset].add(f.bit)
                 continue
+            if f.size == 0:
+                continue
             if f.offset < end or f.offset + f.size > self.byte_count:
                 raise ValueError(f"{self.title}: field {f.name} overlaps or overruns the block")
             if TYPES[f.type][2] > f.size:
@@ -133,8 +138,9 @@ class ModbusBlock:
         for f in self.fields:  # a value field does not see the flag bits inside it
             if f.bit >= 0:
                 plain[f.offset] &= ~(1 << f.bit) & 0xFF
-        return {f.name: (data[f.offset] >> f.bit) & 1 if f.bit >= 0
-                else int.from_bytes(plain[f.offset:f.offset + f.size], "big", signed=f.signed) for f in self.fields}
+        return {f.name: (data[f.offset] >> f.bit) & 1 if f.bit >= 0 else 1 if f.size == 0
+                else int.from_bytes(plain[f.offset:f.offset + f.size], "big", signed=f.signed) - f.bias
+                for f in self.fields}
 
     def encode(self, values: Mapping[str, int]) -> bytes:
         """{parameter name: value} (every field of the block) -> the data bytes, range-checked."""
@@ -151,8 +157,8 @@ class ModbusBlock:
                 if out[f.offset] >> f.bit & 1:
                     raise CommandError(f"{self.title}: a value uses bit {f.bit} of byte {f.offset}, {f.name}'s flag")
                 out[f.offset] |= (v & 1) << f.bit
-            else:
-                out[f.offset:f.offset + f.size] = v.to_bytes(f.size, "big", signed=f.signed)
+            elif f.size:
+                out[f.offset:f.offset + f.size] = (v + f.bias).to_bytes(f.size, "big", signed=f.signed)
         return bytes(out)
 
     def words(self, values: Mapping[str, int]) -> tuple[int, ...]:
@@ -249,7 +255,9 @@ _BLOCKS: tuple[ModbusBlock, ...] = (
            ("zero_mode_speed", 2, 1, "uint8"), ("zero_mode_direction", 3, 1, "uint8")),
     # 8.3 motor running command
     _write(0xF7, "emergency_stop", "bool", C, "8.3.1 Emergency stop the motor"),
-    _write(0x91, "go_home", "bool", C, "8.3.2 Go home"),
+    ModbusBlock(FC_WRITE_SINGLE, 0x91, 1, 2, "8.3.2 Go home (V1.0.9 5.3.6: goZeroMode 1 origin, 2 coordinate)",
+                (_f("go_home", FC_WRITE_SINGLE, 0x91, 0, 0, "bool", C),
+                 ModbusField("go_home_mode", FC_WRITE_SINGLE, 0x91, 0, 2, "uint8", C, bias=1))),
     _multi(0xF6, 2, 4, "8.3.3 #1 Run the motor in speed mode", C,
            ("speed_mode_direction", 0, 1, "uint8"), ("speed_mode_acc", 1, 1, "uint8"),
            ("speed_mode_speed", 2, 2, "uint16")),

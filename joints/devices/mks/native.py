@@ -37,6 +37,7 @@ class Command(enum.IntEnum):
     """Function codes of Parts 5 and 6 (names after the manual's section titles)."""
 
     SET_TIMED_RETURN = 0x01
+    READ_CONFIGURATION_PARAMETER = 0x00
     READ_ENCODER_VALUE_CARRY = 0x30
     READ_ENCODER_VALUE_ADDITION = 0x31
     READ_REAL_TIME_SPEED = 0x32
@@ -55,6 +56,7 @@ class Command(enum.IntEnum):
     READ_ALL_PARAMETERS = 0x47
     READ_ALL_STATUS = 0x48
     RESTART_MOTOR = 0x41
+    USER_ID = 0x42
     SET_SYNC = 0x4A
     IAP_CONTROL = 0x50
     SYNC_EXECUTE = 0x4B
@@ -99,13 +101,13 @@ class Command(enum.IntEnum):
 LONG_PACKET = 0xFC  #: head of a long data package (not a function code)
 
 #: commands that carry no parameter's fields: whole blocks (joints.devices.mks.blocks, V1.0.6), the timed
-#: return of another command's reply (0x01, V1.0.9) and the synchronous execution (0x4B, V1.0.8; broadcast)
+#: return of another command's reply (0x01, V1.0.9), the read of another command's parameter (0x00, V1.0.8) and the synchronous execution (0x4B, V1.0.8; broadcast)
 BLOCK_COMMANDS = frozenset((Command.WRITE_ALL_PARAMETERS, Command.READ_ALL_PARAMETERS, Command.READ_ALL_STATUS,
-                            Command.SET_TIMED_RETURN, Command.SYNC_EXECUTE))
+                            Command.SET_TIMED_RETURN, Command.SYNC_EXECUTE, Command.READ_CONFIGURATION_PARAMETER))
 
 #: fields of a later firmware whose value 0 is the command's older, shorter frame (a drive without the feature
 #: takes the command when they are 0)
-OPTIONAL_FIELDS = frozenset(("speed_mode_run_time", "working_current_unsaved"))
+OPTIONAL_FIELDS = frozenset(("speed_mode_run_time", "working_current_unsaved", "go_home_mode"))
 
 #: run commands of Part 6 (0x8C respond/active applies to them)
 RUN_COMMANDS = frozenset((Command.SPEED_MODE, Command.POSITION_MODE1_RELATIVE_PULSES,
@@ -183,6 +185,7 @@ _KEYS: dict[str, NativeKey] = {
     "restart_motor": NativeKey(C.RESTART_MOTOR),
     "calibrate": NativeKey(C.CALIBRATE_ENCODER),
     "go_home": NativeKey(C.GO_HOME),
+    "go_home_mode": NativeKey(C.GO_HOME, "mode"),
     "set_current_axis_to_zero": NativeKey(C.SET_CURRENT_AXIS_TO_ZERO),
     "emergency_stop": NativeKey(C.EMERGENCY_STOP),
     "work_mode": NativeKey(C.SET_WORK_MODE, "mode"),
@@ -235,6 +238,7 @@ _KEYS: dict[str, NativeKey] = {
     "position_mode4_abs_axis": NativeKey(C.POSITION_MODE4_ABSOLUTE_AXIS, "abs_axis"),
     "raw_encoder_value": NativeKey(C.READ_RAW_ENCODER_VALUE, "value"),
     "version_information": NativeKey(C.READ_VERSION_INFORMATION, "version"),
+    "user_id": NativeKey(C.USER_ID, "id"),
     "heartbeat_protection_time": NativeKey(C.SET_HEARTBEAT_PROTECTION_TIME, "times"),
     "write_io_out2_mask": NativeKey(C.WRITE_IO_PORT, "out2_mask"),
     "write_io_out1_mask": NativeKey(C.WRITE_IO_PORT, "out1_mask"),

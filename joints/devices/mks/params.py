@@ -207,6 +207,12 @@ _PARAMS: tuple[Param, ...] = (
     # 0x3B's second status (V1.0.7; RS485 V1.0.9 5.1.8)
     Param("homing_status", "uint8", R, "", "0x3B status2: the non-single-turn zero return (go home 0x91): 0 going, "
           "1 success, 2 not homed or failed (V1.0.7)", 0, 2),
+    # 0x42 user ID (V1.0.9; RS485 V1.0.9 5.1.12): read without data, written with 4 bytes
+    Param("user_id", "uint32", Access.RW, "", "0x42 user ID: a number of the user's own to identify the motor (V1.0.9)",
+          0, 0xFFFFFFFF, 0),
+    # 0x91 goZeroMode (V1.0.9; RS485 V1.0.9 7.3.6 native 0 / 1, Modbus V1.0.9 5.3.6 register 1 / 2)
+    Param("go_home_mode", "uint8", C, "", "0x91 goZeroMode: 0 origin homing (search), 1 coordinate homing (run to "
+          "the coordinate zero point, no search) (V1.0.9)", 0, 1, 0),
     # 0x4A synchronization flag (V1.0.8; RS485 V1.0.9 12.4.1)
     Param("sync_enable", "bool", W, "", "0x4A synchronization: run commands wait for the broadcast 0x4B (V1.0.8)",
           0, 1, 0),
@@ -226,7 +232,8 @@ FEATURE_OF: dict[str, str] = {"raw_encoder_value": "mks-all-parameters", "versio
                               "position_threshold": "mks-position-threshold", "sync_enable": "mks-sync", "iap_control": "mks-iap",
                               "working_current_unsaved": "mks-current-unsaved", "homing_status": "mks-homing-status",
                               **{f"{m}_{k}": "mks-pid" for m in ("vfoc", "close") for k in ("kp", "ki", "kd", "kv")},
-                              "speed_mode_run_time": "mks-timed-speed"}
+                              "speed_mode_run_time": "mks-timed-speed", "go_home_mode": "mks-coordinate-homing",
+                              "user_id": "mks-user-id"}
 
 MKS_PARAMS: ParamSet = ParamSet("mks-servo42d57d", _PARAMS)
 
