@@ -567,14 +567,7 @@ class World:
             if not self._booked:
                 return
             self._booked = False
-            n = math.ceil((self._target - self.time) / self.timestep - 1e-9)
-            if n > 0:
-                try:
-                    self._step(n)
-                except BaseException:
-                    self._target = self.time
-                    self.clock.set(self._target)
-                    raise
+            self._step_due(self._due(0.0))
 
     def transport(self, bus: str) -> Any:
         """An in-process transport whose peer is every emulated drive on ``bus``."""
@@ -687,15 +680,20 @@ class World:
             return
         with self.lock:
             self._booked = False  # booked time runs now, with this
-            n = self._due(seconds)
-            if n > 0:
-                try:
-                    self._step(n)
-                except BaseException:
-                    self._target = self.time
-                    self.clock.set(self._target)
-                    raise
+            self._step_due(self._due(seconds))
             self.clock.set(self._target)
+
+    def _step_due(self, n: int) -> None:
+        """Run ``n`` due substeps; interrupted, the target falls back to where the physics got (the next advance
+        starts from there)."""
+        if n <= 0:
+            return
+        try:
+            self._step(n)
+        except BaseException:
+            self._target = self.time
+            self.clock.set(self._target)
+            raise
 
     def _due(self, seconds: float) -> int:
         """Book ``seconds`` more on the world's target time: the substeps that are now due."""
