@@ -22,20 +22,28 @@ def _twin(rig) -> MksFirmware:  # type: ignore[no-untyped-def]
     return fw
 
 
+def _set_zero_off_start(rig) -> int:  # type: ignore[no-untyped-def]
+    """Enable, turn the shaft away from its power-on position and set 0_Mode's zero there (NearMode, "Set 0");
+    returns that zero's single-turn count."""
+    j = rig.joints["m1"]
+    d = j.driver
+    j.enable()
+    d.move_to(5000, speed=300)
+    d.wait_motion(10)
+    rig.sleep(0.2)
+    zero = int(d.read("encoder_addition")) % COUNTS
+    d.set_zero_mode(2, set_zero=1, speed=4, confirm=True)
+    return zero
+
+
 @pytest.mark.parametrize("firmware", ["v1.0.6", "v1.0.9"])
 def test_en_triggered_zero_return_runs_on_an_en_pulse_not_at_power_on(tmp_path: Path, firmware: str) -> None:
     """0x9D g0Enable (V1.0.6 5.10): with 0_Mode set, the single-turn zero return no longer runs at power-on
     but on an En pulse of about 200 ms, in a pulse work mode."""
     with open_motor(tmp_path, joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
-        j = rig.joints["m1"]
-        d = j.driver
+        d = rig.joints["m1"].driver
         fw = _twin(rig)
-        j.enable()
-        d.move_to(5000, speed=300)
-        d.wait_motion(10)
-        rig.sleep(0.2)
-        zero = d.read("encoder_addition") % COUNTS
-        d.set_zero_mode(2, set_zero=1, speed=4, confirm=True)  # NearMode, Set 0 here
+        zero = _set_zero_off_start(rig)
         d.set_position_error_protection(False, en_zero_return=True, confirm=True)
         d.move_to(9000, speed=300)
         d.wait_motion(10)
@@ -54,14 +62,9 @@ def test_en_triggered_zero_return_runs_on_an_en_pulse_not_at_power_on(tmp_path: 
 
 def test_without_en_trigger_the_zero_return_runs_at_power_on_and_an_en_pulse_does_nothing(tmp_path: Path) -> None:
     with open_motor(tmp_path, joint={"firmware": "v1.0.9", "watchdog_ms": 0}) as rig:
-        j = rig.joints["m1"]
-        d = j.driver
+        d = rig.joints["m1"].driver
         fw = _twin(rig)
-        j.enable()
-        d.move_to(5000, speed=300)
-        d.wait_motion(10)
-        rig.sleep(0.2)
-        d.set_zero_mode(2, set_zero=1, speed=4, confirm=True)
+        _set_zero_off_start(rig)
         rig.reset()
         assert fw.motion is not None  # returning to zero at power-on
         rig.sleep(2.0)
