@@ -55,12 +55,18 @@ class Register:
     low_word_first: bool = False  #: word order of 32-bit pairs (eRob/ZLAC: Hi first)
     words: int = field(init=False, repr=False, compare=False)  #: 16-bit registers spanned (1 or 2)
     signed: bool = field(init=False, repr=False, compare=False)
+    #: the range :meth:`check` accepts (the type's, narrowed by the documented bounds)
+    _lo: int = field(init=False, repr=False, compare=False)
+    _hi: int = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.type not in _RANGES:
             raise ValueError(f"register {self.name}: unknown type {self.type!r}")
-        object.__setattr__(self, "words", _RANGES[self.type][2])
+        lo, hi, words = _RANGES[self.type]
+        object.__setattr__(self, "words", words)
         object.__setattr__(self, "signed", self.type.startswith("int"))
+        object.__setattr__(self, "_lo", lo if self.minimum is None else max(lo, self.minimum))
+        object.__setattr__(self, "_hi", hi if self.maximum is None else min(hi, self.maximum))
 
     @property
     def type_range(self) -> tuple[int, int]:
@@ -69,6 +75,8 @@ class Register:
 
     def check(self, value: object) -> int:
         """Validate a value for writing; returns it as int or raises :class:`CommandError`."""
+        if type(value) is int and self._lo <= value <= self._hi:  # the usual case: what check_value returns
+            return value
         return check_value(self.name, self.type, value, self.minimum, self.maximum, self.unit,
                            f" (0x{self.address:04X})")
 
@@ -81,9 +89,9 @@ class Register:
     def to_words(self, value: int) -> tuple[int, ...]:
         """Encode a value into its 16-bit words in wire order (range-checked)."""
         value = self.check(value)
-        raw = value & (0xFFFF if self.words == 1 else 0xFFFFFFFF)
         if self.words == 1:
-            return (raw,)
+            return (value & 0xFFFF,)
+        raw = value & 0xFFFFFFFF
         hi, lo = raw >> 16, raw & 0xFFFF
         return (lo, hi) if self.low_word_first else (hi, lo)
 

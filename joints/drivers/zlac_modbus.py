@@ -44,6 +44,10 @@ STATUS_START = 0x20A2
 STATUS_WORDS = 0x20AF - 0x20A2 + 1
 #: the velocity and torque targets of both wheels (0x2088..0x2091 with the position targets between)
 _TARGETS = ("target_velocity_left", "target_velocity_right", "target_torque_left", "target_torque_right")
+#: per side: its target velocity, acceleration time and deceleration time (velocity_plan's names)
+_VELOCITY_NAMES = {side: (f"target_velocity_{side}", f"acceleration_time_{side}", f"deceleration_time_{side}")
+                   for side in SIDES}
+_VELOCITY = int(zr.ControlMode.VELOCITY)
 
 def ramp_time_ms(delta_rpm: float, rpm_per_s: float) -> int:
     """Acceleration/deceleration-time register value [ms] for a speed change of ``delta_rpm`` at
@@ -245,19 +249,27 @@ class ZlacDrive:
     def velocity_plan(self, commands: Mapping[str, tuple[int, int]]) -> tuple[dict[str, int] | None, dict[str, int]]:
         """What :meth:`set_channel_velocities` writes, after its checks and the mode (which it sets if needed):
         (the four ramp times if they change, else None; both target velocities [r/min])."""
-        rpm = {side: round(commands[side][0] / 10.0) for side in SIDES}
+        table, cache, names = self.table, self._cache, _VELOCITY_NAMES
+        left, right = commands["left"], commands["right"]
+        rpm = {"left": round(left[0] / 10.0), "right": round(right[0] / 10.0)}
         for side in SIDES:
-            self.table[f"target_velocity_{side}"].check(rpm[side])
+            table[names[side][0]].check(rpm[side])
         self._need_both("set_velocities")
         ramps: dict[str, int] = {}
+        st = self.state
         for side in SIDES:
-            self.require_mode(side, zr.ControlMode.VELOCITY)
-            last = self._cache.get(f"target_velocity_{side}", 0)
-            ms = ramp_time_ms(rpm[side] - last, commands[side][1] / 10.0) if rpm[side] != last else None
-            for stem in ("acceleration_time", "deceleration_time"):
-                name = f"{stem}_{side}"
-                ramps[name] = self._cache.get(name, 500) if ms is None else ms
-        changed = any(self._cache.get(k) != v for k, v in ramps.items())
+            if st.mode == _VELOCITY:  # require_mode's steady case: the mode is the drive's already
+                st.channel_mode[side] = _VELOCITY
+            else:
+                self.require_mode(side, zr.ControlMode.VELOCITY)
+            target, acc, dec = names[side]
+            last = cache.get(target, 0)
+            if rpm[side] != last:
+                ramps[acc] = ramps[dec] = ramp_time_ms(rpm[side] - last, commands[side][1] / 10.0)
+            else:
+                ramps[acc] = cache.get(acc, 500)
+                ramps[dec] = cache.get(dec, 500)
+        changed = any(cache.get(k) != v for k, v in ramps.items())
         return (ramps if changed else None), {"target_velocity_left": rpm["left"], "target_velocity_right": rpm["right"]}
 
     def set_torques(self, left: int, right: int) -> None:
@@ -278,7 +290,10 @@ class ZlacDrive:
         self.control(zr.ControlWord.START_SYNC)
 
     def _need_both(self, what: str) -> None:
-        missing = [s for s in SIDES if s not in self.state.enabled]
+        enabled = self.state.enabled
+        if "left" in enabled and "right" in enabled:
+            return
+        missing = [s for s in SIDES if s not in enabled]
         if missing:
             raise StateError(f"{self.name}: {what} needs both wheels enabled ({', '.join(missing)} is not)")
 
@@ -307,6 +322,9 @@ class ZlacChannelDriver(JointDriver):
         self.profile = profile
         self.name = name or f"{drive.name}:{side}"
         self.encoder_lines = encoder_lines
+        #: this wheel's status parameters: error code, actual position, velocity, torque
+        self._status = tuple(f"{stem}_{side}" for stem in ("error_code", "actual_motor_position", "actual_velocity",
+                                                             "actual_torque"))
         lines = encoder_lines or int(getattr(profile, "encoder_lines", zr.COUNTS_PER_REV // 4))
         self.units = self._units(lines)  # until the drive told its own (ZlacDrive.identify)
         drive._channels.append(self)
@@ -471,30 +489,35 @@ class ZlacChannelDriver(JointDriver):
         (0x20AF = 0 while this host had it enabled) reports :data:`~joints.devices.zlac.faults.OFFLINE`.
         """
         hi = self.side == "left"
-        fault = v[f"error_code_{self.side}"]
-        was_enabled = self.is_enabled
+        side = self.side
+        drive = self.drive
+        enabled = drive.state.enabled
+        error, position, velocity, torque = self._status
+        fault = v[error]
+        was_enabled = side in enabled
         if v["error_code_left"] or v["error_code_right"]:
             # a fault switches BOTH motors off (one state machine): the drive disabled itself
-            self.drive.state.enabled.clear()
-        elif not self.drive.commanded and self.drive.energised(v) and not self.drive.state.enabled:
+            enabled.clear()
+        elif not drive.commanded and drive.energised(v) and not enabled:
             # this host has sent no control word yet and the drive is on (enabled by another program
             # or process): it is enabled - both motors, one state machine - in the drive's mode
-            self.drive.state.enabled.update(SIDES)
-            self.drive.adopted = True
-        elif self.drive.state.enabled and v["software_connected_status"] == 0:
-            self.drive.state.enabled.clear()  # offline trip: the drive quick-stopped on its own
-            self.drive.offline = True
-        if not fault and self.drive.offline and (was_enabled or not self.drive.state.enabled):
+            enabled.update(SIDES)
+            drive.adopted = True
+        elif enabled and v["software_connected_status"] == 0:
+            enabled.clear()  # offline trip: the drive quick-stopped on its own
+            drive.offline = True
+        if not fault and drive.offline and (was_enabled or not enabled):
             fault = zf.OFFLINE_CODE
         running = (v["motor_state"] >> 8) & 0xFF if hi else v["motor_state"] & 0xFF
         temp = (v["motor_temperature"] >> 8) & 0xFF if hi else v["motor_temperature"] & 0xFF
+        speed = v[velocity]
         return RawState(
-            position=v[f"actual_motor_position_{self.side}"],
-            velocity=v[f"actual_velocity_{self.side}"],
-            current=v[f"actual_torque_{self.side}"] * 100,  # 0.1 A -> mA
+            position=v[position],
+            velocity=speed,
+            current=v[torque] * 100,  # 0.1 A -> mA
             temperature=float(temp),
-            enabled=self.is_enabled and bool(running),
-            moving=bool(running) and v[f"actual_velocity_{self.side}"] != 0,
+            enabled=side in enabled and bool(running),
+            moving=bool(running) and speed != 0,
             fault=fault,
             time=t,
             extra=dict(v),

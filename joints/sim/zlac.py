@@ -218,6 +218,17 @@ _ACTING = frozenset({
     "in_absolute_position_control_reset_the_zero_point", "whether_store_rw_register_to_eeprom",
     "register_parameter_settings", "maximum_motor_speed",
 })
+#: the ramp-time settings: a block of only these and the target velocities refreshes just the ramp columns
+#: (:meth:`ZlacFirmware.write_many`)
+_RAMPS = frozenset(f"{stem}_{side}" for stem in ("acceleration_time", "deceleration_time") for side in ("left", "right"))
+#: target velocity register -> channel index (0 left, 1 right)
+_TARGET_VELOCITY = {"target_velocity_left": 0, "target_velocity_right": 1}
+_LIGHT = _RAMPS | frozenset(_TARGET_VELOCITY)
+#: the status block a host reads in one FC03 (0x20A2 .. 0x20AF), served by :meth:`ZlacFirmware.reader` in one call
+_STATUS = ("motor_state", "hall_state", "motor_temperature", "error_code_left", "error_code_right",
+           "actual_motor_position_left", "actual_motor_position_right", "actual_velocity_left",
+           "actual_velocity_right", "actual_torque_left", "actual_torque_right", "software_connected_status")
+_ENERGISED_CODES = frozenset(float(Z.STATES.index(s)) for s in ENERGISED)
 
 
 def power_on_defaults(profile: HubMotorProfile, address: int) -> dict[str, int]:
@@ -445,24 +456,26 @@ class ZlacChannel:
     # -- commands (from the drive) ---------------------------------------------------------
     def set_velocity_target(self, rpm: int) -> None:
         """Velocity-mode target changed: start the ramp to it (see the module docstring)."""
-        vmax = self.drive.vmax
-        target = max(-vmax, min(vmax, rpm * RPM))
-        if target == self.v_target:
+        drive = self.drive
+        get, s = self._get, self._row
+        vmax = float(drive._dget(Z.D_VMAX))
+        target = float(max(-vmax, min(vmax, rpm * RPM)))
+        if target == get(Z.V_TARGET):
             return
-        self.v_target = target
-        v = self.v_ref
-        ref = self.drive.ramp_reference
+        s[Z.V_TARGET] = target
+        v = float(get(Z.V_REF))
+        ref = drive.ramp_reference
         if ref is not None:
-            self.acc_slope = ref / self.acc_time
-            self.dec_slope = ref / self.dec_time
+            s[Z.ACC_SLOPE] = float(ref / get(Z.ACC_TIME))
+            s[Z.DEC_SLOPE] = float(ref / get(Z.DEC_TIME))
         elif v * target > 0.0:
             if abs(target) >= abs(v):
-                self.acc_slope = (abs(target) - abs(v)) / self.acc_time
+                s[Z.ACC_SLOPE] = float((abs(target) - abs(v)) / get(Z.ACC_TIME))
             else:
-                self.dec_slope = (abs(v) - abs(target)) / self.dec_time
+                s[Z.DEC_SLOPE] = float((abs(v) - abs(target)) / get(Z.DEC_TIME))
         else:
-            self.dec_slope = abs(v) / self.dec_time
-            self.acc_slope = abs(target) / self.acc_time
+            s[Z.DEC_SLOPE] = float(abs(v) / get(Z.DEC_TIME))
+            s[Z.ACC_SLOPE] = float(abs(target) / get(Z.ACC_TIME))
 
     def start_move(self, absolute: bool) -> bool:
         """Position-mode start: latch target, speed and ramps; False if the target is refused."""
@@ -534,8 +547,9 @@ class ZlacFirmware(Firmware):
         quirks: frozenset[str] | None = None,
     ) -> None:
         super().__init__(ZLAC8015D.params, values=power_on_defaults(profile, address))
-        self._batch = False  #: inside write_many
+        self._batch = 0  #: inside write_many: 1, 2 for a block of only ramp times and target velocities
         self._stale = False  #: settings written whose loop constants are not computed yet
+        self._stale_ramps = False  #: (a block of ramps and targets) ramp times written, their columns not yet
         #: the firmware's quirks (joints.devices.quirks); default: the family's default firmware
         self.quirks = quirks if quirks is not None else firmware_profile("zlac8015d").quirks
         self.profile = profile
@@ -569,6 +583,8 @@ class ZlacFirmware(Firmware):
         self.computed["hall_state"] = lambda: _pack(left.hall(), right.hall())
         self.computed["motor_temperature"] = lambda: _pack(round(left.temperature), round(right.temperature))
         self.computed["software_connected_status"] = lambda: int(self._dget(Z.D_CONNECTED))
+        #: what the status block's parameters are computed by (the one-call reader serves them while they are)
+        self._status_fns = tuple(self.computed[n] for n in _STATUS)
         self._power_on()
 
     # -- the rows ----------------------------------------------------------------------------------
@@ -700,6 +716,7 @@ class ZlacFirmware(Firmware):
     # -- settings cache ----------------------------------------------------------------------
     def _cache(self) -> None:
         self._stale = False
+        self._stale_ramps = False
         v = self.values
         d = self._drow
         d[Z.D_VMAX] = max(v["maximum_motor_speed"], 1) * RPM
@@ -712,7 +729,58 @@ class ZlacFirmware(Firmware):
         for ch in getattr(self, "channels", ()):
             ch.cache()
 
+    def _cache_ramps(self) -> None:
+        """The ramp-time columns of both channels from the values (what :meth:`_cache` computes for them)."""
+        self._stale_ramps = False
+        v = self.values
+        for ch in self.channels:
+            r, s = ch.reg, ch._row
+            s[Z.ACC_TIME] = _ramp_seconds(v[r["acceleration_time"]])
+            s[Z.DEC_TIME] = _ramp_seconds(v[r["deceleration_time"]])
+
     # -- what the fronts call ------------------------------------------------------------------
+    def reader(self, names: Sequence[str]) -> Callable[[], list[int]]:
+        """As :meth:`Firmware.reader`; the status block (0x20A2 .. 0x20AF), while its parameters are
+        computed as this class computes them, in one call (:meth:`_read_status`: the same values, in the
+        same order)."""
+        generic = super().reader(names)
+        if (tuple(names) != _STATUS or type(self).on_read is not Firmware.on_read
+                or any(self.computed.get(n) is not f for n, f in zip(_STATUS, self._status_fns))):
+            return generic
+        ranges = tuple(self._type_range[n] for n in _STATUS)
+        status = self._read_status
+
+        def read() -> list[int]:
+            out = status()
+            for i, (lo, hi) in enumerate(ranges):  # saturate, never wrap (as the generic reader)
+                v = out[i]
+                if v < lo:
+                    out[i] = lo
+                elif v > hi:
+                    out[i] = hi
+            return out
+
+        return read
+
+    def _read_status(self) -> list[int]:
+        """The status block's values (:data:`_STATUS` order), each as its ``computed`` function gives it."""
+        left, right = self.left, self.right
+        e = 1 if self._dget(Z.D_STATE) in _ENERGISED_CODES else 0
+        return [
+            _pack(e, e),
+            _pack(left.hall(), right.hall()),
+            _pack(round(left.temperature), round(right.temperature)),
+            left.error_status(),
+            right.error_status(),
+            left.counts(),
+            right.counts(),
+            left.velocity_status(),
+            right.velocity_status(),
+            left.current_status(),
+            right.current_status(),
+            int(self._dget(Z.D_CONNECTED)),
+        ]
+
     def frame_received(self) -> None:
         d = self._drow
         d[Z.D_LAST_FRAME] = d[Z.D_TIME]
@@ -727,28 +795,37 @@ class ZlacFirmware(Firmware):
     def write_many(self, items: Sequence[tuple[str, int]]) -> None:
         """As :meth:`Firmware.write_many`; loop settings written in one block are turned into loop
         constants once, before anything that uses them (a later command of the block, a substep)."""
-        self._batch = True
+        self._batch = 2 if all(name in _LIGHT for name, _ in items) else 1
         try:
             super().write_many(items)
         finally:
-            self._batch = False
+            self._batch = 0
             if self._stale:
                 self._cache()
+            elif self._stale_ramps:
+                self._cache_ramps()
 
     def on_write(self, name: str, value: int) -> None:
-        if self._stale and name in _ACTING:  # settings written earlier in this block: in force first
-            self._cache()
+        if name in _ACTING:  # settings written earlier in this block: in force first
+            if self._stale:
+                self._cache()
+            elif self._stale_ramps:  # only ramp times (a light block): all that _cache would change
+                self._cache_ramps()
+        side = _TARGET_VELOCITY.get(name)
+        if side is not None:
+            d = self._dget
+            if d(Z.D_STATE) == Z.ENABLED and d(Z.D_MODE) == Z.VELOCITY:  # enabled, velocity mode
+                self.channels[side].set_velocity_target(value)
+            return
+        if self._batch == 2 and name in _RAMPS:  # a light block: only the ramp columns are stale
+            self._stale_ramps = True
+            return
         if name == "control_word":
             self._command(value)
             return
         if name == "control_mode":
             self._cache()
             self._mode_changed()
-            return
-        if name in ("target_velocity_left", "target_velocity_right"):
-            ch = self.left if name.endswith("left") else self.right
-            if self.state is DriveState.ENABLED and self.mode == ControlMode.VELOCITY:
-                ch.set_velocity_target(value)
             return
         if name in ("target_torque_left", "target_torque_right"):
             (self.left if name.endswith("left") else self.right)._row[Z.TARGET_TORQUE] = float(value)
