@@ -18,7 +18,7 @@ import pytest
 
 from joints.codecs import modbus as mb
 from joints.devices.zlac.profile import HubMotorProfile
-from joints.devices.zlac.registers import ZLAC8015D
+from joints.devices.zlac.registers import ZLAC8015D, Fault
 from joints.drivers.zlac_modbus import STATUS_START, STATUS_WORDS
 from joints.sim import zlac
 from joints.sim.firmware import Firmware
@@ -149,7 +149,7 @@ def test_the_status_reader_is_the_generic_one_for_the_same_state() -> None:
         r.run(0.03)
         both()
     r.fw.left.temperature = 400.0  # saturates the packed byte
-    r.fw.raise_fault(r.fw.right, zlac.Fault.OVER_LOAD)
+    r.fw.raise_fault(r.fw.right, Fault.OVER_LOAD)
     both()
     r.write(0x200E, 0x06)
     r.write(0x200E, 0x08)
