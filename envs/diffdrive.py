@@ -554,17 +554,20 @@ class DiffDriveGoalEnv(RigEnv):
         """Sim: the chassis site ``base`` from the physics, (x, y, heading) in the episode frame."""
         if not self.sim:
             raise RuntimeError("the true pose is known in simulation only")
-        x, y, th = self._world_pose()
-        ox, oy, oth = self._origin
+        x, y, th = self._world_xyth()  # Python floats: the same arithmetic as on numpy scalars, faster
+        ox, oy, oth = self._origin.tolist()
         c, s = math.cos(oth), math.sin(oth)
         return np.array([c * (x - ox) + s * (y - oy), -s * (x - ox) + c * (y - oy), wrap_angle(th - oth)])
 
     def _world_pose(self) -> np.ndarray:
         """Sim: (x, y, heading) of the chassis site ``base`` in the world frame."""
+        return np.array(self._world_xyth())
+
+    def _world_xyth(self) -> tuple[float, float, float]:
         data = self.rig.sim.data
-        p = data.site_xpos[self._site]
-        m = data.site_xmat[self._site]
-        return np.array([float(p[0]), float(p[1]), math.atan2(float(m[3]), float(m[0]))])
+        x, y, _ = data.site_xpos[self._site].tolist()
+        m = data.site_xmat[self._site].tolist()
+        return x, y, math.atan2(m[3], m[0])
 
     # -- bus --------------------------------------------------------------------------------
     def _read(self) -> dict[str, joints.JointState]:
@@ -583,7 +586,8 @@ class DiffDriveGoalEnv(RigEnv):
     def _command(self, action: np.ndarray) -> None:
         if not all(j.enabled for j in self.wheels):  # faulted/disabled drive: the episode has ended
             return
-        cmd = self.command_of(action)
+        # the action is begin_step's (float64, shape (2,), clipped): command_of without its no-op conversions
+        cmd = action * self.velocity_limits
         compiled = self.compiled_path
         if compiled is not None:  # the same FC16(s), sent as rig.set_velocities sends them
             compiled.command("velocity", cmd.tolist())
