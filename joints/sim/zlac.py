@@ -795,7 +795,11 @@ class ZlacFirmware(Firmware):
     def write_many(self, items: Sequence[tuple[str, int]]) -> None:
         """As :meth:`Firmware.write_many`; loop settings written in one block are turned into loop
         constants once, before anything that uses them (a later command of the block, a substep)."""
-        self._batch = 2 if all(name in _LIGHT for name, _ in items) else 1
+        self._batch = 2
+        for name, _ in items:
+            if name not in _LIGHT:
+                self._batch = 1
+                break
         try:
             super().write_many(items)
         finally:
