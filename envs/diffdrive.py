@@ -484,7 +484,7 @@ class DiffDriveGoalEnv(RigEnv):
         r_success = self.success_bonus if success else 0.0
         self._distance = d
         obs = self._observation()
-        info = self._info(states)
+        info = self._info(states, (d, e))
         info.update(reward_progress=r_progress, reward_heading=r_heading, reward_action=r_action,
                     reward_success=r_success)
         x, y, _ = self.odometry.pose
@@ -519,20 +519,23 @@ class DiffDriveGoalEnv(RigEnv):
     def _goal_terms(self) -> tuple[float, float]:
         """(distance [m], heading error [rad]) of the estimate to the goal."""
         x, y, th = self.odometry.pose
-        return math.hypot(self.goal[0] - x, self.goal[1] - y), wrap_angle(float(self.goal[2]) - th)
+        gx, gy, gh = self.goal.tolist()
+        return math.hypot(gx - x, gy - y), wrap_angle(gh - th)
 
     def _observation(self) -> np.ndarray:
         x, y, th = self.odometry.pose
         c, s = math.cos(th), math.sin(th)
-        dx, dy = self.goal[0] - x, self.goal[1] - y
-        e = float(self.goal[2]) - th
+        gx, gy, gh = self.goal.tolist()
+        dx, dy = gx - x, gy - y
+        e = gh - th
         v = [self._states[n].velocity for n in self.wheel_names]
         obs = np.array([x, y, c, s, c * dx + s * dy, -s * dx + c * dy, math.cos(e), math.sin(e), v[0], v[1]])
         out: np.ndarray = np.clip(obs, self._obs_low, self._obs_high)
         return out
 
-    def _info(self, states: Mapping[str, joints.JointState]) -> dict[str, Any]:
-        d, e = self._goal_terms()
+    def _info(self, states: Mapping[str, joints.JointState], terms: tuple[float, float] | None = None) -> dict[str, Any]:
+        """The step's info; ``terms``: :meth:`_goal_terms` if the caller has them."""
+        d, e = self._goal_terms() if terms is None else terms
         info: dict[str, Any] = {
             "time": float(self.rig.time),  # s on the rig's clock (sim: simulated seconds since reset)
             "overrun": self._overrun,  # s this step ran over its period (0.0: none)
@@ -547,7 +550,9 @@ class DiffDriveGoalEnv(RigEnv):
         if self.sim:
             tp = self.true_pose()
             info["true_pose"] = tp
-            info["true_distance"] = math.hypot(self.goal[0] - tp[0], self.goal[1] - tp[1])
+            tx, ty, _ = tp.tolist()
+            gx, gy, _ = self.goal.tolist()
+            info["true_distance"] = math.hypot(gx - tx, gy - ty)
         return info
 
     def true_pose(self) -> np.ndarray:
