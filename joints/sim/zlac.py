@@ -794,7 +794,9 @@ class ZlacFirmware(Firmware):
 
     def write_many(self, items: Sequence[tuple[str, int]]) -> None:
         """As :meth:`Firmware.write_many`; loop settings written in one block are turned into loop
-        constants once, before anything that uses them (a later command of the block, a substep)."""
+        constants once, before anything that uses them (a later command of the block, a substep). A block of
+        only ramp times and target velocities (a host's velocity command) refreshes only the ramp-time
+        columns, all that it can change (:meth:`_cache_ramps`)."""
         self._batch = 2
         for name, _ in items:
             if name not in _LIGHT:
