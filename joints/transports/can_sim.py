@@ -156,7 +156,7 @@ class CanMedium(ClockDriven):
         self._wire: tuple[float, float, _Pending] | None = None  # (start, end, frame) on the bus
         self._free = self.now  # when the bus is idle again
         self._seq = itertools.count()
-        self._bits_cache: dict[tuple[int, bool, bool, bytes], int] = {}
+        self._bits_cache: dict[tuple[Any, ...], int] = {}
         # statistics
         self.frames = 0
         self.bits = 0
@@ -270,7 +270,10 @@ class CanMedium(ClockDriven):
 
     # -- the wire -------------------------------------------------------------------------
     def _bits(self, frame: can.Message) -> int:
-        key = (frame.arbitration_id, frame.is_extended_id, frame.is_remote_frame, bytes(frame.data))
+        if self.stuffing == "exact":  # the frame's own bits decide
+            key: tuple[Any, ...] = (frame.arbitration_id, frame.is_extended_id, frame.is_remote_frame, bytes(frame.data))
+        else:  # the worst-case bound and no stuffing depend on the format and the data length only
+            key = (frame.is_extended_id, frame.is_remote_frame, len(frame.data))
         bits = self._bits_cache.get(key)
         if bits is None:
             if len(self._bits_cache) > 4096:
