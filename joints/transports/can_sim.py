@@ -410,8 +410,11 @@ class CanMedium(ClockDriven):
     def receive(self, node: _Node, timeout: float | None) -> can.Message | None:
         """The next frame delivered to ``node`` within ``timeout`` s of simulated time (None: none came)."""
         self._sync()
-        deadline = math.inf if timeout is None else self.now + max(timeout, 0.0)
         held, rx = node.held, node.rx
+        if timeout is not None and timeout <= 0 and not rx and not (held and held[0][0] <= self.now + 1e-12) \
+                and self._next_event() > self.now and self.clock.now() >= self.now:
+            return None  # a poll with nothing due: waiting until now would neither sleep nor deliver anything
+        deadline = math.inf if timeout is None else self.now + max(timeout, 0.0)
         while True:
             while held and held[0][0] <= self.now + 1e-12:
                 rx.append(held.popleft()[1])
