@@ -98,6 +98,8 @@ _FIRMWARE_MODE = {Mode.PP: _POSITION, Mode.CSP: _POSITION, Mode.IP: _POSITION, M
 _COMM = range(0x1000, 0x2000)  #: the communication profile area (reset communication)
 _COMM_NAMES = tuple(n for n, o in objects() if o.index in _COMM)
 _PDO_AREA = range(0x1400, 0x1C00)
+#: 0x6060 value -> its mode (what ``Mode(value)`` gives, without the enum call)
+_MODE_OF = {int(m): m for m in Mode}
 #: objects the front computes on read (the others are the firmware's parameters)
 _STATUS = frozenset({"statusword", "modes_of_operation_display", "error_register", "error_code",
                      "target_torque", "torque_actual_value"})
@@ -328,10 +330,7 @@ class CanopenFront:
         """The value of a parameter as CANopen reads it (in the parameter's unit)."""
         fw = self.firmware
         if name not in _STATUS:
-            read = self._readers.get(name)
-            if read is None:  # a prepared read per parameter (Firmware.reader), as fw.read(name) makes each time
-                read = self._readers[name] = fw.reader((name,))
-            return int(read()[0])
+            return int(self._read(name))
         if name == "statusword":
             return self.statusword()
         if name == "modes_of_operation_display":
@@ -343,8 +342,16 @@ class CanopenFront:
         if name == "target_torque":
             return int(fw.values["target_torque"])
         # torque actual value: per mille of rated torque from the motor current
-        torque = fw.read("motor_current") * 1e-3 * fw.kt / fw.profile.rated_torque * 1000
+        torque = self._read("motor_current") * 1e-3 * fw.kt / fw.profile.rated_torque * 1000
         return int(max(-32768, min(32767, round(torque))))
+
+    def _read(self, name: str) -> int:
+        """``firmware.read(name)`` through a read prepared once per parameter (:meth:`Firmware.reader`; the
+        same read, without its checks each time)."""
+        read = self._readers.get(name)
+        if read is None:
+            read = self._readers[name] = self.firmware.reader((name,))
+        return read()[0]
 
     def _sdo_read(self, index: int, subindex: int) -> bytes:
         name, obj = self._object(index, subindex)
@@ -580,10 +587,14 @@ class CanopenFront:
 
     # -- CiA 402 ------------------------------------------------------------------------------
     def _mode(self) -> Mode | None:
-        try:
-            return Mode(self.firmware.values["modes_of_operation"])
-        except ValueError:
-            return None
+        value = self.firmware.values["modes_of_operation"]
+        mode = _MODE_OF.get(value)
+        if mode is None:
+            try:
+                return Mode(value)
+            except ValueError:
+                return None
+        return mode
 
     def statusword(self) -> int:
         state = self.state
@@ -594,15 +605,15 @@ class CanopenFront:
             if mode is Mode.PP:
                 bit12 = bool(self.controlword & cia402.CW_NEW_SETPOINT) and self.pp_active
                 reached = not fw.gen.active and (not self.pp_active or
-                                                 fw.read("status_of_achieving_position") == AchieveStatus.TARGET_REACHED)
+                                                 self._read("status_of_achieving_position") == AchieveStatus.TARGET_REACHED)
             elif mode in (Mode.PV, Mode.CSV):
-                v, target = fw.read("current_speed"), fw.values["target_speed"]
+                v, target = self._read("current_speed"), fw.values["target_speed"]
                 reached = abs(v - target) <= max(100, abs(target) // 100) and abs(fw.v_ref - target) < 1
                 bit12 = abs(v) < 100 if mode is Mode.PV else not self.enabling
             elif mode is Mode.IP:
                 bit12 = bool(self.controlword & cia402.CW_ENABLE_IP) and not self.enabling  # interpolating
                 # at rest at the newest set-point (the reference stops at each set-point until the next)
-                reached = not fw.gen.active and abs(fw.v_ref) < 1 and abs(fw.read("current_speed")) < 100
+                reached = not fw.gen.active and abs(fw.v_ref) < 1 and abs(self._read("current_speed")) < 100
             elif mode in (Mode.CSP, Mode.CST):
                 bit12 = not self.halted and not self.enabling  # following the target (brake released)
                 reached = True
@@ -786,8 +797,11 @@ class CanopenFront:
             self.next_heartbeat = t + period if period > 0 else math.inf
             out.append(co.encode(co.Heartbeat(self.node, self.nmt)))
         if self.nmt is co.NmtState.OPERATIONAL:
-            out.extend(self._event_tpdos(t))
-        out.extend(self._flush())
+            self.pdos()
+            if self._timed_tpdos:
+                out.extend(self._event_tpdos(t))
+        if self._outbox:
+            out.extend(self._flush())
         return out
 
     def _event_tpdos(self, t: float) -> list[can.Message]:
