@@ -270,8 +270,9 @@ class CanMedium(ClockDriven):
 
     # -- the wire -------------------------------------------------------------------------
     def _bits(self, frame: can.Message) -> int:
-        if self.stuffing == "exact":  # the frame's own bits decide
-            key: tuple[Any, ...] = (frame.arbitration_id, frame.is_extended_id, frame.is_remote_frame, bytes(frame.data))
+        if self.stuffing == "exact":  # the frame's own bits decide (a remote frame's DLC among them)
+            key: tuple[Any, ...] = (frame.arbitration_id, frame.is_extended_id, frame.is_remote_frame, frame.dlc,
+                                    bytes(frame.data))
         else:  # the worst-case bound and no stuffing depend on the format and the data length only
             key = (frame.is_extended_id, frame.is_remote_frame, len(frame.data))
         bits = self._bits_cache.get(key)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import random
 import subprocess
 import sys
 import textwrap
@@ -15,8 +16,9 @@ import pytest
 
 from joints.clock import ManualClock
 from joints.transports.can import PythonCanTransport
+from joints.transports import can_sim
 from joints.transports.can_sim import INTERFACE, CanMedium, LockstepCanBus
-from joints.transports.can_timing import frame_time
+from joints.transports.can_timing import frame_bits, frame_time
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -269,4 +271,134 @@ def test_a_clock_behind_the_media_ticks_is_not_a_reset() -> None:
     clock.set(0.0004)  # the instant the host booked, inside that substep
     reply = bus.recv(0.0)
     assert reply is not None and reply.timestamp == pytest.approx(180 * US)
+    bus.shutdown()
+
+
+# -- the medium's hot paths against their plain definitions -----------------------------------------------
+
+
+def _reference_priority(frame: can.Message) -> tuple[int, int, int]:
+    """Arbitration order as CAN defines it: base identifier, then standard before extended, then the extension."""
+    if frame.is_extended_id:
+        return (frame.arbitration_id >> 18, 1, frame.arbitration_id & 0x3FFFF)
+    return (frame.arbitration_id, 0, 0)
+
+
+def _random_frames(rng: random.Random, n: int) -> list[can.Message]:
+    out = []
+    for _ in range(n):
+        ext = rng.random() < 0.4
+        ident = rng.randrange(1 << 29) if ext else rng.randrange(1 << 11)
+        if rng.random() < 0.3:  # collide: an extended frame on a standard one's base id, equal ids
+            ident = (rng.randrange(1 << 11) << 18 | rng.randrange(4)) if ext else rng.randrange(4)
+        remote = rng.random() < 0.1
+        data = bytes(rng.randrange(256) for _ in range(rng.randrange(9)))
+        out.append(can.Message(arbitration_id=ident, is_extended_id=ext, is_remote_frame=remote,
+                               data=b"" if remote else data, dlc=len(data)))
+    return out
+
+
+def test_the_priority_key_orders_frames_as_can_arbitration_does() -> None:
+    rng = random.Random(3)
+    frames = _random_frames(rng, 400)
+    by_key = sorted(range(len(frames)), key=lambda i: (can_sim._priority(frames[i]), i))
+    by_reference = sorted(range(len(frames)), key=lambda i: (_reference_priority(frames[i]), i))
+    assert by_key == by_reference
+
+
+def test_the_winner_is_the_lowest_identifier_among_each_hosts_oldest_and_every_peer_frame() -> None:
+    """``CanMedium._winner`` (one pass over the queue) against the rule written out: the contenders are every
+    ready frame of a peer and the oldest ready frame of each python-can node; the lowest priority, then the
+    oldest, wins."""
+    rng = random.Random(5)
+    for _ in range(300):
+        medium = CanMedium(register=False)
+        nodes = [medium.attach(f"host{i}") for i in range(2)] + \
+            [medium.attach_peer(Echo(medium), name=f"peer{i}") for i in range(2)]
+        for frame in _random_frames(rng, rng.randrange(1, 8)):
+            medium._enqueue(frame, rng.choice(nodes), rng.choice((0.0, 1e-4, 2e-4)))
+        start = rng.choice((0.0, 1e-4, 2e-4))
+        if not any(p.ready <= start for p in medium._pending):
+            continue
+        heads: dict[int, can_sim._Pending] = {}
+        contenders = []
+        for p in medium._pending:
+            if p.ready > start:
+                continue
+            if p.sender.peer is not None:
+                contenders.append(p)
+            elif id(p.sender) not in heads or p.seq < heads[id(p.sender)].seq:
+                heads[id(p.sender)] = p
+        contenders.extend(heads.values())
+        want = min(contenders, key=lambda p: (_reference_priority(p.frame), p.seq))
+        assert medium._winner(start) is want
+
+
+@pytest.mark.parametrize("stuffing", ["worst", "exact", "none"])
+def test_the_bits_cache_gives_each_frame_its_own_bit_count(stuffing: str) -> None:
+    medium = CanMedium(register=False, stuffing=stuffing)
+    for frame in _random_frames(random.Random(7), 500):
+        assert medium._bits(frame) == frame_bits(frame, stuffing), frame
+
+
+def test_a_poll_with_nothing_due_returns_at_once_as_the_waiting_loop_would() -> None:
+    """``receive(node, 0)`` with nothing due takes the short path (no wait at all) and leaves the medium and
+    the clock as the waiting loop leaves them; with a frame due now it waits as before."""
+    runs = []
+    for short in (True, False):
+        clock = ManualClock()
+        medium = CanMedium(register=False, clock=clock)
+        medium.attach_peer(Echo(medium), latency=50 * US)
+        bus = LockstepCanBus(medium=medium, adapter_latency=20 * US)
+        waits: list[float] = []
+        wait = medium._wait_until
+        medium._wait_until = lambda t, lazy=False: (waits.append(t), wait(t, lazy))[1]  # type: ignore[method-assign]
+        bus.send(msg(0x641, b"\x00\x01"))
+        polls = []
+        for _ in range(3):
+            if not short:  # the reference: the waiting loop (what the short path must equal)
+                node, timeout = bus._node, 0.0
+                deadline = medium.now + timeout
+                target = min(medium._next_event(), node.held[0][0] if node.held else math.inf, deadline)
+                medium._wait_until(target)
+                polls.append(node.rx.popleft() if node.rx else None)
+            else:
+                polls.append(bus.recv(0.0))
+        got = bus.recv(1.0)
+        runs.append((waits, [p is None for p in polls], got.timestamp if got else None, clock.now(), medium.now,
+                     medium.frames, medium.bits))
+        bus.shutdown()
+    short_run, reference = runs
+    assert short_run[0] == reference[0][3:] and len(reference[0]) == len(short_run[0]) + 3  # the polls did not wait
+    assert short_run[1:] == reference[1:]
+
+
+def test_a_poll_with_a_frame_due_now_still_delivers_it() -> None:
+    clock = ManualClock()
+    medium = CanMedium(register=False, clock=clock)
+    bus = LockstepCanBus(medium=medium)
+    other = LockstepCanBus(medium=medium)
+    other.send(msg(0x123, b"\x01"))
+    assert bus.recv(0.0) is None  # on the wire: not there yet
+    clock.advance(frame_time(msg(0x123, b"\x01"), medium.bitrate))  # the host slept past its end
+    got = bus.recv(0.0)
+    assert got is not None and got.arbitration_id == 0x123
+    bus.shutdown()
+    other.shutdown()
+
+
+def test_a_poll_still_waits_where_the_waiting_loop_would_act() -> None:
+    """The short path of ``receive(node, 0)`` is taken only where waiting until now does nothing: a frame due
+    now is still processed (here on an ideal medium: delivered at once), and a clock behind the medium's time
+    still sleeps up to it."""
+    clock = ManualClock()
+    medium = CanMedium(register=False, clock=clock, ideal=True)
+    bus = LockstepCanBus(medium=medium)
+    other = medium.attach_peer(Echo(medium), name="other")
+    medium._enqueue(msg(0x123, b"\x01"), other, medium.now)  # due now, not yet processed
+    got = bus.recv(0.0)
+    assert got is not None and got.arbitration_id == 0x123
+    medium.now = clock.now() + 1e-9  # the medium stands ahead of the clock (as after an inexact sleep)
+    assert bus.recv(0.0) is None
+    assert clock.now() == medium.now  # the poll let the clock catch up, as waiting until now does
     bus.shutdown()
