@@ -296,6 +296,7 @@ class ErobCanBus:
         #: bus timing: node -> its drive's reply turnaround [s] (the world fills it from the profiles)
         self.turnarounds: dict[int, float] = {}
         self.medium = CanMedium(name, bitrate=bitrate, ideal=ideal)
+        self.medium.answers_only = True  # the drives answer requests; they never send by themselves
         self.channel = self.medium.channel  #: ``can.Bus(interface="joints-sim", channel=...)`` joins this bus
         self.medium.attach_peer(self, latency=latency, name="twins")
         self.frame_errors = 0

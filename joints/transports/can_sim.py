@@ -150,6 +150,10 @@ class CanMedium(ClockDriven):
         self._clock_seen = self.now
         self._see_epoch()
         self._cap: float | None = None  # while we sleep the clock ourselves: process no further than this
+        #: the peers send only in answer to the frames they receive, never by themselves at a tick (the eRob
+        #: CAN custom protocol's twins): :meth:`receive` may then process frame edges without waiting for them
+        self.answers_only = False
+        self._ticked = self.now  #: the time of the last tick: where the world's physics stands (lockstep)
         self._delivering: float | None = None  # the time of the frame being delivered (peers answer then)
         self._nodes: list[_Node] = []
         self._pending: list[_Pending] = []
@@ -219,7 +223,7 @@ class CanMedium(ClockDriven):
         for n in self._nodes:
             n.rx.clear()
             n.held.clear()
-        self.now = self._free = self._clock_seen = t
+        self.now = self._free = self._clock_seen = self._ticked = t
         self._mark = (t, self.frames, self.bits, self.busy)
 
     def _sync(self) -> None:
@@ -240,6 +244,7 @@ class CanMedium(ClockDriven):
         deliver what is due."""
         if self._epoch_seen is not None and self._restarted(self.clock.now()):
             self._restart(self.clock.now())
+        self._ticked = t
         if self._cap is not None:
             t = min(t, self._cap)
         if t > self.now and (self._pending or self._wire is not None):
@@ -409,23 +414,39 @@ class CanMedium(ClockDriven):
         return self.now
 
     def receive(self, node: _Node, timeout: float | None) -> can.Message | None:
-        """The next frame delivered to ``node`` within ``timeout`` s of simulated time (None: none came)."""
+        """The next frame delivered to ``node`` within ``timeout`` s of simulated time (None: none came).
+
+        It waits for each frame edge in turn (the clock sleeps to it: the world steps its physics up to it)
+        until a frame reaches the node. On a medium whose peers only answer (:attr:`answers_only`) an edge
+        where nothing can happen but the medium's own bookkeeping is processed without the wait
+        (:meth:`_skippable`); the waits that remain show the clock the same instants.
+        """
         self._sync()
         held, rx = node.held, node.rx
         if timeout is not None and timeout <= 0 and not rx and not (held and held[0][0] <= self.now + 1e-12) \
                 and self._next_event() > self.now and self.clock.now() >= self.now:
             return None  # a poll with nothing due: waiting until now would neither sleep nor deliver anything
         deadline = math.inf if timeout is None else self.now + max(timeout, 0.0)
+        skipped: float | None = None  # the last edge processed without its wait (the clock shows an earlier time)
         while True:
             while held and held[0][0] <= self.now + 1e-12:
                 rx.append(held.popleft()[1])
             if rx:
                 return rx.popleft()
-            target = self._next_event()
+            target = edge = self._next_event()
             if held and held[0][0] < target:
                 target = held[0][0]
             if deadline < target:
                 target = deadline
+            if target == edge < deadline and self.answers_only and self._skippable(edge, held):
+                self._run(edge)
+                skipped = edge
+                if rx:  # it reached the node at once (no adapter latency): the host has it at that instant
+                    self._wait_until(edge)
+                continue
+            if skipped is not None and target > 2.0 * self.clock.now():
+                self._wait_until(skipped)  # the clock shows that edge exactly, as the wait for it would
+            skipped = None
             if math.isinf(target):
                 return None  # nothing in flight: in lockstep nothing can arrive any more
             self._wait_until(target)
@@ -433,6 +454,23 @@ class CanMedium(ClockDriven):
                 rx.append(held.popleft()[1])
             if not rx and target >= deadline:
                 return None
+
+    def _skippable(self, edge: float, held: deque[tuple[float, can.Message]]) -> bool:
+        """Whether the frame edge at ``edge`` may be processed without sleeping the clock to it, with the same
+        outcome as the wait: no frame the host holds becomes due there; the clock, sleeping from where it is to
+        any later instant up to twice its time, shows that instant exactly (``t - c`` is exact for
+        ``c <= t <= 2c``: Sterbenz), as it would through the wait; and the edge either touches no peer (an
+        arbitration, or a frame only python-can nodes receive) or comes when the physics already stands
+        there (a wait for it would step nothing). Nothing else acts meanwhile: the peers only answer, and
+        in lockstep no other node sends while this one waits."""
+        if self.ideal or math.isinf(edge) or (held and held[0][0] <= edge + 1e-12) or edge > 2.0 * self.clock.now():
+            return False
+        wire = self._wire
+        return wire is None or edge <= self._ticked or not self._reaches_peer(wire[2].sender)
+
+    def _reaches_peer(self, sender: _Node) -> bool:
+        """Whether a frame ``sender`` sends goes to a peer (an in-process device other than the sender)."""
+        return any(n.peer is not None and n is not sender for n in self._nodes)
 
     def idle(self) -> bool:
         """No frame on the wire or waiting for it."""
