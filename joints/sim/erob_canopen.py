@@ -518,13 +518,13 @@ class CanopenFront:
                     out[(kind, n)] = pdo
             self._pdos = out
             self._pdo_state = out
-            tpdos = [p for (kind, _n), p in out.items() if kind == "tpdo" and p.valid]
-            self._sync_tpdos = [p for p in tpdos if p.transmission_type <= 240]
-            self._timed_tpdos = [p for p in tpdos if p.transmission_type >= 254]
+            tpdos = [pd for (kind, _n), pd in out.items() if kind == "tpdo" and pd.valid]
+            self._sync_tpdos = [pd for pd in tpdos if pd.transmission_type <= 240]
+            self._timed_tpdos = [pd for pd in tpdos if pd.transmission_type >= 254]
             self._rpdo_by_cob = {}
-            for (kind, _n), p in out.items():
-                if kind == "rpdo" and p.valid:
-                    self._rpdo_by_cob.setdefault(p.cob_id, p)
+            for (kind, _n), pd in out.items():
+                if kind == "rpdo" and pd.valid:
+                    self._rpdo_by_cob.setdefault(pd.cob_id, pd)
         return self._pdos
 
     def _tpdo_frame(self, pdo: _Pdo) -> can.Message:

@@ -262,7 +262,7 @@ class CanMedium(ClockDriven):
             return math.inf
         ready = pending[0].ready if len(pending) == 1 else min([p.ready for p in pending])
         free = self._free
-        return free if free >= ready else ready
+        return max(free, ready)
 
     def next_event(self) -> float:
         """The earliest ``t`` at which :meth:`tick` has work: a frame starts or ends (``math.inf``: nothing is
@@ -298,13 +298,13 @@ class CanMedium(ClockDriven):
                 free = self._free
                 if len(pending) == 1:
                     winner = pending[0]
-                    start = free if free >= winner.ready else winner.ready
+                    start = max(free, winner.ready)
                     if start > until:
                         return
                     pending.clear()
                 else:
                     ready = min([p.ready for p in pending])
-                    start = free if free >= ready else ready
+                    start = max(free, ready)
                     if start > until:
                         return
                     winner = self._winner(start)
@@ -436,8 +436,7 @@ class CanMedium(ClockDriven):
             target = edge = self._next_event()
             if held and held[0][0] < target:
                 target = held[0][0]
-            if deadline < target:
-                target = deadline
+            target = min(target, deadline)
             if target == edge < deadline and self.answers_only and self._skippable(edge, held):
                 self._run(edge)
                 skipped = edge
