@@ -417,9 +417,9 @@ class CanMedium(ClockDriven):
         """The next frame delivered to ``node`` within ``timeout`` s of simulated time (None: none came).
 
         It waits for each frame edge in turn (the clock sleeps to it: the world steps its physics up to it)
-        until a frame reaches the node. On a medium whose peers only answer (:attr:`answers_only`) an edge
-        where nothing can happen but the medium's own bookkeeping is processed without the wait
-        (:meth:`_skippable`); the waits that remain show the clock the same instants.
+        until a frame reaches the node; an edge where the wait would change nothing but the clock (the
+        physics stands there already, or - the peers only answering - it touches no peer) is processed
+        without it (:meth:`_skippable`); the waits that remain show the clock the same instants.
         """
         self._sync()
         held, rx = node.held, node.rx
@@ -437,7 +437,7 @@ class CanMedium(ClockDriven):
             if held and held[0][0] < target:
                 target = held[0][0]
             target = min(target, deadline)
-            if target == edge < deadline and self.answers_only and self._skippable(edge, held):
+            if target == edge < deadline and self._skippable(edge, held):
                 self._run(edge)
                 skipped = edge
                 if rx:  # it reached the node at once (no adapter latency): the host has it at that instant
@@ -456,16 +456,21 @@ class CanMedium(ClockDriven):
 
     def _skippable(self, edge: float, held: deque[tuple[float, can.Message]]) -> bool:
         """Whether the frame edge at ``edge`` may be processed without sleeping the clock to it, with the same
-        outcome as the wait: no frame the host holds becomes due there; the clock, sleeping from where it is to
-        any later instant up to twice its time, shows that instant exactly (``t - c`` is exact for
-        ``c <= t <= 2c``: Sterbenz), as it would through the wait; and the edge either touches no peer (an
-        arbitration, or a frame only python-can nodes receive) or comes when the physics already stands
-        there (a wait for it would step nothing). Nothing else acts meanwhile: the peers only answer, and
-        in lockstep no other node sends while this one waits."""
+        outcome as the wait. Always: no frame the host holds becomes due there, and the clock, sleeping from
+        where it is to any later instant up to twice its time, shows that instant exactly (``t - c`` is exact
+        for ``c <= t <= 2c``: Sterbenz), as it would through the wait. Then either the physics already stands
+        at the edge (the last tick came at or after it: the wait would step nothing, every tick up to it has
+        run), or the peers only answer (:attr:`answers_only`: no tick adds a frame) and the edge touches no
+        peer (an arbitration, or a frame only python-can nodes receive). In lockstep no other node sends
+        while this one waits."""
         if self.ideal or math.isinf(edge) or (held and held[0][0] <= edge + 1e-12) or edge > 2.0 * self.clock.now():
             return False
+        if edge <= self._ticked:
+            return True
+        if not self.answers_only:
+            return False
         wire = self._wire
-        return wire is None or edge <= self._ticked or not self._reaches_peer(wire[2].sender)
+        return wire is None or not self._reaches_peer(wire[2].sender)
 
     def _reaches_peer(self, sender: _Node) -> bool:
         """Whether a frame ``sender`` sends goes to a peer (an in-process device other than the sender)."""
