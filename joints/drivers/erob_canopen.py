@@ -40,6 +40,7 @@ to 0x6080 (volatile); a torque limit stays host-side (no max current object in Z
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from collections.abc import Mapping, Sequence
@@ -78,6 +79,12 @@ from joints.errors import (
 )
 
 __all__ = ["HEARTBEAT_MS", "MODES", "NODE_LOST", "CanopenAccess", "ErobCanopenDriver", "SyncCycle"]
+
+
+@functools.lru_cache(maxsize=64)
+def _entries(config: PdoConfig) -> tuple[tuple[int, int, int, bool], ...]:
+    """:attr:`PdoConfig.entries`, computed once per configuration (a pure function of a frozen one)."""
+    return config.entries
 
 #: config ``mode`` -> CiA 402 mode of operation
 MODES: Mapping[str, Mode] = {"pp": Mode.PP, "pv": Mode.PV, "pt": Mode.PT, "csp": Mode.CSP, "csv": Mode.CSV,
@@ -312,7 +319,7 @@ class ErobCanopenDriver(ErobDriver):
         t = self.link.clock.now()
         if msg.cob_id == self.tpdo1_cob:
             try:
-                sw, pos, *current = co.unpack_pdo(self._tpdos[0].entries, msg.data)
+                sw, pos, *current = co.unpack_pdo(_entries(self._tpdos[0]), msg.data)
             except FrameError:
                 return
             if current:
@@ -324,7 +331,7 @@ class ErobCanopenDriver(ErobDriver):
             self.status_cycle = self.group.answered(self)
         elif len(self._tpdos) > 1:
             try:
-                self.velocity, self.current = co.unpack_pdo(self._tpdos[1].entries, msg.data)
+                self.velocity, self.current = co.unpack_pdo(_entries(self._tpdos[1]), msg.data)
             except FrameError:
                 return
 
@@ -339,7 +346,7 @@ class ErobCanopenDriver(ErobDriver):
             self._target = target
         self._cw = cw
         values = [cw, self._target] + [0] * (len(self._rpdo.objects) - 2)
-        self.link.send_pdo(self._rpdo.cob_id(self.node), co.pack_pdo(self._rpdo.entries, values))
+        self.link.send_pdo(self._rpdo.cob_id(self.node), co.pack_pdo(_entries(self._rpdo), values))
         if self.cyclic:
             self.link.sync()
 
@@ -675,7 +682,7 @@ class ErobCanopenDriver(ErobDriver):
         self._target = value
         self._cw = (self._cw | 0x000F) & ~cia402.CW_HALT if self._enabled else self._cw
         values = [self._cw, value] + [0] * (len(self._rpdo.objects) - 2)
-        self.link.send_pdo(self._rpdo.cob_id(self.node), co.pack_pdo(self._rpdo.entries, values))
+        self.link.send_pdo(self._rpdo.cob_id(self.node), co.pack_pdo(_entries(self._rpdo), values))
 
     # -- host-side contracts ----------------------------------------------------------------
     def set_communication_timeout(self, milliseconds: int) -> None:

@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 import can
@@ -132,6 +132,9 @@ class ErobCanFront:
         self.disable_acks = acks if disable_acks is None else disable_acks  #: for one disable (monitor: 5)
         self.held: int | None = None  #: analog set-point waiting for the motor to be ready
         self.requests = 0
+        self._readers: dict[str, Callable[[], list[int]]] = {}  #: parameter -> its prepared firmware read
+        #: (index, subindex) -> (parameter, its key, readable by this protocol): the read path's lookups
+        self._reads: dict[tuple[int, int | None], tuple[str, Any, bool]] = {}
 
     @property
     def node(self) -> int:
@@ -172,15 +175,27 @@ class ErobCanFront:
         except KeyError:
             raise _Refused(ec.READ_FAILED) from None
 
+    def _fw_read(self, name: str) -> int:
+        """``firmware.read(name)`` through a read prepared once per parameter (:meth:`Firmware.reader`; the
+        same read, without its checks each time)."""
+        read = self._readers.get(name)
+        if read is None:
+            read = self._readers[name] = self.firmware.reader((name,))
+        return read()[0]
+
     def _read(self, request: ec.Read) -> ec.Reply:
-        name = self._name(request.index, request.subindex)
-        key = EROB_CAN.key(name)
-        if key.reach is not Reach.VALUE or not EROB_CAN.access(name).readable:
+        where = (request.index, request.subindex)
+        known = self._reads.get(where)
+        if known is None:
+            name = self._name(request.index, request.subindex)
+            key = EROB_CAN.key(name)
+            known = self._reads[where] = (name, key, key.reach is Reach.VALUE and EROB_CAN.access(name).readable)
+        name, key, readable = known
+        if not readable:
             raise _Refused(ec.READ_FAILED)
-        fw = self.firmware
-        if request.index == _MODULE_INDEX and module_info_supported(fw.read("firmware_version")) is False:
+        if request.index == _MODULE_INDEX and module_info_supported(self._fw_read("firmware_version")) is False:
             raise _Refused(ec.READ_FAILED)  # firmware older than X5061715X has no index 0x0232
-        value = fw.read(name) // key.scale
+        value = self._fw_read(name) // key.scale
         if value > 0x7FFFFFFF:
             value -= _INT32
         return ec.ValueReply(request.node, value)
@@ -281,6 +296,7 @@ class ErobCanBus:
         #: bus timing: node -> its drive's reply turnaround [s] (the world fills it from the profiles)
         self.turnarounds: dict[int, float] = {}
         self.medium = CanMedium(name, bitrate=bitrate, ideal=ideal)
+        self.medium.answers_only = True  # the drives answer requests; they never send by themselves
         self.channel = self.medium.channel  #: ``can.Bus(interface="joints-sim", channel=...)`` joins this bus
         self.medium.attach_peer(self, latency=latency, name="twins")
         self.frame_errors = 0

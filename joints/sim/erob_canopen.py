@@ -55,7 +55,7 @@ real eRob, also listed in the README):
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -98,6 +98,8 @@ _FIRMWARE_MODE = {Mode.PP: _POSITION, Mode.CSP: _POSITION, Mode.IP: _POSITION, M
 _COMM = range(0x1000, 0x2000)  #: the communication profile area (reset communication)
 _COMM_NAMES = tuple(n for n, o in objects() if o.index in _COMM)
 _PDO_AREA = range(0x1400, 0x1C00)
+#: 0x6060 value -> its mode (what ``Mode(value)`` gives, without the enum call)
+_MODE_OF = {int(m): m for m in Mode}
 #: objects the front computes on read (the others are the firmware's parameters)
 _STATUS = frozenset({"statusword", "modes_of_operation_display", "error_register", "error_code",
                      "target_torque", "torque_actual_value"})
@@ -116,9 +118,17 @@ class _Pdo:
     entries: tuple[tuple[int, int, int, bool], ...]
     names: tuple[str | None, ...]  #: parameter per entry (None: a dummy / padding entry)
     sync_count: int = 0
+    #: per entry: (parameter, lowest, highest value its bits carry); parameter None: a dummy (sent as 0)
+    clamps: tuple[tuple[str | None, int, int], ...] = ()
     last_data: bytes | None = None
     last_sent: float = -math.inf
     next_event: float = math.inf
+
+
+def _carried(entry: tuple[int, int, int, bool]) -> tuple[int, int]:
+    """The lowest and highest value a PDO mapping entry's bits carry."""
+    bits, signed = entry[2], entry[3]
+    return (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)
 
 
 def _error_register(code: int) -> int:
@@ -157,6 +167,7 @@ class CanopenFront:
         self._outbox: list[can.Message] = []
         #: answers due later than at once: (delay after the frame that caused them [s], frame)
         self.later: list[tuple[float, can.Message]] = []
+        self._readers: dict[str, Callable[[], list[int]]] = {}  #: parameter -> its prepared firmware read
         self._node_relative()
         self._reset(power_on=True)
 
@@ -194,6 +205,11 @@ class CanopenFront:
         self.halted = False
         self.stream_from: tuple[float, float] | None = None
         self._pdos: dict[tuple[str, int], _Pdo] | None = None
+        #: of the PDOs as configured (built with :attr:`_pdos`): the valid synchronous TPDOs (types 0-240), the
+        #: valid event-driven ones (254, 255), the valid RPDOs by COB-ID (the first of each)
+        self._sync_tpdos: list[_Pdo] = []
+        self._timed_tpdos: list[_Pdo] = []
+        self._rpdo_by_cob: dict[int, _Pdo] = {}
         self._pdo_state: dict[tuple[str, int], _Pdo] = {}  #: timers and last data kept over a reconfiguration
         self.controlword_prev = 0
         self.sync_times: list[float] = []  #: drive times of the last SYNCs
@@ -314,7 +330,7 @@ class CanopenFront:
         """The value of a parameter as CANopen reads it (in the parameter's unit)."""
         fw = self.firmware
         if name not in _STATUS:
-            return int(fw.read(name))
+            return int(self._read(name))
         if name == "statusword":
             return self.statusword()
         if name == "modes_of_operation_display":
@@ -326,8 +342,16 @@ class CanopenFront:
         if name == "target_torque":
             return int(fw.values["target_torque"])
         # torque actual value: per mille of rated torque from the motor current
-        torque = fw.read("motor_current") * 1e-3 * fw.kt / fw.profile.rated_torque * 1000
+        torque = self._read("motor_current") * 1e-3 * fw.kt / fw.profile.rated_torque * 1000
         return int(max(-32768, min(32767, round(torque))))
+
+    def _read(self, name: str) -> int:
+        """``firmware.read(name)`` through a read prepared once per parameter (:meth:`Firmware.reader`; the
+        same read, without its checks each time)."""
+        read = self._readers.get(name)
+        if read is None:
+            read = self._readers[name] = self.firmware.reader((name,))
+        return read()[0]
 
     def _sdo_read(self, index: int, subindex: int) -> bytes:
         name, obj = self._object(index, subindex)
@@ -490,34 +514,41 @@ class CanopenFront:
                     if old is not None:
                         pdo.last_data, pdo.last_sent = old.last_data, old.last_sent
                     pdo.next_event = self.now + event if event > 0 else math.inf
+                    pdo.clamps = tuple((name, *_carried(e)) for name, e in zip(pdo.names, pdo.entries))
                     out[(kind, n)] = pdo
             self._pdos = out
             self._pdo_state = out
+            tpdos = [pd for (kind, _n), pd in out.items() if kind == "tpdo" and pd.valid]
+            self._sync_tpdos = [pd for pd in tpdos if pd.transmission_type <= 240]
+            self._timed_tpdos = [pd for pd in tpdos if pd.transmission_type >= 254]
+            self._rpdo_by_cob = {}
+            for (kind, _n), pd in out.items():
+                if kind == "rpdo" and pd.valid:
+                    self._rpdo_by_cob.setdefault(pd.cob_id, pd)
         return self._pdos
 
     def _tpdo_frame(self, pdo: _Pdo) -> can.Message:
-        values = [0 if name is None else self._pdo_value(name, e) for name, e in zip(pdo.names, pdo.entries)]
+        values = [0 if name is None else self._pdo_value(name, lo, hi) for name, lo, hi in pdo.clamps]
         return can.Message(arbitration_id=pdo.cob_id, is_extended_id=False, data=co.pack_pdo(pdo.entries, values))
 
-    def _pdo_value(self, name: str, entry: tuple[int, int, int, bool]) -> int:
+    def _pdo_value(self, name: str, lo: int, hi: int) -> int:
+        """The value of ``name`` clamped to what its mapped bits carry."""
         v = self.value(name)
-        bits, signed = entry[2], entry[3]
-        lo, hi = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)
         return max(lo, min(v, hi))
 
     def _rpdo(self, frame: can.Message) -> None:
-        for (kind, n), pdo in self.pdos().items():
-            if kind != "rpdo" or not pdo.valid or pdo.cob_id != frame.arbitration_id:
-                continue
-            data = bytes(frame.data)
-            if len(data) * 8 < sum(e[2] for e in pdo.entries):
-                self._emcy(PDO_LENGTH_ERROR)
-                return
-            if pdo.transmission_type <= 240:
-                self.latched[n] = data
-            else:
-                self._apply_rpdo(pdo, data)
+        self.pdos()
+        pdo = self._rpdo_by_cob.get(frame.arbitration_id)  # the first valid RPDO with this COB-ID
+        if pdo is None:
             return
+        data = bytes(frame.data)
+        if len(data) * 8 < sum(e[2] for e in pdo.entries):
+            self._emcy(PDO_LENGTH_ERROR)
+            return
+        if pdo.transmission_type <= 240:
+            self.latched[pdo.number] = data
+        else:
+            self._apply_rpdo(pdo, data)
 
     def _apply_rpdo(self, pdo: _Pdo, data: bytes) -> None:
         values = co.unpack_pdo(pdo.entries, data)
@@ -537,9 +568,8 @@ class CanopenFront:
 
     def _sync(self) -> list[can.Message]:
         out: list[can.Message] = []
-        for (kind, _n), pdo in self.pdos().items():
-            if kind != "tpdo" or not pdo.valid:
-                continue
+        self.pdos()
+        for pdo in self._sync_tpdos:
             t = pdo.transmission_type
             if 1 <= t <= 240:
                 pdo.sync_count += 1
@@ -557,10 +587,14 @@ class CanopenFront:
 
     # -- CiA 402 ------------------------------------------------------------------------------
     def _mode(self) -> Mode | None:
-        try:
-            return Mode(self.firmware.values["modes_of_operation"])
-        except ValueError:
-            return None
+        value = self.firmware.values["modes_of_operation"]
+        mode = _MODE_OF.get(value)
+        if mode is None:
+            try:
+                return Mode(value)
+            except ValueError:
+                return None
+        return mode
 
     def statusword(self) -> int:
         state = self.state
@@ -571,15 +605,15 @@ class CanopenFront:
             if mode is Mode.PP:
                 bit12 = bool(self.controlword & cia402.CW_NEW_SETPOINT) and self.pp_active
                 reached = not fw.gen.active and (not self.pp_active or
-                                                 fw.read("status_of_achieving_position") == AchieveStatus.TARGET_REACHED)
+                                                 self._read("status_of_achieving_position") == AchieveStatus.TARGET_REACHED)
             elif mode in (Mode.PV, Mode.CSV):
-                v, target = fw.read("current_speed"), fw.values["target_speed"]
+                v, target = self._read("current_speed"), fw.values["target_speed"]
                 reached = abs(v - target) <= max(100, abs(target) // 100) and abs(fw.v_ref - target) < 1
                 bit12 = abs(v) < 100 if mode is Mode.PV else not self.enabling
             elif mode is Mode.IP:
                 bit12 = bool(self.controlword & cia402.CW_ENABLE_IP) and not self.enabling  # interpolating
                 # at rest at the newest set-point (the reference stops at each set-point until the next)
-                reached = not fw.gen.active and abs(fw.v_ref) < 1 and abs(fw.read("current_speed")) < 100
+                reached = not fw.gen.active and abs(fw.v_ref) < 1 and abs(self._read("current_speed")) < 100
             elif mode in (Mode.CSP, Mode.CST):
                 bit12 = not self.halted and not self.enabling  # following the target (brake released)
                 reached = True
@@ -763,15 +797,17 @@ class CanopenFront:
             self.next_heartbeat = t + period if period > 0 else math.inf
             out.append(co.encode(co.Heartbeat(self.node, self.nmt)))
         if self.nmt is co.NmtState.OPERATIONAL:
-            out.extend(self._event_tpdos(t))
-        out.extend(self._flush())
+            self.pdos()
+            if self._timed_tpdos:
+                out.extend(self._event_tpdos(t))
+        if self._outbox:
+            out.extend(self._flush())
         return out
 
     def _event_tpdos(self, t: float) -> list[can.Message]:
-        out = []
-        for (kind, _n), pdo in self.pdos().items():
-            if kind != "tpdo" or not pdo.valid or pdo.transmission_type < 254:
-                continue
+        out: list[can.Message] = []
+        self.pdos()
+        for pdo in self._timed_tpdos:
             if t - pdo.last_sent < pdo.inhibit - 1e-9:
                 continue
             frame = self._tpdo_frame(pdo)

@@ -117,14 +117,17 @@ class _Pending:
     seq: int
     frame: can.Message
     sender: _Node
-    key: tuple[int, int, int] = (0, 0, 0)
+    key: int = 0  #: :func:`_priority`
+    host: bool = False  #: sent by a python-can node (its controller sends its frames in order)
 
 
-def _priority(frame: can.Message) -> tuple[int, int, int]:
-    """Arbitration order: base identifier, then standard before extended, then the extension."""
+def _priority(frame: can.Message) -> int:
+    """Arbitration order as one integer (the lower wins): base identifier, then standard before extended,
+    then the extension - ``(base << 19) | (extended << 18) | extension``."""
+    ident = frame.arbitration_id
     if frame.is_extended_id:
-        return (frame.arbitration_id >> 18, 1, frame.arbitration_id & 0x3FFFF)
-    return (frame.arbitration_id, 0, 0)
+        return ((ident >> 18) << 19) | (1 << 18) | (ident & 0x3FFFF)
+    return ident << 19
 
 
 _MEDIA: weakref.WeakValueDictionary[str, CanMedium] = weakref.WeakValueDictionary()
@@ -147,13 +150,17 @@ class CanMedium(ClockDriven):
         self._clock_seen = self.now
         self._see_epoch()
         self._cap: float | None = None  # while we sleep the clock ourselves: process no further than this
+        #: the peers send only in answer to the frames they receive, never by themselves at a tick (the eRob
+        #: CAN custom protocol's twins): :meth:`receive` may then process frame edges without waiting for them
+        self.answers_only = False
+        self._ticked = self.now  #: the time of the last tick: where the world's physics stands (lockstep)
         self._delivering: float | None = None  # the time of the frame being delivered (peers answer then)
         self._nodes: list[_Node] = []
         self._pending: list[_Pending] = []
         self._wire: tuple[float, float, _Pending] | None = None  # (start, end, frame) on the bus
         self._free = self.now  # when the bus is idle again
         self._seq = itertools.count()
-        self._bits_cache: dict[tuple[int, bool, bool, bytes], int] = {}
+        self._bits_cache: dict[tuple[Any, ...], int] = {}
         # statistics
         self.frames = 0
         self.bits = 0
@@ -216,13 +223,15 @@ class CanMedium(ClockDriven):
         for n in self._nodes:
             n.rx.clear()
             n.held.clear()
-        self.now = self._free = self._clock_seen = t
+        self.now = self._free = self._clock_seen = self._ticked = t
         self._mark = (t, self.frames, self.bits, self.busy)
 
     def _sync(self) -> None:
         """Catch up with a clock that moved without us (the host slept) or restarted (reset)."""
-        c = self.clock.now()
-        if self._restarted(c):
+        clock = self.clock
+        c = clock.now()
+        seen = self._epoch_seen
+        if (seen is None or getattr(clock, "epoch", None) != seen) and self._restarted(c):
             self._restart(c)
         elif c > self._clock_seen:
             self._clock_seen = c
@@ -235,6 +244,7 @@ class CanMedium(ClockDriven):
         deliver what is due."""
         if self._epoch_seen is not None and self._restarted(self.clock.now()):
             self._restart(self.clock.now())
+        self._ticked = t
         if self._cap is not None:
             t = min(t, self._cap)
         if t > self.now and (self._pending or self._wire is not None):
@@ -244,11 +254,15 @@ class CanMedium(ClockDriven):
             self._clock_seen = max(self._clock_seen, t)
 
     def _next_event(self) -> float:
-        if self._wire is not None:
-            return self._wire[1]
-        if self._pending:
-            return max(self._free, min(p.ready for p in self._pending))
-        return math.inf
+        wire = self._wire
+        if wire is not None:
+            return wire[1]
+        pending = self._pending
+        if not pending:
+            return math.inf
+        ready = pending[0].ready if len(pending) == 1 else min([p.ready for p in pending])
+        free = self._free
+        return max(free, ready)
 
     def next_event(self) -> float:
         """The earliest ``t`` at which :meth:`tick` has work: a frame starts or ends (``math.inf``: nothing is
@@ -261,7 +275,11 @@ class CanMedium(ClockDriven):
 
     # -- the wire -------------------------------------------------------------------------
     def _bits(self, frame: can.Message) -> int:
-        key = (frame.arbitration_id, frame.is_extended_id, frame.is_remote_frame, bytes(frame.data))
+        if self.stuffing == "exact":  # the frame's own bits decide (a remote frame's DLC among them)
+            key: tuple[Any, ...] = (frame.arbitration_id, frame.is_extended_id, frame.is_remote_frame, frame.dlc,
+                                    bytes(frame.data))
+        else:  # the worst-case bound and no stuffing depend on the format and the data length only
+            key = (frame.is_extended_id, frame.is_remote_frame, len(frame.data))
         bits = self._bits_cache.get(key)
         if bits is None:
             if len(self._bits_cache) > 4096:
@@ -271,46 +289,58 @@ class CanMedium(ClockDriven):
 
     def _run(self, until: float) -> None:
         """Process every bus event up to ``until``: starts (arbitration) and ends (delivery)."""
+        pending = self._pending
         while True:
             wire = self._wire
             if wire is None:
-                if not self._pending:
+                if not pending:
                     return
-                start = max(self._free, min(p.ready for p in self._pending))
-                if start > until:
-                    return
-                winner = min(self._contenders(start), key=lambda p: (p.key, p.seq))
-                self._pending.remove(winner)
-                bits = self._bits(winner.frame)
+                free = self._free
+                if len(pending) == 1:
+                    winner = pending[0]
+                    start = max(free, winner.ready)
+                    if start > until:
+                        return
+                    pending.clear()
+                else:
+                    ready = min([p.ready for p in pending])
+                    start = max(free, ready)
+                    if start > until:
+                        return
+                    winner = self._winner(start)
+                    pending.remove(winner)
+                frame = winner.frame
+                bits = self._bits(frame)
                 took = 0.0 if self.ideal else bits / self.bitrate
                 wire = self._wire = (start, start + took, winner)
                 self.frames += 1
                 self.bits += bits
                 self.busy += took
-            start, end, pend = wire
+            end = wire[1]
             if end > until:
                 return
             self._wire = None
             self._free = end
-            self._deliver(pend, end)
+            self._deliver(wire[2], end)
 
-    def _contenders(self, start: float) -> list[_Pending]:
-        """Frames that compete for the bus at ``start``: a python-can node's oldest ready frame (its
-        controller sends in order, so a SYNC queued after RPDOs goes after them), every ready
-        frame of a peer (in-process devices, each with its own controller)."""
-        heads: dict[int, _Pending] = {}
-        out: list[_Pending] = []
+    def _winner(self, start: float) -> _Pending:
+        """Of the frames that compete for the bus at ``start``, the one that wins arbitration (the lowest
+        :func:`_priority`, then the oldest). Competing: a python-can node's oldest ready frame (its
+        controller sends in order, so a SYNC queued after RPDOs goes after them), every ready frame of a
+        peer (in-process devices, each with its own controller). ``_pending`` is in sending order."""
+        best: _Pending | None = None
+        hosts: list[_Node] = []
         for p in self._pending:
             if p.ready > start:
                 continue
-            if p.sender.peer is not None:
-                out.append(p)
-                continue
-            head = heads.get(id(p.sender))
-            if head is None or p.seq < head.seq:
-                heads[id(p.sender)] = p
-        out.extend(heads.values())
-        return out
+            if p.host:
+                if p.sender in hosts:
+                    continue  # not its controller's oldest ready frame
+                hosts.append(p.sender)
+            if best is None or p.key < best.key:  # equal keys: the older (earlier in the list) wins
+                best = p
+        assert best is not None
+        return best
 
     def _deliver(self, pend: _Pending, t: float) -> None:
         self._delivering = t
@@ -321,37 +351,41 @@ class CanMedium(ClockDriven):
 
     def _deliver_to_all(self, pend: _Pending, t: float) -> None:
         frame = pend.frame
+        sender = pend.sender
+        ideal = self.ideal
         for node in tuple(self._nodes):
-            own = node is pend.sender
+            own = node is sender
             if own and not node.receive_own:
                 continue
-            if node.peer is not None:
+            peer = node.peer
+            if peer is not None:
                 if own:
                     continue
-                answers = node.peer.on_frame(frame)
+                answers = peer.on_frame(frame)
                 if answers:
                     turn = node.turnaround(frame) if node.turnaround is not None else None
-                    delay = 0.0 if self.ideal else node.latency if turn is None else turn
+                    delay = 0.0 if ideal else node.latency if turn is None else turn
                     for answer in answers:
                         self._enqueue(answer, node, t + delay)
                 continue
-            if len(node.rx) + len(node.held) >= node.rx_limit:
-                (node.held if not node.rx else node.rx).popleft()
+            rx, held = node.rx, node.held
+            if len(rx) + len(held) >= node.rx_limit:
+                (held if not rx else rx).popleft()
                 node.rx_dropped += 1
             msg = can.Message(
                 timestamp=t, arbitration_id=frame.arbitration_id, is_extended_id=frame.is_extended_id,
                 is_remote_frame=frame.is_remote_frame, is_error_frame=frame.is_error_frame, dlc=frame.dlc,
                 data=frame.data, channel=self.channel, is_rx=not own, check=False,
             )
-            if node.latency > 0 and not self.ideal:
-                node.held.append((t + node.latency, msg))  # the host adapter passes it on later
+            if node.latency > 0 and not ideal:
+                held.append((t + node.latency, msg))  # the host adapter passes it on later
             else:
-                node.rx.append(msg)
+                rx.append(msg)
 
     def _enqueue(self, frame: can.Message, sender: _Node, ready: float) -> None:
         if frame.is_fd:
             raise TransportError(f"{self.channel}: CAN FD frames are not supported by the sim's classic CAN bus")
-        self._pending.append(_Pending(ready, next(self._seq), frame, sender, _priority(frame)))
+        self._pending.append(_Pending(ready, next(self._seq), frame, sender, _priority(frame), sender.peer is None))
 
     # -- what nodes do --------------------------------------------------------------------
     def submit(self, node: _Node, frame: can.Message) -> None:
@@ -380,23 +414,67 @@ class CanMedium(ClockDriven):
         return self.now
 
     def receive(self, node: _Node, timeout: float | None) -> can.Message | None:
-        """The next frame delivered to ``node`` within ``timeout`` s of simulated time (None: none came)."""
+        """The next frame delivered to ``node`` within ``timeout`` s of simulated time (None: none came).
+
+        It waits for each frame edge in turn (the clock sleeps to it: the world steps its physics up to it)
+        until a frame reaches the node; an edge where the wait would change nothing but the clock (the
+        physics stands there already, or - the peers only answering - it touches no peer) is processed
+        without it (:meth:`_skippable`); the waits that remain show the clock the same instants.
+        """
         self._sync()
+        held, rx = node.held, node.rx
+        if timeout is not None and timeout <= 0 and not rx and not (held and held[0][0] <= self.now + 1e-12) \
+                and self._next_event() > self.now and self.clock.now() >= self.now:
+            return None  # a poll with nothing due: waiting until now would neither sleep nor deliver anything
         deadline = math.inf if timeout is None else self.now + max(timeout, 0.0)
+        skipped: float | None = None  # the last edge processed without its wait (the clock shows an earlier time)
         while True:
-            held = node.held
             while held and held[0][0] <= self.now + 1e-12:
-                node.rx.append(held.popleft()[1])
-            if node.rx:
-                return node.rx.popleft()
-            target = min(self._next_event(), held[0][0] if held else math.inf, deadline)
+                rx.append(held.popleft()[1])
+            if rx:
+                return rx.popleft()
+            target = edge = self._next_event()
+            if held and held[0][0] < target:
+                target = held[0][0]
+            target = min(target, deadline)
+            if target == edge < deadline and self._skippable(edge, held):
+                self._run(edge)
+                skipped = edge
+                if rx:  # it reached the node at once (no adapter latency): the host has it at that instant
+                    self._wait_until(edge)
+                continue
+            if skipped is not None and target > 2.0 * self.clock.now():
+                self._wait_until(skipped)  # the clock shows that edge exactly, as the wait for it would
+            skipped = None
             if math.isinf(target):
                 return None  # nothing in flight: in lockstep nothing can arrive any more
             self._wait_until(target)
             while held and held[0][0] <= self.now + 1e-12:
-                node.rx.append(held.popleft()[1])
-            if not node.rx and target >= deadline:
+                rx.append(held.popleft()[1])
+            if not rx and target >= deadline:
                 return None
+
+    def _skippable(self, edge: float, held: deque[tuple[float, can.Message]]) -> bool:
+        """Whether the frame edge at ``edge`` may be processed without sleeping the clock to it, with the same
+        outcome as the wait. Always: no frame the host holds becomes due there, and the clock, sleeping from
+        where it is to any later instant up to twice its time, shows that instant exactly (``t - c`` is exact
+        for ``c <= t <= 2c``: Sterbenz), as it would through the wait. Then either the physics already stands
+        at the edge (the last tick came at or after it: the wait would step nothing, every tick up to it has
+        run), or the peers only answer (:attr:`answers_only`: no tick adds a frame) and the edge touches no
+        peer (an arbitration, or a frame only python-can nodes receive). In lockstep no other node sends
+        while this one waits."""
+        if self.ideal or math.isinf(edge) or (held and held[0][0] <= edge + 1e-12) or edge > 2.0 * self.clock.now():
+            return False
+        if edge <= self._ticked:
+            return True
+        if not self.answers_only:
+            return False
+        wire = self._wire
+        return wire is None or not self._reaches_peer(wire[2].sender)
+
+    def _reaches_peer(self, sender: _Node) -> bool:
+        """Whether a frame ``sender`` sends goes to a peer (an in-process device other than the sender)."""
+        return any(n.peer is not None and n is not sender for n in self._nodes)
 
     def idle(self) -> bool:
         """No frame on the wire or waiting for it."""

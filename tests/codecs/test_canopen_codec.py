@@ -668,3 +668,34 @@ def test_a_frame_with_an_extended_id_re_encodes_as_itself() -> None:
     rtr = can.Message(arbitration_id=0x1234567, is_extended_id=True, is_remote_frame=True, dlc=2)
     again = co.encode(co.decode(rtr))
     assert (again.arbitration_id, again.is_extended_id, again.is_remote_frame, again.dlc) == (0x1234567, True, True, 2)
+
+
+def _classify_by_rule(frame: can.Message) -> co.Route:
+    """CiA 301's pre-defined connection set written out (what the table behind ``co.classify`` must give)."""
+    from joints.codecs.canopen import cob
+
+    ident = frame.arbitration_id
+    if frame.is_extended_id or ident > 0x7FF:
+        return co.Route(co.Kind.UNKNOWN, 0)
+    node = ident & 0x7F
+    if node == 0:
+        kind = {0x000: co.Kind.NMT, 0x080: co.Kind.SYNC, 0x100: co.Kind.TIME}.get(ident, co.Kind.UNKNOWN)
+        return co.Route(kind, 0)
+    kind = cob._BY_FUNCTION[ident >> 7]
+    if kind is co.Kind.HEARTBEAT:
+        if frame.is_remote_frame:
+            return co.Route(co.Kind.GUARD_REQUEST, node)
+        if frame.dlc == 1 and frame.data[0] == 0:
+            return co.Route(co.Kind.BOOT_UP, node)
+    elif kind is co.Kind.UNKNOWN:
+        return co.Route(co.Kind.UNKNOWN, 0)
+    return co.Route(kind, node)
+
+
+@pytest.mark.parametrize("variant", ["data", "remote", "boot-up", "empty", "extended"])
+def test_classify_routes_every_cob_id_by_the_connection_set(variant: str) -> None:
+    for ident in range(0x800 + 2):
+        data = {"data": b"\x05\x01", "boot-up": b"\x00", "empty": b""}.get(variant, b"")
+        frame = can.Message(arbitration_id=ident, is_extended_id=variant == "extended",
+                            is_remote_frame=variant == "remote", data=data, dlc=1 if variant == "remote" else len(data))
+        assert co.classify(frame) == _classify_by_rule(frame), hex(ident)

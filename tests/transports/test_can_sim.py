@@ -4,19 +4,22 @@ from __future__ import annotations
 
 import math
 import os
+import random
 import subprocess
 import sys
 import textwrap
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import can
 import pytest
 
 from joints.clock import ManualClock
+from joints.transports import can_sim
 from joints.transports.can import PythonCanTransport
 from joints.transports.can_sim import INTERFACE, CanMedium, LockstepCanBus
-from joints.transports.can_timing import frame_time
+from joints.transports.can_timing import frame_bits, frame_time
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -270,3 +273,240 @@ def test_a_clock_behind_the_media_ticks_is_not_a_reset() -> None:
     reply = bus.recv(0.0)
     assert reply is not None and reply.timestamp == pytest.approx(180 * US)
     bus.shutdown()
+
+
+# -- the medium's hot paths against their plain definitions -----------------------------------------------
+
+
+def _reference_priority(frame: can.Message) -> tuple[int, int, int]:
+    """Arbitration order as CAN defines it: base identifier, then standard before extended, then the extension."""
+    if frame.is_extended_id:
+        return (frame.arbitration_id >> 18, 1, frame.arbitration_id & 0x3FFFF)
+    return (frame.arbitration_id, 0, 0)
+
+
+def _random_frames(rng: random.Random, n: int) -> list[can.Message]:
+    out = []
+    for _ in range(n):
+        ext = rng.random() < 0.4
+        ident = rng.randrange(1 << 29) if ext else rng.randrange(1 << 11)
+        if rng.random() < 0.3:  # collide: an extended frame on a standard one's base id, equal ids
+            ident = (rng.randrange(1 << 11) << 18 | rng.randrange(4)) if ext else rng.randrange(4)
+        remote = rng.random() < 0.1
+        data = bytes(rng.randrange(256) for _ in range(rng.randrange(9)))
+        out.append(can.Message(arbitration_id=ident, is_extended_id=ext, is_remote_frame=remote,
+                               data=b"" if remote else data, dlc=len(data)))
+    return out
+
+
+def test_the_priority_key_orders_frames_as_can_arbitration_does() -> None:
+    rng = random.Random(3)
+    frames = _random_frames(rng, 400)
+    by_key = sorted(range(len(frames)), key=lambda i: (can_sim._priority(frames[i]), i))
+    by_reference = sorted(range(len(frames)), key=lambda i: (_reference_priority(frames[i]), i))
+    assert by_key == by_reference
+
+
+def test_the_winner_is_the_lowest_identifier_among_each_hosts_oldest_and_every_peer_frame() -> None:
+    """``CanMedium._winner`` (one pass over the queue) against the rule written out: the contenders are every
+    ready frame of a peer and the oldest ready frame of each python-can node; the lowest priority, then the
+    oldest, wins."""
+    rng = random.Random(5)
+    for _ in range(300):
+        medium = CanMedium(register=False)
+        nodes = [medium.attach(f"host{i}") for i in range(2)] + \
+            [medium.attach_peer(Echo(medium), name=f"peer{i}") for i in range(2)]
+        for frame in _random_frames(rng, rng.randrange(1, 8)):
+            medium._enqueue(frame, rng.choice(nodes), rng.choice((0.0, 1e-4, 2e-4)))
+        start = rng.choice((0.0, 1e-4, 2e-4))
+        if not any(p.ready <= start for p in medium._pending):
+            continue
+        heads: dict[int, can_sim._Pending] = {}
+        contenders = []
+        for p in medium._pending:
+            if p.ready > start:
+                continue
+            if p.sender.peer is not None:
+                contenders.append(p)
+            elif id(p.sender) not in heads or p.seq < heads[id(p.sender)].seq:
+                heads[id(p.sender)] = p
+        contenders.extend(heads.values())
+        want = min(contenders, key=lambda p: (_reference_priority(p.frame), p.seq))
+        assert medium._winner(start) is want
+
+
+@pytest.mark.parametrize("stuffing", ["worst", "exact", "none"])
+def test_the_bits_cache_gives_each_frame_its_own_bit_count(stuffing: str) -> None:
+    medium = CanMedium(register=False, stuffing=stuffing)
+    for frame in _random_frames(random.Random(7), 500):
+        assert medium._bits(frame) == frame_bits(frame, stuffing), frame
+
+
+def test_a_poll_with_nothing_due_returns_at_once_as_the_waiting_loop_would() -> None:
+    """``receive(node, 0)`` with nothing due takes the short path (no wait at all) and leaves the medium and
+    the clock as the waiting loop leaves them; with a frame due now it waits as before."""
+    runs = []
+    for short in (True, False):
+        clock = ManualClock()
+        medium = CanMedium(register=False, clock=clock)
+        medium.attach_peer(Echo(medium), latency=50 * US)
+        bus = LockstepCanBus(medium=medium, adapter_latency=20 * US)
+        waits: list[float] = []
+        wait = medium._wait_until
+        medium._wait_until = (  # type: ignore[method-assign]
+            lambda t, lazy=False, waits=waits, wait=wait: (waits.append(t), wait(t, lazy))[1])
+        bus.send(msg(0x641, b"\x00\x01"))
+        polls = []
+        for _ in range(3):
+            if not short:  # the reference: the waiting loop (what the short path must equal)
+                node, timeout = bus._node, 0.0
+                deadline = medium.now + timeout
+                target = min(medium._next_event(), node.held[0][0] if node.held else math.inf, deadline)
+                medium._wait_until(target)
+                polls.append(node.rx.popleft() if node.rx else None)
+            else:
+                polls.append(bus.recv(0.0))
+        got = bus.recv(1.0)
+        runs.append((waits, [p is None for p in polls], got.timestamp if got else None, clock.now(), medium.now,
+                     medium.frames, medium.bits))
+        bus.shutdown()
+    short_run, reference = runs
+    assert short_run[0] == reference[0][3:] and len(reference[0]) == len(short_run[0]) + 3  # the polls did not wait
+    assert short_run[1:] == reference[1:]
+
+
+def test_a_poll_with_a_frame_due_now_still_delivers_it() -> None:
+    clock = ManualClock()
+    medium = CanMedium(register=False, clock=clock)
+    bus = LockstepCanBus(medium=medium)
+    other = LockstepCanBus(medium=medium)
+    other.send(msg(0x123, b"\x01"))
+    assert bus.recv(0.0) is None  # on the wire: not there yet
+    clock.advance(frame_time(msg(0x123, b"\x01"), medium.bitrate))  # the host slept past its end
+    got = bus.recv(0.0)
+    assert got is not None and got.arbitration_id == 0x123
+    bus.shutdown()
+    other.shutdown()
+
+
+def test_a_poll_still_waits_where_the_waiting_loop_would_act() -> None:
+    """The short path of ``receive(node, 0)`` is taken only where waiting until now does nothing: a frame due
+    now is still processed (here on an ideal medium: delivered at once), and a clock behind the medium's time
+    still sleeps up to it."""
+    clock = ManualClock()
+    medium = CanMedium(register=False, clock=clock, ideal=True)
+    bus = LockstepCanBus(medium=medium)
+    other = medium.attach_peer(Echo(medium), name="other")
+    medium._enqueue(msg(0x123, b"\x01"), other, medium.now)  # due now, not yet processed
+    got = bus.recv(0.0)
+    assert got is not None and got.arbitration_id == 0x123
+    medium.now = clock.now() + 1e-9  # the medium stands ahead of the clock (as after an inexact sleep)
+    assert bus.recv(0.0) is None
+    assert clock.now() == medium.now  # the poll let the clock catch up, as waiting until now does
+    bus.shutdown()
+
+
+class _Lockstep:
+    """A world in miniature for the medium: physics in 1 ms substeps; sleeping runs the substeps that end at or
+    before the instant and the one that reaches it, ticking the medium at each substep's end; the clock shows
+    the instant slept to."""
+
+    def __init__(self) -> None:
+        self.t = 0.0
+        self.steps = 0
+        self.medium: CanMedium | None = None
+        self.ticks: list[Any] = []  #: what else the world ticks (a drive sending by itself)
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep(self, seconds: float) -> None:
+        target = self.t + seconds
+        while self.steps * 1e-3 < target - 1e-12:
+            self.steps += 1
+            assert self.medium is not None
+            self.medium.tick(self.steps * 1e-3)
+            for tick in self.ticks:
+                tick(self.steps * 1e-3)
+        self.t = target
+
+
+class _Drive:
+    """A peer that answers every request after its turnaround and notes the physics substep it saw it at."""
+
+    def __init__(self, world: _Lockstep, medium: CanMedium) -> None:
+        self.world, self.medium = world, medium
+        self.node: Any = None  #: its attachment to the medium
+        self.seen: list[tuple[float, int]] = []
+
+    def on_frame(self, frame: can.Message) -> Sequence[can.Message]:
+        self.seen.append((self.medium.time(), self.world.steps))
+        return [msg(frame.arbitration_id - 0x80, bytes([0, 0, 0, self.world.steps & 0xFF, 0x3E]))]
+
+    def turnaround(self, frame: can.Message) -> float:
+        return 1300 * US  # longer than a substep: ticks come between a request and its answer
+
+    def tick(self, t: float) -> None:
+        """Every third substep a frame of its own (an EMCY), sent at the substep's end."""
+        if self.world.steps % 3 == 0:
+            self.medium.send_at(self.node, msg(0x081, bytes([self.world.steps & 0xFF])), t)  # beats the answers
+
+
+def _transactions(answers_only: bool, skip: bool, monkeypatch: pytest.MonkeyPatch) -> tuple[list[Any], int]:
+    """A long run from time 0, then 400 short ones that start at odd instants of the first substep (where the
+    clock's sleeps round: ``t - c`` is exact only for ``t <= 2c``)."""
+    out: list[Any] = []
+    waits = 0
+    rng = random.Random(11)
+    for start in [0.0] + [rng.uniform(1e-7, 4e-5) for _ in range(400)]:
+        got, n = _run_transactions(answers_only, skip, monkeypatch, start, 200 if start == 0.0 else 4, rng)
+        out.append(got)
+        waits += n
+    return out, waits
+
+
+def _run_transactions(answers_only: bool, skip: bool, monkeypatch: pytest.MonkeyPatch, start: float, n: int,
+                      rng: random.Random) -> tuple[list[Any], int]:
+    world = _Lockstep()
+    medium = CanMedium(register=False, clock=world)
+    world.medium = medium
+    medium.answers_only = answers_only
+    if not skip:  # the reference: a wait for every edge
+        monkeypatch.setattr(medium, "_skippable", lambda edge, held: False)
+    drive = _Drive(world, medium)
+    drive.node = medium.attach_peer(drive)
+    if not answers_only:
+        world.ticks.append(drive.tick)
+    bus = LockstepCanBus(medium=medium, adapter_latency=200 * US)
+    waits = []
+    wait = medium._wait_until
+    monkeypatch.setattr(medium, "_wait_until", lambda t, lazy=False: (waits.append(t), wait(t, lazy))[1])
+    out: list[Any] = []
+    world.sleep(start)
+    for i in range(n):
+        if i % 3 == 0:  # the host waits for the next substep's end (a control period): the physics stands there
+            world.sleep(math.ceil(world.t * 1e3 + 1e-9) * 1e-3 - world.t)
+        elif i % 3 == 1:
+            world.sleep(rng.choice((0.0, 37 * US, 410 * US)))
+        bus.send(msg(0x641, bytes(rng.randrange(256) for _ in range(rng.choice((2, 4, 6, 8))))))
+        got = bus.recv(0.01)
+        while got is not None and got.arbitration_id == 0x081:  # the drive's own frames: noted, not the answer
+            out.append((got.timestamp, bytes(got.data)))
+            got = bus.recv(0.01)
+        assert got is not None
+        out.append((got.timestamp, bytes(got.data), world.t, world.steps, medium.now, medium.frames, medium.busy))
+    out.append(drive.seen)
+    bus.shutdown()
+    return out, len(waits)
+
+
+@pytest.mark.parametrize(("answers_only", "fewer"), [(True, 0.7), (False, 0.9)])
+def test_edges_processed_without_their_waits_give_what_waiting_for_each_gives(
+        answers_only: bool, fewer: float, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each request still reaches the drive with the physics at the substep that reaches it, the drive's own
+    frames (where it sends some at ticks) contend as before, the clock shows the same instants, the host gets
+    the same frames at the same times; with fewer waits (most where the drive only answers)."""
+    fast, fast_waits = _transactions(answers_only, True, monkeypatch)
+    reference, reference_waits = _transactions(answers_only, False, monkeypatch)
+    assert fast_waits < fewer * reference_waits, (fast_waits, reference_waits)
+    assert fast == reference

@@ -85,7 +85,20 @@ def classify(frame: can.Message) -> Route:
     """Which service ``frame`` belongs to, and which node (never raises)."""
     cob = frame.arbitration_id
     if frame.is_extended_id or cob > 0x7FF:
-        return Route(Kind.UNKNOWN, 0)
+        return _UNKNOWN
+    route = _ROUTES[cob] if cob >= 0 else _route(cob)
+    if route is None:  # 0x700 + node: heartbeat, boot-up or guard request, by the frame
+        node = cob & 0x7F
+        if frame.is_remote_frame:
+            return Route(Kind.GUARD_REQUEST, node)
+        if frame.dlc == 1 and frame.data[0] == 0:
+            return Route(Kind.BOOT_UP, node)
+        return Route(Kind.HEARTBEAT, node)
+    return route
+
+
+def _route(cob: int) -> Route | None:
+    """The route of a standard COB-ID (None: the 0x700 + node range, where the frame decides)."""
     node = cob & 0x7F
     if node == 0:
         if cob == NMT_ID:
@@ -94,16 +107,18 @@ def classify(frame: can.Message) -> Route:
             return Route(Kind.SYNC, 0)
         if cob == TIME_ID:
             return Route(Kind.TIME, 0)
-        return Route(Kind.UNKNOWN, 0)
+        return _UNKNOWN
     kind = _BY_FUNCTION[cob >> 7]
     if kind is Kind.HEARTBEAT:
-        if frame.is_remote_frame:
-            return Route(Kind.GUARD_REQUEST, node)
-        if frame.dlc == 1 and frame.data[0] == 0:
-            return Route(Kind.BOOT_UP, node)
-    elif kind is Kind.UNKNOWN:
-        return Route(Kind.UNKNOWN, 0)
+        return None
+    if kind is Kind.UNKNOWN:
+        return _UNKNOWN
     return Route(kind, node)
+
+
+_UNKNOWN = Route(Kind.UNKNOWN, 0)
+#: the route of every standard COB-ID, computed once (:func:`classify` looks it up)
+_ROUTES: tuple[Route | None, ...] = tuple(_route(cob) for cob in range(0x800))
 
 
 def pdo_cob_id(kind: Kind, node: int) -> int:
