@@ -173,3 +173,27 @@ def test_one_wheel_alone_is_commanded_as_the_rig_commands_it() -> None:
             runs.append((_frames(_links(u)[0]), _images(u), _links(u)[0].transactions, u.rig.time))
     assert runs[0] == runs[1]
     assert runs[0][2] > 0
+
+
+@pytest.mark.parametrize(("env_id", "mode"), [("joints/ErobReach-v0", "position"), ("joints/ErobArmReach-v0", "torque"),
+                                              ("joints/DiffDriveGoal-v0", None)])
+def test_the_idle_lines_shortcut_gives_the_general_lines_bits(env_id: str, mode: str | None,
+                                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """A transaction on an idle line (TimedSerialLine._transact_idle) gives the frames, instants, clock and
+    physics of the line's general event loop, which runs where the shortcut is refused."""
+    from joints.transports.serial_sim import TimedSerialLine
+
+    taken = [0]
+    idle = TimedSerialLine._transact_idle
+
+    def counted(self: TimedSerialLine, *args: Any) -> Any:
+        taken[0] += 1
+        return idle(self, *args)
+
+    monkeypatch.setattr(TimedSerialLine, "_transact_idle", counted)
+    short = _run(env_id, mode, 12, compiled=True)
+    assert taken[0] > 2 * 12  # the shortcut carried the steps' transactions
+    monkeypatch.setattr(TimedSerialLine, "_plain_peer", lambda self: False)
+    general = _run(env_id, mode, 12, compiled=True)
+    for key in ("reset", "steps", "transactions", "frames", "images", "time"):
+        assert short[key] == general[key], key
