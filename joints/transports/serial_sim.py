@@ -206,12 +206,12 @@ class TimedSerialLine(ByteTransport, ClockDriven):
              handler: Callable[..., Any] | None = None, payload: Any = None, pend: bool = True) -> Transmission:
         n = len(data) if size is None else size
         start = max(at, self._free[side])
-        end = start + self.wire_time(n)
+        end = start + n * self.char_time  # wire_time(n)
         if side == "host":
             due = end + self.gap + (self._device_turnaround(data) if turnaround is None else turnaround)
         else:
             due = end + self.adapter_latency
-        tx = Transmission(start, end, side, bytes(data), due=due, size=n, handler=handler, payload=payload)
+        tx = Transmission(start, end, side, data if type(data) is bytes else bytes(data), due=due, size=n, handler=handler, payload=payload)
         self._free[side] = end + self.gap
         log, latest = self.log, self._latest_end
         if len(latest) != len(log):  # the log was edited from outside: check every frame of it from now on
