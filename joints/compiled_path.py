@@ -43,6 +43,7 @@ from joints.drivers.zlac_modbus import STATUS_START, STATUS_WORDS, ZlacChannelDr
 from joints.errors import OutcomeUnknown
 from joints.joint import Joint, JointState
 from joints.link.base import DirectFraming
+from joints.link.lane import LinkLane
 
 __all__ = ["CompiledPath", "supported"]
 
@@ -57,6 +58,7 @@ class _ErobModbus:
         self.driver = driver
         self.access = access
         self.link = access.link
+        self.lane = LinkLane(access.link)
         self.clock = driver.clock
         plan = access.block_plan(STATUS_NAMES)
         if len(plan) != 1:  # the status block is one FC03 on this register map
@@ -76,7 +78,7 @@ class _ErobModbus:
         return [self.state()]
 
     def _write(self, name: str, value: int) -> None:
-        self.link.request(self.access.write_request(name, value), idempotent=True)
+        self.lane.request(self.access.write_request(name, value), idempotent=True)
         self.driver.note_written(name, value)
 
     def command(self, mode: str, value: float) -> None:
@@ -87,7 +89,7 @@ class _ErobModbus:
                 driver.validate(target_absolute_position=target)
                 self._write("target_absolute_position", target)
                 try:  # a command: never retried
-                    self.link.request(self.start, idempotent=False)
+                    self.lane.request(self.start, idempotent=False)
                 except OutcomeUnknown as exc:
                     driver.start_unknown(target, exc)
                 self.taken += 1
@@ -115,7 +117,7 @@ class _ErobModbus:
     def state(self) -> JointState:
         clock = self.clock
         t0 = clock.now()
-        reply = self.link.request(self.status, idempotent=True)
+        reply = self.lane.request(self.status, idempotent=True)
         assert isinstance(reply, mb.ReadRegistersReply)
         values = self.decode(self.status_start, reply.values)
         return self.joint.to_si(self.driver.state_from(values, sampled_at(t0, clock.now())))
@@ -148,6 +150,7 @@ class _ZlacModbus:
         self.drive = drive
         access = drive.access
         self.link = access.link
+        self.lane = LinkLane(access.link)
         self.clock = drive.clock
         self.status = mb.ReadHoldingRegisters(access.slave, STATUS_START, STATUS_WORDS)  # what read_status sends
         self.decode = access.table.decode_block
@@ -157,7 +160,7 @@ class _ZlacModbus:
         self.taken = 0
 
     def _write(self, block: _Block, values: dict[str, int]) -> None:
-        self.link.request(block.request(values), idempotent=True)
+        self.lane.request(block.request(values), idempotent=True)
         self.drive.note_written(values)
 
     def command_all(self, mode: str, values: Sequence[float], skip: Sequence[bool]) -> None:
@@ -185,7 +188,7 @@ class _ZlacModbus:
         clock = self.clock
         t0 = clock.now()
         self.drive.identify()  # once per drive: a no-op after the first
-        reply = self.link.request(self.status, idempotent=True)
+        reply = self.lane.request(self.status, idempotent=True)
         assert isinstance(reply, mb.ReadRegistersReply)
         block = self.decode(STATUS_START, reply.values)
         t = sampled_at(t0, clock.now())
@@ -275,6 +278,11 @@ class CompiledPath:
     def taken(self) -> int:
         """Joint steps (commands) sent the compiled way, not through the driver's own method."""
         return sum(s.taken for s in self._steppers)
+
+    @property
+    def lane_taken(self) -> int:
+        """Requests sent on the direct lane (:class:`~joints.link.lane.LinkLane`), not through ``Link.request``."""
+        return sum(s.lane.taken for s in self._steppers)
 
     def command(self, mode: str, values: Sequence[float], skip: Sequence[bool] | None = None) -> None:
         """Joint ``i`` gets ``values[i]`` (rad | rad/s | N*m per ``mode``) unless ``skip[i]``, in joint order."""

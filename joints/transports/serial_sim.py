@@ -124,6 +124,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         self.peer = peer
         self._peer_seen: Any = None  #: the peer whose :class:`TimedFrames` check is in ``_peer_timed``
         self._peer_timed = False
+        self._peer_plain_seen: Any = None  #: the peer whose check is in ``_peer_plain`` (:meth:`_plain_peer`)
+        self._peer_plain = False
         self.clock = clock
         self.baudrate = baudrate
         self.char_time = bits_per_char / baudrate
@@ -201,15 +203,15 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         return self.turnaround if got is None else got
 
     def _put(self, side: str, at: float, data: bytes, *, size: int | None = None, turnaround: float | None = None,
-             handler: Callable[..., Any] | None = None, payload: Any = None) -> Transmission:
+             handler: Callable[..., Any] | None = None, payload: Any = None, pend: bool = True) -> Transmission:
         n = len(data) if size is None else size
         start = max(at, self._free[side])
-        end = start + self.wire_time(n)
+        end = start + n * self.char_time  # wire_time(n)
         if side == "host":
             due = end + self.gap + (self._device_turnaround(data) if turnaround is None else turnaround)
         else:
             due = end + self.adapter_latency
-        tx = Transmission(start, end, side, bytes(data), due=due, size=n, handler=handler, payload=payload)
+        tx = Transmission(start, end, side, data if type(data) is bytes else bytes(data), due=due, size=n, handler=handler, payload=payload)
         self._free[side] = end + self.gap
         log, latest = self.log, self._latest_end
         if len(latest) != len(log):  # the log was edited from outside: check every frame of it from now on
@@ -227,7 +229,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
                 other.corrupted = tx.corrupted = True
         latest.append(max(end, latest[-1]) if len(log) > self._epoch else end)
         log.append(tx)
-        self._pending.append(tx)
+        if pend:
+            self._pending.append(tx)
         if len(log) > 2 * LOG_KEEP:
             cut = len(log) - LOG_KEEP  # the oldest frames go once none of them can overlap a new one
             if cut <= self._epoch or latest[cut - 1] <= start - 1.0:
@@ -304,6 +307,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             return reply, (reply_size(reply) if reply is not None else 0), got.append
 
         now = self._sync()
+        if not self._pending and self._cap is None and self._plain_peer():
+            return self._transact_idle(now, size, act, reply_size, turnaround)
         self._run(now)
         tx = self._put("host", now, b"", size=size, turnaround=turnaround, handler=action)
         self._wait_until(tx.due)
@@ -315,6 +320,63 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             assert nxt is not None
             self._wait_until(nxt, self._quiet_until(nxt))
         return got[1]
+
+    def _plain_peer(self) -> bool:
+        """Whether the peer acts only when a host frame reaches it (neither :class:`TimedFrames` nor
+        :class:`Ticking`): on an idle line its transaction is :meth:`_transact_idle`'s."""
+        peer = self.peer
+        if peer is not self._peer_plain_seen:  # a Protocol isinstance costs ~60 us: once per peer
+            self._peer_plain_seen = peer
+            self._peer_plain = not isinstance(peer, (TimedFrames, Ticking))
+        return self._peer_plain
+
+    def _transact_idle(self, now: float, size: int, act: Callable[[], Any], reply_size: Callable[[Any], int],
+                       turnaround: float | None) -> Any:
+        """:meth:`transact` on an idle line (nothing pending, a peer that acts only on host frames): the same
+        frames, instants, clock calls and order of events as :meth:`_run` gives them, without its search.
+
+        Rule: every float is computed by the same operations as the general path (``_put``, ``_wait_until``),
+        so both give the same bits (tests/transports/test_serial_sim.py compares them).
+        """
+        clock = self.clock
+        tx = self._put("host", now, b"", size=size, turnaround=turnaround)  # pending while the clock sleeps
+        due = tx.due
+        behind = due - clock.now()
+        if behind > 0:  # the physics runs to the instant the drive acts (_wait_until)
+            self._cap = due
+            try:
+                clock.sleep(behind)
+            finally:
+                self._cap = None
+            self._clock_seen = clock.now()
+        self._pending.remove(tx)
+        tx.delivered = True
+        settle = self._settle
+        if settle is not None:  # the drive acts now: on the physics of the substep that reaches now
+            settle()
+        reply = act()
+        self.now = max(self.now, due)
+        if reply is None:  # the device stays silent
+            return None
+        rx = self._put("device", due, b"", size=reply_size(reply), payload=reply, pend=False)
+        seen = rx.due
+        behind = seen - clock.now()
+        if behind > 0:  # nothing acts on a drive while the reply travels: booked, no physics (_wait_until, lazy)
+            self._cap = seen
+            try:
+                book = getattr(clock, "book", None)
+                if book is not None:
+                    book(behind)
+                else:
+                    clock.sleep(behind)
+            finally:
+                self._cap = None
+            self._clock_seen = clock.now()
+        rx.delivered = True
+        free = self._free
+        free["host"] = max(free["host"], seen + self.gap)  # the host's own t3.5 from when it saw the reply
+        self.now = max(self.now, seen)
+        return reply
 
     def post(self, size: int, act: Callable[[], Any], reply_size: Callable[[Any], int],
              receiver: Callable[[Any], None], turnaround: float | None = None) -> None:

@@ -9,6 +9,7 @@ really have been taken.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import gymnasium as gym
@@ -85,6 +86,7 @@ def _run(env_id: str, mode: str | None, steps: int, compiled: bool, trace: bool 
         out["time"] = (u.rig.time, u.rig.sim.steps)
         out["trace"] = [(r.time, r.direction, r.data, r.meaning) for r in records]
         out["taken"] = u.compiled_path.taken if u.compiled_path is not None else None
+        out["lane"] = u.compiled_path.lane_taken if u.compiled_path is not None else None
         return out
     finally:
         env.close()
@@ -100,6 +102,7 @@ def test_compiled_path_gives_the_driver_paths_bits(env_id: str, mode: str | None
     assert compiled["taken"] >= steps
     assert sum(t[0] for t in compiled["transactions"]) > 2 * steps
     assert sum(len(f) for f in compiled["frames"]) > 4 * steps  # requests and replies on the timed line
+    assert compiled["lane"] >= 2 * steps  # the direct lane carried the steps' requests (joints.link.lane)
     for key in ("reset", "steps", "transactions", "frames", "images", "time"):
         assert compiled[key] == driver[key], key
 
@@ -173,3 +176,143 @@ def test_one_wheel_alone_is_commanded_as_the_rig_commands_it() -> None:
             runs.append((_frames(_links(u)[0]), _images(u), _links(u)[0].transactions, u.rig.time))
     assert runs[0] == runs[1]
     assert runs[0][2] > 0
+
+
+@pytest.mark.parametrize(("env_id", "mode"), [("joints/ErobReach-v0", "position"), ("joints/ErobArmReach-v0", "torque"),
+                                              ("joints/DiffDriveGoal-v0", None)])
+def test_the_idle_lines_shortcut_gives_the_general_lines_bits(env_id: str, mode: str | None,
+                                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """A transaction on an idle line (TimedSerialLine._transact_idle) gives the frames, instants, clock and
+    physics of the line's general event loop, which runs where the shortcut is refused."""
+    from joints.transports.serial_sim import TimedSerialLine
+
+    taken = [0]
+    idle = TimedSerialLine._transact_idle
+
+    def counted(self: TimedSerialLine, *args: Any) -> Any:
+        taken[0] += 1
+        return idle(self, *args)
+
+    monkeypatch.setattr(TimedSerialLine, "_transact_idle", counted)
+    short = _run(env_id, mode, 12, compiled=True)
+    assert taken[0] > 2 * 12  # the shortcut carried the steps' transactions
+    monkeypatch.setattr(TimedSerialLine, "_plain_peer", lambda self: False)
+    general = _run(env_id, mode, 12, compiled=True)
+    for key in ("reset", "steps", "transactions", "frames", "images", "time"):
+        assert short[key] == general[key], key
+
+
+class _Faulty:
+    """Every ``every``-th request the bus gets is answered wrongly (cycling: silence, another slave's reply, a
+    reply the host's decoder refuses, a refusal) - the replies the direct lane hands back to the link's way."""
+
+    def __init__(self, every: int) -> None:
+        self.every = every
+        self.n = 0
+        self.on = True  #: off: every reply plain (resets)
+
+    def wrap(self, exchange: Any) -> Any:
+        from joints.codecs import modbus as mb
+
+        def faulty(bus: Any, msg: Any) -> Any:
+            reply = exchange(bus, msg)
+            self.n += 1
+            if reply is None or not self.on or self.n % self.every:
+                return reply
+            kind = (self.n // self.every) % 4
+            if kind == 0:
+                return None  # silence: the attempt times out, an idempotent request is sent again
+            if kind == 1:
+                return dataclasses.replace(reply, slave=reply.slave + 1)
+            if kind == 2 and isinstance(reply, mb.ReadRegistersReply):
+                return mb.ReadRegistersReply(reply.slave, reply.function, reply.values[:-1])  # a byte count refused
+            return mb.ExceptionReply(reply.slave, reply.function, 4)  # a refusal (device failure)
+        return faulty
+
+
+def _faulty_run(env_id: str, mode: str | None, every: int, compiled: bool, monkeypatch: pytest.MonkeyPatch
+                ) -> tuple[list[Any], int, int | None]:
+    """30 steps with every ``every``-th reply wrong (resets get plain ones): (what happened, wrong replies
+    planted, requests on the lane)."""
+    from joints.sim.modbus_front import ModbusDeviceBus
+
+    exchange = ModbusDeviceBus.exchange
+    outcome: list[Any] = []
+    kwargs: dict[str, Any] = {} if mode is None else {"action_mode": mode}
+    env = gym.make(env_id, compiled_path=compiled, **kwargs)
+    u: Any = env.unwrapped
+    plant = _Faulty(every)
+    monkeypatch.setattr(ModbusDeviceBus, "exchange", plant.wrap(exchange))
+
+    def reset() -> None:
+        plant.on = False
+        u.reset(seed=3)  # the env itself: a failed reset leaves gymnasium's checker nothing to check
+        plant.on = True
+
+    try:
+        reset()
+        rng = np.random.default_rng(5)
+        for _ in range(30):
+            try:
+                obs, reward, terminated, _truncated, info = u.step(
+                    rng.uniform(-1.0, 1.0, env.action_space.shape).astype(np.float32))
+                outcome.append((obs.tobytes(), reward, terminated, _info(info)))
+            except joints.JointsError as exc:
+                outcome.append((type(exc).__name__, str(exc)))
+                reset()
+        links = _links(u)
+        outcome.append([(lk.transactions, lk.framing.exchanges, lk.retries_used, lk.late_discarded)
+                        for lk in links])
+        outcome.append([_frames(lk) for lk in links])
+        outcome.append((_images(u), u.rig.time, u.rig.sim.steps))
+        lane = u.compiled_path.lane_taken if compiled else None
+    finally:
+        monkeypatch.setattr(ModbusDeviceBus, "exchange", exchange)  # the rig shuts down on plain replies
+        env.close()
+    return outcome, plant.n // every, lane
+
+
+@pytest.mark.parametrize("every", [7, 2])
+@pytest.mark.parametrize(("env_id", "mode"), [("joints/ErobReach-v0", "position"), ("joints/ErobReach-v0", "velocity"),
+                                              ("joints/DiffDriveGoal-v0", None)])
+def test_wrong_replies_leave_the_lane_as_the_link_handles_them(env_id: str, mode: str | None, every: int,
+                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """Silence, another slave's reply, a refused frame and a refusal, planted alike on both paths: the same
+    retries, errors, frames, images and times (the lane's rest is the link's attempt and retries)."""
+    compiled, planted, lane = _faulty_run(env_id, mode, every, True, monkeypatch)
+    driver, _, _ = _faulty_run(env_id, mode, every, False, monkeypatch)
+    assert planted > 4
+    assert lane is not None and lane > 10
+    assert any(isinstance(o, tuple) and isinstance(o[0], str) for o in driver)  # some steps raised
+    assert compiled == driver
+
+
+def test_a_silent_twin_gives_the_links_errors_on_the_lane(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A twin that never answers: the lane's read and command end in the link's errors (its retries, its
+    timeout and unknown-outcome texts), counts, frames and times."""
+    from joints.sim.modbus_front import ModbusDeviceBus
+
+    exchange = ModbusDeviceBus.exchange
+    runs = []
+    for via in ("lane", "link"):
+        env = gym.make("joints/ErobReach-v0")
+        u: Any = env.unwrapped
+        env.reset(seed=0)
+        stepper = u.compiled_path._steppers[0]
+        send = stepper.lane.request if via == "lane" else stepper.link.request
+        monkeypatch.setattr(ModbusDeviceBus, "exchange", lambda bus, msg: (exchange(bus, msg), None)[1])
+        out: list[Any] = []
+        try:
+            for request, idempotent in ((stepper.status, True), (stepper.start, False)):
+                with pytest.raises(joints.JointsError) as caught:
+                    send(request, idempotent=idempotent)
+                out.append((type(caught.value).__name__, str(caught.value)))
+            link = stepper.link
+            out.append((link.transactions, link.framing.exchanges, link.retries_used, link.late_discarded,
+                        _frames(link), u.rig.time))
+        finally:
+            monkeypatch.setattr(ModbusDeviceBus, "exchange", exchange)
+            env.close()
+        runs.append(out)
+    assert "attempts" in runs[0][0][1] and "outcome is unknown" in runs[0][1][1]
+    assert runs[0] == runs[1]
