@@ -229,25 +229,30 @@ class Link(Generic[M]):
             frame = None
         else:
             frame = self.rule.encode(request)  # raises EncodeError before anything is sent
-        attempts = 1 + (self.policy.retries if idempotent else 0)
         with self._lock:
-            last: Exception | None = None
-            for attempt in range(attempts):
-                if attempt:
-                    self.retries_used += 1
-                try:
-                    return self._once(request, frame)
-                except (ReplyTimeout, PeerProtocolError) as exc:
-                    last = exc
-                    self._discard_late()
-            assert last is not None
-            tried = f" (after {attempts} attempts)" if attempts > 1 else ""
-            if self.rule.is_write(request):  # no intact answer: the drive may have executed it
-                raise outcome_unknown(last, f"{last}{tried}; the write's outcome is unknown: the drive may have "
-                                            "executed it - read back what matters before sending it again") from last
-            if tried and isinstance(last, ReplyTimeout):
-                raise ReplyTimeout(f"{last}{tried}") from last
-            raise last
+            return self._attempts(request, frame, idempotent)
+
+    def _attempts(self, request: Any, frame: Any, idempotent: bool, failed: Exception | None = None) -> M | None:
+        """The attempts of :meth:`request` (with the bus lock held), and its error when all fail; ``failed``:
+        the first attempt was made elsewhere (:class:`~joints.link.lane.LinkLane`) and failed so."""
+        attempts = 1 + (self.policy.retries if idempotent else 0)
+        last: Exception | None = failed
+        for attempt in range(0 if failed is None else 1, attempts):
+            if attempt:
+                self.retries_used += 1
+            try:
+                return self._once(request, frame)
+            except (ReplyTimeout, PeerProtocolError) as exc:
+                last = exc
+                self._discard_late()
+        assert last is not None
+        tried = f" (after {attempts} attempts)" if attempts > 1 else ""
+        if self.rule.is_write(request):  # no intact answer: the drive may have executed it
+            raise outcome_unknown(last, f"{last}{tried}; the write's outcome is unknown: the drive may have "
+                                        "executed it - read back what matters before sending it again") from last
+        if tried and isinstance(last, ReplyTimeout):
+            raise ReplyTimeout(f"{last}{tried}") from last
+        raise last
 
     def send(self, message: Any) -> None:
         """Send a frame that gets no reply (nothing is waited for)."""
@@ -326,6 +331,12 @@ class Link(Generic[M]):
             framing.write(request, frame)
         if not rule.expects_reply(request):
             return None
+        return self._await_reply(request, deadline)
+
+    def _await_reply(self, request: Any, deadline: float) -> M:
+        """The rest of an attempt once its request is out: the frames up to ``deadline`` until the reply
+        (others are unsolicited; a garbled one is kept as the error if no reply comes)."""
+        rule, framing = self.rule, self.framing
         error: FrameError | None = None
         while True:
             got = framing.receive(deadline)
@@ -343,7 +354,7 @@ class Link(Generic[M]):
         if error is not None:
             raise error
         raise ReplyTimeout(
-            f"{self.name}: no reply to {rule.describe(request)} within {timeout * 1000:.0f} ms on "
+            f"{self.name}: no reply to {rule.describe(request)} within {self.policy.timeout * 1000:.0f} ms on "
             f"{framing.name}; {rule.timeout_text(request)}"
         )
 

@@ -8,8 +8,8 @@ reply queued, nothing pending on a :class:`~joints.transports.serial_sim.TimedSe
 acts only on host frames, a Modbus request that is not a write of 0xFFFF (whose answer a slave with
 failure replies makes ambiguous); anything else goes to ``link.request`` before anything is sent. A
 reply that is not the plain answer (silence, a frame the host refuses, another slave's reply) continues
-as the link's own attempt does: it waits for a reply until the attempt's deadline, then the link's
-retries (:meth:`LinkLane._rest`). tests/sim/test_compiled_path.py proves both equal to the link's path.
+as the link's own attempt does (:meth:`Link._await_reply`, then the link's retries,
+:meth:`Link._attempts`). tests/sim/test_compiled_path.py proves both equal to the link's path.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import functools
 from typing import Any
 
 from joints.errors import FrameError, PeerProtocolError, ReplyTimeout
-from joints.link.base import DirectFraming, Link, outcome_unknown
+from joints.link.base import DirectFraming, Link
 from joints.link.modbus import FAILED_VALUE, _single_write
 from joints.transports.serial_sim import TimedSerialLine
 
@@ -65,58 +65,12 @@ class LinkLane:
             raw = line._transact_idle(line._sync(), size(request), functools.partial(framing.peer.exchange, request),
                                       size, framing._turnaround(request))
             reply = None if raw is None else framing.as_received(request, raw)
-            try:
+            try:  # as the link's attempt: a reply the rule refuses (another slave's) fails the attempt
                 if reply is not None and not isinstance(reply, FrameError) and rule.is_reply(request, reply):
                     self.taken += 1
                     return reply
-                return self._await(request, reply, deadline)
+                framing.put(reply)  # not the plain answer: the rest of the attempt and the retries are the link's
+                return link._await_reply(request, deadline)
             except (ReplyTimeout, PeerProtocolError) as exc:
                 link._discard_late()
-                return self._rest(request, exc, idempotent)
-
-    def _await(self, request: Any, reply: Any, deadline: float) -> Any:
-        """The rest of the link's first attempt after a reply that is not the plain answer (``Link._once``)."""
-        link, framing = self.link, self.framing
-        assert framing is not None
-        rule = link.rule
-        framing.put(reply)  # what the byte path would receive next
-        error: FrameError | None = None
-        while True:
-            got = framing.receive(deadline)
-            if got is None:
-                break
-            if isinstance(got, FrameError):
-                link._record("rx", got.data, f"error: {got}")
-                error = error or got
-                continue
-            if rule.is_reply(request, got):
-                if link.trace is not None:
-                    link._trace_rx(got, "")
-                return got
-            link._unsolicited(got)
-        if error is not None:
-            raise error
-        raise ReplyTimeout(
-            f"{link.name}: no reply to {rule.describe(request)} within {link.policy.timeout * 1000:.0f} ms on "
-            f"{framing.name}; {rule.timeout_text(request)}"
-        )
-
-    def _rest(self, request: Any, last: Exception, idempotent: bool) -> Any:
-        """The link's retries after a failed first attempt, and its error when all fail (``Link.request``)."""
-        link = self.link
-        attempts = 1 + (link.policy.retries if idempotent else 0)
-        for _ in range(1, attempts):
-            link.retries_used += 1
-            try:
-                return link._once(request, None)
-            except (ReplyTimeout, PeerProtocolError) as exc:
-                last = exc
-                link._discard_late()
-        tried = f" (after {attempts} attempts)" if attempts > 1 else ""
-        if link.rule.is_write(request):  # no intact answer: the drive may have executed it
-            raise outcome_unknown(last, f"{last}{tried}; the write's outcome is unknown: the drive may have "
-                                        "executed it - read back what matters before sending it again") from last
-        if tried and isinstance(last, ReplyTimeout):
-            raise ReplyTimeout(f"{last}{tried}") from last
-        raise last
-
+                return link._attempts(request, None, idempotent, failed=exc)
