@@ -67,6 +67,7 @@ from joints.sim.erob_kernel import (
     SUPERVISION_PERIOD,
 )
 from joints.sim.firmware import Firmware
+from joints.sim.rowattr import column, flag
 from joints.sim.sensors import Sensor, model_of
 
 __all__ = [
@@ -163,30 +164,6 @@ _SETTINGS = tuple(p.name for p in EROB_PARAMS if p.access.value == "R/W")
 _POSITION = int(OperationMode.POSITION)
 ARRIVAL_WINDOW = K.ARRIVAL_WINDOW
 _STATUS_INDEX = {name: i for i, name in enumerate(K.STATUS_NAMES)}
-
-
-def _column(k: int, doc: str = "") -> property:
-    """A float attribute that is column ``k`` of the firmware's row."""
-
-    def get(self: ErobFirmware) -> float:
-        return float(self._get(k))
-
-    def put(self: ErobFirmware, value: float) -> None:
-        self._row[k] = float(value)
-
-    return property(get, put, doc=doc)
-
-
-def _flag(k: int, doc: str = "") -> property:
-    """A bool attribute held as 0.0 / 1.0 in column ``k``."""
-
-    def get(self: ErobFirmware) -> bool:
-        return bool(self._get(k) != 0.0)
-
-    def put(self: ErobFirmware, value: bool) -> None:
-        self._row[k] = 1.0 if value else 0.0
-
-    return property(get, put, doc=doc)
 
 
 class _Generator:
@@ -317,37 +294,37 @@ class ErobFirmware(Firmware):
         """Which of the twin's rows steps ``channel``'s joint."""
         return 0
 
-    time = _column(K.TIME, "drive time [s]: the end of the last substep")
-    pos = _column(K.POS, "encoder [count], before the offset")
-    vel = _column(K.VEL, "speed [count/s]")
-    p_ref = _column(K.P_REF)
-    v_ref = _column(K.V_REF)
-    v_cmd = _column(K.V_CMD)
-    i_cmd = _column(K.I_CMD, "mA")
-    i_out = _column(K.I_OUT, "mA")
-    integ = _column(K.INTEG)
-    mode_speed_target = _column(K.MODE_SPEED_TARGET)
-    repeat_home = _column(K.REPEAT_HOME)
-    repeat_leg_to_target = _flag(K.REPEAT_LEG_TO_TARGET)
-    repeat_stop = _flag(K.REPEAT_STOP)
-    dwell_until = _column(K.DWELL_UNTIL)
-    in_window_since = _column(K.IN_WINDOW_SINCE)
-    peak_since = _column(K.PEAK_SINCE)
-    stall_since = _column(K.STALL_SINCE)
-    temperature = _column(K.TEMPERATURE, "power stage [degC]")
-    brake_released = _flag(K.BRAKE_RELEASED, "released by command while the motor is off: nothing holds the joint")
-    last_frame = _column(K.LAST_FRAME)
-    started = _flag(K.STARTED)
+    time = column(K.TIME, "drive time [s]: the end of the last substep")
+    pos = column(K.POS, "encoder [count], before the offset")
+    vel = column(K.VEL, "speed [count/s]")
+    p_ref = column(K.P_REF)
+    v_ref = column(K.V_REF)
+    v_cmd = column(K.V_CMD)
+    i_cmd = column(K.I_CMD, "mA")
+    i_out = column(K.I_OUT, "mA")
+    integ = column(K.INTEG)
+    mode_speed_target = column(K.MODE_SPEED_TARGET)
+    repeat_home = column(K.REPEAT_HOME)
+    repeat_leg_to_target = flag(K.REPEAT_LEG_TO_TARGET)
+    repeat_stop = flag(K.REPEAT_STOP)
+    dwell_until = column(K.DWELL_UNTIL)
+    in_window_since = column(K.IN_WINDOW_SINCE)
+    peak_since = column(K.PEAK_SINCE)
+    stall_since = column(K.STALL_SINCE)
+    temperature = column(K.TEMPERATURE, "power stage [degC]")
+    brake_released = flag(K.BRAKE_RELEASED, "released by command while the motor is off: nothing holds the joint")
+    last_frame = column(K.LAST_FRAME)
+    started = flag(K.STARTED)
     #: a set-point stream drives the position reference (CiA 402 CSP/IP over CANopen): between
     #: set-points the reference moves on at v_ref (linear interpolation); set by a protocol front
-    streaming = _flag(K.STREAMING)
-    stream_goal = _column(K.STREAM_GOAL, "the newest streamed set-point [count]: the reference stops there")
-    enabled_at = _column(K.ENABLED_AT)
-    watchdog = _column(K.WATCHDOG, "s, 0 = off")
-    kp = _column(K.KP)
-    kv = _column(K.KV)
-    ki = _column(K.KI)
-    vmax = _column(K.VMAX)
+    streaming = flag(K.STREAMING)
+    stream_goal = column(K.STREAM_GOAL, "the newest streamed set-point [count]: the reference stops there")
+    enabled_at = column(K.ENABLED_AT)
+    watchdog = column(K.WATCHDOG, "s, 0 = off")
+    kp = column(K.KP)
+    kv = column(K.KV)
+    ki = column(K.KI)
+    vmax = column(K.VMAX)
 
     @property
     def state(self) -> DriveState:

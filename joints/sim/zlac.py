@@ -174,6 +174,7 @@ from joints.devices.zlac.state import step as transition
 from joints.errors import ParameterRefused, Refusal
 from joints.sim import zlac_kernel as Z
 from joints.sim.firmware import Firmware
+from joints.sim.rowattr import column, flag
 from joints.sim.sensors import Sensor, model_of
 
 __all__ = [
@@ -255,28 +256,6 @@ def _ramp_seconds(ms: int) -> float:
     return max(ms * 1e-3, MIN_RAMP_TIME)
 
 
-def _column(k: int, doc: str = "") -> property:
-    """A float attribute that is column ``k`` of the channel's row."""
-
-    def get(self: ZlacChannel) -> float:
-        return float(self._get(k))
-
-    def put(self: ZlacChannel, value: float) -> None:
-        self._row[k] = float(value)
-
-    return property(get, put, doc=doc)
-
-
-def _flag(k: int, doc: str = "") -> property:
-    def get(self: ZlacChannel) -> bool:
-        return bool(self._get(k) != 0.0)
-
-    def put(self: ZlacChannel, value: bool) -> None:
-        self._row[k] = 1.0 if value else 0.0
-
-    return property(get, put, doc=doc)
-
-
 class ZlacChannel:
     """One motor channel of the drive: its loops, motor model and protections.
 
@@ -312,49 +291,49 @@ class ZlacChannel:
         self._row: Any = table[first + 1 + self.index]
         self._get: Callable[[int], float] = self._row.__getitem__ if isinstance(self._row, list) else self._row.item
 
-    fresh = _flag(Z.FRESH, "the next step latches the encoder origin and the loops at q")
-    q = _column(Z.Q, "wheel angle [rad] seen at the last step")
-    qd = _column(Z.QD, "wheel speed [rad/s] seen at the last step")
-    origin = _column(Z.ORIGIN, "raw angle [rad] where the position counter reads 0")
-    overload_time = _column(Z.OVERLOAD_TIME)
-    i_out = _column(Z.I_OUT, "motor current [A]")
-    temperature = _column(Z.TEMPERATURE, "winding [degC]")
-    v_ref = _column(Z.V_REF, "speed command of the ramp / profile [rad/s]")
-    v_target = _column(Z.V_TARGET, "velocity-mode ramp target [rad/s]")
-    acc_slope = _column(Z.ACC_SLOPE)
-    dec_slope = _column(Z.DEC_SLOPE)
-    p_ref = _column(Z.P_REF, "position command [rad]")
-    goal = _column(Z.GOAL, "end point of the present / last move [rad]")
-    moving = _flag(Z.MOVING, "a position move is in progress")
-    cruise = _column(Z.CRUISE)
-    p_acc = _column(Z.P_ACC)
-    p_dec = _column(Z.P_DEC)
-    integ = _column(Z.INTEG, "velocity-loop integral of the speed error [rad]")
-    lag = _column(Z.LAG, "integral of (speed command - speed) [rad], velocity following error")
-    i_ref = _column(Z.I_REF, "torque-mode current command after the slope [A]")
-    qs_slope = _column(Z.QS_SLOPE)
-    cpr = _column(Z.CPR)
-    counts_per_rad = _column(Z.COUNTS_PER_RAD)
-    arrival_window = _column(Z.ARRIVAL_WINDOW, "half a count [rad]")
-    acc_time = _column(Z.ACC_TIME)
-    dec_time = _column(Z.DEC_TIME)
-    qs_time = _column(Z.QS_TIME)
-    torque_rate = _column(Z.TORQUE_RATE, "A/s")
-    rated = _column(Z.RATED)
-    peak = _column(Z.PEAK)
-    overload_limit = _column(Z.OVERLOAD_LIMIT)
-    follow_limit = _column(Z.FOLLOW_LIMIT)
-    wv = _column(Z.WV)
-    wi = _column(Z.WI)
-    kfv = _column(Z.KFV)
-    kpp = _column(Z.KPP)
-    kfp = _column(Z.KFP)
-    hall_offset = _column(Z.HALL_OFFSET)
-    temp_limit = _column(Z.TEMP_LIMIT)
-    target_speed = _column(Z.TARGET_SPEED)
-    v_start = _column(Z.V_START, "initial velocity [rad/s] (cached from 0x2043/0x2073)")
-    inertia = _column(Z.INERTIA, "J [kg*m^2] the velocity-loop gains are scaled with (tuned for)")
-    kt = _column(Z.KT)
+    fresh = flag(Z.FRESH, "the next step latches the encoder origin and the loops at q")
+    q = column(Z.Q, "wheel angle [rad] seen at the last step")
+    qd = column(Z.QD, "wheel speed [rad/s] seen at the last step")
+    origin = column(Z.ORIGIN, "raw angle [rad] where the position counter reads 0")
+    overload_time = column(Z.OVERLOAD_TIME)
+    i_out = column(Z.I_OUT, "motor current [A]")
+    temperature = column(Z.TEMPERATURE, "winding [degC]")
+    v_ref = column(Z.V_REF, "speed command of the ramp / profile [rad/s]")
+    v_target = column(Z.V_TARGET, "velocity-mode ramp target [rad/s]")
+    acc_slope = column(Z.ACC_SLOPE)
+    dec_slope = column(Z.DEC_SLOPE)
+    p_ref = column(Z.P_REF, "position command [rad]")
+    goal = column(Z.GOAL, "end point of the present / last move [rad]")
+    moving = flag(Z.MOVING, "a position move is in progress")
+    cruise = column(Z.CRUISE)
+    p_acc = column(Z.P_ACC)
+    p_dec = column(Z.P_DEC)
+    integ = column(Z.INTEG, "velocity-loop integral of the speed error [rad]")
+    lag = column(Z.LAG, "integral of (speed command - speed) [rad], velocity following error")
+    i_ref = column(Z.I_REF, "torque-mode current command after the slope [A]")
+    qs_slope = column(Z.QS_SLOPE)
+    cpr = column(Z.CPR)
+    counts_per_rad = column(Z.COUNTS_PER_RAD)
+    arrival_window = column(Z.ARRIVAL_WINDOW, "half a count [rad]")
+    acc_time = column(Z.ACC_TIME)
+    dec_time = column(Z.DEC_TIME)
+    qs_time = column(Z.QS_TIME)
+    torque_rate = column(Z.TORQUE_RATE, "A/s")
+    rated = column(Z.RATED)
+    peak = column(Z.PEAK)
+    overload_limit = column(Z.OVERLOAD_LIMIT)
+    follow_limit = column(Z.FOLLOW_LIMIT)
+    wv = column(Z.WV)
+    wi = column(Z.WI)
+    kfv = column(Z.KFV)
+    kpp = column(Z.KPP)
+    kfp = column(Z.KFP)
+    hall_offset = column(Z.HALL_OFFSET)
+    temp_limit = column(Z.TEMP_LIMIT)
+    target_speed = column(Z.TARGET_SPEED)
+    v_start = column(Z.V_START, "initial velocity [rad/s] (cached from 0x2043/0x2073)")
+    inertia = column(Z.INERTIA, "J [kg*m^2] the velocity-loop gains are scaled with (tuned for)")
+    kt = column(Z.KT)
 
     @property
     def fault(self) -> int:
