@@ -44,7 +44,7 @@ parameters Kp, Ki, Kd, Kv.
 ``mks-current-unsaved`` (V1.0.7+, profile v1.0.9): 0x83 with a trailing 00 / FC06 0x0083 with bit 15 set:
 change the working current while running, not saved (status 2).
 ``mks-homing-status`` (V1.0.7+, profile v1.0.9): the 0x3B reply's second byte, the homing (0x91) status
-(native only: see docs/mks-firmware.md for the Modbus layout).
+(native), and FC04 0x003B read as ``status1 status2`` (Modbus; before: ``00 status``, joints.devices.mks.modbus.REVISED).
 ``mks-read-parameter`` (V1.0.8+, profile v1.0.9): 0x00 reads back one set command's parameter (native only).
 ``mks-user-id`` (V1.0.9): 0x42 read / write a user ID (native only).
 ``mks-coordinate-homing`` (V1.0.9): 0x91 with goZeroMode 01 / FC06 0x0091 = 2: run to the coordinate zero

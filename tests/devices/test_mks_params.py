@@ -174,8 +174,8 @@ def test_reply_rules_follow_the_manual() -> None:
 
 
 def test_every_modbus_field_is_a_parameter_of_the_same_type_and_access() -> None:
-    # 0x35, 0x95 (2 fields), 0x4A, 0x3B status2, 0x42: native only
-    assert len(MKS_MODBUS) == 58 + len(FEATURE_OF) - 6
+    # 0x35, 0x95 (2 fields), 0x4A, 0x42: native only (0x3B status2: in the V1.0.9 layout, the newest profile's map)
+    assert len(MKS_MODBUS) == 58 + len(FEATURE_OF) - 5
     for f in MKS_MODBUS:
         p = MKS_PARAMS[f.name]
         assert (f.type, f.access) == (p.type, p.access), f.name
@@ -195,7 +195,6 @@ def test_modbus_and_native_reach_the_same_command() -> None:
     assert NATIVE_ONLY == {"slave_respond", "slave_active", "group_address", "home_reverse_angle", "home_mode",
                            "home_current", "raw_encoder_value",  # 0x35: not in the Modbus-RTU manual V1.0.9
                            "position_threshold_enable", "position_threshold", "sync_enable",  # 0x95, 0x4A: neither
-                           "homing_status",  # 0x3B status2: the V1.0.9 Modbus layout contradicts V1.0.5 (docs)
                            "user_id"}  # 0x42: not in the Modbus-RTU manual V1.0.9
     assert set(MKS_MODBUS.names()) | NATIVE_ONLY == set(MKS_PARAMS.names())
 

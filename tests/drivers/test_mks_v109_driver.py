@@ -501,9 +501,13 @@ def test_homing_status_needs_v109_and_older_drives_send_one_byte(tmp_path: Path,
         assert reply == mks.GoBackToZeroStatusReply(1, mks.GoBackToZeroStatus.SUCCESS)  # homing None: one byte
 
 
-def test_homing_status_is_native_only(tmp_path: Path) -> None:
-    with open_motor(tmp_path, protocol="modbus-rtu") as rig, pytest.raises(RegisterError, match="native"):
-        rig.joints["m1"].driver.read("homing_status")
+@pytest.mark.parametrize("firmware", _having("mks-homing-status"))
+def test_homing_status_over_modbus_is_the_low_byte_of_0x3b(tmp_path: Path, firmware: str) -> None:
+    """FC04 0x003B "status1 status2" (Modbus-RTU V1.0.9 3.1.7); the layouts per profile: test_mks_modbus_layout."""
+    with open_motor(tmp_path, protocol="modbus-rtu", joint={"firmware": firmware}) as rig:
+        d = rig.joints["m1"].driver
+        assert d.read("homing_status") == 2 and d.read("go_back_to_zero_status") == 1
+        assert d.link.read_registers(1, 0x3B, 1, input_registers=True) == (0x0102,)
 
 
 # -- 0x91 goZeroMode 01: coordinate homing (V1.0.9) ----------------------------------------------------
