@@ -675,6 +675,12 @@ class MksDriver(JointDriver):
         self.access.write_many({"home_trigger_level": trigger_level, "home_direction": direction,
                                 "home_speed": self.speed_value(speed), "end_limit": end_limit})
 
+    def set_nolimit_home(self, *, reverse_angle: int = 0x2000, mode: int = 1, current: int | None = None) -> None:
+        """0x94 'noLimit' homing: back off ``reverse_angle`` counts after the stall, hm-Mode (1 no switch),
+        Hm_Ma [mA] (default the model's). Over Modbus FC16 0x0094, from firmware V1.0.6."""
+        ma = round(self.profile.default_home_current * 1000) if current is None else current
+        self.access.write_many({"home_reverse_angle": reverse_angle, "home_mode": mode, "home_current": ma})
+
     def go_home(self) -> None:
         """0x91 go home (limit switch, or 'noLimit' per 0x94); the end comes as a completion / status 1."""
         self.write_param("go_home", 1, idempotent=False)

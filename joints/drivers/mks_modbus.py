@@ -9,7 +9,7 @@ commands, FC16 multi-field commands sent whole (the other fields from the image 
 written). Modbus mode has no completion frames: :meth:`~joints.drivers.mks.MksDriver.wait_motion`
 polls 0xF1. The FC16 0x90 home-parameter request is the manual's own frame (3 registers, 5 bytes,
 ERRATA DOC-MKS-5), sent as is with :meth:`~joints.link.modbus.ModbusLink.write_pdu`. Native-only
-quantities (0x8C respond/active, 0x8D group address, 0x94 'noLimit' homing) raise
+quantities (0x8C respond/active, 0x8D group address, 0x94 'noLimit' homing before V1.0.6) raise
 :class:`~joints.errors.RegisterError`.
 """
 

@@ -9,7 +9,14 @@ import pytest
 
 from joints.codecs import mks as codec
 from joints.devices.mks import native, state
-from joints.devices.mks.modbus import FC_READ, FC_WRITE_MULTIPLE, FC_WRITE_SINGLE, MKS_MODBUS, NATIVE_ONLY
+from joints.devices.mks.modbus import (
+    FC_READ,
+    FC_WRITE_MULTIPLE,
+    FC_WRITE_SINGLE,
+    MKS_MODBUS,
+    MKS_MODBUS_OF,
+    NATIVE_ONLY,
+)
 from joints.devices.mks.native import MKS_NATIVE, REPLY_RULES, Command, NativeKey
 from joints.devices.mks.params import DANGEROUS, FEATURE_OF, MKS_PARAMS, model_params
 from joints.devices.params import TYPES, Access
@@ -174,8 +181,8 @@ def test_reply_rules_follow_the_manual() -> None:
 
 
 def test_every_modbus_field_is_a_parameter_of_the_same_type_and_access() -> None:
-    # 0x35, 0x95 (2 fields), 0x4A, 0x42: native only (0x3B status2: in the V1.0.9 layout, the newest profile's map)
-    assert len(MKS_MODBUS) == 58 + len(FEATURE_OF) - 5
+    # 0x35, 0x95 (2 fields), 0x4A, 0x42: native only (0x3B status2 and FC16 0x0094's three: in the newest map)
+    assert len(MKS_MODBUS) == 58 + 3 + len(FEATURE_OF) - 5
     for f in MKS_MODBUS:
         p = MKS_PARAMS[f.name]
         assert (f.type, f.access) == (p.type, p.access), f.name
@@ -192,8 +199,8 @@ def test_modbus_and_native_reach_the_same_command() -> None:
         expected_fc = FC_READ if MKS_PARAMS[f.name].access is Access.R else None
         if expected_fc:
             assert f.function == expected_fc
-    assert NATIVE_ONLY == {"slave_respond", "slave_active", "group_address", "home_reverse_angle", "home_mode",
-                           "home_current", "raw_encoder_value",  # 0x35: not in the Modbus-RTU manual V1.0.9
+    assert NATIVE_ONLY == {"slave_respond", "slave_active", "group_address",  # (0x94: FC16 0x0094 from V1.0.6)
+                           "raw_encoder_value",  # 0x35: not in the Modbus-RTU manual V1.0.9
                            "position_threshold_enable", "position_threshold", "sync_enable",  # 0x95, 0x4A: neither
                            "user_id"}  # 0x42: not in the Modbus-RTU manual V1.0.9
     assert set(MKS_MODBUS.names()) | NATIVE_ONLY == set(MKS_PARAMS.names())
@@ -213,7 +220,7 @@ def test_modbus_map_is_a_param_map() -> None:
 def test_every_modbus_request_of_part_8_is_in_the_table() -> None:
     found = set(re.findall(r"\|\s*01H\s*\|\s*(04|06|10)\s*H\s*\|\s*00H\s*\|\s*([0-9A-F]{2})H\s*\|", PART_8))
     blocks = {(int(fc, 16), int(a, 16)) for fc, a in found}
-    assert blocks == {(b.function, b.address) for b in MKS_MODBUS.blocks if b.address not in LATER}
+    assert blocks == {(b.function, b.address) for b in MKS_MODBUS_OF["v1.0.5"].blocks if b.address not in LATER}
     # V1.0.9 Modbus manual: 3.1.8 "01H 04H 00H 40H 00H 02H 70H 1FH", 3.2.14 FC10 0x0098 2 registers 4 bytes
     assert (MKS_MODBUS.block(FC_READ, 0x40).count, MKS_MODBUS.block(FC_WRITE_MULTIPLE, 0x98).count) == (2, 2)
     # register counts as printed ("| 00H | count |" after the address) for FC04 and FC16 requests

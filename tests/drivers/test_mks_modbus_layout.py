@@ -19,7 +19,7 @@ import joints
 from joints.devices.mks.modbus import FC_READ, MKS_MODBUS_OF, REVISED, modbus_map
 from joints.devices.quirks import MKS_HOMING_STATUS, firmware_profile
 from joints.drivers.mks import MksDriver
-from joints.errors import RegisterError
+from joints.errors import DeviceRejected, RegisterError
 from joints.sim.mks import MksFirmware
 
 
@@ -112,3 +112,51 @@ def test_homing_status_follows_go_home_on_the_switch_on_both_protocols(protocol:
         assert rig.world.joint_position("carriage") == pytest.approx(-0.075, abs=0.0002)
         assert statuses() == expect(1)
         assert _twin(rig, "carriage").home_status == 1
+
+
+# -- FC16 0x0094 'noLimit' homing parameters: a request V1.0.6 added over Modbus (native 0x94 in every version) --
+
+
+@pytest.mark.mks_firmware(None)
+@pytest.mark.parametrize(("hm_mode", "frame"), [  # Modbus-RTU manual V1.0.9 5.4 / 5.5 (5.6's mode 2: not built)
+    (0, "01 10 00 94 00 04 08 00 00 20 00 00 00 02 58 83 CE"),
+    (1, "01 10 00 94 00 04 08 00 00 20 00 00 01 02 58 D2 0E")])
+def test_fc16_0x0094_is_the_manuals_frame(hm_mode: int, frame: str) -> None:
+    from joints.codecs import modbus as mb
+
+    block = MKS_MODBUS_OF["v1.0.6"].block(0x10, 0x94)
+    words = block.words({"home_reverse_angle": 0x2000, "home_mode": hm_mode, "home_current": 600})
+    assert mb.encode(mb.WriteMultipleRegisters(1, 0x94, words)) == bytes.fromhex(frame)
+    assert mb.encode(mb.WriteMultipleRegistersReply(1, 0x94, 4)) == bytes.fromhex("01 10 00 94 00 04 80 26")
+    assert MKS_MODBUS_OF["v1.0.5"].find(0x10, 0x94) is None  # not in the V1.0.5 Part 8
+
+
+def test_nolimit_homing_over_modbus_from_v106(mks_firmware: str) -> None:
+    """set_nolimit_home over Modbus: the twin holds what was sent and homes by stalling on the hard stop (one turn
+    back off it); V1.0.5's Part 8 has no such request: refused before sending, and the twin answers exception 02."""
+
+    with joints.open(axis_config(protocol="modbus-rtu")) as rig:
+        j = rig.joints["carriage"]
+        d = j.driver
+        assert isinstance(d, MksDriver)
+        fw = _twin(rig, "carriage")
+        if mks_firmware == "v1.0.5":
+            sent = d.link.transactions
+            with pytest.raises(RegisterError, match="before firmware v1.0.6"):
+                d.set_nolimit_home(reverse_angle=0x4000, mode=1, current=600)
+            assert d.link.transactions == sent
+            with pytest.raises(DeviceRejected) as raw:
+                d.link.write_registers(1, 0x94, (0, 0x4000, 1, 600))
+            assert raw.value.code == 2  # illegal data address
+            assert fw.values["home_mode"] == 0
+            return
+        j.enable()
+        d.set_home(direction=0, speed=240)
+        d.set_nolimit_home(reverse_angle=0x4000, mode=1, current=600)  # back off one turn = 8 mm
+        assert (fw.values["home_reverse_angle"], fw.values["home_mode"], fw.values["home_current"]) == (0x4000, 1, 600)
+        d.go_home()
+        d.wait_motion(30)
+        rig.sleep(0.3)
+        x = rig.world.joint_position("carriage")
+        assert -0.08 + 0.008 - 0.008 < x < -0.08 + 0.008 + 0.002  # one turn off the hard stop at -80 mm
+        assert abs(d.read("encoder_addition")) <= 2
