@@ -600,6 +600,24 @@ class MksDriver(JointDriver):
                                 "write_io_out2_mask": 0 if out2 is None else 1, "write_io_out2": out2 or 0},
                                idempotent=True)
 
+    def set_pulse_divider(self, period: int | None, *, start_high: bool = False) -> None:
+        """0x99 (V1.0.9, 57D only; Modbus FC16 0x0099): OUT_2 becomes a pulse divider output that toggles once
+        every ``period`` pulses (microsteps: 3200 at 16 microsteps = once per turn), starting low (or high);
+        None (sent as 0) turns it off. The manual: below 100 there is no divider output."""
+        if period is not None and not 100 <= period <= 0xFFFFFFFF:
+            raise CommandError(f"{self.name}: 0x99 divPeriod {period}: 100..4294967295 pulses (below 100 the drive "
+                               "gives no divider output; use None to turn it off)")
+        self.access.write_many({"pulse_divider_level": int(start_high), "pulse_divider_period": period or 0})
+
+    def set_in1_mode(self, output: bool, *, confirm: bool = False) -> None:
+        """0x9F (V1.0.9, 28D/35D/42D only, native only): IN_1 as an output (written by ``write_io(out1=...)``,
+        0x36 bit 2, whatever its mask) or back to an input (the default). As an output IN_1 reads no switch, so
+        the home / left limit switch wired to it stops working (unless 0x9E remaps it to En): ``output=True``
+        needs ``confirm=True``."""
+        if output:
+            self._confirm("0x9F makes IN_1 an output: a home or limit switch wired to it is no longer read", confirm)
+        self.access.write_many({"in1_port_mode": int(output)})
+
     def set_position_error_protection(self, on: bool, *, window: float = 0.3, error: float = math.pi,
                                       en_zero_return: bool = False, confirm: bool = False) -> None:
         """0x9D (V1.0.6+; Modbus FC16 0x009D): protect (release the shaft, 0x3E = 1) when the position error

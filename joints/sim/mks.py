@@ -72,6 +72,11 @@ Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; defa
     (:attr:`MksFirmware.protection_cause` says which protection), 0x3D or an En pulse
     (:meth:`MksFirmware.en_pulse`) releases it. g0Enable: the 0_Mode zero return no longer runs at
     power-on but on an En pulse of about 200 ms in a pulse work mode.
+    V1.0.9's 0x99 pulse divider (57D only; a 42D answers status 0): OUT_2 (0x34 bit 3) reads divLevel
+    toggled once every divPeriod pulses of the shaft's travel since the command (:meth:`MksFirmware.divider_level`;
+    signed travel and the start point are our reading), off below 100. V1.0.9's 0x9F (28D/35D/42D only; a
+    57D answers status 0): IN_1 as an output reads the level 0x36 bit 2 writes, whatever OUT1_mask, and no
+    switch (the home / left limit on IN_1 is not seen unless 0x9E remaps it to En).
     V1.0.8's 0x95 (profile v1.0.9): a position move (0xFD/0xFE/0xF4/0xF5) in a closed mode completes only
     while the position error is below the threshold (65536 per turn, default 200 = 1.1 degrees) - a
     necessary condition on top of the settle rule above, so a shaft held off the target by more never
@@ -286,6 +291,7 @@ class MksFirmware(Firmware):
             Command.EMERGENCY_STOP: self._emergency_stop,
             Command.SAVE_CLEAN_SPEED_MODE: self._save_clean,
             Command.WRITE_IO_PORT: self._write_io,
+            Command.SET_PULSE_DIVIDER: self._pulse_divider,
             Command.IAP_CONTROL: self._iap,
             **{code: self._run_command for code in _RUN_CODES},
         }
@@ -305,6 +311,8 @@ class MksFirmware(Firmware):
         self.protection_cause = ""  #: "locked-rotor" (0x88) or "position-error" (0x9D) while protected
         self._perr_since = -1.0
         self.outputs: dict[int, int] = {}  #: OUT_1 / OUT_2 levels the host wrote (0x36, V1.0.6)
+        self.in1_level = 0  #: IN_1's level while 0x9F makes it an output (V1.0.9), written by 0x36 bit 2
+        self.divider_origin = self.q  #: rad where the 0x99 pulse divider (V1.0.9) counts from: power-on or the command
         #: the run command 0x4A holds until 0x4B (V1.0.8): (code, its fields, answered); when 0x4B last started one
         self.sync_held: tuple[int, dict[str, int], bool] | None = None
         self.sync_started_at = -1.0
@@ -486,6 +494,10 @@ class MksFirmware(Firmware):
         cannot run; None: it executes."""
         if command == Command.ENABLE_MOTOR:
             return int(_SET.FAIL) if values.get("motor_enable") and not self.mode.serial else None
+        if command == Command.SET_PULSE_DIVIDER:  # "only for 57D" (V1.0.9 6.4): the model with IN_2
+            return None if self.profile.limit_inputs >= 2 else int(_SET.FAIL)
+        if command == Command.SET_IN1_PORT_MODE:  # "only applies to ... 28D/35D/42D" (V1.0.9 6.2): IN_1 alone
+            return None if self.profile.limit_inputs == 1 else int(_SET.FAIL)
         if command == Command.GO_HOME or (command in _PREFIX and values.get(
                 f"{_PREFIX[command]}_speed", self.values[f"{_PREFIX[command]}_speed"]) != 0):
             return None if self._can_run() else self._refuse()
@@ -610,7 +622,23 @@ class MksFirmware(Firmware):
         for port in (1, 2):
             if values[f"write_io_out{port}_mask"] == 1:
                 self.outputs[port] = values[f"write_io_out{port}"]
+        if self.values["in1_port_mode"]:  # IN_1 an output (0x9F, V1.0.9): bit 2 "without being restricted by OUT1_mask"
+            self.in1_level = values["write_io_out1"]
         return int(_SET.SUCCESS)
+
+    def _pulse_divider(self, values: Mapping[str, int], answered: bool) -> int:
+        self.divider_origin = self.q  # the divider counts from the command (our reading)
+        return int(_SET.SUCCESS)
+
+    def divider_level(self) -> int | None:
+        """OUT_2 as the 0x99 pulse divider output (V1.0.9, 57D): divLevel, toggled once every divPeriod pulses
+        of the shaft's travel since the command (signed: back over a toggle point toggles back); None: off
+        (divPeriod below 100)."""
+        period = self.values["pulse_divider_period"]
+        if period < 100 or self.profile.limit_inputs < 2:
+            return None
+        pulses = (self.q - self.divider_origin) / self.rad_per_pulse
+        return (self.values["pulse_divider_level"] + math.floor(pulses / period + 1e-9)) & 1
 
     def _can_run(self) -> bool:
         return self.mode.serial and self.enabled and not self.protected and self.calibrated \
@@ -772,7 +800,8 @@ class MksFirmware(Firmware):
 
     def _switches(self) -> tuple[bool, bool]:
         low, high = self.end_stops
-        left = low is not None and self.q <= low
+        # (IN_1 an output reads no switch; remapped, the left limit is on En: 0x9E)
+        left = low is not None and self.q <= low and (not self._in1_output() or bool(self.values["limit_port_remap"]))
         right = high is not None and self.q >= high and (
             self.profile.limit_inputs >= 2 or bool(self.values["limit_port_remap"]))
         return left, right
@@ -780,18 +809,23 @@ class MksFirmware(Firmware):
     def _home_switch(self) -> bool:
         return self._switches()[0]
 
+    def _in1_output(self) -> bool:
+        """IN_1 made an output (0x9F, V1.0.9): it reads the level written to it, not a switch."""
+        return bool(self.values["in1_port_mode"])
+
     def io_status(self) -> int:
         """0x34: IN_1 / IN_2 at their levels (the effective level while triggered), OUT_1 on the 57D."""
         left, right = self._switches()
         level = self.values["home_trigger_level"]
-        bits = level if left else 1 - level
+        bits = self.in1_level if self._in1_output() else level if left else 1 - level
         if self.profile.limit_inputs >= 2 or self.values["limit_port_remap"]:
             bits |= (level if right else 1 - level) << 1
         if 1 in self.outputs:  # written by the host (0x36, V1.0.6)
             bits |= self.outputs[1] << 2
         elif self.profile.limit_inputs >= 2:  # OUT_1 stall indication: 0 protected, 1 unprotected (57D only)
             bits |= (0 if self.protected else 1) << 2
-        return bits | self.outputs.get(2, 0) << 3
+        divider = self.divider_level()  # OUT_2 as the pulse divider output (0x99, V1.0.9, 57D)
+        return bits | (self.outputs.get(2, 0) if divider is None else divider) << 3
 
     def motor_status(self) -> st.MotorStatus:
         if self._calibrating_until >= 0:

@@ -28,7 +28,7 @@ PARTS_5_6 = MANUAL[MANUAL.index("Part5. Serial command description"):MANUAL.inde
 PART_8 = MANUAL[MANUAL.index("Part8. MODBUS-RTU command description"):MANUAL.index("Part9. FAQ")]
 #: what V1.0.9 added (manuals V1.0.9: 0x40 read version 5.1.11 / 3.1.8, 0x98 heartbeat 5.2.16 / 3.2.14)
 LATER = {0x40, 0x98, 0x46, 0x47, 0x48, 0x01, 0x35,
-         0x36, 0x9D, 0x95, 0x4A, 0x4B, 0x50, 0x96, 0x97, 0x00, 0x42}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
+         0x36, 0x9D, 0x95, 0x4A, 0x4B, 0x50, 0x96, 0x97, 0x00, 0x42, 0x99, 0x9F}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
 
 
 # ------------------------------------------------------------------------------ parameters
@@ -67,9 +67,10 @@ def test_dangerous_commands_are_persistent() -> None:
         "en_trigger_zero_return",  # 0x9D g0Enable (V1.0.6): the motor moves on an En pulse
         "iap_control",  # 0x50 (V1.0.8): boot loader, silent state
         *(f"{m}_{k}" for m in ("vfoc", "close") for k in ("kp", "ki", "kd", "kv")),  # 0x96 / 0x97 PID (V1.0.8)
+        "in1_port_mode",  # 0x9F (V1.0.9): IN_1 as an output reads no home / limit switch
     }
     commands = {MKS_NATIVE.key(n).command for n in DANGEROUS}
-    assert commands == {0x80, 0x8A, 0x8B, 0x8E, 0x9A, 0xFF, 0x3F, 0x41, 0x92, 0x9D, 0x50, 0x96, 0x97}
+    assert commands == {0x80, 0x8A, 0x8B, 0x8E, 0x9A, 0xFF, 0x3F, 0x41, 0x92, 0x9D, 0x50, 0x96, 0x97, 0x9F}
 
 
 def test_documented_defaults_and_ranges() -> None:
@@ -181,8 +182,8 @@ def test_reply_rules_follow_the_manual() -> None:
 
 
 def test_every_modbus_field_is_a_parameter_of_the_same_type_and_access() -> None:
-    # 0x35, 0x95 (2 fields), 0x4A, 0x42: native only (0x3B status2 and FC16 0x0094's three: in the newest map)
-    assert len(MKS_MODBUS) == 58 + 3 + len(FEATURE_OF) - 5
+    # 0x35, 0x95 (2 fields), 0x4A, 0x42, 0x9F: native only (0x3B status2 and FC16 0x0094's three: in the newest map)
+    assert len(MKS_MODBUS) == 58 + 3 + len(FEATURE_OF) - 6
     for f in MKS_MODBUS:
         p = MKS_PARAMS[f.name]
         assert (f.type, f.access) == (p.type, p.access), f.name
@@ -202,7 +203,8 @@ def test_modbus_and_native_reach_the_same_command() -> None:
     assert NATIVE_ONLY == {"slave_respond", "slave_active", "group_address",  # (0x94: FC16 0x0094 from V1.0.6)
                            "raw_encoder_value",  # 0x35: not in the Modbus-RTU manual V1.0.9
                            "position_threshold_enable", "position_threshold", "sync_enable",  # 0x95, 0x4A: neither
-                           "user_id"}  # 0x42: not in the Modbus-RTU manual V1.0.9
+                           "user_id",  # 0x42: not in the Modbus-RTU manual V1.0.9
+                           "in1_port_mode"}  # 0x9F: neither
     assert set(MKS_MODBUS.names()) | NATIVE_ONLY == set(MKS_PARAMS.names())
 
 

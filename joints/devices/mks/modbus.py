@@ -298,6 +298,8 @@ _BLOCKS: tuple[ModbusBlock, ...] = (
            ("write_io_out2_mask", 0, 1, "uint8"), ("write_io_out2", 1, 1, "uint8"),
            ("write_io_out1_mask", 2, 1, "uint8"), ("write_io_out1", 3, 1, "uint8")),
     _write(0x50, "iap_control", "uint8", C, "V1.0.9 3.6 IAP firmware online upgrade"),
+    _multi(0x99, 3, 6, "V1.0.9 4.3 Pulse frequency division output", W,
+           ("pulse_divider_level", 0, 2, "uint8"), ("pulse_divider_period", 2, 4, "uint32")),
     *(_multi(code, 4, 8, title, W, *((f"{mode}_{k}", 2 * i, 2, "uint16") for i, k in enumerate(("kp", "ki", "kd", "kv"))))
       for code, mode, title in ((0x96, "vfoc", "V1.0.9 3.3.1 Set PID parameters for vFOC mode"),
                                 (0x97, "close", "V1.0.9 3.3.2 Set CLOSE mode PID parameters"))),
