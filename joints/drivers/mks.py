@@ -66,7 +66,7 @@ from joints.clock import Clock, MonotonicClock
 from joints.devices.faults import DEFINED_BY_JOINTS, HOST_DEFINED, Fault
 from joints.devices.mks import state as st
 from joints.devices.mks.native import OPTIONAL_FIELDS
-from joints.devices.mks.params import FEATURE_OF
+from joints.devices.mks.params import FEATURE_OF, VALUE_FEATURE_OF
 from joints.devices.mks.profile import MksProfile
 from joints.devices.mks.profile import profile as lookup_profile
 from joints.devices.params import ParamSet
@@ -134,12 +134,18 @@ class MksAccess(ParamAccess):
         self.features: frozenset[str] = firmware_profile("mks").features
 
     def require(self, names: Sequence[str] | Mapping[str, int]) -> None:
-        """Refuse parameters of a later firmware than this drive's profile (nothing is sent)."""
+        """Refuse parameters, and values (given a mapping), of a later firmware than this drive's profile
+        (nothing is sent)."""
         for n in names:
             feature = FEATURE_OF.get(n)
+            if isinstance(names, Mapping) and feature is None:
+                feature = VALUE_FEATURE_OF.get((n, int(names[n])))
+                what = f"{n} = {names[n]}"
+            else:
+                what = n
             if feature is not None and feature not in self.features:
                 newer = [f for f in MKS_FIRMWARES if feature in firmware_profile("mks", f).features]
-                raise RegisterError(f"{self.params.device}: {n} needs firmware {newer[0]} or later (the joint's "
+                raise RegisterError(f"{self.params.device}: {what} needs firmware {newer[0]} or later (the joint's "
                                     f"firmware key names an older one)")
 
     def forget(self) -> None:
@@ -694,8 +700,9 @@ class MksDriver(JointDriver):
                                 "home_speed": self.speed_value(speed), "end_limit": end_limit})
 
     def set_nolimit_home(self, *, reverse_angle: int = 0x2000, mode: int = 1, current: int | None = None) -> None:
-        """0x94 'noLimit' homing: back off ``reverse_angle`` counts after the stall, hm-Mode (1 no switch),
-        Hm_Ma [mA] (default the model's). Over Modbus FC16 0x0094, from firmware V1.0.6."""
+        """0x94 'noLimit' homing: back off ``reverse_angle`` counts after the stall, hm-Mode (0 switch, 1 no switch,
+        2 single lap to zero from V1.0.9), Hm_Ma [mA] (default the model's). Over Modbus FC16 0x0094, from
+        firmware V1.0.6. Mode 2 on an older profile: ``RegisterError`` naming v1.0.9, nothing sent."""
         ma = round(self.profile.default_home_current * 1000) if current is None else current
         self.access.write_many({"home_reverse_angle": reverse_angle, "home_mode": mode, "home_current": ma})
 

@@ -355,6 +355,7 @@ class MksNativeDriver(MksDriver):
         full = {**self.read_all_parameters(), "zero_mode_set_zero": self.image.get("zero_mode_set_zero", 0),
                 **dict(values)}
         blocks.check(self.params, full)
+        self.access.require({"home_mode": full["home_mode"]})  # a later firmware's value (hm_mode 2: V1.0.9)
         data = blocks.pack(blocks.ALL_PARAMETERS, full, mks.ALL_PARAMETERS_SIZE)
         self.access.sent(full, lambda: self.link.request(mks.WriteAllParameters(self.address, data)))
         for name, value in full.items():

@@ -132,7 +132,7 @@ from dataclasses import dataclass
 from joints.devices.mks import blocks
 from joints.devices.mks import state as st
 from joints.devices.mks.native import Command
-from joints.devices.mks.params import FEATURE_OF
+from joints.devices.mks.params import FEATURE_OF, VALUE_FEATURE_OF
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import Access, ParamSet
 from joints.devices.quirks import (
@@ -144,7 +144,7 @@ from joints.devices.quirks import (
     FirmwareProfile,
     firmware_profile,
 )
-from joints.errors import CommandError
+from joints.errors import CommandError, ParameterRefused, Refusal
 from joints.sim.firmware import Firmware
 from joints.sim.sensors import Sensor, model_of
 
@@ -249,7 +249,7 @@ class MksFirmware(Firmware):
         self.time = 0.0
         #: flash beyond the parameters
         self.calibrated = True
-        self.zero_point: int | None = None  #: 0_Mode zero: counts within the turn
+        self.zero_point: int | None = None  #: 0_Mode zero: counts within the turn of the absolute encoder
         self.saved_speed: tuple[int, int, int] | None = None  #: (direction bit, speed value, acc)
         self.end_stops: tuple[float | None, float | None] = (None, None)  #: trigger angles [rad]
         #: completion statuses waiting for a front
@@ -408,7 +408,9 @@ class MksFirmware(Firmware):
         values = blocks.unpack(blocks.ALL_PARAMETERS, data)
         try:
             blocks.check(self.params, values)
-        except CommandError:
+            for name, value in values.items():
+                self.check_write(name, value)
+        except (CommandError, ParameterRefused):
             return int(_SET.FAIL)
         mode = values["work_mode"] != self.values["work_mode"]
         if values["group_address"] == 0:  # "no group" (the power-on value; 0x8D itself takes 1-255)
@@ -416,7 +418,7 @@ class MksFirmware(Firmware):
         self.write_many([(n, v) for n, v in values.items() if not (n == "group_address" and v == 0)])
         if mode:
             self._work_mode({}, True)
-        self.zero_point = self.counts() % COUNTS if values["zero_mode_set_zero"] else self.zero_point
+        self.zero_point = self.turn_counts() if values["zero_mode_set_zero"] else self.zero_point
         return int(_SET.SUCCESS)
 
     def all_status(self) -> bytes:
@@ -454,6 +456,13 @@ class MksFirmware(Firmware):
         hardware = 3 if self.profile.model == "SERVO57D" else 1
         major, minor, patch = (tuple(self.firmware.version) + (0, 0, 0))[:3]
         return (int(self.calibrated) << 28) | (hardware << 24) | (major << 16) | (minor << 8) | patch
+
+    def check_write(self, name: str, value: int) -> None:
+        """A value a later firmware added to the range (0x94 hm_mode 2, V1.0.9) is out of range before it."""
+        feature = VALUE_FEATURE_OF.get((name, value))
+        if feature is not None and feature not in self.firmware.features:
+            raise ParameterRefused(Refusal.OUT_OF_RANGE, name, f"{value} is {feature}, not in firmware "
+                                   f"{self.firmware.firmware}")
 
     def on_write(self, name: str, value: int) -> None:
         if name in self._persistent and name != "working_current_unsaved":
@@ -498,10 +507,17 @@ class MksFirmware(Firmware):
             return None if self.profile.limit_inputs >= 2 else int(_SET.FAIL)
         if command == Command.SET_IN1_PORT_MODE:  # "only applies to ... 28D/35D/42D" (V1.0.9 6.2): IN_1 alone
             return None if self.profile.limit_inputs == 1 else int(_SET.FAIL)
+        if command == Command.GO_HOME and not values.get("go_home_mode") and not self._single_lap_ready():
+            return self._refuse()  # single lap to zero with no single-turn zero set (assumption S5)
         if command == Command.GO_HOME or (command in _PREFIX and values.get(
                 f"{_PREFIX[command]}_speed", self.values[f"{_PREFIX[command]}_speed"]) != 0):
             return None if self._can_run() else self._refuse()
         return None
+
+    def _single_lap_ready(self) -> bool:
+        """Whether go home can run: any method but single lap to zero, or a 0_Mode direction and zero to run to."""
+        return (self.values["home_mode"] != st.HomeMode.SINGLE_LAP
+                or (bool(self.values["zero_mode"]) and self.zero_point is not None))
 
     # -- commands -----------------------------------------------------------------------------------
     def _release(self, values: Mapping[str, int], answered: bool) -> int:
@@ -559,7 +575,7 @@ class MksFirmware(Firmware):
         return int(_SET.SUCCESS)
 
     def _zero_mode(self, values: Mapping[str, int], answered: bool) -> int:
-        self.zero_point = self.counts() % COUNTS if values["zero_mode_set_zero"] else None
+        self.zero_point = self.turn_counts() if values["zero_mode_set_zero"] else None
         return int(_SET.SUCCESS)
 
     def _save_clean(self, values: Mapping[str, int], answered: bool) -> int:
@@ -650,6 +666,9 @@ class MksFirmware(Firmware):
             self._start(_Motion("move", Command.GO_HOME, answered, goal=self._clamp_value(max(1, v["home_speed"])),
                                 acc=0, target=self.enc_zero))
             return int(_RUN.STARTED)
+        if v["home_mode"] == st.HomeMode.SINGLE_LAP:  # V1.0.9: the 0_Mode return, run by go home (S1-S7)
+            self._zero_return(Command.GO_HOME, answered)
+            return int(_RUN.STARTED)
         home = -1 if v["home_direction"] == st.MotorDirection.CW else 1
         job = _Motion("home", Command.GO_HOME, answered, goal=self._clamp_value(max(1, v["home_speed"])), acc=0)
         self.home_status = int(st.GoBackToZeroStatus.GOING)
@@ -710,8 +729,8 @@ class MksFirmware(Firmware):
         ``code``."""
         self.sync_held = None  # a stop also drops a run command held for 0x4B
         m = self.motion
-        if m is not None and m.kind == "home":
-            self.home_status = int(st.GoBackToZeroStatus.FAIL)  # stopped before it homed
+        if m is not None:
+            self._abandoned(m)  # stopped before it homed / returned to zero
         if acc == 0 or m is None or self.speed == 0:
             tr = st.step(self.run_state, st.RunEvent.STOP if m is None and acc else st.RunEvent.STOP_NOW)
             self.motion = None
@@ -730,8 +749,8 @@ class MksFirmware(Firmware):
     def _start(self, job: _Motion) -> None:
         """A new job replaces the running one (no completion for the replaced, state.py)."""
         self.run_state = st.step(self.run_state, st.RunEvent.START).state
-        if self.motion is not None and self.motion.kind == "home" and job.kind != "home":
-            self.home_status = int(st.GoBackToZeroStatus.FAIL)  # replaced before it homed
+        if self.motion is not None and self.motion.kind != job.kind:
+            self._abandoned(self.motion)  # replaced before it homed / returned to zero
         if self.motion is None or self.speed == 0:
             self._ramp_t = 0.0
         self.motion = job
@@ -742,13 +761,24 @@ class MksFirmware(Firmware):
         tr = st.step(self.run_state, event)
         self.run_state = tr.state
         self.motion = None
-        if m is not None and m.kind == "home":  # 0x3B status2 (V1.0.7): homed, or stopped before it was
-            self.home_status = int(st.GoBackToZeroStatus.SUCCESS if event is st.RunEvent.ARRIVED
-                                   else st.GoBackToZeroStatus.FAIL)
+        if m is not None:  # 0x3B (V1.0.7): homed / returned to zero (a stop that ran out is no arrival)
+            if event is st.RunEvent.ARRIVED and m.kind == "home":
+                self.home_status = int(st.GoBackToZeroStatus.SUCCESS)
+            elif event is st.RunEvent.ARRIVED and m.kind == "zero" and not m.stopping:
+                self.zero_status = int(st.GoBackToZeroStatus.SUCCESS)
+            else:
+                self._abandoned(m)
         self.speed = 0
         self.v_ref = 0.0
         if m is not None and tr.completion is not None and not quiet:
             self._complete(m.function, int(tr.completion), m.answered)
+
+    def _abandoned(self, m: _Motion) -> None:
+        """0x3B: a go home (status2) or a single-turn zero return (status1) ended before it arrived: 2, failed."""
+        if m.kind == "home":
+            self.home_status = int(st.GoBackToZeroStatus.FAIL)
+        elif m.kind == "zero":
+            self.zero_status = int(st.GoBackToZeroStatus.FAIL)
 
     def _complete(self, function: int, status: int, answered: bool) -> None:
         self.completions.append(Completion(self.time, int(function), status, answered))
@@ -765,25 +795,36 @@ class MksFirmware(Firmware):
         top = st.speed_value(self.mode.max_speed, self.microsteps)
         return max(0, min(value, max(top, 1)))
 
-    def _zero_return(self) -> None:
+    def _zero_return(self, function: int = Command.SET_ZERO_MODE, answered: bool = False) -> None:
+        """The single-turn zero return: from the reference, less than one turn to the 0_Mode zero (DirMode: in
+        0_Dir; NearMode: the shorter way), at 0_Speed; none when within half a count of it. At power-on and on an
+        En pulse (no frame), or run by go home in hm_mode 2 (``function`` 0x91: its completion frame)."""
         v = self.values
         assert self.zero_point is not None
-        here = self.counts() % COUNTS
+        here = (self.r % TAU) * COUNTS / TAU  # the reference's angle in the turn [counts, not floored]
         if v["zero_mode"] == st.ZeroMode.DIR_MODE:
             ccw = v["zero_mode_direction"] == st.MotorDirection.CCW
             delta = (self.zero_point - here) % COUNTS if ccw else -((here - self.zero_point) % COUNTS)
         else:
-            delta = (self.zero_point - here + COUNTS // 2) % COUNTS - COUNTS // 2
+            delta = (self.zero_point - here + COUNTS / 2) % COUNTS - COUNTS / 2
+        if min(abs(delta), COUNTS - abs(delta)) < 0.5:
+            delta = 0.0  # already there: no lap
         self.zero_status = int(st.GoBackToZeroStatus.GOING)
         rpm = ZERO_MODE_RPM[min(max(v["zero_mode_speed"], 0), 4)]
         self.enabled = True
-        self._start(_Motion("zero", 0x9A, False, goal=self._clamp_value(st.speed_value(rpm, self.microsteps)),
+        self._start(_Motion("zero", function, answered,
+                            goal=self._clamp_value(st.speed_value(rpm, self.microsteps)),
                             acc=0, target=self.r + delta * TAU / COUNTS))
 
     # -- status ---------------------------------------------------------------------------------------
     def counts(self) -> int:
         """Encoder axis [counts], floor-quantised."""
         return math.floor((self.q - self.enc_zero) * COUNTS / TAU + 1e-9)
+
+    def turn_counts(self) -> int:
+        """The absolute encoder's angle within the turn [counts]: where 0_Mode's zero is kept (0x92 and homing
+        move the axis zero, not this)."""
+        return math.floor((self.q % TAU) * COUNTS / TAU + 1e-9) % COUNTS
 
     def _sensed_counts(self) -> int:
         """The encoder axis [counts] as a read reports it (:mod:`joints.sim.sensors`)."""
@@ -833,7 +874,7 @@ class MksFirmware(Firmware):
         m = self.motion
         if m is None:
             return st.MotorStatus.STOP
-        if m.kind == "home":
+        if m.kind == "home" or (m.kind == "zero" and m.function == Command.GO_HOME):
             return st.MotorStatus.HOMING
         if m.arrived >= 0:
             return st.MotorStatus.SPEED_DOWN  # settling on the target
@@ -941,12 +982,15 @@ class MksFirmware(Firmware):
             m.arrived = self.time
         if self._settling(m):
             return  # the reference is there; the shaft settles into the window
-        if m.kind == "zero":
+        if m.kind == "zero" and m.function != Command.GO_HOME:  # at power-on / by En: no frame
             self.zero_status = int(st.GoBackToZeroStatus.SUCCESS)
             self.motion = None
             self.run_state = st.RunState.COMPLETE
-        else:
-            self._end(st.RunEvent.ARRIVED)
+            return
+        if m.kind == "zero":  # single lap to zero (hm_mode 2): "the current position is reset to zero" (S6)
+            self.enc_zero = self.q
+            self.pulse_zero = self.q
+        self._end(st.RunEvent.ARRIVED)
 
     def _settling(self, m: _Motion) -> bool:
         """Whether a move whose reference arrived still waits for the shaft before it completes."""
