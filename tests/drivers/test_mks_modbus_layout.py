@@ -118,9 +118,10 @@ def test_homing_status_follows_go_home_on_the_switch_on_both_protocols(protocol:
 
 
 @pytest.mark.mks_firmware(None)
-@pytest.mark.parametrize(("hm_mode", "frame"), [  # Modbus-RTU manual V1.0.9 5.4 / 5.5 (5.6's mode 2: not built)
+@pytest.mark.parametrize(("hm_mode", "frame"), [  # Modbus-RTU manual V1.0.9 5.4 / 5.5 / 5.6 (mode 2: V1.0.9's)
     (0, "01 10 00 94 00 04 08 00 00 20 00 00 00 02 58 83 CE"),
-    (1, "01 10 00 94 00 04 08 00 00 20 00 00 01 02 58 D2 0E")])
+    (1, "01 10 00 94 00 04 08 00 00 20 00 00 01 02 58 D2 0E"),
+    (2, "01 10 00 94 00 04 08 00 00 20 00 00 02 02 58 22 0E")])
 def test_fc16_0x0094_is_the_manuals_frame(hm_mode: int, frame: str) -> None:
     from joints.codecs import modbus as mb
 

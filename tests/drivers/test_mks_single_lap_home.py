@@ -6,8 +6,10 @@ the axis reads 0; 0x3B status1 (single-turn) goes 0 -> 1, or 2 when stopped; sta
 
 from __future__ import annotations
 
+import itertools
 import math
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -16,10 +18,17 @@ pytest.importorskip("mujoco")
 from mkskit import open_motor
 
 from joints.codecs import mks
+from joints.codecs import modbus as mb
+from joints.devices.mks.modbus import MKS_MODBUS_OF
 from joints.devices.mks.state import ENCODER_COUNTS_PER_TURN as COUNTS
 from joints.devices.mks.state import MotorStatus
-from joints.devices.quirks import (MKS_FIRMWARES, MKS_HOMING_STATUS, MKS_MODBUS_NOLIMIT_HOME, MKS_SINGLE_LAP_HOME,
-                                   firmware_profile)
+from joints.devices.quirks import (
+    MKS_FIRMWARES,
+    MKS_HOMING_STATUS,
+    MKS_MODBUS_NOLIMIT_HOME,
+    MKS_SINGLE_LAP_HOME,
+    firmware_profile,
+)
 from joints.drivers.mks import MksDriver
 from joints.errors import DeviceRejected, RegisterError
 from joints.sim.mks import MksFirmware
@@ -58,9 +67,11 @@ def _prepare(rig, zero_mode: tuple[int, int]) -> MksDriver:  # type: ignore[no-u
     rig.sleep(0.2)
     mode, direction = zero_mode
     d.set_zero_mode(mode, set_zero=1, speed=4, direction=direction, confirm=True)
-    assert abs(_twin(rig).zero_point - ZERO) <= 1
+    zero = _twin(rig).zero_point
+    assert zero is not None and abs(zero - ZERO) <= 1
     d.set_nolimit_home(mode=2)
     assert _twin(rig).values["home_mode"] == 2
+    assert isinstance(d, MksDriver)
     return d
 
 
@@ -112,7 +123,7 @@ def test_single_lap_home_turns_less_than_a_turn_in_its_direction_and_resets_the_
         progress = [sign * _counts(q - q0) for q in path]  # counts made in the set direction, sampled every 10 ms
         peak = progress.index(max(progress))
         assert min(progress) >= -2  # never set off against the set direction
-        assert all(b >= a - 2 for a, b in zip(progress[:peak], progress[1:peak + 1], strict=True))  # nor turned back
+        assert all(b >= a - 2 for a, b in itertools.pairwise(progress[:peak + 1]))  # nor turned back
         assert progress[peak] - progress[-1] <= COUNTS / 50  # but the overshoot of the unramped stop (7 deg)
         assert abs(_counts(fw.q % math.tau) - ZERO) <= 2  # at the single-turn zero
         assert abs(d.read("encoder_addition")) <= 1  # "the current position is reset to zero"
@@ -180,7 +191,7 @@ def test_single_lap_home_needs_v109(tmp_path: Path, protocol: str, mks_firmware:
     """Before V1.0.9 the driver refuses hm_mode 2 naming v1.0.9, nothing sent; the twin refuses it on the wire
     (native status 0; Modbus v1.0.6 failure reply, v1.0.5 exception: no 0x94 in its Part 8)."""
     with open_motor(tmp_path, protocol=protocol, joint={"firmware": mks_firmware, "watchdog_ms": 0}) as rig:
-        d = rig.joints["m1"].driver
+        d: Any = rig.joints["m1"].driver
         assert isinstance(d, MksDriver)
         fw = _twin(rig)
         sent = d.link.transactions
@@ -198,3 +209,14 @@ def test_single_lap_home_needs_v109(tmp_path: Path, protocol: str, mks_firmware:
         if protocol == "mks-serial" or _has(mks_firmware, MKS_MODBUS_NOLIMIT_HOME):
             d.set_nolimit_home(mode=1)  # the older modes are still taken
             assert fw.values["home_mode"] == 1
+
+
+@pytest.mark.mks_firmware(None)
+def test_single_lap_frames_are_the_manuals_examples() -> None:
+    """RS485 V1.0.9 7.6 steps 2-3 and Modbus-RTU V1.0.9 5.6 step 3 (its step 2, FC16 0x0094 with hm_mode 2, is in
+    test_fc16_0x0094_is_the_manuals_frame): hm_mode 2, then 0_Mode NearMode with "Set 0"."""
+    assert mks.encode(mks.SetNoLimitHomeParameters(1, 0x2000, 2, 0x64)) == bytes.fromhex("FA 01 94 00 00 20 00 02 00 64 15")
+    assert mks.encode(mks.SetZeroMode(1, 2, 1, 2, 0)) == bytes.fromhex("FA 01 9A 02 01 02 00 9A")
+    block = MKS_MODBUS_OF["v1.0.9"].block(0x10, 0x9A)
+    words = block.words({"zero_mode": 2, "zero_mode_set_zero": 1, "zero_mode_speed": 2, "zero_mode_direction": 0})
+    assert mb.encode(mb.WriteMultipleRegisters(1, 0x9A, words)) == bytes.fromhex("01 10 00 9A 00 02 04 02 01 02 00 2B A4")
