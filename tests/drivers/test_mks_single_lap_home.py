@@ -191,8 +191,8 @@ def test_single_lap_home_needs_v109(tmp_path: Path, protocol: str, mks_firmware:
     """Before V1.0.9 the driver refuses hm_mode 2 naming v1.0.9, nothing sent; the twin refuses it on the wire
     (native status 0; Modbus v1.0.6 failure reply, v1.0.5 exception: no 0x94 in its Part 8)."""
     with open_motor(tmp_path, protocol=protocol, joint={"firmware": mks_firmware, "watchdog_ms": 0}) as rig:
-        d: Any = rig.joints["m1"].driver
-        assert isinstance(d, MksDriver)
+        d: Any = rig.joints["m1"].driver  # (its link, for the raw writes)
+        assert isinstance(rig.joints["m1"].driver, MksDriver)
         fw = _twin(rig)
         sent = d.link.transactions
         with pytest.raises(RegisterError, match="v1.0.9"):
