@@ -165,6 +165,9 @@ IN_POSITION_SPEED = 0.5 * RPM  #: ... and this slow (rad/s),
 SETTLE_TIMEOUT = 0.3  #: s - or this long after its reference arrived (a load may hold it off)
 CALIBRATION_TIME = 2.0  #: s
 FLASH_TIME = 0.01  #: s from a save/clean reply to its completion
+#: counts: a single-turn zero return this close to its zero does not turn (the zero is a floored count and a move
+#: ends within IN_POSITION of its target; our choice, the manual says "returns to" only)
+AT_ZERO = 2.0
 ZERO_MODE_RPM = (15, 30, 60, 120, 240)  #: 0_Speed 0 (slowest) .. 4 (fastest)
 POSITION_ERROR_PER_TURN = 28000  #: 0x9D Errors: "When Errors = 28000, the motor is misaligned by 360 degrees"
 POSITION_ERROR_TICK = 0.015  #: s per 0x9D Tim unit ("approximately equal to 15 ms")
@@ -797,7 +800,7 @@ class MksFirmware(Firmware):
 
     def _zero_return(self, function: int = Command.SET_ZERO_MODE, answered: bool = False) -> None:
         """The single-turn zero return: from the reference, less than one turn to the 0_Mode zero (DirMode: in
-        0_Dir; NearMode: the shorter way), at 0_Speed; none when within half a count of it. At power-on and on an
+        0_Dir; NearMode: the shorter way), at 0_Speed; none within :data:`AT_ZERO` of it. At power-on and on an
         En pulse (no frame), or run by go home in hm_mode 2 (``function`` 0x91: its completion frame)."""
         v = self.values
         assert self.zero_point is not None
@@ -807,7 +810,7 @@ class MksFirmware(Firmware):
             delta = (self.zero_point - here) % COUNTS if ccw else -((here - self.zero_point) % COUNTS)
         else:
             delta = (self.zero_point - here + COUNTS / 2) % COUNTS - COUNTS / 2
-        if min(abs(delta), COUNTS - abs(delta)) < 0.5:
+        if min(abs(delta), COUNTS - abs(delta)) < AT_ZERO:
             delta = 0.0  # already there: no lap
         self.zero_status = int(st.GoBackToZeroStatus.GOING)
         rpm = ZERO_MODE_RPM[min(max(v["zero_mode_speed"], 0), 4)]

@@ -111,9 +111,12 @@ def test_single_lap_home_turns_less_than_a_turn_in_its_direction_and_resets_the_
         d.go_home()
         path = [q0]
         assert d.motor_status() is MotorStatus.HOMING
-        while fw.motion is not None:
+        for _ in range(300):  # 3 s: a lap at 0_Speed 4 (240 rpm) takes 0.25 s
+            if fw.motion is None:
+                break
             rig.sleep(0.01)
             path.append(fw.q)
+        assert fw.motion is None
         rig.sleep(0.2)
         path.append(fw.q)
         travel = _counts(fw.q - q0)
@@ -163,6 +166,22 @@ def test_single_lap_home_status_and_the_second_run_from_the_zero(tmp_path: Path,
         d.go_home()  # already there
         d.wait_motion(10)
         assert abs(_counts(fw.q - q0)) <= 2 and _statuses(d) == (1, 2)
+        assert abs(d.read("encoder_addition")) <= 1
+
+
+@pytest.mark.mks_firmware(*HAVING)
+@pytest.mark.parametrize("zero_mode", [CW, CCW, NEAR])
+def test_single_lap_home_right_where_the_zero_was_set_does_not_turn(tmp_path: Path, mks_firmware: str,
+                                                                   zero_mode: tuple[int, int]) -> None:
+    """The zero is the encoder's count (floored), the shaft a fraction of a count past it: either way round that is
+    "already there" (assumption S4), not a lap of 16383 counts."""
+    with open_motor(tmp_path, joint={"firmware": mks_firmware, "watchdog_ms": 0}) as rig:
+        d = _prepare(rig, zero_mode)
+        fw = _twin(rig)
+        q0 = fw.q
+        d.go_home()
+        d.wait_motion(10)
+        assert abs(_counts(fw.q - q0)) <= 2
         assert abs(d.read("encoder_addition")) <= 1
 
 
