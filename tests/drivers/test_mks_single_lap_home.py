@@ -176,8 +176,16 @@ def test_single_lap_home_right_where_the_zero_was_set_does_not_turn(tmp_path: Pa
     """The zero is the encoder's count (floored), the shaft a fraction of a count past it: either way round that is
     "already there" (assumption S4), not a lap of 16383 counts."""
     with open_motor(tmp_path, joint={"firmware": mks_firmware, "watchdog_ms": 0}) as rig:
-        d = _prepare(rig, zero_mode)
+        d = rig.joints["m1"].driver
         fw = _twin(rig)
+        rig.joints["m1"].enable()
+        d.move_to_pulses(980, speed=300)  # 980 x 16384 / 3200 = 5017.6 counts: 0.6 of a count past the one set
+        d.wait_motion(10)
+        rig.sleep(0.2)
+        mode, direction = zero_mode
+        d.set_zero_mode(mode, set_zero=1, speed=4, direction=direction, confirm=True)
+        d.set_nolimit_home(mode=2)
+        assert fw.zero_point == 5017 and _counts(fw.r) == pytest.approx(5017.6)
         q0 = fw.q
         d.go_home()
         d.wait_motion(10)
