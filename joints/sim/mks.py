@@ -44,9 +44,10 @@ The model
       HmDir until IN_1 triggers, stop, that is the axis zero (with EndLimit on the shaft is then
       released: 5.3 note 2); 'noLimit' (0x94 mode 1) - run with the torque of Hm_Ma until the
       rotor stalls, back off retValue counts, zero there.
-    * 0_Mode (0x9A): "Set 0" stores the present angle within the turn (flash); at power-on the
-      motor returns to it (DirMode in 0_Dir, NearMode the shorter way, at most one turn); 0x3B
-      reports 0 going, 1 success.
+    * 0_Mode (0x9A): "Set 0" stores the absolute encoder's present angle within the turn (flash; 0x92
+      and homing do not move it); at power-on the motor returns to it (DirMode in 0_Dir, NearMode the
+      shorter way, less than one turn, none within :data:`AT_ZERO`); 0x3B status1 reports 0 going,
+      1 success, 2 stopped first.
     * Save/clean speed mode (0xFF): C8 stores the speed-mode fields in flash; at power-on a saved
       speed mode runs (in a serial work mode).
     * Settings (0x82-0x9E) are kept in flash like the drive's menu, so they survive a power cycle;
@@ -100,6 +101,10 @@ Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; defa
     starts it (:meth:`MksFirmware.sync_execute`). A second run command before 0x4B replaces the held one
     (the manual does not say; our choice); stops, 0xF7 and disabling act at once and drop it; a power cycle
     drops it too (the flag itself is a setting, kept in flash).
+    V1.0.9's hm_mode 2 "single lap to zero" (0x94; docs/mks-firmware.md, assumptions S1-S7): go home runs
+    the 0_Mode return above (its zero, direction and speed; status 0 without a zero), reports 0xF1 homing,
+    resets the axis to 0 on arrival and ends with go home's completion; 0x3B status1 tracks it. A
+    firmware before V1.0.9 takes hm_mode 0-1 only (:meth:`MksFirmware.check_write`).
     V1.0.9's coordinate homing (0x91 goZeroMode 01, FC06 0x0091 = 2) is a position move to axis 0 at
     HmSpeed without a search (the manuals' "directly runs to the coordinate zero point"); it ends with go
     home's completion and leaves the zero where it is. V1.0.9's user ID (0x42) is kept in flash. V1.0.8's
