@@ -804,12 +804,12 @@ class MksFirmware(Firmware):
         return max(0, min(value, max(top, 1)))
 
     def _zero_return(self, function: int = Command.SET_ZERO_MODE, answered: bool = False) -> None:
-        """The single-turn zero return: from the reference, less than one turn to the 0_Mode zero (DirMode: in
+        """The single-turn zero return: from the encoder's angle, less than one turn to the 0_Mode zero (DirMode: in
         0_Dir; NearMode: the shorter way), at 0_Speed; none within :data:`AT_ZERO` of it. At power-on and on an
         En pulse (no frame), or run by go home in hm_mode 2 (``function`` 0x91: its completion frame)."""
         v = self.values
         assert self.zero_point is not None
-        here = (self.r % TAU) * COUNTS / TAU  # the reference's angle in the turn [counts, not floored]
+        here = (self.q % TAU) * COUNTS / TAU  # the encoder's angle in the turn [counts, not floored]
         if v["zero_mode"] == st.ZeroMode.DIR_MODE:
             ccw = v["zero_mode_direction"] == st.MotorDirection.CCW
             delta = (self.zero_point - here) % COUNTS if ccw else -((here - self.zero_point) % COUNTS)
@@ -822,7 +822,7 @@ class MksFirmware(Firmware):
         self.enabled = True
         self._start(_Motion("zero", function, answered,
                             goal=self._clamp_value(st.speed_value(rpm, self.microsteps)),
-                            acc=0, target=self.r + delta * TAU / COUNTS))
+                            acc=0, target=self.q + delta * TAU / COUNTS))
 
     # -- status ---------------------------------------------------------------------------------------
     def counts(self) -> int:
