@@ -194,6 +194,34 @@ def test_single_lap_home_right_where_the_zero_was_set_does_not_turn(tmp_path: Pa
 
 
 @pytest.mark.mks_firmware(*HAVING)
+def test_the_single_turn_zero_is_the_encoders_angle_whatever_axis_zero_0x92_set(tmp_path: Path,
+                                                                               mks_firmware: str) -> None:
+    """0x92 moves the axis zero, not the single-turn one (assumption S2): Set 0 at axis 2000 after a 0x92 at
+    encoder count 3000 is encoder count 5000, and the CW lap from count 2000 turns 13384 counts to it."""
+    with open_motor(tmp_path, joint={"firmware": mks_firmware, "watchdog_ms": 0}) as rig:
+        d = rig.joints["m1"].driver
+        fw = _twin(rig)
+        rig.joints["m1"].enable()
+        d.move_to(3000, speed=300)
+        d.wait_motion(10)
+        d.set_zero(confirm=True)  # 0x92: axis 0 at encoder count 3000
+        d.move_to(2000, speed=300)  # encoder count 5000
+        d.wait_motion(10)
+        rig.sleep(0.2)
+        d.set_zero_mode(CW[0], direction=CW[1], set_zero=1, speed=4, confirm=True)
+        d.set_nolimit_home(mode=2)
+        d.move_to(-1000, speed=300)  # encoder count 2000
+        d.wait_motion(10)
+        rig.sleep(0.2)
+        q0 = fw.q
+        d.go_home()
+        d.wait_motion(10)
+        rig.sleep(0.2)
+        assert abs(_counts(fw.q - q0) + 13384) <= 2
+        assert abs(_counts(fw.q % math.tau) - ZERO) <= 2 and abs(d.read("encoder_addition")) <= 1
+
+
+@pytest.mark.mks_firmware(*HAVING)
 @pytest.mark.parametrize("protocol", PROTOCOLS)
 def test_single_lap_home_without_a_single_turn_zero_is_refused_and_nothing_moves(tmp_path: Path, protocol: str,
                                                                                   mks_firmware: str) -> None:
