@@ -111,12 +111,16 @@ def test_single_lap_home_turns_less_than_a_turn_in_its_direction_and_resets_the_
         d.go_home()
         path = [q0]
         assert d.motor_status() is MotorStatus.HOMING
+        speeds = []
         for _ in range(300):  # 3 s: a lap at 0_Speed 4 (240 rpm) takes 0.25 s
             if fw.motion is None:
                 break
             rig.sleep(0.01)
             path.append(fw.q)
+            speeds.append(abs(fw.qd) * 60 / math.tau)
         assert fw.motion is None
+        moving = sorted(x for x in speeds if x > 50)  # rpm, sampled every 10 ms while it turned
+        assert moving[len(moving) // 2] == pytest.approx(240, rel=0.1)  # 0_Speed 4, not HmSpeed (60) (S3)
         rig.sleep(0.2)
         path.append(fw.q)
         travel = _counts(fw.q - q0)
