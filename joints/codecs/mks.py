@@ -29,7 +29,8 @@ return and b0 enable, reserved b7-b2; uint16 Tim, uint16 Errors; set status). V1
 the position-reached threshold (enable byte, uint16 values; set status); 0x4A sets the synchronization
 flag (1 byte; set status) and 0x4B (no data, address 0, never answered) starts the held run commands,
 which a drive with the flag on answers with run status 5. 0x50 IAP control (1 byte cmd; set status). 0x96 / 0x97
-PID parameters (4 x uint16; set status). Manual V1.0.6 added 0x46
+PID parameters (4 x uint16; set status). V1.0.9's 0x99 pulse divider output (divLevel byte, uint32
+divPeriod) and 0x9F IN_1 port mode (1 byte), both answered by a set status. Manual V1.0.6 added 0x46
 write all configuration parameters (34 data bytes; set status), 0x47 read all configuration
 parameters and 0x48 read all status parameters (replies of 34 and 28 data bytes): the codec keeps
 their data as bytes (``params``), :mod:`joints.devices.mks.blocks` names the fields; 0x35 reads the
@@ -671,6 +672,26 @@ class SetVfocPid:
 
 
 @dataclass(frozen=True, slots=True)
+class SetPulseDivider:
+    """0x99 (V1.0.9, 6.4) OUT_2 as a pulse divider output (57D): divLevel (start level 0/1), divPeriod (uint32
+    pulses; below 100 no output) -> set status."""
+
+    address: int
+    level: int
+    period: int
+    function: ClassVar[int] = 0x99
+
+
+@dataclass(frozen=True, slots=True)
+class SetIn1PortMode:
+    """0x9F (V1.0.9, 6.2) IN_1 port mode (28D/35D/42D): type 0 input (default), 1 output -> set status."""
+
+    address: int
+    type: int
+    function: ClassVar[int] = 0x9F
+
+
+@dataclass(frozen=True, slots=True)
 class SetClosePid:
     """0x97 (V1.0.8) CLOSE mode PID parameters Kp Ki Kd Kv (uint16 each, 0-1024) -> set status."""
 
@@ -853,7 +874,7 @@ Request = (
     | RunSpeed | SaveCleanSpeedMode | RunRelativePulses | RunAbsolutePulses | RunRelativeAxis | RunAbsoluteAxis
     | ReadRawEncoder | SetTimedReturn | ReadVersion | SetHeartbeat | WriteAllParameters | ReadAllParameters | ReadAllStatus
     | WriteIoPort | SetPositionErrorProtection | SetPositionThreshold | SetSync | SyncExecute | IapControl
-    | SetVfocPid | SetClosePid | ReadParameter | UserId
+    | SetVfocPid | SetClosePid | ReadParameter | UserId | SetPulseDivider | SetIn1PortMode
 )
 
 
@@ -1487,6 +1508,8 @@ _REQUEST_SPECS: tuple[_Spec, ...] = (
     _struct(IapControl, "B", ("cmd",)),
     _struct(SetVfocPid, "HHHH", ("kp", "ki", "kd", "kv")),
     _struct(SetClosePid, "HHHH", ("kp", "ki", "kd", "kv")),
+    _struct(SetPulseDivider, "BI", ("level", "period")),
+    _struct(SetIn1PortMode, "B", ("type",)),
 )
 
 _REQUESTS: dict[int, _Spec] = {s.cls.function: s for s in _REQUEST_SPECS}  # type: ignore[attr-defined]
@@ -1496,7 +1519,7 @@ _REQUEST_BY_TYPE: dict[type, _Spec] = {s.cls: s for s in _REQUEST_SPECS}
 RUN_REPLY_FUNCTIONS = frozenset((0x91, 0xF4, 0xF5, 0xF6, 0xFD, 0xFE, 0xFF))
 SET_REPLY_FUNCTIONS = frozenset((0x3D, 0x3F, 0x41, 0x82, 0x83, 0x84, 0x85, 0x86, 0x87, 0x88, 0x89, 0x8A, 0x8B,
                                  0x8C, 0x8D, 0x8E, 0x8F, 0x90, 0x92, 0x94, 0x98, 0x9A, 0x9B, 0x9E, 0xF3, 0xF7,
-                                 0x46, 0x36, 0x9D, 0x95, 0x4A, 0x50, 0x96, 0x97,
+                                 0x46, 0x36, 0x9D, 0x95, 0x4A, 0x50, 0x96, 0x97, 0x99, 0x9F,
                                  0x4B, 0x42))  # 0x4B is never answered (the layout keeps the table total)
 #: 0x42 (V1.0.9) answers a write with a set status (above), a read with the ID (UserIdReply: the host is told)
 _USER_ID_REPLY = _struct(UserIdReply, "I", ("id",))

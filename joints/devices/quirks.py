@@ -44,11 +44,17 @@ parameters Kp, Ki, Kd, Kv.
 ``mks-current-unsaved`` (V1.0.7+, profile v1.0.9): 0x83 with a trailing 00 / FC06 0x0083 with bit 15 set:
 change the working current while running, not saved (status 2).
 ``mks-homing-status`` (V1.0.7+, profile v1.0.9): the 0x3B reply's second byte, the homing (0x91) status
-(native only: see docs/mks-firmware.md for the Modbus layout).
+(native), and FC04 0x003B read as ``status1 status2`` (Modbus; before: ``00 status``, joints.devices.mks.modbus.REVISED).
 ``mks-read-parameter`` (V1.0.8+, profile v1.0.9): 0x00 reads back one set command's parameter (native only).
 ``mks-user-id`` (V1.0.9): 0x42 read / write a user ID (native only).
+``mks-pulse-divider`` (V1.0.9): 0x99 / FC16 0x0099 OUT_2 as a pulse divider output (57D only).
+``mks-in1-port-mode`` (V1.0.9): 0x9F IN_1 as an input or an output (28D/35D/42D only; native only).
+``mks-modbus-nolimit-home`` (V1.0.6+): FC16 0x0094, the 'noLimit' homing parameters over Modbus (native 0x94 in
+every version; the V1.0.5 Part 8 has no such request).
 ``mks-coordinate-homing`` (V1.0.9): 0x91 with goZeroMode 01 / FC06 0x0091 = 2: run to the coordinate zero
 point without a search.
+``mks-single-lap-home`` (V1.0.9): 0x94 / FC16 0x0094 hm_mode 2, "single lap to zero": go home turns to the
+single-turn zero point (0x9A) and resets the axis there (docs/mks-firmware.md, assumptions S1-S7).
 ``mks-position-error-protection`` (V1.0.6+): 0x9D / FC16 0x009D position-error protection (time window,
 error count) and the En-triggered single-turn zero return; an En pulse also releases the protection.
 """
@@ -64,8 +70,9 @@ from joints.errors import ConfigError
 __all__ = ["DEFAULT_FIRMWARE", "EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED", "FIRMWARES", "MKS_ALL_PARAMETERS",
            "MKS_COORDINATE_HOMING", "MKS_CURRENT_UNSAVED",
            "MKS_FAILURE_REPLIES", "MKS_FIRMWARES", "MKS_HEARTBEAT", "MKS_HOMING_STATUS", "MKS_IAP",
+           "MKS_IN1_PORT_MODE", "MKS_MODBUS_NOLIMIT_HOME",
            "MKS_PID", "MKS_POSITION_ERROR_PROTECTION",
-           "MKS_POSITION_THRESHOLD", "MKS_READ_PARAMETER", "MKS_SYNC", "MKS_TIMED_RETURNS", "MKS_TIMED_SPEED", "MKS_USER_ID", "MKS_VERSION", "MKS_WRITE_IO",
+           "MKS_POSITION_THRESHOLD", "MKS_PULSE_DIVIDER", "MKS_READ_PARAMETER", "MKS_SINGLE_LAP_HOME", "MKS_SYNC", "MKS_TIMED_RETURNS", "MKS_TIMED_SPEED", "MKS_USER_ID", "MKS_VERSION", "MKS_WRITE_IO",
            "QUIRKS",
            "ZLAC_SYNC_FLAG_AS_EXAMPLES", "FirmwareProfile", "Quirk", "firmware_profile"]
 
@@ -113,16 +120,22 @@ MKS_HOMING_STATUS = "mks-homing-status"
 MKS_COORDINATE_HOMING = "mks-coordinate-homing"
 MKS_READ_PARAMETER = "mks-read-parameter"
 MKS_USER_ID = "mks-user-id"
+MKS_MODBUS_NOLIMIT_HOME = "mks-modbus-nolimit-home"
+MKS_PULSE_DIVIDER = "mks-pulse-divider"
+MKS_IN1_PORT_MODE = "mks-in1-port-mode"
+MKS_SINGLE_LAP_HOME = "mks-single-lap-home"
 #: the MKS firmware profiles, oldest first (the last is the default)
 MKS_FIRMWARES = ("v1.0.5", "v1.0.6", "v1.0.9")
 _MKS_FEATURES = {
     "v1.0.5": frozenset(),
-    "v1.0.6": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_WRITE_IO, MKS_POSITION_ERROR_PROTECTION}),
+    "v1.0.6": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_WRITE_IO, MKS_POSITION_ERROR_PROTECTION,
+                         MKS_MODBUS_NOLIMIT_HOME}),
     "v1.0.9": frozenset({MKS_FAILURE_REPLIES, MKS_ALL_PARAMETERS, MKS_VERSION, MKS_HEARTBEAT, MKS_TIMED_RETURNS,
                          MKS_WRITE_IO, MKS_POSITION_ERROR_PROTECTION, MKS_POSITION_THRESHOLD,
                          MKS_SYNC, MKS_TIMED_SPEED, MKS_IAP, MKS_PID, MKS_CURRENT_UNSAVED,
                          MKS_HOMING_STATUS, MKS_COORDINATE_HOMING, MKS_READ_PARAMETER,
-                         MKS_USER_ID}),
+                         MKS_USER_ID, MKS_MODBUS_NOLIMIT_HOME, MKS_PULSE_DIVIDER, MKS_IN1_PORT_MODE,
+                         MKS_SINGLE_LAP_HOME}),
 }
 _MKS_TEXT = {
     "v1.0.5": "manual V1.0.5 (May 2024): no heartbeat, no version command; Modbus write failures undocumented",

@@ -66,7 +66,7 @@ from joints.clock import Clock, MonotonicClock
 from joints.devices.faults import DEFINED_BY_JOINTS, HOST_DEFINED, Fault
 from joints.devices.mks import state as st
 from joints.devices.mks.native import OPTIONAL_FIELDS
-from joints.devices.mks.params import FEATURE_OF
+from joints.devices.mks.params import FEATURE_OF, VALUE_FEATURE_OF
 from joints.devices.mks.profile import MksProfile
 from joints.devices.mks.profile import profile as lookup_profile
 from joints.devices.params import ParamSet
@@ -134,12 +134,18 @@ class MksAccess(ParamAccess):
         self.features: frozenset[str] = firmware_profile("mks").features
 
     def require(self, names: Sequence[str] | Mapping[str, int]) -> None:
-        """Refuse parameters of a later firmware than this drive's profile (nothing is sent)."""
+        """Refuse parameters, and values (given a mapping), of a later firmware than this drive's profile
+        (nothing is sent)."""
         for n in names:
             feature = FEATURE_OF.get(n)
+            if isinstance(names, Mapping) and feature is None:
+                feature = VALUE_FEATURE_OF.get((n, int(names[n])))
+                what = f"{n} = {names[n]}"
+            else:
+                what = n
             if feature is not None and feature not in self.features:
                 newer = [f for f in MKS_FIRMWARES if feature in firmware_profile("mks", f).features]
-                raise RegisterError(f"{self.params.device}: {n} needs firmware {newer[0]} or later (the joint's "
+                raise RegisterError(f"{self.params.device}: {what} needs firmware {newer[0]} or later (the joint's "
                                     f"firmware key names an older one)")
 
     def forget(self) -> None:
@@ -600,6 +606,24 @@ class MksDriver(JointDriver):
                                 "write_io_out2_mask": 0 if out2 is None else 1, "write_io_out2": out2 or 0},
                                idempotent=True)
 
+    def set_pulse_divider(self, period: int | None, *, start_high: bool = False) -> None:
+        """0x99 (V1.0.9, 57D only; Modbus FC16 0x0099): OUT_2 becomes a pulse divider output that toggles once
+        every ``period`` pulses (microsteps: 3200 at 16 microsteps = once per turn), starting low (or high);
+        None (sent as 0) turns it off. The manual: below 100 there is no divider output."""
+        if period is not None and not 100 <= period <= 0xFFFFFFFF:
+            raise CommandError(f"{self.name}: 0x99 divPeriod {period}: 100..4294967295 pulses (below 100 the drive "
+                               "gives no divider output; use None to turn it off)")
+        self.access.write_many({"pulse_divider_level": int(start_high), "pulse_divider_period": period or 0})
+
+    def set_in1_mode(self, output: bool, *, confirm: bool = False) -> None:
+        """0x9F (V1.0.9, 28D/35D/42D only, native only): IN_1 as an output (written by ``write_io(out1=...)``,
+        0x36 bit 2, whatever its mask) or back to an input (the default). As an output IN_1 reads no switch, so
+        the home / left limit switch wired to it stops working (unless 0x9E remaps it to En): ``output=True``
+        needs ``confirm=True``."""
+        if output:
+            self._confirm("0x9F makes IN_1 an output: a home or limit switch wired to it is no longer read", confirm)
+        self.access.write_many({"in1_port_mode": int(output)})
+
     def set_position_error_protection(self, on: bool, *, window: float = 0.3, error: float = math.pi,
                                       en_zero_return: bool = False, confirm: bool = False) -> None:
         """0x9D (V1.0.6+; Modbus FC16 0x009D): protect (release the shaft, 0x3E = 1) when the position error
@@ -674,6 +698,13 @@ class MksDriver(JointDriver):
         """0x90 home parameters: end-stop level (0 low), home direction (0 CW, 1 CCW), speed [rpm], EndLimit."""
         self.access.write_many({"home_trigger_level": trigger_level, "home_direction": direction,
                                 "home_speed": self.speed_value(speed), "end_limit": end_limit})
+
+    def set_nolimit_home(self, *, reverse_angle: int = 0x2000, mode: int = 1, current: int | None = None) -> None:
+        """0x94 'noLimit' homing: back off ``reverse_angle`` counts after the stall, hm-Mode (0 switch, 1 no switch,
+        2 single lap to zero from V1.0.9), Hm_Ma [mA] (default the model's). Over Modbus FC16 0x0094, from
+        firmware V1.0.6. Mode 2 on an older profile: ``RegisterError`` naming v1.0.9, nothing sent."""
+        ma = round(self.profile.default_home_current * 1000) if current is None else current
+        self.access.write_many({"home_reverse_angle": reverse_angle, "home_mode": mode, "home_current": ma})
 
     def go_home(self) -> None:
         """0x91 go home (limit switch, or 'noLimit' per 0x94); the end comes as a completion / status 1."""

@@ -2,13 +2,14 @@
 
 Rule: the procedures are :class:`~joints.drivers.mks.MksDriver`'s, by the same parameter names as
 the native protocol, so switching a bus between ``mks-serial`` and ``modbus-rtu`` changes nothing
-above the driver. Each parameter lives in one Part 8 request (:data:`MKS_MODBUS`): FC04 reads (one
+above the driver. Each parameter lives in one Part 8 request of the map of the drive's firmware profile
+(:func:`~joints.devices.mks.modbus.modbus_map`, the twin's too; 0x3B's layout changed in V1.0.7): FC04 reads (one
 per quantity; the blocks are command codes, not a register file), FC06 single settings and
 commands, FC16 multi-field commands sent whole (the other fields from the image of what was
 written). Modbus mode has no completion frames: :meth:`~joints.drivers.mks.MksDriver.wait_motion`
 polls 0xF1. The FC16 0x90 home-parameter request is the manual's own frame (3 registers, 5 bytes,
 ERRATA DOC-MKS-5), sent as is with :meth:`~joints.link.modbus.ModbusLink.write_pdu`. Native-only
-quantities (0x8C respond/active, 0x8D group address, 0x94 'noLimit' homing) raise
+quantities (0x8C respond/active, 0x8D group address, 0x94 'noLimit' homing before V1.0.6) raise
 :class:`~joints.errors.RegisterError`.
 """
 
@@ -20,7 +21,7 @@ from functools import partial
 from joints.clock import Clock
 from joints.codecs import modbus as mb
 from joints.devices.mks import state as st
-from joints.devices.mks.modbus import FC_READ, FC_WRITE_MULTIPLE, FC_WRITE_SINGLE, MKS_MODBUS, ModbusBlock
+from joints.devices.mks.modbus import FC_READ, FC_WRITE_MULTIPLE, FC_WRITE_SINGLE, MksModbusMap, ModbusBlock, modbus_map
 from joints.devices.mks.params import model_params
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import ParamSet
@@ -44,7 +45,11 @@ class MksModbusAccess(MksAccess):
         super().__init__(params)
         self.link = link
         self.slave = slave
-        self.map = MKS_MODBUS
+
+    @property
+    def map(self) -> MksModbusMap:
+        """The Part 8 map of this drive's firmware profile (the features the driver set)."""
+        return modbus_map(self.features)
 
     def resolve(self, key: str | int) -> str:
         if isinstance(key, int):
@@ -56,6 +61,7 @@ class MksModbusAccess(MksAccess):
                                             f"{', '.join(f.name for f in block.fields)}: name the parameter")
                     return block.fields[0].name
             raise RegisterError(f"{self.params.device}: no Part 8 request at 0x{key:04X}")
+        self.require((key,))  # a later firmware's parameter: say which (its map may not reach it either)
         self.map.get(key)
         return key
 

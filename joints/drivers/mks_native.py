@@ -215,12 +215,6 @@ class MksNativeDriver(MksDriver):
         """0x8D: the drive also executes commands sent to ``group`` (and answers none of them)."""
         self.write_param("group_address", group)
 
-    def set_nolimit_home(self, *, reverse_angle: int = 0x2000, mode: int = 1, current: int | None = None) -> None:
-        """0x94 'noLimit' homing: back off ``reverse_angle`` counts after the stall, hm-Mode (1 no switch),
-        Hm_Ma [mA] (default the model's)."""
-        ma = round(self.profile.default_home_current * 1000) if current is None else current
-        self.access.write_many({"home_reverse_angle": reverse_angle, "home_mode": mode, "home_current": ma})
-
     def wait_motion(self, timeout: float = 30.0, *, poll: float = 0.01, recover: float = 0.25) -> st.MotorStatus:
         """Wait for the completion frame of the motion started last (active mode); without it - respond or
         active off, or the frame lost on the line - the motor status (read every ``recover`` s) tells."""
@@ -361,6 +355,7 @@ class MksNativeDriver(MksDriver):
         full = {**self.read_all_parameters(), "zero_mode_set_zero": self.image.get("zero_mode_set_zero", 0),
                 **dict(values)}
         blocks.check(self.params, full)
+        self.access.require({"home_mode": full["home_mode"]})  # a later firmware's value (hm_mode 2: V1.0.9)
         data = blocks.pack(blocks.ALL_PARAMETERS, full, mks.ALL_PARAMETERS_SIZE)
         self.access.sent(full, lambda: self.link.request(mks.WriteAllParameters(self.address, data)))
         for name, value in full.items():

@@ -44,9 +44,10 @@ The model
       HmDir until IN_1 triggers, stop, that is the axis zero (with EndLimit on the shaft is then
       released: 5.3 note 2); 'noLimit' (0x94 mode 1) - run with the torque of Hm_Ma until the
       rotor stalls, back off retValue counts, zero there.
-    * 0_Mode (0x9A): "Set 0" stores the present angle within the turn (flash); at power-on the
-      motor returns to it (DirMode in 0_Dir, NearMode the shorter way, at most one turn); 0x3B
-      reports 0 going, 1 success.
+    * 0_Mode (0x9A): "Set 0" stores the absolute encoder's present angle within the turn (flash; 0x92
+      and homing do not move it); at power-on the motor returns to it (DirMode in 0_Dir, NearMode the
+      shorter way, less than one turn, none within :data:`AT_ZERO`); 0x3B status1 reports 0 going,
+      1 success, 2 stopped first.
     * Save/clean speed mode (0xFF): C8 stores the speed-mode fields in flash; at power-on a saved
       speed mode runs (in a serial work mode).
     * Settings (0x82-0x9E) are kept in flash like the drive's menu, so they survive a power cycle;
@@ -72,6 +73,11 @@ Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; defa
     (:attr:`MksFirmware.protection_cause` says which protection), 0x3D or an En pulse
     (:meth:`MksFirmware.en_pulse`) releases it. g0Enable: the 0_Mode zero return no longer runs at
     power-on but on an En pulse of about 200 ms in a pulse work mode.
+    V1.0.9's 0x99 pulse divider (57D only; a 42D answers status 0): OUT_2 (0x34 bit 3) reads divLevel
+    toggled once every divPeriod pulses of the shaft's travel since the command (:meth:`MksFirmware.divider_level`;
+    signed travel and the start point are our reading), off below 100. V1.0.9's 0x9F (28D/35D/42D only; a
+    57D answers status 0): IN_1 as an output reads the level 0x36 bit 2 writes, whatever OUT1_mask, and no
+    switch (the home / left limit on IN_1 is not seen unless 0x9E remaps it to En).
     V1.0.8's 0x95 (profile v1.0.9): a position move (0xFD/0xFE/0xF4/0xF5) in a closed mode completes only
     while the position error is below the threshold (65536 per turn, default 200 = 1.1 degrees) - a
     necessary condition on top of the settle rule above, so a shaft held off the target by more never
@@ -95,6 +101,10 @@ Firmware profiles (:mod:`joints.devices.quirks`, ``firmware`` of the joint; defa
     starts it (:meth:`MksFirmware.sync_execute`). A second run command before 0x4B replaces the held one
     (the manual does not say; our choice); stops, 0xF7 and disabling act at once and drop it; a power cycle
     drops it too (the flag itself is a setting, kept in flash).
+    V1.0.9's hm_mode 2 "single lap to zero" (0x94; docs/mks-firmware.md, assumptions S1-S7): go home runs
+    the 0_Mode return above (its zero, direction and speed; status 0 without a zero), reports 0xF1 homing,
+    resets the axis to 0 on arrival and ends with go home's completion; 0x3B status1 tracks it. A
+    firmware before V1.0.9 takes hm_mode 0-1 only (:meth:`MksFirmware.check_write`).
     V1.0.9's coordinate homing (0x91 goZeroMode 01, FC06 0x0091 = 2) is a position move to axis 0 at
     HmSpeed without a search (the manuals' "directly runs to the coordinate zero point"); it ends with go
     home's completion and leaves the zero where it is. V1.0.9's user ID (0x42) is kept in flash. V1.0.8's
@@ -127,7 +137,7 @@ from dataclasses import dataclass
 from joints.devices.mks import blocks
 from joints.devices.mks import state as st
 from joints.devices.mks.native import Command
-from joints.devices.mks.params import FEATURE_OF
+from joints.devices.mks.params import FEATURE_OF, VALUE_FEATURE_OF
 from joints.devices.mks.profile import MksProfile
 from joints.devices.params import Access, ParamSet
 from joints.devices.quirks import (
@@ -139,7 +149,7 @@ from joints.devices.quirks import (
     FirmwareProfile,
     firmware_profile,
 )
-from joints.errors import CommandError
+from joints.errors import CommandError, ParameterRefused, Refusal
 from joints.sim.firmware import Firmware
 from joints.sim.sensors import Sensor, model_of
 
@@ -160,6 +170,9 @@ IN_POSITION_SPEED = 0.5 * RPM  #: ... and this slow (rad/s),
 SETTLE_TIMEOUT = 0.3  #: s - or this long after its reference arrived (a load may hold it off)
 CALIBRATION_TIME = 2.0  #: s
 FLASH_TIME = 0.01  #: s from a save/clean reply to its completion
+#: counts: a single-turn zero return this close to its zero does not turn (the zero is a floored count and a move
+#: ends within IN_POSITION of its target; our choice, the manual says "returns to" only)
+AT_ZERO = 2.0
 ZERO_MODE_RPM = (15, 30, 60, 120, 240)  #: 0_Speed 0 (slowest) .. 4 (fastest)
 POSITION_ERROR_PER_TURN = 28000  #: 0x9D Errors: "When Errors = 28000, the motor is misaligned by 360 degrees"
 POSITION_ERROR_TICK = 0.015  #: s per 0x9D Tim unit ("approximately equal to 15 ms")
@@ -244,7 +257,7 @@ class MksFirmware(Firmware):
         self.time = 0.0
         #: flash beyond the parameters
         self.calibrated = True
-        self.zero_point: int | None = None  #: 0_Mode zero: counts within the turn
+        self.zero_point: int | None = None  #: 0_Mode zero: counts within the turn of the absolute encoder
         self.saved_speed: tuple[int, int, int] | None = None  #: (direction bit, speed value, acc)
         self.end_stops: tuple[float | None, float | None] = (None, None)  #: trigger angles [rad]
         #: completion statuses waiting for a front
@@ -286,6 +299,7 @@ class MksFirmware(Firmware):
             Command.EMERGENCY_STOP: self._emergency_stop,
             Command.SAVE_CLEAN_SPEED_MODE: self._save_clean,
             Command.WRITE_IO_PORT: self._write_io,
+            Command.SET_PULSE_DIVIDER: self._pulse_divider,
             Command.IAP_CONTROL: self._iap,
             **{code: self._run_command for code in _RUN_CODES},
         }
@@ -305,6 +319,8 @@ class MksFirmware(Firmware):
         self.protection_cause = ""  #: "locked-rotor" (0x88) or "position-error" (0x9D) while protected
         self._perr_since = -1.0
         self.outputs: dict[int, int] = {}  #: OUT_1 / OUT_2 levels the host wrote (0x36, V1.0.6)
+        self.in1_level = 0  #: IN_1's level while 0x9F makes it an output (V1.0.9), written by 0x36 bit 2
+        self.divider_origin = self.q  #: rad where the 0x99 pulse divider (V1.0.9) counts from: power-on or the command
         #: the run command 0x4A holds until 0x4B (V1.0.8): (code, its fields, answered); when 0x4B last started one
         self.sync_held: tuple[int, dict[str, int], bool] | None = None
         self.sync_started_at = -1.0
@@ -400,7 +416,9 @@ class MksFirmware(Firmware):
         values = blocks.unpack(blocks.ALL_PARAMETERS, data)
         try:
             blocks.check(self.params, values)
-        except CommandError:
+            for name, value in values.items():
+                self.check_write(name, value)
+        except (CommandError, ParameterRefused):
             return int(_SET.FAIL)
         mode = values["work_mode"] != self.values["work_mode"]
         if values["group_address"] == 0:  # "no group" (the power-on value; 0x8D itself takes 1-255)
@@ -408,7 +426,7 @@ class MksFirmware(Firmware):
         self.write_many([(n, v) for n, v in values.items() if not (n == "group_address" and v == 0)])
         if mode:
             self._work_mode({}, True)
-        self.zero_point = self.counts() % COUNTS if values["zero_mode_set_zero"] else self.zero_point
+        self.zero_point = self.turn_counts() if values["zero_mode_set_zero"] else self.zero_point
         return int(_SET.SUCCESS)
 
     def all_status(self) -> bytes:
@@ -446,6 +464,13 @@ class MksFirmware(Firmware):
         hardware = 3 if self.profile.model == "SERVO57D" else 1
         major, minor, patch = (tuple(self.firmware.version) + (0, 0, 0))[:3]
         return (int(self.calibrated) << 28) | (hardware << 24) | (major << 16) | (minor << 8) | patch
+
+    def check_write(self, name: str, value: int) -> None:
+        """A value a later firmware added to the range (0x94 hm_mode 2, V1.0.9) is out of range before it."""
+        feature = VALUE_FEATURE_OF.get((name, value))
+        if feature is not None and feature not in self.firmware.features:
+            raise ParameterRefused(Refusal.OUT_OF_RANGE, name, f"{value} is {feature}, not in firmware "
+                                   f"{self.firmware.firmware}")
 
     def on_write(self, name: str, value: int) -> None:
         if name in self._persistent and name != "working_current_unsaved":
@@ -486,10 +511,21 @@ class MksFirmware(Firmware):
         cannot run; None: it executes."""
         if command == Command.ENABLE_MOTOR:
             return int(_SET.FAIL) if values.get("motor_enable") and not self.mode.serial else None
+        if command == Command.SET_PULSE_DIVIDER:  # "only for 57D" (V1.0.9 6.4): the model with IN_2
+            return None if self.profile.limit_inputs >= 2 else int(_SET.FAIL)
+        if command == Command.SET_IN1_PORT_MODE:  # "only applies to ... 28D/35D/42D" (V1.0.9 6.2): IN_1 alone
+            return None if self.profile.limit_inputs == 1 else int(_SET.FAIL)
+        if command == Command.GO_HOME and not values.get("go_home_mode") and not self._single_lap_ready():
+            return self._refuse()  # single lap to zero with no single-turn zero set (assumption S5)
         if command == Command.GO_HOME or (command in _PREFIX and values.get(
                 f"{_PREFIX[command]}_speed", self.values[f"{_PREFIX[command]}_speed"]) != 0):
             return None if self._can_run() else self._refuse()
         return None
+
+    def _single_lap_ready(self) -> bool:
+        """Whether go home can run: any method but single lap to zero, or a 0_Mode direction and zero to run to."""
+        return (self.values["home_mode"] != st.HomeMode.SINGLE_LAP
+                or (bool(self.values["zero_mode"]) and self.zero_point is not None))
 
     # -- commands -----------------------------------------------------------------------------------
     def _release(self, values: Mapping[str, int], answered: bool) -> int:
@@ -547,7 +583,7 @@ class MksFirmware(Firmware):
         return int(_SET.SUCCESS)
 
     def _zero_mode(self, values: Mapping[str, int], answered: bool) -> int:
-        self.zero_point = self.counts() % COUNTS if values["zero_mode_set_zero"] else None
+        self.zero_point = self.turn_counts() if values["zero_mode_set_zero"] else None
         return int(_SET.SUCCESS)
 
     def _save_clean(self, values: Mapping[str, int], answered: bool) -> int:
@@ -610,7 +646,23 @@ class MksFirmware(Firmware):
         for port in (1, 2):
             if values[f"write_io_out{port}_mask"] == 1:
                 self.outputs[port] = values[f"write_io_out{port}"]
+        if self.values["in1_port_mode"]:  # IN_1 an output (0x9F, V1.0.9): bit 2 "without being restricted by OUT1_mask"
+            self.in1_level = values["write_io_out1"]
         return int(_SET.SUCCESS)
+
+    def _pulse_divider(self, values: Mapping[str, int], answered: bool) -> int:
+        self.divider_origin = self.q  # the divider counts from the command (our reading)
+        return int(_SET.SUCCESS)
+
+    def divider_level(self) -> int | None:
+        """OUT_2 as the 0x99 pulse divider output (V1.0.9, 57D): divLevel, toggled once every divPeriod pulses
+        of the shaft's travel since the command (signed: back over a toggle point toggles back); None: off
+        (divPeriod below 100)."""
+        period = self.values["pulse_divider_period"]
+        if period < 100 or self.profile.limit_inputs < 2:
+            return None
+        pulses = (self.q - self.divider_origin) / self.rad_per_pulse
+        return (self.values["pulse_divider_level"] + math.floor(pulses / period + 1e-9)) & 1
 
     def _can_run(self) -> bool:
         return self.mode.serial and self.enabled and not self.protected and self.calibrated \
@@ -621,6 +673,9 @@ class MksFirmware(Firmware):
         if values.get("go_home_mode"):  # coordinate homing (V1.0.9): straight to axis 0 at HmSpeed, no search
             self._start(_Motion("move", Command.GO_HOME, answered, goal=self._clamp_value(max(1, v["home_speed"])),
                                 acc=0, target=self.enc_zero))
+            return int(_RUN.STARTED)
+        if v["home_mode"] == st.HomeMode.SINGLE_LAP:  # V1.0.9: the 0_Mode return, run by go home (S1-S7)
+            self._zero_return(Command.GO_HOME, answered)
             return int(_RUN.STARTED)
         home = -1 if v["home_direction"] == st.MotorDirection.CW else 1
         job = _Motion("home", Command.GO_HOME, answered, goal=self._clamp_value(max(1, v["home_speed"])), acc=0)
@@ -682,8 +737,8 @@ class MksFirmware(Firmware):
         ``code``."""
         self.sync_held = None  # a stop also drops a run command held for 0x4B
         m = self.motion
-        if m is not None and m.kind == "home":
-            self.home_status = int(st.GoBackToZeroStatus.FAIL)  # stopped before it homed
+        if m is not None:
+            self._abandoned(m)  # stopped before it homed / returned to zero
         if acc == 0 or m is None or self.speed == 0:
             tr = st.step(self.run_state, st.RunEvent.STOP if m is None and acc else st.RunEvent.STOP_NOW)
             self.motion = None
@@ -702,8 +757,8 @@ class MksFirmware(Firmware):
     def _start(self, job: _Motion) -> None:
         """A new job replaces the running one (no completion for the replaced, state.py)."""
         self.run_state = st.step(self.run_state, st.RunEvent.START).state
-        if self.motion is not None and self.motion.kind == "home" and job.kind != "home":
-            self.home_status = int(st.GoBackToZeroStatus.FAIL)  # replaced before it homed
+        if self.motion is not None and self.motion.kind != job.kind:
+            self._abandoned(self.motion)  # replaced before it homed / returned to zero
         if self.motion is None or self.speed == 0:
             self._ramp_t = 0.0
         self.motion = job
@@ -714,13 +769,24 @@ class MksFirmware(Firmware):
         tr = st.step(self.run_state, event)
         self.run_state = tr.state
         self.motion = None
-        if m is not None and m.kind == "home":  # 0x3B status2 (V1.0.7): homed, or stopped before it was
-            self.home_status = int(st.GoBackToZeroStatus.SUCCESS if event is st.RunEvent.ARRIVED
-                                   else st.GoBackToZeroStatus.FAIL)
+        if m is not None:  # 0x3B (V1.0.7): homed / returned to zero (a stop that ran out is no arrival)
+            if event is st.RunEvent.ARRIVED and m.kind == "home":
+                self.home_status = int(st.GoBackToZeroStatus.SUCCESS)
+            elif event is st.RunEvent.ARRIVED and m.kind == "zero" and not m.stopping:
+                self.zero_status = int(st.GoBackToZeroStatus.SUCCESS)
+            else:
+                self._abandoned(m)
         self.speed = 0
         self.v_ref = 0.0
         if m is not None and tr.completion is not None and not quiet:
             self._complete(m.function, int(tr.completion), m.answered)
+
+    def _abandoned(self, m: _Motion) -> None:
+        """0x3B: a go home (status2) or a single-turn zero return (status1) ended before it arrived: 2, failed."""
+        if m.kind == "home":
+            self.home_status = int(st.GoBackToZeroStatus.FAIL)
+        elif m.kind == "zero":
+            self.zero_status = int(st.GoBackToZeroStatus.FAIL)
 
     def _complete(self, function: int, status: int, answered: bool) -> None:
         self.completions.append(Completion(self.time, int(function), status, answered))
@@ -737,25 +803,36 @@ class MksFirmware(Firmware):
         top = st.speed_value(self.mode.max_speed, self.microsteps)
         return max(0, min(value, max(top, 1)))
 
-    def _zero_return(self) -> None:
+    def _zero_return(self, function: int = Command.SET_ZERO_MODE, answered: bool = False) -> None:
+        """The single-turn zero return: from the encoder's angle, less than one turn to the 0_Mode zero (DirMode: in
+        0_Dir; NearMode: the shorter way), at 0_Speed; none within :data:`AT_ZERO` of it. At power-on and on an
+        En pulse (no frame), or run by go home in hm_mode 2 (``function`` 0x91: its completion frame)."""
         v = self.values
         assert self.zero_point is not None
-        here = self.counts() % COUNTS
+        here = (self.q % TAU) * COUNTS / TAU  # the encoder's angle in the turn [counts, not floored]
         if v["zero_mode"] == st.ZeroMode.DIR_MODE:
             ccw = v["zero_mode_direction"] == st.MotorDirection.CCW
             delta = (self.zero_point - here) % COUNTS if ccw else -((here - self.zero_point) % COUNTS)
         else:
-            delta = (self.zero_point - here + COUNTS // 2) % COUNTS - COUNTS // 2
+            delta = (self.zero_point - here + COUNTS / 2) % COUNTS - COUNTS / 2
+        if min(abs(delta), COUNTS - abs(delta)) < AT_ZERO:
+            delta = 0.0  # already there: no lap
         self.zero_status = int(st.GoBackToZeroStatus.GOING)
         rpm = ZERO_MODE_RPM[min(max(v["zero_mode_speed"], 0), 4)]
         self.enabled = True
-        self._start(_Motion("zero", 0x9A, False, goal=self._clamp_value(st.speed_value(rpm, self.microsteps)),
-                            acc=0, target=self.r + delta * TAU / COUNTS))
+        self._start(_Motion("zero", function, answered,
+                            goal=self._clamp_value(st.speed_value(rpm, self.microsteps)),
+                            acc=0, target=self.q + delta * TAU / COUNTS))
 
     # -- status ---------------------------------------------------------------------------------------
     def counts(self) -> int:
         """Encoder axis [counts], floor-quantised."""
         return math.floor((self.q - self.enc_zero) * COUNTS / TAU + 1e-9)
+
+    def turn_counts(self) -> int:
+        """The absolute encoder's angle within the turn [counts]: where 0_Mode's zero is kept (0x92 and homing
+        move the axis zero, not this)."""
+        return math.floor((self.q % TAU) * COUNTS / TAU + 1e-9) % COUNTS
 
     def _sensed_counts(self) -> int:
         """The encoder axis [counts] as a read reports it (:mod:`joints.sim.sensors`)."""
@@ -772,7 +849,8 @@ class MksFirmware(Firmware):
 
     def _switches(self) -> tuple[bool, bool]:
         low, high = self.end_stops
-        left = low is not None and self.q <= low
+        # (IN_1 an output reads no switch; remapped, the left limit is on En: 0x9E)
+        left = low is not None and self.q <= low and (not self._in1_output() or bool(self.values["limit_port_remap"]))
         right = high is not None and self.q >= high and (
             self.profile.limit_inputs >= 2 or bool(self.values["limit_port_remap"]))
         return left, right
@@ -780,18 +858,23 @@ class MksFirmware(Firmware):
     def _home_switch(self) -> bool:
         return self._switches()[0]
 
+    def _in1_output(self) -> bool:
+        """IN_1 made an output (0x9F, V1.0.9): it reads the level written to it, not a switch."""
+        return bool(self.values["in1_port_mode"])
+
     def io_status(self) -> int:
         """0x34: IN_1 / IN_2 at their levels (the effective level while triggered), OUT_1 on the 57D."""
         left, right = self._switches()
         level = self.values["home_trigger_level"]
-        bits = level if left else 1 - level
+        bits = self.in1_level if self._in1_output() else level if left else 1 - level
         if self.profile.limit_inputs >= 2 or self.values["limit_port_remap"]:
             bits |= (level if right else 1 - level) << 1
         if 1 in self.outputs:  # written by the host (0x36, V1.0.6)
             bits |= self.outputs[1] << 2
         elif self.profile.limit_inputs >= 2:  # OUT_1 stall indication: 0 protected, 1 unprotected (57D only)
             bits |= (0 if self.protected else 1) << 2
-        return bits | self.outputs.get(2, 0) << 3
+        divider = self.divider_level()  # OUT_2 as the pulse divider output (0x99, V1.0.9, 57D)
+        return bits | (self.outputs.get(2, 0) if divider is None else divider) << 3
 
     def motor_status(self) -> st.MotorStatus:
         if self._calibrating_until >= 0:
@@ -799,7 +882,7 @@ class MksFirmware(Firmware):
         m = self.motion
         if m is None:
             return st.MotorStatus.STOP
-        if m.kind == "home":
+        if m.kind == "home" or (m.kind == "zero" and m.function == Command.GO_HOME):
             return st.MotorStatus.HOMING
         if m.arrived >= 0:
             return st.MotorStatus.SPEED_DOWN  # settling on the target
@@ -907,12 +990,15 @@ class MksFirmware(Firmware):
             m.arrived = self.time
         if self._settling(m):
             return  # the reference is there; the shaft settles into the window
-        if m.kind == "zero":
+        if m.kind == "zero" and m.function != Command.GO_HOME:  # at power-on / by En: no frame
             self.zero_status = int(st.GoBackToZeroStatus.SUCCESS)
             self.motion = None
             self.run_state = st.RunState.COMPLETE
-        else:
-            self._end(st.RunEvent.ARRIVED)
+            return
+        if m.kind == "zero":  # single lap to zero (hm_mode 2): "the current position is reset to zero" (S6)
+            self.enc_zero = self.q
+            self.pulse_zero = self.q
+        self._end(st.RunEvent.ARRIVED)
 
     def _settling(self, m: _Motion) -> bool:
         """Whether a move whose reference arrived still waits for the shaft before it completes."""

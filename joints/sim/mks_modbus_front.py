@@ -1,8 +1,8 @@
 """MKS Modbus-RTU front (manual Part 8): the MKS firmware seen through its Part 8 requests.
 
 Rule: a slave of a :class:`~joints.sim.modbus_front.ModbusDeviceBus`, reaching the firmware only by
-parameter name through :data:`~joints.devices.mks.modbus.MKS_MODBUS` - the same names as the native
-front, so both fronts drive the same firmware identically. Only while the drive speaks Modbus
+parameter name through the Part 8 map of the firmware's profile (:func:`~joints.devices.mks.modbus.modbus_map`,
+the host driver's too) - the same names as the native front, so both fronts drive the same firmware identically. Only while the drive speaks Modbus
 (0x8E on) does it answer.
 
 * FC04 reads exactly the documented blocks (start address and register count of Part 8); another
@@ -27,7 +27,7 @@ from __future__ import annotations
 from typing import Any
 
 from joints.codecs import modbus as mb
-from joints.devices.mks.modbus import FC_READ, FC_WRITE_MULTIPLE, FC_WRITE_SINGLE, MKS_MODBUS, ModbusBlock
+from joints.devices.mks.modbus import FC_READ, FC_WRITE_MULTIPLE, FC_WRITE_SINGLE, MksModbusMap, ModbusBlock, modbus_map
 from joints.devices.mks.native import OPTIONAL_FIELDS, Command
 from joints.devices.quirks import MKS_FAILURE_REPLIES
 from joints.errors import CommandError, ParameterRefused
@@ -57,7 +57,6 @@ class MksModbusFront:
 
     def __init__(self, firmware: MksFirmware) -> None:
         self.firmware = firmware
-        self.map = MKS_MODBUS
         #: the non-standard frames accepted as documented quirks: (block title, PDU after the function code)
         self.quirks: list[tuple[str, bytes]] = []
 
@@ -110,6 +109,11 @@ class MksModbusFront:
         if len(frame) < 4 or frame[1] != FC_WRITE_MULTIPLE:
             return None
         return self.handle(mb.UnsupportedRequest(frame[0], frame[1], bytes(frame[2:-2])))
+
+    @property
+    def map(self) -> MksModbusMap:
+        """The Part 8 map of this firmware's profile (0x3B: one status before V1.0.7, two from it)."""
+        return modbus_map(self.firmware.firmware.features)
 
     @property
     def failure_replies(self) -> bool:

@@ -91,7 +91,7 @@ def test_frame_lengths_follow_the_function_code() -> None:
                         0x83: 2, 0x8C: 2, 0xF6: 3, 0x98: 4, 0x9A: 4, 0x90: 5, 0x46: 34, 0x01: 3,
                         **{c: 7 for c in (0x94, 0xF4, 0xF5, 0xFD, 0xFE)},
                         0x36: 1, 0x9D: 5, 0x95: 3, 0x4A: 1, 0x4B: 0, 0x50: 1,
-                        0x96: 8, 0x97: 8, 0x00: 1, 0x42: 0}  # V1.0.6-V1.0.9: tests/codecs/test_mks_v109_commands.py
+                        0x96: 8, 0x97: 8, 0x00: 1, 0x42: 0, 0x99: 5, 0x9F: 1}  # V1.0.6-V1.0.9: tests/codecs/test_mks_v109_commands.py
     assert dict(mks.REQUEST_DATA_LENGTH) == expected_request
     expected_reply = {c: 1 for c in expected_request if c != 0x00} | {0x30: 6, 0x31: 6, 0x32: 2, 0x33: 4, 0x39: 4, 0x40: 4,
                                                          0x47: 34, 0x48: 28, 0x01: 2, 0x35: 6}

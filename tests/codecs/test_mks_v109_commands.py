@@ -391,3 +391,32 @@ def test_user_id_read_and_write_forms() -> None:
     host.expect_reply(mks.UserId(1, 5))
     host.feed(mks.encode(mks.SetReply(1, 0x42, mks.SetStatus.SUCCESS)))
     assert host.next_message() == mks.SetReply(1, 0x42, mks.SetStatus.SUCCESS)
+
+
+# -- 0x99 pulse divider output, 0x9F IN_1 port mode (V1.0.9; the manual prints no example frame) ------------
+
+
+def test_pulse_divider_0x99_is_divlevel_and_a_uint32_divperiod() -> None:
+    msg = mks.SetPulseDivider(1, 1, 3200)  # 6.4: "FA addr 99[H] divLevel divPeriod CRC", bytes 5-8 the period
+    frame = mks.encode(msg)
+    assert frame == mks.with_checksum(bytes.fromhex("FA 01 99 01 00 00 0C 80"))
+    assert _decode(Role.DEVICE, frame) == msg
+    assert _decode(Role.HOST, mks.with_checksum(bytes.fromhex("FB 01 99 01"))) == \
+        mks.SetReply(1, 0x99, mks.SetStatus.SUCCESS)
+    with pytest.raises(EncodeError):
+        mks.encode(mks.SetPulseDivider(1, 0, 1 << 32))
+    # Modbus-RTU V1.0.9 4.3: FC16 0x0099, 3 registers: divLevel (bytes 1-2), divPeriod (bytes 3-6)
+    block = MKS_MODBUS.block(FC_WRITE_MULTIPLE, 0x99)
+    assert block.words({"pulse_divider_level": 1, "pulse_divider_period": 3200}) == (1, 0, 3200)
+    reply = bytes.fromhex("01 10 00 99 00 03")
+    assert crc16_modbus(reply).to_bytes(2, "little") == bytes.fromhex("50 27")  # the manual's reply frame
+
+
+def test_in1_port_mode_0x9f_is_one_byte() -> None:
+    msg = mks.SetIn1PortMode(1, 1)  # 6.2: "FA addr 9FH type CRC"
+    frame = mks.encode(msg)
+    assert frame == mks.with_checksum(bytes.fromhex("FA 01 9F 01"))
+    assert _decode(Role.DEVICE, frame) == msg
+    assert _decode(Role.HOST, mks.with_checksum(bytes.fromhex("FB 01 9F 00"))) == \
+        mks.SetReply(1, 0x9F, mks.SetStatus.FAIL)
+    assert MKS_MODBUS.find(FC_WRITE_MULTIPLE, 0x9F) is None and MKS_MODBUS.find(0x06, 0x9F) is None  # native only

@@ -19,7 +19,7 @@ import pytest
 from joints.codecs import mks
 from joints.codecs import modbus as mb
 from joints.codecs.crc import crc_ok
-from joints.devices.mks.modbus import FC_READ, FC_WRITE_MULTIPLE, FC_WRITE_SINGLE, MKS_MODBUS
+from joints.devices.mks.modbus import FC_READ, FC_WRITE_MULTIPLE, FC_WRITE_SINGLE, MKS_MODBUS, MKS_MODBUS_OF
 from joints.devices.mks.params import MKS_PARAMS
 from joints.errors import ByteCountError, ChecksumError, FrameError
 from testdata import by_id, records, sequences
@@ -211,6 +211,8 @@ _REGISTER_TYPES = {
 
 @pytest.mark.parametrize("record", _ids(MODBUS))
 def test_modbus_frame_decodes_against_the_mks_table(record: dict[str, Any]) -> None:
+    """(The vectors are the V1.0.5 manual's frames: its firmware's map; 0x3B's V1.0.9 layout: test_mks_modbus_layout.)"""
+    table = MKS_MODBUS_OF["v1.0.5"]
     frame = _corrected(record)
     assert crc_ok(frame)
     (msg,) = _mb_decode(record, frame)
@@ -219,7 +221,7 @@ def test_modbus_frame_decodes_against_the_mks_table(record: dict[str, Any]) -> N
     assert (msg.slave, msg.function) == (doc["slave"], doc["function"])
     if isinstance(msg, mb.ReadInputRegisters):
         assert msg.address == int(doc["start_register"], 16)
-        block = MKS_MODBUS.block(FC_READ, msg.address)
+        block = table.block(FC_READ, msg.address)
         assert block.count == msg.count == doc["count"]
         kind = doc["register_type"]
         if kind == "uint8 in low byte":
@@ -229,7 +231,7 @@ def test_modbus_frame_decodes_against_the_mks_table(record: dict[str, Any]) -> N
             assert [(f.name, f.type, f.offset, f.size) for f in block.fields] == _REGISTER_TYPES[kind]
     elif isinstance(msg, (mb.WriteSingleRegister, mb.WriteSingleRegisterReply)):
         assert msg.address == int(doc["register_hex"], 16) and msg.value == doc["value"]
-        block = MKS_MODBUS.block(FC_WRITE_SINGLE, msg.address)
+        block = table.block(FC_WRITE_SINGLE, msg.address)
         values = block.decode_words((msg.value,))
         for name, value in values.items():  # (0x91 also carries V1.0.9's goZeroMode: 0 in the V1.0.5 vector)
             MKS_PARAMS[name].check(value)  # a documented value of the parameter
@@ -237,7 +239,7 @@ def test_modbus_frame_decodes_against_the_mks_table(record: dict[str, Any]) -> N
     else:
         assert isinstance(msg, mb.WriteMultipleRegistersReply)
         assert msg.address == int(doc["start_register"], 16)
-        block = MKS_MODBUS.block(FC_WRITE_MULTIPLE, msg.address)
+        block = table.block(FC_WRITE_MULTIPLE, msg.address)
         assert block.count == msg.count == doc["count"]
 
 

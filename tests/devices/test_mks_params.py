@@ -9,7 +9,14 @@ import pytest
 
 from joints.codecs import mks as codec
 from joints.devices.mks import native, state
-from joints.devices.mks.modbus import FC_READ, FC_WRITE_MULTIPLE, FC_WRITE_SINGLE, MKS_MODBUS, NATIVE_ONLY
+from joints.devices.mks.modbus import (
+    FC_READ,
+    FC_WRITE_MULTIPLE,
+    FC_WRITE_SINGLE,
+    MKS_MODBUS,
+    MKS_MODBUS_OF,
+    NATIVE_ONLY,
+)
 from joints.devices.mks.native import MKS_NATIVE, REPLY_RULES, Command, NativeKey
 from joints.devices.mks.params import DANGEROUS, FEATURE_OF, MKS_PARAMS, model_params
 from joints.devices.params import TYPES, Access
@@ -21,7 +28,7 @@ PARTS_5_6 = MANUAL[MANUAL.index("Part5. Serial command description"):MANUAL.inde
 PART_8 = MANUAL[MANUAL.index("Part8. MODBUS-RTU command description"):MANUAL.index("Part9. FAQ")]
 #: what V1.0.9 added (manuals V1.0.9: 0x40 read version 5.1.11 / 3.1.8, 0x98 heartbeat 5.2.16 / 3.2.14)
 LATER = {0x40, 0x98, 0x46, 0x47, 0x48, 0x01, 0x35,
-         0x36, 0x9D, 0x95, 0x4A, 0x4B, 0x50, 0x96, 0x97, 0x00, 0x42}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
+         0x36, 0x9D, 0x95, 0x4A, 0x4B, 0x50, 0x96, 0x97, 0x00, 0x42, 0x99, 0x9F}  # V1.0.6-V1.0.9 commands: tests/codecs/test_mks_v109_commands.py
 
 
 # ------------------------------------------------------------------------------ parameters
@@ -60,9 +67,10 @@ def test_dangerous_commands_are_persistent() -> None:
         "en_trigger_zero_return",  # 0x9D g0Enable (V1.0.6): the motor moves on an En pulse
         "iap_control",  # 0x50 (V1.0.8): boot loader, silent state
         *(f"{m}_{k}" for m in ("vfoc", "close") for k in ("kp", "ki", "kd", "kv")),  # 0x96 / 0x97 PID (V1.0.8)
+        "in1_port_mode",  # 0x9F (V1.0.9): IN_1 as an output reads no home / limit switch
     }
     commands = {MKS_NATIVE.key(n).command for n in DANGEROUS}
-    assert commands == {0x80, 0x8A, 0x8B, 0x8E, 0x9A, 0xFF, 0x3F, 0x41, 0x92, 0x9D, 0x50, 0x96, 0x97}
+    assert commands == {0x80, 0x8A, 0x8B, 0x8E, 0x9A, 0xFF, 0x3F, 0x41, 0x92, 0x9D, 0x50, 0x96, 0x97, 0x9F}
 
 
 def test_documented_defaults_and_ranges() -> None:
@@ -174,8 +182,8 @@ def test_reply_rules_follow_the_manual() -> None:
 
 
 def test_every_modbus_field_is_a_parameter_of_the_same_type_and_access() -> None:
-    # 0x35, 0x95 (2 fields), 0x4A, 0x3B status2, 0x42: native only
-    assert len(MKS_MODBUS) == 58 + len(FEATURE_OF) - 6
+    # 0x35, 0x95 (2 fields), 0x4A, 0x42, 0x9F: native only (0x3B status2 and FC16 0x0094's three: in the newest map)
+    assert len(MKS_MODBUS) == 58 + 3 + len(FEATURE_OF) - 6
     for f in MKS_MODBUS:
         p = MKS_PARAMS[f.name]
         assert (f.type, f.access) == (p.type, p.access), f.name
@@ -192,11 +200,11 @@ def test_modbus_and_native_reach_the_same_command() -> None:
         expected_fc = FC_READ if MKS_PARAMS[f.name].access is Access.R else None
         if expected_fc:
             assert f.function == expected_fc
-    assert NATIVE_ONLY == {"slave_respond", "slave_active", "group_address", "home_reverse_angle", "home_mode",
-                           "home_current", "raw_encoder_value",  # 0x35: not in the Modbus-RTU manual V1.0.9
+    assert NATIVE_ONLY == {"slave_respond", "slave_active", "group_address",  # (0x94: FC16 0x0094 from V1.0.6)
+                           "raw_encoder_value",  # 0x35: not in the Modbus-RTU manual V1.0.9
                            "position_threshold_enable", "position_threshold", "sync_enable",  # 0x95, 0x4A: neither
-                           "homing_status",  # 0x3B status2: the V1.0.9 Modbus layout contradicts V1.0.5 (docs)
-                           "user_id"}  # 0x42: not in the Modbus-RTU manual V1.0.9
+                           "user_id",  # 0x42: not in the Modbus-RTU manual V1.0.9
+                           "in1_port_mode"}  # 0x9F: neither
     assert set(MKS_MODBUS.names()) | NATIVE_ONLY == set(MKS_PARAMS.names())
 
 
@@ -214,7 +222,7 @@ def test_modbus_map_is_a_param_map() -> None:
 def test_every_modbus_request_of_part_8_is_in_the_table() -> None:
     found = set(re.findall(r"\|\s*01H\s*\|\s*(04|06|10)\s*H\s*\|\s*00H\s*\|\s*([0-9A-F]{2})H\s*\|", PART_8))
     blocks = {(int(fc, 16), int(a, 16)) for fc, a in found}
-    assert blocks == {(b.function, b.address) for b in MKS_MODBUS.blocks if b.address not in LATER}
+    assert blocks == {(b.function, b.address) for b in MKS_MODBUS_OF["v1.0.5"].blocks if b.address not in LATER}
     # V1.0.9 Modbus manual: 3.1.8 "01H 04H 00H 40H 00H 02H 70H 1FH", 3.2.14 FC10 0x0098 2 registers 4 bytes
     assert (MKS_MODBUS.block(FC_READ, 0x40).count, MKS_MODBUS.block(FC_WRITE_MULTIPLE, 0x98).count) == (2, 2)
     # register counts as printed ("| 00H | count |" after the address) for FC04 and FC16 requests

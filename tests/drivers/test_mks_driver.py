@@ -105,7 +105,8 @@ def test_dangerous_parameters_by_name_need_confirm_through_the_joint_too() -> No
                          "zero_mode_speed", "zero_mode_direction", "save_clean_speed_mode_parameter",
                          "restore_default_parameters", "restart_motor", "set_current_axis_to_zero",
                          "en_trigger_zero_return", "iap_control",  # 0x9D g0Enable (V1.0.6), 0x50 IAP (V1.0.8)
-                         *(f"{m}_{k}" for m in ("vfoc", "close") for k in ("kp", "ki", "kd", "kv"))}  # 0x96/0x97
+                         *(f"{m}_{k}" for m in ("vfoc", "close") for k in ("kp", "ki", "kd", "kv")),  # 0x96/0x97
+                         "in1_port_mode"}  # 0x9F (V1.0.9): IN_1 as an output reads no switch
     driver, drive = native()
     joint = Joint("axis", driver, clock=driver.clock)
     for name in sorted(DANGEROUS):

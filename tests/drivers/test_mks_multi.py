@@ -123,4 +123,5 @@ def test_registers_lists_both_mks_maps(capsys: pytest.CaptureFixture[str]) -> No
     assert "0x0094  home_reverse_angle" in native and "needs --confirm" in native
     assert main(["registers", "--device", "mks-servo57d"]) == 0  # modbus-rtu by default
     modbus = capsys.readouterr().out
-    assert "0x0090  home_speed" in modbus and "home_reverse_angle" not in modbus  # 0x94 is native only
+    assert "0x0090  home_speed" in modbus and "0x0094  home_reverse_angle" in modbus  # FC16 0x0094 from V1.0.6
+    assert "group_address" not in modbus  # 0x8D is native only

@@ -501,9 +501,13 @@ def test_homing_status_needs_v109_and_older_drives_send_one_byte(tmp_path: Path,
         assert reply == mks.GoBackToZeroStatusReply(1, mks.GoBackToZeroStatus.SUCCESS)  # homing None: one byte
 
 
-def test_homing_status_is_native_only(tmp_path: Path) -> None:
-    with open_motor(tmp_path, protocol="modbus-rtu") as rig, pytest.raises(RegisterError, match="native"):
-        rig.joints["m1"].driver.read("homing_status")
+@pytest.mark.parametrize("firmware", _having("mks-homing-status"))
+def test_homing_status_over_modbus_is_the_low_byte_of_0x3b(tmp_path: Path, firmware: str) -> None:
+    """FC04 0x003B "status1 status2" (Modbus-RTU V1.0.9 3.1.7); the layouts per profile: test_mks_modbus_layout."""
+    with open_motor(tmp_path, protocol="modbus-rtu", joint={"firmware": firmware}) as rig:
+        d = rig.joints["m1"].driver
+        assert d.read("homing_status") == 2 and d.read("go_back_to_zero_status") == 1
+        assert d.link.read_registers(1, 0x3B, 1, input_registers=True) == (0x0102,)
 
 
 # -- 0x91 goZeroMode 01: coordinate homing (V1.0.9) ----------------------------------------------------
@@ -618,3 +622,107 @@ def test_user_id_needs_v109(tmp_path: Path, firmware: str) -> None:
 def test_user_id_is_native_only(tmp_path: Path) -> None:
     with open_motor(tmp_path, protocol="modbus-rtu") as rig, pytest.raises(RegisterError):
         rig.joints["m1"].driver.read("user_id")
+
+
+# -- 0x99 pulse divider output (V1.0.9, 57D) -------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+@pytest.mark.parametrize("firmware", _having("mks-pulse-divider"))
+def test_pulse_divider_toggles_out2_once_per_period_of_travel(tmp_path: Path, protocol: str, firmware: str) -> None:
+    """divPeriod 3200 at 16 microsteps: OUT_2 flips once per turn of the shaft (RS485 6.4's example), from divLevel."""
+    with open_motor(tmp_path, protocol=protocol, device="mks-servo57d",
+                    joint={"firmware": firmware, "watchdog_ms": 0}) as rig:
+        j = rig.joints["m1"]
+        d = j.driver
+
+        def out2() -> int:
+            return (d.read("io_status") >> 3) & 1
+
+        j.enable()
+        d.set_pulse_divider(3200)  # starts low
+        assert (_twin(rig).values["pulse_divider_period"], out2()) == (3200, 0)
+        for turns, level in ((0.5, 0), (1.5, 1), (2.5, 0), (-0.5, 1)):  # floor(turns) odd: toggled
+            d.move_to(round(turns * 16384), speed=300)
+            d.wait_motion(10)
+            assert out2() == level, turns
+        d.set_pulse_divider(3200, start_high=True)  # counts from here again, high
+        d.move_by(16384 + 8192, speed=300)
+        d.wait_motion(10)
+        assert out2() == 0  # high, toggled once
+        d.set_pulse_divider(None)  # off: OUT_2 is the written output again (0)
+        d.write_io(out2=1)
+        assert out2() == 1
+        with pytest.raises(CommandError, match="100"):
+            d.set_pulse_divider(99)  # "When divPeriod < 100, no frequency divider output"
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+def test_pulse_divider_is_refused_on_a_42d_and_before_v109(tmp_path: Path, protocol: str) -> None:
+    from joints.errors import DeviceRejected
+
+    with open_motor(tmp_path, protocol=protocol, joint={"firmware": "v1.0.9"}) as rig:  # a 42D: "only for 57D"
+        with pytest.raises(DeviceRejected):
+            rig.joints["m1"].driver.set_pulse_divider(3200)
+        assert _twin(rig).values["pulse_divider_period"] == 0
+    for firmware in _lacking("mks-pulse-divider"):
+        with open_motor(tmp_path, protocol=protocol, device="mks-servo57d", joint={"firmware": firmware}) as rig:
+            d = rig.joints["m1"].driver
+            sent = d.link.transactions
+            with pytest.raises(RegisterError, match="v1.0.9"):
+                d.set_pulse_divider(3200)
+            assert d.link.transactions == sent
+
+
+# -- 0x9F IN_1 as an output (V1.0.9, 28D/35D/42D, native only) ---------------------------------------------------
+
+
+@pytest.mark.parametrize("firmware", _having("mks-in1-port-mode"))
+def test_in1_as_an_output_reads_what_0x36_writes_and_no_switch(firmware: str) -> None:
+    """On the linear axis, parked on the home switch (IN_1, low-active: reads 0 there): as an output IN_1 reads the
+    level 0x36 bit 2 writes, whatever OUT1_mask, and homing no longer finds the switch; back to an input, it does."""
+    from mkskit import axis_config
+
+    import joints
+    from joints.codecs import mks as codec
+    from joints.errors import ConfirmationRequired
+
+    with joints.open(axis_config(firmware=firmware)) as rig:
+        rig.world.set_joint_positions({"carriage": -0.077})  # on the switch
+        j = rig.joints["carriage"]
+        d = j.driver
+        fw = rig.world.drives["carriage"]
+        assert isinstance(fw, MksFirmware)
+        assert d.read("io_status") & 1 == 0  # triggered (effective level low)
+        sent = d.link.transactions
+        with pytest.raises(ConfirmationRequired):
+            d.set_in1_mode(True)
+        assert d.link.transactions == sent
+        d.set_in1_mode(True, confirm=True)
+        assert fw.values["in1_port_mode"] == 1
+        d.write_io(out1=1)
+        assert d.read("io_status") & 1 == 1  # the written level, not the switch
+        d.link.request(codec.WriteIoPort(1, 0, 0, 0, 0), idempotent=True)
+        assert d.read("io_status") & 1 == 0  # mask 0 ("do not write") still writes IN_1
+        assert not fw._switches()[0]  # the home switch is not read
+        d.set_in1_mode(False)
+        assert d.read("io_status") & 1 == 0 and fw._switches()[0]
+
+
+@pytest.mark.parametrize("protocol", PROTOCOLS)
+def test_in1_port_mode_is_native_42d_and_v109_only(tmp_path: Path, protocol: str) -> None:
+    from joints.errors import DeviceRejected
+
+    with open_motor(tmp_path, protocol=protocol, device="mks-servo57d", joint={"firmware": "v1.0.9"}) as rig:
+        d = rig.joints["m1"].driver
+        if protocol == "modbus-rtu":  # the Modbus-RTU manual has no such request
+            with pytest.raises(RegisterError, match="native"):
+                d.set_in1_mode(True, confirm=True)
+        else:  # "This only applies to setting the IN_1 port of 28D/35D/42D"
+            with pytest.raises(DeviceRejected):
+                d.set_in1_mode(True, confirm=True)
+        assert _twin(rig).values["in1_port_mode"] == 0
+    for firmware in _lacking("mks-in1-port-mode"):
+        with open_motor(tmp_path, protocol=protocol, joint={"firmware": firmware}) as rig, \
+                pytest.raises(RegisterError, match="v1.0.9"):
+            rig.joints["m1"].driver.set_in1_mode(True, confirm=True)

@@ -19,12 +19,13 @@ Why not a :class:`~joints.devices.registers.RegisterTable`
 Layouts (Part 8 tables; data bytes after the byte count, big-endian)
     FC04 0x30 (3 regs): carry int32, value uint16. 0x31 (3): int48. 0x32 (1): int16. 0x33 (2):
     int32 pulses (Part 8 prints uint32; read as int32 like 5.1, ERRATA DOC-MKS-4). 0x39 (2):
-    int32. 0x34, 0x3A, 0x3B, 0x3E, 0xF1 (1): reserved byte 00, then the uint8 value.
+    int32. 0x34, 0x3A, 0x3B, 0x3E, 0xF1 (1): reserved byte 00, then the uint8 value (0x3B from
+    V1.0.7: two statuses, :data:`REVISED`).
     FC06: the value in the register (commands write 1). FC16: 0x90 hmTrig(1) hmDir(1)
     hmSpeed(2) EndLimit(1); 0x9A mode(1) enable(1) speed(1) dir(1); 0xF6 dir(1) acc(1) speed(2);
     0xFD dir(1) acc(1) speed(2) pulses(4); 0xFE/0xF4/0xF5 acc(2) speed(2) position(4).
-    Native-only quantities (0x8C respond/active, 0x8D group address, 0x94 "noLimit" homing) have
-    no Modbus entry: :data:`NATIVE_ONLY`.
+    Native-only quantities (0x8C respond/active, 0x8D group address; 0x94 "noLimit" homing before
+    V1.0.6) have no Modbus entry: :data:`NATIVE_ONLY`.
 
 The 0x90 quirk (ERRATA DOC-MKS-5, manual 8.2 #20, vector mks-modbus-8.2.20-recv)
     The home-parameter request announces 3 registers but a byte count of 5 and carries 5 data
@@ -43,6 +44,19 @@ V1.0.6-V1.0.9 requests (Modbus-RTU manual V1.0.9; the RS485 manual V1.0.6 Part 8
     acc, speed, runTime (uint32, 10 ms) - a longer form of 8.3.3 #1 (:attr:`MksModbusMap.variants`,
     :data:`TIMED_SPEED_MODE`).
 
+Requests that changed between firmwares (:data:`REVISED`, one map per profile: :func:`modbus_map`)
+    A later manual may read a request's bytes differently: FC04 0x003B is ``00 status`` in V1.0.5
+    (Part 8 #8) and V1.0.6 (8.1 #8), ``status1 status2`` in the Modbus-RTU manual V1.0.9 (3.1.7:
+    status1 the single-turn zero return, status2 the non-single-turn one, go home), so the low
+    byte that was the zero-return status is the homing status from V1.0.7 on. Or it may add a
+    request for parameters the native protocol always had: FC16 0x0094, the 'noLimit' homing
+    parameters (RS485 V1.0.6 8.2 #22, Modbus-RTU V1.0.9 5.3.3: retValue uint32, hm_mode uint16,
+    hm_ma uint16). Each is listed with the firmware feature (:mod:`joints.devices.quirks`) whose
+    profiles have it; a profile's map takes it in place of the older block, or adds it. (A request
+    of parameters a later firmware added - 0x40, 0x98 ... - is in every map and refused by
+    parameter, :data:`~joints.devices.mks.params.FEATURE_OF`.) Driver and twin both take the map
+    of the joint's profile, so they cannot disagree on the layout.
+
 Other choices: ``slave_address`` is 1-247 over Modbus (the Modbus address range); microsteps are
 written as the count 1-256 (Part 8 shows a 16-bit value, unlike the native byte).
 """
@@ -51,14 +65,16 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cache
 from types import MappingProxyType
 
 from joints.devices.mks.params import MKS_PARAMS
 from joints.devices.params import TYPES, Access, ParamMap, ParamSet, check_value, suggest
+from joints.devices.quirks import MKS_FIRMWARES, MKS_HOMING_STATUS, MKS_MODBUS_NOLIMIT_HOME, firmware_profile
 from joints.errors import CommandError, RegisterError
 
-__all__ = ["FC_READ", "FC_WRITE_MULTIPLE", "FC_WRITE_SINGLE", "MKS_MODBUS", "NATIVE_ONLY", "TIMED_SPEED_MODE",
-           "MksModbusMap", "ModbusBlock", "ModbusField"]
+__all__ = ["FC_READ", "FC_WRITE_MULTIPLE", "FC_WRITE_SINGLE", "MKS_MODBUS", "MKS_MODBUS_OF", "NATIVE_ONLY", "REVISED",
+           "TIMED_SPEED_MODE", "MksModbusMap", "ModbusBlock", "ModbusField", "modbus_map"]
 
 FC_READ = 0x04  #: read input registers
 FC_WRITE_SINGLE = 0x06  #: write single register
@@ -282,6 +298,8 @@ _BLOCKS: tuple[ModbusBlock, ...] = (
            ("write_io_out2_mask", 0, 1, "uint8"), ("write_io_out2", 1, 1, "uint8"),
            ("write_io_out1_mask", 2, 1, "uint8"), ("write_io_out1", 3, 1, "uint8")),
     _write(0x50, "iap_control", "uint8", C, "V1.0.9 3.6 IAP firmware online upgrade"),
+    _multi(0x99, 3, 6, "V1.0.9 4.3 Pulse frequency division output", W,
+           ("pulse_divider_level", 0, 2, "uint8"), ("pulse_divider_period", 2, 4, "uint32")),
     *(_multi(code, 4, 8, title, W, *((f"{mode}_{k}", 2 * i, 2, "uint16") for i, k in enumerate(("kp", "ki", "kd", "kv"))))
       for code, mode, title in ((0x96, "vfoc", "V1.0.9 3.3.1 Set PID parameters for vFOC mode"),
                                 (0x97, "close", "V1.0.9 3.3.2 Set CLOSE mode PID parameters"))),
@@ -349,7 +367,11 @@ class MksModbusMap:
         f = self._by_name.get(name)
         if f is None:
             if name in self.params_all:
-                raise RegisterError(f"{self.device}: {name!r} cannot be reached over Modbus (native protocol only)")
+                later = [fw for fw in MKS_FIRMWARES for feature, b in REVISED
+                         if feature in firmware_profile("mks", fw).features and name in {x.name for x in b.fields}]
+                raise RegisterError(f"{self.device}: {name!r} cannot be reached over Modbus "
+                                    + (f"before firmware {later[0]} (the joint's firmware key names an older one; "
+                                       "the native protocol reaches it)" if later else "(native protocol only)"))
             raise RegisterError(f"{self.device}: no parameter named {name!r}{suggest(name, self._by_name)}")
         return f
 
@@ -391,7 +413,35 @@ TIMED_SPEED_MODE = _multi(0xF6, 4, 8, "V1.0.9 8.1 Run the motor in speed mode wi
                           ("speed_mode_direction", 0, 1, "uint8"), ("speed_mode_acc", 1, 1, "uint8"),
                           ("speed_mode_speed", 2, 2, "uint16"), ("speed_mode_run_time", 4, 4, "uint32"))
 
-MKS_MODBUS = MksModbusMap("mks-servo42d57d", MKS_PARAMS, _BLOCKS, (TIMED_SPEED_MODE,))
+#: requests a later firmware reads in another layout, or adds: (the feature whose profiles have it, the request)
+REVISED: tuple[tuple[str, ModbusBlock], ...] = (
+    # Modbus-RTU manual V1.0.9 3.1.7 "01H 04H 02H status1 status2" (V1.0.7's homing status); before: "00H status"
+    (MKS_HOMING_STATUS, _read(0x3B, 1, "V1.0.9 3.1.7 Read the go back to zero status",
+                              ("go_back_to_zero_status", 0, 1, "uint8"), ("homing_status", 1, 1, "uint8"))),
+    # RS485 manual V1.0.6 8.2 #22, Modbus-RTU manual V1.0.9 5.3.3 (reply 01 10 00 94 00 04 80 26); not in V1.0.5
+    (MKS_MODBUS_NOLIMIT_HOME, _multi(0x94, 4, 8, "V1.0.9 5.3.3 Set the zero-return torque and origin offset", W,
+                                     ("home_reverse_angle", 0, 4, "uint32"), ("home_mode", 4, 2, "uint8"),
+                                     ("home_current", 6, 2, "uint16"))),
+)
 
-#: parameters only the native protocol reaches
-NATIVE_ONLY: frozenset[str] = frozenset(p.name for p in MKS_PARAMS if p.name not in MKS_MODBUS)
+
+@cache
+def modbus_map(features: frozenset[str]) -> MksModbusMap:
+    """The Part 8 map of a firmware with ``features`` (a profile's :attr:`FirmwareProfile.features`): the
+    base blocks, each revised or added one of :data:`REVISED` whose feature it has (the last listed wins)."""
+    blocks = {(b.function, b.address): b for b in _BLOCKS}
+    for feature, block in REVISED:
+        if feature in features:
+            blocks[block.function, block.address] = block
+    return MksModbusMap("mks-servo42d57d", MKS_PARAMS, tuple(blocks.values()), (TIMED_SPEED_MODE,))
+
+
+#: the map of each firmware profile (joints.devices.quirks.MKS_FIRMWARES)
+MKS_MODBUS_OF: Mapping[str, MksModbusMap] = MappingProxyType(
+    {fw: modbus_map(firmware_profile("mks", fw).features) for fw in MKS_FIRMWARES})
+
+#: the map of the newest profile (the default firmware); a driver or twin takes its profile's (:func:`modbus_map`)
+MKS_MODBUS = MKS_MODBUS_OF[MKS_FIRMWARES[-1]]
+
+#: parameters only the native protocol reaches (on every firmware)
+NATIVE_ONLY: frozenset[str] = frozenset(p.name for p in MKS_PARAMS if not any(p.name in m for m in MKS_MODBUS_OF.values()))

@@ -87,6 +87,8 @@ class Command(enum.IntEnum):
     SET_VFOC_PID = 0x96
     SET_CLOSE_PID = 0x97
     SET_LIMIT_PORT_REMAP = 0x9E
+    SET_PULSE_DIVIDER = 0x99
+    SET_IN1_PORT_MODE = 0x9F
     QUERY_MOTOR_STATUS = 0xF1
     ENABLE_MOTOR = 0xF3
     POSITION_MODE3_RELATIVE_AXIS = 0xF4
@@ -254,6 +256,9 @@ _KEYS: dict[str, NativeKey] = {
     "iap_control": NativeKey(C.IAP_CONTROL, "cmd"),
     **{f"vfoc_{k}": NativeKey(C.SET_VFOC_PID, k) for k in ("kp", "ki", "kd", "kv")},
     **{f"close_{k}": NativeKey(C.SET_CLOSE_PID, k) for k in ("kp", "ki", "kd", "kv")},
+    "pulse_divider_level": NativeKey(C.SET_PULSE_DIVIDER, "level"),
+    "pulse_divider_period": NativeKey(C.SET_PULSE_DIVIDER, "period"),
+    "in1_port_mode": NativeKey(C.SET_IN1_PORT_MODE, "type"),
 }
 del C
 

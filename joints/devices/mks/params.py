@@ -56,7 +56,7 @@ from dataclasses import replace
 
 from joints.devices.params import Access, Param, ParamSet
 
-__all__ = ["DANGEROUS", "FEATURE_OF", "MKS_PARAMS", "MODELS", "model_params"]
+__all__ = ["DANGEROUS", "FEATURE_OF", "MKS_PARAMS", "MODELS", "VALUE_FEATURE_OF", "model_params"]
 
 R, W, C = Access.R, Access.W, Access.COMMAND
 
@@ -125,7 +125,8 @@ _PARAMS: tuple[Param, ...] = (
     Param("end_limit", "bool", W, "", "0x90 EndLimit: endstop-limit function", 0, 1, 0),
     Param("home_reverse_angle", "uint32", W, "count", "0x94 retValue: reverse angle after 'noLimit' homing "
           "(0x4000 = 360 deg)", 0, 0xFFFFFFFF, 0x2000),
-    Param("home_mode", "uint8", W, "", "0x94 hm-Mode: 0 limit switch, 1 no limit switch", 0, 1, 0),
+    Param("home_mode", "uint8", W, "", "0x94 hm-Mode: the method of go home: 0 limit switch, 1 no limit switch, "
+          "2 single lap to zero (V1.0.9: to the 0x9A zero within one turn, then axis 0 there)", 0, 2, 0),
     Param("home_current", "uint16", W, "mA", "0x94 Hm_Ma: current of 'noLimit' go home", 0, 5200, 800),
     Param("limit_port_remap", "bool", W, "", "0x9E limit port remap (left -> En, right -> Dir)", 0, 1, 0),
     # 5.4 0_Mode
@@ -218,6 +219,14 @@ _PARAMS: tuple[Param, ...] = (
           0, 1, 0),
     Param("heartbeat_protection_time", "uint32", W, "ms", "0x98 heartbeat protection time (V1.0.9): no command "
           "for this long stops the motor urgently; 0 = off", 0, 0xFFFFFFFF, 0),
+    # 0x99 pulse frequency division output (V1.0.9; RS485 V1.0.9 6.4, Modbus V1.0.9 4.3; 57D only)
+    Param("pulse_divider_level", "uint8", W, "", "0x99 divLevel: start level of the OUT_2 pulse divider output, "
+          "0 low, 1 high (57D) (V1.0.9)", 0, 1, 0),
+    Param("pulse_divider_period", "uint32", W, "pulses", "0x99 divPeriod: OUT_2 toggles once every divPeriod "
+          "pulses; below 100 no divider output (57D) (V1.0.9)", 0, 0xFFFFFFFF, 0),
+    # 0x9F port mode (V1.0.9; RS485 V1.0.9 6.2; 28D/35D/42D only): IN_1 as an output disables its switch input
+    Param("in1_port_mode", "uint8", W, "", "0x9F IN_1 port mode: 0 input (default), 1 output, written by 0x36 "
+          "bit 2 (28D/35D/42D) (V1.0.9)", 0, 1, 0, persistent=True),
 )
 
 #: parameters a later firmware added -> the feature (joints.devices.quirks) a firmware profile needs for them
@@ -233,7 +242,11 @@ FEATURE_OF: dict[str, str] = {"raw_encoder_value": "mks-all-parameters", "versio
                               "working_current_unsaved": "mks-current-unsaved", "homing_status": "mks-homing-status",
                               **{f"{m}_{k}": "mks-pid" for m in ("vfoc", "close") for k in ("kp", "ki", "kd", "kv")},
                               "speed_mode_run_time": "mks-timed-speed", "go_home_mode": "mks-coordinate-homing",
-                              "user_id": "mks-user-id"}
+                              "user_id": "mks-user-id", "pulse_divider_level": "mks-pulse-divider",
+                              "pulse_divider_period": "mks-pulse-divider", "in1_port_mode": "mks-in1-port-mode"}
+
+#: values a later firmware added to a parameter's range -> the feature a firmware profile needs for them
+VALUE_FEATURE_OF: dict[tuple[str, int], str] = {("home_mode", 2): "mks-single-lap-home"}
 
 MKS_PARAMS: ParamSet = ParamSet("mks-servo42d57d", _PARAMS)
 

@@ -164,6 +164,7 @@ class HomeMode(enum.IntEnum):
 
     LIMITED = 0  #: go home on the limit switch (default)
     NO_LIMIT = 1  #: run with Hm_Ma until blocked, then back by the reverse angle
+    SINGLE_LAP = 2  #: V1.0.9 "single lap to zero": to the 0x9A zero within one turn, the axis reset there
 
 
 class ZeroMode(enum.IntEnum):

@@ -1,7 +1,7 @@
 """The MKS maps as listing rows (what ``joints registers`` prints): one row per parameter and protocol.
 
 Rule: pure data, derived from :data:`~joints.devices.mks.native.MKS_NATIVE` and
-:data:`~joints.devices.mks.modbus.MKS_MODBUS`; the parameter's own type, access, unit and
+:data:`~joints.devices.mks.modbus.MKS_MODBUS` (the newest firmware's map); the parameter's own type, access, unit and
 persistence, the protocol's address (native: the command code; Modbus: the Part 8 start register).
 """
 
