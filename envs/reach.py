@@ -435,7 +435,8 @@ class ErobArmReachEnv(JointsEnv):
         return np.concatenate([self._ee, self.target, self.target - self._ee])
 
     def _reward(self, positions: np.ndarray, action: np.ndarray) -> tuple[float, dict[str, Any]]:
-        distance = float(np.linalg.norm(self.target - self._ee))
+        d = self.target - self._ee
+        distance = math.sqrt(d.dot(d))  # np.linalg.norm of a vector, as it computes it: sqrt(x.dot(x))
         r_dist = -distance
         r_rate = -self.action_rate_weight * _sq(action - self._prev_action)
         return r_dist + r_rate, {

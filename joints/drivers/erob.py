@@ -219,6 +219,9 @@ class ErobDriver(JointDriver):
             tail["target_relative_position"] = 0
         return head, tail
 
+    #: what :meth:`move_to` (absolute) writes around its profile: ``_position_settings(ABSOLUTE, clear_relative=True)``,
+    #: built once (a pure function of constants)
+    _STEADY_HEAD, _STEADY_TAIL = _position_settings(MotionMode.ABSOLUTE, clear_relative=True)
     #: the settings speed and torque control write before their set-point (besides the ramps)
     _SPEED_SETTINGS: Mapping[str, int] = {"operation_mode": int(OperationMode.SPEED), "control_source": 0}
     _TORQUE_SETTINGS: Mapping[str, int] = {"operation_mode": int(OperationMode.TORQUE), "control_source": 0}
@@ -227,8 +230,7 @@ class ErobDriver(JointDriver):
     def steady_move(self, speed: int, acceleration: int, deceleration: int) -> bool:
         """Whether :meth:`move_to` with this profile now writes nothing but its target and "start": the drive
         holds the setup and the profile, and the 500 ms after "enable" are over."""
-        head, tail = self._position_settings(MotionMode.ABSOLUTE, clear_relative=True)
-        return (self._settled() and self._holds(head) and self._holds(tail)
+        return (self._settled() and self._holds(self._STEADY_HEAD) and self._holds(self._STEADY_TAIL)
                 and self._holds(self._profile(speed, acceleration, deceleration)))
 
     def steady_velocity(self, acceleration: int, deceleration: int) -> bool:

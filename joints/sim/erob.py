@@ -483,14 +483,9 @@ class ErobFirmware(Firmware):
             if not self.sensor.model.ideal:  # what the drive reports (outside the kernel: same bits)
                 st = (*st[:4], self._sensed_counts(), *st[5:7], self._sensed_speed(), *st[8:10],
                       self._sensed_current(), *st[11:])
-            out: list[int] = []
-            for i, name, lo, hi in entries:
-                if i < 0:
-                    out.append(values[name])
-                    continue
-                v = st[i]
-                out.append(lo if v < lo else min(v, hi))  # saturate, never wrap
-            return out
+            # saturate, never wrap: ``lo if v < lo else min(v, hi)``, spelled out (min(v, hi) is v unless hi < v)
+            return [values[name] if i < 0 else lo if (v := st[i]) < lo else hi if hi < v else v  # noqa: FURB136
+                    for i, name, lo, hi in entries]
 
         return read
 

@@ -208,18 +208,22 @@ class Group:
         table = self.worlds_table
         all_worlds = self.worlds
         active = tuple(worlds)
-        order, indices = self._plan(active)
+        plan = self._plans.get(active)
+        order, indices = self._plan(active) if plan is None else plan
+        mj_step, rows, adr, ratio, dts = self.mj_step or 0, self.table, self.adr, self.ratio, self.dts_array
+        limits = self._arena_limits  # as World.arena_crowded(ARENA_GUARD), without a call per world
         while n > 0:
             m = min(n, CHUNK)
             for w in active:
                 table[w, STEPS] = all_worlds[w].steps
-            _run_compiled(m, 1, self.mj_step or 0, self.table, self.adr, self.ratio, order,  # type: ignore[misc]
-                          table, self.dts_array, indices)
+            _run_compiled(m, 1, mj_step, rows, adr, ratio, order, table, dts, indices)  # type: ignore[misc]
             for w in active:
                 all_worlds[w].steps += m
             n -= m
-            limits = self._arena_limits  # as World.arena_crowded(ARENA_GUARD), without a call per world
-            crowded = [w for w in active if all_worlds[w].data.maxuse_arena > limits[w]]
+            crowded: list[int] = []
+            for w in active:
+                if all_worlds[w].data.maxuse_arena > limits[w]:
+                    crowded.append(w)
             if crowded:
                 for w in crowded:
                     all_worlds[w].leave_fused_path()
