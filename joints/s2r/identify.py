@@ -98,7 +98,8 @@ class IdentificationAborted(LimitError):
 
 @dataclass(frozen=True)
 class Excitation:
-    """A multi-sine (Schroeder phases, log-spaced frequencies) in torque or speed, faded in and out.
+    """A multi-sine (Schroeder phases, log-spaced frequencies) in torque or speed, faded in and out, then
+    optionally a swing (one sine of the full amplitude) that takes the joint to higher speeds.
 
     ``amplitude`` is the peak [N*m in torque mode, rad/s in speed mode]; None: half the joint's
     torque / velocity limit ("small": the stand's default excitation stays well inside them).
@@ -115,6 +116,13 @@ class Excitation:
     #: a command is written with every this-many-th state read (a slow bus: one transaction per sample instead
     #: of two; the command is held in between, the fit integrates what was sent)
     command_every: int = 1
+    #: s of a swing ending the excitation (part of ``duration``; 0: none): a sine of the full amplitude at
+    #: ``f_swing`` Hz, near the stand's resonance. The multi-sine's crest factor keeps the joint slow (BAM's
+    #: eRob80:100 on the pendulum stand: 1.6 rad/s at 32 N*m peak, where its Stribeck friction, v_s ~2 rad/s, has
+    #: fallen by a third only, so the Coulomb and Stribeck levels trade off); the swing reaches 2.7 rad/s, where
+    #: it has fallen to a tenth (docs/identification.md). A joint it drives past its velocity limit aborts.
+    swing: float = 0.0
+    f_swing: float = 0.6  #: Hz
 
     def __post_init__(self) -> None:
         if self.mode not in ("torque", "speed"):
@@ -131,9 +139,15 @@ class Excitation:
             raise ConfigError(f"command_every must be an integer >= 1, got {self.command_every!r}", key="command_every")
         if self.components < 1:
             raise ConfigError(f"components must be >= 1, got {self.components}", key="components")
-        if self.duration < 3 * self.fade:
-            raise ConfigError(f"duration {self.duration} s is too short for the {self.fade} s fades",
-                              key="duration")
+        if not (math.isfinite(self.swing) and self.swing >= 0 and math.isfinite(self.f_swing) and self.f_swing > 0):
+            raise ConfigError(f"swing must be >= 0 s and f_swing > 0 Hz, got {self.swing!r}, {self.f_swing!r}",
+                              key="swing")
+        if self.duration - self.swing < 3 * self.fade:
+            raise ConfigError(f"duration {self.duration} s (less a {self.swing} s swing) is too short for the "
+                              f"{self.fade} s fades", key="duration")
+        if self.swing and self.swing < 2 * self.fade + 1 / self.f_swing:
+            raise ConfigError(f"a swing of {self.swing} s is too short for its {self.fade} s fades and a cycle of "
+                              f"{self.f_swing} Hz", key="swing")
 
     def shape(self) -> Callable[[float], float]:
         """The signal of unit peak as a function of time since the start [s] (0 outside the duration)."""
@@ -143,16 +157,24 @@ class Excitation:
         freqs = np.geomspace(self.f_min, self.f_max, n)
         k = np.arange(1, n + 1)
         phases = -np.pi * k * (k - 1) / n  # Schroeder: a low crest factor
-        grid = np.arange(0.0, self.duration, 1e-3)
+        multi = self.duration - self.swing  # s of multi-sine, then the swing
+        grid = np.arange(0.0, multi, 1e-3)
         peak = float(np.abs(np.sin(2 * np.pi * np.outer(grid, freqs) + phases).sum(axis=1)).max())
         w = 2 * np.pi * freqs
-        fade_in, fade_out, duration = self.fade, self.fade * 2 / 3, self.duration
+        fade_in, fade_out, duration, swing, f_swing = self.fade, self.fade * 2 / 3, self.duration, self.swing, \
+            self.f_swing
+
+        def smooth(x: float) -> float:  # smoothstep: no jump in the command's slope
+            x = min(1.0, max(0.0, x))
+            return x * x * (3 - 2 * x)
 
         def signal(t: float) -> float:
             if not 0.0 <= t < duration:
                 return 0.0
-            env = min(1.0, t / fade_in, (duration - t) / fade_out)
-            env = env * env * (3 - 2 * env)  # smoothstep: no jump in the command's slope
+            if t >= multi:  # the swing, faded in and out
+                x = t - multi
+                return smooth(min(x / fade_in, (swing - x) / fade_out)) * math.sin(2 * math.pi * f_swing * x)
+            env = smooth(min(t / fade_in, (multi - t) / fade_out))
             return float(env * np.sin(w * t + phases).sum() / peak)
 
         return signal
@@ -745,13 +767,16 @@ STRIBECK_MIN = 0.05
 STRIBECK_SEEN = 0.25
 #: the Stribeck curve's exponents searched (2: Gaussian; BAM's eRob80:100 fits use 3)
 STRIBECK_EXPONENTS = (1.0, 1.5, 2.0, 3.0, 4.0)
+#: the relative step to which the best Stribeck velocity is refined
+STRIBECK_STEP = 0.002
 
 
 def _best_stribeck(reg: _Regression, d: float, known_inertia: float | None, terms: tuple[str, ...],
                    rows: Any = None, exponent: float | None = None) -> tuple[float, float] | None:
     """The Stribeck curve (vs, exponent) of smallest residual (the linear parameters solved at each, friction
     held >= 0): every exponent of :data:`STRIBECK_EXPONENTS` (or ``exponent``) on a log grid of vs from
-    :data:`STRIBECK_MIN` to 3x the speeds the excitation reached, vs refined around the best point."""
+    :data:`STRIBECK_MIN` to 3x the speeds the excitation reached, vs refined around the best point (golden
+    section, to :data:`STRIBECK_STEP`)."""
     import numpy as np
 
     grid = np.geomspace(STRIBECK_MIN, max(2 * STRIBECK_MIN, 3 * reg.speed), 25)
@@ -768,8 +793,23 @@ def _best_stribeck(reg: _Regression, d: float, known_inertia: float | None, term
     if best is None:
         return None
     _, i, a = best
-    fine = [v for v in np.geomspace(grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)], 13) if seen(float(v), a)]
-    return float(fine[int(np.argmin([cost(float(v), a) for v in fine]))]), a
+    # refined between the grid's neighbours by golden-section search on ln vs, to STRIBECK_STEP: a grid step
+    # there moves the Coulomb level (BAM's M2 on the stand: 0.07 N*m per 3 % of vs)
+    top = reg.speed / (-math.log(1 - STRIBECK_SEEN)) ** (1 / a)  # the largest vs the data see
+    lo, hi = math.log(grid[max(i - 1, 0)]), math.log(min(grid[min(i + 1, len(grid) - 1)], top))
+    inv = (math.sqrt(5) - 1) / 2
+    x1, x2 = hi - inv * (hi - lo), lo + inv * (hi - lo)
+    c1, c2 = cost(math.exp(x1), a), cost(math.exp(x2), a)
+    while hi - lo > STRIBECK_STEP:
+        if c1 <= c2:
+            hi, x2, c2 = x2, x1, c1
+            x1 = hi - inv * (hi - lo)
+            c1 = cost(math.exp(x1), a)
+        else:
+            lo, x1, c1 = x1, x2, c2
+            x2 = lo + inv * (hi - lo)
+            c2 = cost(math.exp(x2), a)
+    return math.exp(x1 if c1 <= c2 else x2), a
 
 
 def _named(x: Any, names: list[str], known_inertia: float | None) -> dict[str, float]:
@@ -968,7 +1008,7 @@ def fit(samples: Samples, terms: ModelTerms | None, *, known_inertia: float | No
             est[key] /= est["torque_scale"] ** power
     if vs is not None:  # the spread over the folds, at least the search's step
         std["stribeck_velocity"] = max(jack("stribeck_velocity", lambda e: e["stribeck_velocity"]) / vs[0],
-                                       (3 * reg.speed / STRIBECK_MIN) ** (1 / 144) - 1)
+                                       STRIBECK_STEP)
     if known_inertia is None:
         arm_unc = max(float(se["inertia"]), jack("armature", lambda e: e["inertia"] - body))
         std["armature"] = arm_unc / abs(armature) if armature else math.inf
