@@ -7,6 +7,7 @@ What these tests assert is what holds on this branch; see docs/identification.md
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -83,9 +84,11 @@ def test_sensors_report_noise_seeded_and_independent_of_the_kernel(monkeypatch: 
     assert other != runs["1"][0]  # another seed, another stream
 
 
-#: the excitation the reality twins are judged with: peak 32 N*m (80 % of the stand's torque limit). At the
-#: default (half the limit) a joint with the real friction sticks 95 % of the time and the fit refuses.
-EXCITATION = Excitation(duration=20.0, amplitude=32.0)
+#: the excitation the reality twins are judged with: peak 32 N*m (80 % of the stand's torque limit; at the
+#: default, half the limit, a joint with the real friction sticks 95 % of the time and the fit refuses), 20 s of
+#: multi-sine and a 6 s swing: a sine at 0.6 Hz that takes BAM's eRob80:100 to 2.7 rad/s, where its Stribeck
+#: friction has decayed (the multi-sine alone reaches 1.6 rad/s: the Coulomb and Stribeck levels then trade off)
+EXCITATION = Excitation(duration=26.0, amplitude=32.0, swing=6.0)
 
 
 @pytest.fixture(scope="module", params=REALITIES, ids=lambda r: r.name.split()[-1])
@@ -109,22 +112,45 @@ def check_recovery(reality: Any, ref: Identification, got: Identification, *, de
     assert got.armature == pytest.approx(reality.armature, rel=0.10), str(got)
     assert got.torque_scale == pytest.approx(reality.torque_scale, rel=0.10), str(got)
     check_friction(got, ref)
+    check_split(reality, ref)
+    check_split(reality, got)
     assert got.delay is not None and abs(got.delay - reality.delay) <= 1e-3 + delay_slack, str(got)
 
 
 #: rad/s, where the friction curves are compared: from slow sliding to the speeds the excitation reaches
-SPEEDS = (0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.5)
+SPEEDS = (0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.5, 2.0, 2.5)
 
 
 def check_friction(got: Identification, ref: Identification) -> None:
-    """Friction within 10 % of the reference: the viscous coefficient, and the friction curve (Coulomb + Stribeck
-    + viscous) at every speed of SPEEDS - with a Stribeck term the Coulomb and Stribeck levels trade off (the
-    report names them inseparable), the curve they make does not. Without one, the Coulomb level itself."""
+    """Friction within 10 % of the reference: the viscous coefficient, the Stribeck level, the friction curve
+    (Coulomb + Stribeck + viscous) at every speed of SPEEDS and the Coulomb level - within 10 % where the
+    reference puts it at 10 % or more of the friction at standstill; a Coulomb level that the reference puts near
+    0 (BAM's M2: truly 0) within 5 % of the friction at standstill (10 % of a level near 0 is below the scatter
+    the sensors' noise gives it: +-0.03 N*m on M2 in process, +-0.1 N*m over the pty)."""
     assert got.viscous_friction == pytest.approx(ref.viscous_friction, rel=0.10), (str(got), str(ref))
+    assert bool(got.stribeck_friction) == bool(ref.stribeck_friction), (str(got), str(ref))
+    assert got.stribeck_friction == pytest.approx(ref.stribeck_friction, rel=0.10), (str(got), str(ref))
     for v in SPEEDS:
         assert got.friction_at(v) == pytest.approx(ref.friction_at(v), rel=0.10), (v, str(got), str(ref))
-    if not (got.stribeck_friction or ref.stribeck_friction):
+    standstill = ref.coulomb_friction + ref.stribeck_friction
+    if ref.coulomb_friction >= 0.1 * standstill:
         assert got.coulomb_friction == pytest.approx(ref.coulomb_friction, rel=0.10), (str(got), str(ref))
+    else:
+        assert abs(got.coulomb_friction - ref.coulomb_friction) <= 0.05 * standstill, (str(got), str(ref))
+
+
+def check_split(reality: Any, got: Identification) -> None:
+    """Where the twin's friction is exactly the fitted form (BAM's M2: Coulomb 0, Stribeck, viscous), the fit
+    tells the Coulomb and Stribeck levels apart as the twin has them: the Coulomb level below 5 % of the
+    friction at standstill, the Stribeck level and velocity within 10 %, viscous within 10 %. The multi-sine
+    alone (1.6 rad/s) gives Coulomb 0.5-0.75 N*m and Stribeck -10 ... -15 %: the levels trade off."""
+    if reality.load_motor or reality.load_external or not reality.stribeck:
+        return  # M6: its torque-dependent terms have no single Coulomb value; the issue-24 twin: no Stribeck term
+    standstill = reality.coulomb + reality.stribeck
+    assert abs(got.coulomb_friction - reality.coulomb) <= 0.05 * standstill, str(got)
+    assert got.stribeck_friction == pytest.approx(reality.stribeck, rel=0.10), str(got)
+    assert got.stribeck_velocity == pytest.approx(reality.v_stribeck, rel=0.10), str(got)
+    assert got.viscous_friction == pytest.approx(reality.viscous, rel=0.10), str(got)
 
 
 def test_reality_twins_are_recovered(judged: tuple[Any, Identification, Identification, Any]) -> None:
@@ -287,7 +313,7 @@ def test_shadow_counts_twin_errors() -> None:
 
 #: over the pty: a state every ~5-7 ms (two transactions per sample at the host's pace), so twice the duration
 #: of the in-process excitation: the fit's windows grow to 30 sampling periods and fewer of them slide
-PTY_EXCITATION = Excitation(duration=40.0, amplitude=32.0)
+PTY_EXCITATION = Excitation(duration=46.0, amplitude=32.0, swing=6.0)
 
 
 @pytest.mark.slow
@@ -318,8 +344,7 @@ def test_identification_over_the_pty_at_wall_clock_time(reality: Any) -> None:
     ref_rig = open_real(reality, noise=False)
     try:
         period = round(got.period / ref_rig.sim.timestep) * ref_rig.sim.timestep
-        ref = identify(ref_rig, "joint1", Excitation(duration=PTY_EXCITATION.duration, amplitude=32.0,
-                                                     period=max(period, 0.001)))
+        ref = identify(ref_rig, "joint1", replace(PTY_EXCITATION, period=max(period, 0.001)))
     finally:
         ref_rig.close()
     print(got)
