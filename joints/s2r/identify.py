@@ -785,31 +785,36 @@ def _best_stribeck(reg: _Regression, d: float, known_inertia: float | None, term
         A, y, names = reg.system(d, known_inertia, friction=((vs, a), terms))
         return _solve(A, y, rows, names)[1]
 
-    def seen(vs: float, a: float) -> bool:  # the curve falls by STRIBECK_SEEN within the speeds reached
-        return math.exp(-((reg.speed / vs) ** a)) <= 1 - STRIBECK_SEEN
+    def refined(a: float) -> tuple[float, float] | None:
+        """(cost, vs) at the best vs for exponent ``a``: the grid's best point refined between its neighbours by
+        golden-section search on ln vs, to STRIBECK_STEP (a grid step there moves the Coulomb level: BAM's M2 on
+        the stand, 0.07 N*m per 3 % of vs)."""
+        top = reg.speed / (-math.log(1 - STRIBECK_SEEN)) ** (1 / a)  # the largest vs whose curve falls by
+        # STRIBECK_SEEN within the speeds reached
+        on_grid = [(cost(float(v), a), i) for i, v in enumerate(grid) if v <= top]
+        if not on_grid:
+            return None
+        _, i = min(on_grid)
+        lo, hi = math.log(grid[max(i - 1, 0)]), math.log(min(grid[min(i + 1, len(grid) - 1)], top))
+        inv = (math.sqrt(5) - 1) / 2
+        x1, x2 = hi - inv * (hi - lo), lo + inv * (hi - lo)
+        c1, c2 = cost(math.exp(x1), a), cost(math.exp(x2), a)
+        while hi - lo > STRIBECK_STEP:
+            if c1 <= c2:
+                hi, x2, c2 = x2, x1, c1
+                x1 = hi - inv * (hi - lo)
+                c1 = cost(math.exp(x1), a)
+            else:
+                lo, x1, c1 = x1, x2, c2
+                x2 = lo + inv * (hi - lo)
+                c2 = cost(math.exp(x2), a)
+        return (c1, math.exp(x1)) if c1 <= c2 else (c2, math.exp(x2))
 
-    best = min(((cost(float(v), a), i, a) for a in (STRIBECK_EXPONENTS if exponent is None else (exponent,))
-                for i, v in enumerate(grid) if seen(float(v), a)), default=None)
-    if best is None:
-        return None
-    _, i, a = best
-    # refined between the grid's neighbours by golden-section search on ln vs, to STRIBECK_STEP: a grid step
-    # there moves the Coulomb level (BAM's M2 on the stand: 0.07 N*m per 3 % of vs)
-    top = reg.speed / (-math.log(1 - STRIBECK_SEEN)) ** (1 / a)  # the largest vs the data see
-    lo, hi = math.log(grid[max(i - 1, 0)]), math.log(min(grid[min(i + 1, len(grid) - 1)], top))
-    inv = (math.sqrt(5) - 1) / 2
-    x1, x2 = hi - inv * (hi - lo), lo + inv * (hi - lo)
-    c1, c2 = cost(math.exp(x1), a), cost(math.exp(x2), a)
-    while hi - lo > STRIBECK_STEP:
-        if c1 <= c2:
-            hi, x2, c2 = x2, x1, c1
-            x1 = hi - inv * (hi - lo)
-            c1 = cost(math.exp(x1), a)
-        else:
-            lo, x1, c1 = x1, x2, c2
-            x2 = lo + inv * (hi - lo)
-            c2 = cost(math.exp(x2), a)
-    return math.exp(x1 if c1 <= c2 else x2), a
+    # every exponent refined before they are compared: on the grid alone the exponent whose grid point happens
+    # to lie nearer its optimum wins (BAM's M6: exponent 4 by the grid, 3 refined, 2 % less residual)
+    best = min(((r[0], r[1], a) for a in (STRIBECK_EXPONENTS if exponent is None else (exponent,))
+                if (r := refined(a)) is not None), default=None)
+    return None if best is None else (best[1], best[2])
 
 
 def _named(x: Any, names: list[str], known_inertia: float | None) -> dict[str, float]:
@@ -877,8 +882,8 @@ def _model(reg: _Regression, known_inertia: float | None, max_delay: float, torq
         current, (vs, terms) = rss, friction
         candidates.remove(k)
     d = delay_of((vs, terms))
-    if vs is not None:
-        vs = _best_stribeck(reg, d, known_inertia, terms, exponent=vs[1])
+    if vs is not None:  # the exponent too: it was chosen before the terms added after the Stribeck term
+        vs = _best_stribeck(reg, d, known_inertia, terms)
     return d, (vs, terms)
 
 
@@ -928,7 +933,7 @@ def fit(samples: Samples, terms: ModelTerms | None, *, known_inertia: float | No
     delay, friction = _model(reg, known_inertia, max_delay, torque_mode, extended_friction)
     vs, extra = friction
     A, y, names = reg.system(delay, known_inertia, friction=friction)
-    x, rss = _solve(A, y)
+    x, rss = _solve(A, y, None, names)  # friction held >= 0, as in the model's choice
     est = _named(x, names, known_inertia)
     est.setdefault("coulomb_friction", 0.0)
     # the regression's standard errors (overlapping windows are not independent: inflate)
@@ -959,7 +964,7 @@ def fit(samples: Samples, terms: ModelTerms | None, *, known_inertia: float | No
         dk = _best_delay(reg, known_inertia, max_delay, train, friction) if torque_mode else 0.0
         vk = _best_stribeck(reg, dk, known_inertia, extra, train, vs[1]) if vs is not None else None
         Ak, yk, _ = reg.system(dk, known_inertia, friction=(vk, extra))
-        xk, _ = _solve(Ak, yk, train)
+        xk, _ = _solve(Ak, yk, train, names)
         e = _named(xk, names, known_inertia)
         e["delay"] = dk
         if vk is not None:
@@ -1027,7 +1032,7 @@ def fit(samples: Samples, terms: ModelTerms | None, *, known_inertia: float | No
             body2 = heavier.body_inertia(float(q[0]))
             ratio = float(np.sqrt(np.mean(g2 ** 2)) / (np.sqrt(np.mean(g ** 2)) or 1.0))
             A2, y2, _ = reg.system(delay, known_inertia, f4_scale=ratio, friction=friction)
-            x2, _ = _solve(A2, y2)
+            x2, _ = _solve(A2, y2, None, names)
             e2 = _named(x2, names, known_inertia)
             e2["armature"] = e2["inertia"] - body2
             for key, power in SCALED.items():
