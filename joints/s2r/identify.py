@@ -769,35 +769,14 @@ STRIBECK_SEEN = 0.25
 STRIBECK_EXPONENTS = (1.0, 1.5, 2.0, 3.0, 4.0)
 #: the relative step to which the best Stribeck velocity is refined
 STRIBECK_STEP = 0.002
-#: the step to which the exponent is refined between those of STRIBECK_EXPONENTS (the final model's)
-EXPONENT_STEP = 0.02
-
-
-def _golden(f: Callable[[float], float], lo: float, hi: float, tol: float) -> tuple[float, float]:
-    """(f(x), x) at the x of smallest f in [lo, hi] by golden-section search, to ``tol``."""
-    inv = (math.sqrt(5) - 1) / 2
-    x1, x2 = hi - inv * (hi - lo), lo + inv * (hi - lo)
-    c1, c2 = f(x1), f(x2)
-    while hi - lo > tol:
-        if c1 <= c2:
-            hi, x2, c2 = x2, x1, c1
-            x1 = hi - inv * (hi - lo)
-            c1 = f(x1)
-        else:
-            lo, x1, c1 = x1, x2, c2
-            x2 = lo + inv * (hi - lo)
-            c2 = f(x2)
-    return (c1, x1) if c1 <= c2 else (c2, x2)
 
 
 def _best_stribeck(reg: _Regression, d: float, known_inertia: float | None, terms: tuple[str, ...],
-                   rows: Any = None, exponent: float | None = None,
-                   continuous: bool = False) -> tuple[float, float] | None:
+                   rows: Any = None, exponent: float | None = None) -> tuple[float, float] | None:
     """The Stribeck curve (vs, exponent) of smallest residual (the linear parameters solved at each, friction
     held >= 0): every exponent of :data:`STRIBECK_EXPONENTS` (or ``exponent``) on a log grid of vs from
     :data:`STRIBECK_MIN` to 3x the speeds the excitation reached, vs refined around the best point (golden
-    section, to :data:`STRIBECK_STEP`). ``continuous``: the exponent too, between the best one's neighbours
-    in :data:`STRIBECK_EXPONENTS` (to :data:`EXPONENT_STEP`)."""
+    section, to :data:`STRIBECK_STEP`)."""
     import numpy as np
 
     grid = np.geomspace(STRIBECK_MIN, max(2 * STRIBECK_MIN, 3 * reg.speed), 25)
@@ -817,36 +796,25 @@ def _best_stribeck(reg: _Regression, d: float, known_inertia: float | None, term
             return None
         _, i = min(on_grid)
         lo, hi = math.log(grid[max(i - 1, 0)]), math.log(min(grid[min(i + 1, len(grid) - 1)], top))
-        c, x = _golden(lambda x: cost(math.exp(x), a), lo, hi, STRIBECK_STEP)
-        return c, math.exp(x)
+        inv = (math.sqrt(5) - 1) / 2
+        x1, x2 = hi - inv * (hi - lo), lo + inv * (hi - lo)
+        c1, c2 = cost(math.exp(x1), a), cost(math.exp(x2), a)
+        while hi - lo > STRIBECK_STEP:
+            if c1 <= c2:
+                hi, x2, c2 = x2, x1, c1
+                x1 = hi - inv * (hi - lo)
+                c1 = cost(math.exp(x1), a)
+            else:
+                lo, x1, c1 = x1, x2, c2
+                x2 = lo + inv * (hi - lo)
+                c2 = cost(math.exp(x2), a)
+        return (c1, math.exp(x1)) if c1 <= c2 else (c2, math.exp(x2))
 
     # every exponent refined before they are compared: on the grid alone the exponent whose grid point happens
     # to lie nearer its optimum wins (BAM's M6: exponent 4 by the grid, 3 refined, 2 % less residual)
     best = min(((r[0], r[1], a) for a in (STRIBECK_EXPONENTS if exponent is None else (exponent,))
                 if (r := refined(a)) is not None), default=None)
-    if best is None:
-        return None
-    if not continuous:
-        return best[1], best[2]
-    # the exponent between its neighbours: the residual's minimum lies between the discrete exponents (BAM M6:
-    # 3.25-3.5), where the choice of 3 or 4 is left to the noise and moves the Coulomb level by 1.4 N*m
-    k = STRIBECK_EXPONENTS.index(best[2]) if best[2] in STRIBECK_EXPONENTS else None
-    if k is None:
-        return best[1], best[2]
-    a_lo, a_hi = STRIBECK_EXPONENTS[max(k - 1, 0)], STRIBECK_EXPONENTS[min(k + 1, len(STRIBECK_EXPONENTS) - 1)]
-    at: dict[float, float] = {}
-
-    def by_exponent(a: float) -> float:
-        top = reg.speed / (-math.log(1 - STRIBECK_SEEN)) ** (1 / a)
-        lo, hi = math.log(best[1] / 1.25), math.log(min(best[1] * 1.25, top))
-        if hi <= lo:
-            return math.inf
-        c, x = _golden(lambda x: cost(math.exp(x), a), lo, hi, STRIBECK_STEP)
-        at[a] = math.exp(x)
-        return c
-
-    c, a = _golden(by_exponent, a_lo, a_hi, EXPONENT_STEP)
-    return (at[a], a) if c < best[0] else (best[1], best[2])
+    return None if best is None else (best[1], best[2])
 
 
 def _named(x: Any, names: list[str], known_inertia: float | None) -> dict[str, float]:
@@ -915,7 +883,7 @@ def _model(reg: _Regression, known_inertia: float | None, max_delay: float, torq
         candidates.remove(k)
     d = delay_of((vs, terms))
     if vs is not None:  # the exponent too: it was chosen before the terms added after the Stribeck term
-        vs = _best_stribeck(reg, d, known_inertia, terms, continuous=True)
+        vs = _best_stribeck(reg, d, known_inertia, terms)
     return d, (vs, terms)
 
 

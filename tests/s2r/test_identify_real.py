@@ -123,20 +123,19 @@ SPEEDS = (0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.5, 2.0, 2.5)
 
 def check_friction(got: Identification, ref: Identification) -> None:
     """Friction within 10 % of the reference: the viscous coefficient, the Stribeck level, the friction curve
-    (Coulomb + Stribeck + viscous) at every speed of SPEEDS and the Coulomb level - within 10 % where the
-    reference puts it at 10 % or more of the friction at standstill; a Coulomb level that the reference puts near
-    0 (BAM's M2: truly 0) within 5 % of the friction at standstill (10 % of a level near 0 is below the scatter
-    the sensors' noise gives it: up to 0.07 N*m on M2 and 0.26 N*m on M6 in process, seeds 0-4)."""
+    (Coulomb + Stribeck + viscous) at every speed of SPEEDS, and the Coulomb level within 10 % of itself or 5 % of
+    the friction at standstill, whichever is wider. The second bound is wider for a Coulomb level below half of
+    the standstill friction: BAM's twins (M2: truly 0, M6: 0.0005 N*m + torque-dependent friction). 10 % of a level
+    near 0 is below the scatter that the sensors' noise gives it (M2: 0.04 N*m in process over seeds 0-4, 0.02-0.15
+    N*m over the pty); docs/identification.md."""
     assert got.viscous_friction == pytest.approx(ref.viscous_friction, rel=0.10), (str(got), str(ref))
     assert bool(got.stribeck_friction) == bool(ref.stribeck_friction), (str(got), str(ref))
     assert got.stribeck_friction == pytest.approx(ref.stribeck_friction, rel=0.10), (str(got), str(ref))
     for v in SPEEDS:
         assert got.friction_at(v) == pytest.approx(ref.friction_at(v), rel=0.10), (v, str(got), str(ref))
     standstill = ref.coulomb_friction + ref.stribeck_friction
-    if ref.coulomb_friction >= 0.1 * standstill:
-        assert got.coulomb_friction == pytest.approx(ref.coulomb_friction, rel=0.10), (str(got), str(ref))
-    else:
-        assert abs(got.coulomb_friction - ref.coulomb_friction) <= 0.05 * standstill, (str(got), str(ref))
+    tolerance = max(0.10 * ref.coulomb_friction, 0.05 * standstill)
+    assert abs(got.coulomb_friction - ref.coulomb_friction) <= tolerance, (str(got), str(ref))
 
 
 def check_split(reality: Any, got: Identification) -> None:
