@@ -769,6 +769,12 @@ STRIBECK_SEEN = 0.25
 STRIBECK_EXPONENTS = (1.0, 1.5, 2.0, 3.0, 4.0)
 #: the relative step to which the best Stribeck velocity is refined
 STRIBECK_STEP = 0.002
+#: the Stribeck exponent is a model choice, not a parameter the data must pin: an exponent whose refined residual
+#: exceeds the smallest by less than this F value x the residual variance per independent window (F(1, inf) at
+#: 5 %: the exponent's one degree of freedom not significant) fits as well, and the lowest such exponent - the
+#: simplest curve - is taken; the same rule on noisy and noise-free data (BAM's M6 over the pty: exponents 3 and 4
+#: within 0.1 % of each other, the noise chose between them and the Coulomb level jumped 1.4 N*m)
+EXPONENT_F = 3.84
 
 
 def _best_stribeck(reg: _Regression, d: float, known_inertia: float | None, terms: tuple[str, ...],
@@ -812,9 +818,17 @@ def _best_stribeck(reg: _Regression, d: float, known_inertia: float | None, term
 
     # every exponent refined before they are compared: on the grid alone the exponent whose grid point happens
     # to lie nearer its optimum wins (BAM's M6: exponent 4 by the grid, 3 refined, 2 % less residual)
-    best = min(((r[0], r[1], a) for a in (STRIBECK_EXPONENTS if exponent is None else (exponent,))
-                if (r := refined(a)) is not None), default=None)
-    return None if best is None else (best[1], best[2])
+    fits = [(r[0], r[1], a) for a in (STRIBECK_EXPONENTS if exponent is None else (exponent,))
+            if (r := refined(a)) is not None]
+    if not fits:
+        return None
+    # the lowest exponent whose residual the data do not tell from the smallest (see EXPONENT_F)
+    least = min(f[0] for f in fits)
+    A, _, _ = reg.system(d, known_inertia, friction=((fits[0][1], fits[0][2]), terms))
+    dof = reg.used / reg.overlap - A.shape[1]  # independent windows less the parameters
+    limit = least * (1 + EXPONENT_F / dof) if dof > 0 else math.inf
+    best = min((f for f in fits if f[0] <= limit), key=lambda f: f[2])
+    return best[1], best[2]
 
 
 def _named(x: Any, names: list[str], known_inertia: float | None) -> dict[str, float]:
