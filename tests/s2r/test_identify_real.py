@@ -319,7 +319,7 @@ PTY_EXCITATION = Excitation(duration=46.0, amplitude=32.0, swing=6.0)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("reality", [EROB80_100_M2, PERTURBED], ids=lambda r: r.name.split()[-1])
+@pytest.mark.parametrize("reality", REALITIES, ids=lambda r: r.name.split()[-1])
 def test_identification_over_the_pty_at_wall_clock_time(reality: Any) -> None:
     """A reality twin served on a pseudo-terminal in real time (wall clock), identified through the serial port
     as on hardware: the parameters - armature and Kt within 10 % of the truth, friction within 10 % of the same
