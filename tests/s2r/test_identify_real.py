@@ -33,6 +33,7 @@ from joints.sim import sensors
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from reality import (
     EROB80_100_M2,
+    EROB80_100_M6,
     NOMINAL,
     PERTURBED,
     REALITIES,
@@ -316,6 +317,22 @@ def test_shadow_counts_twin_errors() -> None:
 #: over the pty: a state every ~5-7 ms (two transactions per sample at the host's pace), so twice the in-process
 #: multi-sine (the fit's windows grow to 30 sampling periods and fewer of them slide), the same swing
 PTY_EXCITATION = Excitation(duration=46.0, amplitude=32.0, swing=6.0)
+
+
+def test_stribeck_exponents_the_data_cannot_tell_apart_give_the_lowest() -> None:
+    """BAM M6 sampled every 6 ms as over the pty, noise-free: its exponents 3 and 4 fit within 0.01 % of each
+    other (its torque-dependent friction is not of the fit's form), far below what the residual can resolve, so
+    the fit takes the lower, 3, and the Coulomb / Stribeck split the noisy fits over the pty find (Coulomb 0,
+    Stribeck 5.2-5.3 N*m). Taking the smaller residual gave exponent 4, Coulomb 1.43, Stribeck 3.94 N*m."""
+    rig = open_real(EROB80_100_M6, noise=False)
+    try:
+        got = identify(rig, "joint1", replace(PTY_EXCITATION, period=0.006))
+    finally:
+        rig.close()
+    assert got.stribeck_exponent == 3.0, str(got)
+    standstill = got.coulomb_friction + got.stribeck_friction
+    assert got.coulomb_friction <= 0.05 * standstill, str(got)
+    assert got.stribeck_friction == pytest.approx(EROB80_100_M6.stribeck, rel=0.10), str(got)
 
 
 @pytest.mark.slow
