@@ -24,7 +24,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     from joints.s2r.identify import Excitation, identify, write_overlay
 
     exc = Excitation(mode=args.mode, duration=args.duration, amplitude=args.amplitude, f_min=args.f_min,
-                     f_max=args.f_max)
+                     f_max=args.f_max, swing=args.swing, f_swing=args.f_swing)
 
     def progress(fraction: float, text: str) -> None:
         bar = "#" * round(30 * fraction)
@@ -33,7 +33,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
     with open_rig(args, config=load_config(args)) as rig:  # the config's on_exit: a failed run disables
         j = joint(rig, args.joint)
         print(f"identifying joint {args.joint} ({rig.backend}): {exc.mode} multi-sine {exc.f_min:g}-{exc.f_max:g} Hz "
-              f"for {exc.duration:g} s inside limits {j.limits}", file=sys.stderr)
+              f"for {exc.duration:g} s" + (f" ending in a {exc.swing:g} s swing at {exc.f_swing:g} Hz" if exc.swing else "")
+              + f" inside limits {j.limits}", file=sys.stderr)
         ident = identify(rig, args.joint, exc, known_inertia=args.inertia, progress=progress)
         print(file=sys.stderr)
         driver: Any = j.driver  # every family's driver holds its physical profile
@@ -97,8 +98,9 @@ def replay_options(p: argparse.ArgumentParser) -> None:
 def register(sub: Any) -> None:
     ident = command(sub, "identify", help="identify a joint's inertia, friction, torque constant and delay (a safe "
                                           "excitation inside its limits) and write its profile overlay",
-                    example="joints identify stand.toml joint1\njoints identify stand.toml joint1 --mode speed "
-                            "--duration 30", func=cmd_identify)
+                    example="joints identify stand.toml joint1\njoints identify stand.toml joint1 --amplitude 32 "
+                            "--duration 26 --swing 6\njoints identify stand.toml joint1 --mode speed --duration 30",
+                    func=cmd_identify)
     add_config(ident)
     ident.add_argument("joint")
     ident.add_argument("--mode", choices=("torque", "speed"), default="torque",
@@ -107,6 +109,10 @@ def register(sub: Any) -> None:
     ident.add_argument("--amplitude", type=positive, help="peak N*m (torque) or rad/s (speed); default half the limit")
     ident.add_argument("--f-min", type=positive, default=0.2, dest="f_min", help="Hz")
     ident.add_argument("--f-max", type=positive, default=3.0, dest="f_max", help="Hz")
+    ident.add_argument("--swing", type=nonnegative, default=0.0,
+                       help="seconds of the duration that end it in a sine of the full amplitude (higher speeds: "
+                            "tells Coulomb from Stribeck friction; docs/identification.md)")
+    ident.add_argument("--f-swing", type=positive, default=0.6, dest="f_swing", help="Hz of the swing")
     ident.add_argument("--inertia", type=nonnegative,
                        help="the joint's whole inertia [kg*m^2] when it has no gravity torque")
     ident.add_argument("--output", help="overlay file (default: <joint>.profile.toml next to the config)")

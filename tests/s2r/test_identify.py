@@ -210,6 +210,26 @@ def test_excitation_stays_inside_the_limits() -> None:
         assert abs(rig.joints["joint1"].state().position) < 0.06
 
 
+def test_excitation_ends_in_a_swing_of_the_full_amplitude() -> None:
+    """The swing (the last ``swing`` s): one sine at ``f_swing`` reaching the full amplitude, after a multi-sine
+    that has faded out; a swing too short for its fades and one cycle is refused."""
+    exc = Excitation(duration=26.0, amplitude=32.0, swing=6.0)
+    signal = exc.shape()
+    ts = np.arange(0.0, 26.0, 1e-3)
+    u = np.array([signal(t) for t in ts])
+    swing = ts >= 20.0
+    assert np.abs(u).max() == pytest.approx(1.0, abs=1e-3)  # unit peak, in the multi-sine and the swing
+    assert np.abs(u[swing]).max() == pytest.approx(1.0, abs=1e-3)
+    assert abs(signal(19.999)) < 1e-3 and signal(20.0) == 0.0  # the multi-sine faded out, the swing starts at 0
+    full = swing & (ts >= 21.5) & (ts <= 25.0)
+    assert u[full] == pytest.approx(np.sin(2 * np.pi * 0.6 * (ts[full] - 20.0)), abs=1e-9)
+    assert np.abs(u[ts < 20.0]).max() == pytest.approx(1.0, abs=1e-3)
+    with pytest.raises(ConfigError, match="swing"):
+        Excitation(duration=26.0, swing=3.0)  # < 1.5 + 1.0 s of fades + a 0.6 Hz cycle
+    with pytest.raises(ConfigError, match="duration"):
+        Excitation(duration=8.0, swing=6.0)  # 2 s of multi-sine: shorter than its fades
+
+
 def test_progress_is_reported() -> None:
     seen: list[float] = []
     with joints.open(pendulum()) as rig:

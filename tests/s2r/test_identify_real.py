@@ -7,6 +7,7 @@ What these tests assert is what holds on this branch; see docs/identification.md
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,7 @@ from joints.sim import sensors
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from reality import (
     EROB80_100_M2,
+    EROB80_100_M6,
     NOMINAL,
     PERTURBED,
     REALITIES,
@@ -83,9 +85,11 @@ def test_sensors_report_noise_seeded_and_independent_of_the_kernel(monkeypatch: 
     assert other != runs["1"][0]  # another seed, another stream
 
 
-#: the excitation the reality twins are judged with: peak 32 N*m (80 % of the stand's torque limit). At the
-#: default (half the limit) a joint with the real friction sticks 95 % of the time and the fit refuses.
-EXCITATION = Excitation(duration=20.0, amplitude=32.0)
+#: the excitation the reality twins are judged with: peak 32 N*m (80 % of the stand's torque limit; at the
+#: default, half the limit, a joint with the real friction sticks 95 % of the time and the fit refuses), 20 s of
+#: multi-sine and a 6 s swing: a sine at 0.6 Hz that takes BAM's eRob80:100 to 2.7 rad/s, where its Stribeck
+#: friction has decayed (the multi-sine alone reaches 1.6 rad/s: the Coulomb and Stribeck levels then trade off)
+EXCITATION = Excitation(duration=26.0, amplitude=32.0, swing=6.0)
 
 
 @pytest.fixture(scope="module", params=REALITIES, ids=lambda r: r.name.split()[-1])
@@ -109,22 +113,44 @@ def check_recovery(reality: Any, ref: Identification, got: Identification, *, de
     assert got.armature == pytest.approx(reality.armature, rel=0.10), str(got)
     assert got.torque_scale == pytest.approx(reality.torque_scale, rel=0.10), str(got)
     check_friction(got, ref)
+    check_split(reality, ref)
+    check_split(reality, got)
     assert got.delay is not None and abs(got.delay - reality.delay) <= 1e-3 + delay_slack, str(got)
 
 
 #: rad/s, where the friction curves are compared: from slow sliding to the speeds the excitation reaches
-SPEEDS = (0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.5)
+SPEEDS = (0.05, 0.1, 0.2, 0.4, 0.7, 1.0, 1.5, 2.0, 2.5)
 
 
 def check_friction(got: Identification, ref: Identification) -> None:
-    """Friction within 10 % of the reference: the viscous coefficient, and the friction curve (Coulomb + Stribeck
-    + viscous) at every speed of SPEEDS - with a Stribeck term the Coulomb and Stribeck levels trade off (the
-    report names them inseparable), the curve they make does not. Without one, the Coulomb level itself."""
+    """Friction within 10 % of the reference: the viscous coefficient, the Stribeck level, the friction curve
+    (Coulomb + Stribeck + viscous) at every speed of SPEEDS, and the Coulomb level within 10 % of itself or 5 % of
+    the friction at standstill, whichever is wider. The second bound is wider for a Coulomb level below half of
+    the standstill friction: BAM's twins (M2: truly 0, M6: 0.0005 N*m + torque-dependent friction). 10 % of a level
+    near 0 is below the scatter that the sensors' noise gives it (M2: 0.06 N*m in process over seeds 0-4, up to 0.15
+    N*m over the pty); docs/identification.md."""
     assert got.viscous_friction == pytest.approx(ref.viscous_friction, rel=0.10), (str(got), str(ref))
+    assert bool(got.stribeck_friction) == bool(ref.stribeck_friction), (str(got), str(ref))
+    assert got.stribeck_friction == pytest.approx(ref.stribeck_friction, rel=0.10), (str(got), str(ref))
     for v in SPEEDS:
         assert got.friction_at(v) == pytest.approx(ref.friction_at(v), rel=0.10), (v, str(got), str(ref))
-    if not (got.stribeck_friction or ref.stribeck_friction):
-        assert got.coulomb_friction == pytest.approx(ref.coulomb_friction, rel=0.10), (str(got), str(ref))
+    standstill = ref.coulomb_friction + ref.stribeck_friction
+    tolerance = max(0.10 * ref.coulomb_friction, 0.05 * standstill)
+    assert abs(got.coulomb_friction - ref.coulomb_friction) <= tolerance, (str(got), str(ref))
+
+
+def check_split(reality: Any, got: Identification) -> None:
+    """Where the twin's friction is exactly the fitted form (BAM's M2: Coulomb 0, Stribeck, viscous), the fit
+    tells the Coulomb and Stribeck levels apart as the twin has them: the Coulomb level below 5 % of the
+    friction at standstill, the Stribeck level and velocity within 10 %, viscous within 10 %. The multi-sine
+    alone (1.6 rad/s) gives Coulomb 0.5-0.75 N*m and Stribeck -10 ... -15 %: the levels trade off."""
+    if reality.load_motor or reality.load_external or not reality.stribeck:
+        return  # M6: its torque-dependent terms have no single Coulomb value; the issue-24 twin: no Stribeck term
+    standstill = reality.coulomb + reality.stribeck
+    assert abs(got.coulomb_friction - reality.coulomb) <= 0.05 * standstill, str(got)
+    assert got.stribeck_friction == pytest.approx(reality.stribeck, rel=0.10), str(got)
+    assert got.stribeck_velocity == pytest.approx(reality.v_stribeck, rel=0.10), str(got)
+    assert got.viscous_friction == pytest.approx(reality.viscous, rel=0.10), str(got)
 
 
 def test_reality_twins_are_recovered(judged: tuple[Any, Identification, Identification, Any]) -> None:
@@ -135,7 +161,10 @@ def test_reality_twins_are_recovered(judged: tuple[Any, Identification, Identifi
     check_recovery(reality, ref, got)
     assert got.period == pytest.approx(0.001)
     assert f"every {got.period * 1e3:.3f} ms" in str(got)
-    assert set(got.load_sensitivity) >= {"armature", "coulomb_friction", "viscous_friction", "torque_scale"}
+    # every parameter that is not 0 (a friction level held at 0 - BAM M6's Coulomb - has no relative sensitivity)
+    stated = {k for k in ("armature", "coulomb_friction", "viscous_friction", "stribeck_friction", "torque_scale")
+              if getattr(got, k)}
+    assert set(got.load_sensitivity) >= stated >= {"armature", "viscous_friction", "torque_scale"}
     assert np.isfinite(got.condition) and got.correlations
     assert "identifiability" in str(got) and "load mass" in str(got)
 
@@ -285,13 +314,29 @@ def test_shadow_counts_twin_errors() -> None:
     assert {"mean", "std", "p5", "p95"} <= set(summary["joint1"]["position"])
 
 
-#: over the pty: a state every ~5-7 ms (two transactions per sample at the host's pace), so twice the duration
-#: of the in-process excitation: the fit's windows grow to 30 sampling periods and fewer of them slide
-PTY_EXCITATION = Excitation(duration=40.0, amplitude=32.0)
+#: over the pty: a state every ~5-7 ms (two transactions per sample at the host's pace), so twice the in-process
+#: multi-sine (the fit's windows grow to 30 sampling periods and fewer of them slide), the same swing
+PTY_EXCITATION = Excitation(duration=46.0, amplitude=32.0, swing=6.0)
+
+
+def test_stribeck_exponents_the_data_cannot_tell_apart_give_the_lowest() -> None:
+    """BAM M6 sampled every 6 ms as over the pty, noise-free: its exponents 3 and 4 fit within 0.01 % of each
+    other (its torque-dependent friction is not of the fit's form), far below what the residual can resolve, so
+    the fit takes the lower, 3, and the Coulomb / Stribeck split the noisy fits over the pty find (Coulomb 0,
+    Stribeck 5.2-5.3 N*m). Taking the smaller residual gave exponent 4, Coulomb 1.43, Stribeck 3.94 N*m."""
+    rig = open_real(EROB80_100_M6, noise=False)
+    try:
+        got = identify(rig, "joint1", replace(PTY_EXCITATION, period=0.006))
+    finally:
+        rig.close()
+    assert got.stribeck_exponent == 3.0, str(got)
+    standstill = got.coulomb_friction + got.stribeck_friction
+    assert got.coulomb_friction <= 0.05 * standstill, str(got)
+    assert got.stribeck_friction == pytest.approx(EROB80_100_M6.stribeck, rel=0.10), str(got)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("reality", [EROB80_100_M2, PERTURBED], ids=lambda r: r.name.split()[-1])
+@pytest.mark.parametrize("reality", REALITIES, ids=lambda r: r.name.split()[-1])
 def test_identification_over_the_pty_at_wall_clock_time(reality: Any) -> None:
     """A reality twin served on a pseudo-terminal in real time (wall clock), identified through the serial port
     as on hardware: the parameters - armature and Kt within 10 % of the truth, friction within 10 % of the same
@@ -318,8 +363,7 @@ def test_identification_over_the_pty_at_wall_clock_time(reality: Any) -> None:
     ref_rig = open_real(reality, noise=False)
     try:
         period = round(got.period / ref_rig.sim.timestep) * ref_rig.sim.timestep
-        ref = identify(ref_rig, "joint1", Excitation(duration=PTY_EXCITATION.duration, amplitude=32.0,
-                                                     period=max(period, 0.001)))
+        ref = identify(ref_rig, "joint1", replace(PTY_EXCITATION, period=max(period, 0.001)))
     finally:
         ref_rig.close()
     print(got)
