@@ -897,7 +897,7 @@ def advance_together(worlds: Sequence[World], seconds: Sequence[float]) -> None:
             while True:
                 for i, w in enumerate(worlds):  # on its own: a world that cannot (or no longer can) run fused
                     if due[i] > 0 and not (group.compiled and group.fusable[w.group_index]):
-                        w.step(due[i])
+                        w._step_due(due[i])
                         due[i] = 0
                 left = [i for i, d in enumerate(due) if d > 0]
                 if not left:

@@ -18,8 +18,19 @@ from gymnasium.vector import AutoresetMode
 import envs
 import joints
 from envs.vector import JointsVectorEnv
+from joints.sim import kernel
 
 N = 3
+#: how the worlds run their drives' kernels: compiled (fused calls across the rigs) and as plain Python
+KERNELS = ["compiled", "python"] if kernel.AVAILABLE else ["python"]
+
+
+@pytest.fixture(params=KERNELS)
+def kernels(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """Worlds built in this test run their kernels ``request.param`` (``JOINTS_COMPILED``)."""
+    monkeypatch.setenv(kernel.SWITCH, "1" if request.param == "compiled" else "0")
+    monkeypatch.delenv(kernel.OLD_SWITCH, raising=False)
+    return str(request.param)
 CASES = [
     ("joints/ErobReach-v0", {"max_episode_steps": 25}),
     ("joints/ErobReach-v0", {"action_mode": "torque", "domain_randomization": True, "max_episode_steps": 40}),
@@ -56,10 +67,11 @@ def _pair(env_id: str, kwargs: dict[str, Any], mode: AutoresetMode) -> tuple[Any
 
 
 @pytest.mark.parametrize(("env_id", "kwargs"), CASES)
-def test_batched_env_is_a_sync_vector_env_of_single_envs(env_id: str, kwargs: dict[str, Any]) -> None:
+def test_batched_env_is_a_sync_vector_env_of_single_envs(env_id: str, kwargs: dict[str, Any], kernels: str) -> None:
     vec, ref = _pair(env_id, kwargs, AutoresetMode.NEXT_STEP)
     try:
         assert isinstance(vec.unwrapped, JointsVectorEnv)
+        assert {e.rig.sim.compiled for e in vec.unwrapped.envs} == {kernels == "compiled"}
         assert vec.single_observation_space == ref.single_observation_space
         assert vec.single_action_space == ref.single_action_space
         assert vec.observation_space == ref.observation_space and vec.action_space == ref.action_space
@@ -81,7 +93,7 @@ def test_batched_env_is_a_sync_vector_env_of_single_envs(env_id: str, kwargs: di
         ref.close()
 
 
-def test_same_step_autoreset_and_partial_reset() -> None:
+def test_same_step_autoreset_and_partial_reset(kernels: str) -> None:
     vec, ref = _pair("joints/ErobReach-v0", {"max_episode_steps": 7}, AutoresetMode.SAME_STEP)
     try:
         _same(vec.reset(seed=1), ref.reset(seed=1), "reset")
