@@ -167,3 +167,38 @@ def erob_arm3_clearance_bound(q2: float, q3: float) -> float:
         _segment_column(ex, ez, fx, fz, *base) - ARM3_FORE_RADIUS,
         _segment_column(ex, ez, fx, fz, *link1) - ARM3_FORE_RADIUS,
     )
+
+
+#: m the shield's bound gives away for rounding (:meth:`envs.reach.ErobArmReachEnv.keeps_clearance`)
+BOUND_SLACK = 1e-9
+
+
+def erob_arm3_clears(q2: float, q3: float, less: float, need: float) -> bool:
+    """``erob_arm3_clearance_bound(q2, q3) - less - BOUND_SLACK >= need``, the same answer for every input,
+    faster: each of the bound's terms is computed by the same IEEE operations, and since ``t - less - slack``
+    never decreases as ``t`` grows, the smallest term passes exactly when every term passes - so the cheap
+    terms go first and the first that fails ends it. (``min()`` keeps a NaN only as its first argument, the
+    upper arm - floor term: that term fails on NaN, the others on ``<`` alone, which a NaN never is.)"""
+    slack = BOUND_SLACK
+    h = ARM3_SHOULDER_HEIGHT
+    ex, ez = ARM3_UPPER * math.cos(q2), h - ARM3_UPPER * math.sin(q2)
+    r = ARM3_ELBOW_RADIUS
+    if ez - r - less - slack < need:  # elbow - floor
+        return False
+    t = (h if not ez < h else ez) - ARM3_UPPER_RADIUS  # min(h, ez), NaN as min() has it
+    if not t - less - slack >= need:  # upper arm - floor (min()'s first argument)
+        return False
+    fx, fz = ex + ARM3_FORE * math.cos(q2 + q3), ez - ARM3_FORE * math.sin(q2 + q3)
+    if (ez if not fz < ez else fz) - ARM3_FORE_RADIUS - less - slack < need:  # forearm - floor; min(ez, fz)
+        return False
+    (bh, b0, b1), (lh, l0, l1) = ARM3_COLUMNS
+    if _point_column(ex, ez, bh, b0, b1) - r - less - slack < need:  # elbow - base
+        return False
+    if _point_column(ex, ez, lh, l0, l1) - r - less - slack < need:  # elbow - link1
+        return False
+    r = ARM3_FORE_RADIUS
+    if _segment_column(ex, ez, fx, fz, bh, b0, b1) - r - less - slack < need:  # forearm - base
+        return False
+    if _segment_column(ex, ez, fx, fz, lh, l0, l1) - r - less - slack < need:  # forearm - link1
+        return False
+    return not _segment_column(0.0, h, ex, ez, bh, b0, b1) - ARM3_UPPER_RADIUS - less - slack < need  # upper arm - base
