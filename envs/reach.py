@@ -17,6 +17,7 @@ from envs.kinematics import (
     erob_arm3_clearance,
     erob_arm3_clears,
     erob_arm3_ee,
+    erob_arm3_falls_short,
     erob_stand_tip,
 )
 from envs.render import CameraSpec
@@ -403,7 +404,8 @@ class ErobArmReachEnv(JointsEnv):
             if erob_arm3_clears(q2, q3, span2 / 2 + span3 / 2, need):
                 continue
             if bounds >= self.BOUNDS:
-                return self.clearance((0.0, lo2, lo3), (0.0, hi2, hi3)) >= need
+                return not self._short_on_grid(lo2, hi2, lo3, hi3) \
+                    and self.clearance((0.0, lo2, lo3), (0.0, hi2, hi3)) >= need
             if span2 >= span3:
                 m = (a2 + b2) / 2
                 boxes += [(a2, m, a3, b3), (m, b2, a3, b3)]
@@ -411,6 +413,21 @@ class ErobArmReachEnv(JointsEnv):
                 m = (a3 + b3) / 2
                 boxes += [(a2, b2, a3, m), (a2, b2, m, b3)]
         return True
+
+    def _short_on_grid(self, lo2: float, hi2: float, lo3: float, hi3: float) -> bool:
+        """Whether a corner or the middle of :meth:`clearance`'s grid over the box surely falls short of
+        :attr:`CLEARANCE` (:func:`~envs.kinematics.erob_arm3_falls_short`): the grid's answer, without the grid
+        (most boxes the bounds cannot tell are ones that do not keep the gap)."""
+        axes = []
+        for i, (lo, hi) in ((1, (lo2, hi2)), (2, (lo3, hi3))):
+            j = self.joints[i]
+            n = max(2, math.ceil((hi - lo) / self.GRID) + 1)
+            axes.append(((np.linspace(lo, hi, n) - j.offset) * j.direction).tolist())  # as clearance() has them
+        (a, b) = axes
+        for q2, q3 in ((a[0], b[0]), (a[-1], b[-1]), (a[0], b[-1]), (a[-1], b[0]), (a[len(a) // 2], b[len(b) // 2])):
+            if erob_arm3_falls_short(q2, q3, self.CLEARANCE):
+                return True
+        return False
 
     def _shield(self, command: list[float]) -> list[float]:
         """Keep the arm :attr:`CLEARANCE` off the floor and its base: the shoulder and elbow commands
