@@ -192,9 +192,15 @@ def erob_arm3_clears(q2: float, q3: float, less: float, need: float) -> bool:
     if (ez if not fz < ez else fz) - ARM3_FORE_RADIUS - less - slack < need:  # forearm - floor; min(ez, fz)
         return False
     (bh, b0, b1), (lh, l0, l1) = ARM3_COLUMNS
-    if _point_column(ex, ez, bh, b0, b1) - r - less - slack < need:  # elbow - base
+    # elbow - base and elbow - link1: _point_column written out (max(a, b) is ``b if b > a else a``)
+    ax = abs(ex)
+    dx, dz, w = ax - bh, b0 - ez, ez - b1
+    dz = w if w > dz else dz  # noqa: FURB136
+    if math.hypot(0.0 if 0.0 > dx else dx, 0.0 if 0.0 > dz else dz) - r - less - slack < need:  # noqa: FURB136
         return False
-    if _point_column(ex, ez, lh, l0, l1) - r - less - slack < need:  # elbow - link1
+    dx, dz, w = ax - lh, l0 - ez, ez - l1
+    dz = w if w > dz else dz  # noqa: FURB136
+    if math.hypot(0.0 if 0.0 > dx else dx, 0.0 if 0.0 > dz else dz) - r - less - slack < need:  # noqa: FURB136
         return False
     r = ARM3_FORE_RADIUS
     if _apart(ex, ez, fx, fz, bh, b0, b1) - r - less - slack < need \
