@@ -185,15 +185,14 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
             env.note_overrun(-remaining)
         if rigs:
             joints.sleep_together(rigs, spans)
-        same_step = mode is AutoresetMode.SAME_STEP
         limit = self.max_episode_steps
         elapsed = self._elapsed
-        for i, token in acting:
-            env = envs[i]
-            if env.batchable:
-                obs, rewards[i], terminated[i], truncated[i], infos_of[i] = env.finish_step(token)
-                obs_rows[i] = obs
-            if same_step:
+        if mode is AutoresetMode.SAME_STEP:  # rig by rig: a rig that ends is reset at once
+            for i, token in acting:
+                env = envs[i]
+                if env.batchable:
+                    obs, rewards[i], terminated[i], truncated[i], infos_of[i] = env.finish_step(token)
+                    obs_rows[i] = obs
                 elapsed[i] += 1
                 if limit is not None and elapsed[i] >= limit:
                     truncated[i] = True
@@ -201,7 +200,16 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
                     finals[i] = (obs_rows[i].copy(), infos_of[i])
                     obs_rows[i], infos_of[i] = env.reset()
                     elapsed[i] = 0
-        if not same_step and acting:  # the episode counters of the rigs that stepped, at once
+        elif acting:  # every rig's outcome, then each array at once
+            done = [(i, envs[i].finish_step(token)) for i, token in acting if envs[i].batchable]
+            if done:
+                rows = [i for i, _ in done]
+                obs_rows[rows] = [out[0] for _, out in done]
+                rewards[rows] = [out[1] for _, out in done]
+                terminated[rows] = [out[2] for _, out in done]
+                truncated[rows] = [out[3] for _, out in done]
+                for i, out in done:
+                    infos_of[i] = out[4]
             stepped = [i for i, _ in acting]
             elapsed[stepped] += 1
             if limit is not None:
@@ -219,7 +227,8 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
     def _batched_info(self, infos: Sequence[dict[str, Any]]) -> dict[str, Any] | None:
         """What :meth:`_add_info` makes of one info per rig, built a key at a time across all rigs (one array per
         key, every mask all True), where every rig's info has the same keys in the same order and each key one
-        plain type (and shape and dtype) in all of them; else None (then :meth:`_add_info`, rig by rig)."""
+        plain type (and shape and dtype: numbers, arrays, dicts) in all of them, or objects that are no dict (None,
+        str ...); else None (then :meth:`_add_info`, rig by rig)."""
         first = infos[0]
         keys = list(first)
         for info in infos:
@@ -232,8 +241,9 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
                 return None
             values = [info[key] for info in infos]
             kind = type(values[0])
+            plain = kind in (int, float, bool) or issubclass(kind, (np.number, np.ndarray, dict))
             for v in values:
-                if type(v) is not kind:
+                if type(v) is not kind and (plain or isinstance(v, dict)):  # objects may mix (None, str ...)
                     return None
             array: Any
             if kind is dict:
