@@ -383,8 +383,9 @@ class ErobArmReachEnv(JointsEnv):
         ARM3_FORE * |dq3|``, so the exact gap at the centre (a lower bound of the grid's sampled
         one) minus that is a lower bound over the whole box. Where that cannot tell, the box is halved
         (along the joint that moves the links more) and each half bounded the same way, up to
-        :attr:`BOUNDS` bounds; only where they cannot tell either is the grid evaluated. A bound only
-        ever answers True where every grid pose keeps the gap, so the answer is the grid's."""
+        :attr:`BOUNDS` bounds; only where they cannot tell either is the grid evaluated, unless a corner or
+        the middle of the grid surely falls short (:meth:`_short_on_grid`: False, as the grid answers). A bound
+        only ever answers True where every grid pose keeps the gap, so the answer is the grid's."""
         return self._keeps(float(lo[1]), float(hi[1]), float(lo[2]), float(hi[2]))
 
     def _keeps(self, lo2: float, hi2: float, lo3: float, hi3: float) -> bool:
