@@ -125,6 +125,44 @@ def braking_speed(distance: np.ndarray, acceleration: np.ndarray, period: float,
     return out
 
 
+def braking_speed_of(distance: float, acceleration: float, period: float, speed: float) -> float:
+    """:func:`braking_speed` of one joint on plain floats: the same IEEE operations in the same order
+    (``x ** 2`` of an array is ``x * x``; ``np.maximum(x, 0.0)`` is ``x if not x <= 0.0 else 0.0``, NaN
+    kept; ``np.sqrt`` and ``math.sqrt`` both round correctly), so the same bits, for the env's per-step
+    cap. Only the branch ``np.where`` picks is computed."""
+    a, d, t = acceleration, distance, period
+    if not a > 0.0:  # no ramp (numpy's inf / nan arithmetic, without a ZeroDivisionError)
+        return float(braking_speed(np.array([d]), np.array([a]), t, speed)[0])
+    u = speed if not speed <= 0.0 else 0.0
+    at = a * t
+    two_a = 2.0 * a
+    w = u + at
+    if d >= (2.0 * u + at) * 0.5 * t + w * w / two_a:  # d_up
+        return math.inf
+    uu = u * u
+    if d >= u * t + uu / two_a:  # d_hold
+        return (d + uu / two_a) / (t + u / a)
+    lo = u - at
+    lo = lo if not lo <= 0.0 else 0.0
+    r = u - lo
+    if d >= lo * t + r * r / two_a + lo * lo / two_a:  # d_lo
+        b = t - u / a
+        disc = b * b - 4.0 / a * (uu / two_a - d)
+        disc = disc if not disc <= 0.0 else 0.0
+        down = (math.sqrt(disc) - b) * a / 2.0
+        return down if not down <= 0.0 else 0.0
+    return 0.0
+
+
+def clip_to(value: float, low: float, high: float) -> float:
+    """``np.clip`` of one float between ARRAY bounds (whose loop, unlike a scalar bound's, gives the
+    bound on a tie: ``np.clip([0.0], [-0.0], [1.0])`` is ``-0.0``), NaN kept: its bits on plain floats."""
+    if math.isnan(value):
+        return value
+    m = value if value > low else low  # noqa: FURB136 - numpy's rule, not max()'s
+    return m if m < high else high  # noqa: FURB136
+
+
 def fault_info(name: str, state: joints.JointState) -> dict[str, Any]:
     """``info["fault"]`` of a faulted joint: its name, the fault's name, code, text and what clears it."""
     f = state.fault
@@ -412,6 +450,10 @@ class JointsEnv(RigEnv):
         #: the limits as plain floats (per-step arithmetic on a few joints)
         self._pos_lo, self._pos_hi = self.position_limits[:, 0].tolist(), self.position_limits[:, 1].tolist()
         self._vel_list, self._torque_list = self.velocity_limits.tolist(), self.torque_limits.tolist()
+        #: where velocity actions brake to: LIMIT_INSET inside the limits (plain floats)
+        self._inset_lo = (self.position_limits[:, 0] + LIMIT_INSET).tolist()
+        self._inset_hi = (self.position_limits[:, 1] - LIMIT_INSET).tolist()
+        self._action_shape = (n,)
 
         self._mjcf_joints = [rig.config.joints[nm].mjcf_joint or nm for nm in self.joint_names]
 
@@ -419,6 +461,7 @@ class JointsEnv(RigEnv):
         self._twin: tuple[Any, Any, np.ndarray] | None = None  # hardware: (model, data, qpos addresses)
         self._queue: deque[np.ndarray] = deque()
         self._prev_action = np.zeros(n)
+        self._prev_values = self._prev_action.tolist()
         self._states: list[joints.JointState] = []
         self._sent = np.zeros(n)  # the SI command of the last step (after safe_command)
         self._tick = 0
@@ -451,12 +494,13 @@ class JointsEnv(RigEnv):
     def _sample_target(self, options: Mapping[str, Any]) -> None:
         """Draw the task's goal from ``self.np_random``."""
 
-    def _task_terms(self, positions: np.ndarray) -> np.ndarray:
-        """Task terms of the observation for the measured joint positions."""
-        return np.zeros(0)
+    def _task_terms(self, positions: list[float]) -> list[float]:
+        """Task terms of the observation for the measured joint positions (plain floats)."""
+        return []
 
-    def _reward(self, positions: np.ndarray, action: np.ndarray) -> tuple[float, dict[str, Any]]:
-        """Reward and its terms (``info``)."""
+    def _reward(self, positions: list[float], action_change: float) -> tuple[float, dict[str, Any]]:
+        """Reward and its terms (``info``) for the measured joint positions and ``action_change``, the
+        action's squared change ``sum((a_t - a_{t-1})^2)``."""
         return 0.0, {}
 
     def _markers(self) -> list[tuple[np.ndarray, tuple[float, float, float, float]]]:
@@ -472,12 +516,15 @@ class JointsEnv(RigEnv):
     def command_of(self, action: Sequence[float] | np.ndarray) -> np.ndarray:
         """SI commands (rad | rad/s | N*m per the action mode) of a normalised action."""
         a = [clip(v, -1.0, 1.0) for v in np.asarray(action, dtype=np.float64).reshape(-1).tolist()]
-        if self.action_mode == "position":  # plain floats: the same IEEE operations as the arrays, the same bits
-            out = [clip(lo + (v + 1.0) * 0.5 * (hi - lo), lo, hi) for v, lo, hi in zip(a, self._pos_lo, self._pos_hi)]
-        else:
-            scale = self._vel_list if self.action_mode == "velocity" else self._torque_list
-            out = [v * s for v, s in zip(a, scale)]
-        return np.array(out)
+        return np.array(self._commands(a))
+
+    def _commands(self, a: list[float]) -> list[float]:
+        """:meth:`command_of` of an action already clipped to [-1, 1], on plain floats (the same IEEE
+        operations as the arrays, the same bits)."""
+        if self.action_mode == "position":
+            return [clip(lo + (v + 1.0) * 0.5 * (hi - lo), lo, hi) for v, lo, hi in zip(a, self._pos_lo, self._pos_hi)]
+        scale = self._vel_list if self.action_mode == "velocity" else self._torque_list
+        return [v * s for v, s in zip(a, scale)]
 
     def action_of(self, command: Sequence[float] | np.ndarray) -> np.ndarray:
         """The normalised action (float32, clipped to [-1, 1]) for SI commands; inverse of :meth:`command_of`."""
@@ -506,28 +553,36 @@ class JointsEnv(RigEnv):
         values = np.asarray(command, dtype=np.float64).reshape(-1).tolist()
         if len(values) != len(self.joints) or any(v - v != 0.0 for v in values):  # NaN or infinite
             raise ValueError(f"command must be one finite value per joint, got {command!r}")
-        mode = self.action_mode
-        if mode == "position":  # plain floats, np.clip's rule: the same bits as the arrays
-            values = [clip(v, lo, hi) for v, lo, hi in zip(values, self._pos_lo, self._pos_hi)]
-        else:
-            cap = self.speed_cap.tolist() if mode == "velocity" else self._torque_list
-            values = [clip(v, -m, m) for v, m in zip(values, cap)]
-        c: np.ndarray = np.array(values)
-        if mode == "torque":
-            return c
-        if not self._states:
-            return c
-        if self.action_mode == "velocity":
-            p = np.array([s.position for s in self._states])
-            a, dt = self.profile_acceleration, self.control_period + self.bus_lag
-            v = np.array([s.velocity for s in self._states])
-            lo, hi = self.position_limits[:, 0] + LIMIT_INSET, self.position_limits[:, 1] - LIMIT_INSET
-            np.clip(c, -braking_speed(p - lo, a, dt, -v), braking_speed(hi - p, a, dt, v), out=c)
-        return self._shield(c)
+        return np.array(self._safe(self._limit(values)))
 
-    def _shield(self, command: np.ndarray) -> np.ndarray:
-        """The task's own safety rule on a position or velocity command (SI, within the limits);
-        default: none. See :meth:`_reach` and :meth:`_stop_command` for the motion it may predict."""
+    def _limit(self, values: list[float]) -> list[float]:
+        """The limit clip of :meth:`safe_command` on plain floats (np.clip's rule: the same bits as the arrays)."""
+        mode = self.action_mode
+        if mode == "position":
+            return [clip(v, lo, hi) for v, lo, hi in zip(values, self._pos_lo, self._pos_hi)]
+        cap = self.speed_cap.tolist() if mode == "velocity" else self._torque_list
+        return [clip(v, -m, m) for v, m in zip(values, cap)]
+
+    def _safe(self, values: list[float]) -> list[float]:
+        """:meth:`safe_command` after the limit clip: the braking cap (velocity) and the task's rule."""
+        mode = self.action_mode
+        if mode == "torque" or not self._states:
+            return values
+        if mode == "velocity":
+            dt = self.control_period + self.bus_lag
+            acc = self.profile_acceleration.tolist()
+            capped = []
+            for c, s, a, lo, hi in zip(values, self._states, acc, self._inset_lo, self._inset_hi):
+                p, v = s.position, s.velocity
+                # np.clip(c, -braking_speed(p - lo, a, dt, -v), braking_speed(hi - p, a, dt, v)), per joint
+                capped.append(clip_to(c, -braking_speed_of(p - lo, a, dt, -v), braking_speed_of(hi - p, a, dt, v)))
+            values = capped
+        return self._shield(values)
+
+    def _shield(self, command: list[float]) -> list[float]:
+        """The task's own safety rule on a position or velocity command (SI, within the limits, one
+        float per joint); default: none. See :meth:`_reach` and :meth:`_stop_command` for the motion it
+        may predict."""
         return command
 
     def _stop_command(self, i: int) -> float:
@@ -536,14 +591,14 @@ class JointsEnv(RigEnv):
         if self.action_mode == "velocity":
             return 0.0
         s = self._states[i]
-        stop = s.position + s.velocity * abs(s.velocity) / (2.0 * self.profile_deceleration[i])
-        return float(np.clip(stop, *self.position_limits[i]))
+        stop = s.position + s.velocity * abs(s.velocity) / (2.0 * float(self.profile_deceleration[i]))
+        return clip(stop, self._pos_lo[i], self._pos_hi[i])  # np.clip of a scalar: the value on a tie, NaN kept
 
-    def _reach(self, command: np.ndarray) -> tuple[list[float], list[float]]:
+    def _reach(self, command: Sequence[float]) -> tuple[list[float], list[float]]:
         """Per joint, the lowest and highest position [rad] it can pass through if ``command``
         (position or velocity, SI) is held for one period and the joint is then stopped with the
-        drive's deceleration - a conservative envelope of the drive's own profile. Plain floats per
-        joint (a few joints: cheaper than arrays; the same IEEE operations, the same bits)."""
+        drive's deceleration - a conservative envelope of the drive's own profile
+        (:meth:`_joint_reach` of each joint)."""
         dt = self.control_period + self.bus_lag  # the state is older, the command later, by up to a bus cycle
         acc = self.profile_acceleration.tolist()
         velocity = self.action_mode == "velocity"
@@ -551,24 +606,30 @@ class JointsEnv(RigEnv):
         cruise = self.profile_velocity.tolist()
         lows: list[float] = []
         highs: list[float] = []
-        ends: tuple[float, ...]
-        for i, (s, c) in enumerate(zip(self._states, command.tolist())):
-            p, v = s.position, s.velocity
-            a, b = acc[i], dec[i]
-            stop_now = p + v * abs(v) / (2.0 * b)
-            if velocity:
-                step = a * dt
-                v1 = c if abs(c - v) <= step else v + math.copysign(step, c - v)
-                p1 = p + 0.5 * (v + v1) * dt
-                ends = (p1, p1 + v1 * abs(v1) / (2.0 * b))
-            else:
-                u = min(max(cruise[i], abs(v)), abs(v) + a * dt)
-                travel = u * dt + u * u / (2.0 * b)
-                d = c - p
-                ends = (p + math.copysign(min(travel, abs(d)), d),)
-            lows.append(min(p, stop_now, *ends))
-            highs.append(max(p, stop_now, *ends))
+        for i, (s, c) in enumerate(zip(self._states, list(command))):
+            lo, hi = self._joint_reach(s.position, s.velocity, float(c), dt, acc[i], dec[i], cruise[i], velocity)
+            lows.append(lo)
+            highs.append(hi)
         return lows, highs
+
+    @staticmethod
+    def _joint_reach(p: float, v: float, c: float, dt: float, a: float, b: float, cruise: float,
+                     velocity: bool) -> tuple[float, float]:
+        """One joint of :meth:`_reach`: at ``p`` [rad] moving at ``v`` [rad/s], ``c`` held for ``dt`` [s]
+        (velocity: ramped with ``a``; position: the profile of top speed ``cruise`` and ramps ``a``),
+        then stopped with ``b`` [rad/s^2]. Plain floats (a few joints: cheaper than arrays)."""
+        stop_now = p + v * abs(v) / (2.0 * b)
+        if velocity:
+            step = a * dt
+            v1 = c if abs(c - v) <= step else v + math.copysign(step, c - v)
+            p1 = p + 0.5 * (v + v1) * dt
+            end = p1 + v1 * abs(v1) / (2.0 * b)
+            return min(p, stop_now, p1, end), max(p, stop_now, p1, end)
+        u = min(max(cruise, abs(v)), abs(v) + a * dt)
+        travel = u * dt + u * u / (2.0 * b)
+        d = c - p
+        end = p + math.copysign(min(travel, abs(d)), d)
+        return min(p, stop_now, end), max(p, stop_now, end)
 
     def _to_model(self, i: int, position: float) -> float:
         """Joint position (user frame) -> MJCF joint angle: ``(position - offset) * direction``."""
@@ -599,6 +660,7 @@ class JointsEnv(RigEnv):
             self._reset_hardware(start)
         neutral = self.action_of(start) if self.action_mode == "position" else np.zeros(len(self.joints), np.float32)
         self._prev_action = neutral.astype(np.float64)
+        self._prev_values = self._prev_action.tolist()
         self._sent = start.copy() if self.action_mode == "position" else np.zeros(len(self.joints))
         latency = self.randomization_sample["latency"] if self.randomization_sample else 0
         self._queue = deque(neutral.astype(np.float64) for _ in range(latency))
@@ -616,64 +678,79 @@ class JointsEnv(RigEnv):
 
     batchable = True
 
-    def begin_step(self, action: np.ndarray) -> np.ndarray:
+    def begin_step(self, action: np.ndarray) -> tuple[np.ndarray, list[float]]:
         self._check_open()
         a = np.asarray(action, dtype=np.float64)
-        if a.shape != self.action_space.shape:
+        if a.shape != self._action_shape:
             raise ValueError(f"action shape {a.shape} != {self.action_space.shape}")
         values = a.tolist()
         for v in values:
             if v - v != 0.0:  # NaN or infinite
                 raise ValueError(f"action must be finite, got {values}")
-        a = a.clip(-1.0, 1.0)
+        values = [clip(v, -1.0, 1.0) for v in values]  # a.clip(-1.0, 1.0) on plain floats: the same bits
+        a = np.array(values)
         if self._queue:  # bus latency (domain randomisation): the action waits its turn
             self._queue.append(a)
-            self._command(self._queue.popleft())
+            sent = self._queue.popleft()
+            self._command(sent.tolist())
         else:
-            self._command(a)
+            self._command(values)
         self._tick += 1
-        return a
+        return a, values
 
-    def finish_step(self, a: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+    def finish_step(self, token: tuple[np.ndarray, list[float]]) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        a, values = token
         states = self._read()
-        listed = [s.position for s in states]
-        positions = np.array(listed)
+        positions = [s.position for s in states]
         obs = self._observation(states, positions)
-        reward, terms = self._reward(positions, a)
-        self._prev_action = a
-        info = self._info(states)
+        if len(values) == 1:  # np.dot of one difference is its square
+            d = values[0] - self._prev_values[0]
+            change = d * d
+        else:
+            diff = a - self._prev_action
+            change = float(np.dot(diff, diff))
+        reward, terms = self._reward(positions, change)
+        self._prev_action, self._prev_values = a, values
+        faults: dict[str, str | None] = {}
+        faulted = None
+        for name, s in zip(self.joint_names, states):
+            f = s.fault
+            if f is None:
+                faults[name] = None
+            else:
+                faults[name] = f.name
+                if faulted is None:
+                    faulted = (name, s)
+        info = {"time": float(self.rig.time), "overrun": self._overrun, "faults": faults}
         info.update(terms)
         violation = False
-        for p, lo, hi in zip(listed, self._lo_list, self._hi_list):
+        for p, lo, hi in zip(positions, self._lo_list, self._hi_list):
             if p < lo or p > hi:
                 violation = True
         info["limit_violation"] = violation
-        info["command"] = self._sent.copy()
-        faulted = [(n, s) for n, s in zip(self.joint_names, states) if s.fault is not None]
-        if faulted:
-            info["fault"] = fault_info(*faulted[0])
-        terminated = violation or bool(faulted)
+        info["command"] = self._sent  # a new array every step, never changed in place
+        if faulted is not None:
+            info["fault"] = fault_info(*faulted)
+        terminated = violation or faulted is not None
         if terminated:
             self._safe_stop()
         if self.render_mode == "human":
             self.render()
-        return obs, float(reward), bool(terminated), False, info
+        return obs, float(reward), terminated, False, info
 
     def _read(self) -> list[joints.JointState]:
         compiled = self.compiled_path
         self._states = compiled.states() if compiled is not None else [j.state() for j in self.joints]
         return self._states
 
-    def _observation(self, states: Sequence[joints.JointState], pos: np.ndarray | None = None) -> np.ndarray:
-        n = len(states)
-        if pos is None:
-            pos = np.array([s.position for s in states])
-        obs = np.empty(self._obs_dim)
-        obs[:n] = pos
+    def _observation(self, states: Sequence[joints.JointState], positions: list[float] | None = None) -> np.ndarray:
+        if positions is None:
+            positions = [s.position for s in states]
+        obs = np.array(positions + [s.velocity for s in states] + [s.torque for s in states]
+                       + self._task_terms(positions))
         if self._noise_rng is not None and self._noisy:
+            n = len(positions)
             obs[:n] += self._noise_rng.normal(0.0, 1.0, n) * self._noise
-        obs[n:3 * n] = [s.velocity for s in states] + [s.torque for s in states]
-        obs[3 * n:] = self._task_terms(pos)
         np.maximum(obs, self._obs_low, out=obs)
         np.minimum(obs, self._obs_high, out=obs)
         return obs
@@ -685,10 +762,14 @@ class JointsEnv(RigEnv):
             "faults": {n: (s.fault.name if s.fault else None) for n, s in zip(self.joint_names, states)},
         }
 
-    def _command(self, action: np.ndarray) -> None:
-        self._sent = self.safe_command(self.command_of(action))
-        cmd = self._sent.tolist()
+    def _command(self, action: list[float]) -> None:
+        """Send the safe command of ``action`` (clipped to [-1, 1], plain floats)."""
         mode = self.action_mode
+        values = self._commands(action)
+        if mode != "position":  # the limit clip (position: command_of clipped to the limits already)
+            values = self._limit(values)
+        cmd = self._safe(values)
+        self._sent = np.array(cmd)
         compiled = self.compiled_path
         if compiled is not None:  # faulted/disabled drives: the episode has ended; never command them
             compiled.command(mode, cmd, [not j.enabled for j in self.joints])

@@ -167,3 +167,88 @@ def erob_arm3_clearance_bound(q2: float, q3: float) -> float:
         _segment_column(ex, ez, fx, fz, *base) - ARM3_FORE_RADIUS,
         _segment_column(ex, ez, fx, fz, *link1) - ARM3_FORE_RADIUS,
     )
+
+
+#: m the shield's bound gives away for rounding (:meth:`envs.reach.ErobArmReachEnv.keeps_clearance`)
+BOUND_SLACK = 1e-9
+
+
+def erob_arm3_clears(q2: float, q3: float, less: float, need: float) -> bool:
+    """``erob_arm3_clearance_bound(q2, q3) - less - BOUND_SLACK >= need``, the same answer for every input,
+    faster: each of the bound's terms is computed by the same IEEE operations, and since ``t - less - slack``
+    never decreases as ``t`` grows, the smallest term passes exactly when every term passes - so the cheap
+    terms go first and the first that fails ends it. (``min()`` keeps a NaN only as its first argument, the
+    upper arm - floor term: that term fails on NaN, the others on ``<`` alone, which a NaN never is.)"""
+    slack = BOUND_SLACK
+    h = ARM3_SHOULDER_HEIGHT
+    ex, ez = ARM3_UPPER * math.cos(q2), h - ARM3_UPPER * math.sin(q2)
+    r = ARM3_ELBOW_RADIUS
+    if ez - r - less - slack < need:  # elbow - floor
+        return False
+    t = (h if not ez < h else ez) - ARM3_UPPER_RADIUS  # min(h, ez), NaN as min() has it
+    if not t - less - slack >= need:  # upper arm - floor (min()'s first argument)
+        return False
+    fx, fz = ex + ARM3_FORE * math.cos(q2 + q3), ez - ARM3_FORE * math.sin(q2 + q3)
+    if (ez if not fz < ez else fz) - ARM3_FORE_RADIUS - less - slack < need:  # forearm - floor; min(ez, fz)
+        return False
+    (bh, b0, b1), (lh, l0, l1) = ARM3_COLUMNS
+    # elbow - base and elbow - link1: _point_column written out (max(a, b) is ``b if b > a else a``)
+    ax = abs(ex)
+    dx, dz, w = ax - bh, b0 - ez, ez - b1
+    dz = w if w > dz else dz  # noqa: FURB136
+    if math.hypot(0.0 if 0.0 > dx else dx, 0.0 if 0.0 > dz else dz) - r - less - slack < need:  # noqa: FURB136
+        return False
+    dx, dz, w = ax - lh, l0 - ez, ez - l1
+    dz = w if w > dz else dz  # noqa: FURB136
+    if math.hypot(0.0 if 0.0 > dx else dx, 0.0 if 0.0 > dz else dz) - r - less - slack < need:  # noqa: FURB136
+        return False
+    r = ARM3_FORE_RADIUS
+    if _apart(ex, ez, fx, fz, bh, b0, b1) - r - less - slack < need \
+            and _segment_column(ex, ez, fx, fz, bh, b0, b1) - r - less - slack < need:  # forearm - base
+        return False
+    if _apart(ex, ez, fx, fz, lh, l0, l1) - r - less - slack < need \
+            and _segment_column(ex, ez, fx, fz, lh, l0, l1) - r - less - slack < need:  # forearm - link1
+        return False
+    r = ARM3_UPPER_RADIUS  # upper arm - base
+    return not (_apart(0.0, h, ex, ez, bh, b0, b1) - r - less - slack < need
+                and _segment_column(0.0, h, ex, ez, bh, b0, b1) - r - less - slack < need)
+
+
+#: m below the gap of two boxes that :func:`_segment_column` can read for it (its rounding is ~1e-16 m)
+_ROUNDING = 1e-9
+
+
+def _apart(px: float, pz: float, qx: float, qz: float, half: float, z0: float, z1: float) -> float:
+    """A lower bound [m] of what :func:`_segment_column` computes for the segment P-Q and the rectangle: how far
+    the segment's bounding box is from the rectangle along x or z (never more than the distance itself), less
+    :data:`_ROUNDING`. Where it already clears the gap the exact distance, at least as large, does too."""
+    lo, hi = (px, qx) if px < qx else (qx, px)
+    dx = lo - half if lo - half > -half - hi else -half - hi  # noqa: FURB136 - max() without a call
+    lo, hi = (pz, qz) if pz < qz else (qz, pz)
+    dz = lo - z1 if lo - z1 > z0 - hi else z0 - hi  # noqa: FURB136
+    return (dx if dx > dz else dz) - _ROUNDING  # noqa: FURB136
+
+
+def erob_arm3_falls_short(q2: float, q3: float, need: float) -> bool:
+    """Whether some sample point of :func:`erob_arm3_clearance` at the pose ``q2``, ``q3`` [rad] (model frame) is
+    closer than ``need`` [m] to the floor, ``base`` or ``link1`` by more than rounding: then the sampled gap of
+    that pose, the smallest over all its sample points, is below ``need`` too. Scalar, with an early exit, for
+    the shield's grid (:meth:`envs.reach.ErobArmReachEnv.keeps_clearance`): a pose of the grid that falls
+    short answers for the whole grid without it."""
+    limit = need - _ROUNDING
+    h, (bh, b0, b1), (lh, l0, l1) = ARM3_SHOULDER_HEIGHT, ARM3_COLUMNS[0], ARM3_COLUMNS[1]
+    c2, s2, c23, s23 = math.cos(q2), math.sin(q2), math.cos(q2 + q3), math.sin(q2 + q3)
+    ex, ez = ARM3_UPPER * c2, h - ARM3_UPPER * s2
+    if ez - ARM3_ELBOW_RADIUS < limit or _point_column(ex, ez, bh, b0, b1) - ARM3_ELBOW_RADIUS < limit \
+            or _point_column(ex, ez, lh, l0, l1) - ARM3_ELBOW_RADIUS < limit:
+        return True
+    for k in range(_SAMPLES):
+        s = k / (_SAMPLES - 1)
+        x, z = s * ARM3_UPPER * c2, h - s * ARM3_UPPER * s2
+        if z - ARM3_UPPER_RADIUS < limit or _point_column(x, z, bh, b0, b1) - ARM3_UPPER_RADIUS < limit:
+            return True
+        x, z = ex + s * ARM3_FORE * c23, ez - s * ARM3_FORE * s23
+        if z - ARM3_FORE_RADIUS < limit or _point_column(x, z, bh, b0, b1) - ARM3_FORE_RADIUS < limit \
+                or _point_column(x, z, lh, l0, l1) - ARM3_FORE_RADIUS < limit:
+            return True
+    return False

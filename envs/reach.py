@@ -15,15 +15,12 @@ from envs.kinematics import (
     ARM3_REACH,
     ARM3_SHOULDER_HEIGHT,
     erob_arm3_clearance,
-    erob_arm3_clearance_bound,
+    erob_arm3_clears,
     erob_arm3_ee,
+    erob_arm3_falls_short,
     erob_stand_tip,
 )
 from envs.render import CameraSpec
-
-
-def _sq(d: np.ndarray) -> float:
-    return float(np.dot(d, d))
 
 
 def _range(name: str, r: Sequence[float], lo: float, hi: float) -> tuple[float, float]:
@@ -178,16 +175,16 @@ class ErobReachEnv(JointsEnv):
         else:
             self.target = float(self.np_random.uniform(*self.target_range))
 
-    def _task_terms(self, positions: np.ndarray) -> np.ndarray:
-        return np.array([self.target, self.target - positions[0]])
+    def _task_terms(self, positions: list[float]) -> list[float]:
+        return [self.target, self.target - positions[0]]
 
     def _markers(self) -> list[tuple[np.ndarray, tuple[float, float, float, float]]]:
         return [(erob_stand_tip(self._to_model(0, self.target)), (0.1, 0.9, 0.2, 0.6))]
 
-    def _reward(self, positions: np.ndarray, action: np.ndarray) -> tuple[float, dict[str, Any]]:
-        distance = abs(self.target - float(positions[0]))
+    def _reward(self, positions: list[float], action_change: float) -> tuple[float, dict[str, Any]]:
+        distance = abs(self.target - positions[0])
         r_dist = -distance
-        r_rate = -self.action_rate_weight * _sq(action - self._prev_action)
+        r_rate = -self.action_rate_weight * action_change
         return r_dist + r_rate, {
             "reward_distance": r_dist,
             "reward_action_rate": r_rate,
@@ -302,7 +299,8 @@ class ErobArmReachEnv(JointsEnv):
         self.success_tolerance = float(success_tolerance)
         self.action_rate_weight = float(action_rate_weight)
         self.target = np.zeros(3)
-        self._ee = np.zeros(3)
+        self._ee = [0.0, 0.0, 0.0]  #: the end effector of the last observation [m]
+        self._to_target = [0.0, 0.0, 0.0]  #: target - end effector [m]
         super().__init__(config, backend, **kwargs)
         if self.sim:
             mj = self.rig.world.mujoco
@@ -385,21 +383,30 @@ class ErobArmReachEnv(JointsEnv):
         ARM3_FORE * |dq3|``, so the exact gap at the centre (a lower bound of the grid's sampled
         one) minus that is a lower bound over the whole box. Where that cannot tell, the box is halved
         (along the joint that moves the links more) and each half bounded the same way, up to
-        :attr:`BOUNDS` bounds; only where they cannot tell either is the grid evaluated. A bound only
-        ever answers True where every grid pose keeps the gap, so the answer is the grid's."""
+        :attr:`BOUNDS` bounds; only where they cannot tell either is the grid evaluated, unless a corner or
+        the middle of the grid surely falls short (:meth:`_short_on_grid`: False, as the grid answers). A bound
+        only ever answers True where every grid pose keeps the gap, so the answer is the grid's."""
+        return self._keeps(float(lo[1]), float(hi[1]), float(lo[2]), float(hi[2]))
+
+    def _keeps(self, lo2: float, hi2: float, lo3: float, hi3: float) -> bool:
+        """:meth:`keeps_clearance` of the box joint2 in ``[lo2, hi2]``, joint3 in ``[lo3, hi3]``."""
         j2, j3 = self.joints[1], self.joints[2]
-        boxes = [(float(lo[1]), float(hi[1]), float(lo[2]), float(hi[2]))]
+        o2, d2, o3, d3 = j2.offset, j2.direction, j3.offset, j3.direction
+        need = self.CLEARANCE
+        boxes = [(lo2, hi2, lo3, hi3)]
         bounds = 0
         while boxes:
             a2, b2, a3, b3 = boxes.pop()
-            q2 = ((a2 + b2) / 2 - j2.offset) * j2.direction  # user -> model frame
-            q3 = ((a3 + b3) / 2 - j3.offset) * j3.direction
+            q2 = ((a2 + b2) / 2 - o2) * d2  # user -> model frame
+            q3 = ((a3 + b3) / 2 - o3) * d3
             span2, span3 = ARM3_REACH * abs(b2 - a2), ARM3_FORE * abs(b3 - a3)
             bounds += 1
-            if erob_arm3_clearance_bound(q2, q3) - (span2 / 2 + span3 / 2) - 1e-9 >= self.CLEARANCE:
+            # erob_arm3_clearance_bound(q2, q3) - (span2 / 2 + span3 / 2) - 1e-9 >= CLEARANCE
+            if erob_arm3_clears(q2, q3, span2 / 2 + span3 / 2, need):
                 continue
             if bounds >= self.BOUNDS:
-                return self.clearance(lo, hi) >= self.CLEARANCE
+                return not self._short_on_grid(lo2, hi2, lo3, hi3) \
+                    and self.clearance((0.0, lo2, lo3), (0.0, hi2, hi3)) >= need
             if span2 >= span3:
                 m = (a2 + b2) / 2
                 boxes += [(a2, m, a3, b3), (m, b2, a3, b3)]
@@ -408,7 +415,22 @@ class ErobArmReachEnv(JointsEnv):
                 boxes += [(a2, b2, a3, m), (a2, b2, m, b3)]
         return True
 
-    def _shield(self, command: np.ndarray) -> np.ndarray:
+    def _short_on_grid(self, lo2: float, hi2: float, lo3: float, hi3: float) -> bool:
+        """Whether a corner or the middle of :meth:`clearance`'s grid over the box surely falls short of
+        :attr:`CLEARANCE` (:func:`~envs.kinematics.erob_arm3_falls_short`): the grid's answer, without the grid
+        (most boxes the bounds cannot tell are ones that do not keep the gap)."""
+        axes = []
+        for i, (lo, hi) in ((1, (lo2, hi2)), (2, (lo3, hi3))):
+            j = self.joints[i]
+            n = max(2, math.ceil((hi - lo) / self.GRID) + 1)
+            axes.append(((np.linspace(lo, hi, n) - j.offset) * j.direction).tolist())  # as clearance() has them
+        (a, b) = axes
+        for q2, q3 in ((a[0], b[0]), (a[-1], b[-1]), (a[0], b[-1]), (a[-1], b[0]), (a[len(a) // 2], b[len(b) // 2])):
+            if erob_arm3_falls_short(q2, q3, self.CLEARANCE):
+                return True
+        return False
+
+    def _shield(self, command: list[float]) -> list[float]:
         """Keep the arm :attr:`CLEARANCE` off the floor and its base: the shoulder and elbow commands
         go out as asked if every pose they can lead to within the next period - and while stopping
         after it - keeps the gap (:meth:`~envs.base.JointsEnv._reach`); else the shoulder, or the
@@ -421,24 +443,49 @@ class ErobArmReachEnv(JointsEnv):
         """
         if self.action_mode == "torque":
             return command
-        c: np.ndarray = command
+        # the shoulder's and the elbow's reach (joint1 does not matter), for their command and their stop
+        dt = self.control_period + self.bus_lag
+        acc = self.profile_acceleration.tolist()
+        velocity = self.action_mode == "velocity"
+        dec = acc if velocity else self.profile_deceleration.tolist()
+        cruise = self.profile_velocity.tolist()
+        states = self._states
+        reach = self._joint_reach
+        go = [reach(states[i].position, states[i].velocity, command[i], dt, acc[i], dec[i], cruise[i], velocity)
+              for i in (1, 2)]
+        stops: list[float] = []
+        halt: list[tuple[float, float]] = []
+        c = command
         for hold in ((), (1,), (2,), (1, 2)):
-            c = command.copy()
+            if hold and not stops:
+                stops = [self._stop_command(1), self._stop_command(2)]
+                halt = [reach(states[i].position, states[i].velocity, stops[i - 1], dt, acc[i], dec[i], cruise[i],
+                              velocity) for i in (1, 2)]
+            (a2, b2), (a3, b3) = (halt[0] if 1 in hold else go[0]), (halt[1] if 2 in hold else go[1])
+            c = list(command)
             for i in hold:
-                c[i] = self._stop_command(i)
-            if self.keeps_clearance(*self._reach(c)):
+                c[i] = stops[i - 1]
+            if self._keeps(a2, b2, a3, b3):
                 return c
         return c  # nothing keeps it (the arm is there already): stop both
 
-    def _task_terms(self, positions: np.ndarray) -> np.ndarray:
-        self._ee = self.end_effector(None if self.sim else positions)
-        return np.concatenate([self._ee, self.target, self.target - self._ee])
+    def _task_terms(self, positions: list[float]) -> list[float]:
+        ee: list[float]
+        if self.sim:
+            ee = self.rig.world.data.site_xpos[self._site].tolist()
+        else:
+            ee = self.end_effector(np.array(positions)).tolist()
+        target: list[float] = self.target.tolist()
+        to_target = [t - e for t, e in zip(target, ee)]  # the arrays' subtraction, element by element
+        self._ee = ee
+        self._to_target = to_target
+        return ee + target + to_target
 
-    def _reward(self, positions: np.ndarray, action: np.ndarray) -> tuple[float, dict[str, Any]]:
-        d = self.target - self._ee
+    def _reward(self, positions: list[float], action_change: float) -> tuple[float, dict[str, Any]]:
+        d = np.array(self._to_target)
         distance = math.sqrt(d.dot(d))  # np.linalg.norm of a vector, as it computes it: sqrt(x.dot(x))
         r_dist = -distance
-        r_rate = -self.action_rate_weight * _sq(action - self._prev_action)
+        r_rate = -self.action_rate_weight * action_change
         return r_dist + r_rate, {
             "reward_distance": r_dist,
             "reward_action_rate": r_rate,

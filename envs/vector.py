@@ -125,12 +125,17 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
                                  f"True value, got {mask!r}")
             if not self._has_reset:
                 raise gym.error.ResetNeeded("reset the whole batch before a masked reset")
-        infos: dict[str, Any] = {}
+        reset: list[tuple[int, dict[str, Any]]] = []
         for i, env in enumerate(self.envs):
             if mask[i]:
                 self._obs[i], info = env.reset(seed=seeds[i], options=options)
                 self._elapsed[i] = 0
                 self._autoreset[i] = False
+                reset.append((i, info))
+        infos = self._batched_info([info for _, info in reset]) if len(reset) == self.num_envs else None
+        if infos is None:
+            infos = {}
+            for i, info in reset:
                 infos = self._add_info(infos, info, i)
         self._has_reset = True
         return self._obs.copy(), infos
@@ -150,50 +155,118 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
         infos_of: list[dict[str, Any]] = [{} for _ in range(n)]
         finals: dict[int, tuple[Any, dict[str, Any]]] = {}
         acting: list[tuple[int, Any]] = []
-        for i, env in enumerate(self.envs):
-            if self.autoreset_mode is AutoresetMode.NEXT_STEP and self._autoreset[i]:
-                self._obs[i], infos_of[i] = env.reset()
+        envs = self.envs
+        mode = self.autoreset_mode
+        pending = self._autoreset.tolist()
+        obs_rows = self._obs
+        for i, env in enumerate(envs):
+            if pending[i] and mode is AutoresetMode.NEXT_STEP:
+                obs_rows[i], infos_of[i] = env.reset()
                 self._elapsed[i] = 0
-            elif self.autoreset_mode is AutoresetMode.DISABLED and self._autoreset[i]:
+            elif pending[i] and mode is AutoresetMode.DISABLED:
                 raise gym.error.ResetNeeded(f"rig {i} ended its episode: reset it (autoreset is disabled)")
             elif env.batchable:
                 acting.append((i, env.begin_step(actions[i])))
             else:  # an env that cannot split its step: on its own
                 acting.append((i, None))
                 obs, rewards[i], terminated[i], truncated[i], infos_of[i] = env.step(actions[i])
-                self._obs[i] = obs
+                obs_rows[i] = obs
         rigs: list[joints.Rig] = []
         spans: list[float] = []
         for i, token in acting:
-            env = self.envs[i]
+            env = envs[i]
             if token is None or not env.batchable:
                 continue
-            remaining = env.tick_time() - env.rig.time  # as RigEnv._wait_until
+            rig = env.rig
+            remaining = env.tick_time() - rig.time  # as RigEnv._wait_until
             if remaining > 0:
-                rigs.append(env.rig)
+                rigs.append(rig)
                 spans.append(remaining)
             env.note_overrun(-remaining)
         if rigs:
             joints.sleep_together(rigs, spans)
-        for i, token in acting:
-            env = self.envs[i]
-            if env.batchable:
-                obs, rewards[i], terminated[i], truncated[i], infos_of[i] = env.finish_step(token)
-                self._obs[i] = obs
-            self._elapsed[i] += 1
-            if self.max_episode_steps is not None and self._elapsed[i] >= self.max_episode_steps:
-                truncated[i] = True
-            if self.autoreset_mode is AutoresetMode.SAME_STEP and (terminated[i] or truncated[i]):
-                finals[i] = (self._obs[i].copy(), infos_of[i])
-                self._obs[i], infos_of[i] = env.reset()
-                self._elapsed[i] = 0
-        infos: dict[str, Any] = {}
-        for i in range(n):
-            if i in finals:
-                infos = self._add_info(infos, {"final_obs": finals[i][0], "final_info": finals[i][1]}, i)
-            infos = self._add_info(infos, infos_of[i], i)
+        limit = self.max_episode_steps
+        elapsed = self._elapsed
+        if mode is AutoresetMode.SAME_STEP:  # rig by rig: a rig that ends is reset at once
+            for i, token in acting:
+                env = envs[i]
+                if env.batchable:
+                    obs, rewards[i], terminated[i], truncated[i], infos_of[i] = env.finish_step(token)
+                    obs_rows[i] = obs
+                elapsed[i] += 1
+                if limit is not None and elapsed[i] >= limit:
+                    truncated[i] = True
+                if terminated[i] or truncated[i]:
+                    finals[i] = (obs_rows[i].copy(), infos_of[i])
+                    obs_rows[i], infos_of[i] = env.reset()
+                    elapsed[i] = 0
+        elif acting:  # every rig's outcome, then each array at once
+            done = [(i, envs[i].finish_step(token)) for i, token in acting if envs[i].batchable]
+            if done:
+                rows = [i for i, _ in done]
+                obs_rows[rows] = [out[0] for _, out in done]
+                rewards[rows] = [out[1] for _, out in done]
+                terminated[rows] = [out[2] for _, out in done]
+                truncated[rows] = [out[3] for _, out in done]
+                for i, out in done:
+                    infos_of[i] = out[4]
+            stepped = [i for i, _ in acting]
+            elapsed[stepped] += 1
+            if limit is not None:
+                truncated[stepped] |= elapsed[stepped] >= limit
+        infos = None if finals else self._batched_info(infos_of)
+        if infos is None:
+            infos = {}
+            for i in range(n):
+                if i in finals:
+                    infos = self._add_info(infos, {"final_obs": finals[i][0], "final_info": finals[i][1]}, i)
+                infos = self._add_info(infos, infos_of[i], i)
         self._autoreset = np.logical_or(terminated, truncated)
         return self._obs.copy(), rewards, terminated, truncated, infos
+
+    def _batched_info(self, infos: Sequence[dict[str, Any]]) -> dict[str, Any] | None:
+        """What :meth:`_add_info` makes of one info per rig, built a key at a time across all rigs (one array per
+        key, every mask all True), where every rig's info has the same keys in the same order and each key one
+        plain type (and shape and dtype: numbers, arrays, dicts) in all of them, or objects that are no dict (None,
+        str ...); else None (then :meth:`_add_info`, rig by rig)."""
+        first = infos[0]
+        keys = list(first)
+        for info in infos:
+            if list(info) != keys:
+                return None
+        n = len(infos)
+        out: dict[str, Any] = {}
+        for key in keys:
+            if key.startswith("_") or key == "final_obs":
+                return None
+            values = [info[key] for info in infos]
+            kind = type(values[0])
+            plain = kind in (int, float, bool) or issubclass(kind, (np.number, np.ndarray, dict))
+            for v in values:
+                if type(v) is not kind and (plain or isinstance(v, dict)):  # objects may mix (None, str ...)
+                    return None
+            array: Any
+            if kind is dict:
+                array = self._batched_info(values)
+                if array is None:
+                    return None
+            elif kind in (int, float, bool) or issubclass(kind, np.number):
+                array = np.array(values, dtype=kind)
+            elif kind is np.ndarray:
+                shape, dtype = values[0].shape, values[0].dtype
+                for v in values:
+                    if v.shape != shape or v.dtype != dtype:
+                        return None
+                array = np.array(values)
+            elif issubclass(kind, dict):
+                return None
+            else:  # as _add_info: objects, one by one
+                array = np.full(n, fill_value=None, dtype=object)
+                for i, v in enumerate(values):
+                    array[i] = v
+            out[key] = array
+            out["_" + key] = np.ones(n, dtype=np.bool_)
+        return out
 
     def _add_info(self, vector_infos: dict[str, Any], env_info: dict[str, Any], env_num: int) -> dict[str, Any]:
         """``VectorEnv._add_info`` (the same arrays, masks and key order), without allocating a

@@ -62,3 +62,161 @@ def test_command_of_and_the_limit_clip_give_the_array_bits(env_id: str, mode: st
             u.safe_command(np.full(n, math.nan))
         with pytest.raises(ValueError, match="one finite value per joint"):
             u.safe_command(np.zeros(n + 1))
+
+
+def test_braking_speed_of_gives_the_arrays_bits() -> None:
+    """The per-joint braking cap on plain floats is braking_speed's arrays, bit for bit, on every branch."""
+    from envs.base import braking_speed, braking_speed_of
+
+    rng = np.random.default_rng(3)
+    branches = set()
+    for _ in range(20000):
+        a = float(rng.choice([10.0, 8.0, rng.uniform(0.5, 30.0)]))
+        t = float(rng.choice([0.04, 0.1, rng.uniform(0.001, 0.2)]))
+        u = float(rng.choice([0.0, -0.0, rng.uniform(-3.0, 3.0), rng.uniform(-0.01, 0.01)]))
+        d = float(rng.choice([0.0, -0.0, rng.uniform(-0.2, 3.0), rng.uniform(-1e-3, 1e-2), rng.uniform(0.0, 0.3)]))
+        want = braking_speed(np.array([d]), np.array([a]), t, np.array([u]))[0]
+        got = braking_speed_of(d, a, t, u)
+        assert _bits(got) == _bits(want), (d, a, t, u, got, want)
+        branches.add("inf" if math.isinf(got) else "zero" if got == 0.0 else "speed")
+    assert branches == {"inf", "zero", "speed"}
+
+
+def test_clip_to_is_np_clip_between_array_bounds_bit_for_bit() -> None:
+    """Array bounds give the bound on a tie (``-0.0`` for ``0.0`` against ``-0.0``), unlike a scalar bound."""
+    from envs.base import clip_to
+
+    rng = np.random.default_rng(4)
+    bounds = [0.0, -0.0, 1.0, -1.0, math.inf, -math.inf, 2.5, -2.5]
+    for v in EDGES + rng.uniform(-4, 4, 200).tolist() + [math.nan]:
+        for lo in bounds:
+            for hi in bounds:
+                if lo > hi:
+                    continue
+                want = np.clip(np.array([v]), np.array([lo]), np.array([hi]))[0]
+                got = clip_to(v, lo, hi)
+                assert _bits(got) == _bits(want) or (math.isnan(got) and math.isnan(want)), (v, lo, hi, got, want)
+    assert _bits(clip_to(0.0, -0.0, 1.0)) == _bits(-0.0)  # the case that tells the two rules apart
+
+
+def test_the_action_change_of_one_joint_is_np_dot_of_its_difference() -> None:
+    rng = np.random.default_rng(5)
+    for a, b in rng.uniform(-1, 1, (20000, 2)).tolist() + [(0.0, -0.0), (-0.0, 0.0), (1.0, -1.0), (1e-300, 0.0)]:
+        d = np.array([a]) - np.array([b])
+        assert _bits((a - b) * (a - b)) == _bits(float(np.dot(d, d)))
+
+
+def test_erob_arm3_clears_answers_as_the_bound() -> None:
+    """The shield's early-exit test is ``erob_arm3_clearance_bound(q2, q3) - less - 1e-9 >= need`` for every
+    input, thresholds at the bound itself and one ulp either side included."""
+    from envs.kinematics import BOUND_SLACK, erob_arm3_clearance_bound, erob_arm3_clears
+
+    rng = np.random.default_rng(6)
+    passed = failed = 0
+    for q2, q3 in rng.uniform(-3.3, 3.3, (20000, 2)).tolist():
+        bound = erob_arm3_clearance_bound(q2, q3)
+        for less in (0.0, 0.013, 0.1):
+            edge = bound - less - BOUND_SLACK
+            for need in (0.02, edge, float(np.nextafter(edge, 1.0)), float(np.nextafter(edge, -1.0))):
+                want = bound - less - BOUND_SLACK >= need
+                assert erob_arm3_clears(q2, q3, less, need) == want, (q2, q3, less, need)
+                passed += want
+                failed += not want
+    assert passed > 10000 and failed > 10000
+
+
+def test_a_pose_that_falls_short_has_a_sampled_gap_below_the_need() -> None:
+    """erob_arm3_falls_short is only True where erob_arm3_clearance (the grid's value) is below ``need``, and
+    it is True for most poses that are clearly below."""
+    from envs.kinematics import erob_arm3_clearance, erob_arm3_falls_short
+
+    rng = np.random.default_rng(7)
+    q = rng.uniform(-3.3, 3.3, (20000, 2))
+    gap = erob_arm3_clearance(q[:, 0], q[:, 1])
+    for need in (0.02, 0.0, 0.1):
+        short = np.array([erob_arm3_falls_short(a, b, need) for a, b in q.tolist()])
+        assert np.all(gap[short] < need)
+        assert short[gap < need - 1e-6].mean() == 1.0  # a sample point below the need is found
+        assert short.sum() > 1000
+
+
+def _reference_safe_command(u: Any, command: np.ndarray) -> np.ndarray:
+    """safe_command as the arrays computed it before it went to plain floats (the shield's loop included)."""
+    from envs.base import LIMIT_INSET, braking_speed
+
+    lo, hi = u.position_limits[:, 0], u.position_limits[:, 1]
+    if u.action_mode == "position":
+        c = np.clip(command, lo, hi)
+    else:
+        cap = u.speed_cap if u.action_mode == "velocity" else u.torque_limits
+        c = np.clip(command, -cap, cap)
+    if u.action_mode == "torque":
+        return c  # type: ignore[no-any-return]
+    if u.action_mode == "velocity":
+        p = np.array([s.position for s in u._states])
+        v = np.array([s.velocity for s in u._states])
+        a, dt = u.profile_acceleration, u.control_period + u.bus_lag
+        np.clip(c, -braking_speed(p - (lo + LIMIT_INSET), a, dt, -v), braking_speed(hi - LIMIT_INSET - p, a, dt, v),
+                out=c)
+    if len(u.joints) == 1:
+        return c  # type: ignore[no-any-return]
+    out = c
+    for hold in ((), (1,), (2,), (1, 2)):
+        out = c.copy()
+        for i in hold:
+            s = u._states[i]
+            stop = s.position + s.velocity * abs(s.velocity) / (2.0 * u.profile_deceleration[i])
+            out[i] = 0.0 if u.action_mode == "velocity" else float(np.clip(stop, *u.position_limits[i]))
+        if u.keeps_clearance(*u._reach(out)):
+            return out  # type: ignore[no-any-return]
+    return out  # type: ignore[no-any-return]
+
+
+@pytest.mark.parametrize("mode", ["position", "velocity", "torque"])
+@pytest.mark.parametrize("env_id", ["joints/ErobReach-v0", "joints/ErobArmReach-v0"])
+def test_each_step_gives_the_array_formulas_bits(env_id: str, mode: str) -> None:
+    """Along an episode of random actions: the safe command, the observation and the reward are what the array
+    formulas give for the same state (the observation's clip, the task terms, np.dot of the action change)."""
+    with gym.make(env_id, action_mode=mode) as env:
+        u: Any = env.unwrapped
+        n = len(u.joints)
+        env.reset(seed=3)
+        rng = np.random.default_rng(8)
+        prev = u._prev_action.copy()
+        held: set[tuple[int, ...]] = set()  # the joints the arm's shield stopped, per step
+        low, high = (-1.2, 1.2) if n == 1 else ([-1.2, 0.2, -1.2], [1.2, 1.2, 1.2])  # the arm: shoulder mostly down
+        for _ in range(80):
+            action = rng.uniform(low, high, n).astype(np.float32)
+            a = np.asarray(action, dtype=np.float64).clip(-1.0, 1.0)
+            want_cmd = _reference_safe_command(u, _reference_command_of(u, a))
+            got_cmd = u.safe_command(u.command_of(a))
+            assert got_cmd.tobytes() == want_cmd.tobytes()
+            if n == 3 and mode == "position":
+                free = np.clip(_reference_command_of(u, a), u.position_limits[:, 0], u.position_limits[:, 1])
+                held.add(tuple(i for i in (1, 2) if want_cmd[i] != free[i]))
+            obs, reward, terminated, _truncated, info = env.step(action)
+            assert info["command"].tobytes() == want_cmd.tobytes()
+            if terminated:  # the joints were stopped since (the physics moved on): nothing to recompute from
+                env.reset()
+                prev = u._prev_action.copy()
+                continue
+            states = u._states
+            pos = np.array([s.position for s in states])
+            if n == 1:
+                task = np.array([u.target, u.target - pos[0]])
+                distance = abs(u.target - float(pos[0]))
+            else:
+                ee = np.array(u.rig.world.data.site_xpos[u._site])
+                task = np.concatenate([ee, u.target, u.target - ee])
+                d = u.target - ee
+                distance = math.sqrt(d.dot(d))
+            raw = np.concatenate([pos, [s.velocity for s in states], [s.torque for s in states], task])
+            want_obs = np.minimum(np.maximum(raw, u.observation_space.low), u.observation_space.high)
+            assert obs.tobytes() == want_obs.tobytes()
+            change = a - prev
+            want_reward = -distance + -u.action_rate_weight * float(np.dot(change, change))
+            assert _bits(reward) == _bits(want_reward)
+            assert _bits(info["distance"]) == _bits(distance)
+            prev = a
+        if n == 3 and mode == "position":
+            assert held >= {(), (1,), (2,)}, held  # the shield's variants were compared too

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+from typing import Any
 
 import numpy as np
 import pytest
@@ -72,5 +73,41 @@ def test_make_vec_by_id() -> None:
         obs, _ = vec.reset(seed=0)
         assert obs.shape == (2, 18)
         assert isinstance(vec.unwrapped.envs[0].unwrapped, ErobArmReachEnv)
+    finally:
+        vec.close()
+
+
+def test_batched_infos_are_add_info_rig_by_rig() -> None:
+    """The batch's infos built a key at a time equal _add_info's, rig by rig: the same keys in the same order,
+    the same dtypes, shapes and values, nested dicts and their masks included; mixed infos take the rig-by-rig
+    way."""
+    from envs.vector import JointsVectorEnv
+
+    vec = JointsVectorEnv("envs.reach:ErobReachEnv", 3)
+    try:
+        def info(k: int) -> dict[str, Any]:
+            return {"time": 0.5 * k, "overrun": 0.0, "faults": {"joint1": None if k else "over_current"},
+                    "steps": k, "is_success": k == 1, "command": np.array([k, -k], dtype=np.float64),
+                    "name": f"rig{k}", "sample": np.float32(k) / 3, "nested": {"a": {"b": k}}}
+
+        infos = [info(k) for k in range(3)]
+        want: dict[str, Any] = {}
+        for k, i in enumerate(infos):
+            want = vec._add_info(want, i, k)
+        got = vec._batched_info(infos)
+        assert got is not None
+
+        def same(a: Any, b: Any) -> None:
+            if isinstance(a, dict):
+                assert isinstance(b, dict) and list(a) == list(b)
+                for key in a:
+                    same(a[key], b[key])
+            else:
+                assert type(a) is type(b) and a.dtype == b.dtype and a.shape == b.shape
+                assert a.tolist() == b.tolist()
+
+        same(got, want)
+        assert vec._batched_info([info(0), info(1), {**info(2), "extra": 1}]) is None  # keys differ
+        assert vec._batched_info([info(0), info(1), {**info(2), "time": 1}]) is None  # an int among floats
     finally:
         vec.close()
