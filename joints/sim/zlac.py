@@ -173,7 +173,7 @@ from joints.devices.zlac.state import ENERGISED, DriveState, Event, command
 from joints.devices.zlac.state import step as transition
 from joints.errors import ParameterRefused, Refusal
 from joints.sim import zlac_kernel as Z
-from joints.sim.firmware import Firmware
+from joints.sim.firmware import WRITE_LOG_LIMIT, Firmware
 from joints.sim.rowattr import column, flag
 from joints.sim.sensors import Sensor, model_of
 
@@ -434,27 +434,9 @@ class ZlacChannel:
 
     # -- commands (from the drive) ---------------------------------------------------------
     def set_velocity_target(self, rpm: int) -> None:
-        """Velocity-mode target changed: start the ramp to it (see the module docstring)."""
-        drive = self.drive
-        get, s = self._get, self._row
-        vmax = float(drive._dget(Z.D_VMAX))
-        target = float(max(-vmax, min(vmax, rpm * RPM)))
-        if target == get(Z.V_TARGET):
-            return
-        s[Z.V_TARGET] = target
-        v = float(get(Z.V_REF))
-        ref = drive.ramp_reference
-        if ref is not None:
-            s[Z.ACC_SLOPE] = float(ref / get(Z.ACC_TIME))
-            s[Z.DEC_SLOPE] = float(ref / get(Z.DEC_TIME))
-        elif v * target > 0.0:
-            if abs(target) >= abs(v):
-                s[Z.ACC_SLOPE] = float((abs(target) - abs(v)) / get(Z.ACC_TIME))
-            else:
-                s[Z.DEC_SLOPE] = float((abs(v) - abs(target)) / get(Z.DEC_TIME))
-        else:
-            s[Z.DEC_SLOPE] = float(abs(v) / get(Z.DEC_TIME))
-            s[Z.ACC_SLOPE] = float(abs(target) / get(Z.ACC_TIME))
+        """Velocity-mode target changed: start the ramp to it (see the module docstring;
+        :func:`joints.sim.zlac_kernel.set_velocity_target`)."""
+        self.drive._k.set_velocity_target(self.drive._drow, self._row, float(rpm))
 
     def start_move(self, absolute: bool) -> bool:
         """Position-mode start: latch target, speed and ramps; False if the target is refused."""
@@ -775,7 +757,9 @@ class ZlacFirmware(Firmware):
         """As :meth:`Firmware.write_many`; loop settings written in one block are turned into loop
         constants once, before anything that uses them (a later command of the block, a substep). A block of
         only ramp times and target velocities (a host's velocity command) refreshes only the ramp-time
-        columns, all that it can change (:meth:`_cache_ramps`)."""
+        columns, all that it can change (:meth:`_cache_ramps`), in one pass (:meth:`_write_light`)."""
+        if self._write_light(items):
+            return
         self._batch = 2
         for name, _ in items:
             if name not in _LIGHT:
@@ -789,6 +773,47 @@ class ZlacFirmware(Firmware):
                 self._cache()
             elif self._stale_ramps:
                 self._cache_ramps()
+
+    def _write_light(self, items: Sequence[tuple[str, int]]) -> bool:
+        """:meth:`write_many` of a light block (only ramp times and target velocities: a host's velocity command)
+        where nothing else can happen: every value an int the firmware accepts, nothing pending or stale, this
+        class's own hooks. The same validation, store, log and effects in order as the general way (the ramp
+        columns refreshed before a target that follows them, :meth:`ZlacChannel.set_velocity_target` for each
+        target while enabled in velocity mode); False (nothing done) where that is not the case."""
+        if type(self) is not ZlacFirmware or self.pending or self._stale or self._stale_ramps or self.DELAYED:
+            return False
+        limits = self._limits
+        checked: list[tuple[str, int]] = []
+        for name, value in items:
+            if name not in _LIGHT or type(value) is not int:
+                return False
+            writable, lo, hi = limits[name]
+            if not (writable and lo <= value <= hi):
+                return False  # the general way refuses it
+            checked.append((name, value))
+        values = self.values
+        for name, value in checked:
+            values[name] = value
+        log = self.write_log
+        log.extend(checked)
+        if len(log) > WRITE_LOG_LIMIT:
+            del log[: WRITE_LOG_LIMIT // 2]
+        d = self._dget
+        running = d(Z.D_STATE) == Z.ENABLED and d(Z.D_MODE) == Z.VELOCITY
+        stale = False
+        for name, value in checked:
+            side = _TARGET_VELOCITY.get(name)
+            if side is None:  # a ramp time: its column before the next target, or at the end
+                stale = True
+                continue
+            if stale:
+                self._cache_ramps()
+                stale = False
+            if running:
+                self.channels[side].set_velocity_target(value)
+        if stale:
+            self._cache_ramps()
+        return True
 
     def on_write(self, name: str, value: int) -> None:
         if name in _ACTING:  # settings written earlier in this block: in force first
