@@ -458,10 +458,10 @@ class DiffDriveGoalEnv(RigEnv):
 
     def begin_step(self, action: np.ndarray) -> tuple[tuple[float, float], bool]:
         self._check_open()
-        a = np.asarray(action, dtype=np.float64)
+        a = action if type(action) is np.ndarray and action.dtype.kind == "f" else np.asarray(action, dtype=np.float64)
         if a.shape != self.action_space.shape:
             raise ValueError(f"action shape {a.shape} != {self.action_space.shape}")
-        left, right = a.tolist()  # plain floats from here: the same bits as the array arithmetic
+        left, right = a.tolist()  # plain floats (float32 exactly widened) from here: the array arithmetic's bits
         if not (math.isfinite(left) and math.isfinite(right)):
             raise ValueError(f"action must be finite, got {[left, right]}")
         clipped = (clip(left, -1.0, 1.0), clip(right, -1.0, 1.0))

@@ -135,10 +135,16 @@ class _Block:
             raise ValueError(f"_Block: {list(names)} are not in address order")
         self.names = tuple(names)
         self.slave = access.slave
+        #: every register one word: its word is its checked value & 0xFFFF (``to_words`` without the tuple)
+        self._checks = tuple(r.check for r in self.registers) if all(r.words == 1 for r in self.registers) else None
 
     def request(self, values: Sequence[int]) -> mb.WriteMultipleRegisters:
-        """The FC16 of ``values`` (one per register, in :attr:`names`' order), each encoded by its register's
-        ``to_words`` (range-checked, as ``encode_block`` does)."""
+        """The FC16 of ``values`` (one per register, in :attr:`names`' order), each encoded as its register's
+        ``to_words`` encodes it (range-checked, as ``encode_block`` does)."""
+        checks = self._checks
+        if checks is not None:
+            return mb.WriteMultipleRegisters(self.slave, self.start,
+                                             tuple([check(v) & 0xFFFF for check, v in zip(checks, values)]))
         words: list[int] = []
         for reg, v in zip(self.registers, values):
             words.extend(reg.to_words(v))

@@ -289,7 +289,10 @@ class ZlacChannel:
 
     def _bind(self, table: Any, first: int) -> None:
         self._row: Any = table[first + 1 + self.index]
-        self._get: Callable[[int], float] = self._row.__getitem__ if isinstance(self._row, list) else self._row.item
+        plain = isinstance(self._row, list)
+        self._get: Callable[[int], float] = self._row.__getitem__ if plain else self._row.item
+        #: the row's values as Python floats (the list itself, or a numpy row's ``tolist``)
+        self._values: Callable[[], list[float]] = (lambda: table[first + 1 + self.index]) if plain else self._row.tolist
 
     fresh = flag(Z.FRESH, "the next step latches the encoder origin and the loops at q")
     q = column(Z.Q, "wheel angle [rad] seen at the last step")
@@ -401,29 +404,37 @@ class ZlacChannel:
         s[Z.V_START] = v[r["initial_velocity_velocity_mode"]] * RPM
         s[Z.TARGET_TORQUE] = float(v[r["target_torque"]])
 
-    # -- conversions -----------------------------------------------------------------------
+    # -- conversions (each also from the row's values as a list, ``r``: one read of the row per status read) --
     def counts(self) -> int:
         """Actual position value [counts] (as the channel's sensor reports it)."""
-        get = self._get
-        q = get(Z.Q)
+        return self._counts(self._values(), self.drive.time)
+
+    def _counts(self, r: Sequence[float], t: float) -> int:
+        q = r[Z.Q]
         sensor = self.sensor
         if not sensor.model.ideal:
-            q = sensor.position(self.drive.time, q, get(Z.QD))
-        return round((q - get(Z.ORIGIN)) * get(Z.COUNTS_PER_RAD))
+            q = sensor.position(t, q, r[Z.QD])
+        return round((q - r[Z.ORIGIN]) * r[Z.COUNTS_PER_RAD])
 
     def rpm(self) -> float:
         return float(self._get(Z.QD)) / RPM
 
     def velocity_status(self) -> int:
         """Actual velocity value [0.1 r/min]: the drive's estimate."""
-        v = self._get(Z.QD)
+        return self._velocity_status(self._values())
+
+    def _velocity_status(self, r: Sequence[float]) -> int:
+        v = r[Z.QD]
         if not self.sensor.model.ideal:
-            v = self.sensor.velocity(self._get(Z.Q), v)
+            v = self.sensor.velocity(r[Z.Q], v)
         return round(v / RPM * 10)
 
     def current_status(self) -> int:
         """Actual torque (current) value [0.1 A], as the drive measures it."""
-        i = self._get(Z.I_OUT)
+        return self._current_status(self._values())
+
+    def _current_status(self, r: Sequence[float]) -> int:
+        i = r[Z.I_OUT]
         if not self.sensor.model.ideal:
             i = self.sensor.current(i)
         return round(i * 10)
@@ -482,7 +493,11 @@ class ZlacChannel:
         return float(drive._k.step(drive._table, drive._first, self.index, t, dt, q, qd))
 
     def hall(self) -> int:
-        angle = (self._get(Z.Q) * self.poles + self._get(Z.HALL_OFFSET)) % TWO_PI
+        return self._hall(self._values())
+
+    @staticmethod
+    def _hall(r: Sequence[float]) -> int:
+        angle = (r[Z.Q] * int(r[Z.POLES]) + r[Z.HALL_OFFSET]) % TWO_PI
         return _HALL_SEQUENCE[min(5, int(angle / (TWO_PI / 6)))]
 
     @property
@@ -724,22 +739,26 @@ class ZlacFirmware(Firmware):
         return read
 
     def _read_status(self) -> list[int]:
-        """The status block's values (:data:`_STATUS` order), each as its ``computed`` function gives it."""
+        """The status block's values (:data:`_STATUS` order), each as its ``computed`` function gives it (the same
+        channel conversions, each channel's row read once; every sensor draws in the order its own reads would)."""
         left, right = self.left, self.right
-        e = 1 if self._dget(Z.D_STATE) in _ENERGISED_CODES else 0
+        d = self._dget
+        t = float(d(Z.D_TIME))
+        e = 1 if d(Z.D_STATE) in _ENERGISED_CODES else 0
+        lv, rv = left._values(), right._values()
         return [
             _pack(e, e),
-            _pack(left.hall(), right.hall()),
-            _pack(round(left.temperature), round(right.temperature)),
-            left.error_status(),
-            right.error_status(),
-            left.counts(),
-            right.counts(),
-            left.velocity_status(),
-            right.velocity_status(),
-            left.current_status(),
-            right.current_status(),
-            int(self._dget(Z.D_CONNECTED)),
+            _pack(left._hall(lv), right._hall(rv)),
+            _pack(round(lv[Z.TEMPERATURE]), round(rv[Z.TEMPERATURE])),
+            int(lv[Z.FAULT_BITS]),
+            int(rv[Z.FAULT_BITS]),
+            left._counts(lv, t),
+            right._counts(rv, t),
+            left._velocity_status(lv),
+            right._velocity_status(rv),
+            left._current_status(lv),
+            right._current_status(rv),
+            int(d(Z.D_CONNECTED)),
         ]
 
     def frame_received(self) -> None:
