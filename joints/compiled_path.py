@@ -171,11 +171,24 @@ class _ZlacModbus:
         #: the joint index of the left and of the right wheel (velocity_words takes them in that order)
         channels = [d.channel for d in self.drivers]
         self._sides = (channels.index("left"), channels.index("right"))
+        #: the steady FC16s in one compiled call (frames, physics, the twin's ops) where the twin offers it
+        self.exchange = _velocity_exchange(self.lane, access.slave)
         self.taken = 0
 
     def _write(self, block: _Block, values: tuple[int, ...]) -> None:
         self.lane.request(block.request(values), idempotent=True)
         self.drive.note_words(block.names, values)
+
+    def _send(self, ramps: tuple[int, ...] | None, targets: tuple[int, ...]) -> None:
+        """The ramp FC16 (if any) and the target FC16: in one exchange where it takes them, else one by one."""
+        blocks = ([(self.ramps, ramps)] if ramps is not None else []) + [(self.targets, targets)]
+        exchange = self.exchange
+        if exchange is not None and exchange.write([block.request(values) for block, values in blocks]):
+            for block, values in blocks:
+                self.drive.note_words(block.names, values)
+            return
+        for block, values in blocks:
+            self._write(block, values)
 
     def command_all(self, mode: str, values: Sequence[float], skip: Sequence[bool]) -> None:
         joints = self.joints
@@ -183,9 +196,7 @@ class _ZlacModbus:
             checked = [j.velocity_command(v) for j, v in zip(joints, values)]
             left, right = self._sides
             ramps, targets = self.drive.velocity_words(checked[left], checked[right])
-            if ramps is not None:
-                self._write(self.ramps, ramps)
-            self._write(self.targets, targets)
+            self._send(ramps, targets)
             self.taken += len(joints)
             return
         for j, v, s in zip(joints, values, skip):  # the driver's own methods
@@ -208,6 +219,15 @@ class _ZlacModbus:
         block = self.decode(STATUS_START, reply.values)
         t = sampled_at(t0, clock.now())
         return [j.to_si(d.state_from(block, t)) for j, d in zip(self.joints, self.drivers)]
+
+
+def _velocity_exchange(lane: LinkLane, slave: int) -> Any:
+    """The one-call exchange the twin at ``slave`` behind ``lane``'s in-process peer offers for a steady velocity
+    command (``velocity_exchange(lane, slave)``, e.g. :class:`joints.sim.zlac_exchange.ZlacExchange`), or None."""
+    slaves = getattr(getattr(lane.framing, "peer", None), "slaves", None)
+    front = slaves.get(slave) if isinstance(slaves, dict) else None
+    make = getattr(getattr(front, "firmware", None), "velocity_exchange", None)
+    return make(lane, slave) if callable(make) else None
 
 
 _Stepper = _ErobModbus | _ZlacModbus

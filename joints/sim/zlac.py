@@ -580,6 +580,14 @@ class ZlacFirmware(Firmware):
         for ch in getattr(self, "channels", ()):
             ch._bind(table, first)
 
+    def velocity_exchange(self, lane: Any, slave: int) -> Any:
+        """The one-call exchange of a host's steady velocity command to this twin at ``slave`` over ``lane`` (the
+        host link's direct lane): :class:`joints.sim.zlac_exchange.ZlacExchange` (it checks at every call that
+        the twin, its bus and world are as it assumes, else the lane sends the requests its usual way)."""
+        from joints.sim.zlac_exchange import ZlacExchange
+
+        return ZlacExchange(lane, slave)
+
     def kernel_rows(self) -> list[list[float]]:
         """The twin's rows as they stand: the drive, the left channel, the right channel."""
         return [[float(x) for x in self._table[self._first + k]] for k in range(3)]
@@ -762,10 +770,7 @@ class ZlacFirmware(Firmware):
         ]
 
     def frame_received(self) -> None:
-        d = self._drow
-        d[Z.D_LAST_FRAME] = d[Z.D_TIME]
-        if d[Z.D_OFFLINE] == 0.0:
-            d[Z.D_CONNECTED] = 1.0
+        Z.PY_OPS.frame(self._drow)  # :func:`joints.sim.zlac_kernel.frame` (as Python: two row writes)
 
     def check_write(self, name: str, value: int) -> None:
         if (name == "target_position_left" or name == "target_position_right") and (

@@ -130,6 +130,15 @@ def quick_stop(table: Any, first: int) -> None:
 
 
 @jitable
+def frame(d: Row) -> None:
+    """A frame addressed to the drive arrived (the offline watchdog's food; the host counts as connected again
+    unless the watchdog tripped)."""
+    d[D_LAST_FRAME] = d[D_TIME]
+    if d[D_OFFLINE] == 0.0:
+        d[D_CONNECTED] = 1.0
+
+
+@jitable
 def set_velocity_target(d: Row, c: Row, rpm: float) -> None:
     """Velocity-mode target ``rpm`` [r/min] written: clamp it to the maximum motor speed and start the ramp
     to it from the present speed command (see :mod:`joints.sim.zlac`); the same target again changes nothing."""
@@ -342,7 +351,8 @@ def step(table: Any, first: int, side: int, t: float, dt: float, q: float, qd: f
 
 #: the helpers the firmware object calls, as Python (rows that are lists)
 PY_OPS = SimpleNamespace(reset_loops=reset_loops, begin_quick_stop=begin_quick_stop, quick_stop=quick_stop,
-                         tick=tick, step=step, set_velocity_target=set_velocity_target)
+                         tick=tick, step=step, set_velocity_target=set_velocity_target,
+                         frame=frame)
 _COMPILED: list[Any] = []
 
 
@@ -369,6 +379,7 @@ def warm() -> None:
     t[0, D_STATE] = DISABLED
     ops.reset_loops(t[1])
     ops.set_velocity_target(t[0], t[1], 1.0)
+    ops.frame(t[0])
     ops.begin_quick_stop(t[0], t[1], 5.0, False)
     ops.quick_stop(t, 0)
     ops.tick(t, 0, 0.001)

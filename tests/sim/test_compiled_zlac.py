@@ -35,23 +35,25 @@ ENV = "joints/DiffDriveGoal-v0"
 
 
 class _Counts:
-    """Calls of the ZLAC pieces the steady step should take (wrapped, not replaced)."""
+    """Calls of the ZLAC pieces the steady step should take (wrapped, not replaced). Wrapping the twin's light
+    write replaces a stock method, which turns the one-call exchange off (it then goes the lane's way)."""
 
-    def __init__(self, monkeypatch: pytest.MonkeyPatch) -> None:
+    def __init__(self, monkeypatch: pytest.MonkeyPatch, *, light: bool) -> None:
         self.n = {"velocity_words": 0, "light": 0, "light_refused": 0}
-        words, light = ZlacDrive.velocity_words, ZlacFirmware._write_light
+        words, write_light = ZlacDrive.velocity_words, ZlacFirmware._write_light
 
         def velocity_words(drive: ZlacDrive, *args: Any) -> Any:
             self.n["velocity_words"] += 1
             return words(drive, *args)
 
-        def write_light(fw: ZlacFirmware, items: Any) -> bool:
-            done = light(fw, items)
+        def counted(fw: ZlacFirmware, items: Any) -> bool:
+            done = write_light(fw, items)
             self.n["light" if done else "light_refused"] += 1
             return done
 
         monkeypatch.setattr(ZlacDrive, "velocity_words", velocity_words)
-        monkeypatch.setattr(ZlacFirmware, "_write_light", write_light)
+        if light:
+            monkeypatch.setattr(ZlacFirmware, "_write_light", counted)
 
 
 def _info(info: dict[str, Any]) -> list[tuple[str, Any]]:
@@ -90,6 +92,7 @@ def _run(compiled: bool, steps: int = 80, counts: _Counts | None = None, **kwarg
         out["time"] = (u.rig.time, u.rig.sim.steps)
         out["taken"] = u.compiled_path.taken if u.compiled_path is not None else None
         out["lane"] = u.compiled_path.lane_taken if u.compiled_path is not None else None
+        out["fused"] = u.compiled_path._steppers[0].exchange.taken if u.compiled_path is not None else None
         out["counts"] = {k: v - before[k] for k, v in counts.n.items()} if counts is not None else None
         return out
     finally:
@@ -101,19 +104,35 @@ _COMPARED = ("reset", "steps", "transactions", "frames", "images", "rows", "writ
 
 @pytest.mark.parametrize("mode", ["compiled", "python"])
 def test_the_steady_step_is_taken_and_gives_the_driver_paths_bits(mode: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Compiled: the ramp and target FC16s of a step in one exchange (ZlacExchange: frames, physics, the twin's
+    ops in one compiled call); JOINTS_COMPILED=0: the lane, one request after the other (the world does not run
+    fused). Either way the driver path's bits."""
     monkeypatch.setenv("JOINTS_COMPILED", "0" if mode == "python" else "1")
-    counts = _Counts(monkeypatch)
+    counts = _Counts(monkeypatch, light=False)
     driver = _run(compiled=False, counts=counts)
     compiled = _run(compiled=True, counts=counts)
-    on_driver, on_compiled = driver["counts"], compiled["counts"]
     assert driver["taken"] is None
     assert compiled["taken"] >= 2 * 80  # both wheels, every step (the compiled path's FC16s)
-    assert compiled["lane"] >= 2 * 80
+    assert compiled["lane"] >= 2 * 80  # the steps' requests on the lane (the exchange counts its own there)
+    if mode == "compiled":
+        assert compiled["fused"] >= 78  # every step's FC16s in one call (not the steps after an ended episode)
+    else:
+        assert compiled["fused"] == 0
     # the drive's plan as register values, once per step on either path (velocity_plan is its dict view)
-    assert on_compiled["velocity_words"] >= 80 and on_driver["velocity_words"] >= 80
-    # the twin's one-pass light write: every ramp and target block of the steps, on both paths
-    assert on_compiled["light"] >= 80 and on_driver["light"] >= 80
-    assert on_compiled == on_driver  # the same plans, the same light blocks (and the same refused to it)
+    assert compiled["counts"] == driver["counts"] and compiled["counts"]["velocity_words"] >= 80
+    for key in _COMPARED:
+        assert compiled[key] == driver[key], key
+
+
+def test_a_replaced_twin_method_sends_the_requests_the_lanes_way(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The twin's light write wrapped (not stock): no one-call exchange, the lane's requests, the light write
+    taken for every ramp and target block on both paths - the same bits."""
+    counts = _Counts(monkeypatch, light=True)
+    driver = _run(compiled=False, counts=counts)
+    compiled = _run(compiled=True, counts=counts)
+    assert compiled["fused"] == 0 and compiled["taken"] >= 2 * 80 and compiled["lane"] >= 3 * 80
+    assert compiled["counts"] == driver["counts"]
+    assert compiled["counts"]["light"] >= 2 * 80
     for key in _COMPARED:
         assert compiled[key] == driver[key], key
 
@@ -331,3 +350,28 @@ def test_planted_wrong_replies_leave_both_paths_alike(monkeypatch: pytest.Monkey
     assert taken >= 20  # the compiled path sent the steps that got through
     assert any(isinstance(o, tuple) and isinstance(o[0], str) for o in driver)  # some steps raised
     assert compiled == driver
+
+
+def test_commands_alone_leave_the_twin_as_the_rigs_commands_do() -> None:
+    """Velocity commands without a status read between them (the drive's rows right after each: the frame
+    instants it saw, its ramps and targets), the one-call exchange against ``rig.set_velocities``."""
+    runs = []
+    for compiled in (True, False):
+        with gym.make(ENV, compiled_path=compiled) as env:
+            u: Any = env.unwrapped
+            env.reset(seed=1)
+            front = next(f for b in u.rig.sim.buses.values() for f in b.slaves.values())
+            out = []
+            for left, right in [(2.5, -1.0), (2.5, -1.0), (-4.0, 3.0), (0.0, 0.5)]:
+                if compiled:
+                    u.compiled_path.command("velocity", [left, right])
+                else:
+                    u.rig.set_velocities(dict(zip(u.wheel_names, (left, right))))
+                out.append((np.array(front.firmware.kernel_rows()).tobytes(), u.rig.time, u.rig.sim.steps))
+                u.rig.sleep(0.013)
+            fused = u.compiled_path._steppers[0].exchange.taken if compiled else None
+            link = next(iter(u.rig.joints.values())).driver.access.link
+            out.append([(tx.start, tx.end, tx.due, tx.size, tx.side) for tx in link.transport.log])
+            runs.append((out, fused))
+    assert runs[0][1] == 4
+    assert runs[0][0] == runs[1][0]
