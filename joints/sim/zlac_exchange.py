@@ -331,19 +331,29 @@ class ZlacExchange:
         return True
 
 
+#: (register table, start address) -> each word's register is signed, or None where the table does not hold the
+#: block's one-word writable registers there (tables are immutable: checked once)
+_SIGNED: dict[tuple[int, int], tuple[bool, ...] | None] = {}
+
+
 def _items(front: ModbusFront, request: mb.WriteMultipleRegisters, names: tuple[str, ...]
            ) -> list[tuple[str, int]] | None:
     """The firmware write (name, value) of an FC16 of one-word registers ``names`` (as ``ModbusFront.write``
     makes it: each word masked, a signed register's two's complement); None where the front's table does not
     hold exactly those registers there."""
     table = front.table
+    key = (id(table), request.address)
+    if key not in _SIGNED:
+        regs = [table.owner(request.address + i) for i in range(len(names))]
+        ok = all(r is not None and r.name == n and r.words == 1 and r.access.writable for r, n in zip(regs, names))
+        _SIGNED[key] = tuple(r.signed for r in regs if r is not None) if ok else None
+    signed = _SIGNED[key]
+    if signed is None:
+        return None
     out: list[tuple[str, int]] = []
-    for i, (word, name) in enumerate(zip(request.values, names)):
-        reg = table.owner(request.address + i)
-        if reg is None or reg.name != name or reg.words != 1 or not reg.access.writable:
-            return None
+    for word, name, sign in zip(request.values, names, signed):
         raw = word & 0xFFFF
-        out.append((name, raw - 0x10000 if reg.signed and raw & 0x8000 else raw))
+        out.append((name, raw - 0x10000 if sign and raw & 0x8000 else raw))
     return out
 
 
