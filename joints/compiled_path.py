@@ -214,7 +214,10 @@ class _ZlacModbus:
         clock = self.clock
         t0 = clock.now()
         self.drive.identify()  # once per drive: a no-op after the first
-        reply = self.lane.request(self.status, idempotent=True)
+        exchange = self.exchange
+        done, reply = exchange.read(self.status) if exchange is not None else (False, None)
+        if not done:
+            reply = self.lane.request(self.status, idempotent=True)
         assert isinstance(reply, mb.ReadRegistersReply)
         block = self.decode(STATUS_START, reply.values)
         t = sampled_at(t0, clock.now())

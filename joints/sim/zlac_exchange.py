@@ -140,7 +140,22 @@ def exchanges(tx: Any, st: Any, out: Any, first: int, w: int, mj_step: int, tabl
             st[NOW] = seen
 
 
+def advance(seconds: float, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any,
+            worlds: Any, dts: Any, active: Any) -> None:
+    """The line's sleep of ``seconds`` (if > 0: ``World.advance``) to the instant a drive acts on a frame, then
+    its settle (``World.sync``: booked time runs), on the state vector of a fused world without ticks."""
+    if seconds > 0:
+        st[BOOKED] = 0.0
+        _advance(seconds, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+        st[CLOCK] = st[TARGET]
+        st[SEEN] = st[CLOCK]
+    if st[BOOKED] != 0.0:
+        st[BOOKED] = 0.0
+        _advance(0.0, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+
+
 _COMPILED: list[Any] = []
+_ADVANCE: list[Any] = []
 
 
 def _compiled() -> Any:
@@ -151,8 +166,10 @@ def _compiled() -> Any:
             kernel.jitable(_advance)
             kernel.jitable(_act)
             _COMPILED.append(kernel.compiled(exchanges))
+            _ADVANCE.append(kernel.compiled(advance))
         else:  # pragma: no cover - depends on the install
             _COMPILED.append(None)
+            _ADVANCE.append(None)
     return _COMPILED[0]
 
 
@@ -164,6 +181,10 @@ _STOCK = ((ModbusDeviceBus, "exchange", ModbusDeviceBus.exchange), (ModbusFront,
           (ZlacFirmware, "_cache_ramps", ZlacFirmware._cache_ramps),
           (TimedSerialLine, "_transact_idle", TimedSerialLine._transact_idle),
           (TimedSerialLine, "_plain_peer", TimedSerialLine._plain_peer))
+
+
+_TRANSACT_IDLE = TimedSerialLine._transact_idle
+_PLAIN_PEER = TimedSerialLine._plain_peer
 
 
 def _stock() -> bool:
@@ -195,6 +216,7 @@ class ZlacExchange:
         self.lane = lane
         self.slave = slave
         self.taken = 0  #: calls that ran (each of one or two transactions)
+        self.reads = 0  #: status reads sent with the world's advance in one call (:meth:`read`)
         self._group: Any = None
         self._first = 0
         self._world: Any = None
@@ -330,6 +352,109 @@ class ZlacExchange:
         self.taken += 1
         return True
 
+    def _timing(self) -> tuple[Any, TimedSerialLine] | None:
+        """(world, line) where the line and the world are as the read's fused advance assumes, else None."""
+        lane = self.lane
+        line, framing = lane.line, lane.framing
+        if line is None or framing is None:
+            return None
+        if TimedSerialLine._transact_idle is not _TRANSACT_IDLE or TimedSerialLine._plain_peer is not _PLAIN_PEER:
+            return None
+        bus = framing.peer
+        if self._bus is not bus:
+            self._bus, self._world = bus, _world_of(bus, line.clock)
+        world = self._world
+        if world is None or line.clock is not world.clock or world._ticks or world._bind != world._bind_seen:
+            return None
+        group = world.group
+        if not (group.compiled and group.fusable[world.group_index]):
+            return None
+        return world, line
+
+    def read(self, request: mb.ReadHoldingRegisters, *, idempotent: bool = True) -> tuple[bool, Any]:
+        """``LinkLane.request(request)`` of a status read, the world's advance to the instant the drive acts on
+        it in one compiled call: (True, the reply) - or (False, None), nothing sent, where the line or world is
+        not as assumed. The drive's act is the bus's own (``framing.peer.exchange``, whatever it answers); a
+        reply that is not the plain answer continues as the lane's does (the link's attempt and retries)."""
+        fn = _ADVANCE[0] if _ADVANCE else (_compiled(), _ADVANCE[0])[1]
+        lane = self.lane
+        if fn is None or not lane._open(request):
+            return False, None
+        timing = self._timing()
+        if timing is None:
+            return False, None
+        world, line = timing
+        link = lane.link
+        framing = lane.framing
+        assert framing is not None
+        rule = link.rule
+        rule.check(request)  # raises EncodeError before anything is sent
+        clock = world.clock
+        with link._lock, world.lock:
+            now = line._sync()  # (the lane's own way calls it again: a second call changes nothing)
+            log, latest = line.log, line._latest_end
+            free = line._free
+            start = max(now, free["host"])
+            if len(latest) != len(log) or (len(log) > line._epoch and latest[-1] > start):
+                return False, None  # an edited log, or a frame that may overlap the request: the lane's own way
+            link.transactions += 1
+            deadline = link.clock.now() + link.policy.timeout  # from the request's start, as the link's
+            framing.exchanges += 1
+            size = framing.size
+            turn = framing._turnaround(request)
+            n = size(request)
+            end = start + n * line.char_time  # TimedSerialLine._put of the host's frame
+            due = end + line.gap + (line.turnaround if turn is None else turn)
+            free["host"] = end + line.gap
+            _log(line, Transmission(start, end, "host", b"", delivered=True, due=due, size=n))
+            behind = due - clock.now()
+            if behind > 0 or world._booked:  # the physics runs to the instant the drive acts (sleep, settle)
+                group = world.group
+                w = world.group_index
+                table = group.worlds_table
+                table[w, stepping.STEPS] = world.steps
+                st = self._st
+                if st is None:
+                    import numpy as np
+
+                    st = self._st = np.zeros(11)
+                st[CLOCK] = clock.now()
+                st[TARGET] = world._target
+                st[BOOKED] = 1.0 if world._booked else 0.0
+                st[SEEN] = line._clock_seen
+                st[DT] = world.timestep
+                order, active = group._plan(world._me)
+                try:
+                    fn(behind, st, w, group.mj_step or 0, group.table, group.adr, group.ratio, order, table,
+                       group.dts_array, active)
+                finally:
+                    world.steps = int(table[w, stepping.STEPS])
+                    world._target = float(st[TARGET])
+                    world._booked = bool(st[BOOKED])
+                    clock.set(float(st[CLOCK]))
+                if behind > 0:
+                    line._clock_seen = float(st[SEEN])
+                if world._data.maxuse_arena > group._arena_limits[w]:  # as Group.run after its calls
+                    world.leave_fused_path()
+                    group.replan()
+            raw = framing.peer.exchange(request)  # the drive acts (the lane's act)
+            line.now = max(line.now, due)
+            if raw is not None:  # the reply (TimedSerialLine._put of the device's frame), booked while it travels
+                m = size(raw)
+                d_start = max(due, free["device"])
+                d_end = d_start + m * line.char_time
+                seen = d_end + line.adapter_latency
+                free["device"] = d_end + line.gap
+                _log(line, Transmission(d_start, d_end, "device", b"", delivered=True, due=seen, size=m, payload=raw))
+                behind = seen - clock.now()
+                if behind > 0:
+                    clock.book(behind)
+                    line._clock_seen = clock.now()
+                free["host"] = max(free["host"], seen + line.gap)
+                line.now = max(line.now, seen)
+            self.reads += 1
+            return True, lane_finish(lane, request, raw, deadline, idempotent)
+
 
 #: (register table, start address) -> each word's register is signed, or None where the table does not hold the
 #: block's one-word writable registers there (tables are immutable: checked once)
@@ -355,6 +480,24 @@ def _items(front: ModbusFront, request: mb.WriteMultipleRegisters, names: tuple[
         raw = word & 0xFFFF
         out.append((name, raw - 0x10000 if sign and raw & 0x8000 else raw))
     return out
+
+
+def lane_finish(lane: Any, request: Any, raw: Any, deadline: float, idempotent: bool) -> Any:
+    """The rest of the lane's request once the peer's reply ``raw`` (None: silence) reached the host
+    (``LinkLane.request`` after its transaction: the plain answer is returned, anything else is the link's)."""
+    from joints.errors import FrameError, PeerProtocolError, ReplyTimeout
+
+    link, framing = lane.link, lane.framing
+    reply = None if raw is None else framing.as_received(request, raw)
+    try:  # as the link's attempt: a reply the rule refuses (another slave's) fails the attempt
+        if reply is not None and not isinstance(reply, FrameError) and link.rule.is_reply(request, reply):
+            lane.taken += 1
+            return reply
+        framing.put(reply)  # not the plain answer: the rest of the attempt and the retries are the link's
+        return link._await_reply(request, deadline)
+    except (ReplyTimeout, PeerProtocolError) as exc:
+        link._discard_late()
+        return link._attempts(request, None, idempotent, failed=exc)
 
 
 def _store(fw: ZlacFirmware, items: list[tuple[str, int]]) -> None:

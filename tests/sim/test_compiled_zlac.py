@@ -93,6 +93,7 @@ def _run(compiled: bool, steps: int = 80, counts: _Counts | None = None, **kwarg
         out["taken"] = u.compiled_path.taken if u.compiled_path is not None else None
         out["lane"] = u.compiled_path.lane_taken if u.compiled_path is not None else None
         out["fused"] = u.compiled_path._steppers[0].exchange.taken if u.compiled_path is not None else None
+        out["reads"] = u.compiled_path._steppers[0].exchange.reads if u.compiled_path is not None else None
         out["counts"] = {k: v - before[k] for k, v in counts.n.items()} if counts is not None else None
         return out
     finally:
@@ -116,8 +117,9 @@ def test_the_steady_step_is_taken_and_gives_the_driver_paths_bits(mode: str, mon
     assert compiled["lane"] >= 2 * 80  # the steps' requests on the lane (the exchange counts its own there)
     if mode == "compiled":
         assert compiled["fused"] >= 78  # every step's FC16s in one call (not the steps after an ended episode)
+        assert compiled["reads"] >= 80  # every step's status read with the world's advance in one call
     else:
-        assert compiled["fused"] == 0
+        assert compiled["fused"] == 0 and compiled["reads"] == 0
     # the drive's plan as register values, once per step on either path (velocity_plan is its dict view)
     assert compiled["counts"] == driver["counts"] and compiled["counts"]["velocity_words"] >= 80
     for key in _COMPARED:
@@ -296,7 +298,7 @@ class _NoLink:
 
 # -- wrong replies on the compiled path ------------------------------------------------------------------
 
-def _planted_run(compiled: bool, monkeypatch: pytest.MonkeyPatch) -> tuple[list[Any], int]:
+def _planted_run(compiled: bool, monkeypatch: pytest.MonkeyPatch) -> tuple[list[Any], int, int]:
     """40 steps, every 5th reply of the bus wrong (silence, another slave's, a short read, a refusal)."""
     exchange = ModbusDeviceBus.exchange
     n = [0]
@@ -338,16 +340,18 @@ def _planted_run(compiled: bool, monkeypatch: pytest.MonkeyPatch) -> tuple[list[
         out.append([(tx.start, tx.end, tx.due, tx.size, tx.side) for tx in link.transport.log])
         out.append((u.rig.time, u.rig.sim.steps))
         taken = u.compiled_path.taken if compiled else 0
+        reads = u.compiled_path._steppers[0].exchange.reads if compiled else 0
     finally:
         monkeypatch.setattr(ModbusDeviceBus, "exchange", exchange)
         env.close()
-    return out, taken
+    return out, taken, reads
 
 
 def test_planted_wrong_replies_leave_both_paths_alike(monkeypatch: pytest.MonkeyPatch) -> None:
-    compiled, taken = _planted_run(True, monkeypatch)
-    driver, _ = _planted_run(False, monkeypatch)
+    compiled, taken, reads = _planted_run(True, monkeypatch)
+    driver, _, _ = _planted_run(False, monkeypatch)
     assert taken >= 20  # the compiled path sent the steps that got through
+    assert reads >= 30  # the status reads (silence, another slave's reply, a short read, a refusal among them) fused
     assert any(isinstance(o, tuple) and isinstance(o[0], str) for o in driver)  # some steps raised
     assert compiled == driver
 
@@ -361,7 +365,7 @@ def test_commands_alone_leave_the_twin_as_the_rigs_commands_do() -> None:
             u: Any = env.unwrapped
             env.reset(seed=1)
             front = next(f for b in u.rig.sim.buses.values() for f in b.slaves.values())
-            out = []
+            out: list[Any] = []
             for left, right in [(2.5, -1.0), (2.5, -1.0), (-4.0, 3.0), (0.0, 0.5)]:
                 if compiled:
                     u.compiled_path.command("velocity", [left, right])
