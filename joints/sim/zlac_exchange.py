@@ -54,7 +54,7 @@ H_START, H_END, H_DUE, D_START, D_END, D_SEEN = range(6)
 
 
 #: the world's substeps (:func:`joints.sim.stepping._run`, compiled), called from inside the compiled call
-_run_steps: Any = stepping._run_compiled
+_run_steps: Any = getattr(stepping, "_run_compiled", None)
 
 
 def _advance(seconds: float, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any,
