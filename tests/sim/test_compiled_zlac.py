@@ -27,6 +27,7 @@ from joints.devices.zlac.profile import HubMotorProfile
 from joints.devices.zlac.registers import ZLAC8015D
 from joints.drivers.zlac_modbus import RAMP_NAMES, TARGET_NAMES, ZlacDrive
 from joints.errors import ParameterRefused
+from joints.sim import kernel
 from joints.sim.firmware import Firmware
 from joints.sim.modbus_front import ModbusDeviceBus, ModbusFront
 from joints.sim.zlac import ZlacFirmware
@@ -351,7 +352,9 @@ def test_planted_wrong_replies_leave_both_paths_alike(monkeypatch: pytest.Monkey
     compiled, taken, reads = _planted_run(True, monkeypatch)
     driver, _, _ = _planted_run(False, monkeypatch)
     assert taken >= 20  # the compiled path sent the steps that got through
-    assert reads >= 30  # the status reads (silence, another slave's reply, a short read, a refusal among them) fused
+    # the status reads (silence, another slave's reply, a short read, a refusal among them) fused where the world
+    # runs compiled (JOINTS_COMPILED=0: the lane's way)
+    assert reads >= 30 if kernel.default_mode() else reads == 0
     assert any(isinstance(o, tuple) and isinstance(o[0], str) for o in driver)  # some steps raised
     assert compiled == driver
 
@@ -377,5 +380,5 @@ def test_commands_alone_leave_the_twin_as_the_rigs_commands_do() -> None:
             link = next(iter(u.rig.joints.values())).driver.access.link
             out.append([(tx.start, tx.end, tx.due, tx.size, tx.side) for tx in link.transport.log])
             runs.append((out, fused))
-    assert runs[0][1] == 4
+    assert runs[0][1] == (4 if kernel.default_mode() else 0)  # the exchange where the world runs compiled
     assert runs[0][0] == runs[1][0]
