@@ -34,7 +34,7 @@ from gymnasium import spaces
 
 import joints
 from envs import configs
-from envs.base import RigEnv, fault_info
+from envs.base import RigEnv, clip, fault_info
 from envs.randomization import GAINS, DomainRandomization
 from envs.render import CameraSpec, SceneRenderer
 from joints.errors import MotionTimeout
@@ -318,6 +318,7 @@ class DiffDriveGoalEnv(RigEnv):
                                          file=rig.config.source, key=f"joints.{name}.limits.velocity")
             vlim.append(j.limits.velocity)
         self.velocity_limits = np.array(vlim, dtype=np.float64)  #: (2,) rad/s
+        self._vlim = (float(vlim[0]), float(vlim[1]))
         watchdog = [rig.config.joints[n].watchdog_ms for n in self.wheel_names]
         #: s of host silence after which the drive quick-stops (0x2000; its default 1000 ms)
         self.watchdog = min((w if w is not None else 1000) for w in watchdog) / 1000.0
@@ -349,9 +350,9 @@ class DiffDriveGoalEnv(RigEnv):
         self._renderer: SceneRenderer | None = None
         self._twin: tuple[Any, Any, int, list[int]] | None = None
         self.goal = np.zeros(3)  #: goal (x, y, heading) in the episode frame
-        self._queue: deque[np.ndarray] = deque()
+        self._queue: deque[tuple[float, float]] = deque()
         self._states: dict[str, joints.JointState] = {}
-        self._angles = np.zeros(2)
+        self._angles = (0.0, 0.0)  #: the wheel angles the odometry sees [rad] (with the encoder noise)
         self._distance = 0.0
         self._tick = 0
         self._slip = 0.0  #: s the schedule slipped by overruns this episode
@@ -436,7 +437,7 @@ class DiffDriveGoalEnv(RigEnv):
         else:
             self._reset_hardware()
         latency = self.randomization_sample["latency"] if self.randomization_sample else 0
-        self._queue = deque(np.zeros(2) for _ in range(latency))
+        self._queue = deque((0.0, 0.0) for _ in range(latency))
         self._tick = 0
         self._slip = 0.0  #: s the schedule slipped by overruns this episode
         states = self._read()
@@ -455,40 +456,44 @@ class DiffDriveGoalEnv(RigEnv):
 
     batchable = True
 
-    def begin_step(self, action: np.ndarray) -> tuple[np.ndarray, bool]:
+    def begin_step(self, action: np.ndarray) -> tuple[tuple[float, float], bool]:
         self._check_open()
-        a = np.asarray(action, dtype=np.float64)
+        a = action if type(action) is np.ndarray and action.dtype.kind == "f" else np.asarray(action, dtype=np.float64)
         if a.shape != self.action_space.shape:
             raise ValueError(f"action shape {a.shape} != {self.action_space.shape}")
-        if not np.isfinite(a).all():
-            raise ValueError(f"action must be finite, got {a.tolist()}")
-        a = a.clip(-1.0, 1.0)
+        left, right = a.tolist()  # plain floats (float32 exactly widened) from here: the array arithmetic's bits
+        if not (math.isfinite(left) and math.isfinite(right)):
+            raise ValueError(f"action must be finite, got {[left, right]}")
+        clipped = (clip(left, -1.0, 1.0), clip(right, -1.0, 1.0))
         watchdog = not self.sim and self._watchdog_tripped()
         if self._queue:  # bus latency (domain randomisation): the action waits its turn
-            self._queue.append(a)
+            self._queue.append(clipped)
             self._command(self._queue.popleft())
         else:
-            self._command(a)
+            self._command(clipped)
         self._tick += 1
-        return a, watchdog
+        return clipped, watchdog
 
-    def finish_step(self, token: tuple[np.ndarray, bool]) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        a, watchdog = token
+    def finish_step(self, token: tuple[tuple[float, float], bool]) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """Read both wheels (one FC03), integrate the odometry, observe, reward - on plain floats."""
+        (a_left, a_right), watchdog = token
         states = self._read()
-        self.odometry.update(*self._angles)
+        x, y, _ = self.odometry.update(*self._angles)
         d, e = self._goal_terms()
         success = d < self.success_distance and abs(e) < self.success_heading
         r_progress = self.progress_weight * (self._distance - d)
         r_heading = -self.heading_weight * abs(e) / math.pi * math.exp(-d / self.heading_scale)
-        r_action = -self.action_weight * float(np.dot(a, a))
+        r_action = -self.action_weight * (a_left * a_left + a_right * a_right)
         r_success = self.success_bonus if success else 0.0
         self._distance = d
         obs = self._observation()
         info = self._info(states, (d, e))
-        info.update(reward_progress=r_progress, reward_heading=r_heading, reward_action=r_action,
-                    reward_success=r_success)
-        x, y, _ = self.odometry.pose
-        out_of_arena = abs(x) > self.arena or abs(y) > self.arena
+        info["reward_progress"] = r_progress
+        info["reward_heading"] = r_heading
+        info["reward_action"] = r_action
+        info["reward_success"] = r_success
+        arena = self.arena
+        out_of_arena = abs(x) > arena or abs(y) > arena
         info["out_of_arena"] = out_of_arena
         info["watchdog"] = watchdog
         faulted = [n for n in self.wheel_names if states[n].fault is not None]
@@ -528,29 +533,34 @@ class DiffDriveGoalEnv(RigEnv):
         gx, gy, gh = self.goal.tolist()
         dx, dy = gx - x, gy - y
         e = gh - th
-        v = [self._states[n].velocity for n in self.wheel_names]
-        obs = np.array([x, y, c, s, c * dx + s * dy, -s * dx + c * dy, math.cos(e), math.sin(e), v[0], v[1]])
-        out: np.ndarray = np.clip(obs, self._obs_low, self._obs_high)
-        return out
+        states = self._states
+        left, right = self.wheel_names
+        obs = np.array([x, y, c, s, c * dx + s * dy, -s * dx + c * dy, math.cos(e), math.sin(e),
+                        states[left].velocity, states[right].velocity])
+        np.maximum(obs, self._obs_low, out=obs)  # np.clip's bits (the values are finite), one array each
+        np.minimum(obs, self._obs_high, out=obs)
+        return obs
 
     def _info(self, states: Mapping[str, joints.JointState], terms: tuple[float, float] | None = None) -> dict[str, Any]:
         """The step's info; ``terms``: :meth:`_goal_terms` if the caller has them."""
         d, e = self._goal_terms() if terms is None else terms
+        left, right = self.wheel_names
+        sl, sr = states[left], states[right]
+        fl, fr = sl.fault, sr.fault
         info: dict[str, Any] = {
             "time": float(self.rig.time),  # s on the rig's clock (sim: simulated seconds since reset)
             "overrun": self._overrun,  # s this step ran over its period (0.0: none)
-            "faults": {n: _fault_name(states[n]) for n in self.wheel_names},
+            "faults": {left: None if fl is None else fl.name, right: None if fr is None else fr.name},
             "distance": d,
             "heading_error": e,
             "is_success": bool(d < self.success_distance and abs(e) < self.success_heading),
             "pose_estimate": np.array(self.odometry.pose),
             "goal": self.goal.copy(),
-            "wheel_velocities": np.array([states[n].velocity for n in self.wheel_names]),
+            "wheel_velocities": np.array([sl.velocity, sr.velocity]),
         }
         if self.sim:
-            tp = self.true_pose()
-            info["true_pose"] = tp
-            tx, ty, _ = tp.tolist()
+            tx, ty, th = self._true_xyth()
+            info["true_pose"] = np.array([tx, ty, th])
             gx, gy, _ = self.goal.tolist()
             info["true_distance"] = math.hypot(gx - tx, gy - ty)
         return info
@@ -559,10 +569,14 @@ class DiffDriveGoalEnv(RigEnv):
         """Sim: the chassis site ``base`` from the physics, (x, y, heading) in the episode frame."""
         if not self.sim:
             raise RuntimeError("the true pose is known in simulation only")
-        x, y, th = self._world_xyth()  # Python floats: the same arithmetic as on numpy scalars, faster
+        return np.array(self._true_xyth())
+
+    def _true_xyth(self) -> tuple[float, float, float]:
+        """:meth:`true_pose` as Python floats (the same arithmetic as on numpy scalars, faster)."""
+        x, y, th = self._world_xyth()
         ox, oy, oth = self._origin.tolist()
         c, s = math.cos(oth), math.sin(oth)
-        return np.array([c * (x - ox) + s * (y - oy), -s * (x - ox) + c * (y - oy), wrap_angle(th - oth)])
+        return c * (x - ox) + s * (y - oy), -s * (x - ox) + c * (y - oy), wrap_angle(th - oth)
 
     def _world_pose(self) -> np.ndarray:
         """Sim: (x, y, heading) of the chassis site ``base`` in the world frame."""
@@ -577,27 +591,33 @@ class DiffDriveGoalEnv(RigEnv):
     # -- bus --------------------------------------------------------------------------------
     def _read(self) -> dict[str, joints.JointState]:
         compiled = self.compiled_path
+        left, right = self.wheel_names
         if compiled is not None:  # the same FC03, read as rig.read_states reads it
-            self._states = dict(zip(self.wheel_names, compiled.states()))
+            sl, sr = compiled.states()
+            self._states = {left: sl, right: sr}
         else:
             self._states = self.rig.read_states()  # one FC03 per drive
+            sl, sr = self._states[left], self._states[right]
         self._last_io = self.rig.time
-        angles = np.array([self._states[n].position for n in self.wheel_names])
+        ql, qr = sl.position, sr.position
         if self._noise_rng is not None and self._noise > 0:
-            angles += self._noise_rng.normal(0.0, self._noise, 2)
-        self._angles = angles
+            nl, nr = self._noise_rng.normal(0.0, self._noise, 2).tolist()
+            ql, qr = ql + nl, qr + nr
+        self._angles = (ql, qr)
         return self._states
 
-    def _command(self, action: np.ndarray) -> None:
+    def _command(self, action: tuple[float, float]) -> None:
+        """Both wheel speeds for ``action`` (clipped to [-1, 1]: :meth:`command_of` on plain floats)."""
         if not all(j.enabled for j in self.wheels):  # faulted/disabled drive: the episode has ended
             return
-        # the action is begin_step's (float64, shape (2,), clipped): command_of without its no-op conversions
-        cmd = action * self.velocity_limits
+        vl, vr = self._vlim
+        cmd = [action[0] * vl, action[1] * vr]
         compiled = self.compiled_path
         if compiled is not None:  # the same FC16(s), sent as rig.set_velocities sends them
-            compiled.command("velocity", cmd.tolist())
+            compiled.command("velocity", cmd)
             return
-        self.rig.set_velocities({n: float(c) for n, c in zip(self.wheel_names, cmd)})  # one FC16
+        left, right = self.wheel_names
+        self.rig.set_velocities({left: cmd[0], right: cmd[1]})  # one FC16
 
     def _watchdog_tripped(self) -> bool:
         """Hardware: after a silence longer than the drive's offline time, has it quick-stopped?
@@ -746,7 +766,3 @@ class DiffDriveGoalEnv(RigEnv):
         w = self.wheel_speeds_of(v, omega)
         scale = max(1.0, float(np.max(np.abs(w) / self.velocity_limits)))  # keep the curvature
         return self.action_of(w / scale)
-
-
-def _fault_name(state: joints.JointState) -> str | None:
-    return state.fault.name if state.fault is not None else None

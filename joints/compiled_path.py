@@ -35,6 +35,7 @@ from collections.abc import Sequence
 from typing import Any, TypeGuard
 
 from joints.codecs import modbus as mb
+from joints.drivers import zlac_modbus as zm
 from joints.drivers.access import ModbusAccess
 from joints.drivers.base import sampled_at
 from joints.drivers.erob import CMD_START, STATUS_NAMES
@@ -124,18 +125,29 @@ class _ErobModbus:
 
 
 class _Block:
-    """One FC16 of fixed contiguous registers (what ``ModbusAccess.write_many`` sends for them)."""
+    """One FC16 of fixed contiguous registers, named in address order (what ``ModbusAccess.write_many`` sends)."""
 
     def __init__(self, access: ModbusAccess, names: Sequence[str]) -> None:
         table = access.table
         self.start, _ = table.encode_block(dict.fromkeys(names, 0))  # raises unless contiguous
-        self.registers = tuple(sorted((table[n] for n in names), key=lambda r: r.address))
+        self.registers = tuple(table[n] for n in names)
+        if [r.address for r in self.registers] != sorted(r.address for r in self.registers):
+            raise ValueError(f"_Block: {list(names)} are not in address order")
+        self.names = tuple(names)
         self.slave = access.slave
+        #: every register one word: its word is its checked value & 0xFFFF (``to_words`` without the tuple)
+        self._checks = tuple(r.check for r in self.registers) if all(r.words == 1 for r in self.registers) else None
 
-    def request(self, values: dict[str, int]) -> mb.WriteMultipleRegisters:
+    def request(self, values: Sequence[int]) -> mb.WriteMultipleRegisters:
+        """The FC16 of ``values`` (one per register, in :attr:`names`' order), each encoded as its register's
+        ``to_words`` encodes it (range-checked, as ``encode_block`` does)."""
+        checks = self._checks
+        if checks is not None:
+            return mb.WriteMultipleRegisters(self.slave, self.start,
+                                             tuple([check(v) & 0xFFFF for check, v in zip(checks, values)]))
         words: list[int] = []
-        for reg in self.registers:
-            words.extend(reg.to_words(values[reg.name]))  # range-checked, as encode_block does
+        for reg, v in zip(self.registers, values):
+            words.extend(reg.to_words(v))
         return mb.WriteMultipleRegisters(self.slave, self.start, tuple(words))
 
 
@@ -154,23 +166,37 @@ class _ZlacModbus:
         self.clock = drive.clock
         self.status = mb.ReadHoldingRegisters(access.slave, STATUS_START, STATUS_WORDS)  # what read_status sends
         self.decode = access.table.decode_block
-        self.ramps = _Block(access, [f"{stem}_{side}" for stem in ("acceleration_time", "deceleration_time")
-                                     for side in ("left", "right")])
-        self.targets = _Block(access, ["target_velocity_left", "target_velocity_right"])
+        self.ramps = _Block(access, zm.RAMP_NAMES)
+        self.targets = _Block(access, zm.TARGET_NAMES)
+        #: the joint index of the left and of the right wheel (velocity_words takes them in that order)
+        channels = [d.channel for d in self.drivers]
+        self._sides = (channels.index("left"), channels.index("right"))
+        #: the steady FC16s in one compiled call (frames, physics, the twin's ops) where the twin offers it
+        self.exchange = _velocity_exchange(self.lane, access.slave)
         self.taken = 0
 
-    def _write(self, block: _Block, values: dict[str, int]) -> None:
+    def _write(self, block: _Block, values: tuple[int, ...]) -> None:
         self.lane.request(block.request(values), idempotent=True)
-        self.drive.note_written(values)
+        self.drive.note_words(block.names, values)
+
+    def _send(self, ramps: tuple[int, ...] | None, targets: tuple[int, ...]) -> None:
+        """The ramp FC16 (if any) and the target FC16: in one exchange where it takes them, else one by one."""
+        blocks = ([(self.ramps, ramps)] if ramps is not None else []) + [(self.targets, targets)]
+        exchange = self.exchange
+        if exchange is not None and exchange.write([block.request(values) for block, values in blocks]):
+            for block, values in blocks:
+                self.drive.note_words(block.names, values)
+            return
+        for block, values in blocks:
+            self._write(block, values)
 
     def command_all(self, mode: str, values: Sequence[float], skip: Sequence[bool]) -> None:
         joints = self.joints
         if mode == "velocity" and not any(skip):
             checked = [j.velocity_command(v) for j, v in zip(joints, values)]
-            ramps, targets = self.drive.velocity_plan({d.channel: c for d, c in zip(self.drivers, checked)})
-            if ramps is not None:
-                self._write(self.ramps, ramps)
-            self._write(self.targets, targets)
+            left, right = self._sides
+            ramps, targets = self.drive.velocity_words(checked[left], checked[right])
+            self._send(ramps, targets)
             self.taken += len(joints)
             return
         for j, v, s in zip(joints, values, skip):  # the driver's own methods
@@ -188,11 +214,23 @@ class _ZlacModbus:
         clock = self.clock
         t0 = clock.now()
         self.drive.identify()  # once per drive: a no-op after the first
-        reply = self.lane.request(self.status, idempotent=True)
+        exchange = self.exchange
+        done, reply = exchange.read(self.status) if exchange is not None else (False, None)
+        if not done:
+            reply = self.lane.request(self.status, idempotent=True)
         assert isinstance(reply, mb.ReadRegistersReply)
         block = self.decode(STATUS_START, reply.values)
         t = sampled_at(t0, clock.now())
         return [j.to_si(d.state_from(block, t)) for j, d in zip(self.joints, self.drivers)]
+
+
+def _velocity_exchange(lane: LinkLane, slave: int) -> Any:
+    """The one-call exchange the twin at ``slave`` behind ``lane``'s in-process peer offers for a steady velocity
+    command (``velocity_exchange(lane, slave)``, e.g. :class:`joints.sim.zlac_exchange.ZlacExchange`), or None."""
+    slaves = getattr(getattr(lane.framing, "peer", None), "slaves", None)
+    front = slaves.get(slave) if isinstance(slaves, dict) else None
+    make = getattr(getattr(front, "firmware", None), "velocity_exchange", None)
+    return make(lane, slave) if callable(make) else None
 
 
 _Stepper = _ErobModbus | _ZlacModbus

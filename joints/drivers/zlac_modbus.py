@@ -48,6 +48,13 @@ _TARGETS = ("target_velocity_left", "target_velocity_right", "target_torque_left
 _VELOCITY_NAMES = {side: (f"target_velocity_{side}", f"acceleration_time_{side}", f"deceleration_time_{side}")
                    for side in SIDES}
 _VELOCITY = int(zr.ControlMode.VELOCITY)
+#: the four ramp times in address order (0x2080 .. 0x2083: one FC16)
+RAMP_NAMES = ("acceleration_time_left", "acceleration_time_right", "deceleration_time_left", "deceleration_time_right")
+#: both target velocities in address order (0x2088, 0x2089: one FC16)
+TARGET_NAMES = ("target_velocity_left", "target_velocity_right")
+_CHECK_LEFT = zr.ZLAC8015D["target_velocity_left"].check
+_CHECK_RIGHT = zr.ZLAC8015D["target_velocity_right"].check
+
 
 def ramp_time_ms(delta_rpm: float, rpm_per_s: float) -> int:
     """Acceleration/deceleration-time register value [ms] for a speed change of ``delta_rpm`` at
@@ -249,28 +256,46 @@ class ZlacDrive:
     def velocity_plan(self, commands: Mapping[str, tuple[int, int]]) -> tuple[dict[str, int] | None, dict[str, int]]:
         """What :meth:`set_channel_velocities` writes, after its checks and the mode (which it sets if needed):
         (the four ramp times if they change, else None; both target velocities [r/min])."""
-        table, cache, names = self.table, self._cache, _VELOCITY_NAMES
-        left, right = commands["left"], commands["right"]
-        rpm = {"left": round(left[0] / 10.0), "right": round(right[0] / 10.0)}
-        for side in SIDES:
-            table[names[side][0]].check(rpm[side])
+        ramps, targets = self.velocity_words(commands["left"], commands["right"])
+        return (None if ramps is None else dict(zip(RAMP_NAMES, ramps))), dict(zip(TARGET_NAMES, targets))
+
+    def velocity_words(self, left: tuple[int, int], right: tuple[int, int]
+                       ) -> tuple[tuple[int, int, int, int] | None, tuple[int, int]]:
+        """:meth:`velocity_plan` of ``left``, ``right`` = (velocity [0.1 r/min], ramp [0.1 r/min/s]) as register
+        values in address order: (the four ramp times of :data:`RAMP_NAMES` if they change, else None; both
+        target velocities of :data:`TARGET_NAMES`). The checks, the mode and the ramp rule in one place (the
+        compiled path sends these words without the names)."""
+        cache = self._cache
+        rpm_l, rpm_r = round(left[0] / 10.0), round(right[0] / 10.0)
+        _CHECK_LEFT(rpm_l)
+        _CHECK_RIGHT(rpm_r)
         self._need_both("set_velocities")
-        ramps: dict[str, int] = {}
         st = self.state
-        for side in SIDES:
+        out = []
+        for side, rpm, ramp in (("left", rpm_l, left[1]), ("right", rpm_r, right[1])):
             if st.mode == _VELOCITY:  # require_mode's steady case: the mode is the drive's already
                 st.channel_mode[side] = _VELOCITY
             else:
                 self.require_mode(side, zr.ControlMode.VELOCITY)
-            target, acc, dec = names[side]
+            target, acc, dec = _VELOCITY_NAMES[side]
             last = cache.get(target, 0)
-            if rpm[side] != last:
-                ramps[acc] = ramps[dec] = ramp_time_ms(rpm[side] - last, commands[side][1] / 10.0)
+            if rpm != last:
+                t = ramp_time_ms(rpm - last, ramp / 10.0)
+                out.append((t, t))
             else:
-                ramps[acc] = cache.get(acc, 500)
-                ramps[dec] = cache.get(dec, 500)
-        changed = any(cache.get(k) != v for k, v in ramps.items())
-        return (ramps if changed else None), {"target_velocity_left": rpm["left"], "target_velocity_right": rpm["right"]}
+                out.append((cache.get(acc, 500), cache.get(dec, 500)))
+        (acc_l, dec_l), (acc_r, dec_r) = out
+        ramps = (acc_l, acc_r, dec_l, dec_r)  # 0x2080 .. 0x2083
+        get = cache.get
+        changed = (get("acceleration_time_left") != acc_l or get("acceleration_time_right") != acc_r
+                   or get("deceleration_time_left") != dec_l or get("deceleration_time_right") != dec_r)
+        return (ramps if changed else None), (rpm_l, rpm_r)
+
+    def note_words(self, names: tuple[str, ...], values: tuple[int, ...]) -> None:
+        """:meth:`note_written` of ``values`` of the registers ``names`` (the compiled path's FC16s)."""
+        cache = self._cache
+        for n, v in zip(names, values):
+            cache[n] = v
 
     def set_torques(self, left: int, right: int) -> None:
         """Both target torques [mA] in one FC16 (torque mode)."""

@@ -173,7 +173,7 @@ from joints.devices.zlac.state import ENERGISED, DriveState, Event, command
 from joints.devices.zlac.state import step as transition
 from joints.errors import ParameterRefused, Refusal
 from joints.sim import zlac_kernel as Z
-from joints.sim.firmware import Firmware
+from joints.sim.firmware import WRITE_LOG_LIMIT, Firmware
 from joints.sim.rowattr import column, flag
 from joints.sim.sensors import Sensor, model_of
 
@@ -289,7 +289,10 @@ class ZlacChannel:
 
     def _bind(self, table: Any, first: int) -> None:
         self._row: Any = table[first + 1 + self.index]
-        self._get: Callable[[int], float] = self._row.__getitem__ if isinstance(self._row, list) else self._row.item
+        plain = isinstance(self._row, list)
+        self._get: Callable[[int], float] = self._row.__getitem__ if plain else self._row.item
+        #: the row's values as Python floats (the list itself, or a numpy row's ``tolist``)
+        self._values: Callable[[], list[float]] = (lambda: table[first + 1 + self.index]) if plain else self._row.tolist
 
     fresh = flag(Z.FRESH, "the next step latches the encoder origin and the loops at q")
     q = column(Z.Q, "wheel angle [rad] seen at the last step")
@@ -401,29 +404,37 @@ class ZlacChannel:
         s[Z.V_START] = v[r["initial_velocity_velocity_mode"]] * RPM
         s[Z.TARGET_TORQUE] = float(v[r["target_torque"]])
 
-    # -- conversions -----------------------------------------------------------------------
+    # -- conversions (each also from the row's values as a list, ``r``: one read of the row per status read) --
     def counts(self) -> int:
         """Actual position value [counts] (as the channel's sensor reports it)."""
-        get = self._get
-        q = get(Z.Q)
+        return self._counts(self._values(), self.drive.time)
+
+    def _counts(self, r: Sequence[float], t: float) -> int:
+        q = r[Z.Q]
         sensor = self.sensor
         if not sensor.model.ideal:
-            q = sensor.position(self.drive.time, q, get(Z.QD))
-        return round((q - get(Z.ORIGIN)) * get(Z.COUNTS_PER_RAD))
+            q = sensor.position(t, q, r[Z.QD])
+        return round((q - r[Z.ORIGIN]) * r[Z.COUNTS_PER_RAD])
 
     def rpm(self) -> float:
         return float(self._get(Z.QD)) / RPM
 
     def velocity_status(self) -> int:
         """Actual velocity value [0.1 r/min]: the drive's estimate."""
-        v = self._get(Z.QD)
+        return self._velocity_status(self._values())
+
+    def _velocity_status(self, r: Sequence[float]) -> int:
+        v = r[Z.QD]
         if not self.sensor.model.ideal:
-            v = self.sensor.velocity(self._get(Z.Q), v)
+            v = self.sensor.velocity(r[Z.Q], v)
         return round(v / RPM * 10)
 
     def current_status(self) -> int:
         """Actual torque (current) value [0.1 A], as the drive measures it."""
-        i = self._get(Z.I_OUT)
+        return self._current_status(self._values())
+
+    def _current_status(self, r: Sequence[float]) -> int:
+        i = r[Z.I_OUT]
         if not self.sensor.model.ideal:
             i = self.sensor.current(i)
         return round(i * 10)
@@ -434,27 +445,9 @@ class ZlacChannel:
 
     # -- commands (from the drive) ---------------------------------------------------------
     def set_velocity_target(self, rpm: int) -> None:
-        """Velocity-mode target changed: start the ramp to it (see the module docstring)."""
-        drive = self.drive
-        get, s = self._get, self._row
-        vmax = float(drive._dget(Z.D_VMAX))
-        target = float(max(-vmax, min(vmax, rpm * RPM)))
-        if target == get(Z.V_TARGET):
-            return
-        s[Z.V_TARGET] = target
-        v = float(get(Z.V_REF))
-        ref = drive.ramp_reference
-        if ref is not None:
-            s[Z.ACC_SLOPE] = float(ref / get(Z.ACC_TIME))
-            s[Z.DEC_SLOPE] = float(ref / get(Z.DEC_TIME))
-        elif v * target > 0.0:
-            if abs(target) >= abs(v):
-                s[Z.ACC_SLOPE] = float((abs(target) - abs(v)) / get(Z.ACC_TIME))
-            else:
-                s[Z.DEC_SLOPE] = float((abs(v) - abs(target)) / get(Z.DEC_TIME))
-        else:
-            s[Z.DEC_SLOPE] = float(abs(v) / get(Z.DEC_TIME))
-            s[Z.ACC_SLOPE] = float(abs(target) / get(Z.ACC_TIME))
+        """Velocity-mode target changed: start the ramp to it (see the module docstring;
+        :func:`joints.sim.zlac_kernel.set_velocity_target`)."""
+        self.drive._k.set_velocity_target(self.drive._drow, self._row, float(rpm))
 
     def start_move(self, absolute: bool) -> bool:
         """Position-mode start: latch target, speed and ramps; False if the target is refused."""
@@ -500,7 +493,11 @@ class ZlacChannel:
         return float(drive._k.step(drive._table, drive._first, self.index, t, dt, q, qd))
 
     def hall(self) -> int:
-        angle = (self._get(Z.Q) * self.poles + self._get(Z.HALL_OFFSET)) % TWO_PI
+        return self._hall(self._values())
+
+    @staticmethod
+    def _hall(r: Sequence[float]) -> int:
+        angle = (r[Z.Q] * int(r[Z.POLES]) + r[Z.HALL_OFFSET]) % TWO_PI
         return _HALL_SEQUENCE[min(5, int(angle / (TWO_PI / 6)))]
 
     @property
@@ -582,6 +579,14 @@ class ZlacFirmware(Firmware):
             self._k = Z.compiled_ops()
         for ch in getattr(self, "channels", ()):
             ch._bind(table, first)
+
+    def velocity_exchange(self, lane: Any, slave: int) -> Any:
+        """The one-call exchange of a host's steady velocity command to this twin at ``slave`` over ``lane`` (the
+        host link's direct lane): :class:`joints.sim.zlac_exchange.ZlacExchange` (it checks at every call that
+        the twin, its bus and world are as it assumes, else the lane sends the requests its usual way)."""
+        from joints.sim.zlac_exchange import ZlacExchange
+
+        return ZlacExchange(lane, slave)
 
     def kernel_rows(self) -> list[list[float]]:
         """The twin's rows as they stand: the drive, the left channel, the right channel."""
@@ -742,29 +747,30 @@ class ZlacFirmware(Firmware):
         return read
 
     def _read_status(self) -> list[int]:
-        """The status block's values (:data:`_STATUS` order), each as its ``computed`` function gives it."""
+        """The status block's values (:data:`_STATUS` order), each as its ``computed`` function gives it (the same
+        channel conversions, each channel's row read once; every sensor draws in the order its own reads would)."""
         left, right = self.left, self.right
-        e = 1 if self._dget(Z.D_STATE) in _ENERGISED_CODES else 0
+        d = self._dget
+        t = float(d(Z.D_TIME))
+        e = 1 if d(Z.D_STATE) in _ENERGISED_CODES else 0
+        lv, rv = left._values(), right._values()
         return [
             _pack(e, e),
-            _pack(left.hall(), right.hall()),
-            _pack(round(left.temperature), round(right.temperature)),
-            left.error_status(),
-            right.error_status(),
-            left.counts(),
-            right.counts(),
-            left.velocity_status(),
-            right.velocity_status(),
-            left.current_status(),
-            right.current_status(),
-            int(self._dget(Z.D_CONNECTED)),
+            _pack(left._hall(lv), right._hall(rv)),
+            _pack(round(lv[Z.TEMPERATURE]), round(rv[Z.TEMPERATURE])),
+            int(lv[Z.FAULT_BITS]),
+            int(rv[Z.FAULT_BITS]),
+            left._counts(lv, t),
+            right._counts(rv, t),
+            left._velocity_status(lv),
+            right._velocity_status(rv),
+            left._current_status(lv),
+            right._current_status(rv),
+            int(d(Z.D_CONNECTED)),
         ]
 
     def frame_received(self) -> None:
-        d = self._drow
-        d[Z.D_LAST_FRAME] = d[Z.D_TIME]
-        if d[Z.D_OFFLINE] == 0.0:
-            d[Z.D_CONNECTED] = 1.0
+        Z.PY_OPS.frame(self._drow)  # :func:`joints.sim.zlac_kernel.frame` (as Python: two row writes)
 
     def check_write(self, name: str, value: int) -> None:
         if (name == "target_position_left" or name == "target_position_right") and (
@@ -775,7 +781,9 @@ class ZlacFirmware(Firmware):
         """As :meth:`Firmware.write_many`; loop settings written in one block are turned into loop
         constants once, before anything that uses them (a later command of the block, a substep). A block of
         only ramp times and target velocities (a host's velocity command) refreshes only the ramp-time
-        columns, all that it can change (:meth:`_cache_ramps`)."""
+        columns, all that it can change (:meth:`_cache_ramps`), in one pass (:meth:`_write_light`)."""
+        if self._write_light(items):
+            return
         self._batch = 2
         for name, _ in items:
             if name not in _LIGHT:
@@ -789,6 +797,47 @@ class ZlacFirmware(Firmware):
                 self._cache()
             elif self._stale_ramps:
                 self._cache_ramps()
+
+    def _write_light(self, items: Sequence[tuple[str, int]]) -> bool:
+        """:meth:`write_many` of a light block (only ramp times and target velocities: a host's velocity command)
+        where nothing else can happen: every value an int the firmware accepts, nothing pending or stale, this
+        class's own hooks. The same validation, store, log and effects in order as the general way (the ramp
+        columns refreshed before a target that follows them, :meth:`ZlacChannel.set_velocity_target` for each
+        target while enabled in velocity mode); False (nothing done) where that is not the case."""
+        if type(self) is not ZlacFirmware or self.pending or self._stale or self._stale_ramps or self.DELAYED:
+            return False
+        limits = self._limits
+        checked: list[tuple[str, int]] = []
+        for name, value in items:
+            if name not in _LIGHT or type(value) is not int:
+                return False
+            writable, lo, hi = limits[name]
+            if not (writable and lo <= value <= hi):
+                return False  # the general way refuses it
+            checked.append((name, value))
+        values = self.values
+        for name, value in checked:
+            values[name] = value
+        log = self.write_log
+        log.extend(checked)
+        if len(log) > WRITE_LOG_LIMIT:
+            del log[: WRITE_LOG_LIMIT // 2]
+        d = self._dget
+        running = d(Z.D_STATE) == Z.ENABLED and d(Z.D_MODE) == Z.VELOCITY
+        stale = False
+        for name, value in checked:
+            side = _TARGET_VELOCITY.get(name)
+            if side is None:  # a ramp time: its column before the next target, or at the end
+                stale = True
+                continue
+            if stale:
+                self._cache_ramps()
+                stale = False
+            if running:
+                self.channels[side].set_velocity_target(value)
+        if stale:
+            self._cache_ramps()
+        return True
 
     def on_write(self, name: str, value: int) -> None:
         if name in _ACTING:  # settings written earlier in this block: in force first

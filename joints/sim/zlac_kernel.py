@@ -130,6 +130,43 @@ def quick_stop(table: Any, first: int) -> None:
 
 
 @jitable
+def frame(d: Row) -> None:
+    """A frame addressed to the drive arrived (the offline watchdog's food; the host counts as connected again
+    unless the watchdog tripped)."""
+    d[D_LAST_FRAME] = d[D_TIME]
+    if d[D_OFFLINE] == 0.0:
+        d[D_CONNECTED] = 1.0
+
+
+@jitable
+def set_velocity_target(d: Row, c: Row, rpm: float) -> None:
+    """Velocity-mode target ``rpm`` [r/min] written: clamp it to the maximum motor speed and start the ramp
+    to it from the present speed command (see :mod:`joints.sim.zlac`); the same target again changes nothing."""
+    vmax = d[D_VMAX]
+    target = rpm * RPM
+    if not target < vmax:  # max(-vmax, min(vmax, target)) as Python computes it (no NaN here)
+        target = vmax
+    if not target > -vmax:
+        target = -vmax
+    if target == c[V_TARGET]:
+        return
+    c[V_TARGET] = target
+    v = c[V_REF]
+    ref = d[D_RAMP_REF]
+    if not math.isnan(ref):  # a fixed-slope reference (ramp_reference_rpm)
+        c[ACC_SLOPE] = ref / c[ACC_TIME]
+        c[DEC_SLOPE] = ref / c[DEC_TIME]
+    elif v * target > 0.0:
+        if abs(target) >= abs(v):
+            c[ACC_SLOPE] = (abs(target) - abs(v)) / c[ACC_TIME]
+        else:
+            c[DEC_SLOPE] = (abs(v) - abs(target)) / c[DEC_TIME]
+    else:
+        c[DEC_SLOPE] = abs(v) / c[DEC_TIME]
+        c[ACC_SLOPE] = abs(target) / c[ACC_TIME]
+
+
+@jitable
 def raise_fault(d: Row, c: Row, bit: int) -> None:
     """A channel detected a fault: set its bit, switch both motors off (every state leads to FAULT)."""
     c[FAULT_BITS] = float(int(c[FAULT_BITS]) | bit)
@@ -314,7 +351,8 @@ def step(table: Any, first: int, side: int, t: float, dt: float, q: float, qd: f
 
 #: the helpers the firmware object calls, as Python (rows that are lists)
 PY_OPS = SimpleNamespace(reset_loops=reset_loops, begin_quick_stop=begin_quick_stop, quick_stop=quick_stop,
-                         tick=tick, step=step)
+                         tick=tick, step=step, set_velocity_target=set_velocity_target,
+                         frame=frame)
 _COMPILED: list[Any] = []
 
 
@@ -340,6 +378,8 @@ def warm() -> None:
     t[0, D_RAMP_REF] = math.nan
     t[0, D_STATE] = DISABLED
     ops.reset_loops(t[1])
+    ops.set_velocity_target(t[0], t[1], 1.0)
+    ops.frame(t[0])
     ops.begin_quick_stop(t[0], t[1], 5.0, False)
     ops.quick_stop(t, 0)
     ops.tick(t, 0, 0.001)
