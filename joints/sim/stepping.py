@@ -249,3 +249,60 @@ class Group:
         for w in worlds:
             steps[w] = self.worlds[w].steps
         substep(self.table, self.adr, self.ratio, order, steps, self.dts, *self._arrays)
+
+    def run_watching(self, world: int, n: int, cells: Sequence[tuple[Any, int]]) -> int:
+        """Up to ``n`` substeps of world ``world`` (fusable) as :meth:`run` steps them, ending after the first
+        substep at whose end one of ``cells`` (twin, column of the twin's first row) is non-zero (a fault the
+        loops tripped: a CANopen front reports it at that substep). Returns the substeps run (fewer than ``n``
+        also where the arena guard took the world off the fused path)."""
+        import numpy as np
+
+        firsts = {id(twin): first for twin, first in self._owners}
+        watch = np.array([[firsts[id(twin)], column] for twin, column in cells], dtype=np.int64).reshape(-1, 2)
+        order, indices = self._plan((world,))
+        table = self.worlds_table
+        w = self.worlds[world]
+        done = 0
+        while done < n:
+            m = min(n - done, CHUNK)
+            table[world, STEPS] = w.steps
+            ran = int(_run_watch_compiled(m, self.mj_step or 0, self.table, self.adr,  # type: ignore[misc]
+                                          self.ratio, order, table, self.dts_array, indices, watch))
+            w.steps += ran
+            done += ran
+            if w.data.maxuse_arena > self._arena_limits[world]:
+                w.leave_fused_path()
+                self.replan()
+                return done
+            if ran < m:
+                return done  # a watched cell turned non-zero
+        return done
+
+
+def _run_watch(n: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any, worlds: Any, dts: Any,
+               active: Any, watch: Any) -> int:
+    """:func:`_run` (physics on) substep by substep inside one compiled call, ending after the first substep at
+    whose end ``table[row, column]`` of a ``watch`` pair is non-zero; returns the substeps run."""
+    doubles, call = kernel.doubles, kernel.call
+    for k in range(n):
+        for j in range(len(order)):
+            i = order[j]
+            a = adr[i]
+            w = a[WORLD]
+            row = worlds[w]
+            dt = dts[w]
+            t = (row[STEPS] + k + 1) * dt
+            r = ratio[i]
+            q = doubles(row[QPOS_AT], row[NQ])[a[QPOS]] * r
+            qd = doubles(row[QVEL_AT], row[NV])[a[DOF]] * r
+            doubles(row[CTRL_AT], row[NU])[a[ACT]] = step_row(table, adr, i, t, dt, q, qd)
+        for j in range(len(active)):
+            row = worlds[active[j]]
+            call(mj_step, row[MODEL], row[DATA])
+        for j in range(len(watch)):
+            if table[watch[j, 0], watch[j, 1]] != 0.0:
+                return k + 1
+    return n
+
+
+_run_watch_compiled = kernel.compiled(_run_watch) if kernel.AVAILABLE else None
