@@ -124,6 +124,8 @@ class _Pdo:
     last_data: bytes | None = None
     last_sent: float = -math.inf
     next_event: float = math.inf
+    #: a TPDO's mapped values as :meth:`CanopenFront.value` reads them, clamped (:meth:`CanopenFront._sampler`)
+    sample: Callable[[], list[int]] | None = None
 
 
 def _carried(entry: tuple[int, int, int, bool]) -> tuple[int, int]:
@@ -529,13 +531,46 @@ class CanopenFront:
         return self._pdos
 
     def _tpdo_frame(self, pdo: _Pdo) -> can.Message:
-        values = [0 if name is None else self._pdo_value(name, lo, hi) for name, lo, hi in pdo.clamps]
-        return can.Message(arbitration_id=pdo.cob_id, is_extended_id=False, data=co.pack_pdo(pdo.entries, values))
+        sample = pdo.sample
+        if sample is None:
+            sample = pdo.sample = self._sampler(pdo.clamps)
+        return can.Message(arbitration_id=pdo.cob_id, is_extended_id=False, data=co.pack_pdo(pdo.entries, sample()))
 
-    def _pdo_value(self, name: str, lo: int, hi: int) -> int:
-        """The value of ``name`` clamped to what its mapped bits carry."""
-        v = self.value(name)
-        return max(lo, min(v, hi))
+    def _sampler(self, clamps: Sequence[tuple[str | None, int, int]]) -> Callable[[], list[int]]:
+        """A prepared sample of a TPDO's mapped values: each as :meth:`value` reads it, clamped to what its bits
+        carry, in mapping order; a run of firmware parameters through one prepared read of
+        them all (:meth:`Firmware.reader`: the same reads in the same order), a dummy entry 0."""
+        plan: list[tuple[str | None, Any, tuple[tuple[int, int], ...]]] = []
+        block: list[tuple[str, int, int]] = []
+
+        def close() -> None:
+            if block:
+                plan.append(("", self.firmware.reader([n for n, _lo, _hi in block]),
+                             tuple((lo, hi) for _n, lo, hi in block)))
+                block.clear()
+
+        for name, lo, hi in clamps:
+            if name is not None and name not in _STATUS:
+                block.append((name, lo, hi))
+                continue
+            close()
+            plan.append((name, None, ((lo, hi),)))
+        close()
+
+        def sample() -> list[int]:
+            out: list[int] = []
+            for name, read, bounds in plan:
+                if read is not None:
+                    for v, (lo, hi) in zip(read(), bounds):
+                        out.append(max(lo, min(int(v), hi)))
+                elif name is None:
+                    out.append(0)
+                else:
+                    lo, hi = bounds[0]
+                    out.append(max(lo, min(self.value(name), hi)))
+            return out
+
+        return sample
 
     def _rpdo(self, frame: can.Message) -> None:
         self.pdos()
