@@ -140,7 +140,7 @@ def unpack_pdo(entries: Sequence[tuple[int, int, int, bool]], data: bytes) -> tu
     if len(data) * 8 < bits:
         raise FrameError(f"PDO of {len(data)} bytes, mapping needs {(bits + 7) // 8}", data=data)
     if layout.fixed is not None:
-        return layout.fixed.unpack_from(data)  # type: ignore[no-any-return]
+        return layout.fixed.unpack_from(data)
     raw = int.from_bytes(data, "little")
     out = []
     offset = 0
