@@ -640,8 +640,8 @@ class World:
     def _run_fused(self, k: int) -> int:
         """Up to ``k`` substeps in compiled calls; with watched kernel cells (:class:`Watching`) they end at the
         first substep whose end shows one non-zero. Returns the substeps run."""
-        cells = [c for watched in self._bus_watches for c in watched()] if self._bus_watches else None
-        if not cells or k == 1:
+        cells = [c for watched in self._bus_watches for c in watched()] if self._bus_watches and k > 1 else None
+        if not cells:
             self.group.run(self._me, k)
             return k
         return self.group.run_watching(self.group_index, k, cells)
