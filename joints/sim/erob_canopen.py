@@ -77,6 +77,7 @@ from joints.devices.erob.canopen import (
 )
 from joints.devices.erob.params import EROB_PARAMS
 from joints.devices.erob.registers import AchieveStatus, MotionMode, OperationMode
+from joints.devices.erob.state import ENABLE_DELAY
 from joints.devices.quirks import EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED
 from joints.errors import CommandError, DeviceRejected, FrameError, ParameterRefused, Refusal, RegisterError
 from joints.sim import erob_kernel
@@ -842,14 +843,22 @@ class CanopenFront:
 
     def next_event(self) -> float:
         """The earliest ``t`` at which :meth:`tick` does more than move :attr:`now`: ``-math.inf`` where the
-        kernel's loops decide it (enabling with the brake releasing, quick stop, a PP set-point waiting for the
-        running move, event-driven TPDOs, a fault the front has not reported yet) or frames are due (boot-up,
-        EMCY); else the next heartbeat or life-guarding timeout (``math.inf``: none). A fault the loops trip
-        later is not announced: the world stops at it by :meth:`fault_watched`."""
+        kernel's loops decide it (quick stop, a PP set-point waiting for the running move, event-driven TPDOs, a
+        fault the front has not reported yet, the motor off while enabling) or frames are due (boot-up, EMCY);
+        else the end of the brake's release after an enable, the next heartbeat or life-guarding timeout
+        (``math.inf``: none). A fault the loops trip later is not announced: the world stops at it by
+        :meth:`fault_watched`."""
         if not self.powered:
             return math.inf
-        if self._boot or self._outbox or self.enabling:
+        if self._boot or self._outbox:
             return -math.inf
+        e = math.inf
+        if self.enabling:  # tick acts once the brake has released (Firmware.ready), or at once if the motor went off
+            fw = self.firmware
+            if not fw.enabled:
+                return -math.inf
+            released = fw.enabled_at + ENABLE_DELAY - 1e-9
+            e = released - 1e-9 * max(1.0, abs(released))  # a little early: a tick before it acts on nothing
         state = self.state
         if state is State.QUICK_STOP_ACTIVE or (state is not State.FAULT and self.firmware.fault) \
                 or (state is State.OPERATION_ENABLED and self.pp_pending is not None):
@@ -857,9 +866,8 @@ class CanopenFront:
         nmt = self.nmt
         if nmt is co.NmtState.OPERATIONAL and (self._pdos is None or self._timed_tpdos):
             return -math.inf
-        e = math.inf
         if nmt is not co.NmtState.INITIALISING:
-            e = self.next_heartbeat
+            e = min(e, self.next_heartbeat)
         v = self.firmware.values
         guard_ms, factor = v["guard_time"], v["life_time_factor"]
         if self.last_guard >= 0 and guard_ms and factor:
