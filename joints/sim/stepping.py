@@ -279,26 +279,18 @@ class Group:
         return done
 
 
+jitable(_run)  # also compiled into _run_watch
+
+
 def _run_watch(n: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any, worlds: Any, dts: Any,
                active: Any, watch: Any) -> int:
-    """:func:`_run` (physics on) substep by substep inside one compiled call, ending after the first substep at
-    whose end ``table[row, column]`` of a ``watch`` pair is non-zero; returns the substeps run."""
-    doubles, call = kernel.doubles, kernel.call
+    """:func:`_run` (physics on) one substep at a time inside one compiled call, ending after the first substep
+    at whose end ``table[row, column]`` of a ``watch`` pair is non-zero; returns the substeps run (the active
+    worlds' ``worlds[w, STEPS]`` count them)."""
     for k in range(n):
-        for j in range(len(order)):
-            i = order[j]
-            a = adr[i]
-            w = a[WORLD]
-            row = worlds[w]
-            dt = dts[w]
-            t = (row[STEPS] + k + 1) * dt
-            r = ratio[i]
-            q = doubles(row[QPOS_AT], row[NQ])[a[QPOS]] * r
-            qd = doubles(row[QVEL_AT], row[NV])[a[DOF]] * r
-            doubles(row[CTRL_AT], row[NU])[a[ACT]] = step_row(table, adr, i, t, dt, q, qd)
+        _run(1, 1, mj_step, table, adr, ratio, order, worlds, dts, active)
         for j in range(len(active)):
-            row = worlds[active[j]]
-            call(mj_step, row[MODEL], row[DATA])
+            worlds[active[j], STEPS] += 1
         for j in range(len(watch)):
             if table[watch[j, 0], watch[j, 1]] != 0.0:
                 return k + 1
