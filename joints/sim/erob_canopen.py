@@ -77,8 +77,10 @@ from joints.devices.erob.canopen import (
 )
 from joints.devices.erob.params import EROB_PARAMS
 from joints.devices.erob.registers import AchieveStatus, MotionMode, OperationMode
+from joints.devices.erob.state import ENABLE_DELAY
 from joints.devices.quirks import EROB_CANOPEN_MODE_CHANGE_WHILE_ENABLED
 from joints.errors import CommandError, DeviceRejected, FrameError, ParameterRefused, Refusal, RegisterError
+from joints.sim import erob_kernel
 from joints.transports.can_sim import CanMedium, ClockLike
 
 __all__ = ["LIFE_GUARD_ERROR", "CanopenFront", "ErobCanopenBus"]
@@ -123,6 +125,8 @@ class _Pdo:
     last_data: bytes | None = None
     last_sent: float = -math.inf
     next_event: float = math.inf
+    #: a TPDO's mapped values as :meth:`CanopenFront.value` reads them, clamped (:meth:`CanopenFront._sampler`)
+    sample: Callable[[], list[int]] | None = None
 
 
 def _carried(entry: tuple[int, int, int, bool]) -> tuple[int, int]:
@@ -528,13 +532,46 @@ class CanopenFront:
         return self._pdos
 
     def _tpdo_frame(self, pdo: _Pdo) -> can.Message:
-        values = [0 if name is None else self._pdo_value(name, lo, hi) for name, lo, hi in pdo.clamps]
-        return can.Message(arbitration_id=pdo.cob_id, is_extended_id=False, data=co.pack_pdo(pdo.entries, values))
+        sample = pdo.sample
+        if sample is None:
+            sample = pdo.sample = self._sampler(pdo.clamps)
+        return can.Message(arbitration_id=pdo.cob_id, is_extended_id=False, data=co.pack_pdo(pdo.entries, sample()))
 
-    def _pdo_value(self, name: str, lo: int, hi: int) -> int:
-        """The value of ``name`` clamped to what its mapped bits carry."""
-        v = self.value(name)
-        return max(lo, min(v, hi))
+    def _sampler(self, clamps: Sequence[tuple[str | None, int, int]]) -> Callable[[], list[int]]:
+        """A prepared sample of a TPDO's mapped values: each as :meth:`value` reads it, clamped to what its bits
+        carry, in mapping order; a run of firmware parameters through one prepared read of
+        them all (:meth:`Firmware.reader`: the same reads in the same order), a dummy entry 0."""
+        plan: list[tuple[str | None, Any, tuple[tuple[int, int], ...]]] = []
+        block: list[tuple[str, int, int]] = []
+
+        def close() -> None:
+            if block:
+                plan.append(("", self.firmware.reader([n for n, _lo, _hi in block]),
+                             tuple((lo, hi) for _n, lo, hi in block)))
+                block.clear()
+
+        for name, lo, hi in clamps:
+            if name is not None and name not in _STATUS:
+                block.append((name, lo, hi))
+                continue
+            close()
+            plan.append((name, None, ((lo, hi),)))
+        close()
+
+        def sample() -> list[int]:
+            out: list[int] = []
+            for name, read, bounds in plan:
+                if read is not None:
+                    for v, (lo, hi) in zip(read(), bounds):
+                        out.append(max(lo, min(int(v), hi)))
+                elif name is None:
+                    out.append(0)
+                else:
+                    lo, hi = bounds[0]
+                    out.append(max(lo, min(self.value(name), hi)))
+            return out
+
+        return sample
 
     def _rpdo(self, frame: can.Message) -> None:
         self.pdos()
@@ -804,6 +841,47 @@ class CanopenFront:
             out.extend(self._flush())
         return out
 
+    def next_event(self) -> float:
+        """The earliest ``t`` at which :meth:`tick` does more than move :attr:`now`: ``-math.inf`` where the
+        kernel's loops decide it (quick stop, a PP set-point waiting for the running move, event-driven TPDOs, a
+        fault the front has not reported yet, the motor off while enabling) or frames are due (boot-up, EMCY);
+        else the end of the brake's release after an enable, the next heartbeat or life-guarding timeout
+        (``math.inf``: none). A fault the loops trip later is not announced: the world stops at it by
+        :meth:`fault_watched`."""
+        if not self.powered:
+            return math.inf
+        if self._boot or self._outbox:
+            return -math.inf
+        e = math.inf
+        if self.enabling:  # tick acts once the brake has released (Firmware.ready), or at once if the motor went off
+            fw = self.firmware
+            if not fw.enabled:
+                return -math.inf
+            released = fw.enabled_at + ENABLE_DELAY - 1e-9
+            e = released - 1e-9 * max(1.0, abs(released))  # a little early: a tick before it acts on nothing
+        state = self.state
+        if state is State.QUICK_STOP_ACTIVE or (state is not State.FAULT and self.firmware.fault) \
+                or (state is State.OPERATION_ENABLED and self.pp_pending is not None):
+            return -math.inf
+        nmt = self.nmt
+        if nmt is co.NmtState.OPERATIONAL and (self._pdos is None or self._timed_tpdos):
+            return -math.inf
+        if nmt is not co.NmtState.INITIALISING:
+            e = min(e, self.next_heartbeat)
+        v = self.firmware.values
+        guard_ms, factor = v["guard_time"], v["life_time_factor"]
+        if self.last_guard >= 0 and guard_ms and factor:
+            # tick acts at the first t with t - last_guard > the life time: announced a little early (a tick
+            # before it acts on nothing; the next announcement is then the next substep)
+            limit = guard_ms * factor * 1e-3
+            e = min(e, self.last_guard + limit - 1e-9 * max(1.0, abs(self.last_guard) + limit))
+        return e
+
+    def fault_watched(self) -> bool:
+        """Whether a fault the drive's loops trip must end a run of substeps at once (:meth:`tick` reports it
+        with an EMCY at the end of the substep that tripped it): powered and not in FAULT already."""
+        return self.powered and self.state is not State.FAULT
+
     def _event_tpdos(self, t: float) -> list[can.Message]:
         out: list[can.Message] = []
         self.pdos()
@@ -846,6 +924,9 @@ class ErobCanopenBus:
         self._node = self.medium.attach_peer(self, latency=latency, name="twins")
         self.frame_errors = 0
         self._last_tick = 0.0
+        self._clock: Any = None
+        self._epoch: int | None = None
+        self._dt: float | None = None  #: the world's substep (:meth:`bind_substep`); None: ticked every substep
         for f in fronts:
             self.add(f)
 
@@ -899,12 +980,48 @@ class ErobCanopenBus:
             front.later.clear()
         return out
 
-    # -- the world's clock (joints.sim.world.TimedDeviceBus) ------------------------------------
+    # -- the world's clock (joints.sim.world.TimedDeviceBus, Announcing, Watching) -------------
     def bind_clock(self, clock: ClockLike) -> None:
         self.medium.bind_clock(clock)
+        self._clock = clock
+        self._epoch = getattr(clock, "epoch", None)
+
+    def bind_substep(self, dt: float) -> None:
+        """The world's substep [s]: its ticks come at ``k * dt``; from now on the bus announces its next event
+        (:meth:`next_event`) and may be ticked only there."""
+        self._dt = dt
+
+    def next_event(self) -> float:
+        """When a tick next has work (:class:`joints.sim.world.Announcing`): the medium's next frame edge or the
+        earliest front's event (:meth:`CanopenFront.next_event`); every substep after a reset (the fronts
+        power-cycle at the next tick), or where the bus does not know the world's substep."""
+        if self._dt is None or getattr(self._clock, "epoch", None) != self._epoch:
+            return -math.inf
+        e = self.medium.next_event()
+        for f in self.fronts:
+            fe = f.next_event()
+            e = min(e, fe)
+        return e
+
+    def watched(self) -> list[tuple[Any, int]]:
+        """Kernel cells (twin, column) whose turning non-zero ends a run of substeps
+        (:class:`joints.sim.world.Watching`): the fault code of every drive whose front reports a fault."""
+        return [(f.firmware, erob_kernel.FAULT_CODE) for f in self.fronts if f.fault_watched()]
 
     def tick(self, t: float) -> None:
+        """The world finished the substep ending at ``t``. Ticked only at announced events, the bus first
+        ticks the substep before ``t`` if it was skipped, as ticking every substep would have: the fronts
+        then see the frames the medium delivers at ``t`` with :attr:`CanopenFront.now` at that substep."""
+        dt = self._dt
+        if dt is not None:
+            prev = (round(t / dt) - 1) * dt
+            if self._last_tick < prev < t:
+                self._tick(prev)
+        self._tick(t)
+
+    def _tick(self, t: float) -> None:
         self._last_tick = t
+        self._epoch = getattr(self._clock, "epoch", None)
         self.medium.tick(t)
         for f in self.fronts:
             frames = f.tick(t)

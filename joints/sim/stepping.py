@@ -249,3 +249,52 @@ class Group:
         for w in worlds:
             steps[w] = self.worlds[w].steps
         substep(self.table, self.adr, self.ratio, order, steps, self.dts, *self._arrays)
+
+    def run_watching(self, world: int, n: int, cells: Sequence[tuple[Any, int]]) -> int:
+        """Up to ``n`` substeps of world ``world`` (fusable) as :meth:`run` steps them, ending after the first
+        substep at whose end one of ``cells`` (twin, column of the twin's first row) is non-zero (a fault the
+        loops tripped: a CANopen front reports it at that substep). Returns the substeps run (fewer than ``n``
+        also where the arena guard took the world off the fused path)."""
+        import numpy as np
+
+        firsts = {id(twin): first for twin, first in self._owners}
+        watch = np.array([[firsts[id(twin)], column] for twin, column in cells], dtype=np.int64).reshape(-1, 2)
+        order, indices = self._plan((world,))
+        table = self.worlds_table
+        w = self.worlds[world]
+        done = 0
+        while done < n:
+            m = min(n - done, CHUNK)
+            table[world, STEPS] = w.steps
+            ran = int(_run_watch_compiled(m, self.mj_step or 0, self.table, self.adr,  # type: ignore[misc]
+                                          self.ratio, order, table, self.dts_array, indices, watch))
+            w.steps += ran
+            done += ran
+            if w.data.maxuse_arena > self._arena_limits[world]:
+                w.leave_fused_path()
+                self.replan()
+                return done
+            if ran < m:
+                return done  # a watched cell turned non-zero
+        return done
+
+
+jitable(_run)  # also compiled into _run_watch
+
+
+def _run_watch(n: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any, worlds: Any, dts: Any,
+               active: Any, watch: Any) -> int:
+    """:func:`_run` (physics on) one substep at a time inside one compiled call, ending after the first substep
+    at whose end ``table[row, column]`` of a ``watch`` pair is non-zero; returns the substeps run (the active
+    worlds' ``worlds[w, STEPS]`` count them)."""
+    for k in range(n):
+        _run(1, 1, mj_step, table, adr, ratio, order, worlds, dts, active)
+        for j in range(len(active)):
+            worlds[active[j], STEPS] += 1
+        for j in range(len(watch)):
+            if table[watch[j, 0], watch[j, 1]] != 0.0:
+                return k + 1
+    return n
+
+
+_run_watch_compiled = kernel.compiled(_run_watch) if kernel.AVAILABLE else None

@@ -153,6 +153,16 @@ class Announcing(Protocol):
         ...
 
 
+@runtime_checkable
+class Watching(Protocol):
+    """An announcing timed bus whose devices report a drive's fault by themselves at the substep it trips (a
+    CANopen EMCY): a run of substeps in one compiled call ends at the first substep whose end shows one."""
+
+    def watched(self) -> Sequence[tuple[Any, int]]:
+        """Kernel cells (twin, column of its first row) whose turning non-zero ends a run of substeps."""
+        ...
+
+
 @dataclass(frozen=True)
 class DriveSpec:
     """One emulated joint: which bus/address (and channel) answers for it and which MJCF joint it drives."""
@@ -349,6 +359,11 @@ class World:
         timed = [bus for bus in self.buses.values() if isinstance(bus, TimedDeviceBus)]
         for bus in timed:
             bus.bind_clock(self.clock)
+            bind_substep = getattr(bus, "bind_substep", None)
+            if bind_substep is not None:  # a bus that ticks only at its events needs the substep (erob_canopen)
+                bind_substep(self.timestep)
+        #: per timed bus that reports faults by itself (:class:`Watching`), the kernel cells it watches
+        self._bus_watches = [bus.watched for bus in timed if isinstance(bus, Watching)]
         self._bus_ticks = [bus.tick for bus in timed]
         #: per timed bus, when its tick next has work (None: the bus does not say; it is ticked every substep)
         self._bus_events: list[Callable[[], float] | None] = [
@@ -622,6 +637,15 @@ class World:
             k += 1
         return min(k, n)
 
+    def _run_fused(self, k: int) -> int:
+        """Up to ``k`` substeps in compiled calls; with watched kernel cells (:class:`Watching`) they end at the
+        first substep whose end shows one non-zero. Returns the substeps run."""
+        cells = [c for watched in self._bus_watches for c in watched()] if self._bus_watches and k > 1 else None
+        if not cells:
+            self.group.run(self._me, k)
+            return k
+        return self.group.run_watching(self.group_index, k, cells)
+
     def _tick_now(self) -> None:
         """The ticks, with the clock at the end of the last substep run (an advance then shows the clock at the
         instant it booked)."""
@@ -643,8 +667,7 @@ class World:
                 return
             while n > 0 and group.fusable[index]:
                 k = self._until_event(n)
-                group.run(me, k)
-                n -= k
+                n -= self._run_fused(k)
                 self._tick_now()
             if n <= 0:
                 return
@@ -896,7 +919,7 @@ def advance_together(worlds: Sequence[World], seconds: Sequence[float]) -> None:
         try:
             while True:
                 for i, w in enumerate(worlds):  # on its own: a world that cannot (or no longer can) run fused
-                    if due[i] > 0 and not (group.compiled and group.fusable[w.group_index]):
+                    if due[i] > 0 and (w._bus_watches or not (group.compiled and group.fusable[w.group_index])):
                         w._step_due(due[i])
                         due[i] = 0
                 left = [i for i, d in enumerate(due) if d > 0]

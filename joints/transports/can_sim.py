@@ -156,6 +156,8 @@ class CanMedium(ClockDriven):
         self._ticked = self.now  #: the time of the last tick: where the world's physics stands (lockstep)
         self._delivering: float | None = None  # the time of the frame being delivered (peers answer then)
         self._nodes: list[_Node] = []
+        self._delivery_order: tuple[_Node, ...] = ()
+        self._peers: tuple[_Node, ...] = ()
         self._pending: list[_Pending] = []
         self._wire: tuple[float, float, _Pending] | None = None  # (start, end, frame) on the bus
         self._free = self.now  # when the bus is idle again
@@ -195,6 +197,7 @@ class CanMedium(ClockDriven):
             raise ValueError(f"adapter_latency must be a finite number >= 0, got {adapter_latency!r}")
         node = _Node(name, receive_own=receive_own, latency=adapter_latency)
         self._nodes.append(node)
+        self._attached()
         return node
 
     def attach_peer(self, peer: FramePeer, *, latency: float = 0.0, name: str = "peer") -> _Node:
@@ -204,11 +207,18 @@ class CanMedium(ClockDriven):
         turnaround = getattr(peer, "turnaround", None)
         node = _Node(name, peer=peer, latency=latency, turnaround=turnaround if callable(turnaround) else None)
         self._nodes.append(node)
+        self._attached()
         return node
 
     def detach(self, node: _Node) -> None:
         self._nodes = [n for n in self._nodes if n is not node]
         self._pending = [p for p in self._pending if p.sender is not node]
+        self._attached()
+
+    def _attached(self) -> None:
+        """The nodes changed: the snapshot a delivery walks, and the peers among them."""
+        self._delivery_order = tuple(self._nodes)
+        self._peers = tuple(n for n in self._nodes if n.peer is not None)
 
     # -- time -----------------------------------------------------------------------------
     def bind_clock(self, clock: ClockLike) -> None:
@@ -353,7 +363,7 @@ class CanMedium(ClockDriven):
         frame = pend.frame
         sender = pend.sender
         ideal = self.ideal
-        for node in tuple(self._nodes):
+        for node in self._delivery_order:  # the nodes as they are now (a peer may attach or detach meanwhile)
             own = node is sender
             if own and not node.receive_own:
                 continue
@@ -474,7 +484,10 @@ class CanMedium(ClockDriven):
 
     def _reaches_peer(self, sender: _Node) -> bool:
         """Whether a frame ``sender`` sends goes to a peer (an in-process device other than the sender)."""
-        return any(n.peer is not None and n is not sender for n in self._nodes)
+        for n in self._peers:
+            if n is not sender:
+                return True
+        return False
 
     def idle(self) -> bool:
         """No frame on the wire or waiting for it."""

@@ -5,6 +5,8 @@ Rule: pure.
 
 from __future__ import annotations
 
+import functools
+import struct
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -83,28 +85,62 @@ def pdo_length(entries: Iterable[tuple[int, int, int, bool]]) -> int:
     return bits
 
 
+class _Layout(NamedTuple):
+    """A mapping prepared once: per entry (index, subindex, lowest, highest value); its bits; a ``struct`` of the
+    whole PDO where every entry is 8, 16, 32 or 64 bits (None: packed bit by bit)."""
+
+    ranges: tuple[tuple[int, int, int, int], ...]
+    bits: int
+    fixed: struct.Struct | None
+
+
+_FORMATS = {8: "b", 16: "h", 32: "i", 64: "q"}
+
+
+@functools.lru_cache(maxsize=256)
+def _layout(entries: tuple[tuple[int, int, int, bool], ...]) -> _Layout:
+    ranges = tuple((index, subindex, *((-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)))
+                   for index, subindex, bits, signed in entries)
+    bits = sum(e[2] for e in entries)
+    fixed = None
+    if all(e[2] in _FORMATS for e in entries):
+        fixed = struct.Struct("<" + "".join(_FORMATS[e[2]] if e[3] else _FORMATS[e[2]].upper() for e in entries))
+    return _Layout(ranges, bits, fixed)
+
+
 def pack_pdo(entries: Sequence[tuple[int, int, int, bool]], values: Sequence[int]) -> bytes:
     """PDO data from the values of its mapped objects, in mapping order (dummies take any value, e.g. 0)."""
     if len(entries) != len(values):
         raise EncodeError(f"PDO has {len(entries)} mapped objects, got {len(values)} values")
-    raw = 0
-    offset = 0
-    for (index, subindex, bits, signed), value in zip(entries, values):
-        lo, hi = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)
+    layout = _layout(entries if isinstance(entries, tuple) else tuple(entries))
+    for (index, subindex, lo, hi), value in zip(layout.ranges, values):
         if not lo <= value <= hi:
             raise EncodeError(f"PDO object 0x{index:04X}:{subindex:02X}: value {value} out of range [{lo}, {hi}]")
+    if layout.bits > MAX_PDO_BITS:
+        raise EncodeError(f"PDO mapping of {layout.bits} bits exceeds {MAX_PDO_BITS}")
+    if layout.fixed is not None:
+        try:
+            return layout.fixed.pack(*values)
+        except struct.error:
+            pass  # not an integer: the bit by bit packing says what is wrong
+    raw = 0
+    offset = 0
+    for (_index, _subindex, bits, _signed), value in zip(entries, values):
         raw |= (value & ((1 << bits) - 1)) << offset
         offset += bits
-    if offset > MAX_PDO_BITS:
-        raise EncodeError(f"PDO mapping of {offset} bits exceeds {MAX_PDO_BITS}")
     return raw.to_bytes((offset + 7) // 8, "little")
 
 
 def unpack_pdo(entries: Sequence[tuple[int, int, int, bool]], data: bytes) -> tuple[int, ...]:
     """Values of the mapped objects in PDO ``data`` (FrameError if shorter than the mapping)."""
-    bits = pdo_length(entries)
+    layout = _layout(entries if isinstance(entries, tuple) else tuple(entries))
+    bits = layout.bits
+    if bits > MAX_PDO_BITS:
+        raise EncodeError(f"PDO mapping of {bits} bits exceeds {MAX_PDO_BITS}")
     if len(data) * 8 < bits:
         raise FrameError(f"PDO of {len(data)} bytes, mapping needs {(bits + 7) // 8}", data=data)
+    if layout.fixed is not None:
+        return layout.fixed.unpack_from(data)
     raw = int.from_bytes(data, "little")
     out = []
     offset = 0
