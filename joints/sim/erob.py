@@ -161,7 +161,6 @@ def power_on_defaults(profile: ErobProfile, address: int) -> dict[str, int]:
 #: Parameters kept over a power cycle when saved: the R/W settings (not status or commands), those
 #: only the CAN custom protocol reaches (node id, jerk, ...) included.
 _SETTINGS = tuple(p.name for p in EROB_PARAMS if p.access.value == "R/W")
-_POSITION = int(OperationMode.POSITION)
 ARRIVAL_WINDOW = K.ARRIVAL_WINDOW
 _STATUS_INDEX = {name: i for i, name in enumerate(K.STATUS_NAMES)}
 
@@ -518,8 +517,7 @@ class ErobFirmware(Firmware):
 
     # -- what the fronts call ---------------------------------------------------------------
     def frame_received(self) -> None:
-        s = self._row
-        s[K.LAST_FRAME] = s[K.TIME]
+        K.frame(self._row)  # a jitable helper, as Python here (two row accesses)
 
     def check_write(self, name: str, value: int) -> None:
         if name == "torque_control_mode_max_speed" and self.enabled:
@@ -535,23 +533,16 @@ class ErobFirmware(Firmware):
         elif name in _CACHED_SETTINGS:
             self._cache_settings()
         elif name == "target_speed":
-            if self.mode == _SPEED:
-                self._speed_command(value)
+            self._speed_command(value)  # acts in speed mode only
         elif name == "target_current":
-            if self.mode == _TORQUE and value:
-                self._ready_or_refuse()
+            self._k.target_current(self._row, float(value))  # the row's target was set above; a motion command
         elif name == "operation_mode":
             self._row[K.MODE] = float(value)
             self._change_mode()
 
     # -- state machine ----------------------------------------------------------------------
     def _ready_or_refuse(self) -> bool:
-        if self._k.ready(self._row):
-            return True
-        # Not enabled / brake not released yet: no motion, the error is visible.
-        self.state = transition(self.state, Event.MOTION) or self.state
-        self.fault = self.fault or faults.START_WHILE_DISABLED
-        return False
+        return bool(self._k.ready_or_refuse(self._row))
 
     def _raise_fault(self, code: int) -> None:
         self._k.raise_fault(self._row, float(code))
@@ -613,33 +604,8 @@ class ErobFirmware(Firmware):
 
     def _start(self, value: int) -> None:
         v = self.values
-        if self.mode != _POSITION:
-            return
-        if not self._ready_or_refuse():
-            return
-        s = self._row
-        motion = v["motion_mode"]
-        s[K.G_STOPPING] = 0.0
-        s[K.G_RATE] = 0.0
-        s[K.STARTED] = 1.0
-        s[K.IN_WINDOW_SINCE] = -1.0
-        if motion == MotionMode.CONTINUOUS:
-            s[K.G_ACTIVE], s[K.G_CONTINUOUS] = 1.0, 1.0
-        elif motion == MotionMode.ABSOLUTE:
-            rel = v["target_relative_position"]
-            if rel:
-                s[K.G_TARGET] = self._k.clamp_target(s, s[K.P_REF] + rel)
-            else:
-                s[K.G_TARGET] = self._k.clamp_target(s, float(v["target_absolute_position"] - self.offset))
-            s[K.G_ACTIVE], s[K.G_CONTINUOUS] = 1.0, 0.0
-        elif motion == MotionMode.REPETITIVE:
-            s[K.REPEAT_HOME] = s[K.P_REF]
-            s[K.REPEAT_LEG_TO_TARGET] = 1.0
-            s[K.REPEAT_STOP] = 0.0
-            s[K.G_TARGET] = self._k.clamp_target(s, float(v["target_absolute_position"] - self.offset))
-            s[K.G_ACTIVE], s[K.G_CONTINUOUS] = 1.0, 0.0
-        else:  # the parameter's range (0-2) keeps other values out
-            s[K.STARTED] = 0.0
+        self._k.start(self._row, float(v["motion_mode"]), float(v["target_relative_position"]),
+                      float(v["target_absolute_position"]))
 
     def _stop(self, decel: float) -> None:
         s = self._row
@@ -678,13 +644,7 @@ class ErobFirmware(Firmware):
         s[K.P_REF] = s[K.POS]
 
     def _speed_command(self, value: int) -> None:
-        if value and not self._ready_or_refuse():
-            return
-        s = self._row
-        if value:
-            self._k.gen_clear(s)  # a new speed command ends a stop ramp in progress
-        vmax = s[K.VMAX]
-        s[K.MODE_SPEED_TARGET] = float(max(-vmax, min(vmax, value)))
+        self._k.target_speed(self._row, float(value))
 
     # -- physics side -----------------------------------------------------------------------
     def step(self, t: float, dt: float, q: float, qd: float) -> float:
