@@ -69,6 +69,15 @@ class _ErobModbus:
         self.decode = access.table.decode_block
         self.start = access.write_request("start_operating", CMD_START)  # a constant command
         self.taken = 0
+        #: the twin's one-call exchange (the sim's eRob: frames, physics and register ops in one compiled call,
+        #: :meth:`LinkLane.exchange`), where the peer offers one
+        fused = getattr(self.lane.framing.peer if self.lane.framing is not None else None, "fused", None)
+        self.exchange: Any = fused(access.slave, self.lane.line) if callable(fused) and self.lane.line else None
+
+    def _fused(self, requests: tuple[Any, ...], idempotent: bool) -> list[Any] | None:
+        """The replies to ``requests`` by the twin's one-call exchange, or None (nothing sent)."""
+        exchange = self.exchange
+        return None if exchange is None else self.lane.exchange(exchange, requests, idempotent=idempotent)
 
     def command_all(self, mode: str, values: Sequence[float], skip: Sequence[bool]) -> None:
         if not skip[0]:
@@ -78,7 +87,9 @@ class _ErobModbus:
         return [self.state()]
 
     def _write(self, name: str, value: int) -> None:
-        self.lane.request(self.access.write_request(name, value), idempotent=True)
+        request = self.access.write_request(name, value)
+        if self._fused((request,), True) is None:
+            self.lane.request(request, idempotent=True)
         self.driver.note_written(name, value)
 
     def command(self, mode: str, value: float) -> None:
@@ -87,11 +98,16 @@ class _ErobModbus:
             target, speed, acc, dec = joint.position_command(value)
             if driver.steady_move(speed, acc, dec):
                 driver.validate(target_absolute_position=target)
-                self._write("target_absolute_position", target)
-                try:  # a command: never retried
-                    self.lane.request(self.start, idempotent=False)
-                except OutcomeUnknown as exc:
-                    driver.start_unknown(target, exc)
+                request = self.access.write_request("target_absolute_position", target)
+                if self._fused((request, self.start), False) is not None:  # both in one call
+                    driver.note_written("target_absolute_position", target)
+                else:
+                    self.lane.request(request, idempotent=True)
+                    driver.note_written("target_absolute_position", target)
+                    try:  # a command: never retried
+                        self.lane.request(self.start, idempotent=False)
+                    except OutcomeUnknown as exc:
+                        driver.start_unknown(target, exc)
                 self.taken += 1
             else:
                 driver.move_to(target, speed=speed, acceleration=acc, deceleration=dec)
@@ -117,7 +133,8 @@ class _ErobModbus:
     def state(self) -> JointState:
         clock = self.clock
         t0 = clock.now()
-        reply = self.lane.request(self.status, idempotent=True)
+        replies = self._fused((self.status,), True)
+        reply = self.lane.request(self.status, idempotent=True) if replies is None else replies[0]
         assert isinstance(reply, mb.ReadRegistersReply)
         values = self.decode(self.status_start, reply.values)
         return self.joint.to_si(self.driver.state_from(values, sampled_at(t0, clock.now())))
@@ -278,6 +295,11 @@ class CompiledPath:
     def taken(self) -> int:
         """Joint steps (commands) sent the compiled way, not through the driver's own method."""
         return sum(s.taken for s in self._steppers)
+
+    @property
+    def fused(self) -> int:
+        """Requests sent by a twin's one-call exchange (:meth:`~joints.link.lane.LinkLane.exchange`)."""
+        return sum(s.lane.fused for s in self._steppers)
 
     @property
     def lane_taken(self) -> int:

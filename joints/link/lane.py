@@ -15,6 +15,7 @@ as the link's own attempt does (:meth:`Link._await_reply`, then the link's retri
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 from typing import Any
 
 from joints.errors import FrameError, PeerProtocolError, ReplyTimeout
@@ -35,6 +36,7 @@ class LinkLane:
         line = getattr(framing, "transport", None)
         self.line = line if isinstance(line, TimedSerialLine) else None
         self.taken = 0  #: requests that took the lane
+        self.fused = 0  #: of them, requests sent by a twin's one-call exchange (:meth:`exchange`)
 
     def _open(self, request: Any) -> bool:
         """Whether the lane can take ``request`` now (nothing sent yet either way)."""
@@ -64,13 +66,52 @@ class LinkLane:
             size = framing.size
             raw = line._transact_idle(line._sync(), size(request), functools.partial(framing.peer.exchange, request),
                                       size, framing._turnaround(request))
-            reply = None if raw is None else framing.as_received(request, raw)
-            try:  # as the link's attempt: a reply the rule refuses (another slave's) fails the attempt
-                if reply is not None and not isinstance(reply, FrameError) and rule.is_reply(request, reply):
-                    self.taken += 1
-                    return reply
-                framing.put(reply)  # not the plain answer: the rest of the attempt and the retries are the link's
-                return link._await_reply(request, deadline)
-            except (ReplyTimeout, PeerProtocolError) as exc:
-                link._discard_late()
-                return link._attempts(request, None, idempotent, failed=exc)
+            return self._finish(request, raw, deadline, idempotent)
+
+    def _finish(self, request: Any, raw: Any, deadline: float, idempotent: bool) -> Any:
+        """The rest of the link's attempt once the peer's reply ``raw`` (None: silence) reached the host."""
+        link, framing = self.link, self.framing
+        assert framing is not None
+        reply = None if raw is None else framing.as_received(request, raw)
+        try:  # as the link's attempt: a reply the rule refuses (another slave's) fails the attempt
+            if reply is not None and not isinstance(reply, FrameError) and link.rule.is_reply(request, reply):
+                self.taken += 1
+                return reply
+            framing.put(reply)  # not the plain answer: the rest of the attempt and the retries are the link's
+            return link._await_reply(request, deadline)
+        except (ReplyTimeout, PeerProtocolError) as exc:
+            link._discard_late()
+            return link._attempts(request, None, idempotent, failed=exc)
+
+    def exchange(self, exchange: Any, requests: Sequence[Any], *, idempotent: bool = False) -> list[Any] | None:
+        """:meth:`request` of each of ``requests`` (a read only alone) by ``exchange``, a twin's one-call exchange
+        (``exchange.run(requests, size, check)``: the frames, the physics between them and the drive's ops in one
+        compiled call, e.g. :class:`joints.sim.erob_exchange.ErobExchange`); None where the lane or the exchange
+        cannot take them all (nothing sent: send them the usual way). ``idempotent`` applies to a lone request
+        (the replies of several, all writes, are checked before anything is sent)."""
+        framing = self.framing
+        if framing is None or not all(self._open(r) for r in requests):
+            return None
+        link = self.link
+        rule = link.rule
+        for r in requests:
+            rule.check(r)  # raises EncodeError before anything is sent
+        as_received = framing.as_received
+
+        def plain(request: Any, reply: Any) -> bool:
+            return as_received(request, reply) is reply and bool(rule.is_reply(request, reply))
+
+        with link._lock:
+            deadline = link.clock.now() + link.policy.timeout  # the last request's, when it is the only one
+            replies: list[Any] | None = exchange.run(requests, framing.size, plain)
+            if replies is None:
+                return None
+            n = len(requests)
+            link.transactions += n
+            framing.exchanges += n
+            self.fused += n
+            if n > 1:  # writes only (a read goes alone): their replies were checked before, plain
+                self.taken += n
+                return replies
+            replies[0] = self._finish(requests[0], replies[0], deadline, idempotent)
+            return replies

@@ -163,6 +163,7 @@ def power_on_defaults(profile: ErobProfile, address: int) -> dict[str, int]:
 _SETTINGS = tuple(p.name for p in EROB_PARAMS if p.access.value == "R/W")
 ARRIVAL_WINDOW = K.ARRIVAL_WINDOW
 _STATUS_INDEX = {name: i for i, name in enumerate(K.STATUS_NAMES)}
+_REPETITIVE = int(MotionMode.REPETITIVE)
 
 
 class _Generator:
@@ -473,20 +474,13 @@ class ErobFirmware(Firmware):
             return generic  # other computed values, or ones replaced since (tests count calls)
         types = self._type_range
         entries = tuple((index.get(n, -1), n, *types[n]) for n in names)
-        values = self.values
-        repetitive = int(MotionMode.REPETITIVE)
+        return _StatusRead(self, names, entries)
 
-        def read() -> list[int]:
-            self.on_read(names)
-            st = self._k.status(self._row, values["motion_mode"] == repetitive)
-            if not self.sensor.model.ideal:  # what the drive reports (outside the kernel: same bits)
-                st = (*st[:4], self._sensed_counts(), *st[5:7], self._sensed_speed(), *st[8:10],
-                      self._sensed_current(), *st[11:])
-            # saturate, never wrap: ``lo if v < lo else min(v, hi)``, spelled out (min(v, hi) is v unless hi < v)
-            return [values[name] if i < 0 else lo if (v := st[i]) < lo else hi if hi < v else v  # noqa: FURB136
-                    for i, name, lo, hi in entries]
+    def fused_exchange(self, world: Any, bus: Any, front: Any, line: Any) -> Any:
+        """The one-call exchange of this twin's steady Modbus requests (:mod:`joints.sim.erob_exchange`), or None."""
+        from joints.sim.erob_exchange import prepare
 
-        return read
+        return prepare(world, bus, front, line)
 
     def counts(self) -> int:
         """Actual position value: encoder counts + position offset."""
@@ -660,3 +654,36 @@ class ErobFirmware(Firmware):
             return int(MotionStatus.STOP_REPETITIVE)
         return int(MotionStatus.MOVING if self._k.moving(s) else MotionStatus.STOP)
 
+
+class _StatusRead:
+    """A prepared read of a block with the status values (:meth:`ErobFirmware.reader`): one kernel call
+    (:func:`joints.sim.erob_kernel.status`), then :meth:`finish` (what the sensors report, saturation) - which
+    the one-call exchange (:mod:`joints.sim.erob_exchange`) calls on the values its compiled call computed."""
+
+    __slots__ = ("entries", "fw", "names", "values")
+
+    def __init__(self, fw: ErobFirmware, names: tuple[str, ...], entries: tuple[tuple[int, str, int, int], ...]) -> None:
+        self.fw = fw
+        self.names = names
+        self.entries = entries
+        self.values = fw.values
+
+    def repetitive(self) -> bool:
+        """The status call's ``repetitive`` argument now."""
+        return bool(self.values["motion_mode"] == _REPETITIVE)
+
+    def __call__(self) -> list[int]:
+        fw = self.fw
+        fw.on_read(self.names)
+        return self.finish(fw._k.status(fw._row, self.values["motion_mode"] == _REPETITIVE))
+
+    def finish(self, st: Sequence[int]) -> list[int]:
+        """The read's values from the kernel's status values ``st`` (in :data:`~joints.sim.erob_kernel.STATUS_NAMES`
+        order) as the drive reports them."""
+        fw, values = self.fw, self.values
+        if not fw.sensor.model.ideal:  # what the drive reports (outside the kernel: same bits)
+            st = (*st[:4], fw._sensed_counts(), *st[5:7], fw._sensed_speed(), *st[8:10], fw._sensed_current(),
+                  *st[11:])
+        # saturate, never wrap: ``lo if v < lo else min(v, hi)``, spelled out (min(v, hi) is v unless hi < v)
+        return [values[name] if i < 0 else lo if (v := st[i]) < lo else hi if hi < v else v  # noqa: FURB136
+                for i, name, lo, hi in self.entries]
