@@ -15,7 +15,7 @@ as the link's own attempt does (:meth:`Link._await_reply`, then the link's retri
 from __future__ import annotations
 
 import functools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from joints.errors import FrameError, PeerProtocolError, ReplyTimeout
@@ -83,12 +83,14 @@ class LinkLane:
             link._discard_late()
             return link._attempts(request, None, idempotent, failed=exc)
 
-    def exchange(self, exchange: Any, requests: Sequence[Any], *, idempotent: bool = False) -> list[Any] | None:
-        """:meth:`request` of each of ``requests`` (a read only alone) by ``exchange``, a twin's one-call exchange
-        (``exchange.run(requests, size, check)``: the frames, the physics between them and the drive's ops in one
-        compiled call, e.g. :class:`joints.sim.erob_exchange.ErobExchange`); None where the lane or the exchange
-        cannot take them all (nothing sent: send them the usual way). ``idempotent`` applies to a lone request
-        (the replies of several, all writes, are checked before anything is sent)."""
+    def exchange(self, run: Callable[..., list[Any] | None], requests: Sequence[Any], *,
+                 idempotent: bool = False) -> list[Any] | None:
+        """:meth:`request` of each of ``requests`` by ``run(requests, size, check)``, a twin's one-call exchange
+        (the frames, the physics between them and the drives' ops in one compiled call, e.g.
+        :meth:`joints.sim.erob_exchange.ErobExchange.run`: ``check(request, reply)`` tells it before anything is
+        sent whether the host takes a reply as the plain answer, ``size`` a message's characters); None where
+        the lane or the exchange cannot take them all (nothing sent: send them the usual way). A lone request's
+        reply is then checked as :meth:`request` checks it (``idempotent`` for the rest of its attempt)."""
         framing = self.framing
         if framing is None or not all(self._open(r) for r in requests):
             return None
@@ -103,14 +105,14 @@ class LinkLane:
 
         with link._lock:
             deadline = link.clock.now() + link.policy.timeout  # the last request's, when it is the only one
-            replies: list[Any] | None = exchange.run(requests, framing.size, plain)
+            replies = run(requests, framing.size, plain)
             if replies is None:
                 return None
             n = len(requests)
             link.transactions += n
             framing.exchanges += n
             self.fused += n
-            if n > 1:  # writes only (a read goes alone): their replies were checked before, plain
+            if n > 1:  # their replies were checked before anything was sent: plain
                 self.taken += n
                 return replies
             replies[0] = self._finish(requests[0], replies[0], deadline, idempotent)

@@ -486,25 +486,26 @@ class ErobFirmware(Firmware):
         """Actual position value: encoder counts + position offset."""
         return round(self._get(K.POS)) + self.offset
 
-    def _sensed_counts(self) -> int:
-        """``actual_position`` as the drive reports it (:mod:`joints.sim.sensors`)."""
+    def _sensed_counts(self, get: Callable[[int], float] | None = None) -> int:
+        """``actual_position`` as the drive reports it (:mod:`joints.sim.sensors`); ``get``: the row's columns as
+        they stood when it was read (default: the row now)."""
         sensor = self.sensor
         if sensor.model.ideal:
             return self.counts()
-        get = self._get
+        get = self._get if get is None else get
         pos = sensor.position(get(K.TIME), get(K.POS) / COUNTS_PER_RAD, get(K.VEL) / COUNTS_PER_RAD)
         return round(pos * COUNTS_PER_RAD) + self.offset
 
-    def _sensed_speed(self) -> int:
+    def _sensed_speed(self, get: Callable[[int], float] | None = None) -> int:
         """``current_speed`` [count/s]: the drive's velocity estimate."""
-        get = self._get
+        get = self._get if get is None else get
         if self.sensor.model.ideal:
             return round(get(K.VEL))
         return round(self.sensor.velocity(get(K.POS) / COUNTS_PER_RAD, get(K.VEL) / COUNTS_PER_RAD) * COUNTS_PER_RAD)
 
-    def _sensed_current(self) -> int:
+    def _sensed_current(self, get: Callable[[int], float] | None = None) -> int:
         """``motor_current`` [mA] as the drive measures it."""
-        i = self._get(K.I_OUT)
+        i = (self._get if get is None else get)(K.I_OUT)
         if self.sensor.model.ideal:
             return round(i)
         return round(self.sensor.current(i * 1e-3) * 1e3)
@@ -677,13 +678,13 @@ class _StatusRead:
         fw.on_read(self.names)
         return self.finish(fw._k.status(fw._row, self.values["motion_mode"] == _REPETITIVE))
 
-    def finish(self, st: Sequence[int]) -> list[int]:
+    def finish(self, st: Sequence[int], get: Callable[[int], float] | None = None) -> list[int]:
         """The read's values from the kernel's status values ``st`` (in :data:`~joints.sim.erob_kernel.STATUS_NAMES`
-        order) as the drive reports them."""
+        order) as the drive reports them; ``get``: the row's columns as they stood at the read (default: now)."""
         fw, values = self.fw, self.values
         if not fw.sensor.model.ideal:  # what the drive reports (outside the kernel: same bits)
-            st = (*st[:4], fw._sensed_counts(), *st[5:7], fw._sensed_speed(), *st[8:10], fw._sensed_current(),
-                  *st[11:])
+            st = (*st[:4], fw._sensed_counts(get), *st[5:7], fw._sensed_speed(get), *st[8:10],
+                  fw._sensed_current(get), *st[11:])
         # saturate, never wrap: ``lo if v < lo else min(v, hi)``, spelled out (min(v, hi) is v unless hi < v)
         return [values[name] if i < 0 else lo if (v := st[i]) < lo else hi if hi < v else v  # noqa: FURB136
                 for i, name, lo, hi in self.entries]

@@ -34,7 +34,7 @@ from joints.sim.erob import ErobFirmware, _StatusRead
 from joints.sim.firmware import WRITE_LOG_LIMIT, Firmware
 from joints.sim.kernel import jitable
 from joints.sim.modbus_front import ModbusDeviceBus, ModbusException, ModbusFront
-from joints.transports.serial_sim import LOG_KEEP, TimedSerialLine, Transmission
+from joints.transports.serial_sim import TimedSerialLine
 
 __all__ = ["ErobExchange", "prepare"]
 
@@ -44,17 +44,22 @@ READ, TARGET_POSITION, START, TARGET_SPEED, TARGET_CURRENT = range(5)
 OP_OF = {"target_absolute_position": TARGET_POSITION, "start_operating": START, "target_speed": TARGET_SPEED,
          "target_current": TARGET_CURRENT}
 #: columns of a transaction row: op, value, request characters, turnaround [s], reply characters, motion
-#: mode, target relative position, repetitive (a read's status argument)
-OP, VALUE, REQUEST, TURN, REPLY, MOTION, RELATIVE, REPETITIVE = range(8)
-TX_WIDTH = 8
+#: mode, target relative position, repetitive (a read's status argument), the drive's row in the table
+OP, VALUE, REQUEST, TURN, REPLY, MOTION, RELATIVE, REPETITIVE, ROW = range(9)
+TX_WIDTH = 9
 #: columns of the state vector (in and out): the clock's time, the world's target time, whether time is
 #: booked, the line's time, the time the line last saw on the clock, when the host's / device's UART is
 #: free, the line's character time, gap, adapter latency, the world's timestep
 CLOCK, TARGET, BOOKED, NOW, SEEN, FREE_HOST, FREE_DEVICE, CHAR, GAP, LATENCY, DT = range(11)
 STATE_WIDTH = 11
-#: columns of an output row: host frame start, end, due; device frame start, end, seen; then a read's status
-H_START, H_END, H_DUE, D_START, D_END, D_SEEN = range(6)
-OUT_WIDTH = 6 + len(K.STATUS_NAMES)
+#: columns of an output row: host frame start, end, due; device frame start, end, seen; the clock after the
+#: transaction; then a read's status
+H_START, H_END, H_DUE, D_START, D_END, D_SEEN, CLOCK_AFTER = range(7)
+STATUS_AT = 7
+#: then the row's columns a read's sensors see (what they stood at when the drive read them)
+SENSED = (K.TIME, K.POS, K.VEL, K.I_OUT)
+SENSED_AT = STATUS_AT + len(K.STATUS_NAMES)
+OUT_WIDTH = SENSED_AT + len(SENSED)
 
 
 @jitable
@@ -77,7 +82,11 @@ def _act(s: Any, t: Any, out: Any) -> None:
     if op == READ:
         values = K.status(s, t[REPETITIVE] != 0.0)
         for k in range(len(values)):
-            out[6 + k] = values[k]
+            out[STATUS_AT + k] = values[k]
+        out[SENSED_AT] = s[K.TIME]
+        out[SENSED_AT + 1] = s[K.POS]
+        out[SENSED_AT + 2] = s[K.VEL]
+        out[SENSED_AT + 3] = s[K.I_OUT]
     elif op == TARGET_POSITION:
         s[K.TARGET_ABSOLUTE] = t[VALUE]
     elif op == START:
@@ -88,15 +97,15 @@ def _act(s: Any, t: Any, out: Any) -> None:
         K.target_current(s, t[VALUE])
 
 
-def exchanges(tx: Any, st: Any, out: Any, row: int, w: int, mj_step: int, table: Any, adr: Any, ratio: Any,
+def exchanges(tx: Any, st: Any, out: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any,
               order: Any, worlds: Any, dts: Any, active: Any) -> None:
-    """The transactions ``tx`` (rows of :data:`TX_WIDTH`) of the drive on ``row`` of ``table`` in world ``w``,
+    """The transactions ``tx`` (rows of :data:`TX_WIDTH`, each naming its drive's row of ``table``) in world ``w``,
     one after the other, as :meth:`~joints.transports.serial_sim.TimedSerialLine._transact_idle` carries each:
     ``st`` (the state vector) in and out, each transaction's frame instants (and a read's status) into ``out``."""
-    s = table[row]
     for k in range(tx.shape[0]):
         t = tx[k]
         o = out[k]
+        s = table[int(t[ROW])]
         if k:  # TimedSerialLine._sync: the clock moved without the line (a booked reply)
             c = st[CLOCK]
             if c > st[SEEN]:
@@ -138,6 +147,7 @@ def exchanges(tx: Any, st: Any, out: Any, row: int, w: int, mj_step: int, table:
             st[SEEN] = st[CLOCK]
         st[FREE_HOST] = K.fmax(st[FREE_HOST], seen + st[GAP])
         st[NOW] = K.fmax(st[NOW], seen)
+        o[CLOCK_AFTER] = st[CLOCK]
 
 
 _COMPILED: list[Any] = []
@@ -176,7 +186,7 @@ class _Shape:
     name: str  #: the parameter a write stores
     request: int  #: characters of the request
     reply: int  #: characters of the reply
-    made: Any  #: a write's reply (an FC06's for its first value)
+    made: Any  #: a write's reply (an FC06's for its first value); a read's reply with every word 0
     extra: Any  #: a read's plan (:meth:`ModbusFront.read_plan`); a write's limits (writable, lowest, highest)
 
 
@@ -198,8 +208,10 @@ class ErobExchange:
         import numpy as np
 
         self._st = np.zeros(STATE_WIDTH)
-        self._out = np.zeros((4, OUT_WIDTH))
+        self._outs: dict[int, Any] = {}
         self._txs: dict[int, Any] = {}
+        #: the clock after each transaction of the last :meth:`run` (the host's per-joint instants)
+        self.clocks: list[float] = []
 
     def _steady(self) -> bool:
         """Whether the world, line, bus, front and firmware are as the compiled call assumes (checked first)."""
@@ -243,7 +255,7 @@ class ErobExchange:
             if isinstance(plan, int) or not isinstance(plan[0], _StatusRead):
                 return None
             blank = mb.ReadRegistersReply(request.slave, request.function, (0,) * request.count)
-            return _Shape(READ, "", size(request), size(blank), None, plan)
+            return _Shape(READ, "", size(request), size(blank), blank, plan)
         if type(request) is mb.WriteMultipleRegisters:
             words = request.values
             reply: Any = mb.WriteMultipleRegistersReply(request.slave, request.address, len(words))
@@ -268,9 +280,9 @@ class ErobExchange:
         op = shape.op
         if op == READ:
             plan = self.front.read_plan(request.address, request.count)  # the front's own, as it serves it now
-            if isinstance(plan, int) or not isinstance(plan[0], _StatusRead):
-                return None
-            return [READ, 0.0, shape.request, 0.0, shape.reply, 0.0, 0.0, float(plan[0].repetitive())], None, plan
+            if isinstance(plan, int) or not isinstance(plan[0], _StatusRead) or not check(request, shape.made):
+                return None  # (the words a read packs are plain: a blank reply of its size stands for them)
+            return [READ, 0.0, shape.request, 0.0, shape.reply, 0.0, 0.0, float(plan[0].repetitive()), 0.0], None, plan
         if type(request) is mb.WriteMultipleRegisters:
             reply: Any = shape.made
             items = self.front.items(request.address, request.values)
@@ -297,44 +309,49 @@ class ErobExchange:
             target = value
         return ([op, float(target), shape.request, 0.0, shape.reply,
                  float(written.get("motion_mode", values["motion_mode"])),
-                 float(written.get("target_relative_position", values["target_relative_position"])), 0.0],
+                 float(written.get("target_relative_position", values["target_relative_position"])), 0.0, 0.0],
                 reply, items)
 
-    def run(self, requests: Sequence[Any], size: Callable[[Any], int], check: Callable[[Any, Any], bool]
-            ) -> list[Any] | None:
-        """The replies to ``requests`` (sent one after the other, a read only alone), each as the bus gives it,
-        once the host would have received it; None (nothing sent) where this is not the steady case. ``size``:
-        a message's characters on the line; ``check(request, reply)``: whether the host takes a write's reply
-        as the plain answer (asked before anything is sent)."""
+    def run(self, requests: Sequence[Any], size: Callable[[Any], int], check: Callable[[Any, Any], bool],
+            exchanges: Sequence[ErobExchange] | None = None) -> list[Any] | None:
+        """The replies to ``requests`` (sent one after the other), each as the bus gives it, once the host would
+        have received it; None (nothing sent) where this is not the steady case. ``size``: a message's
+        characters on the line; ``check(request, reply)``: whether the host takes the reply as the plain answer
+        (asked before anything is sent; a read's with its words 0); ``exchanges``: per request, the exchange
+        of the drive it is for (default: this one's; all on this one's line and world)."""
         fn = _compiled()
-        if fn is None or not self._steady():
+        if fn is None:
             return None
-        line = self.line
-        turn = self.bus.message_turnaround(requests[0])
-        if turn is None:
-            turn = line.turnaround
+        line, world = self.line, self.world
+        mine = [self] * len(requests) if exchanges is None else exchanges
         rows: list[list[float]] = []
         made: list[tuple[Any, Any]] = []
-        written: dict[str, int] = {}
-        for r in requests:
-            shape = self._shape(r, size)
-            if shape is None or (shape.op == READ and len(requests) > 1):
+        written: dict[int, dict[str, int]] = {}
+        steady: set[int] = set()
+        group = world.group
+        for ex, r in zip(mine, requests):
+            if id(ex) not in steady:
+                if ex.line is not line or ex.world is not world or not ex._steady():
+                    return None
+                steady.add(id(ex))
+            shape = ex._shape(r, size)
+            if shape is None:
                 return None
-            got = self._row(r, shape, written, check)
+            got = ex._row(r, shape, written.setdefault(id(ex), {}), check)
             if got is None:
                 return None
-            got[0][TURN] = turn
-            rows.append(got[0])
+            turn = ex.bus.message_turnaround(r)
+            row = got[0]
+            row[TURN] = line.turnaround if turn is None else turn
+            row[ROW] = float(ex._row_index(group))
+            rows.append(row)
             made.append((got[1], got[2]))
-        world = self.world
         clock = world.clock
         with world.lock:
             now = line._sync()
-            log, latest = line.log, line._latest_end
             free = line._free
-            if len(latest) != len(log) or (len(log) > line._epoch and latest[-1] > max(now, free["host"])):
+            if len(line._latest_end) != len(line._log) or line.latest_end() > max(now, free["host"]):
                 return None  # an edited log, or a frame that may overlap the first request: the line's own way
-            group = world.group
             w = world.group_index
             table = group.worlds_table
             table[w, stepping.STEPS] = world.steps
@@ -344,11 +361,11 @@ class ErobExchange:
             n = len(rows)
             tx = self._tx(n)
             tx[:] = rows
-            out = self._out[:n]
+            out = self._out(n)
             order, active = group._plan(world._me)
             try:
-                fn(tx, st, out, self._row_index(group), w, group.mj_step or 0, group.table, group.adr, group.ratio,
-                   order, table, group.dts_array, active)
+                fn(tx, st, out, w, group.mj_step or 0, group.table, group.adr, group.ratio, order, table,
+                   group.dts_array, active)
             finally:
                 world.steps = int(table[w, stepping.STEPS])
                 state = st.tolist()
@@ -363,20 +380,31 @@ class ErobExchange:
             free["host"] = state[FREE_HOST]
             free["device"] = state[FREE_DEVICE]
             replies: list[Any] = []
-            for r, t, o, (reply, extra) in zip(requests, rows, out.tolist(), made):
+            frames: list[tuple[float, float, float, int, str, Any]] = []
+            self.clocks = clocks = []
+            for ex, r, t, o, (reply, extra) in zip(mine, requests, rows, out.tolist(), made):
                 if t[OP] == READ:
                     plan = extra
-                    values = plan[0].finish([int(v) for v in o[6:]])
+                    values = plan[0].finish([int(v) for v in o[STATUS_AT:SENSED_AT]],
+                                            dict(zip(SENSED, o[SENSED_AT:])).__getitem__)
                     reply = mb.ReadRegistersReply(r.slave, r.function, ModbusFront.pack(plan, values, r.count))
                 else:
-                    self._store(extra)
-                self._log(line, Transmission(o[H_START], o[H_END], "host", b"", delivered=True, due=o[H_DUE],
-                                             size=int(t[REQUEST])))
-                self._log(line, Transmission(o[D_START], o[D_END], "device", b"", delivered=True, due=o[D_SEEN],
-                                             size=int(t[REPLY]), payload=reply))
+                    ex._store(extra)
+                frames.append((o[H_START], o[H_END], o[H_DUE], int(t[REQUEST]), "host", None))
+                frames.append((o[D_START], o[D_END], o[D_SEEN], int(t[REPLY]), "device", reply))
                 replies.append(reply)
+                clocks.append(o[CLOCK_AFTER])
+            line.book_frames(frames)
         self.taken += 1
         return replies
+
+    def _out(self, n: int) -> Any:
+        out = self._outs.get(n)
+        if out is None:
+            import numpy as np
+
+            out = self._outs[n] = np.zeros((n, OUT_WIDTH))
+        return out
 
     def _tx(self, n: int) -> Any:
         tx = self._txs.get(n)
@@ -396,18 +424,6 @@ class ErobExchange:
         log.extend(items)
         if len(log) > WRITE_LOG_LIMIT:
             del log[: WRITE_LOG_LIMIT // 2]
-
-    @staticmethod
-    def _log(line: TimedSerialLine, tx: Transmission) -> None:
-        """The log's part of :meth:`TimedSerialLine._put` for a frame that overlaps none (checked before)."""
-        log, latest = line.log, line._latest_end
-        latest.append(max(tx.end, latest[-1]) if len(log) > line._epoch else tx.end)
-        log.append(tx)
-        if len(log) > 2 * LOG_KEEP:
-            cut = len(log) - LOG_KEEP
-            if cut <= line._epoch or latest[cut - 1] <= tx.start - 1.0:
-                del log[:cut], latest[:cut]
-                line._epoch = max(0, line._epoch - cut)
 
 
 def prepare(world: Any, bus: Any, front: Any, line: Any) -> ErobExchange | None:

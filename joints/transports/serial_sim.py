@@ -132,7 +132,11 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         self.turnaround = turnaround  #: s, the device's default (a peer that knows its drives' wins)
         self.adapter_latency = adapter_latency
         self.gap = gap
-        self.log: list[Transmission] = []
+        self._log: list[Transmission] = []
+        #: frames a one-call exchange booked (:meth:`book_frames`), not yet in :attr:`log` as transmissions, and
+        #: the latest end of any of them
+        self._unlogged: list[tuple[float, float, float, int, str, Any]] = []
+        self._unlogged_end = -math.inf
         #: per logged frame, the latest end of it and every frame logged before it since the epoch: a new
         #: frame's overlap check stops where nothing older can reach it
         self._latest_end: list[float] = []
@@ -157,6 +161,53 @@ class TimedSerialLine(ByteTransport, ClockDriven):
     @property
     def name(self) -> str:
         return f"TimedSerialLine({self.baudrate} bd)"
+
+    @property
+    def log(self) -> list[Transmission]:
+        """The transmissions, oldest first (see the module docstring)."""
+        if self._unlogged:
+            self._flush()
+        return self._log
+
+    def book_frames(self, frames: list[tuple[float, float, float, int, str, Any]]) -> None:
+        """Frames a one-call exchange carried (``(start, end, due, size, side, payload)`` each, delivered, none
+        overlapping another frame - its caller checked that): they join :attr:`log` as :meth:`_put` would have
+        logged them, as transmissions once the log is read (or kept: at most :data:`LOG_KEEP` wait)."""
+        unlogged = self._unlogged
+        unlogged.extend(frames)
+        end = self._unlogged_end
+        for f in frames:
+            end = max(end, f[1])
+        self._unlogged_end = end
+        if len(unlogged) > LOG_KEEP:
+            self._flush()
+
+    def latest_end(self) -> float:
+        """The latest end of any frame of the present timeline (-inf: none)."""
+        latest = self._latest_end
+        end = latest[-1] if len(self._log) > self._epoch and latest else -math.inf
+        return max(end, self._unlogged_end)
+
+    def _flush(self) -> None:
+        """The booked frames into the log: its latest-end bookkeeping and trimming as :meth:`_put` does it, the
+        frames that stay made transmissions."""
+        raw, self._unlogged, self._unlogged_end = self._unlogged, [], -math.inf
+        log: list[Any] = self._log
+        latest = self._latest_end
+        first = len(log)
+        for item in raw:
+            start, end = item[0], item[1]
+            latest.append(max(end, latest[-1]) if len(log) > self._epoch else end)
+            log.append(item)
+            if len(log) > 2 * LOG_KEEP:
+                cut = len(log) - LOG_KEEP
+                if cut <= self._epoch or latest[cut - 1] <= start - 1.0:
+                    del log[:cut], latest[:cut]
+                    self._epoch = max(0, self._epoch - cut)
+                    first = max(0, first - cut)
+        for k in range(first, len(log)):
+            start, end, due, size, side, payload = log[k]
+            log[k] = Transmission(start, end, side, b"", delivered=True, due=due, size=size, payload=payload)
 
     def wire_time(self, n: int) -> float:
         """Seconds ``n`` characters occupy the line."""
