@@ -133,10 +133,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         self.adapter_latency = adapter_latency
         self.gap = gap
         self._log: list[Transmission] = []
-        #: frames a one-call exchange booked (:meth:`book_frames`), not yet in :attr:`log` as transmissions, and
-        #: the latest end of any of them
-        self._unlogged: list[tuple[float, float, float, int, str, Any]] = []
-        self._unlogged_end = -math.inf
+        #: the log's first entry that may still be a booked frame's tuple (:meth:`book_frames`)
+        self._raw_from = 0
         #: per logged frame, the latest end of it and every frame logged before it since the epoch: a new
         #: frame's overlap check stops where nothing older can reach it
         self._latest_end: list[float] = []
@@ -165,49 +163,42 @@ class TimedSerialLine(ByteTransport, ClockDriven):
     @property
     def log(self) -> list[Transmission]:
         """The transmissions, oldest first (see the module docstring)."""
-        if self._unlogged:
-            self._flush()
+        if self._raw_from < len(self._log):
+            self._materialize()
         return self._log
 
     def book_frames(self, frames: list[tuple[float, float, float, int, str, Any]]) -> None:
         """Frames a one-call exchange carried (``(start, end, due, size, side, payload)`` each, delivered, none
-        overlapping another frame - its caller checked that): they join :attr:`log` as :meth:`_put` would have
-        logged them, as transmissions once the log is read (or kept: at most :data:`LOG_KEEP` wait)."""
-        unlogged = self._unlogged
-        unlogged.extend(frames)
-        end = self._unlogged_end
-        for f in frames:
-            end = max(end, f[1])
-        self._unlogged_end = end
-        if len(unlogged) > LOG_KEEP:
-            self._flush()
+        overlapping another frame - its caller checked that): logged as :meth:`_put` logs them (the latest-end
+        bookkeeping, the trimming), made :class:`Transmission` objects when the log is read."""
+        log: list[Any] = self._log
+        latest = self._latest_end
+        epoch = self._epoch
+        for item in frames:
+            end = item[1]
+            latest.append(max(end, latest[-1]) if len(log) > epoch else end)
+            log.append(item)
+            if len(log) > 2 * LOG_KEEP:
+                cut = len(log) - LOG_KEEP
+                if cut <= epoch or latest[cut - 1] <= item[0] - 1.0:
+                    del log[:cut], latest[:cut]
+                    self._epoch = epoch = max(0, epoch - cut)
+                    self._raw_from = max(0, self._raw_from - cut)
 
     def latest_end(self) -> float:
         """The latest end of any frame of the present timeline (-inf: none)."""
         latest = self._latest_end
-        end = latest[-1] if len(self._log) > self._epoch and latest else -math.inf
-        return max(end, self._unlogged_end)
+        return latest[-1] if len(self._log) > self._epoch and latest else -math.inf
 
-    def _flush(self) -> None:
-        """The booked frames into the log: its latest-end bookkeeping and trimming as :meth:`_put` does it, the
-        frames that stay made transmissions."""
-        raw, self._unlogged, self._unlogged_end = self._unlogged, [], -math.inf
+    def _materialize(self) -> None:
+        """Booked frames (:meth:`book_frames`) become transmissions."""
         log: list[Any] = self._log
-        latest = self._latest_end
-        first = len(log)
-        for item in raw:
-            start, end = item[0], item[1]
-            latest.append(max(end, latest[-1]) if len(log) > self._epoch else end)
-            log.append(item)
-            if len(log) > 2 * LOG_KEEP:
-                cut = len(log) - LOG_KEEP
-                if cut <= self._epoch or latest[cut - 1] <= start - 1.0:
-                    del log[:cut], latest[:cut]
-                    self._epoch = max(0, self._epoch - cut)
-                    first = max(0, first - cut)
-        for k in range(first, len(log)):
-            start, end, due, size, side, payload = log[k]
-            log[k] = Transmission(start, end, side, b"", delivered=True, due=due, size=size, payload=payload)
+        for k in range(self._raw_from, len(log)):
+            item = log[k]
+            if type(item) is tuple:
+                start, end, due, size, side, payload = item
+                log[k] = Transmission(start, end, side, b"", delivered=True, due=due, size=size, payload=payload)
+        self._raw_from = len(log)
 
     def wire_time(self, n: int) -> float:
         """Seconds ``n`` characters occupy the line."""
@@ -287,6 +278,7 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             if cut <= self._epoch or latest[cut - 1] <= start - 1.0:
                 del log[:cut], latest[:cut]
                 self._epoch = max(0, self._epoch - cut)
+                self._raw_from = max(0, self._raw_from - cut)
         return tx
 
     def _run(self, until: float) -> None:
