@@ -40,14 +40,20 @@ class LinkLane:
 
     def _open(self, request: Any) -> bool:
         """Whether the lane can take ``request`` now (nothing sent yet either way)."""
+        return self._idle() and self._plain(request)
+
+    def _idle(self) -> bool:
+        """Whether the link and its line are as the lane needs them: nothing traced, in flight or pending."""
         link, framing, line = self.link, self.framing, self.line
         if framing is None or line is None or link.trace is not None or link._direct is not framing:
             return False
         if framing._line is not line or framing.pending() or line._pending or line._cap is not None or line._closed:
             return False
-        if not link.rule.expects_reply(request) or _single_write(request) == FAILED_VALUE:
-            return False
         return bool(line._plain_peer())
+
+    def _plain(self, request: Any) -> bool:
+        """Whether ``request`` gets a reply whose meaning the lane can take (not an FC06 write of 0xFFFF)."""
+        return bool(self.link.rule.expects_reply(request)) and _single_write(request) != FAILED_VALUE
 
     def request(self, request: Any, *, idempotent: bool = False) -> Any:
         """:meth:`Link.request` of ``request`` (a Modbus request)."""
@@ -88,11 +94,12 @@ class LinkLane:
         """:meth:`request` of each of ``requests`` by ``run(requests, size, check)``, a twin's one-call exchange
         (the frames, the physics between them and the drives' ops in one compiled call, e.g.
         :meth:`joints.sim.erob_exchange.ErobExchange.run`: ``check(request, reply)`` tells it before anything is
-        sent whether the host takes a reply as the plain answer, ``size`` a message's characters); None where
-        the lane or the exchange cannot take them all (nothing sent: send them the usual way). A lone request's
-        reply is then checked as :meth:`request` checks it (``idempotent`` for the rest of its attempt)."""
+        sent whether the host takes a reply as the plain answer - None for a lone request, whose reply is
+        checked after, as :meth:`request` checks it - ``size`` a message's characters); None where
+        the lane or the exchange cannot take them all (nothing sent: send them the usual way). ``idempotent``:
+        a lone request's, for the rest of its attempt where its reply is not the plain answer."""
         framing = self.framing
-        if framing is None or not all(self._open(r) for r in requests):
+        if framing is None or not self._idle() or not all(self._plain(r) for r in requests):
             return None
         link = self.link
         rule = link.rule
@@ -105,7 +112,8 @@ class LinkLane:
 
         with link._lock:
             deadline = link.clock.now() + link.policy.timeout  # the last request's, when it is the only one
-            replies = run(requests, framing.size, plain)
+            # a lone request's reply is checked after, as the lane checks it; several are checked before
+            replies = run(requests, framing.size, plain if len(requests) > 1 else None)
             if replies is None:
                 return None
             n = len(requests)

@@ -678,11 +678,13 @@ class _StatusRead:
         fw.on_read(self.names)
         return self.finish(fw._k.status(fw._row, self.values["motion_mode"] == _REPETITIVE))
 
-    def finish(self, st: Sequence[int], get: Callable[[int], float] | None = None) -> list[int]:
+    def finish(self, st: Sequence[int], row: dict[int, float] | None = None) -> list[int]:
         """The read's values from the kernel's status values ``st`` (in :data:`~joints.sim.erob_kernel.STATUS_NAMES`
-        order) as the drive reports them; ``get``: the row's columns as they stood at the read (default: now)."""
+        order) as the drive reports them; ``row``: the row's columns the sensors see (column -> value) as they
+        stood at the read (default: the row now)."""
         fw, values = self.fw, self.values
         if not fw.sensor.model.ideal:  # what the drive reports (outside the kernel: same bits)
+            get = None if row is None else row.__getitem__
             st = (*st[:4], fw._sensed_counts(get), *st[5:7], fw._sensed_speed(get), *st[8:10],
                   fw._sensed_current(get), *st[11:])
         # saturate, never wrap: ``lo if v < lo else min(v, hi)``, spelled out (min(v, hi) is v unless hi < v)

@@ -272,7 +272,7 @@ class ErobExchange:
             return None
         return _Shape(op, items[0][0], size(request), size(reply), reply, limits)
 
-    def _row(self, request: Any, shape: _Shape, written: dict[str, int], check: Callable[[Any, Any], bool]
+    def _row(self, request: Any, shape: _Shape, written: dict[str, int], check: Callable[[Any, Any], bool] | None
              ) -> tuple[list[float], Any, Any] | None:
         """The transaction row of ``request``, its reply (None for a read: made after the call) and what the
         Python side finishes it with; None where it is not a steady request now."""
@@ -280,7 +280,8 @@ class ErobExchange:
         op = shape.op
         if op == READ:
             plan = self.front.read_plan(request.address, request.count)  # the front's own, as it serves it now
-            if isinstance(plan, int) or not isinstance(plan[0], _StatusRead) or not check(request, shape.made):
+            if isinstance(plan, int) or not isinstance(plan[0], _StatusRead) or (
+                    check is not None and not check(request, shape.made)):
                 return None  # (the words a read packs are plain: a blank reply of its size stands for them)
             return [READ, 0.0, shape.request, 0.0, shape.reply, 0.0, 0.0, float(plan[0].repetitive()), 0.0], None, plan
         if type(request) is mb.WriteMultipleRegisters:
@@ -299,7 +300,7 @@ class ErobExchange:
             fw.check_write(name, value)
         except ParameterRefused:  # refused: the front answers it its way
             return None
-        if not check(request, reply):  # a reply the host would not take as the plain answer
+        if check is not None and not check(request, reply):  # a reply the host would not take as the plain answer
             return None
         values = fw.values
         written[name] = value
@@ -312,12 +313,12 @@ class ErobExchange:
                  float(written.get("target_relative_position", values["target_relative_position"])), 0.0, 0.0],
                 reply, items)
 
-    def run(self, requests: Sequence[Any], size: Callable[[Any], int], check: Callable[[Any, Any], bool],
+    def run(self, requests: Sequence[Any], size: Callable[[Any], int], check: Callable[[Any, Any], bool] | None,
             exchanges: Sequence[ErobExchange] | None = None) -> list[Any] | None:
         """The replies to ``requests`` (sent one after the other), each as the bus gives it, once the host would
         have received it; None (nothing sent) where this is not the steady case. ``size``: a message's
         characters on the line; ``check(request, reply)``: whether the host takes the reply as the plain answer
-        (asked before anything is sent; a read's with its words 0); ``exchanges``: per request, the exchange
+        (asked before anything is sent; a read's with its words 0; None: the caller checks the replies after); ``exchanges``: per request, the exchange
         of the drive it is for (default: this one's; all on this one's line and world)."""
         fn = _compiled()
         if fn is None:
@@ -385,8 +386,7 @@ class ErobExchange:
             for ex, r, t, o, (reply, extra) in zip(mine, requests, rows, out.tolist(), made):
                 if t[OP] == READ:
                     plan = extra
-                    values = plan[0].finish([int(v) for v in o[STATUS_AT:SENSED_AT]],
-                                            dict(zip(SENSED, o[SENSED_AT:])).__getitem__)
+                    values = plan[0].finish(list(map(int, o[STATUS_AT:SENSED_AT])), dict(zip(SENSED, o[SENSED_AT:])))
                     reply = mb.ReadRegistersReply(r.slave, r.function, ModbusFront.pack(plan, values, r.count))
                 else:
                     ex._store(extra)
