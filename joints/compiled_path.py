@@ -22,6 +22,12 @@ that is not the steady case (a setting to write, the 500 ms after "enable" not o
 the driver's own method, so the result is the driver path's in every case.
 :attr:`CompiledPath.taken` counts the joint steps that took the compiled path.
 
+Where the peer offers a one-call exchange (the sim's eRob twins: :mod:`joints.sim.erob_exchange`), an eRob's
+steady requests - a command's writes, the status read; every eRob's of a rig on one line together - go in ONE
+compiled call (frames, physics and the drive's register ops), by :meth:`~joints.link.lane.LinkLane.exchange`,
+which falls back to the requests one by one before anything is sent where the case is not steady;
+:attr:`CompiledPath.fused` counts the requests it carried.
+
 A ZLAC8015D's two wheels are one drive: their reference is the rig's (:meth:`~joints.rig.Rig.set_velocities`,
 :meth:`~joints.rig.Rig.read_states`), so a velocity command of both is the joints' checks, the drive's plan
 (:meth:`~joints.drivers.zlac_modbus.ZlacDrive.velocity_plan`: range checks, mode, ramps) and its one or two

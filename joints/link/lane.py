@@ -9,7 +9,9 @@ acts only on host frames, a Modbus request that is not a write of 0xFFFF (whose 
 failure replies makes ambiguous); anything else goes to ``link.request`` before anything is sent. A
 reply that is not the plain answer (silence, a frame the host refuses, another slave's reply) continues
 as the link's own attempt does (:meth:`Link._await_reply`, then the link's retries,
-:meth:`Link._attempts`). tests/sim/test_compiled_path.py proves both equal to the link's path.
+:meth:`Link._attempts`). :meth:`LinkLane.exchange` hands several requests to a twin's one-call exchange (the
+sim's eRob, :mod:`joints.sim.erob_exchange`) under the same conditions, or sends nothing.
+tests/sim/test_compiled_path.py proves both equal to the link's path.
 """
 
 from __future__ import annotations
