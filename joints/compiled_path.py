@@ -323,7 +323,7 @@ def _erob_batch(steppers: Sequence[_Stepper]) -> list[_ErobModbus] | None:
     first = units[0]
     same = all(s.link is first.link and s.exchange.line is first.exchange.line
                and s.exchange.world is first.exchange.world for s in units)
-    return units if same else None
+    return units if same and getattr(first.exchange.world, "compiled", False) else None  # (it needs the compiled world)
 
 
 def _command_batch(units: list[_ErobModbus], mode: str, values: Sequence[float], skip: Sequence[bool] | None) -> None:
