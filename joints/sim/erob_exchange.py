@@ -9,7 +9,8 @@ reply's travel booked), the same register semantics (the firmware's own writes c
 from the fixed request and reply sizes, the physics runs to each frame's arrival inside the compiled call
 (MuJoCo's ``mj_step`` by address, :mod:`joints.sim.stepping`), the ops act on the drive's row there.
 Afterwards Python brings the line, the world, the clock and the firmware's parameter store to where the
-request-by-request path leaves them.
+request-by-request path leaves them. The requests of several drives on one line (a rig's eRobs) go in one call
+too, each acting on its own row.
 
 It runs only in the steady case, checked before anything is sent: the world runs fused (compiled, every
 drive a kernel row, nothing ticking after substeps), the line is idle and its peer acts only on host
@@ -318,8 +319,9 @@ class ErobExchange:
         """The replies to ``requests`` (sent one after the other), each as the bus gives it, once the host would
         have received it; None (nothing sent) where this is not the steady case. ``size``: a message's
         characters on the line; ``check(request, reply)``: whether the host takes the reply as the plain answer
-        (asked before anything is sent; a read's with its words 0; None: the caller checks the replies after); ``exchanges``: per request, the exchange
-        of the drive it is for (default: this one's; all on this one's line and world)."""
+        (asked before anything is sent; a read's with its words 0; None: the caller checks the replies after);
+        ``exchanges``: per request, the exchange of the drive it is for (default: this one's; all on this one's
+        line and world: a rig's eRobs on one bus go in one call)."""
         fn = _compiled()
         if fn is None:
             return None
