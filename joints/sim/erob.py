@@ -690,3 +690,10 @@ class _StatusRead:
         # saturate, never wrap: ``lo if v < lo else min(v, hi)``, spelled out (min(v, hi) is v unless hi < v)
         return [values[name] if i < 0 else lo if (v := st[i]) < lo else hi if hi < v else v  # noqa: FURB136
                 for i, name, lo, hi in self.entries]
+
+
+#: the firmware methods a Modbus request reaches, as defined (captured when this module is imported): a one-call
+#: exchange (:mod:`joints.sim.erob_exchange`) runs only while none of them is replaced
+STOCK = tuple((ErobFirmware, name, getattr(ErobFirmware, name)) for name in (
+    "write_many", "on_write", "on_read", "check_write", "frame_received", "_start", "_speed_command", "set",
+    "reader", "_store"))

@@ -29,12 +29,13 @@ from typing import Any
 
 from joints.codecs import modbus as mb
 from joints.errors import ParameterRefused
+from joints.sim import erob, kernel, modbus_front, stepping
 from joints.sim import erob_kernel as K
-from joints.sim import kernel, stepping
 from joints.sim.erob import ErobFirmware, _StatusRead
-from joints.sim.firmware import WRITE_LOG_LIMIT, Firmware
+from joints.sim.firmware import WRITE_LOG_LIMIT
 from joints.sim.kernel import jitable
 from joints.sim.modbus_front import ModbusDeviceBus, ModbusException, ModbusFront
+from joints.transports import serial_sim
 from joints.transports.serial_sim import TimedSerialLine
 
 __all__ = ["ErobExchange", "prepare"]
@@ -161,15 +162,9 @@ def _compiled() -> Any:
     return _COMPILED[0]
 
 
-#: the stock methods the requests would go through (a replaced one - a test planting replies - means no fusion)
-_STOCK = ((ModbusDeviceBus, "exchange", ModbusDeviceBus.exchange), (ModbusFront, "handle", ModbusFront.handle),
-          (ModbusFront, "read", ModbusFront.read), (ModbusFront, "write", ModbusFront.write),
-          (ErobFirmware, "write_many", Firmware.write_many), (ErobFirmware, "on_write", ErobFirmware.on_write),
-          (ErobFirmware, "on_read", Firmware.on_read), (ErobFirmware, "check_write", ErobFirmware.check_write),
-          (ErobFirmware, "frame_received", ErobFirmware.frame_received), (ErobFirmware, "_start", ErobFirmware._start),
-          (ErobFirmware, "_speed_command", ErobFirmware._speed_command), (ErobFirmware, "set", ErobFirmware.set),
-          (TimedSerialLine, "_transact_idle", TimedSerialLine._transact_idle),
-          (TimedSerialLine, "_plain_peer", TimedSerialLine._plain_peer))
+#: the stock methods the requests would go through, captured when their modules were imported (a replaced one -
+#: a test planting replies - means no one-call exchange)
+_STOCK = (*modbus_front.STOCK, *serial_sim.STOCK, *erob.STOCK)
 
 
 def _stock() -> bool:

@@ -435,3 +435,10 @@ class ModbusDeviceBus:
             return None
         slave = self.slaves.get(msg.slave)
         return None if slave is None else slave.handle(msg)
+
+
+#: the methods a request goes through, as defined here (captured when this module is imported): a one-call
+#: exchange (:mod:`joints.sim.erob_exchange`) runs only while none of them is replaced (a test planting replies)
+STOCK = ((ModbusDeviceBus, "exchange", ModbusDeviceBus.exchange), (ModbusFront, "handle", ModbusFront.handle),
+         (ModbusFront, "read", ModbusFront.read), (ModbusFront, "write", ModbusFront.write),
+         (ModbusFront, "items", ModbusFront.items), (ModbusFront, "read_plan", ModbusFront.read_plan))

@@ -475,3 +475,10 @@ class TimedSerialLine(ByteTransport, ClockDriven):
     def trace(self) -> str:
         """The wire trace: every transmission, one per line."""
         return "\n".join(str(tx) for tx in self.log)
+
+
+#: the methods a transaction goes through, as defined here (captured when this module is imported): a one-call
+#: exchange (:mod:`joints.sim.erob_exchange`) runs only while none of them is replaced
+STOCK = ((TimedSerialLine, "_transact_idle", TimedSerialLine._transact_idle),
+         (TimedSerialLine, "_plain_peer", TimedSerialLine._plain_peer), (TimedSerialLine, "_put", TimedSerialLine._put),
+         (TimedSerialLine, "transact", TimedSerialLine.transact))
