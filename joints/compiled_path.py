@@ -22,6 +22,12 @@ that is not the steady case (a setting to write, the 500 ms after "enable" not o
 the driver's own method, so the result is the driver path's in every case.
 :attr:`CompiledPath.taken` counts the joint steps that took the compiled path.
 
+Where the peer offers a one-call exchange (the sim's eRob twins: :mod:`joints.sim.erob_exchange`), an eRob's
+steady requests - a command's writes, the status read; every eRob's of a rig on one line together - go in ONE
+compiled call (frames, physics and the drive's register ops), by :meth:`~joints.link.lane.LinkLane.exchange`,
+which falls back to the requests one by one before anything is sent where the case is not steady;
+:attr:`CompiledPath.fused` counts the requests it carried.
+
 A ZLAC8015D's two wheels are one drive: their reference is the rig's (:meth:`~joints.rig.Rig.set_velocities`,
 :meth:`~joints.rig.Rig.read_states`), so a velocity command of both is the joints' checks, the drive's plan
 (:meth:`~joints.drivers.zlac_modbus.ZlacDrive.velocity_plan`: range checks, mode, ramps) and its one or two
@@ -31,6 +37,7 @@ prebuilt FC03 decoded once. Its other commands, and a command to one wheel only,
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Any, TypeGuard
 
@@ -70,6 +77,51 @@ class _ErobModbus:
         self.decode = access.table.decode_block
         self.start = access.write_request("start_operating", CMD_START)  # a constant command
         self.taken = 0
+        #: the twin's one-call exchange (the sim's eRob: frames, physics and register ops in one compiled call,
+        #: :meth:`LinkLane.exchange`), where the peer offers one
+        fused = getattr(self.lane.framing.peer if self.lane.framing is not None else None, "fused", None)
+        self.exchange: Any = fused(access.slave, self.lane.line) if callable(fused) and self.lane.line else None
+
+    def _fused(self, requests: tuple[Any, ...], idempotent: bool) -> list[Any] | None:
+        """The replies to ``requests`` by the twin's one-call exchange, or None (nothing sent)."""
+        exchange = self.exchange
+        return None if exchange is None else self.lane.exchange(exchange.run, requests, idempotent=idempotent)
+
+    def plan(self, mode: str, value: float) -> tuple[tuple[Any, ...], str, int] | None:
+        """A command's checks (:meth:`command`'s) and, in the steady case, its requests, the parameter it sets
+        and the value; None where it is not the steady case (nothing sent either way)."""
+        joint, driver, access = self.joint, self.driver, self.access
+        if mode == "position":
+            target, speed, acc, dec = joint.position_command(value)
+            if not driver.steady_move(speed, acc, dec):
+                return None
+            driver.validate(target_absolute_position=target)
+            return (access.write_request("target_absolute_position", target), self.start), \
+                "target_absolute_position", target
+        if mode == "velocity":
+            speed, ramp = joint.velocity_command(value)
+            if not driver.steady_velocity(ramp, ramp):
+                return None
+            driver.validate(target_speed=speed)
+            return (access.write_request("target_speed", speed),), "target_speed", speed
+        current = joint.torque_command(value)
+        if not driver.steady_current():
+            return None
+        driver.validate(target_current=current)
+        return (access.write_request("target_current", current),), "target_current", current
+
+    def done(self, mode: str, name: str, value: int, before: float, after: float) -> None:
+        """The bookkeeping of a planned command sent between the clock instants ``before`` and ``after``."""
+        self.driver.note_written(name, value)
+        # the joint's contact: velocity_command's before the frames, note_contact's after them
+        self.joint.note_contact(before if mode == "velocity" else after)
+        self.taken += 1
+
+    def state_of(self, reply: Any, t0: float, t1: float) -> JointState:
+        """The state from the status read's ``reply``, sent at ``t0`` and answered at ``t1`` (clock instants)."""
+        assert isinstance(reply, mb.ReadRegistersReply)
+        values = self.decode(self.status_start, reply.values)
+        return self.joint.to_si(self.driver.state_from(values, sampled_at(t0, t1)))
 
     def command_all(self, mode: str, values: Sequence[float], skip: Sequence[bool]) -> None:
         if not skip[0]:
@@ -79,7 +131,9 @@ class _ErobModbus:
         return [self.state()]
 
     def _write(self, name: str, value: int) -> None:
-        self.lane.request(self.access.write_request(name, value), idempotent=True)
+        request = self.access.write_request(name, value)
+        if self._fused((request,), True) is None:
+            self.lane.request(request, idempotent=True)
         self.driver.note_written(name, value)
 
     def command(self, mode: str, value: float) -> None:
@@ -88,11 +142,16 @@ class _ErobModbus:
             target, speed, acc, dec = joint.position_command(value)
             if driver.steady_move(speed, acc, dec):
                 driver.validate(target_absolute_position=target)
-                self._write("target_absolute_position", target)
-                try:  # a command: never retried
-                    self.lane.request(self.start, idempotent=False)
-                except OutcomeUnknown as exc:
-                    driver.start_unknown(target, exc)
+                request = self.access.write_request("target_absolute_position", target)
+                if self._fused((request, self.start), False) is not None:  # both in one call
+                    driver.note_written("target_absolute_position", target)
+                else:
+                    self.lane.request(request, idempotent=True)
+                    driver.note_written("target_absolute_position", target)
+                    try:  # a command: never retried
+                        self.lane.request(self.start, idempotent=False)
+                    except OutcomeUnknown as exc:
+                        driver.start_unknown(target, exc)
                 self.taken += 1
             else:
                 driver.move_to(target, speed=speed, acceleration=acc, deceleration=dec)
@@ -118,10 +177,9 @@ class _ErobModbus:
     def state(self) -> JointState:
         clock = self.clock
         t0 = clock.now()
-        reply = self.lane.request(self.status, idempotent=True)
-        assert isinstance(reply, mb.ReadRegistersReply)
-        values = self.decode(self.status_start, reply.values)
-        return self.joint.to_si(self.driver.state_from(values, sampled_at(t0, clock.now())))
+        replies = self._fused((self.status,), True)
+        reply = self.lane.request(self.status, idempotent=True) if replies is None else replies[0]
+        return self.state_of(reply, t0, clock.now())
 
 
 class _Block:
@@ -294,6 +352,77 @@ def _steppers(joints: Sequence[Joint]) -> list[tuple[tuple[int, ...], _Stepper]]
     return out
 
 
+def _erob_batch(steppers: Sequence[_Stepper]) -> list[_ErobModbus] | None:
+    """Two or more eRobs, one per joint in joint order, on one link whose twins share one line and world:
+    their steps go in one call of their one-call exchange (:func:`_command_batch`, :func:`_states_batch`)."""
+    units = [s for s in steppers if isinstance(s, _ErobModbus) and s.exchange is not None]
+    if len(units) < 2 or len(units) != len(steppers):
+        return None
+    first = units[0]
+    same = all(s.link is first.link and s.exchange.line is first.exchange.line
+               and s.exchange.world is first.exchange.world for s in units)
+    return units if same and getattr(first.exchange.world, "compiled", False) else None  # (it needs the compiled world)
+
+
+def _command_batch(units: list[_ErobModbus], mode: str, values: Sequence[float], skip: Sequence[bool] | None) -> None:
+    """:meth:`CompiledPath.command` of one eRob per joint: the steady commands of the joints up to the first that
+    is not the steady case (or whose checks refuse it) go in one call, after each joint's checks; from that
+    joint on, joint by joint, each its own way (so a refusal is raised by that joint's own command, after the
+    joints before it were sent, as the joint by joint path raises it)."""
+    planned: list[tuple[_ErobModbus, tuple[tuple[Any, ...], str, int]]] = []
+    rest = len(units)
+    for k, s in enumerate(units):
+        if skip is not None and skip[k]:
+            continue
+        try:
+            p = s.plan(mode, values[k])
+        except Exception:  # noqa: BLE001 - a refusal: this joint's own command raises it again, in its turn
+            p = None
+        if p is None:
+            rest = k
+            break
+        planned.append((s, p))
+    if planned:
+        first = planned[0][0]
+        requests = [r for _, p in planned for r in p[0]]
+        exchanges = [s.exchange for s, p in planned for _ in p[0]]
+        t0 = first.clock.now()
+        replies = first.lane.exchange(functools.partial(first.exchange.run, exchanges=exchanges), requests,
+                                      idempotent=True)  # (one request alone: a target write, idempotent)
+        if replies is None:  # not the steady case: joint by joint, each its own way (its checks again)
+            for s, _ in planned:
+                s.command(mode, values[units.index(s)])
+        else:
+            clocks = first.exchange.clocks
+            before, at = t0, 0
+            for s, (reqs, name, value) in planned:
+                at += len(reqs)
+                after = clocks[at - 1]
+                s.done(mode, name, value, before, after)
+                before = after
+    for k in range(rest, len(units)):  # from the first joint that is not the steady case (or refuses): its own way
+        if skip is None or not skip[k]:
+            units[k].command(mode, values[k])
+
+
+def _states_batch(units: list[_ErobModbus]) -> list[JointState] | None:
+    """Every joint's state by one call of the twins' one-call exchange (the reads joint by joint, the state of
+    each stamped with its own transaction's instants); None (nothing sent) where that is not the steady case."""
+    first = units[0]
+    t0 = first.clock.now()
+    run = functools.partial(first.exchange.run, exchanges=[s.exchange for s in units])
+    replies = first.lane.exchange(run, [s.status for s in units], idempotent=True)
+    if replies is None:
+        return None
+    clocks = first.exchange.clocks
+    out: list[JointState] = []
+    before = t0
+    for s, reply, after in zip(units, replies, clocks):
+        out.append(s.state_of(reply, before, after))
+        before = after
+    return out
+
+
 class CompiledPath:
     """The commands and state reads of a list of joints, each joint's in order (see the module docstring)."""
 
@@ -301,6 +430,7 @@ class CompiledPath:
         self._joints = list(joints)
         self._units = _steppers(joints)
         self._steppers = [s for _, s in self._units]
+        self._batch = _erob_batch(self._steppers)
 
     @classmethod
     def build(cls, joints: Sequence[Joint]) -> CompiledPath | None:
@@ -318,6 +448,11 @@ class CompiledPath:
         return sum(s.taken for s in self._steppers)
 
     @property
+    def fused(self) -> int:
+        """Requests sent by a twin's one-call exchange (:meth:`~joints.link.lane.LinkLane.exchange`)."""
+        return sum(s.lane.fused for s in self._steppers)
+
+    @property
     def lane_taken(self) -> int:
         """Requests sent on the direct lane (:class:`~joints.link.lane.LinkLane`), not through ``Link.request``."""
         return sum(s.lane.taken for s in self._steppers)
@@ -326,12 +461,19 @@ class CompiledPath:
         """Joint ``i`` gets ``values[i]`` (rad | rad/s | N*m per ``mode``) unless ``skip[i]``, in joint order."""
         if mode not in ACTION_MODES:
             raise ValueError(f"mode {mode!r} is not one of {ACTION_MODES}")
+        if self._batch is not None:
+            _command_batch(self._batch, mode, values, skip)
+            return
         for idx, s in self._units:
             s.command_all(mode, [values[i] for i in idx], [skip is not None and skip[i] for i in idx])
 
     def states(self) -> list[JointState]:
         """Every joint's state, read in joint order (as ``[j.state() for j in joints]``; the wheels of a
         ZLAC8015D as ``rig.read_states``: one read of their drive)."""
+        if self._batch is not None:
+            got = _states_batch(self._batch)
+            if got is not None:
+                return got
         out: list[Any] = [None] * len(self._joints)
         for idx, s in self._units:
             for i, state in zip(idx, s.states()):

@@ -184,10 +184,10 @@ class Joint:
     def _contact(self) -> None:
         self.last_contact = self.clock.now()
 
-    def note_contact(self) -> None:
+    def note_contact(self, at: float | None = None) -> None:
         """A command reached the drive by another way than this joint's methods (the sim's compiled path,
-        :mod:`joints.compiled_path`): :attr:`last_contact` is now."""
-        self.last_contact = self.clock.now()
+        :mod:`joints.compiled_path`): :attr:`last_contact` is now (or ``at``, the clock's instant it did)."""
+        self.last_contact = self.clock.now() if at is None else at
 
     # -- power ------------------------------------------------------------------------------
     def enable(self) -> None:

@@ -9,12 +9,15 @@ acts only on host frames, a Modbus request that is not a write of 0xFFFF (whose 
 failure replies makes ambiguous); anything else goes to ``link.request`` before anything is sent. A
 reply that is not the plain answer (silence, a frame the host refuses, another slave's reply) continues
 as the link's own attempt does (:meth:`Link._await_reply`, then the link's retries,
-:meth:`Link._attempts`). tests/sim/test_compiled_path.py proves both equal to the link's path.
+:meth:`Link._attempts`). :meth:`LinkLane.exchange` hands several requests to a twin's one-call exchange (the
+sim's eRob, :mod:`joints.sim.erob_exchange`) under the same conditions, or sends nothing.
+tests/sim/test_compiled_path.py proves both equal to the link's path.
 """
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from joints.errors import FrameError, PeerProtocolError, ReplyTimeout
@@ -35,17 +38,24 @@ class LinkLane:
         line = getattr(framing, "transport", None)
         self.line = line if isinstance(line, TimedSerialLine) else None
         self.taken = 0  #: requests that took the lane
+        self.fused = 0  #: of them, requests sent by a twin's one-call exchange (:meth:`exchange`)
 
     def _open(self, request: Any) -> bool:
         """Whether the lane can take ``request`` now (nothing sent yet either way)."""
+        return self._idle() and self._plain(request)
+
+    def _idle(self) -> bool:
+        """Whether the link and its line are as the lane needs them: nothing traced, in flight or pending."""
         link, framing, line = self.link, self.framing, self.line
         if framing is None or line is None or link.trace is not None or link._direct is not framing:
             return False
         if framing._line is not line or framing.pending() or line._pending or line._cap is not None or line._closed:
             return False
-        if not link.rule.expects_reply(request) or _single_write(request) == FAILED_VALUE:
-            return False
         return bool(line._plain_peer())
+
+    def _plain(self, request: Any) -> bool:
+        """Whether ``request`` gets a reply whose meaning the lane can take (not an FC06 write of 0xFFFF)."""
+        return bool(self.link.rule.expects_reply(request)) and _single_write(request) != FAILED_VALUE
 
     def request(self, request: Any, *, idempotent: bool = False) -> Any:
         """:meth:`Link.request` of ``request`` (a Modbus request)."""
@@ -64,13 +74,56 @@ class LinkLane:
             size = framing.size
             raw = line._transact_idle(line._sync(), size(request), functools.partial(framing.peer.exchange, request),
                                       size, framing._turnaround(request))
-            reply = None if raw is None else framing.as_received(request, raw)
-            try:  # as the link's attempt: a reply the rule refuses (another slave's) fails the attempt
-                if reply is not None and not isinstance(reply, FrameError) and rule.is_reply(request, reply):
-                    self.taken += 1
-                    return reply
-                framing.put(reply)  # not the plain answer: the rest of the attempt and the retries are the link's
-                return link._await_reply(request, deadline)
-            except (ReplyTimeout, PeerProtocolError) as exc:
-                link._discard_late()
-                return link._attempts(request, None, idempotent, failed=exc)
+            return self._finish(request, raw, deadline, idempotent)
+
+    def _finish(self, request: Any, raw: Any, deadline: float, idempotent: bool) -> Any:
+        """The rest of the link's attempt once the peer's reply ``raw`` (None: silence) reached the host."""
+        link, framing = self.link, self.framing
+        assert framing is not None
+        reply = None if raw is None else framing.as_received(request, raw)
+        try:  # as the link's attempt: a reply the rule refuses (another slave's) fails the attempt
+            if reply is not None and not isinstance(reply, FrameError) and link.rule.is_reply(request, reply):
+                self.taken += 1
+                return reply
+            framing.put(reply)  # not the plain answer: the rest of the attempt and the retries are the link's
+            return link._await_reply(request, deadline)
+        except (ReplyTimeout, PeerProtocolError) as exc:
+            link._discard_late()
+            return link._attempts(request, None, idempotent, failed=exc)
+
+    def exchange(self, run: Callable[..., list[Any] | None], requests: Sequence[Any], *,
+                 idempotent: bool = False) -> list[Any] | None:
+        """:meth:`request` of each of ``requests`` by ``run(requests, size, check)``, a twin's one-call exchange
+        (the frames, the physics between them and the drives' ops in one compiled call, e.g.
+        :meth:`joints.sim.erob_exchange.ErobExchange.run`: ``check(request, reply)`` tells it before anything is
+        sent whether the host takes a reply as the plain answer - None for a lone request, whose reply is
+        checked after, as :meth:`request` checks it - ``size`` a message's characters); None where
+        the lane or the exchange cannot take them all (nothing sent: send them the usual way). ``idempotent``:
+        a lone request's, for the rest of its attempt where its reply is not the plain answer."""
+        framing = self.framing
+        if framing is None or not self._idle() or not all(self._plain(r) for r in requests):
+            return None
+        link = self.link
+        rule = link.rule
+        for r in requests:
+            rule.check(r)  # raises EncodeError before anything is sent
+        as_received = framing.as_received
+
+        def plain(request: Any, reply: Any) -> bool:
+            return as_received(request, reply) is reply and bool(rule.is_reply(request, reply))
+
+        with link._lock:
+            deadline = link.clock.now() + link.policy.timeout  # the last request's, when it is the only one
+            # a lone request's reply is checked after, as the lane checks it; several are checked before
+            replies = run(requests, framing.size, plain if len(requests) > 1 else None)
+            if replies is None:
+                return None
+            n = len(requests)
+            link.transactions += n
+            framing.exchanges += n
+            self.fused += n
+            if n > 1:  # their replies were checked before anything was sent: plain
+                self.taken += n
+                return replies
+            replies[0] = self._finish(requests[0], replies[0], deadline, idempotent)
+            return replies

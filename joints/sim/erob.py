@@ -161,9 +161,9 @@ def power_on_defaults(profile: ErobProfile, address: int) -> dict[str, int]:
 #: Parameters kept over a power cycle when saved: the R/W settings (not status or commands), those
 #: only the CAN custom protocol reaches (node id, jerk, ...) included.
 _SETTINGS = tuple(p.name for p in EROB_PARAMS if p.access.value == "R/W")
-_POSITION = int(OperationMode.POSITION)
 ARRIVAL_WINDOW = K.ARRIVAL_WINDOW
 _STATUS_INDEX = {name: i for i, name in enumerate(K.STATUS_NAMES)}
+_REPETITIVE = int(MotionMode.REPETITIVE)
 
 
 class _Generator:
@@ -474,52 +474,45 @@ class ErobFirmware(Firmware):
             return generic  # other computed values, or ones replaced since (tests count calls)
         types = self._type_range
         entries = tuple((index.get(n, -1), n, *types[n]) for n in names)
-        values = self.values
-        repetitive = int(MotionMode.REPETITIVE)
+        return _StatusRead(self, names, entries)
 
-        def read() -> list[int]:
-            self.on_read(names)
-            st = self._k.status(self._row, values["motion_mode"] == repetitive)
-            if not self.sensor.model.ideal:  # what the drive reports (outside the kernel: same bits)
-                st = (*st[:4], self._sensed_counts(), *st[5:7], self._sensed_speed(), *st[8:10],
-                      self._sensed_current(), *st[11:])
-            # saturate, never wrap: ``lo if v < lo else min(v, hi)``, spelled out (min(v, hi) is v unless hi < v)
-            return [values[name] if i < 0 else lo if (v := st[i]) < lo else hi if hi < v else v  # noqa: FURB136
-                    for i, name, lo, hi in entries]
+    def fused_exchange(self, world: Any, bus: Any, front: Any, line: Any) -> Any:
+        """The one-call exchange of this twin's steady Modbus requests (:mod:`joints.sim.erob_exchange`), or None."""
+        from joints.sim.erob_exchange import prepare
 
-        return read
+        return prepare(world, bus, front, line)
 
     def counts(self) -> int:
         """Actual position value: encoder counts + position offset."""
         return round(self._get(K.POS)) + self.offset
 
-    def _sensed_counts(self) -> int:
-        """``actual_position`` as the drive reports it (:mod:`joints.sim.sensors`)."""
+    def _sensed_counts(self, get: Callable[[int], float] | None = None) -> int:
+        """``actual_position`` as the drive reports it (:mod:`joints.sim.sensors`); ``get``: the row's columns as
+        they stood when it was read (default: the row now)."""
         sensor = self.sensor
         if sensor.model.ideal:
             return self.counts()
-        get = self._get
+        get = self._get if get is None else get
         pos = sensor.position(get(K.TIME), get(K.POS) / COUNTS_PER_RAD, get(K.VEL) / COUNTS_PER_RAD)
         return round(pos * COUNTS_PER_RAD) + self.offset
 
-    def _sensed_speed(self) -> int:
+    def _sensed_speed(self, get: Callable[[int], float] | None = None) -> int:
         """``current_speed`` [count/s]: the drive's velocity estimate."""
-        get = self._get
+        get = self._get if get is None else get
         if self.sensor.model.ideal:
             return round(get(K.VEL))
         return round(self.sensor.velocity(get(K.POS) / COUNTS_PER_RAD, get(K.VEL) / COUNTS_PER_RAD) * COUNTS_PER_RAD)
 
-    def _sensed_current(self) -> int:
+    def _sensed_current(self, get: Callable[[int], float] | None = None) -> int:
         """``motor_current`` [mA] as the drive measures it."""
-        i = self._get(K.I_OUT)
+        i = (self._get if get is None else get)(K.I_OUT)
         if self.sensor.model.ideal:
             return round(i)
         return round(self.sensor.current(i * 1e-3) * 1e3)
 
     # -- what the fronts call ---------------------------------------------------------------
     def frame_received(self) -> None:
-        s = self._row
-        s[K.LAST_FRAME] = s[K.TIME]
+        K.frame(self._row)  # a jitable helper, as Python here (two row accesses)
 
     def check_write(self, name: str, value: int) -> None:
         if name == "torque_control_mode_max_speed" and self.enabled:
@@ -535,23 +528,16 @@ class ErobFirmware(Firmware):
         elif name in _CACHED_SETTINGS:
             self._cache_settings()
         elif name == "target_speed":
-            if self.mode == _SPEED:
-                self._speed_command(value)
+            self._speed_command(value)  # acts in speed mode only
         elif name == "target_current":
-            if self.mode == _TORQUE and value:
-                self._ready_or_refuse()
+            self._k.target_current(self._row, float(value))  # the row's target was set above; a motion command
         elif name == "operation_mode":
             self._row[K.MODE] = float(value)
             self._change_mode()
 
     # -- state machine ----------------------------------------------------------------------
     def _ready_or_refuse(self) -> bool:
-        if self._k.ready(self._row):
-            return True
-        # Not enabled / brake not released yet: no motion, the error is visible.
-        self.state = transition(self.state, Event.MOTION) or self.state
-        self.fault = self.fault or faults.START_WHILE_DISABLED
-        return False
+        return bool(self._k.ready_or_refuse(self._row))
 
     def _raise_fault(self, code: int) -> None:
         self._k.raise_fault(self._row, float(code))
@@ -613,33 +599,8 @@ class ErobFirmware(Firmware):
 
     def _start(self, value: int) -> None:
         v = self.values
-        if self.mode != _POSITION:
-            return
-        if not self._ready_or_refuse():
-            return
-        s = self._row
-        motion = v["motion_mode"]
-        s[K.G_STOPPING] = 0.0
-        s[K.G_RATE] = 0.0
-        s[K.STARTED] = 1.0
-        s[K.IN_WINDOW_SINCE] = -1.0
-        if motion == MotionMode.CONTINUOUS:
-            s[K.G_ACTIVE], s[K.G_CONTINUOUS] = 1.0, 1.0
-        elif motion == MotionMode.ABSOLUTE:
-            rel = v["target_relative_position"]
-            if rel:
-                s[K.G_TARGET] = self._k.clamp_target(s, s[K.P_REF] + rel)
-            else:
-                s[K.G_TARGET] = self._k.clamp_target(s, float(v["target_absolute_position"] - self.offset))
-            s[K.G_ACTIVE], s[K.G_CONTINUOUS] = 1.0, 0.0
-        elif motion == MotionMode.REPETITIVE:
-            s[K.REPEAT_HOME] = s[K.P_REF]
-            s[K.REPEAT_LEG_TO_TARGET] = 1.0
-            s[K.REPEAT_STOP] = 0.0
-            s[K.G_TARGET] = self._k.clamp_target(s, float(v["target_absolute_position"] - self.offset))
-            s[K.G_ACTIVE], s[K.G_CONTINUOUS] = 1.0, 0.0
-        else:  # the parameter's range (0-2) keeps other values out
-            s[K.STARTED] = 0.0
+        self._k.start(self._row, float(v["motion_mode"]), float(v["target_relative_position"]),
+                      float(v["target_absolute_position"]))
 
     def _stop(self, decel: float) -> None:
         s = self._row
@@ -678,13 +639,7 @@ class ErobFirmware(Firmware):
         s[K.P_REF] = s[K.POS]
 
     def _speed_command(self, value: int) -> None:
-        if value and not self._ready_or_refuse():
-            return
-        s = self._row
-        if value:
-            self._k.gen_clear(s)  # a new speed command ends a stop ramp in progress
-        vmax = s[K.VMAX]
-        s[K.MODE_SPEED_TARGET] = float(max(-vmax, min(vmax, value)))
+        self._k.target_speed(self._row, float(value))
 
     # -- physics side -----------------------------------------------------------------------
     def step(self, t: float, dt: float, q: float, qd: float) -> float:
@@ -700,3 +655,45 @@ class ErobFirmware(Firmware):
             return int(MotionStatus.STOP_REPETITIVE)
         return int(MotionStatus.MOVING if self._k.moving(s) else MotionStatus.STOP)
 
+
+class _StatusRead:
+    """A prepared read of a block with the status values (:meth:`ErobFirmware.reader`): one kernel call
+    (:func:`joints.sim.erob_kernel.status`), then :meth:`finish` (what the sensors report, saturation) - which
+    the one-call exchange (:mod:`joints.sim.erob_exchange`) calls on the values its compiled call computed."""
+
+    __slots__ = ("entries", "fw", "names", "values")
+
+    def __init__(self, fw: ErobFirmware, names: tuple[str, ...], entries: tuple[tuple[int, str, int, int], ...]) -> None:
+        self.fw = fw
+        self.names = names
+        self.entries = entries
+        self.values = fw.values
+
+    def repetitive(self) -> bool:
+        """The status call's ``repetitive`` argument now."""
+        return bool(self.values["motion_mode"] == _REPETITIVE)
+
+    def __call__(self) -> list[int]:
+        fw = self.fw
+        fw.on_read(self.names)
+        return self.finish(fw._k.status(fw._row, self.values["motion_mode"] == _REPETITIVE))
+
+    def finish(self, st: Sequence[int], row: dict[int, float] | None = None) -> list[int]:
+        """The read's values from the kernel's status values ``st`` (in :data:`~joints.sim.erob_kernel.STATUS_NAMES`
+        order) as the drive reports them; ``row``: the row's columns the sensors see (column -> value) as they
+        stood at the read (default: the row now)."""
+        fw, values = self.fw, self.values
+        if not fw.sensor.model.ideal:  # what the drive reports (outside the kernel: same bits)
+            get = None if row is None else row.__getitem__
+            st = (*st[:4], fw._sensed_counts(get), *st[5:7], fw._sensed_speed(get), *st[8:10],
+                  fw._sensed_current(get), *st[11:])
+        # saturate, never wrap: ``lo if v < lo else min(v, hi)``, spelled out (min(v, hi) is v unless hi < v)
+        return [values[name] if i < 0 else lo if (v := st[i]) < lo else hi if hi < v else v  # noqa: FURB136
+                for i, name, lo, hi in self.entries]
+
+
+#: the firmware methods a Modbus request reaches, as defined (captured when this module is imported): a one-call
+#: exchange (:mod:`joints.sim.erob_exchange`) runs only while none of them is replaced
+STOCK = tuple((ErobFirmware, name, getattr(ErobFirmware, name)) for name in (
+    "write_many", "on_write", "on_read", "check_write", "frame_received", "_start", "_speed_command", "set",
+    "reader", "_store"))

@@ -55,6 +55,8 @@ REFUSED_ON = float(STATES.index(DriveState.REFUSED_ON))
 FAULT = float(STATES.index(DriveState.FAULT))
 EV_PROTECTION = EVENTS.index(Event.PROTECTION)
 EV_WATCHDOG = EVENTS.index(Event.WATCHDOG)
+EV_MOTION = EVENTS.index(Event.MOTION)
+START_WHILE_DISABLED = float(faults.START_WHILE_DISABLED)
 #: NEXT[state code][event code] -> next state code, -1 where the event is refused / ignored
 NEXT = tuple(tuple(STATES.index(TRANSITIONS[(s, e)]) if (s, e) in TRANSITIONS else -1 for e in EVENTS)
              for s in STATES)
@@ -63,6 +65,8 @@ TORQUE = float(OperationMode.TORQUE)
 SPEED_MODE = float(OperationMode.SPEED)
 POSITION = float(OperationMode.POSITION)
 REPETITIVE = float(MotionMode.REPETITIVE)
+CONTINUOUS = float(MotionMode.CONTINUOUS)
+ABSOLUTE = float(MotionMode.ABSOLUTE)
 A_MOTOR_OFF = int(AchieveStatus.MOTOR_OFF)
 A_MOTOR_ON = int(AchieveStatus.MOTOR_ON)
 A_OPERATION = int(AchieveStatus.OPERATION)
@@ -286,6 +290,84 @@ def round_half_even(x: float) -> int:
     if d > 0.5 or (d == 0.5 and r % 2 != 0):
         r += 1
     return int(r)
+
+
+# -- register ops: what a write of a motion command does to the row (the firmware object's writes and the
+# -- one-call exchange of joints.sim.erob_exchange both call these: the semantics live here once) ------
+@jitable
+def frame(s: Row) -> None:
+    """A frame addressed to the drive arrived (the communication watchdog's food)."""
+    s[LAST_FRAME] = s[TIME]
+
+
+@jitable
+def ready_or_refuse(s: Row) -> bool:
+    """A motion command: True if the drive is ready; else nothing moves, the state machine sees the refused
+    motion and the error 0x0027 latches (unless an error is latched already)."""
+    if ready(s):
+        return True
+    new = NEXT[int(s[STATE])][EV_MOTION]
+    if new >= 0:
+        s[STATE] = float(new)
+    if s[FAULT_CODE] == 0.0:
+        s[FAULT_CODE] = START_WHILE_DISABLED
+    return False
+
+
+@jitable
+def start(s: Row, motion: float, relative: float, target: float) -> None:
+    """Start Operating (0x00F2) in position mode with ``motion_mode`` ``motion``, ``target_relative_position``
+    ``relative`` and ``target_absolute_position`` ``target`` (counts incl. offset)."""
+    if s[MODE] != POSITION:
+        return
+    if not ready_or_refuse(s):
+        return
+    s[G_STOPPING] = 0.0
+    s[G_RATE] = 0.0
+    s[STARTED] = 1.0
+    s[IN_WINDOW_SINCE] = -1.0
+    if motion == CONTINUOUS:
+        s[G_ACTIVE] = 1.0
+        s[G_CONTINUOUS] = 1.0
+    elif motion == ABSOLUTE:
+        if relative != 0.0:
+            s[G_TARGET] = clamp_target(s, s[P_REF] + relative)
+        else:
+            s[G_TARGET] = clamp_target(s, target - s[OFFSET])
+        s[G_ACTIVE] = 1.0
+        s[G_CONTINUOUS] = 0.0
+    elif motion == REPETITIVE:
+        s[REPEAT_HOME] = s[P_REF]
+        s[REPEAT_LEG_TO_TARGET] = 1.0
+        s[REPEAT_STOP] = 0.0
+        s[G_TARGET] = clamp_target(s, target - s[OFFSET])
+        s[G_ACTIVE] = 1.0
+        s[G_CONTINUOUS] = 0.0
+    else:  # the parameter's range (0-2) keeps other values out
+        s[STARTED] = 0.0
+
+
+@jitable
+def target_speed(s: Row, value: float) -> None:
+    """A write of ``target_speed`` (0x0044, count/s): in speed mode the ramp's target (a nonzero one is a motion
+    command: refused unless ready; it ends a stop ramp in progress)."""
+    if s[MODE] != SPEED_MODE:
+        return
+    if value != 0.0 and not ready_or_refuse(s):
+        return
+    if value != 0.0:
+        gen_clear(s)
+    vmax = s[VMAX]
+    s[MODE_SPEED_TARGET] = fmax(-vmax, fmin(vmax, value))
+
+
+@jitable
+def target_current(s: Row, value: float) -> None:
+    """A write of ``target_current`` (0x00E4, mA): the torque loop's target (a nonzero one in torque mode is a
+    motion command: refused unless ready)."""
+    s[TARGET_CURRENT] = value
+    if s[MODE] == TORQUE and value != 0.0:
+        ready_or_refuse(s)
 
 
 #: the status values :func:`status` computes, in its order (the Modbus status block 0x0060-0x0078
@@ -589,7 +671,8 @@ def step(s: Row, t: float, dt: float, q: float, qd: float) -> float:
 #: the helpers the firmware object calls, as Python (rows that are lists)
 PY_OPS = SimpleNamespace(achieve=achieve, moving=moving, ready=ready, motor_off=motor_off, raise_fault=raise_fault,
                          gen_clear=gen_clear, clamp_target=clamp_target, step=step,
-                         status=status)
+                         status=status, ready_or_refuse=ready_or_refuse, start=start, target_speed=target_speed,
+                         target_current=target_current)
 _COMPILED: list[Any] = []
 
 
@@ -622,4 +705,8 @@ def warm() -> None:
     ops.gen_clear(s)
     ops.clamp_target(s, 0.0)
     ops.status(s, False)
+    ops.ready_or_refuse(s)
+    ops.start(s, 1.0, 0.0, 0.0)
+    ops.target_speed(s, 0.0)
+    ops.target_current(s, 0.0)
     ops.step(s, 0.001, 0.001, 0.0, 0.0)

@@ -187,11 +187,17 @@ class ModbusFront:
             plan = plans[(start, count)] = self._read_plan(start, count)
         if isinstance(plan, int):
             raise ModbusException(plan)
-        reader, packer, words, slots = plan
+        reader = plan[0]
         try:
             values = reader() if reader is not None else []
         except ParameterRefused as exc:
             raise ModbusException(EXCEPTION_FOR[exc.reason], str(exc)) from exc
+        return self.pack(plan, values, count)
+
+    @staticmethod
+    def pack(plan: _ReadPlan, values: list[int], count: int) -> tuple[int, ...]:
+        """The ``count`` words of a read by ``plan`` of ``values`` (its firmware read's result)."""
+        _reader, packer, words, slots = plan
         if packer is not None:
             try:
                 block: tuple[int, ...] = words.unpack_from(packer.pack(*values), 2)
@@ -212,6 +218,15 @@ class ModbusFront:
 
     def write(self, start: int, words: tuple[int, ...]) -> None:
         """Write ``words`` from ``start`` as one atomic firmware write (raises :class:`ModbusException`)."""
+        items = self.items(start, words)
+        try:
+            self.firmware.write_many(items)
+        except ParameterRefused as exc:
+            raise ModbusException(EXCEPTION_FOR[exc.reason], str(exc)) from exc
+
+    def items(self, start: int, words: tuple[int, ...]) -> list[tuple[str, int]]:
+        """The firmware write (name, value) ``words`` from ``start`` make (raises :class:`ModbusException` for
+        addresses no register may be written at); nothing is written."""
         count = len(words)
         plans = self._write_plans
         plan = plans.get((start, count))
@@ -239,10 +254,18 @@ class ModbusFront:
             hi, lo = (b, a) if low_first else (a, b)
             raw = hi << 16 | lo
             items.append((name, raw - 0x100000000 if signed and raw & 0x80000000 else raw))
-        try:
-            self.firmware.write_many(items)
-        except ParameterRefused as exc:
-            raise ModbusException(EXCEPTION_FOR[exc.reason], str(exc)) from exc
+        return items
+
+    def read_plan(self, start: int, count: int) -> _ReadPlan | int:
+        """The plan :meth:`read` serves ``count`` registers from ``start`` by (an exception code where it
+        refuses them), cached as :meth:`read` caches it."""
+        plans = self._read_plans
+        plan = plans.get((start, count))
+        if plan is None:
+            if len(plans) >= _PLAN_CACHE:
+                plans.clear()
+            plan = plans[(start, count)] = self._read_plan(start, count)
+        return plan
 
     def image(self) -> dict[int, int]:
         """The whole register image as {address: word} (every register, commands as last written)."""
@@ -310,6 +333,8 @@ class ModbusDeviceBus:
         self.frame_errors = 0
         #: bus timing: slave address -> its drive's reply turnaround [s] (the world fills it from the profiles)
         self.turnarounds: dict[int, float] = {}
+        #: the world whose physics runs between this bus's frames (set by the world): a twin's one-call exchange
+        self.world: Any = None
 
     def add(self, slave: ModbusSlave) -> None:
         address = slave.address
@@ -317,6 +342,13 @@ class ModbusDeviceBus:
             raise ValueError(f"two emulated slaves at address {address}")
         self._fronts.append(slave)
         self._refresh()
+
+    def fused(self, slave: int, line: Any) -> Any:
+        """The one-call exchange of the twin at ``slave`` over ``line`` (the host's end of this bus), where its
+        firmware offers one (``fused_exchange``, e.g. :mod:`joints.sim.erob_exchange`); None otherwise."""
+        front = self.slaves.get(slave)
+        make = getattr(getattr(front, "firmware", None), "fused_exchange", None)
+        return make(self.world, self, front, line) if self.world is not None and callable(make) else None
 
     def _refresh(self) -> None:
         by_address: dict[int, ModbusSlave] = {}
@@ -403,3 +435,10 @@ class ModbusDeviceBus:
             return None
         slave = self.slaves.get(msg.slave)
         return None if slave is None else slave.handle(msg)
+
+
+#: the methods a request goes through, as defined here (captured when this module is imported): a one-call
+#: exchange (:mod:`joints.sim.erob_exchange`) runs only while none of them is replaced (a test planting replies)
+STOCK = ((ModbusDeviceBus, "exchange", ModbusDeviceBus.exchange), (ModbusFront, "handle", ModbusFront.handle),
+         (ModbusFront, "read", ModbusFront.read), (ModbusFront, "write", ModbusFront.write),
+         (ModbusFront, "items", ModbusFront.items), (ModbusFront, "read_plan", ModbusFront.read_plan))

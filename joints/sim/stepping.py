@@ -74,6 +74,7 @@ def substep(table: Any, adr: Any, ratio: Sequence[float], order: Any, steps: Seq
         ctrl[w][a[ACT]] = step_row(table, adr, i, t, dt, float(qpos[w][a[QPOS]]) * r, float(qvel[w][a[DOF]]) * r)
 
 
+@jitable
 def _run(n: int, physics: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any, worlds: Any,
          dts: Any, active: Any) -> None:
     """``n`` substeps of the ``active`` worlds: the loops of the rows in ``order`` (theirs), then

@@ -334,6 +334,7 @@ class World:
         self._drives: dict[str, Any] = {}  #: joint name -> its drive's twin (shared by channels)
         self.bus_specs = dict(buses)
         self.buses: dict[str, Any] = {name: b.device_bus() for name, b in self.bus_specs.items()}
+        self._offer_world()
         self._bound: list[_Bound] = []
         fronts: set[tuple[str, int]] = set()
         for d in drives:
@@ -418,6 +419,13 @@ class World:
         if self.kinematic:
             self._extra_ticks.append(self._drive_kinematic)
             self._update_ticks()
+
+    def _offer_world(self) -> None:
+        """Device buses that take part in a one-call exchange (twin ops and the physics between frames in one
+        compiled call: ``ModbusDeviceBus.fused``) learn which world steps between their frames."""
+        for bus in self.buses.values():
+            if hasattr(bus, "world") and getattr(bus, "world", None) is None:
+                bus.world = self
 
     # -- joints driven by measurements (mixed rigs) -------------------------------------------
     def set_measured(self, name: str, q: float, qd: float, t: float) -> None:

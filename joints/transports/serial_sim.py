@@ -132,7 +132,9 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         self.turnaround = turnaround  #: s, the device's default (a peer that knows its drives' wins)
         self.adapter_latency = adapter_latency
         self.gap = gap
-        self.log: list[Transmission] = []
+        self._log: list[Transmission] = []
+        #: the log's first entry that may still be a booked frame's tuple (:meth:`book_frames`)
+        self._raw_from = 0
         #: per logged frame, the latest end of it and every frame logged before it since the epoch: a new
         #: frame's overlap check stops where nothing older can reach it
         self._latest_end: list[float] = []
@@ -157,6 +159,46 @@ class TimedSerialLine(ByteTransport, ClockDriven):
     @property
     def name(self) -> str:
         return f"TimedSerialLine({self.baudrate} bd)"
+
+    @property
+    def log(self) -> list[Transmission]:
+        """The transmissions, oldest first (see the module docstring)."""
+        if self._raw_from < len(self._log):
+            self._materialize()
+        return self._log
+
+    def book_frames(self, frames: list[tuple[float, float, float, int, str, Any]]) -> None:
+        """Frames a one-call exchange carried (``(start, end, due, size, side, payload)`` each, delivered, none
+        overlapping another frame - its caller checked that): logged as :meth:`_put` logs them (the latest-end
+        bookkeeping, the trimming), made :class:`Transmission` objects when the log is read."""
+        log: list[Any] = self._log
+        latest = self._latest_end
+        epoch = self._epoch
+        for item in frames:
+            end = item[1]
+            latest.append(max(end, latest[-1]) if len(log) > epoch else end)
+            log.append(item)
+            if len(log) > 2 * LOG_KEEP:
+                cut = len(log) - LOG_KEEP
+                if cut <= epoch or latest[cut - 1] <= item[0] - 1.0:
+                    del log[:cut], latest[:cut]
+                    self._epoch = epoch = max(0, epoch - cut)
+                    self._raw_from = max(0, self._raw_from - cut)
+
+    def latest_end(self) -> float:
+        """The latest end of any frame of the present timeline (-inf: none)."""
+        latest = self._latest_end
+        return latest[-1] if len(self._log) > self._epoch and latest else -math.inf
+
+    def _materialize(self) -> None:
+        """Booked frames (:meth:`book_frames`) become transmissions."""
+        log: list[Any] = self._log
+        for k in range(self._raw_from, len(log)):
+            item = log[k]
+            if type(item) is tuple:
+                start, end, due, size, side, payload = item
+                log[k] = Transmission(start, end, side, b"", delivered=True, due=due, size=size, payload=payload)
+        self._raw_from = len(log)
 
     def wire_time(self, n: int) -> float:
         """Seconds ``n`` characters occupy the line."""
@@ -236,6 +278,7 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             if cut <= self._epoch or latest[cut - 1] <= start - 1.0:
                 del log[:cut], latest[:cut]
                 self._epoch = max(0, self._epoch - cut)
+                self._raw_from = max(0, self._raw_from - cut)
         return tx
 
     def _run(self, until: float) -> None:
@@ -432,3 +475,10 @@ class TimedSerialLine(ByteTransport, ClockDriven):
     def trace(self) -> str:
         """The wire trace: every transmission, one per line."""
         return "\n".join(str(tx) for tx in self.log)
+
+
+#: the methods a transaction goes through, as defined here (captured when this module is imported): a one-call
+#: exchange (:mod:`joints.sim.erob_exchange`) runs only while none of them is replaced
+STOCK = ((TimedSerialLine, "_transact_idle", TimedSerialLine._transact_idle),
+         (TimedSerialLine, "_plain_peer", TimedSerialLine._plain_peer), (TimedSerialLine, "_put", TimedSerialLine._put),
+         (TimedSerialLine, "transact", TimedSerialLine.transact))

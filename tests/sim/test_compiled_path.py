@@ -21,12 +21,14 @@ import joints
 from joints.compiled_path import supported
 from joints.errors import LimitError
 from joints.link.trace import TraceRecord
+from joints.sim import kernel
 
 #: env id -> steps per run (the arm steps at 10 Hz: fewer steps cover as much motion)
 SUPPORTED = {"joints/ErobReach-v0": 40, "joints/ErobArmReach-v0": 12, "joints/DiffDriveGoal-v0": 60}
 MODES = ("position", "velocity", "torque")
 #: env id -> its action modes (None: the env has one, wheel speeds, and no action_mode argument)
 ENV_MODES: dict[str, tuple[str | None, ...]] = {"joints/DiffDriveGoal-v0": (None,)}
+EROB = ("joints/ErobReach-v0", "joints/ErobArmReach-v0")
 CASES = [(env_id, mode) for env_id in sorted(SUPPORTED) for mode in ENV_MODES.get(env_id, MODES)]
 
 
@@ -87,6 +89,7 @@ def _run(env_id: str, mode: str | None, steps: int, compiled: bool, trace: bool 
         out["trace"] = [(r.time, r.direction, r.data, r.meaning) for r in records]
         out["taken"] = u.compiled_path.taken if u.compiled_path is not None else None
         out["lane"] = u.compiled_path.lane_taken if u.compiled_path is not None else None
+        out["fused"] = u.compiled_path.fused if u.compiled_path is not None else None
         return out
     finally:
         env.close()
@@ -103,6 +106,8 @@ def test_compiled_path_gives_the_driver_paths_bits(env_id: str, mode: str | None
     assert sum(t[0] for t in compiled["transactions"]) > 2 * steps
     assert sum(len(f) for f in compiled["frames"]) > 4 * steps  # requests and replies on the timed line
     assert compiled["lane"] >= 2 * steps  # the direct lane carried the steps' requests (joints.link.lane)
+    if env_id in EROB and kernel.default_mode():  # the eRobs' one-call exchange (joints.sim.erob_exchange) carried them
+        assert compiled["fused"] >= 2 * steps
     for key in ("reset", "steps", "transactions", "frames", "images", "time"):
         assert compiled[key] == driver[key], key
 
@@ -315,4 +320,100 @@ def test_a_silent_twin_gives_the_links_errors_on_the_lane(monkeypatch: pytest.Mo
             env.close()
         runs.append(out)
     assert "attempts" in runs[0][0][1] and "outcome is unknown" in runs[0][1][1]
+    assert runs[0] == runs[1]
+
+
+def _mixed_run(env_id: str, mode: str, compiled: bool, monkeypatch: pytest.MonkeyPatch) -> tuple[list[Any], list[int]]:
+    """36 steps in which some are not the steady case: wrong replies planted for one step (every reply of it), a
+    drive tripped by a fault, a command delay for two steps (the world then ticks after substeps), a joint's
+    stepping replaced for the last steps (off the fused stepping). Returns (what happened, requests the one-call
+    exchange carried in each step)."""
+    from joints.sim.modbus_front import ModbusDeviceBus
+
+    exchange = ModbusDeviceBus.exchange
+    env = gym.make(env_id, compiled_path=compiled, action_mode=mode)
+    u: Any = env.unwrapped
+    name = u.joint_names[0]
+    world = u.rig.sim
+    outcome: list[Any] = []
+    fused: list[int] = []
+    plant = _Faulty(1)
+    try:
+        u.reset(seed=3)
+        rng = np.random.default_rng(9)
+        for step in range(36):
+            phase = step % 12
+            if phase == 3:
+                monkeypatch.setattr(ModbusDeviceBus, "exchange", plant.wrap(exchange))
+            elif phase == 5:
+                world.drives[name].trip(0x8611)  # a following error: the next read reports it, the episode ends
+            elif phase == 7:
+                world.perturb(name, command_delay=0.002)
+            elif step == 34:  # from here on the joint steps in Python (the same loops, wrapped): not fused
+                world.intercept(name, lambda step: lambda t, dt, q, qd: step(t, dt, q, qd))
+            before = u.compiled_path.fused if compiled else 0
+            try:
+                obs, reward, terminated, _truncated, info = u.step(
+                    rng.uniform(-1.0, 1.0, env.action_space.shape).astype(np.float32))
+                outcome.append((obs.tobytes(), reward, terminated, _info(info)))
+            except joints.JointsError as exc:
+                outcome.append((type(exc).__name__, str(exc)))
+                terminated = True
+            fused.append((u.compiled_path.fused if compiled else 0) - before)
+            monkeypatch.setattr(ModbusDeviceBus, "exchange", exchange)
+            if phase == 8:
+                world.restore()
+            if terminated:
+                u.reset(seed=step)
+                outcome.append("reset")
+        links = _links(u)
+        outcome.append([(lk.transactions, lk.framing.exchanges, lk.retries_used, lk.late_discarded) for lk in links])
+        outcome.append([_frames(lk) for lk in links])
+        outcome.append((_images(u), u.rig.time, world.steps))
+    finally:
+        monkeypatch.setattr(ModbusDeviceBus, "exchange", exchange)
+        env.close()
+    return outcome, fused
+
+
+@pytest.mark.parametrize(("env_id", "mode"), [("joints/ErobReach-v0", "position"), ("joints/ErobReach-v0", "torque"),
+                                              ("joints/ErobArmReach-v0", "velocity")])
+def test_the_one_call_exchange_leaves_what_is_not_steady_to_the_driver_path(env_id: str, mode: str,
+                                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """Planted wrong replies, a fault, a command delay, a joint stepped in Python: those steps go the usual way
+    (decided before anything is sent), the others by the one-call exchange, and every bit is the driver path's."""
+    compiled, fused = _mixed_run(env_id, mode, True, monkeypatch)
+    driver, _ = _mixed_run(env_id, mode, False, monkeypatch)
+    assert compiled == driver
+    assert any(isinstance(o, tuple) and o[0] in ("UnexpectedReply", "ReplyTimeout", "DeviceRejected",
+                                                  "OutcomeUnknownReplyTimeout", "ChecksumError", "FrameError")
+               or (isinstance(o, tuple) and len(o) == 4 and "fault" in dict(o[3])) for o in driver)
+    if kernel.default_mode():
+        assert all(fused[k] == 0 for k in range(len(fused)) if k % 12 in (3, 7, 8) or k >= 34)  # the usual way
+        assert sum(1 for k in range(len(fused)) if fused[k] > 0) >= 20
+
+
+def test_a_refusal_in_a_batch_is_raised_after_the_joints_before_it_were_sent() -> None:
+    """The arm's three eRobs go in one call; a refused second joint: the first is sent (as joint by joint), the
+    second raises its own LimitError, the third is not sent - frames, counts and images as the driver path's."""
+    runs = []
+    for compiled in (True, False):
+        with gym.make("joints/ErobArmReach-v0", compiled_path=compiled) as env:
+            u: Any = env.unwrapped
+            env.reset(seed=0)
+            js = u.joints
+            targets = [float(j.last_state.position) for j in js]
+            targets[1] = 10.0
+            fused = u.compiled_path.fused if compiled else 0
+            with pytest.raises(LimitError, match="outside the limits"):
+                if compiled:
+                    u.compiled_path.command("position", targets)
+                else:
+                    for j, q in zip(js, targets):
+                        j.move_to(q)
+            if compiled and kernel.default_mode():
+                assert u.compiled_path.fused - fused == 2  # the first joint's target and start, in one call
+            link = _links(u)[0]
+            runs.append((_frames(link), link.transactions, _images(u), u.rig.time,
+                         [j.last_contact for j in js]))
     assert runs[0] == runs[1]

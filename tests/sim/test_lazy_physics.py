@@ -57,30 +57,42 @@ def test_every_access_to_the_physics_or_a_twin_runs_the_booked_time_first(what: 
         assert world.steps * world.timestep - world.timestep < rig.time
 
 
-def test_an_env_step_runs_one_compiled_call_per_drive_action(monkeypatch: pytest.MonkeyPatch) -> None:
-    """ErobReach-v0: three transactions (the drive acts on each request) and the period hold: four calls
-    (seven when every frame instant stepped the physics)."""
+def test_an_env_step_runs_three_compiled_calls(monkeypatch: pytest.MonkeyPatch) -> None:
+    """ErobReach-v0: three transactions (the drive acts on each request) and the period hold in three compiled
+    calls - the command's target write and start in one (the one-call exchange, joints.sim.erob_exchange), the
+    hold, the status read - where every frame instant once stepped the physics in a call of its own (seven)."""
     import gymnasium as gym
     import numpy as np
 
     import envs  # noqa: F401 - registers the ids
+    from joints.sim import erob_exchange, kernel
 
+    if not kernel.default_mode():
+        pytest.skip("the compiled stepping is off (JOINTS_COMPILED=0 or no numba)")
     calls = [0]
+    exchanges = [0]
     run = stepping.Group.run
+    compiled = erob_exchange._compiled()
 
     def counted(self: Any, *a: Any, **k: Any) -> Any:
         calls[0] += 1
         return run(self, *a, **k)
 
+    def exchange(*a: Any) -> None:
+        exchanges[0] += 1
+        compiled(*a)
+
     monkeypatch.setattr(stepping.Group, "run", counted)
+    monkeypatch.setattr(erob_exchange, "_compiled", lambda: exchange)
     env = gym.make("joints/ErobReach-v0")
     try:
         env.reset(seed=1)
         rng = np.random.default_rng(0)
         space = env.action_space
-        calls[0] = 0
+        calls[0] = exchanges[0] = 0
         for _ in range(20):
             env.step(rng.uniform(space.low, space.high).astype(space.dtype))
-        assert calls[0] == 4 * 20
+        assert calls[0] == 20  # the hold
+        assert exchanges[0] == 2 * 20  # the command, the read
     finally:
         env.close()
