@@ -316,9 +316,9 @@ SCENARIOS: dict[str, Callable[[Recorder], None]] = {
     "env_reach_erob_can": _env_on_can("joints/ErobReach-v0", 200, action_mode="velocity"),
     "env_arm_canopen": _env_on_can("joints/ErobArmReach-v0", 120),
 }
-#: scenarios whose worlds step substep by substep even compiled: the CANopen twins are ticked every substep
-#: (they announce no next event: an EMCY goes out at the substep its fault trips)
-NOT_FUSABLE = frozenset({"env_arm_canopen"})
+#: scenarios whose worlds step substep by substep even compiled (none: the CANopen twins announce their next
+#: event and a watched fault ends a fused run at the substep it trips, tests/sim/test_canopen_fused.py)
+NOT_FUSABLE: frozenset[str] = frozenset()
 
 
 # -- running, recording, comparing ----------------------------------------------------------------
