@@ -179,12 +179,7 @@ class ModbusFront:
     # -- register access ------------------------------------------------------------------------
     def read(self, start: int, count: int) -> tuple[int, ...]:
         """The words of registers ``start`` .. ``start + count - 1`` (raises :class:`ModbusException`)."""
-        plans = self._read_plans
-        plan = plans.get((start, count))
-        if plan is None:
-            if len(plans) >= _PLAN_CACHE:
-                plans.clear()
-            plan = plans[(start, count)] = self._read_plan(start, count)
+        plan = self.read_plan(start, count)
         if isinstance(plan, int):
             raise ModbusException(plan)
         reader = plan[0]
