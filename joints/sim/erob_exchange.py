@@ -32,7 +32,6 @@ from joints.errors import ParameterRefused
 from joints.sim import erob, kernel, modbus_front, stepping
 from joints.sim import erob_kernel as K
 from joints.sim.erob import ErobFirmware, _StatusRead
-from joints.sim.firmware import WRITE_LOG_LIMIT
 from joints.sim.kernel import jitable
 from joints.sim.modbus_front import ModbusDeviceBus, ModbusException, ModbusFront
 from joints.transports import serial_sim
@@ -386,7 +385,7 @@ class ErobExchange:
                     values = plan[0].finish(list(map(int, o[STATUS_AT:SENSED_AT])), dict(zip(SENSED, o[SENSED_AT:])))
                     reply = mb.ReadRegistersReply(r.slave, r.function, ModbusFront.pack(plan, values, r.count))
                 else:
-                    ex._store(extra)
+                    ex.firmware._keep(extra)  # the parameter store's part (the row's ran in the call)
                 frames.append((o[H_START], o[H_END], o[H_DUE], int(t[REQUEST]), "host", None))
                 frames.append((o[D_START], o[D_END], o[D_SEEN], int(t[REPLY]), "device", reply))
                 replies.append(reply)
@@ -410,17 +409,6 @@ class ErobExchange:
 
             tx = self._txs[n] = np.zeros((n, TX_WIDTH))
         return tx
-
-    def _store(self, items: list[tuple[str, int]]) -> None:
-        """The parameter store's part of :meth:`Firmware._store` (the row's part ran in the compiled call)."""
-        fw = self.firmware
-        values = fw.values
-        for name, value in items:
-            values[name] = value
-        log = fw.write_log
-        log.extend(items)
-        if len(log) > WRITE_LOG_LIMIT:
-            del log[: WRITE_LOG_LIMIT // 2]
 
 
 def prepare(world: Any, bus: Any, front: Any, line: Any) -> ErobExchange | None:

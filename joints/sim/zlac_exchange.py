@@ -32,7 +32,6 @@ from typing import Any
 from joints.codecs import modbus as mb
 from joints.sim import kernel, stepping
 from joints.sim import zlac_kernel as Z
-from joints.sim.firmware import WRITE_LOG_LIMIT
 from joints.sim.modbus_front import ModbusDeviceBus, ModbusFront
 from joints.sim.zlac import ZlacFirmware, _ramp_seconds
 from joints.transports.serial_sim import LOG_KEEP, TimedSerialLine, Transmission
@@ -343,7 +342,7 @@ class ZlacExchange:
             free["host"] = free_host
             free["device"] = free_device
             for t, o, (reply, items) in zip(rows, out.tolist(), made):
-                _store(fw, items)
+                fw._keep(items)  # the parameter store's part of the light write (its row effects ran)
                 _log(line, Transmission(o[H_START], o[H_END], "host", b"", delivered=True, due=o[H_DUE],
                                         size=int(t[REQUEST])))
                 _log(line, Transmission(o[D_START], o[D_END], "device", b"", delivered=True, due=o[D_SEEN],
@@ -498,17 +497,6 @@ def lane_finish(lane: Any, request: Any, raw: Any, deadline: float, idempotent: 
     except (ReplyTimeout, PeerProtocolError) as exc:
         link._discard_late()
         return link._attempts(request, None, idempotent, failed=exc)
-
-
-def _store(fw: ZlacFirmware, items: list[tuple[str, int]]) -> None:
-    """The parameter store's part of the light write (its row effects ran in the compiled call)."""
-    values = fw.values
-    for name, value in items:
-        values[name] = value
-    log = fw.write_log
-    log.extend(items)
-    if len(log) > WRITE_LOG_LIMIT:
-        del log[: WRITE_LOG_LIMIT // 2]
 
 
 def _log(line: TimedSerialLine, tx: Transmission) -> None:
