@@ -74,7 +74,8 @@ jitable(motion.move_step)
 #: the sources compiled into the kernels: numba's on-disk cache checks only the file of the
 #: function it caches, so the cache lives in a directory named by a hash of all of them
 _SOURCES = ("joints/sim/kernel.py", "joints/sim/erob_kernel.py", "joints/sim/zlac_kernel.py",
-            "joints/sim/stepping.py", "joints/sim/erob_exchange.py", "joints/devices/motion.py")
+            "joints/sim/stepping.py", "joints/sim/line_exchange.py", "joints/sim/erob_exchange.py",
+            "joints/sim/zlac_exchange.py", "joints/devices/motion.py")
 
 
 def cache_dir() -> str:
