@@ -20,6 +20,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from joints.sim import kernel, stepping
+from joints.sim.erob_kernel import fmax  # ``max`` as Python's builtin, in compiled code too
 from joints.sim.kernel import jitable
 from joints.sim.stepping import EROB, STEPS, ZLAC
 
@@ -39,12 +40,6 @@ TX_WIDTH = ARGS + 5
 #: transaction; then the family's own from :data:`OUTS`
 H_START, H_END, H_DUE, D_START, D_END, D_SEEN, CLOCK_AFTER = range(7)
 OUTS = 7
-
-
-@jitable
-def fmax(a: float, b: float) -> float:
-    """``max(a, b)`` exactly as Python's builtin."""
-    return b if b > a else a  # noqa: FURB136 - spelled out: the same in compiled code
 
 
 @jitable
