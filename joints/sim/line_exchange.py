@@ -24,7 +24,7 @@ from joints.sim.erob_kernel import fmax  # ``max`` as Python's builtin, in compi
 from joints.sim.kernel import jitable
 from joints.sim.stepping import EROB, STEPS, ZLAC
 
-__all__ = ["Carrier", "advance", "book", "clear", "compiled", "exchanges", "fused", "stock", "world_fused"]
+__all__ = ["Carrier", "advance", "book", "clear", "compiled", "exchanges", "fill", "fused", "stock", "world_fused"]
 
 #: columns of the state vector: the clock's time, the world's target time, whether time is booked, the line's
 #: time, the time the line last saw on the clock, when the host's / device's UART is free, the line's character
@@ -128,7 +128,10 @@ def compiled() -> tuple[Any, Any]:
 def stock(methods: Sequence[tuple[Any, str, Any]]) -> bool:
     """Whether none of ``methods`` ((class, name, the function as defined)) is replaced (a test planting replies
     turns the one-call exchange off)."""
-    return all(getattr(cls, name) is fn for cls, name, fn in methods)
+    for cls, name, fn in methods:
+        if getattr(cls, name) is not fn:
+            return False
+    return True
 
 
 def world_fused(world: Any) -> bool:
@@ -147,31 +150,34 @@ def clear(line: Any) -> float | None:
     return now
 
 
-def fused(fn: Any, world: Any, st: Any, *head: Any) -> None:
-    """``fn(*head, st, ...)`` (a compiled entry of this module) on ``world``'s fused table, the state vector's
-    clock and world columns filled first and brought back to the world and the clock after (``Group.run``'s
-    arena check too)."""
+def fill(st: Any, world: Any, line: Any, now: float) -> None:
+    """The state vector of ``world``, its clock and ``line`` (its time ``now``)."""
+    free = line._free
+    st[:] = (world.clock.now(), world._target, 1.0 if world._booked else 0.0, now, line._clock_seen, free["host"],
+             free["device"], line.char_time, line.gap, line.adapter_latency, world.timestep)
+
+
+def fused(fn: Any, world: Any, st: Any, *head: Any) -> list[float]:
+    """``fn(*head, st, ...)`` (a compiled entry of this module, ``st`` filled: :func:`fill`) on ``world``'s fused
+    table; the world and the clock brought back after (``Group.run``'s arena check too): the state vector."""
     group = world.group
     w = world.group_index
     worlds = group.worlds_table
     worlds[w, STEPS] = world.steps
-    clock = world.clock
-    st[CLOCK] = clock.now()
-    st[TARGET] = world._target
-    st[BOOKED] = 1.0 if world._booked else 0.0
-    st[DT] = world.timestep
     order, active = group._plan(world._me)
     try:
         fn(*head, st, w, group.mj_step or 0, group.table, group.adr, group.ratio, order, worlds, group.dts_array,
            active)
     finally:
         world.steps = int(worlds[w, STEPS])
-        world._target = float(st[TARGET])
-        world._booked = st[BOOKED] != 0.0
-        clock.set(float(st[CLOCK]))
+        state: list[float] = st.tolist()
+        world._target = state[TARGET]
+        world._booked = state[BOOKED] != 0.0
+        world.clock.set(state[CLOCK])
     if world._data.maxuse_arena > group._arena_limits[w]:  # as Group.run after its calls
         world.leave_fused_path()
         group.replan()
+    return state
 
 
 class Carrier:
@@ -208,19 +214,13 @@ class Carrier:
         tx, out = buffers
         tx[:] = rows
         st = self._st
+        fill(st, world, line, now)
+        state = fused(fn, world, st, tx, out)
+        line.now = state[NOW]
+        line._clock_seen = state[SEEN]
         free = line._free
-        st[NOW] = now
-        st[SEEN] = line._clock_seen
-        st[FREE_HOST] = free["host"]
-        st[FREE_DEVICE] = free["device"]
-        st[CHAR] = line.char_time
-        st[GAP] = line.gap
-        st[LATENCY] = line.adapter_latency
-        fused(fn, world, st, tx, out)
-        line.now = float(st[NOW])
-        line._clock_seen = float(st[SEEN])
-        free["host"] = float(st[FREE_HOST])
-        free["device"] = float(st[FREE_DEVICE])
+        free["host"] = state[FREE_HOST]
+        free["device"] = state[FREE_DEVICE]
         return out.tolist()  # type: ignore[no-any-return]
 
 

@@ -225,10 +225,10 @@ class ZlacExchange(L.Carrier):
             behind = due - clock.now()
             if behind > 0 or world._booked:  # the physics runs to the instant the drive acts (sleep, settle)
                 st = self._st
-                st[L.SEEN] = line._clock_seen
-                L.fused(fn, world, st, behind)
+                L.fill(st, world, line, now)
+                state = L.fused(fn, world, st, behind)
                 if behind > 0:
-                    line._clock_seen = float(st[L.SEEN])
+                    line._clock_seen = state[L.SEEN]
             raw = framing.peer.exchange(request)  # the drive acts (the lane's act)
             line.now = max(line.now, due)
             if raw is not None:  # the reply (TimedSerialLine._put of the device's frame), booked while it travels
