@@ -29,6 +29,7 @@ from joints.sim import erob_kernel as K
 from joints.sim import line_exchange as L
 from joints.sim.erob import ErobFirmware, _StatusRead
 from joints.sim.kernel import jitable
+from joints.sim.line_exchange import CLOCK_AFTER, ROW, TURN
 from joints.sim.modbus_front import ModbusDeviceBus, ModbusException, ModbusFront
 from joints.sim.stepping import EROB
 from joints.transports import serial_sim
@@ -237,8 +238,8 @@ class ErobExchange(L.Carrier):
                 return None
             turn = ex.bus.message_turnaround(r)
             row = got[0]
-            row[L.TURN] = line.turnaround if turn is None else turn
-            row[L.ROW] = float(ex._first_row(group, ex.firmware))
+            row[TURN] = line.turnaround if turn is None else turn
+            row[ROW] = float(ex._first_row(group, ex.firmware))
             rows.append(row)
             made.append((got[1], got[2]))
         with world.lock:
@@ -247,7 +248,7 @@ class ErobExchange(L.Carrier):
                 return None
             outs = self.carry(fn, world, line, now, rows)
             replies: list[Any] = []
-            self.clocks = [o[L.CLOCK_AFTER] for o in outs]
+            self.clocks = clocks = []
             for ex, r, t, o, (reply, extra) in zip(mine, requests, rows, outs, made):
                 if t[OP] == READ:
                     plan = extra
@@ -256,6 +257,7 @@ class ErobExchange(L.Carrier):
                 else:
                     ex.firmware._keep(extra)  # the parameter store's part (the row's ran in the call)
                 replies.append(reply)
+                clocks.append(o[CLOCK_AFTER])
             L.book(line, rows, outs, replies)
         self.taken += 1
         return replies
