@@ -1,16 +1,12 @@
-"""One compiled call for an eRob's steady Modbus requests over a timed RS485 line: frames, physics, register ops.
+"""An eRob's steady Modbus requests in one compiled call: what they request and what the drive does with them.
 
 Rule: it gives what the sim's direct path gives request by request (the host's link over
 :meth:`~joints.transports.serial_sim.TimedSerialLine._transact_idle`, the bus, the
-:class:`~joints.sim.modbus_front.ModbusFront`, the firmware) - the same frame instants, every float by the
-same operations, the same world advances (the physics up to each instant the drive acts on a frame, the
-reply's travel booked), the same register semantics (the firmware's own writes call the same kernel ops of
-:mod:`joints.sim.erob_kernel`), the same replies - in one call: the frame instants are computed up front
-from the fixed request and reply sizes, the physics runs to each frame's arrival inside the compiled call
-(MuJoCo's ``mj_step`` by address, :mod:`joints.sim.stepping`), the ops act on the drive's row there.
-Afterwards Python brings the line, the world, the clock and the firmware's parameter store to where the
-request-by-request path leaves them. The requests of several drives on one line (a rig's eRobs) go in one call
-too, each acting on its own row.
+:class:`~joints.sim.modbus_front.ModbusFront`, the firmware): the line and world arithmetic is
+:mod:`joints.sim.line_exchange`'s, the drive's act (:func:`act`) the kernel ops of :mod:`joints.sim.erob_kernel`
+the firmware's own writes call (target+start, target speed, target current, the status read); afterwards
+Python brings the firmware's parameter store to where that path leaves it and makes a read's reply. The
+requests of several drives on one line (a rig's eRobs) go in one call too, each acting on its own row.
 
 It runs only in the steady case, checked before anything is sent: the world runs fused (compiled, every
 drive a kernel row, nothing ticking after substeps), the line is idle and its peer acts only on host
@@ -22,63 +18,44 @@ compares both.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from joints.codecs import modbus as mb
 from joints.errors import ParameterRefused
-from joints.sim import erob, kernel, modbus_front, stepping
+from joints.sim import erob, modbus_front
 from joints.sim import erob_kernel as K
+from joints.sim import line_exchange as L
 from joints.sim.erob import ErobFirmware, _StatusRead
-from joints.sim.firmware import WRITE_LOG_LIMIT
 from joints.sim.kernel import jitable
+from joints.sim.line_exchange import CLOCK_AFTER, ROW, TURN
 from joints.sim.modbus_front import ModbusDeviceBus, ModbusException, ModbusFront
+from joints.sim.stepping import EROB
 from joints.transports import serial_sim
 from joints.transports.serial_sim import TimedSerialLine
 
-__all__ = ["ErobExchange", "prepare"]
+__all__ = ["ErobExchange", "act", "prepare"]
 
 #: ops (column OP of a transaction row): what the drive does with the frame
 READ, TARGET_POSITION, START, TARGET_SPEED, TARGET_CURRENT = range(5)
 #: the parameter each write op stores
 OP_OF = {"target_absolute_position": TARGET_POSITION, "start_operating": START, "target_speed": TARGET_SPEED,
          "target_current": TARGET_CURRENT}
-#: columns of a transaction row: op, value, request characters, turnaround [s], reply characters, motion
-#: mode, target relative position, repetitive (a read's status argument), the drive's row in the table
-OP, VALUE, REQUEST, TURN, REPLY, MOTION, RELATIVE, REPETITIVE, ROW = range(9)
-TX_WIDTH = 9
-#: columns of the state vector (in and out): the clock's time, the world's target time, whether time is
-#: booked, the line's time, the time the line last saw on the clock, when the host's / device's UART is
-#: free, the line's character time, gap, adapter latency, the world's timestep
-CLOCK, TARGET, BOOKED, NOW, SEEN, FREE_HOST, FREE_DEVICE, CHAR, GAP, LATENCY, DT = range(11)
-STATE_WIDTH = 11
-#: columns of an output row: host frame start, end, due; device frame start, end, seen; the clock after the
-#: transaction; then a read's status
-H_START, H_END, H_DUE, D_START, D_END, D_SEEN, CLOCK_AFTER = range(7)
-STATUS_AT = 7
-#: then the row's columns a read's sensors see (what they stood at when the drive read them)
+#: the family's columns of a transaction row (after :mod:`joints.sim.line_exchange`'s): op, value, motion mode,
+#: target relative position, repetitive (a read's status argument)
+OP, VALUE, MOTION, RELATIVE, REPETITIVE = range(L.ARGS, L.ARGS + 5)
+#: the family's columns of an output row: a read's status, then the row's columns its sensors saw
+STATUS_AT = L.OUTS
 SENSED = (K.TIME, K.POS, K.VEL, K.I_OUT)
 SENSED_AT = STATUS_AT + len(K.STATUS_NAMES)
 OUT_WIDTH = SENSED_AT + len(SENSED)
 
 
 @jitable
-def _advance(seconds: float, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any,
-             worlds: Any, dts: Any, active: Any) -> None:
-    """:meth:`joints.sim.world.World._step_due` of ``World._due(seconds)`` on a fused world without ticks."""
-    st[TARGET] += seconds
-    dt = st[DT]
-    n = math.ceil((st[TARGET] - worlds[w, stepping.STEPS] * dt) / dt - 1e-9)
-    if n > 0:
-        stepping._run(n, 1, mj_step, table, adr, ratio, order, worlds, dts, active)
-        worlds[w, stepping.STEPS] += n
-
-
-@jitable
-def _act(s: Any, t: Any, out: Any) -> None:
-    """The drive acts on a frame: its watchdog is fed, then the op (the firmware's own writes call the same)."""
+def act(s: Any, t: Any, out: Any) -> None:
+    """The drive (row ``s``) acts on a frame: its watchdog is fed, then the op (the firmware's own writes call
+    the same)."""
     K.frame(s)
     op = t[OP]
     if op == READ:
@@ -99,79 +76,14 @@ def _act(s: Any, t: Any, out: Any) -> None:
         K.target_current(s, t[VALUE])
 
 
-def exchanges(tx: Any, st: Any, out: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any,
-              order: Any, worlds: Any, dts: Any, active: Any) -> None:
-    """The transactions ``tx`` (rows of :data:`TX_WIDTH`, each naming its drive's row of ``table``) in world ``w``,
-    one after the other, as :meth:`~joints.transports.serial_sim.TimedSerialLine._transact_idle` carries each:
-    ``st`` (the state vector) in and out, each transaction's frame instants (and a read's status) into ``out``."""
-    for k in range(tx.shape[0]):
-        t = tx[k]
-        o = out[k]
-        s = table[int(t[ROW])]
-        if k:  # TimedSerialLine._sync: the clock moved without the line (a booked reply)
-            c = st[CLOCK]
-            if c > st[SEEN]:
-                st[SEEN] = c
-                st[NOW] = K.fmax(st[NOW], c)
-        now = st[NOW]
-        # the request (TimedSerialLine._put of the host's frame)
-        start = K.fmax(now, st[FREE_HOST])  # every max as Python's builtin (K.fmax)
-        end = start + t[REQUEST] * st[CHAR]
-        due = end + st[GAP] + t[TURN]
-        st[FREE_HOST] = end + st[GAP]
-        o[H_START] = start
-        o[H_END] = end
-        o[H_DUE] = due
-        behind = due - st[CLOCK]
-        if behind > 0:  # the physics runs to the instant the drive acts (World.advance)
-            st[BOOKED] = 0.0
-            _advance(behind, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
-            st[CLOCK] = st[TARGET]
-            st[SEEN] = st[CLOCK]
-        if st[BOOKED] != 0.0:  # World.sync: booked time runs before the drive acts
-            st[BOOKED] = 0.0
-            _advance(0.0, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
-        _act(s, t, o)
-        st[NOW] = K.fmax(st[NOW], due)
-        # the reply (TimedSerialLine._put of the device's frame), booked while it travels (World.book)
-        start = K.fmax(due, st[FREE_DEVICE])
-        end = start + t[REPLY] * st[CHAR]
-        seen = end + st[LATENCY]
-        st[FREE_DEVICE] = end + st[GAP]
-        o[D_START] = start
-        o[D_END] = end
-        o[D_SEEN] = seen
-        behind = seen - st[CLOCK]
-        if behind > 0:
-            st[TARGET] += behind
-            st[BOOKED] = 1.0
-            st[CLOCK] = st[TARGET]
-            st[SEEN] = st[CLOCK]
-        st[FREE_HOST] = K.fmax(st[FREE_HOST], seen + st[GAP])
-        st[NOW] = K.fmax(st[NOW], seen)
-        o[CLOCK_AFTER] = st[CLOCK]
-
-
-_COMPILED: list[Any] = []
-
-
 def _compiled() -> Any:
-    """:func:`exchanges` compiled (numba), or None without it."""
-    if not _COMPILED:
-        _COMPILED.append(kernel.compiled(exchanges) if kernel.AVAILABLE else None)
-    return _COMPILED[0]
+    """The one-call exchange (:func:`joints.sim.line_exchange.exchanges`) compiled (numba), or None without it."""
+    return L.compiled()[0]
 
 
 #: the stock methods the requests would go through, captured when their modules were imported (a replaced one -
 #: a test planting replies - means no one-call exchange)
 _STOCK = (*modbus_front.STOCK, *serial_sim.STOCK, *erob.STOCK)
-
-
-def _stock() -> bool:
-    for cls, name, fn in _STOCK:
-        if getattr(cls, name) is not fn:
-            return False
-    return True
 
 
 @dataclass(frozen=True, slots=True)
@@ -186,47 +98,32 @@ class _Shape:
     extra: Any  #: a read's plan (:meth:`ModbusFront.read_plan`); a write's limits (writable, lowest, highest)
 
 
-class ErobExchange:
+class ErobExchange(L.Carrier):
     """The steady requests of one eRob twin (``front`` on ``bus``) over ``line``, in ``world`` (see the module
     docstring)."""
 
     def __init__(self, world: Any, bus: ModbusDeviceBus, front: ModbusFront, line: TimedSerialLine) -> None:
+        super().__init__(OUT_WIDTH)
         self.world = world
         self.bus = bus
         self.front = front
         self.firmware: ErobFirmware = front.firmware  # type: ignore[assignment]
         self.line = line
         self.slave = front.address
-        self.taken = 0  #: calls that ran (each of one or more transactions)
-        self._group: Any = None
-        self._row_at = 0
         self._shapes: dict[tuple[Any, ...], _Shape | None] = {}
-        import numpy as np
-
-        self._st = np.zeros(STATE_WIDTH)
-        self._outs: dict[int, Any] = {}
-        self._txs: dict[int, Any] = {}
         #: the clock after each transaction of the last :meth:`run` (the host's per-joint instants)
         self.clocks: list[float] = []
 
     def _steady(self) -> bool:
         """Whether the world, line, bus, front and firmware are as the compiled call assumes (checked first)."""
-        world, line, fw = self.world, self.line, self.firmware
-        group = world.group
-        if not (group.compiled and group.fusable[world.group_index]) or world._ticks or world._bind != world._bind_seen:
+        line, fw = self.line, self.firmware
+        if not L.world_fused(self.world):
             return False
         if line._pending or line._cap is not None or line._closed or line.peer is not self.bus or not line._plain_peer():
             return False
         if fw.pending or fw.command_delay > 0 or type(fw) is not ErobFirmware or type(self.front) is not ModbusFront:
             return False
-        return self.bus.slaves.get(self.slave) is self.front and _stock()
-
-    def _row_index(self, group: Any) -> int:
-        """The firmware's row in ``group``'s table (kept per group: a batch may join the world to another)."""
-        if self._group is not group:
-            self._row_at = next(first for twin, first in group._owners if twin is self.firmware)
-            self._group = group
-        return self._row_at
+        return self.bus.slaves.get(self.slave) is self.front and L.stock(_STOCK)
 
     def _shape(self, request: Any, size: Callable[[Any], int]) -> _Shape | None:
         """What stays the same for requests like ``request`` (kept per shape); None: not one of the steady ones."""
@@ -279,7 +176,8 @@ class ErobExchange:
             if isinstance(plan, int) or not isinstance(plan[0], _StatusRead) or (
                     check is not None and not check(request, shape.made)):
                 return None  # (the words a read packs are plain: a blank reply of its size stands for them)
-            return [READ, 0.0, shape.request, 0.0, shape.reply, 0.0, 0.0, float(plan[0].repetitive()), 0.0], None, plan
+            return [EROB, 0.0, shape.request, 0.0, shape.reply, READ, 0.0, 0.0, 0.0, float(plan[0].repetitive())], \
+                None, plan
         if type(request) is mb.WriteMultipleRegisters:
             reply: Any = shape.made
             items = self.front.items(request.address, request.values)
@@ -304,9 +202,9 @@ class ErobExchange:
             target = written.get("target_absolute_position", values["target_absolute_position"])
         else:
             target = value
-        return ([op, float(target), shape.request, 0.0, shape.reply,
+        return ([EROB, 0.0, shape.request, 0.0, shape.reply, op, float(target),
                  float(written.get("motion_mode", values["motion_mode"])),
-                 float(written.get("target_relative_position", values["target_relative_position"])), 0.0, 0.0],
+                 float(written.get("target_relative_position", values["target_relative_position"])), 0.0],
                 reply, items)
 
     def run(self, requests: Sequence[Any], size: Callable[[Any], int], check: Callable[[Any, Any], bool] | None,
@@ -341,86 +239,28 @@ class ErobExchange:
             turn = ex.bus.message_turnaround(r)
             row = got[0]
             row[TURN] = line.turnaround if turn is None else turn
-            row[ROW] = float(ex._row_index(group))
+            row[ROW] = float(ex._first_row(group, ex.firmware))
             rows.append(row)
             made.append((got[1], got[2]))
-        clock = world.clock
         with world.lock:
-            now = line._sync()
-            free = line._free
-            if len(line._latest_end) != len(line._log) or line.latest_end() > max(now, free["host"]):
-                return None  # an edited log, or a frame that may overlap the first request: the line's own way
-            w = world.group_index
-            table = group.worlds_table
-            table[w, stepping.STEPS] = world.steps
-            st = self._st
-            st[:] = (clock.now(), world._target, 1.0 if world._booked else 0.0, now, line._clock_seen,
-                     free["host"], free["device"], line.char_time, line.gap, line.adapter_latency, world.timestep)
-            n = len(rows)
-            tx = self._tx(n)
-            tx[:] = rows
-            out = self._out(n)
-            order, active = group._plan(world._me)
-            try:
-                fn(tx, st, out, w, group.mj_step or 0, group.table, group.adr, group.ratio, order, table,
-                   group.dts_array, active)
-            finally:
-                world.steps = int(table[w, stepping.STEPS])
-                state = st.tolist()
-                world._target = state[TARGET]
-                world._booked = state[BOOKED] != 0.0
-                clock.set(state[CLOCK])
-            if world._data.maxuse_arena > group._arena_limits[w]:  # as Group.run after its calls
-                world.leave_fused_path()
-                group.replan()
-            line.now = state[NOW]
-            line._clock_seen = state[SEEN]
-            free["host"] = state[FREE_HOST]
-            free["device"] = state[FREE_DEVICE]
+            now = L.clear(line)
+            if now is None:
+                return None
+            outs = self.carry(fn, world, line, now, rows)
             replies: list[Any] = []
-            frames: list[tuple[float, float, float, int, str, Any]] = []
             self.clocks = clocks = []
-            for ex, r, t, o, (reply, extra) in zip(mine, requests, rows, out.tolist(), made):
+            for ex, r, t, o, (reply, extra) in zip(mine, requests, rows, outs, made):
                 if t[OP] == READ:
                     plan = extra
                     values = plan[0].finish(list(map(int, o[STATUS_AT:SENSED_AT])), dict(zip(SENSED, o[SENSED_AT:])))
                     reply = mb.ReadRegistersReply(r.slave, r.function, ModbusFront.pack(plan, values, r.count))
                 else:
-                    ex._store(extra)
-                frames.append((o[H_START], o[H_END], o[H_DUE], int(t[REQUEST]), "host", None))
-                frames.append((o[D_START], o[D_END], o[D_SEEN], int(t[REPLY]), "device", reply))
+                    ex.firmware._keep(extra)  # the parameter store's part (the row's ran in the call)
                 replies.append(reply)
                 clocks.append(o[CLOCK_AFTER])
-            line.book_frames(frames)
+            L.book(line, rows, outs, replies)
         self.taken += 1
         return replies
-
-    def _out(self, n: int) -> Any:
-        out = self._outs.get(n)
-        if out is None:
-            import numpy as np
-
-            out = self._outs[n] = np.zeros((n, OUT_WIDTH))
-        return out
-
-    def _tx(self, n: int) -> Any:
-        tx = self._txs.get(n)
-        if tx is None:
-            import numpy as np
-
-            tx = self._txs[n] = np.zeros((n, TX_WIDTH))
-        return tx
-
-    def _store(self, items: list[tuple[str, int]]) -> None:
-        """The parameter store's part of :meth:`Firmware._store` (the row's part ran in the compiled call)."""
-        fw = self.firmware
-        values = fw.values
-        for name, value in items:
-            values[name] = value
-        log = fw.write_log
-        log.extend(items)
-        if len(log) > WRITE_LOG_LIMIT:
-            del log[: WRITE_LOG_LIMIT // 2]
 
 
 def prepare(world: Any, bus: Any, front: Any, line: Any) -> ErobExchange | None:

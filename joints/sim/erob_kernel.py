@@ -673,17 +673,9 @@ PY_OPS = SimpleNamespace(achieve=achieve, moving=moving, ready=ready, motor_off=
                          gen_clear=gen_clear, clamp_target=clamp_target, step=step,
                          status=status, ready_or_refuse=ready_or_refuse, start=start, target_speed=target_speed,
                          target_current=target_current)
-_COMPILED: list[Any] = []
-
-
 def compiled_ops() -> Any:
     """The same helpers compiled (rows that are numpy arrays), or :data:`PY_OPS` without numba."""
-    if not _COMPILED:
-        if kernel.AVAILABLE:
-            _COMPILED.append(SimpleNamespace(**{k: kernel.compiled(fn) for k, fn in vars(PY_OPS).items()}))
-        else:  # pragma: no cover - depends on the install
-            _COMPILED.append(PY_OPS)
-    return _COMPILED[0]
+    return kernel.compiled_ops(PY_OPS)
 
 
 def warm() -> None:

@@ -191,6 +191,12 @@ class Firmware:
 
     def _store(self, checked: list[tuple[str, int]]) -> None:
         """Store, log and act on validated writes."""
+        self._keep(checked)
+        for name, value in checked:
+            self.on_write(name, value)
+
+    def _keep(self, checked: Sequence[tuple[str, int]]) -> None:
+        """The parameter store's part of :meth:`_store`: the values stored, the writes logged (the log trimmed)."""
         values = self.values
         for name, value in checked:
             values[name] = value
@@ -198,8 +204,6 @@ class Firmware:
         log.extend(checked)
         if len(log) > WRITE_LOG_LIMIT:
             del log[: WRITE_LOG_LIMIT // 2]
-        for name, value in checked:
-            self.on_write(name, value)
 
     def frame_received(self) -> None:
         """A frame addressed to this drive (or broadcast) arrived, before it is served."""

@@ -23,7 +23,7 @@ from typing import Any, TypeVar
 
 from joints.devices import motion
 
-__all__ = ["AVAILABLE", "arrays", "call", "compiled", "default_mode", "doubles", "jitable", "mj_step_address", "rows",
+__all__ = ["AVAILABLE", "arrays", "call", "compiled", "compiled_ops", "default_mode", "doubles", "jitable", "mj_step_address", "rows",
            "table"]
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -74,7 +74,8 @@ jitable(motion.move_step)
 #: the sources compiled into the kernels: numba's on-disk cache checks only the file of the
 #: function it caches, so the cache lives in a directory named by a hash of all of them
 _SOURCES = ("joints/sim/kernel.py", "joints/sim/erob_kernel.py", "joints/sim/zlac_kernel.py",
-            "joints/sim/stepping.py", "joints/sim/erob_exchange.py", "joints/devices/motion.py")
+            "joints/sim/stepping.py", "joints/sim/line_exchange.py", "joints/sim/erob_exchange.py",
+            "joints/sim/zlac_exchange.py", "joints/devices/motion.py")
 
 
 def cache_dir() -> str:
@@ -112,6 +113,19 @@ def compiled(fn: F) -> F | None:
 
 
 _CACHE_DIR: list[str] = []
+
+
+def compiled_ops(py_ops: Any) -> Any:
+    """A twin's helpers ``py_ops`` (a namespace of kernel functions) compiled, made once per namespace, or
+    ``py_ops`` itself without numba."""
+    ops = _OPS.get(id(py_ops))
+    if ops is None:
+        ops = _OPS[id(py_ops)] = type(py_ops)(**{k: compiled(fn) for k, fn in vars(py_ops).items()}) \
+            if AVAILABLE else py_ops
+    return ops
+
+
+_OPS: dict[int, Any] = {}
 
 
 def table(n: int, width: int, compiled_mode: bool) -> Any:

@@ -173,7 +173,7 @@ from joints.devices.zlac.state import ENERGISED, DriveState, Event, command
 from joints.devices.zlac.state import step as transition
 from joints.errors import ParameterRefused, Refusal
 from joints.sim import zlac_kernel as Z
-from joints.sim.firmware import WRITE_LOG_LIMIT, Firmware
+from joints.sim.firmware import Firmware
 from joints.sim.rowattr import column, flag
 from joints.sim.sensors import Sensor, model_of
 
@@ -815,13 +815,7 @@ class ZlacFirmware(Firmware):
             if not (writable and lo <= value <= hi):
                 return False  # the general way refuses it
             checked.append((name, value))
-        values = self.values
-        for name, value in checked:
-            values[name] = value
-        log = self.write_log
-        log.extend(checked)
-        if len(log) > WRITE_LOG_LIMIT:
-            del log[: WRITE_LOG_LIMIT // 2]
+        self._keep(checked)
         d = self._dget
         running = d(Z.D_STATE) == Z.ENABLED and d(Z.D_MODE) == Z.VELOCITY
         stale = False

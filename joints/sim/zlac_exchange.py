@@ -1,75 +1,49 @@
-"""One compiled call for a ZLAC8015D's steady velocity command over a timed RS485 line: frames, physics, ops.
+"""A ZLAC8015D's steady velocity command in one compiled call: what it requests and what the drive does with it.
 
 Rule: it gives what the sim's direct path gives request by request - the host's link on its direct lane
-(:class:`~joints.link.lane.LinkLane`, :meth:`~joints.transports.serial_sim.TimedSerialLine._transact_idle`),
-the bus, the :class:`~joints.sim.modbus_front.ModbusFront`, the firmware's light write
-(:meth:`~joints.sim.zlac.ZlacFirmware._write_light`) - for the FC16 of the four ramp times (0x2080) and the
-FC16 of both target velocities (0x2088): the same frame instants, every float by the same operations, the
-same world advances (the physics up to each instant the drive acts on a frame, the reply's travel booked),
-the same register effects (the drive's frame and target ops are the kernel ops of
-:mod:`joints.sim.zlac_kernel` its own write path calls; the ramp columns are the values
-:meth:`ZlacFirmware._cache_ramps` computes), the same counts and replies - in one call: the frame instants
-follow from the fixed request and reply sizes, the physics runs to each frame's arrival inside the compiled
-call (MuJoCo's ``mj_step`` by address, :mod:`joints.sim.stepping`). Afterwards Python brings the link, the
-line, the world, the clock and the firmware's parameter store to where the request-by-request path leaves them.
+(:class:`~joints.link.lane.LinkLane`), the bus, the :class:`~joints.sim.modbus_front.ModbusFront`, the
+firmware's light write (:meth:`~joints.sim.zlac.ZlacFirmware._write_light`) - for the FC16 of the four ramp
+times (0x2080) and the FC16 of both target velocities (0x2088): the line and world arithmetic is
+:mod:`joints.sim.line_exchange`'s, the drive's act (:func:`act`) the kernel ops of :mod:`joints.sim.zlac_kernel`
+its own write path calls (the ramp columns the values :meth:`ZlacFirmware._cache_ramps` computes); afterwards
+Python brings the link's counts and the firmware's parameter store to where that path leaves them. A status
+read goes with the world's advance to its instant in one call (:meth:`ZlacExchange.read`).
 
 It runs only in the steady case, checked before anything is sent: numba present, the lane open for every
-request, the world running fused (compiled, every drive a kernel row, nothing ticking after substeps), the
-bus, front, firmware and line the stock ones (nothing replaced, nothing pending or stale), every value one the
-firmware takes in its light write and every reply one the host takes as the plain answer, and no frame of the
-line's log able to overlap the first request. Anything else returns None and the caller sends the requests
-the usual way. This is the ZLAC8015D's counterpart of the eRob's one-call exchange; both follow the line's
-and the world's arithmetic step by step (tests/sim/test_compiled_zlac.py compares the results bit for bit).
+request, the world running fused, the bus, front, firmware and line the stock ones (nothing replaced, nothing
+pending or stale), every value one the firmware takes in its light write and every reply one the host takes as
+the plain answer, and no frame of the line's log able to overlap the first request. Anything else returns
+False and the caller sends the requests the usual way (tests/sim/test_compiled_zlac.py compares both bit for
+bit).
 """
 
-# ruff: noqa: PLR1730, FURB136 - the comparisons are the line's own (``max`` of Python and of numba alike on ties)
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
 from joints.codecs import modbus as mb
-from joints.sim import kernel, stepping
+from joints.sim import line_exchange as L
 from joints.sim import zlac_kernel as Z
-from joints.sim.firmware import WRITE_LOG_LIMIT
+from joints.sim.kernel import jitable
 from joints.sim.modbus_front import ModbusDeviceBus, ModbusFront
+from joints.sim.stepping import ZLAC
 from joints.sim.zlac import ZlacFirmware, _ramp_seconds
-from joints.transports.serial_sim import LOG_KEEP, TimedSerialLine, Transmission
+from joints.transports.serial_sim import TimedSerialLine
 
-__all__ = ["ZlacExchange"]
+__all__ = ["ZlacExchange", "act"]
 
 #: ops (column OP of a transaction row)
 RAMPS, TARGETS = 0, 1
-#: columns of a transaction row: op, four values (ramps: acceleration L/R, deceleration L/R [s]; targets:
-#: left, right [r/min]), request characters, turnaround [s], reply characters
-OP, V0, V1, V2, V3, REQUEST, TURN, REPLY = range(8)
-TX_WIDTH = 8
-#: columns of the state vector: the clock's time, the world's target time, whether time is booked, the
-#: line's time, the time the line last saw on the clock, when the host's / device's UART is free, the line's
-#: character time, gap, adapter latency, the world's timestep
-CLOCK, TARGET, BOOKED, NOW, SEEN, FREE_HOST, FREE_DEVICE, CHAR, GAP, LATENCY, DT = range(11)
-#: columns of an output row: host frame start, end, due; device frame start, end, seen
-H_START, H_END, H_DUE, D_START, D_END, D_SEEN = range(6)
+#: the family's columns of a transaction row (after :mod:`joints.sim.line_exchange`'s): op, four values (ramps:
+#: acceleration L/R, deceleration L/R [s]; targets: left, right [r/min])
+OP, V0, V1, V2, V3 = range(L.ARGS, L.ARGS + 5)
 
 
-#: the world's substeps (:func:`joints.sim.stepping._run`, compiled), called from inside the compiled call
-_run_steps: Any = getattr(stepping, "_run_compiled", None)
-
-
-def _advance(seconds: float, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any,
-             worlds: Any, dts: Any, active: Any) -> None:
-    """``World._step_due(World._due(seconds))`` of a fused world without ticks (``World.advance``/``sync``)."""
-    st[TARGET] += seconds
-    dt = st[DT]
-    n = math.ceil((st[TARGET] - worlds[w, stepping.STEPS] * dt) / dt - 1e-9)
-    if n > 0:
-        _run_steps(n, 1, mj_step, table, adr, ratio, order, worlds, dts, active)
-        worlds[w, stepping.STEPS] += n
-
-
-def _act(table: Any, first: int, t: Any) -> None:
-    """The drive acts on a frame (:meth:`ZlacFirmware.frame_received`, then the light write's effects)."""
+@jitable
+def act(table: Any, first: int, t: Any) -> None:
+    """The drive (rows from ``first``) acts on a frame (:meth:`ZlacFirmware.frame_received`, then the light
+    write's effects)."""
     d = table[first]
     Z.frame(d)
     left = table[first + 1]
@@ -84,111 +58,15 @@ def _act(table: Any, first: int, t: Any) -> None:
         Z.set_velocity_target(d, right, t[V1])
 
 
-def exchanges(tx: Any, st: Any, out: Any, first: int, w: int, mj_step: int, table: Any, adr: Any, ratio: Any,
-              order: Any, worlds: Any, dts: Any, active: Any) -> None:
-    """The transactions ``tx`` (rows of :data:`TX_WIDTH`) of the drive whose rows start at ``first`` of ``table``
-    in world ``w``, one after the other, as ``TimedSerialLine._transact_idle`` carries each: ``st`` (the state
-    vector) in and out, each transaction's frame instants into ``out``."""
-    for k in range(tx.shape[0]):
-        t = tx[k]
-        o = out[k]
-        if k:  # TimedSerialLine._sync: the clock moved without the line (a booked reply)
-            c = st[CLOCK]
-            if c > st[SEEN]:
-                st[SEEN] = c
-                if c > st[NOW]:
-                    st[NOW] = c
-        now = st[NOW]
-        free = st[FREE_HOST]  # TimedSerialLine._put of the host's frame
-        start = free if free > now else now
-        end = start + t[REQUEST] * st[CHAR]
-        due = end + st[GAP] + t[TURN]
-        st[FREE_HOST] = end + st[GAP]
-        o[H_START] = start
-        o[H_END] = end
-        o[H_DUE] = due
-        behind = due - st[CLOCK]
-        if behind > 0:  # the physics runs to the instant the drive acts (World.advance)
-            st[BOOKED] = 0.0
-            _advance(behind, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
-            st[CLOCK] = st[TARGET]
-            st[SEEN] = st[CLOCK]
-        if st[BOOKED] != 0.0:  # World.sync: booked time runs before the drive acts
-            st[BOOKED] = 0.0
-            _advance(0.0, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
-        _act(table, first, t)
-        if due > st[NOW]:
-            st[NOW] = due
-        free = st[FREE_DEVICE]  # the reply (TimedSerialLine._put of the device's frame), booked (World.book)
-        start = free if free > due else due
-        end = start + t[REPLY] * st[CHAR]
-        seen = end + st[LATENCY]
-        st[FREE_DEVICE] = end + st[GAP]
-        o[D_START] = start
-        o[D_END] = end
-        o[D_SEEN] = seen
-        behind = seen - st[CLOCK]
-        if behind > 0:
-            st[TARGET] += behind
-            st[BOOKED] = 1.0
-            st[CLOCK] = st[TARGET]
-            st[SEEN] = st[CLOCK]
-        gapped = seen + st[GAP]
-        if gapped > st[FREE_HOST]:
-            st[FREE_HOST] = gapped
-        if seen > st[NOW]:
-            st[NOW] = seen
-
-
-def advance(seconds: float, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any,
-            worlds: Any, dts: Any, active: Any) -> None:
-    """The line's sleep of ``seconds`` (if > 0: ``World.advance``) to the instant a drive acts on a frame, then
-    its settle (``World.sync``: booked time runs), on the state vector of a fused world without ticks."""
-    if seconds > 0:
-        st[BOOKED] = 0.0
-        _advance(seconds, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
-        st[CLOCK] = st[TARGET]
-        st[SEEN] = st[CLOCK]
-    if st[BOOKED] != 0.0:
-        st[BOOKED] = 0.0
-        _advance(0.0, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
-
-
-_COMPILED: list[Any] = []
-_ADVANCE: list[Any] = []
-
-
-def _compiled() -> Any:
-    """:func:`exchanges` compiled (numba), or None without it (or with ``JOINTS_COMPILED=0``: the world then
-    does not run fused, and the steady check sends the requests the usual way)."""
-    if not _COMPILED:
-        if kernel.AVAILABLE and _run_steps is not None:
-            kernel.jitable(_advance)
-            kernel.jitable(_act)
-            _COMPILED.append(kernel.compiled(exchanges))
-            _ADVANCE.append(kernel.compiled(advance))
-        else:  # pragma: no cover - depends on the install
-            _COMPILED.append(None)
-            _ADVANCE.append(None)
-    return _COMPILED[0]
-
-
+#: the line's methods the read's advance assumes, as defined
+_LINE = ((TimedSerialLine, "_transact_idle", TimedSerialLine._transact_idle),
+         (TimedSerialLine, "_plain_peer", TimedSerialLine._plain_peer))
 #: the stock methods the requests would go through (a replaced one - a test planting replies - means no fusion)
 _STOCK = ((ModbusDeviceBus, "exchange", ModbusDeviceBus.exchange), (ModbusFront, "handle", ModbusFront.handle),
           (ModbusFront, "write", ModbusFront.write), (ZlacFirmware, "write_many", ZlacFirmware.write_many),
           (ZlacFirmware, "_write_light", ZlacFirmware._write_light), (ZlacFirmware, "on_write", ZlacFirmware.on_write),
           (ZlacFirmware, "frame_received", ZlacFirmware.frame_received),
-          (ZlacFirmware, "_cache_ramps", ZlacFirmware._cache_ramps),
-          (TimedSerialLine, "_transact_idle", TimedSerialLine._transact_idle),
-          (TimedSerialLine, "_plain_peer", TimedSerialLine._plain_peer))
-
-
-_TRANSACT_IDLE = TimedSerialLine._transact_idle
-_PLAIN_PEER = TimedSerialLine._plain_peer
-
-
-def _stock() -> bool:
-    return all(getattr(cls, name) is fn for cls, name, fn in _STOCK)
+          (ZlacFirmware, "_cache_ramps", ZlacFirmware._cache_ramps), *_LINE)
 
 
 def _world_of(bus: Any, clock: Any) -> Any:
@@ -208,26 +86,30 @@ _BLOCKS = {(0x2080, 4): (RAMPS, ("acceleration_time_left", "acceleration_time_ri
            (0x2088, 2): (TARGETS, ("target_velocity_left", "target_velocity_right"))}
 
 
-class ZlacExchange:
+class ZlacExchange(L.Carrier):
     """The steady FC16s of one ZLAC8015D twin behind ``lane`` (the host link's direct lane,
     :class:`joints.link.lane.LinkLane`; see the module docstring)."""
 
     def __init__(self, lane: Any, slave: int) -> None:
+        super().__init__(L.OUTS)
         self.lane = lane
         self.slave = slave
-        self.taken = 0  #: calls that ran (each of one or two transactions)
         self.reads = 0  #: status reads sent with the world's advance in one call (:meth:`read`)
-        self._group: Any = None
-        self._first = 0
         self._world: Any = None
         self._bus: Any = None
-        self._st: Any = None
+
+    def _fused_world(self, line: TimedSerialLine, bus: Any) -> Any:
+        """The world between ``bus``'s frames where it runs fused on ``line``'s clock, else None."""
+        if self._bus is not bus:
+            self._bus, self._world = bus, _world_of(bus, line.clock)
+        world = self._world
+        return world if world is not None and line.clock is world.clock and L.world_fused(world) else None
 
     def _parts(self) -> tuple[Any, ModbusFront, ZlacFirmware, TimedSerialLine] | None:
         """(world, front, firmware, line) where they are as the compiled call assumes, else None."""
         lane = self.lane
         line, framing = lane.line, lane.framing
-        if line is None or framing is None or not _stock():
+        if line is None or framing is None or not L.stock(_STOCK):
             return None
         bus = framing.peer
         if type(bus) is not ModbusDeviceBus or line.peer is not bus:
@@ -238,27 +120,13 @@ class ZlacExchange:
         fw = front.firmware
         if type(fw) is not ZlacFirmware or fw.pending or fw._stale or fw._stale_ramps or fw.DELAYED:
             return None
-        if self._bus is not bus:
-            self._bus, self._world = bus, _world_of(bus, line.clock)
-        world = self._world
-        if world is None or line.clock is not world.clock or world._ticks or world._bind != world._bind_seen:
-            return None
-        group = world.group
-        if not (group.compiled and group.fusable[world.group_index]):
-            return None
-        return world, front, fw, line
-
-    def _row_first(self, group: Any, fw: ZlacFirmware) -> int:
-        """The firmware's first row in ``group``'s table (kept per group: a batch may join the world to another)."""
-        if self._group is not group:
-            self._first = next(first for twin, first in group._owners if twin is fw)
-            self._group = group
-        return self._first
+        world = self._fused_world(line, bus)
+        return None if world is None else (world, front, fw, line)
 
     def write(self, requests: Sequence[mb.WriteMultipleRegisters]) -> bool:
         """Send ``requests`` (the ramp FC16 then the target FC16, or the target FC16 alone) as the lane would,
         one after the other; False (nothing sent) where this is not the steady case."""
-        fn = _COMPILED[0] if _COMPILED else _compiled()
+        fn = L.compiled()[0]
         if fn is None:
             return False
         lane = self.lane
@@ -299,104 +167,51 @@ class ZlacExchange:
             if framing.as_received(r, reply) is not reply or not rule.is_reply(r, reply):
                 return False
             turn = framing._turnaround(r)
-            rows.append([float(op), *values, float(size(r)), line.turnaround if turn is None else turn,
-                         float(size(reply))])
+            rows.append([ZLAC, 0.0, float(size(r)), line.turnaround if turn is None else turn, float(size(reply)),
+                         float(op), *values])
             made.append((reply, items))
-        import numpy as np
-
-        clock = world.clock
         with link._lock, world.lock:
-            now = line._sync()
-            log, latest = line.log, line._latest_end
-            free = line._free
-            start = max(now, free["host"])
-            if len(latest) != len(log) or (len(log) > line._epoch and latest[-1] > start):
-                return False  # an edited log, or a frame that may overlap the first request: the lane's own way
-            group = world.group
-            w = world.group_index
-            table = group.worlds_table
-            table[w, stepping.STEPS] = world.steps
-            st = np.array([clock.now(), world._target, 1.0 if world._booked else 0.0, now, line._clock_seen,
-                           free["host"], free["device"], line.char_time, line.gap, line.adapter_latency,
-                           world.timestep])
+            now = L.clear(line)
+            if now is None:
+                return False
+            first = float(self._first_row(world.group, fw))
+            for row in rows:
+                row[L.ROW] = first
             n = len(rows)
-            tx = np.array(rows)
-            out = np.zeros((n, 6))
-            order, active = group._plan(world._me)
-            first = self._row_first(group, fw)
             link.transactions += n
             framing.exchanges += n
-            try:
-                fn(tx, st, out, first, w, group.mj_step or 0, group.table, group.adr, group.ratio, order, table,
-                   group.dts_array, active)
-            finally:
-                world.steps = int(table[w, stepping.STEPS])
-                clock_now, target, booked, line_now, seen, free_host, free_device = st.tolist()[:7]
-                world._target = target
-                world._booked = booked != 0.0
-                clock.set(clock_now)
-            if world._data.maxuse_arena > group._arena_limits[w]:  # as Group.run after its calls
-                world.leave_fused_path()
-                group.replan()
-            line.now = line_now
-            line._clock_seen = seen
-            free["host"] = free_host
-            free["device"] = free_device
-            for t, o, (reply, items) in zip(rows, out.tolist(), made):
-                _store(fw, items)
-                _log(line, Transmission(o[H_START], o[H_END], "host", b"", delivered=True, due=o[H_DUE],
-                                        size=int(t[REQUEST])))
-                _log(line, Transmission(o[D_START], o[D_END], "device", b"", delivered=True, due=o[D_SEEN],
-                                        size=int(t[REPLY]), payload=reply))
+            outs = self.carry(fn, world, line, now, rows)
+            for _, items in made:
+                fw._keep(items)  # the parameter store's part of the light write (its row effects ran)
+            L.book(line, rows, outs, [reply for reply, _ in made])
             lane.taken += n
         self.taken += 1
         return True
-
-    def _timing(self) -> tuple[Any, TimedSerialLine] | None:
-        """(world, line) where the line and the world are as the read's fused advance assumes, else None."""
-        lane = self.lane
-        line, framing = lane.line, lane.framing
-        if line is None or framing is None:
-            return None
-        if TimedSerialLine._transact_idle is not _TRANSACT_IDLE or TimedSerialLine._plain_peer is not _PLAIN_PEER:
-            return None
-        bus = framing.peer
-        if self._bus is not bus:
-            self._bus, self._world = bus, _world_of(bus, line.clock)
-        world = self._world
-        if world is None or line.clock is not world.clock or world._ticks or world._bind != world._bind_seen:
-            return None
-        group = world.group
-        if not (group.compiled and group.fusable[world.group_index]):
-            return None
-        return world, line
 
     def read(self, request: mb.ReadHoldingRegisters, *, idempotent: bool = True) -> tuple[bool, Any]:
         """``LinkLane.request(request)`` of a status read, the world's advance to the instant the drive acts on
         it in one compiled call: (True, the reply) - or (False, None), nothing sent, where the line or world is
         not as assumed. The drive's act is the bus's own (``framing.peer.exchange``, whatever it answers); a
         reply that is not the plain answer continues as the lane's does (the link's attempt and retries)."""
-        fn = _ADVANCE[0] if _ADVANCE else (_compiled(), _ADVANCE[0])[1]
+        fn = L.compiled()[1]
         lane = self.lane
         if fn is None or not lane._open(request):
             return False, None
-        timing = self._timing()
-        if timing is None:
+        line, framing = lane.line, lane.framing
+        if line is None or framing is None or not L.stock(_LINE):
             return False, None
-        world, line = timing
+        world = self._fused_world(line, framing.peer)
+        if world is None:
+            return False, None
         link = lane.link
-        framing = lane.framing
-        assert framing is not None
-        rule = link.rule
-        rule.check(request)  # raises EncodeError before anything is sent
+        link.rule.check(request)  # raises EncodeError before anything is sent
         clock = world.clock
         with link._lock, world.lock:
-            now = line._sync()  # (the lane's own way calls it again: a second call changes nothing)
-            log, latest = line.log, line._latest_end
+            now = L.clear(line)  # (the lane's own way calls _sync again: a second call changes nothing)
+            if now is None:
+                return False, None
             free = line._free
             start = max(now, free["host"])
-            if len(latest) != len(log) or (len(log) > line._epoch and latest[-1] > start):
-                return False, None  # an edited log, or a frame that may overlap the request: the lane's own way
             link.transactions += 1
             deadline = link.clock.now() + link.policy.timeout  # from the request's start, as the link's
             framing.exchanges += 1
@@ -406,37 +221,14 @@ class ZlacExchange:
             end = start + n * line.char_time  # TimedSerialLine._put of the host's frame
             due = end + line.gap + (line.turnaround if turn is None else turn)
             free["host"] = end + line.gap
-            _log(line, Transmission(start, end, "host", b"", delivered=True, due=due, size=n))
+            line.book_frames([(start, end, due, n, "host", None)])
             behind = due - clock.now()
             if behind > 0 or world._booked:  # the physics runs to the instant the drive acts (sleep, settle)
-                group = world.group
-                w = world.group_index
-                table = group.worlds_table
-                table[w, stepping.STEPS] = world.steps
                 st = self._st
-                if st is None:
-                    import numpy as np
-
-                    st = self._st = np.zeros(11)
-                st[CLOCK] = clock.now()
-                st[TARGET] = world._target
-                st[BOOKED] = 1.0 if world._booked else 0.0
-                st[SEEN] = line._clock_seen
-                st[DT] = world.timestep
-                order, active = group._plan(world._me)
-                try:
-                    fn(behind, st, w, group.mj_step or 0, group.table, group.adr, group.ratio, order, table,
-                       group.dts_array, active)
-                finally:
-                    world.steps = int(table[w, stepping.STEPS])
-                    world._target = float(st[TARGET])
-                    world._booked = bool(st[BOOKED])
-                    clock.set(float(st[CLOCK]))
+                L.fill(st, world, line, now)
+                state = L.fused(fn, world, st, behind)
                 if behind > 0:
-                    line._clock_seen = float(st[SEEN])
-                if world._data.maxuse_arena > group._arena_limits[w]:  # as Group.run after its calls
-                    world.leave_fused_path()
-                    group.replan()
+                    line._clock_seen = state[L.SEEN]
             raw = framing.peer.exchange(request)  # the drive acts (the lane's act)
             line.now = max(line.now, due)
             if raw is not None:  # the reply (TimedSerialLine._put of the device's frame), booked while it travels
@@ -445,7 +237,7 @@ class ZlacExchange:
                 d_end = d_start + m * line.char_time
                 seen = d_end + line.adapter_latency
                 free["device"] = d_end + line.gap
-                _log(line, Transmission(d_start, d_end, "device", b"", delivered=True, due=seen, size=m, payload=raw))
+                line.book_frames([(d_start, d_end, seen, m, "device", raw)])
                 behind = seen - clock.now()
                 if behind > 0:
                     clock.book(behind)
@@ -453,7 +245,7 @@ class ZlacExchange:
                 free["host"] = max(free["host"], seen + line.gap)
                 line.now = max(line.now, seen)
             self.reads += 1
-            return True, lane_finish(lane, request, raw, deadline, idempotent)
+            return True, lane._finish(request, raw, deadline, idempotent)
 
 
 #: (register table, start address) -> each word's register is signed, or None where the table does not hold the
@@ -480,44 +272,3 @@ def _items(front: ModbusFront, request: mb.WriteMultipleRegisters, names: tuple[
         raw = word & 0xFFFF
         out.append((name, raw - 0x10000 if sign and raw & 0x8000 else raw))
     return out
-
-
-def lane_finish(lane: Any, request: Any, raw: Any, deadline: float, idempotent: bool) -> Any:
-    """The rest of the lane's request once the peer's reply ``raw`` (None: silence) reached the host
-    (``LinkLane.request`` after its transaction: the plain answer is returned, anything else is the link's)."""
-    from joints.errors import FrameError, PeerProtocolError, ReplyTimeout
-
-    link, framing = lane.link, lane.framing
-    reply = None if raw is None else framing.as_received(request, raw)
-    try:  # as the link's attempt: a reply the rule refuses (another slave's) fails the attempt
-        if reply is not None and not isinstance(reply, FrameError) and link.rule.is_reply(request, reply):
-            lane.taken += 1
-            return reply
-        framing.put(reply)  # not the plain answer: the rest of the attempt and the retries are the link's
-        return link._await_reply(request, deadline)
-    except (ReplyTimeout, PeerProtocolError) as exc:
-        link._discard_late()
-        return link._attempts(request, None, idempotent, failed=exc)
-
-
-def _store(fw: ZlacFirmware, items: list[tuple[str, int]]) -> None:
-    """The parameter store's part of the light write (its row effects ran in the compiled call)."""
-    values = fw.values
-    for name, value in items:
-        values[name] = value
-    log = fw.write_log
-    log.extend(items)
-    if len(log) > WRITE_LOG_LIMIT:
-        del log[: WRITE_LOG_LIMIT // 2]
-
-
-def _log(line: TimedSerialLine, tx: Transmission) -> None:
-    """The log's part of ``TimedSerialLine._put`` for a frame that overlaps none (checked before)."""
-    log, latest = line.log, line._latest_end
-    latest.append(max(tx.end, latest[-1]) if len(log) > line._epoch else tx.end)
-    log.append(tx)
-    if len(log) > 2 * LOG_KEEP:
-        cut = len(log) - LOG_KEEP
-        if cut <= line._epoch or latest[cut - 1] <= tx.start - 1.0:
-            del log[:cut], latest[:cut]
-            line._epoch = max(0, line._epoch - cut)

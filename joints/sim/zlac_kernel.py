@@ -353,17 +353,9 @@ def step(table: Any, first: int, side: int, t: float, dt: float, q: float, qd: f
 PY_OPS = SimpleNamespace(reset_loops=reset_loops, begin_quick_stop=begin_quick_stop, quick_stop=quick_stop,
                          tick=tick, step=step, set_velocity_target=set_velocity_target,
                          frame=frame)
-_COMPILED: list[Any] = []
-
-
 def compiled_ops() -> Any:
     """The same helpers compiled (rows of a numpy table), or :data:`PY_OPS` without numba."""
-    if not _COMPILED:
-        if kernel.AVAILABLE:
-            _COMPILED.append(SimpleNamespace(**{k: kernel.compiled(fn) for k, fn in vars(PY_OPS).items()}))
-        else:  # pragma: no cover - depends on the install
-            _COMPILED.append(PY_OPS)
-    return _COMPILED[0]
+    return kernel.compiled_ops(PY_OPS)
 
 
 def warm() -> None:
