@@ -122,6 +122,7 @@ class Group:
         adr: list[list[int]] = []
         ratio: list[float] = []
         self._owners: list[tuple[Any, int]] = []  #: (twin, first row)
+        self._watches: dict[tuple[tuple[int, int], ...], Any] = {}  #: run_watching's cells as (row, column) pairs
         self._row_of: dict[tuple[int, str], int] = {}  #: (world index, joint name) -> row
         for w, world in enumerate(self.worlds):
             seen: dict[int, int] = {}
@@ -256,10 +257,14 @@ class Group:
         substep at whose end one of ``cells`` (twin, column of the twin's first row) is non-zero (a fault the
         loops tripped: a CANopen front reports it at that substep). Returns the substeps run (fewer than ``n``
         also where the arena guard took the world off the fused path)."""
-        import numpy as np
+        key = tuple((id(twin), column) for twin, column in cells)
+        watch = self._watches.get(key)
+        if watch is None:  # the rows are the group's for its life: one array per set of cells
+            import numpy as np
 
-        firsts = {id(twin): first for twin, first in self._owners}
-        watch = np.array([[firsts[id(twin)], column] for twin, column in cells], dtype=np.int64).reshape(-1, 2)
+            firsts = {id(twin): first for twin, first in self._owners}
+            watch = self._watches[key] = np.array([[firsts[id(twin)], column] for twin, column in cells],
+                                                  dtype=np.int64).reshape(-1, 2)
         order, indices = self._plan((world,))
         table = self.worlds_table
         w = self.worlds[world]
