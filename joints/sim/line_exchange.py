@@ -26,11 +26,13 @@ from joints.sim.stepping import EROB, STEPS, ZLAC
 
 __all__ = ["Carrier", "advance", "book", "clear", "compiled", "exchanges", "fill", "fused", "stock", "world_fused"]
 
-#: columns of the state vector: the clock's time, the world's target time, whether time is booked, the line's
+#: columns of the state vector: the clock's time, the world's target time, whether time is booked (:data:`HELD`:
+#: the last of it a sleep's, ``World.hold``), the line's
 #: time, the time the line last saw on the clock, when the host's / device's UART is free, the line's character
 #: time, gap, adapter latency, the world's timestep
 CLOCK, TARGET, BOOKED, NOW, SEEN, FREE_HOST, FREE_DEVICE, CHAR, GAP, LATENCY, DT = range(11)
 STATE_WIDTH = 11
+HELD = 2.0
 #: columns of a transaction row: the family's kind, its drive's (first) row in the table, request characters,
 #: turnaround [s], reply characters; then the family's own from :data:`ARGS`
 KIND, ROW, REQUEST, TURN, REPLY = range(5)
@@ -58,7 +60,11 @@ def _due(seconds: float, st: Any, w: int, mj_step: int, table: Any, adr: Any, ra
 def advance(seconds: float, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any,
             worlds: Any, dts: Any, active: Any) -> None:
     """The line's sleep of ``seconds`` (if > 0: ``World.advance``) to the instant a drive acts on a frame, then
-    its settle (``World.sync``: booked time runs first)."""
+    its settle (``World.sync``: booked time runs first). A sleep's time (``World.hold``, :data:`BOOKED` 2) runs
+    on its own first, as ``World.advance`` runs it."""
+    if seconds > 0 and st[BOOKED] == HELD:
+        st[BOOKED] = 0.0
+        _due(0.0, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
     if seconds > 0:
         st[BOOKED] = 0.0
         _due(seconds, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
@@ -153,7 +159,8 @@ def clear(line: Any) -> float | None:
 def fill(st: Any, world: Any, line: Any, now: float) -> None:
     """The state vector of ``world``, its clock and ``line`` (its time ``now``)."""
     free = line._free
-    st[:] = (world.clock.now(), world._target, 1.0 if world._booked else 0.0, now, line._clock_seen, free["host"],
+    st[:] = (world.clock.now(), world._target, (HELD if world._held else 1.0) if world._booked else 0.0, now,
+             line._clock_seen, free["host"],
              free["device"], line.char_time, line.gap, line.adapter_latency, world.timestep)
 
 
@@ -172,7 +179,9 @@ def fused(fn: Any, world: Any, st: Any, *head: Any) -> list[float]:
         world.steps = int(worlds[w, STEPS])
         state: list[float] = st.tolist()
         world._target = state[TARGET]
-        world._booked = state[BOOKED] != 0.0
+        booked = state[BOOKED]
+        world._booked = booked != 0.0
+        world._held = booked == HELD
         world.clock.set(state[CLOCK])
     if world._data.maxuse_arena > group._arena_limits[w]:  # as Group.run after its calls
         world.leave_fused_path()

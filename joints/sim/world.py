@@ -279,6 +279,8 @@ class World:
                  kinematic: Mapping[str, str] | None = None, jit: bool | None = None) -> None:
         mj = _mujoco()
         self._booked = False  #: time is booked on the clock that the physics has not run yet (:meth:`book`)
+        #: of it, the last is a sleep's (:meth:`hold`): its substeps run on their own, before any other advance
+        self._held = False
         #: the drives' loops run compiled (numba; :mod:`joints.sim.kernel`) - default: when installed
         self.compiled = kernel.default_mode() if jit is None else bool(jit and kernel.AVAILABLE)
         self.mujoco = mj
@@ -320,7 +322,7 @@ class World:
         self.steps = 0
         self._target = 0.0
         self.clock = ManualClock()
-        self.clock.bind(self.advance, on_book=self.book, on_settle=self.sync)
+        self.clock.bind(self.hold, on_book=self.book, on_settle=self.sync)
         addr: dict[str, tuple[int, int, int]] = {}
         ratios: dict[str, float] = {}
         for d in drives:
@@ -579,8 +581,25 @@ class World:
             self.advance(seconds)
             return
         with self.lock:
+            if self._held:
+                self.sync()
             self._target += seconds
             self._booked = True
+            self.clock.set(self._target)
+
+    def hold(self, seconds: float) -> None:
+        """The clock's sleep: :meth:`advance` by ``seconds``, its physics run lazily - at the next :meth:`sync`
+        (any access to the physics or a twin, a medium about to hand a frame to a drive), or at the start of the
+        next :meth:`advance`/:meth:`book` or one-call exchange (:mod:`joints.sim.line_exchange`), on its own:
+        the same substeps as :meth:`advance` runs now, counted the same way. A world with ticks advances at once."""
+        if seconds <= 0:
+            return
+        if self._ticks:
+            self.advance(seconds)
+            return
+        with self.lock:
+            self._target += seconds  # as advance: the sleep with any booked time before it, in one count
+            self._booked = self._held = True
             self.clock.set(self._target)
 
     def sync(self) -> None:
@@ -589,7 +608,7 @@ class World:
         with self.lock:
             if not self._booked:
                 return
-            self._booked = False
+            self._booked = self._held = False
             self._step_due(self._due(0.0))
 
     def transport(self, bus: str) -> Any:
@@ -710,6 +729,8 @@ class World:
         if seconds <= 0:
             return
         with self.lock:
+            if self._held:  # a sleep's substeps, on their own (as they ran at the sleep)
+                self.sync()
             self._booked = False  # booked time runs now, with this
             self._step_due(self._due(seconds))
             self.clock.set(self._target)
@@ -739,7 +760,7 @@ class World:
 
     def reset(self) -> None:
         """Physics to the model's initial state, every drive to its power-on state (saved settings kept)."""
-        self._booked = False  # booked time of the old episode never runs
+        self._booked = self._held = False  # booked time of the old episode never runs
         mj = self.mujoco
         mj.mj_resetData(self.model, self.data)
         mj.mj_forward(self.model, self.data)
@@ -922,6 +943,8 @@ def advance_together(worlds: Sequence[World], seconds: Sequence[float]) -> None:
             stack.enter_context(w.lock)
         group = join(worlds)
         for w in worlds:
+            if w._held:  # a sleep's substeps, on their own (as they ran at the sleep)
+                w.sync()
             w._booked = False  # booked time runs now, with this
         due = [w._due(s) if s > 0 else 0 for w, s in zip(worlds, seconds)]
         try:

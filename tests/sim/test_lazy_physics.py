@@ -57,10 +57,11 @@ def test_every_access_to_the_physics_or_a_twin_runs_the_booked_time_first(what: 
         assert world.steps * world.timestep - world.timestep < rig.time
 
 
-def test_an_env_step_runs_three_compiled_calls(monkeypatch: pytest.MonkeyPatch) -> None:
-    """ErobReach-v0: three transactions (the drive acts on each request) and the period hold in three compiled
+def test_an_env_step_runs_two_compiled_calls(monkeypatch: pytest.MonkeyPatch) -> None:
+    """ErobReach-v0: three transactions (the drive acts on each request) and the period hold in two compiled
     calls - the command's target write and start in one (the one-call exchange, joints.sim.erob_exchange), the
-    hold, the status read - where every frame instant once stepped the physics in a call of its own (seven)."""
+    hold (``World.hold``: booked, its substeps run on their own at the start of the next call) with the status
+    read in the other - where every frame instant once stepped the physics in a call of its own (seven)."""
     import gymnasium as gym
     import numpy as np
 
@@ -92,7 +93,7 @@ def test_an_env_step_runs_three_compiled_calls(monkeypatch: pytest.MonkeyPatch) 
         calls[0] = exchanges[0] = 0
         for _ in range(20):
             env.step(rng.uniform(space.low, space.high).astype(space.dtype))
-        assert calls[0] == 20  # the hold
+        assert calls[0] == 0  # the hold runs in the read's call
         assert exchanges[0] == 2 * 20  # the command, the read
     finally:
         env.close()
