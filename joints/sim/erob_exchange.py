@@ -111,19 +111,31 @@ class ErobExchange(L.Carrier):
         self.line = line
         self.slave = front.address
         self._shapes: dict[tuple[Any, ...], _Shape | None] = {}
+        self._read: tuple[Any, _Shape] | None = None  #: the last status read request and its shape
         #: the clock after each transaction of the last :meth:`run` (the host's per-joint instants)
         self.clocks: list[float] = []
 
     def _steady(self) -> bool:
         """Whether the world, line, bus, front and firmware are as the compiled call assumes (checked first)."""
-        line, fw = self.line, self.firmware
+        return self._line_steady() and self._drive_steady()
+
+    def _line_steady(self) -> bool:
+        """Whether the world and the line are as the compiled call assumes, and every method the requests would
+        go through is the stock one (once per call, for all the drives on the line)."""
+        line = self.line
         if not L.world_fused(self.world):
             return False
-        if line._pending or line._cap is not None or line._closed or line.peer is not self.bus or not line._plain_peer():
+        if line._pending or line._cap is not None or line._closed or not line._plain_peer():
             return False
+        return L.stock(_STOCK)
+
+    def _drive_steady(self) -> bool:
+        """Whether this drive's bus, front and firmware are as the compiled call assumes (per drive and call)."""
+        fw = self.firmware
         if fw.pending or fw.command_delay > 0 or type(fw) is not ErobFirmware or type(self.front) is not ModbusFront:
             return False
-        return self.bus.slaves.get(self.slave) is self.front and L.stock(_STOCK)
+        bus = self.bus
+        return self.line.peer is bus and bus.slaves.get(self.slave) is self.front
 
     def _shape(self, request: Any, size: Callable[[Any], int]) -> _Shape | None:
         """What stays the same for requests like ``request`` (kept per shape); None: not one of the steady ones."""
@@ -167,17 +179,10 @@ class ErobExchange(L.Carrier):
 
     def _row(self, request: Any, shape: _Shape, written: dict[str, int], check: Callable[[Any, Any], bool] | None
              ) -> tuple[list[float], Any, Any] | None:
-        """The transaction row of ``request``, its reply (None for a read: made after the call) and what the
-        Python side finishes it with; None where it is not a steady request now."""
+        """The transaction row of a write ``request``, its reply and the firmware's items it stores; None where it
+        is not a steady request now (a read's row: :meth:`_read_row`)."""
         fw = self.firmware
         op = shape.op
-        if op == READ:
-            plan = self.front.read_plan(request.address, request.count)  # the front's own, as it serves it now
-            if isinstance(plan, int) or not isinstance(plan[0], _StatusRead) or (
-                    check is not None and not check(request, shape.made)):
-                return None  # (the words a read packs are plain: a blank reply of its size stands for them)
-            return [EROB, 0.0, shape.request, 0.0, shape.reply, READ, 0.0, 0.0, 0.0, float(plan[0].repetitive())], \
-                None, plan
         if type(request) is mb.WriteMultipleRegisters:
             reply: Any = shape.made
             items = self.front.items(request.address, request.values)
@@ -207,6 +212,24 @@ class ErobExchange(L.Carrier):
                  float(written.get("target_relative_position", values["target_relative_position"])), 0.0],
                 reply, items)
 
+    def _read_row(self, request: Any, size: Callable[[Any], int], check: Callable[[Any, Any], bool] | None
+                  ) -> tuple[list[float], Any] | None:
+        """The transaction row of a status read and the front's plan for it; None where it is not a steady
+        request now (``request``: the same FC03 object step after step, its shape kept by identity; the words
+        a read packs are plain: a blank reply of its size stands for them in ``check``)."""
+        last = self._read
+        if last is None or last[0] is not request:
+            got = self._shape(request, size)
+            if got is None or got.op != READ:
+                return None
+            last = self._read = (request, got)
+        shape = last[1]
+        plan = self.front.read_plan(request.address, request.count)  # the front's own, as it serves it now
+        if isinstance(plan, int) or not isinstance(plan[0], _StatusRead) or (
+                check is not None and not check(request, shape.made)):
+            return None
+        return [EROB, 0.0, shape.request, 0.0, shape.reply, READ, 0.0, 0.0, 0.0, float(plan[0].repetitive())], plan
+
     def run(self, requests: Sequence[Any], size: Callable[[Any], int], check: Callable[[Any, Any], bool] | None,
             exchanges: Sequence[ErobExchange] | None = None) -> list[Any] | None:
         """The replies to ``requests`` (sent one after the other), each as the bus gives it, once the host would
@@ -216,32 +239,42 @@ class ErobExchange(L.Carrier):
         ``exchanges``: per request, the exchange of the drive it is for (default: this one's; all on this one's
         line and world: a rig's eRobs on one bus go in one call)."""
         fn = _compiled()
-        if fn is None:
+        if fn is None or not self._line_steady():
             return None
         line, world = self.line, self.world
-        mine = [self] * len(requests) if exchanges is None else exchanges
+        if exchanges is None:
+            if not self._drive_steady():
+                return None
+            mine: Sequence[ErobExchange] = (self,) * len(requests)
+        else:
+            mine = exchanges
+            for ex in {id(ex): ex for ex in exchanges}.values():
+                if ex.line is not line or ex.world is not world or not ex._drive_steady():
+                    return None
         rows: list[list[float]] = []
-        made: list[tuple[Any, Any]] = []
+        made: list[Any] = []  # per request: a write's reply and firmware items, a read's plan
         written: dict[int, dict[str, int]] = {}
-        steady: set[int] = set()
         group = world.group
         for ex, r in zip(mine, requests):
-            if id(ex) not in steady:
-                if ex.line is not line or ex.world is not world or not ex._steady():
+            if type(r) is mb.ReadHoldingRegisters:
+                got = ex._read_row(r, size, check)
+                if got is None:
                     return None
-                steady.add(id(ex))
-            shape = ex._shape(r, size)
-            if shape is None:
-                return None
-            got = ex._row(r, shape, written.setdefault(id(ex), {}), check)
-            if got is None:
-                return None
+                row, extra = got
+                made.append(extra)
+            else:
+                shape = ex._shape(r, size)
+                if shape is None or shape.op == READ:
+                    return None
+                wrote = ex._row(r, shape, written.setdefault(id(ex), {}), check)
+                if wrote is None:
+                    return None
+                row = wrote[0]
+                made.append(wrote[1:])
             turn = ex.bus.message_turnaround(r)
-            row = got[0]
             row[TURN] = line.turnaround if turn is None else turn
             row[ROW] = float(ex._first_row(group, ex.firmware))
             rows.append(row)
-            made.append((got[1], got[2]))
         with world.lock:
             now = L.clear(line)
             if now is None:
@@ -249,16 +282,19 @@ class ErobExchange(L.Carrier):
             outs = self.carry(fn, world, line, now, rows)
             replies: list[Any] = []
             self.clocks = clocks = []
-            for ex, r, t, o, (reply, extra) in zip(mine, requests, rows, outs, made):
+            frames: list[tuple[float, float, float, int, str, Any]] = []
+            for ex, r, t, o, extra in zip(mine, requests, rows, outs, made):
                 if t[OP] == READ:
-                    plan = extra
-                    values = plan[0].finish(list(map(int, o[STATUS_AT:SENSED_AT])), dict(zip(SENSED, o[SENSED_AT:])))
-                    reply = mb.ReadRegistersReply(r.slave, r.function, ModbusFront.pack(plan, values, r.count))
+                    values = extra[0].finish(list(map(int, o[STATUS_AT:SENSED_AT])), dict(zip(SENSED, o[SENSED_AT:])))
+                    reply = mb.ReadRegistersReply(r.slave, r.function, ModbusFront.pack(extra, values, r.count))
                 else:
-                    ex.firmware._keep(extra)  # the parameter store's part (the row's ran in the call)
+                    reply, items = extra
+                    ex.firmware._keep(items)  # the parameter store's part (the row's ran in the call)
                 replies.append(reply)
                 clocks.append(o[CLOCK_AFTER])
-            L.book(line, rows, outs, replies)
+                frames.append((o[L.H_START], o[L.H_END], o[L.H_DUE], int(t[L.REQUEST]), "host", None))
+                frames.append((o[L.D_START], o[L.D_END], o[L.D_SEEN], int(t[L.REPLY]), "device", reply))
+            line.book_frames(frames)  # (joints.sim.line_exchange.book, in the same pass)
         self.taken += 1
         return replies
 
