@@ -281,6 +281,11 @@ class World:
         self._booked = False  #: time is booked on the clock that the physics has not run yet (:meth:`book`)
         #: of it, the last is a sleep's (:meth:`hold`): its substeps run on their own, before any other advance
         self._held = False
+        #: the clock's sleep books its time (:meth:`hold`) instead of stepping at once (:meth:`advance`): for a
+        #: world every medium of which settles it (``clock.settle``) before a drive acts on a frame - set by the
+        #: compiled path (:class:`joints.CompiledPath`) over the one-call exchanges' timed lines; an ideal
+        #: (untimed) transport hands frames to the drives without settling
+        self.hold_sleeps = False
         #: the drives' loops run compiled (numba; :mod:`joints.sim.kernel`) - default: when installed
         self.compiled = kernel.default_mode() if jit is None else bool(jit and kernel.AVAILABLE)
         self.mujoco = mj
@@ -322,7 +327,7 @@ class World:
         self.steps = 0
         self._target = 0.0
         self.clock = ManualClock()
-        self.clock.bind(self.hold, on_book=self.book, on_settle=self.sync)
+        self.clock.bind(self._sleep, on_book=self.book, on_settle=self.sync)
         addr: dict[str, tuple[int, int, int]] = {}
         ratios: dict[str, float] = {}
         for d in drives:
@@ -587,11 +592,19 @@ class World:
             self._booked = True
             self.clock.set(self._target)
 
+    def _sleep(self, seconds: float) -> None:
+        """The clock's sleep: :meth:`hold` where :attr:`hold_sleeps`, else :meth:`advance`."""
+        if self.hold_sleeps:
+            self.hold(seconds)
+        else:
+            self.advance(seconds)
+
     def hold(self, seconds: float) -> None:
-        """The clock's sleep: :meth:`advance` by ``seconds``, its physics run lazily - at the next :meth:`sync`
-        (any access to the physics or a twin, a medium about to hand a frame to a drive), or at the start of the
-        next :meth:`advance`/:meth:`book` or one-call exchange (:mod:`joints.sim.line_exchange`), on its own:
-        the same substeps as :meth:`advance` runs now, counted the same way. A world with ticks advances at once."""
+        """:meth:`advance` by ``seconds``, its physics run lazily - at the next :meth:`sync` (any access to the
+        physics or a twin, a timed medium about to hand a frame to a drive), or at the start of the next
+        :meth:`advance`/:meth:`book` or one-call exchange (:mod:`joints.sim.line_exchange`), on its own: the
+        same substeps as :meth:`advance` runs now, counted the same way. A world with ticks advances at once.
+        The clock's sleep where :attr:`hold_sleeps`."""
         if seconds <= 0:
             return
         if self._ticks:
@@ -751,6 +764,10 @@ class World:
         """Book ``seconds`` more on the world's target time: the substeps that are now due."""
         self._target += seconds
         return math.ceil((self._target - self.time) / self.timestep - 1e-9)
+
+    def emulators(self) -> list[Any]:
+        """Every drive's twin, once each."""
+        return self._emulators()
 
     def _emulators(self) -> list[Any]:
         seen: dict[int, Any] = {}
