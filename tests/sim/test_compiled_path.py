@@ -417,3 +417,32 @@ def test_a_refusal_in_a_batch_is_raised_after_the_joints_before_it_were_sent() -
             runs.append((_frames(link), link.transactions, _images(u), u.rig.time,
                          [j.last_contact for j in js]))
     assert runs[0] == runs[1]
+
+
+def test_a_batch_checks_every_drive_not_only_the_first() -> None:
+    """The arm's batch goes in one call only where every drive in it is steady: joint 2's firmware replaced (a
+    subclass: not the stock one) - the batch goes joint by joint (joints 1 and 3 each in their own call, joint 2
+    the usual way), with the driver path's bits."""
+    from joints.sim.erob import ErobFirmware
+
+    class Replaced(ErobFirmware):
+        pass
+
+    runs = []
+    for compiled in (True, False):
+        with gym.make("joints/ErobArmReach-v0", compiled_path=compiled, action_mode="position") as env:
+            u: Any = env.unwrapped
+            env.reset(seed=0)
+            u.rig.sim.drives[u.joint_names[1]].__class__ = Replaced
+            fused = u.compiled_path.fused if compiled else 0
+            rng = np.random.default_rng(1)
+            out = []
+            for _ in range(4):
+                obs, reward, _term, _trunc, _info = env.step(
+                    rng.uniform(-1.0, 1.0, env.action_space.shape).astype(np.float32))
+                out.append((obs.tobytes(), reward))
+            if compiled and kernel.default_mode():  # per step: joints 1 and 3's target + start and read
+                assert u.compiled_path.fused - fused == 4 * (2 * 2 + 2)
+            link = _links(u)[0]
+            runs.append((out, _frames(link), link.transactions, _images(u), u.rig.time, u.rig.sim.steps))
+    assert runs[0] == runs[1]
