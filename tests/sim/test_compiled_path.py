@@ -446,3 +446,21 @@ def test_a_batch_checks_every_drive_not_only_the_first() -> None:
             link = _links(u)[0]
             runs.append((out, _frames(link), link.transactions, _images(u), u.rig.time, u.rig.sim.steps))
     assert runs[0] == runs[1]
+
+
+def test_the_status_reads_shape_is_kept_for_that_request_only() -> None:
+    """The one-call exchange keeps the status read's shape by the request's identity: another FC03 (the same block
+    for another slave) is not taken from it (nothing sent: None), the status read still is."""
+    if not kernel.default_mode():
+        pytest.skip("the one-call exchange needs the compiled world")
+    with gym.make("joints/ErobReach-v0") as env:
+        u: Any = env.unwrapped
+        env.reset(seed=0)
+        s = u.compiled_path._steppers[0]
+        status = s.status
+        other = type(status)(status.slave + 1, status.address, status.count)
+        assert s.lane.exchange(s.exchange.run, (status,), idempotent=True) is not None
+        transactions = s.link.transactions
+        assert s.lane.exchange(s.exchange.run, (other,), idempotent=True) is None
+        assert s.link.transactions == transactions
+        assert s.lane.exchange(s.exchange.run, (status,), idempotent=True) is not None
