@@ -26,12 +26,13 @@ from joints.sim.stepping import EROB, STEPS, ZLAC
 
 __all__ = ["Carrier", "advance", "book", "clear", "compiled", "exchanges", "fill", "fused", "stock", "world_fused"]
 
-#: columns of the state vector: the clock's time, the world's target time, whether time is booked (:data:`HELD`:
-#: the last of it a sleep's, ``World.hold``), the line's
-#: time, the time the line last saw on the clock, when the host's / device's UART is free, the line's character
-#: time, gap, adapter latency, the world's timestep
+#: columns of the state vector: the clock's time, the world's target time, whether time is booked (1, or
+#: :data:`HELD`), the line's time, the time the line last saw on the clock, when the host's / device's UART is
+#: free, the line's character time, gap, adapter latency, the world's timestep
 CLOCK, TARGET, BOOKED, NOW, SEEN, FREE_HOST, FREE_DEVICE, CHAR, GAP, LATENCY, DT = range(11)
 STATE_WIDTH = 11
+#: :data:`BOOKED` of a world whose booked time ends with a sleep's (``World.hold``): its substeps run on their own
+#: before an advance (as ``World.advance`` runs them), never merged with it
 HELD = 2.0
 #: columns of a transaction row: the family's kind, its drive's (first) row in the table, request characters,
 #: turnaround [s], reply characters; then the family's own from :data:`ARGS`
@@ -160,8 +161,8 @@ def fill(st: Any, world: Any, line: Any, now: float) -> None:
     """The state vector of ``world``, its clock and ``line`` (its time ``now``)."""
     free = line._free
     st[:] = (world.clock.now(), world._target, (HELD if world._held else 1.0) if world._booked else 0.0, now,
-             line._clock_seen, free["host"],
-             free["device"], line.char_time, line.gap, line.adapter_latency, world.timestep)
+             line._clock_seen, free["host"], free["device"], line.char_time, line.gap, line.adapter_latency,
+             world.timestep)
 
 
 def fused(fn: Any, world: Any, st: Any, *head: Any) -> list[float]:
