@@ -53,7 +53,7 @@ from joints.devices.erob.registers import (
     MotionStatus,
     OperationMode,
 )
-from joints.devices.erob.state import ENABLE_DELAY, ENABLED, DriveState, Event
+from joints.devices.erob.state import ENABLE_DELAY, ENABLED, Event
 from joints.devices.erob.state import step as transition
 from joints.errors import ParameterRefused, Refusal
 from joints.sim import erob_kernel as K
@@ -67,7 +67,6 @@ from joints.sim.erob_kernel import (
     SUPERVISION_PERIOD,
 )
 from joints.sim.firmware import Firmware
-from joints.sim.rowattr import column, flag
 from joints.sim.sensors import Sensor, model_of
 
 __all__ = [
@@ -167,7 +166,8 @@ _REPETITIVE = int(MotionMode.REPETITIVE)
 
 
 class _Generator:
-    """The profile generator's state (columns of the firmware's row), as attributes."""
+    """The profile generator's columns by their short names: ``fw.gen.active`` is ``fw.gen_active`` (declared in
+    :class:`joints.sim.erob_kernel.Columns`)."""
 
     __slots__ = ("_fw",)
 
@@ -176,26 +176,26 @@ class _Generator:
 
     @property
     def active(self) -> bool:
-        return bool(self._fw._get(K.G_ACTIVE) != 0.0)
+        return self._fw.gen_active
 
     @property
     def target(self) -> float:
-        return float(self._fw._get(K.G_TARGET))
+        return self._fw.gen_target
 
     @property
     def continuous(self) -> bool:
-        return bool(self._fw._get(K.G_CONTINUOUS) != 0.0)
+        return self._fw.gen_continuous
 
     @property
     def stopping(self) -> bool:
-        return bool(self._fw._get(K.G_STOPPING) != 0.0)
+        return self._fw.gen_stopping
 
     @property
     def rate(self) -> float:
-        return float(self._fw._get(K.G_RATE))
+        return self._fw.gen_rate
 
 
-class ErobFirmware(Firmware):
+class ErobFirmware(Firmware, K.Columns):
     """One eRob's firmware, coupled to one simulated joint.
 
     ``address`` is the power-on value of ``modbus_address``; ``inertia`` the J the drive's gains
@@ -294,78 +294,12 @@ class ErobFirmware(Firmware):
         """Which of the twin's rows steps ``channel``'s joint."""
         return 0
 
-    time = column(K.TIME, "drive time [s]: the end of the last substep")
-    pos = column(K.POS, "encoder [count], before the offset")
-    vel = column(K.VEL, "speed [count/s]")
-    p_ref = column(K.P_REF)
-    v_ref = column(K.V_REF)
-    v_cmd = column(K.V_CMD)
-    i_cmd = column(K.I_CMD, "mA")
-    i_out = column(K.I_OUT, "mA")
-    integ = column(K.INTEG)
-    mode_speed_target = column(K.MODE_SPEED_TARGET)
-    repeat_home = column(K.REPEAT_HOME)
-    repeat_leg_to_target = flag(K.REPEAT_LEG_TO_TARGET)
-    repeat_stop = flag(K.REPEAT_STOP)
-    dwell_until = column(K.DWELL_UNTIL)
-    in_window_since = column(K.IN_WINDOW_SINCE)
-    peak_since = column(K.PEAK_SINCE)
-    stall_since = column(K.STALL_SINCE)
-    temperature = column(K.TEMPERATURE, "power stage [degC]")
-    brake_released = flag(K.BRAKE_RELEASED, "released by command while the motor is off: nothing holds the joint")
-    last_frame = column(K.LAST_FRAME)
-    started = flag(K.STARTED)
-    #: a set-point stream drives the position reference (CiA 402 CSP/IP over CANopen): between
-    #: set-points the reference moves on at v_ref (linear interpolation); set by a protocol front
-    streaming = flag(K.STREAMING)
-    stream_goal = column(K.STREAM_GOAL, "the newest streamed set-point [count]: the reference stops there")
-    enabled_at = column(K.ENABLED_AT)
-    watchdog = column(K.WATCHDOG, "s, 0 = off")
-    kp = column(K.KP)
-    kv = column(K.KV)
-    ki = column(K.KI)
-    vmax = column(K.VMAX)
-
-    @property
-    def state(self) -> DriveState:
-        return K.STATES[int(self._get(K.STATE))]
-
-    @state.setter
-    def state(self, value: DriveState) -> None:
-        self._row[K.STATE] = float(K.STATES.index(value))
-
-    @property
-    def fault(self) -> int:
-        """The latched error code (0x0027 or a fault), 0 = none."""
-        return int(self._get(K.FAULT_CODE))
-
-    @fault.setter
-    def fault(self, value: int) -> None:
-        self._row[K.FAULT_CODE] = float(value)
-
-    @property
-    def mode(self) -> int:
-        """The operation mode in force (0x0040)."""
-        return int(self._get(K.MODE))
-
-    @property
-    def offset(self) -> int:
-        """The position offset in force (0x0052)."""
-        return int(self._get(K.OFFSET))
-
-    @property
-    def brake_hold(self) -> float | None:
-        """Where the brake holds [count]; None: where the joint is when it engages."""
-        at = float(self._get(K.BRAKE_HOLD))
-        return None if math.isnan(at) else at
-
-    @brake_hold.setter
-    def brake_hold(self, value: float | None) -> None:
-        self._row[K.BRAKE_HOLD] = math.nan if value is None else float(value)
+    # the row's columns are attributes of the twin: declared once, in :class:`joints.sim.erob_kernel.Columns`
 
     # -- power-on state ---------------------------------------------------------------------
     def _reset_state(self) -> None:
         s = self._row
+        kt, ambient = float(self.kt), float(self.ambient)  # the drive's constants (columns too) stay
         for k in range(K.WIDTH):
             s[k] = 0.0
         s[K.STATE] = K.MOTOR_OFF
@@ -376,12 +310,12 @@ class ErobFirmware(Firmware):
         s[K.IN_WINDOW_SINCE] = -1.0
         s[K.PEAK_SINCE] = -1.0
         s[K.STALL_SINCE] = -1.0
-        s[K.TEMPERATURE] = float(self.ambient)
+        s[K.TEMPERATURE] = ambient
         s[K.BRAKE_HOLD] = math.nan
         s[K.LAST_FRAME] = -1.0
-        s[K.KT] = float(self.kt)
+        s[K.KT] = kt
         s[K.RATED_CURRENT] = float(self.profile.rated_current)
-        s[K.AMBIENT] = float(self.ambient)
+        s[K.AMBIENT] = ambient
         self._cache_settings()
 
     def power_cycle(self) -> None:

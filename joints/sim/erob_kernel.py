@@ -25,8 +25,9 @@ from joints.devices.erob import faults
 from joints.devices.erob.registers import COUNTS_PER_REV, AchieveStatus, MotionMode, OperationMode
 from joints.devices.erob.state import ENABLE_DELAY, TRANSITIONS, DriveState, Event
 from joints.devices.motion import Arrival, move_step, ramp
-from joints.sim import kernel
+from joints.sim import kernel, rowattr
 from joints.sim.kernel import jitable
+from joints.sim.rowattr import Code, Flag, Int, Maybe, Real
 
 Row = MutableSequence[float]
 
@@ -74,108 +75,107 @@ A_WAIT_TIME = int(AchieveStatus.WAIT_TIME)
 A_TARGET_REACHED = int(AchieveStatus.TARGET_REACHED)
 
 # -- columns ---------------------------------------------------------------------------------------
-_names: list[str] = []
+class Columns(rowattr.Columns):
+    """The eRob's row (one per drive), declared once: the index constants below and the twin's attributes
+    (:class:`joints.sim.erob.ErobFirmware` inherits this class) come from here. Counts are the encoder's
+    (before the position offset); -1 in a "since"/"until"/"at" column means "not running"."""
+
+    # working state
+    time = Real("drive time [s]: the end of the last substep")
+    pos = Real("encoder [count], before the offset")
+    vel = Real("speed [count/s]")
+    p_ref = Real("position reference of the profile generator [count]")
+    v_ref = Real("speed reference of the profile generator / speed ramp [count/s]")
+    v_cmd = Real("speed command of the position loop (reference + Kp * error), limited [count/s]")
+    i_cmd = Real("current command [mA]")
+    i_out = Real("output current [mA]")
+    integ = Real("speed-loop integral of the speed error [count]")
+    mode_speed_target = Real("speed mode's target speed, limited to vmax [count/s]")
+    gen_active = Flag("the profile generator: a move is running", const="G_ACTIVE")
+    gen_target = Real("the profile generator's target [count]", const="G_TARGET")
+    gen_continuous = Flag("the profile generator runs at the profile speed with no target (continuous motion)",
+                          const="G_CONTINUOUS")
+    gen_stopping = Flag("the profile generator decelerates to a stop", const="G_STOPPING")
+    gen_rate = Real("the profile generator's deceleration override (emergency stop) [count/s^2], 0 = none",
+                    const="G_RATE")
+    repeat_home = Real("repetitive motion: where it started, the leg back's end [count]")
+    repeat_leg_to_target = Flag("repetitive motion: the present leg goes to the target (else back home)")
+    repeat_stop = Flag("repetitive motion: stop at the end of the present leg (stop_repetitive_motion)")
+    dwell_until = Real("repetitive motion: drive time the dwell between legs ends [s], -1 = none")
+    in_window_since = Real("drive time the position entered the arrival window (position_reaches_set_precision) [s], -1 = outside")
+    peak_since = Real("drive time the current went above the continuous current [s], -1 = below")
+    stall_since = Real("drive time the stall condition (struck_current, struck_speed) began [s], -1 = none")
+    temperature = Real("power stage [degC]")
+    brake_hold = Maybe("where the brake holds [count]; None (NaN in the row): where the joint is when it engages")
+    brake_released = Flag("released by command while the motor is off: nothing holds the joint")
+    last_frame = Real("drive time of the last frame addressed to the drive [s], -1 = none (watchdog)")
+    started = Flag("a start (start_operating) is in force: the settle timer and the repetitive legs run")
+    streaming = Flag("a set-point stream drives the position reference (CiA 402 CSP/IP over CANopen, set by a "
+                     "protocol front): between set-points the reference moves on at v_ref (linear interpolation)")
+    stream_goal = Real("the newest streamed set-point [count]: the reference stops there, never past it")
+    sup = Real("drive time since the last slow task (supervision) [s]")
+    state = Code(STATES, "the drive state (held as its code in :data:`STATES`)")
+    enabled_at = Real("drive time of the last enable [s], -1 = never (the brake's release delay)")
+    fault = Int("the latched error code (0x0027 or a fault), 0 = none", const="FAULT_CODE")
+    # loop settings (from the parameters, refreshed on every write of one of them)
+    mode = Int("the operation mode in force (0x0040)")
+    watchdog = Real("communication timeout [s], 0 = off (modbus_communication_timeout_duration)")
+    max_position_error = Real("following-error limit [count], 0 = off")
+    max_speed_error = Real("speed-error limit [count/s], 0 = off")
+    offset = Int("the position offset in force [count] (position_offset)")
+    kp = Real("position-loop gain [1/s] (position_loop_gain / 10)")
+    kv = Real("speed-loop gain [mA per count/s], from speed_loop_gain and the tuned-for inertia")
+    ki = Real("speed-loop integral gain [mA per count], kv / the integral time (speed_loop_integral)")
+    kff = Real("acceleration feed-forward [mA per count/s^2], from the tuned-for inertia")
+    i_cont = Real("continuous current [mA]")
+    i_peak = Real("peak current [mA]")
+    i_max = Real("the motor's maximum current [mA]")
+    peak_time = Real("how long the peak current may last [s]")
+    i_lim = Real("current limit: the smaller of peak and maximum current [mA]")
+    brake_k = Real("holding brake stiffness [N*m/rad]")
+    brake_c = Real("holding brake damping [N*m*s/rad]")
+    brake_hold_torque = Real("torque above which the holding brake slips [N*m]")
+    vmax = Real("maximum speed [count/s]")
+    amax = Real("maximum acceleration [count/s^2]")
+    acc = Real("profile acceleration [count/s^2] (the maximum where the parameter is 0)")
+    dec = Real("profile deceleration [count/s^2] (the maximum where the parameter is 0)")
+    speed = Real("profile speed, signed [count/s]")
+    vprof = Real("profile speed magnitude, limited to vmax [count/s]")
+    # constants of the drive
+    kt = Real("torque constant at the output [N*m/A]")
+    rated_current = Real("rated current [A] (the thermal model's scale)")
+    ambient = Real("ambient temperature [degC]")
+    # parameters the loops read (kept equal to the firmware's values, in the parameter's own unit)
+    motion_mode = Real("motion mode (0x0041)", param=True)
+    dwell_time = Real("repetitive motion's dwell [0.05 ms]", param=True)
+    target_absolute_position = Real("absolute target [count]", param=True, const="TARGET_ABSOLUTE")
+    min_position_limit_value = Real("lower position limit [count]", param=True, const="MIN_LIMIT")
+    max_position_limit_value = Real("upper position limit [count]", param=True, const="MAX_LIMIT")
+    struck_current = Real("stall detection: current above [mA]", param=True)
+    struck_speed = Real("stall detection: speed below [count/s]", param=True)
+    struck_time = Real("stall detection: for longer than [0.05 ms]", param=True)
+    power_temperature_protection_value = Real("over-temperature limit [degC], 0 = off", param=True,
+                                              const="TEMP_PROTECTION")
+    target_current = Real("torque mode's target current [mA]", param=True)
+    torque_control_mode_max_speed = Real("torque mode's speed limit [count/s]", param=True,
+                                         const="TORQUE_MAX_SPEED")
+    position_reaches_set_precision = Real("arrival window [count]", param=True, const="PRECISION")
+    time_setting_of_achieving_position = Real("settle time in the window [0.05 ms]", param=True,
+                                              const="SETTLE_TIME")
 
 
-def _column(name: str) -> int:
-    _names.append(name)
-    return len(_names) - 1
-
-
-# working state
-TIME = _column("time")
-POS = _column("pos")  #: counts (encoder, before offset)
-VEL = _column("vel")  #: count/s
-P_REF = _column("p_ref")
-V_REF = _column("v_ref")
-V_CMD = _column("v_cmd")
-I_CMD = _column("i_cmd")  #: mA
-I_OUT = _column("i_out")
-INTEG = _column("integ")
-MODE_SPEED_TARGET = _column("mode_speed_target")
-G_ACTIVE = _column("gen.active")  #: the profile generator: a move is running
-G_TARGET = _column("gen.target")
-G_CONTINUOUS = _column("gen.continuous")
-G_STOPPING = _column("gen.stopping")
-G_RATE = _column("gen.rate")  #: deceleration override (emergency stop), 0 = none
-REPEAT_HOME = _column("repeat_home")
-REPEAT_LEG_TO_TARGET = _column("repeat_leg_to_target")
-REPEAT_STOP = _column("repeat_stop")
-DWELL_UNTIL = _column("dwell_until")
-IN_WINDOW_SINCE = _column("in_window_since")
-PEAK_SINCE = _column("peak_since")
-STALL_SINCE = _column("stall_since")
-TEMPERATURE = _column("temperature")
-BRAKE_HOLD = _column("brake_hold")  #: counts where the brake holds; NaN = where the joint is when it engages
-BRAKE_RELEASED = _column("brake_released")
-LAST_FRAME = _column("last_frame")
-STARTED = _column("started")
-STREAMING = _column("streaming")  #: set-points stream in (CANopen CSP/IP): p_ref moves on at v_ref between them
-STREAM_GOAL = _column("stream_goal")  #: the newest streamed set-point (counts): p_ref stops there, never past it
-SUP = _column("sup")  #: drive time since the last slow task
-STATE = _column("state")  #: code of :data:`STATES`
-ENABLED_AT = _column("enabled_at")
-FAULT_CODE = _column("fault")
-# loop settings (from the parameters, refreshed on every write of one of them)
-MODE = _column("mode")
-WATCHDOG = _column("watchdog")
-MAX_POSITION_ERROR = _column("max_position_error")
-MAX_SPEED_ERROR = _column("max_speed_error")
-OFFSET = _column("offset")
-KP = _column("kp")
-KV = _column("kv")
-KI = _column("ki")
-KFF = _column("kff")
-I_CONT = _column("i_cont")
-I_PEAK = _column("i_peak")
-I_MAX = _column("i_max")
-PEAK_TIME = _column("peak_time")
-I_LIM = _column("i_lim")
-BRAKE_K = _column("brake_k")
-BRAKE_C = _column("brake_c")
-BRAKE_HOLD_TORQUE = _column("brake_hold_torque")
-VMAX = _column("vmax")
-AMAX = _column("amax")
-ACC = _column("acc")
-DEC = _column("dec")
-SPEED = _column("speed")
-VPROF = _column("vprof")
-# constants of the drive
-KT = _column("kt")
-RATED_CURRENT = _column("rated_current")
-AMBIENT = _column("ambient")
-# parameters the loops read (kept equal to the firmware's values by name)
-PARAMS = {
-    "motion_mode": _column("motion_mode"),
-    "dwell_time": _column("dwell_time"),
-    "target_absolute_position": _column("target_absolute_position"),
-    "min_position_limit_value": _column("min_position_limit_value"),
-    "max_position_limit_value": _column("max_position_limit_value"),
-    "struck_current": _column("struck_current"),
-    "struck_speed": _column("struck_speed"),
-    "struck_time": _column("struck_time"),
-    "power_temperature_protection_value": _column("power_temperature_protection_value"),
-    "target_current": _column("target_current"),
-    "torque_control_mode_max_speed": _column("torque_control_mode_max_speed"),
-    "position_reaches_set_precision": _column("position_reaches_set_precision"),
-    "time_setting_of_achieving_position": _column("time_setting_of_achieving_position"),
-}
-MOTION_MODE = PARAMS["motion_mode"]
-DWELL_TIME = PARAMS["dwell_time"]
-TARGET_ABSOLUTE = PARAMS["target_absolute_position"]
-MIN_LIMIT = PARAMS["min_position_limit_value"]
-MAX_LIMIT = PARAMS["max_position_limit_value"]
-STRUCK_CURRENT = PARAMS["struck_current"]
-STRUCK_SPEED = PARAMS["struck_speed"]
-STRUCK_TIME = PARAMS["struck_time"]
-TEMP_PROTECTION = PARAMS["power_temperature_protection_value"]
-TARGET_CURRENT = PARAMS["target_current"]
-TORQUE_MAX_SPEED = PARAMS["torque_control_mode_max_speed"]
-PRECISION = PARAMS["position_reaches_set_precision"]
-SETTLE_TIME = PARAMS["time_setting_of_achieving_position"]
-
-WIDTH = len(_names)  #: columns of an eRob row
-COLUMNS = tuple(_names)
+#: the columns' index constants, in the declared order (plain ints: numba compiles them in; checked at import)
+(TIME, POS, VEL, P_REF, V_REF, V_CMD, I_CMD, I_OUT, INTEG, MODE_SPEED_TARGET, G_ACTIVE, G_TARGET, G_CONTINUOUS,
+ G_STOPPING, G_RATE, REPEAT_HOME, REPEAT_LEG_TO_TARGET, REPEAT_STOP, DWELL_UNTIL, IN_WINDOW_SINCE, PEAK_SINCE,
+ STALL_SINCE, TEMPERATURE, BRAKE_HOLD, BRAKE_RELEASED, LAST_FRAME, STARTED, STREAMING, STREAM_GOAL, SUP, STATE,
+ ENABLED_AT, FAULT_CODE, MODE, WATCHDOG, MAX_POSITION_ERROR, MAX_SPEED_ERROR, OFFSET, KP, KV, KI, KFF, I_CONT, I_PEAK,
+ I_MAX, PEAK_TIME, I_LIM, BRAKE_K, BRAKE_C, BRAKE_HOLD_TORQUE, VMAX, AMAX, ACC, DEC, SPEED, VPROF, KT, RATED_CURRENT,
+ AMBIENT, MOTION_MODE, DWELL_TIME, TARGET_ABSOLUTE, MIN_LIMIT, MAX_LIMIT, STRUCK_CURRENT, STRUCK_SPEED, STRUCK_TIME,
+ TEMP_PROTECTION, TARGET_CURRENT, TORQUE_MAX_SPEED, PRECISION, SETTLE_TIME) = rowattr.indices(Columns)
+WIDTH = rowattr.bind(globals(), Columns)  #: columns of an eRob row
+COLUMNS = rowattr.names(Columns)
+#: the parameters the loops read: name -> its column (kept equal to the firmware's values by name)
+PARAMS = rowattr.params(Columns)
 
 
 # -- helpers shared with the firmware object --------------------------------------------------------

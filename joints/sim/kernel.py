@@ -2,9 +2,11 @@
 
 Rule: a twin's loops are plain Python functions over rows of a table (one row of floats per drive
 or channel: its working state, its loop settings and the parameters the loops read), written in
-the subset of Python that numba compiles. With numba installed (the ``fast`` extra) the entry
-points are compiled (:func:`compiled`) and the helpers they call are compiled into them
-(:func:`jitable`); without it - or with ``JOINTS_COMPILED=0`` (the old ``JOINTS_JIT=0`` too) - the very same functions run as Python,
+the subset of Python that numba compiles. With numba installed (the ``compiled`` extra; ``fast``, its older
+name, still installs it) the entry points are compiled (:func:`compiled`; a twin's helpers once per process:
+:func:`compiled_ops`) and the helpers they call are compiled into them (:func:`jitable`, numba's word for
+such a helper); without it - or with ``JOINTS_COMPILED=0`` (the older ``JOINTS_JIT=0`` too), or
+``World(compiled=False)`` - the very same functions run as Python,
 on tables of Python lists instead of numpy arrays (plain floats are what Python is fast with).
 Both give the same bits: only IEEE double arithmetic, no fused multiply-add, no fast-math.
 
@@ -36,7 +38,7 @@ def _load(name: str) -> Any:
         return None
 
 
-numba: Any = _load("numba")  # the optional `fast` extra
+numba: Any = _load("numba")  # the optional `compiled` extra
 _extending: Any = _load("numba.extending") if numba is not None else None
 register_jitable: Any = _extending.register_jitable if _extending is not None else None
 

@@ -12,8 +12,8 @@ substep) the world steps substep by substep from Python: :func:`substep` runs th
 through the same :func:`step_row`. Every path gives the same bits.
 
 Rows are stepped in the order of the worlds' joints (as a world has always stepped its drives);
-each stepped row's kind, MuJoCo addresses, world and the rows its loops reach besides its own
-are in :attr:`Group.adr` (columns :data:`KIND` ... :data:`C`); each world's addresses and
+each stepped row's kind, MuJoCo addresses, world and its twin's first row are in :attr:`Group.adr`
+(columns :data:`KIND` ... :data:`FIRST`); each world's addresses and
 step count in :attr:`Group.worlds_table` (columns :data:`STEPS` ... :data:`NU`).
 """
 
@@ -27,12 +27,15 @@ from joints.sim.kernel import jitable
 
 __all__ = ["CHUNK", "KINDS", "Group", "has_kernel", "step_row", "substep"]
 
-#: the kernel kinds (each kernel module's ``KIND``; a kernel-backed twin's ``KERNEL`` is one of them)
+#: the kernel kinds (each kernel module's ``KIND``; a kernel-backed twin's ``KERNEL`` is one of them: the twin a
+#: device family of :mod:`joints.registry` builds says which kernel it runs, nothing here names a device)
 EROB, ZLAC = erob_kernel.KIND, zlac_kernel.KIND
 KINDS = (EROB, ZLAC)
-#: columns of :attr:`Group.adr`
-KIND, QPOS, DOF, ACT, WORLD, A, B, C = range(8)
-ADR_WIDTH = 8
+#: columns of :attr:`Group.adr`, one row per kernel row: its kind (its twin's ``KERNEL``), the MuJoCo addresses of
+#: its joint (``qpos``, ``qvel`` and ``ctrl`` index), its world, and the first of its twin's rows (a ZLAC
+#: channel's loops read the drive's row there)
+KIND, QPOS, DOF, ACT, WORLD, FIRST = range(6)
+ADR_WIDTH = 6
 #: columns of :attr:`Group.worlds_table`
 STEPS, MODEL, DATA, QPOS_AT, NQ, QVEL_AT, NV, CTRL_AT, NU = range(9)
 WORLD_WIDTH = 9
@@ -56,8 +59,8 @@ def step_row(table: Any, adr: Any, i: int, t: float, dt: float, q: float, qd: fl
     kind = a[KIND]
     if kind == EROB:
         return erob_kernel.step(table[i], t, dt, q, qd)
-    if kind == ZLAC:  # a channel row; A: the drive's first row
-        first = a[A]
+    if kind == ZLAC:  # a channel row; the drive's row is its twin's first
+        first = a[FIRST]
         return zlac_kernel.step(table, first, i - first - 1, t, dt, q, qd)
     return 0.0
 
@@ -137,7 +140,7 @@ class Group:
                         ratio.append(1.0)
                     self._owners.append((twin, first))
                 i = first + twin.kernel_row(b.channel)
-                adr[i] = [twin.KERNEL, b.qadr, b.dadr, b.aid, w, first, 0, 0]
+                adr[i] = [twin.KERNEL, b.qadr, b.dadr, b.aid, w, first]
                 ratio[i] = b.ratio  # motor rad per joint unit (a slide on a lead screw)
                 self._row_of[(w, b.name)] = i
         width = max([len(r) for r in rows], default=1)

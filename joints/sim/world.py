@@ -29,6 +29,7 @@ import contextlib
 import logging
 import math
 import threading
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
@@ -276,7 +277,8 @@ class World:
 
     def __init__(self, model: str | Path, drives: Sequence[DriveSpec], *, buses: Mapping[str, BusSpec],
                  timestep: float = 0.001, base_dir: Path | None = None,
-                 kinematic: Mapping[str, str] | None = None, jit: bool | None = None) -> None:
+                 kinematic: Mapping[str, str] | None = None, compiled: bool | None = None,
+                 jit: bool | None = None) -> None:
         mj = _mujoco()
         self._booked = False  #: time is booked on the clock that the physics has not run yet (:meth:`book`)
         #: of it, the last is a sleep's (:meth:`hold`): its substeps run on their own, before any other advance
@@ -286,8 +288,12 @@ class World:
         #: compiled path (:class:`joints.CompiledPath`) over the one-call exchanges' timed lines; an ideal
         #: (untimed) transport hands frames to the drives without settling
         self.hold_sleeps = False
-        #: the drives' loops run compiled (numba; :mod:`joints.sim.kernel`) - default: when installed
-        self.compiled = kernel.default_mode() if jit is None else bool(jit and kernel.AVAILABLE)
+        if jit is not None:  # the older name of ``compiled``
+            warnings.warn("World(jit=...) is deprecated: use World(compiled=...)", DeprecationWarning, stacklevel=2)
+            compiled = jit if compiled is None else compiled
+        #: the drives' loops run compiled (numba; :mod:`joints.sim.kernel`) - default: when installed and not
+        #: turned off (``JOINTS_COMPILED=0``)
+        self.compiled = kernel.default_mode() if compiled is None else bool(compiled and kernel.AVAILABLE)
         self.mujoco = mj
         self.path = resolve_model(model, base_dir)
         spec = mj.MjSpec.from_file(str(self.path))

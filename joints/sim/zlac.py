@@ -174,7 +174,6 @@ from joints.devices.zlac.state import step as transition
 from joints.errors import ParameterRefused, Refusal
 from joints.sim import zlac_kernel as Z
 from joints.sim.firmware import Firmware
-from joints.sim.rowattr import column, flag
 from joints.sim.sensors import Sensor, model_of
 
 __all__ = [
@@ -256,7 +255,7 @@ def _ramp_seconds(ms: int) -> float:
     return max(ms * 1e-3, MIN_RAMP_TIME)
 
 
-class ZlacChannel:
+class ZlacChannel(Z.ChannelColumns):
     """One motor channel of the drive: its loops, motor model and protections.
 
     Its working state is row ``first + 1 + side`` of the drive's table (the loops are
@@ -294,62 +293,7 @@ class ZlacChannel:
         #: the row's values as Python floats (the list itself, or a numpy row's ``tolist``)
         self._values: Callable[[], list[float]] = (lambda: table[first + 1 + self.index]) if plain else self._row.tolist
 
-    fresh = flag(Z.FRESH, "the next step latches the encoder origin and the loops at q")
-    q = column(Z.Q, "wheel angle [rad] seen at the last step")
-    qd = column(Z.QD, "wheel speed [rad/s] seen at the last step")
-    origin = column(Z.ORIGIN, "raw angle [rad] where the position counter reads 0")
-    overload_time = column(Z.OVERLOAD_TIME)
-    i_out = column(Z.I_OUT, "motor current [A]")
-    temperature = column(Z.TEMPERATURE, "winding [degC]")
-    v_ref = column(Z.V_REF, "speed command of the ramp / profile [rad/s]")
-    v_target = column(Z.V_TARGET, "velocity-mode ramp target [rad/s]")
-    acc_slope = column(Z.ACC_SLOPE)
-    dec_slope = column(Z.DEC_SLOPE)
-    p_ref = column(Z.P_REF, "position command [rad]")
-    goal = column(Z.GOAL, "end point of the present / last move [rad]")
-    moving = flag(Z.MOVING, "a position move is in progress")
-    cruise = column(Z.CRUISE)
-    p_acc = column(Z.P_ACC)
-    p_dec = column(Z.P_DEC)
-    integ = column(Z.INTEG, "velocity-loop integral of the speed error [rad]")
-    lag = column(Z.LAG, "integral of (speed command - speed) [rad], velocity following error")
-    i_ref = column(Z.I_REF, "torque-mode current command after the slope [A]")
-    qs_slope = column(Z.QS_SLOPE)
-    cpr = column(Z.CPR)
-    counts_per_rad = column(Z.COUNTS_PER_RAD)
-    arrival_window = column(Z.ARRIVAL_WINDOW, "half a count [rad]")
-    acc_time = column(Z.ACC_TIME)
-    dec_time = column(Z.DEC_TIME)
-    qs_time = column(Z.QS_TIME)
-    torque_rate = column(Z.TORQUE_RATE, "A/s")
-    rated = column(Z.RATED)
-    peak = column(Z.PEAK)
-    overload_limit = column(Z.OVERLOAD_LIMIT)
-    follow_limit = column(Z.FOLLOW_LIMIT)
-    wv = column(Z.WV)
-    wi = column(Z.WI)
-    kfv = column(Z.KFV)
-    kpp = column(Z.KPP)
-    kfp = column(Z.KFP)
-    hall_offset = column(Z.HALL_OFFSET)
-    temp_limit = column(Z.TEMP_LIMIT)
-    target_speed = column(Z.TARGET_SPEED)
-    v_start = column(Z.V_START, "initial velocity [rad/s] (cached from 0x2043/0x2073)")
-    inertia = column(Z.INERTIA, "J [kg*m^2] the velocity-loop gains are scaled with (tuned for)")
-    kt = column(Z.KT)
-
-    @property
-    def fault(self) -> int:
-        """Fault bits (error code register)."""
-        return int(self._get(Z.FAULT_BITS))
-
-    @fault.setter
-    def fault(self, value: int) -> None:
-        self._row[Z.FAULT_BITS] = float(value)
-
-    @property
-    def poles(self) -> int:
-        return int(self._get(Z.POLES))
+    # the row's columns are attributes of the channel: declared once, in :class:`joints.sim.zlac_kernel.ChannelColumns`
 
     # -- state ----------------------------------------------------------------------------
     def reset_power(self) -> None:
@@ -505,7 +449,7 @@ class ZlacChannel:
         return self.drive.state in ENERGISED
 
 
-class ZlacFirmware(Firmware):
+class ZlacFirmware(Firmware, Z.DriveColumns):
     """One ZLAC8015D's firmware: two hub motors, ``left`` and ``right``, one state machine.
 
     ``address`` is the power-on value of ``rs485_node_id``.
@@ -529,12 +473,10 @@ class ZlacFirmware(Firmware):
         #: the firmware's quirks (joints.devices.quirks); default: the family's default firmware
         self.quirks = quirks if quirks is not None else firmware_profile("zlac8015d").quirks
         self.profile = profile
+        self._bind_rows([[0.0] * Z.WIDTH for _ in range(3)], 0)
         self.ambient = float(ambient)
         self.ramp_reference = ramp_reference_rpm * RPM if ramp_reference_rpm else None
-        self._bind_rows([[0.0] * Z.WIDTH for _ in range(3)], 0)
         d = self._drow
-        d[Z.D_AMBIENT] = self.ambient
-        d[Z.D_RAMP_REF] = math.nan if self.ramp_reference is None else self.ramp_reference
         d[Z.D_BACK_EMF] = float(profile.back_emf_constant)
         d[Z.D_BUS_VOLTAGE] = float(profile.bus_voltage)
         d[Z.D_PHASE_R] = float(profile.phase_resistance)
@@ -571,12 +513,14 @@ class ZlacFirmware(Firmware):
         self._table: Any = table
         self._first = first
         self._drow: Any = table[first]
+        self._row = self._drow  #: the drive's row, as its column attributes read it (``_get`` too)
         if isinstance(self._drow, list):
             self._dget: Callable[[int], float] = self._drow.__getitem__
             self._k: Any = Z.PY_OPS
         else:  # numpy rows: Python floats out, the helpers compiled
             self._dget = self._drow.item
             self._k = Z.compiled_ops()
+        self._get = self._dget
         for ch in getattr(self, "channels", ()):
             ch._bind(table, first)
 
@@ -604,59 +548,8 @@ class ZlacFirmware(Firmware):
         """Which of the twin's rows steps ``channel``'s joint."""
         return 1 + self.channel(channel or "left").index
 
-    @property
-    def state(self) -> DriveState:
-        return Z.STATES[int(self._dget(Z.D_STATE))]
-
-    @state.setter
-    def state(self, value: DriveState) -> None:
-        self._drow[Z.D_STATE] = float(Z.STATES.index(value))
-
-    @property
-    def time(self) -> float:
-        return float(self._dget(Z.D_TIME))
-
-    @time.setter
-    def time(self, value: float) -> None:
-        self._drow[Z.D_TIME] = float(value)
-
-    @property
-    def last_frame(self) -> float:
-        """Time of the last received frame (-1: none since power-on)."""
-        return float(self._dget(Z.D_LAST_FRAME))
-
-    @last_frame.setter
-    def last_frame(self, value: float) -> None:
-        self._drow[Z.D_LAST_FRAME] = float(value)
-
-    @property
-    def offline(self) -> bool:
-        """The offline watchdog tripped (until the next enable)."""
-        return bool(self._dget(Z.D_OFFLINE) != 0.0)
-
-    @offline.setter
-    def offline(self, value: bool) -> None:
-        self._drow[Z.D_OFFLINE] = 1.0 if value else 0.0
-
-    @property
-    def vmax(self) -> float:
-        return float(self._dget(Z.D_VMAX))
-
-    @property
-    def watchdog(self) -> float:
-        return float(self._dget(Z.D_WATCHDOG))
-
-    @property
-    def mode(self) -> int:
-        return int(self._dget(Z.D_MODE))
-
-    @property
-    def sync(self) -> int:
-        return int(self._dget(Z.D_SYNC))
-
-    @property
-    def quick_stop_option(self) -> int:
-        return int(self._dget(Z.D_QS_OPTION))
+    # the drive row's columns are attributes of the drive: declared once, in
+    # :class:`joints.sim.zlac_kernel.DriveColumns`
 
     # -- power -------------------------------------------------------------------------------
     def _power_on(self) -> None:

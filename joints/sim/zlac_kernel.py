@@ -20,9 +20,10 @@ from typing import Any
 from joints.devices.motion import Arrival, move_step, ramp
 from joints.devices.zlac.registers import ControlMode, Fault, QuickStopBehaviour
 from joints.devices.zlac.state import DriveState
-from joints.sim import kernel
+from joints.sim import kernel, rowattr
 from joints.sim.erob_kernel import fmax, fmin
 from joints.sim.kernel import jitable
+from joints.sim.rowattr import Code, Flag, Int, Maybe, Real
 
 Row = MutableSequence[float]
 Table = Sequence[Row]
@@ -53,31 +54,101 @@ OVER_LOAD = int(Fault.OVER_LOAD)
 MOTOR_OVER_TEMPERATURE = int(Fault.MOTOR_OVER_TEMPERATURE)
 
 # -- the drive's row ----------------------------------------------------------------------------------
-DRIVE_COLUMNS = ("time", "state", "last_frame", "offline", "ticked", "vmax", "watchdog", "mode", "sync",
-                 "quick_stop_option", "ramp_reference", "ambient", "back_emf_constant", "bus_voltage",
-                 "phase_resistance", "motor_rated_current", "connected")
+class DriveColumns(rowattr.Columns):
+    """The drive's row, declared once: the ``D_`` index constants below and the drive's attributes
+    (:class:`joints.sim.zlac.ZlacFirmware` inherits this class) come from here."""
+
+    PREFIX = "D_"
+    time = Real("drive time [s]: the end of the last substep")
+    state = Code(STATES, "the drive state (held as its code in :data:`STATES`)")
+    last_frame = Real("time of the last received frame [s], -1 = none since power-on")
+    offline = Flag("the offline watchdog tripped (until the next enable)")
+    ticked = Real("the substep the drive's own tasks last ran for [s] (the second channel of a substep skips them)")
+    vmax = Real("maximum motor speed [rad/s] (0x2008)")
+    watchdog = Real("communication offline time [s], 0 = off (0x2000)")
+    mode = Int("control mode in force (0x200D)")
+    sync = Int("synchronous / asynchronous control (0x200F)")
+    quick_stop_option = Int("what a quick stop does (0x2011; an invalid value: its default)", const="D_QS_OPTION")
+    ramp_reference = Maybe("the speed the ramp times refer to [rad/s]; None (NaN in the row): the move's own",
+                           const="D_RAMP_REF")
+    ambient = Real("ambient temperature [degC]")
+    back_emf_constant = Real("the motors' back-EMF constant [V*s/rad]", const="D_BACK_EMF")
+    bus_voltage = Real("DC bus voltage [V]")
+    phase_resistance = Real("the motors' phase resistance [ohm]", const="D_PHASE_R")
+    motor_rated_current = Real("the motors' rated current [A] (the thermal model's scale)", const="D_MOTOR_RATED")
+    connected = Flag("the host counts as connected (software connected status, 0x20AF)")
+
+
+#: the drive row's index constants, in the declared order (plain ints: numba compiles them in; checked at import)
 (D_TIME, D_STATE, D_LAST_FRAME, D_OFFLINE, D_TICKED, D_VMAX, D_WATCHDOG, D_MODE, D_SYNC, D_QS_OPTION,
- D_RAMP_REF, D_AMBIENT, D_BACK_EMF, D_BUS_VOLTAGE, D_PHASE_R, D_MOTOR_RATED, D_CONNECTED) = range(len(DRIVE_COLUMNS))
+ D_RAMP_REF, D_AMBIENT, D_BACK_EMF, D_BUS_VOLTAGE, D_PHASE_R, D_MOTOR_RATED, D_CONNECTED) = rowattr.indices(DriveColumns)
+DRIVE_COLUMNS = rowattr.names(DriveColumns)
+
 
 # -- a channel's row -----------------------------------------------------------------------------------
-CHANNEL_COLUMNS = (
+class ChannelColumns(rowattr.Columns):
+    """A channel's row (left, right), declared once: the index constants below and the channel's attributes
+    (:class:`joints.sim.zlac.ZlacChannel` inherits this class) come from here. Angles are the wheel's."""
+
     # working state
-    "fresh", "q", "qd", "origin", "fault", "overload_time", "i_out", "temperature", "v_ref", "v_target",
-    "acc_slope", "dec_slope", "p_ref", "goal", "moving", "cruise", "p_acc", "p_dec", "integ", "lag", "i_ref",
-    "qs_slope",
+    fresh = Flag("the next step latches the encoder origin and the loops at q")
+    q = Real("wheel angle [rad] seen at the last step")
+    qd = Real("wheel speed [rad/s] seen at the last step")
+    origin = Real("raw angle [rad] where the position counter reads 0")
+    fault = Int("fault bits (error code register 0x20A5 / 0x20A6), 0 = none", const="FAULT_BITS")
+    overload_time = Real("how long the current has been above the rated current [s]")
+    i_out = Real("motor current [A]")
+    temperature = Real("winding [degC]")
+    v_ref = Real("speed command of the ramp / profile [rad/s]")
+    v_target = Real("velocity-mode ramp target [rad/s]")
+    acc_slope = Real("velocity-mode ramp's acceleration [rad/s^2]")
+    dec_slope = Real("velocity-mode ramp's deceleration [rad/s^2]")
+    p_ref = Real("position command [rad]")
+    goal = Real("end point of the present / last move [rad]")
+    moving = Flag("a position move is in progress")
+    cruise = Real("the move's cruise speed [rad/s]")
+    p_acc = Real("the move's acceleration [rad/s^2]")
+    p_dec = Real("the move's deceleration [rad/s^2]")
+    integ = Real("velocity-loop integral of the speed error [rad]")
+    lag = Real("integral of (speed command - speed) [rad], velocity following error")
+    i_ref = Real("torque-mode current command after the slope [A]")
+    qs_slope = Real("quick stop's deceleration [rad/s^2]")
     # settings (from the parameters)
-    "cpr", "counts_per_rad", "arrival_window", "acc_time", "dec_time", "qs_time", "torque_rate", "rated", "peak",
-    "overload_limit", "follow_limit", "wv", "wi", "kfv", "kpp", "kfp", "poles", "hall_offset", "temp_limit",
-    "target_speed", "v_start", "target_torque",
+    cpr = Real("encoder counts per motor revolution (4 x the encoder lines, 0x2030 / 0x2060)")
+    counts_per_rad = Real("encoder counts per rad")
+    arrival_window = Real("half a count [rad]")
+    acc_time = Real("acceleration time [s] (0x2080 / 0x2081)")
+    dec_time = Real("deceleration time [s] (0x2082 / 0x2083)")
+    qs_time = Real("quick stop's deceleration time [s] (0x2084 / 0x2085)")
+    torque_rate = Real("torque-mode current slope [A/s] (0x2086 / 0x2087)")
+    rated = Real("rated current [A]")
+    peak = Real("peak current [A]: the maximum current, or rated x the overload factor if less")
+    overload_limit = Real("how long the current may stay above rated [s], 0 = off")
+    follow_limit = Real("following-error limit [rad]")
+    wv = Real("velocity-loop bandwidth [rad/s] (vl_kp / 10)")
+    wi = Real("velocity-loop integral rate [1/s] (vl_ki / 10)")
+    kfv = Real("velocity-loop acceleration feed-forward (vl_kf / 1000)")
+    kpp = Real("position-loop gain [1/s] (pl_kp / 10)")
+    kfp = Real("position-loop speed feed-forward (pl_kf / 100)")
+    poles = Int("motor poles")
+    hall_offset = Real("hall offset angle [rad]")
+    temp_limit = Real("over-temperature limit [degC], 0 = off")
+    target_speed = Real("position mode's cruise speed [rad/s] (0x208E / 0x208F)")
+    v_start = Real("initial velocity [rad/s] (cached from 0x2043/0x2073)")
+    target_torque = Real("torque mode's target [mA] (0x2090 / 0x2091)")
     # constants
-    "inertia", "kt",
-)
+    inertia = Real("J [kg*m^2] the velocity-loop gains are scaled with (tuned for)")
+    kt = Real("torque constant [N*m/A]")
+
+
+#: a channel row's index constants, in the declared order (plain ints: numba compiles them in; checked at import)
 (FRESH, Q, QD, ORIGIN, FAULT_BITS, OVERLOAD_TIME, I_OUT, TEMPERATURE, V_REF, V_TARGET, ACC_SLOPE, DEC_SLOPE, P_REF,
  GOAL, MOVING, CRUISE, P_ACC, P_DEC, INTEG, LAG, I_REF, QS_SLOPE, CPR, COUNTS_PER_RAD, ARRIVAL_WINDOW, ACC_TIME,
  DEC_TIME, QS_TIME, TORQUE_RATE, RATED, PEAK, OVERLOAD_LIMIT, FOLLOW_LIMIT, WV, WI, KFV, KPP, KFP, POLES,
- HALL_OFFSET, TEMP_LIMIT, TARGET_SPEED, V_START, TARGET_TORQUE, INERTIA, KT) = range(len(CHANNEL_COLUMNS))
+ HALL_OFFSET, TEMP_LIMIT, TARGET_SPEED, V_START, TARGET_TORQUE, INERTIA, KT) = rowattr.indices(ChannelColumns)
+CHANNEL_COLUMNS = rowattr.names(ChannelColumns)
 
-WIDTH = max(len(DRIVE_COLUMNS), len(CHANNEL_COLUMNS))  #: columns of a row
+WIDTH = max(rowattr.bind(globals(), DriveColumns), rowattr.bind(globals(), ChannelColumns))  #: columns of a row
 
 
 # -- helpers shared with the firmware object ------------------------------------------------------------

@@ -42,10 +42,10 @@ TORQUES = [30.0 * math.sin(0.05 * k) for k in range(150)]
 
 def test_state_friction_is_the_profiles_and_the_same_compiled_or_not(monkeypatch: pytest.MonkeyPatch) -> None:
     runs = {}
-    for jit in ("0", "1"):
-        monkeypatch.setenv("JOINTS_JIT", jit)
+    for compiled in ("0", "1"):
+        monkeypatch.setenv("JOINTS_COMPILED", compiled)
         with joints.open(config(profile=FRICTION)) as rig:
-            runs[jit] = run(rig, TORQUES)
+            runs[compiled] = run(rig, TORQUES)
             m, d, dof = rig.sim.model, rig.sim.data, rig.sim.joint("joint1").dof
             aid = rig.sim.joint("joint1").actuator
             v, tau, ext = float(d.qvel[dof]), abs(float(d.actuator_force[aid])), abs(float(d.qfrc_bias[dof]))

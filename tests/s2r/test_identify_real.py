@@ -65,10 +65,10 @@ def read_many(rig: joints.Rig, n: int = 200) -> list[tuple[float, float, float]]
 
 def test_sensors_report_noise_seeded_and_independent_of_the_kernel(monkeypatch: pytest.MonkeyPatch) -> None:
     runs = {}
-    for jit in ("1", "0", "1"):
-        monkeypatch.setenv("JOINTS_JIT", jit)
+    for compiled in ("1", "0", "1"):
+        monkeypatch.setenv("JOINTS_COMPILED", compiled)
         with joints.open(config()) as rig:
-            runs.setdefault(jit, []).append(read_many(rig))
+            runs.setdefault(compiled, []).append(read_many(rig))
     assert runs["1"][0] == runs["1"][1]  # seeded: the same run twice gives the same bits
     assert runs["0"][0] == runs["1"][0]  # compiled or Python kernels: the same bits
     with joints.open(config()) as rig:

@@ -125,3 +125,19 @@ def test_one_switch_for_the_compiled_path_and_its_old_name(monkeypatch: pytest.M
         else:
             monkeypatch.setenv(name, value)
     assert kernel.default_mode() is (expected and kernel.AVAILABLE)
+
+
+def test_a_world_is_compiled_by_its_own_argument_and_its_old_name(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``World(compiled=...)`` overrides the switch; ``World(jit=...)``, its older name, still does (deprecated)."""
+    from joints.sim.world import World
+
+    monkeypatch.delenv(kernel.SWITCH, raising=False)
+    monkeypatch.delenv(kernel.OLD_SWITCH, raising=False)
+    assert World("erob_stand.xml", [], buses={}).compiled is kernel.AVAILABLE
+    assert World("erob_stand.xml", [], buses={}, compiled=False).compiled is False
+    assert World("erob_stand.xml", [], buses={}, compiled=True).compiled is kernel.AVAILABLE
+    with pytest.warns(DeprecationWarning, match="compiled="):
+        assert World("erob_stand.xml", [], buses={}, jit=False).compiled is False
+    monkeypatch.setenv(kernel.SWITCH, "0")
+    assert World("erob_stand.xml", [], buses={}).compiled is False
+    assert World("erob_stand.xml", [], buses={}, compiled=True).compiled is kernel.AVAILABLE
