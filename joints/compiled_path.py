@@ -46,7 +46,6 @@ from joints.drivers import zlac_modbus as zm
 from joints.drivers.access import ModbusAccess
 from joints.drivers.base import sampled_at
 from joints.drivers.erob import CMD_START, STATUS_NAMES
-from joints.drivers import erob_can_steady
 from joints.drivers.erob_modbus import ErobModbusDriver
 from joints.drivers.zlac_modbus import STATUS_START, STATUS_WORDS, ZlacChannelDriver, ZlacDrive
 from joints.errors import OutcomeUnknown
@@ -292,7 +291,7 @@ def _velocity_exchange(lane: LinkLane, slave: int) -> Any:
     return make(lane, slave) if callable(make) else None
 
 
-_Stepper = _ErobModbus | _ZlacModbus | erob_can_steady.ErobCanStep
+_Stepper = _ErobModbus | _ZlacModbus
 
 
 def _direct(access: object) -> TypeGuard[ModbusAccess]:
@@ -300,13 +299,15 @@ def _direct(access: object) -> TypeGuard[ModbusAccess]:
     return isinstance(access, ModbusAccess) and isinstance(access.link.framing, DirectFraming)
 
 
-def _stepper(joint: Joint) -> _ErobModbus | erob_can_steady.ErobCanStep | None:
+def _stepper(joint: Joint) -> Any:
     driver = joint.driver
     if isinstance(driver, ErobModbusDriver):
         access = driver.access
         if _direct(access):
             return _ErobModbus(joint, driver, access)
-    return erob_can_steady.stepper(joint)  # an eRob on the CAN custom protocol to an in-process twin
+        return None
+    own = getattr(driver, "compiled_step", None)  # a driver's own step (an eRob on CAN: joints.drivers.erob_can_steady)
+    return own(joint) if callable(own) else None
 
 
 def _zlac_drive(joint: Joint) -> ZlacDrive | None:
@@ -324,7 +325,7 @@ def supported(joint: Joint) -> bool:
 
 def _steppers(joints: Sequence[Joint]) -> list[tuple[tuple[int, ...], _Stepper]]:
     """(joint indices, stepper) in the order of each stepper's first joint; raises where a joint cannot be stepped."""
-    units: list[tuple[list[int], ZlacDrive | _ErobModbus | erob_can_steady.ErobCanStep | None]] = []
+    units: list[tuple[list[int], ZlacDrive | _ErobModbus | None]] = []
     drives: dict[int, list[int]] = {}
     for i, j in enumerate(joints):
         drive = _zlac_drive(j)

@@ -266,6 +266,11 @@ class ErobCanDriver(ErobDriver):
         super().forget()
         self._temperature = None
 
+    def compiled_step(self, joint: Any) -> Any:
+        """The sim's compiled path's step of ``joint`` (this driver's) where its link's peer is an in-process twin
+        that offers a one-call exchange (:mod:`joints.drivers.erob_can_steady`), else None."""
+        return erob_can_steady.stepper(joint)
+
     # -- module information (7.5.3) ------------------------------------------------------------
     def versions(self) -> tuple[int, int]:
         """(hardware version 0x0001/3, firmware version 0x0001/4), as the drive reports them."""
@@ -335,3 +340,7 @@ class ErobCanDriver(ErobDriver):
         """Refused: the CAN custom protocol has no position offset (7.5.1); calibrate over Modbus RTU."""
         raise CommandError(f"{self.name}: zero calibration needs the position offset, which the CAN custom "
                            "protocol does not reach (eRunner 7.5.1); use Modbus RTU; nothing was sent")
+
+
+# (imported last: it builds on this module; its check of the stock methods is captured when this module loads)
+from joints.drivers import erob_can_steady

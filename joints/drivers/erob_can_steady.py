@@ -158,7 +158,7 @@ def stepper(joint: Joint) -> ErobCanStep | None:
     framing = driver.link.framing
     transport = getattr(framing, "transport", None)
     host = getattr(transport, "bus", None)
-    peers = getattr(getattr(host, "medium", None), "_peers", ())
+    peers: Any = getattr(getattr(host, "medium", None), "_peers", ())
     if not isinstance(framing, FrameFraming) or len(peers) != 1:
         return None
     make = getattr(peers[0].peer, "can_exchange", None)

@@ -38,10 +38,9 @@ from typing import Any
 from joints.codecs import erob_can as ec
 from joints.devices.erob.can import EROB_CAN, Reach
 from joints.devices.erob.registers import MotionMode
-from joints.sim import erob
+from joints.sim import erob, kernel, stepping
 from joints.sim import erob_can as sim_can
 from joints.sim import erob_kernel as K
-from joints.sim import kernel, stepping
 from joints.sim import line_exchange as L
 from joints.sim.erob import ErobFirmware
 from joints.sim.erob_can import ErobCanBus, ErobCanFront
@@ -272,6 +271,11 @@ _STOCK = (*erob.STOCK, *((cls, name, getattr(cls, name)) for cls, names in (
     (ErobCanBus, ("on_frame", "exchange", "front", "turnaround", "tick", "next_event")),
     (ErobCanFront, ("handle", "_read", "_write", "_command", "_setpoint", "_fw_read", "tick")),
 ) for name in names))
+
+
+#: the reads whose value the drive's sensors report (the firmware's method, given the row as the read saw it)
+_SENSED_READS = {"actual_position": "_sensed_counts", "current_speed": "_sensed_speed",
+                 "motor_current": "_sensed_current"}
 
 
 @dataclass(frozen=True, slots=True)
@@ -531,21 +535,13 @@ class ErobCanExchange:
         """What the front answers to a read: the firmware's value (the sensors' report of what they saw then),
         saturated, in the protocol's scale, as int32."""
         index, scale, lo, hi, plan = shape.extra
-        st = [int(x) for x in o[STATUS_AT:SENSED_AT]]
-        row = dict(zip(SENSED, o[SENSED_AT:]))
         if plan is not None:  # the status read (its sensors report too, as the firmware's own read)
-            v = plan.finish(st, row)[0]
+            v = plan.finish([int(x) for x in o[STATUS_AT:SENSED_AT]], dict(zip(SENSED, o[SENSED_AT:])))[0]
         else:
-            v = st[index]
-            if not fw.sensor.model.ideal:
-                get = row.__getitem__
-                name = shape.name
-                if name == "actual_position":
-                    v = fw._sensed_counts(get)
-                elif name == "current_speed":
-                    v = fw._sensed_speed(get)
-                elif name == "motor_current":
-                    v = fw._sensed_current(get)
+            v = int(o[STATUS_AT + index])
+            sensed = _SENSED_READS.get(shape.name)
+            if sensed is not None and not fw.sensor.model.ideal:
+                v = getattr(fw, sensed)(dict(zip(SENSED, o[SENSED_AT:])).__getitem__)
             if v < lo:
                 v = lo
             elif v > hi:

@@ -13,6 +13,7 @@ cache must be equal; the one-call exchange must have carried the steady steps (w
 from __future__ import annotations
 
 import copy
+import sys
 from importlib import resources
 from typing import Any
 
@@ -25,17 +26,18 @@ from joints.drivers.erob_can_steady import ErobCanStep
 from joints.errors import DeviceRejected
 from joints.sim import kernel
 
-try:
+if sys.version_info >= (3, 11):
     import tomllib
-except ImportError:  # pragma: no cover - Python 3.10
-    import tomli as tomllib  # type: ignore[no-redef]
+else:  # pragma: no cover
+    import tomli as tomllib
 
 PERIOD = 0.02
 
 
 def _config() -> dict[str, Any]:
     """The shipped ErobReach config with its joint on an eRob CAN bus at 1 Mbit/s (as ``joints bench`` runs it)."""
-    cfg = tomllib.loads((resources.files("joints.configs") / "erob_reach.toml").read_text(encoding="utf-8"))
+    cfg: dict[str, Any] = tomllib.loads(
+        (resources.files("joints.configs") / "erob_reach.toml").read_text(encoding="utf-8"))
     on_can = copy.deepcopy(cfg)
     on_can["buses"] = {"can": {"protocol": "erob-can", "bitrate": 1_000_000}}
     for j in on_can["joints"].values():
@@ -55,14 +57,23 @@ class _Recorder:
         self.frames: list[tuple[float, int]] = []
         self.host: list[float] = []
         self.acted: list[int] = []
+        self.replies: list[str] = []  #: what the one-call exchange answered (its kinds)
         world = u.rig.sim
         bus = next(iter(world.buses.values()))
         medium = bus.medium
         deliver = medium._deliver
-        medium._deliver = lambda pend, t: (self.frames.append((t, pend.frame.arbitration_id)), deliver(pend, t))[1]
+
+        def delivered(pend: Any, t: float) -> None:
+            self.frames.append((t, pend.frame.arbitration_id))
+            deliver(pend, t)
+
+        medium._deliver = delivered
         for front in bus.fronts:
-            handle = front.handle
-            front.handle = lambda r, handle=handle: (self.acted.append(world.steps), handle(r))[1]
+            def handled(r: Any, handle: Any = front.handle) -> Any:
+                self.acted.append(world.steps)
+                return handle(r)
+
+            front.handle = handled
         for j in u.joints:
             link = j.driver.link
             request = link.request
@@ -81,6 +92,7 @@ class _Recorder:
             def carried(requests: Any, timeout: float, run: Any = run, s: Any = s) -> Any:
                 out = run(requests, timeout)
                 if out is not None:
+                    self.replies += [type(reply).__name__ for reply in out]
                     for r, (_e0, e1, _r0, r1, seen, acted) in zip(requests, s.exchange.instants):
                         self.frames += [(e1, 0x640 + r.node), (r1, 0x5C0 + r.node)]
                         self.host.append(seen)
@@ -138,7 +150,7 @@ def _run(compiled: bool, mode: str, steps: int, *, plant: Any = None) -> dict[st
                 obs, info = env.reset()
                 out["steps"].append(("reset", obs.tobytes(), _info(info)))
         out["state"] = _state(u)
-        out["frames"], out["host"], out["acted"] = rec.frames, rec.host, rec.acted
+        out["frames"], out["host"], out["acted"], out["replies"] = rec.frames, rec.host, rec.acted, rec.replies
         cp = u.compiled_path
         out["taken"] = None if cp is None else (cp.taken, cp.fused, sum(s.exchange.taken for s in rec.steps))
         return out
@@ -187,5 +199,6 @@ def test_a_start_the_drive_refuses_mid_step_is_refused_the_same_way() -> None:
     compiled = _run(True, "position", 20, plant=plant)
     assert driver["steps"][-1][0] == "refused" and driver["steps"][-1][2] == 0x0027
     _same(driver, compiled)
-    if kernel.default_mode():
+    if kernel.default_mode():  # the call carried the steps, and the refused start (its last reply)
         assert compiled["taken"][2] >= 2 * 12
+        assert compiled["replies"][-2:] == ["Ack", "ErrorReply"]
