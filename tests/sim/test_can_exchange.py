@@ -202,3 +202,39 @@ def test_a_start_the_drive_refuses_mid_step_is_refused_the_same_way() -> None:
     if kernel.default_mode():  # the call carried the steps, and the refused start (its last reply)
         assert compiled["taken"][2] >= 2 * 12
         assert compiled["replies"][-2:] == ["Ack", "ErrorReply"]
+
+
+def test_a_trace_or_a_replaced_method_leaves_the_steps_to_the_frame_by_frame_path(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """From step 10 a trace is hooked, from step 20 the front's read is wrapped (as a test planting replies
+    would): from then on nothing goes by the call, and the bits (and the trace) stay the frame-by-frame path's."""
+    from joints.sim.erob_can import ErobCanFront
+
+    records: list[Any] = []
+    calls: list[int] = []
+    original = ErobCanFront._read
+
+    def plant(k: int, u: Any) -> None:
+        if k == 10:
+            u.rig.trace(records.append)
+        elif k == 20:
+            u.rig.trace(None)
+            monkeypatch.setattr(ErobCanFront, "_read", lambda self, r: original(self, r))
+        cp = u.compiled_path
+        if cp is not None:
+            calls.append(cp.fused)
+
+    out = {}
+    for compiled in (False, True):
+        records.clear()
+        calls.clear()
+        monkeypatch.setattr(ErobCanFront, "_read", original)
+        out[compiled] = _run(compiled, "position", 30, plant=plant)
+        out[compiled]["trace"] = [(r.time, r.direction, r.data, r.meaning) for r in records]
+        out[compiled]["calls"] = list(calls)
+    _same(out[False], out[True])
+    assert len(out[True]["trace"]) > 100 and out[True]["trace"] == out[False]["trace"]
+    fused = out[True]["calls"]
+    if kernel.default_mode():
+        assert fused[10] > fused[1] > 0  # the call carried the first steps
+        assert fused[10] == fused[20] == fused[-1]  # traced, then a replaced method: never again
