@@ -299,13 +299,15 @@ def _direct(access: object) -> TypeGuard[ModbusAccess]:
     return isinstance(access, ModbusAccess) and isinstance(access.link.framing, DirectFraming)
 
 
-def _stepper(joint: Joint) -> _ErobModbus | None:
+def _stepper(joint: Joint) -> Any:
     driver = joint.driver
     if isinstance(driver, ErobModbusDriver):
         access = driver.access
         if _direct(access):
             return _ErobModbus(joint, driver, access)
-    return None
+        return None
+    own = getattr(driver, "compiled_step", None)  # a driver's own step (an eRob on CAN: joints.drivers.erob_can_steady)
+    return own(joint) if callable(own) else None
 
 
 def _zlac_drive(joint: Joint) -> ZlacDrive | None:

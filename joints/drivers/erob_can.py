@@ -241,21 +241,35 @@ class ErobCanDriver(ErobDriver):
     def state(self) -> RawState:
         """Six reads (status, position, speed, current); the temperature at most every TEMPERATURE_PERIOD."""
         t0 = self.clock.now()
-        names: tuple[str, ...] = CAN_STATUS_NAMES
+        return self.state_read(self.access.read_many(self.state_names(t0)), t0, self.clock.now())
+
+    def state_names(self, t0: float) -> tuple[str, ...]:
+        """What :meth:`state` reads when it starts at ``t0``: :data:`CAN_STATUS_NAMES`, and the temperature when
+        its last read is :data:`TEMPERATURE_PERIOD` old."""
         cached = self._temperature
         if cached is None or t0 - cached[0] >= TEMPERATURE_PERIOD or t0 < cached[0]:
-            names = (*names, TEMPERATURE)
-        v = self.access.read_many(names)
+            return (*CAN_STATUS_NAMES, TEMPERATURE)
+        return CAN_STATUS_NAMES
+
+    def state_read(self, v: dict[str, int], t0: float, t1: float) -> RawState:
+        """The state from the values ``v`` of :meth:`state_names` read between the clock instants ``t0`` and ``t1``
+        (the temperature kept, or the kept one filled in)."""
+        cached = self._temperature
         if TEMPERATURE in v:
             self._temperature = (t0, v[TEMPERATURE])
         else:
             assert cached is not None
             v[TEMPERATURE] = cached[1]
-        return self.state_from(v, sampled_at(t0, self.clock.now()))
+        return self.state_from(v, sampled_at(t0, t1))
 
     def forget(self) -> None:
         super().forget()
         self._temperature = None
+
+    def compiled_step(self, joint: Any) -> Any:
+        """The sim's compiled path's step of ``joint`` (this driver's) where its link's peer is an in-process twin
+        that offers a one-call exchange (:mod:`joints.drivers.erob_can_steady`), else None."""
+        return erob_can_steady.stepper(joint)
 
     # -- module information (7.5.3) ------------------------------------------------------------
     def versions(self) -> tuple[int, int]:
@@ -326,3 +340,7 @@ class ErobCanDriver(ErobDriver):
         """Refused: the CAN custom protocol has no position offset (7.5.1); calibrate over Modbus RTU."""
         raise CommandError(f"{self.name}: zero calibration needs the position offset, which the CAN custom "
                            "protocol does not reach (eRunner 7.5.1); use Modbus RTU; nothing was sent")
+
+
+# (imported last: it builds on this module; its check of the stock methods is captured when this module loads)
+from joints.drivers import erob_can_steady

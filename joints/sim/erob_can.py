@@ -303,6 +303,8 @@ class ErobCanBus:
         self._last_tick = 0.0
         #: (identifier, data) -> the request it decodes to (immutable): requests repeat from cycle to cycle
         self._requests: dict[tuple[int, bytes], ec.Read | ec.Write | ec.Command] = {}
+        #: the world stepping between this bus's frames (a world offers itself: the one-call exchange needs it)
+        self.world: Any = None
         for f in fronts:
             self.add(f)
 
@@ -320,6 +322,11 @@ class ErobCanBus:
     def turnaround(self, frame: can.Message) -> float | None:
         """The reply turnaround [s] of the drive a request frame (0x640 + node) addresses; None: unknown."""
         return self.turnarounds.get(frame.arbitration_id - 0x640)
+
+    def can_exchange(self, host: Any, transport: Any) -> Any:
+        """The one-call exchange of this bus's steady requests from the python-can node ``host`` (a lockstep bus on
+        this bus's medium) wrapped by the link's ``transport`` (:mod:`joints.sim.can_exchange`), or None."""
+        return can_exchange.prepare(self.world, self, host, transport)
 
     def exchange(self, request: ec.Request) -> list[ec.Reply]:
         """Message-level twin of :meth:`on_frame`: the replies to one request ([] where nobody answers)."""
@@ -367,3 +374,7 @@ class ErobCanBus:
         for f in self.fronts:
             if f.held is not None:
                 f.tick()
+
+
+# (imported last: it builds on this module; its check of the stock methods is captured when this module loads)
+from joints.sim import can_exchange

@@ -1,0 +1,167 @@
+"""The compiled path's step of one eRob on the CAN custom protocol: its steady requests in one call of the twin.
+
+Rule: what :class:`~joints.drivers.erob_can.ErobCanDriver` and its :class:`~joints.link.erob_can.ErobCanLink`
+do for a steady command and a state read - the joint's checks, the driver's steady compare and range checks,
+the same request objects (``ErobCanAccess.message``; the state's reads as ``ErobCanAccess.read`` makes them),
+encoded by the rule before anything is sent, counted by the link, each reply taken by the rule's ``is_reply``
+(an error reply raises its :class:`~joints.errors.DeviceRejected` as the link raises it), the link's fence
+bookkeeping, the driver's cache and temperature bookkeeping, the joint's contact - with the frames, the physics
+between them and the drive's ops in one call of the twin's one-call exchange (the sim's
+:mod:`joints.sim.can_exchange`, reached through the in-process medium's peer: nothing of the sim is imported
+here). Where the link, the driver or the twin is not in the steady case (a trace, a node to fence, a setting to
+write, anything the exchange refuses before sending) the joint's own method runs instead, so the result is
+the driver path's in every case. Used by :mod:`joints.compiled_path`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+from joints.codecs import erob_can as ec
+from joints.drivers.erob import CMD_START
+from joints.drivers.erob_can import ErobCanAccess, ErobCanDriver
+from joints.link.base import FrameFraming, Link
+from joints.link.erob_can import ErobCanLink, ErobCanRule
+
+if TYPE_CHECKING:
+    from joints.joint import Joint, JointState
+
+__all__ = ["ErobCanStep", "stepper"]
+
+#: the host's methods a request goes through, as defined (a replaced one: the joint's own method)
+_STOCK = tuple((cls, name, getattr(cls, name)) for cls, names in (
+    (Link, ("request", "_attempts", "_once", "_await_reply", "_drain", "_unsolicited")),
+    (ErobCanLink, ("_once", "_guarded", "_fence")),
+    (ErobCanRule, ("is_reply", "encode", "check", "expects_reply")),
+    (FrameFraming, ("write", "receive")),
+) for name in names)
+
+
+class _Counts:
+    """Requests sent by the one-call exchange (``fused``; all of them ``taken`` by it), as a lane counts them."""
+
+    def __init__(self) -> None:
+        self.fused = 0
+        self.taken = 0
+
+
+class ErobCanStep:
+    """One eRob on an eRob CAN link whose peer is an in-process twin offering a one-call exchange."""
+
+    def __init__(self, joint: Joint, driver: ErobCanDriver, exchange: Any) -> None:
+        self.joint = joint
+        self.driver = driver
+        access = driver.access
+        assert isinstance(access, ErobCanAccess)
+        self.access = access
+        self.link: ErobCanLink = driver.link
+        self.clock = driver.clock
+        self.exchange = exchange
+        self.node = access.node
+        self.lane = _Counts()
+        self.taken = 0  #: joint steps (commands) sent by the exchange
+        self.start = access.message("start_operating", CMD_START)
+        self.link.rule.check(self.start)
+        self._reads: dict[tuple[str, ...], tuple[ec.Read, ...]] = {}
+
+    def _reads_of(self, names: tuple[str, ...]) -> tuple[ec.Read, ...]:
+        """The reads ``ErobCanAccess.read`` sends for ``names`` (checked once: constants)."""
+        reads = self._reads.get(names)
+        if reads is None:
+            cmap = self.access.map
+            out = []
+            for name in names:
+                key = cmap.key(name)
+                out.append(ec.Read(self.node, key.index, key.subindex))
+            for r in out:
+                self.link.rule.check(r)
+            reads = self._reads[names] = tuple(out)
+        return reads
+
+    def _send(self, requests: Sequence[Any]) -> list[Any] | None:
+        """The twin's replies to ``requests`` by one call of its exchange (counted as the link counts them; each
+        to be taken by :meth:`_take`, in order), or None (nothing sent) where the link is not in the steady case."""
+        link = self.link
+        if link.trace is not None or self.node in link._unsynced or type(link) is not ErobCanLink or \
+                type(link.rule) is not ErobCanRule or type(link.framing) is not FrameFraming or \
+                not all(getattr(cls, name) is fn for cls, name, fn in _STOCK):
+            return None
+        with link._lock:
+            replies: list[Any] | None = self.exchange.run(requests, link.policy.timeout)
+            if replies is None:
+                return None
+            link.transactions += len(replies)
+        self.lane.fused += len(replies)
+        self.lane.taken += len(replies)
+        return replies
+
+    def _take(self, request: Any, reply: Any) -> Any:
+        """``reply`` taken as the link takes it (an error reply raises here, as it raises there)."""
+        link = self.link
+        if not link.rule.is_reply(request, reply):  # (a steady reply always answers its request)
+            raise AssertionError(f"{link.name}: {reply!r} does not answer {request!r}")
+        if isinstance(reply, ec.ValueReply):
+            link._unsynced.discard(request.node)
+        return reply
+
+    # -- what the compiled path calls -----------------------------------------------------------
+    def command_all(self, mode: str, values: Sequence[float], skip: Sequence[bool]) -> None:
+        if not skip[0]:
+            self.command(mode, values[0])
+
+    def states(self) -> list[JointState]:
+        return [self.state()]
+
+    def command(self, mode: str, value: float) -> None:
+        joint, driver = self.joint, self.driver
+        if mode == "position":
+            target, speed, acc, dec = joint.position_command(value)
+            if driver.steady_move(speed, acc, dec):
+                driver.validate(target_absolute_position=target)
+                request = self.access.message("target_absolute_position", target)
+                self.link.rule.check(request)  # raises EncodeError before anything is sent
+                replies = self._send((request, self.start))
+                if replies is not None:
+                    self._take(request, replies[0])
+                    driver.note_written("target_absolute_position", target)
+                    self._take(self.start, replies[1])
+                    self.taken += 1
+                    joint.note_contact()
+                    return
+            driver.move_to(target, speed=speed, acceleration=acc, deceleration=dec)
+            joint.note_contact()
+        elif mode == "velocity":
+            joint.set_velocity(value)
+        else:
+            joint.set_torque(value)
+
+    def state(self) -> JointState:
+        clock, driver = self.clock, self.driver
+        t0 = clock.now()
+        names = driver.state_names(t0)
+        reads = self._reads_of(names)
+        replies = self._send(reads)
+        if replies is None:
+            return self.joint.state()
+        cmap = self.access.map
+        v = {name: cmap.from_wire(name, self._take(r, reply).value) for name, r, reply in zip(names, reads, replies)}
+        return self.joint.to_si(driver.state_read(v, t0, clock.now()))
+
+
+def stepper(joint: Joint) -> ErobCanStep | None:
+    """The compiled path's step of ``joint`` where it is an eRob on an eRob CAN link whose in-process peer (the
+    medium's one device) offers a one-call exchange, else None."""
+    driver = joint.driver
+    if not isinstance(driver, ErobCanDriver) or not isinstance(driver.link, ErobCanLink):
+        return None
+    framing = driver.link.framing
+    transport = getattr(framing, "transport", None)
+    host = getattr(transport, "bus", None)
+    peers: Any = getattr(getattr(host, "medium", None), "_peers", ())
+    if not isinstance(framing, FrameFraming) or len(peers) != 1:
+        return None
+    make = getattr(peers[0].peer, "can_exchange", None)
+    exchange = make(host, transport) if callable(make) else None
+    return None if exchange is None else ErobCanStep(joint, driver, exchange)
+

@@ -1,0 +1,598 @@
+"""An eRob's steady CAN custom-protocol requests in one compiled call: frames, physics and the drive's ops.
+
+Rule: it gives what the frame-by-frame path gives - the host's link over python-can's lockstep bus
+(:class:`~joints.transports.can_sim.LockstepCanBus`: ``Link._drain``'s poll, ``submit``, ``receive`` and its
+``_wait_until``/``_skippable`` over the :class:`~joints.transports.can_sim.CanMedium`), the world's clock
+(``World.advance``: the due substeps, ``_until_event``, the bus's tick after them) and the twin
+(:class:`~joints.sim.erob_can.ErobCanFront` on :class:`~joints.sim.erob.ErobFirmware`) - float by float:
+the frame instants are the medium's own arithmetic on the fixed frame sizes (worst-case or no bit stuffing: a
+frame's bits depend on its data length only), each ``max`` spelled as Python's builtin. Inside the call the
+physics runs to the instant each request reaches the drive, and the drive acts through the kernel ops of
+:mod:`joints.sim.erob_kernel` its firmware's own writes and reads call (``frame``, ``ready`` + ``start``, the
+target's column, ``status``); afterwards Python brings the medium (its time, free instant, counters), the
+bus's last tick, the world and clock, the firmware's parameter store and write log, the front's request count
+and the sensors (what a read of position, speed or current reports, in the order of the reads) to where the
+frame-by-frame path leaves them, and makes the replies (``ValueReply``, ``Ack``, the ``ErrorReply`` 0x0027 of a
+start that found the motor not ready, which ends the call as it ends the host's move).
+
+It runs only in the steady case, checked before anything is sent (:meth:`ErobCanExchange.run` returns None
+otherwise): the world runs fused with this bus's tick its only tick, the medium times frames (not ideal,
+stuffing not "exact"), nothing is on it, queued or waiting for the host, the host is the medium's only
+python-can node and the bus its only peer, the methods the frames go through are the stock ones (a test
+planting frames replaces one), no set-point is held, every write is one the firmware and the front accept
+now, and the clock is far enough from 0 and the link's timeout long enough that none of the medium's
+branches for those cases can be met. ``tests/sim/test_can_exchange.py`` compares both paths bit for bit.
+
+Not mirrored: the bus's cache of decoded request frames and the front's caches of prepared reads (they
+only save work; what they hold does not change what a request does).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from joints.codecs import erob_can as ec
+from joints.devices.erob.can import EROB_CAN, Reach
+from joints.devices.erob.registers import MotionMode
+from joints.sim import erob, kernel, stepping
+from joints.sim import erob_can as sim_can
+from joints.sim import erob_kernel as K
+from joints.sim import line_exchange as L
+from joints.sim.erob import ErobFirmware
+from joints.sim.erob_can import ErobCanBus, ErobCanFront
+from joints.sim.erob_kernel import fmax
+from joints.sim.kernel import jitable
+from joints.sim.stepping import STEPS
+from joints.transports import can as can_transport
+from joints.transports.can_sim import CanMedium, LockstepCanBus
+
+__all__ = ["ErobCanExchange", "act", "exchanges"]
+
+#: columns of the state vector (the first three are :mod:`joints.sim.line_exchange`'s: ``L.fused`` brings the
+#: world and clock back): the clock, the world's target time, booked; the medium's time, the clock time it last
+#: saw, when the bus is free, its last tick; its frame, bit and busy-time counters; the world's timestep; ticks
+#: made; the link's timeout; transactions done; whether a branch the call does not model was met
+CLOCK, TARGET, BOOKED, NOW, SEEN, FREE, TICKED, FRAMES, BITS, BUSY, DT, TICKS, TIMEOUT, DONE, ODD = range(15)
+STATE_WIDTH = 15
+#: columns of a transaction row: the drive's row, the request's wire time and bits, the reply's, an error
+#: reply's, the drive's answer delay, the host adapter's latency; the op and its arguments
+ROW, REQ_TOOK, REQ_BITS, REP_TOOK, REP_BITS, ERR_TOOK, ERR_BITS, DELAY, LATENCY, OP, VALUE, MOTION, RELATIVE, \
+    REPETITIVE = range(14)
+TX_WIDTH = 14
+#: ops: a read (the status values of a copy of the row: no side effect), the read of
+#: ``status_of_achieving_position`` (the row itself: its settle timer runs), the target write, "start"
+READ, READ_ACHIEVE, TARGET_POSITION, START = range(4)
+#: columns of an output row: the request's start and end, the reply's start and end, when the host has it, the
+#: clock after; the reply refused (0x0027); the world's substeps when the drive acted; the status values; the
+#: row's columns the sensors see
+E0, E1, R0, R1, HOST, CLOCK_AFTER, REFUSED, ACTED = range(8)
+STATUS_AT = 8
+SENSED = (K.TIME, K.POS, K.VEL, K.I_OUT)
+SENSED_AT = STATUS_AT + len(K.STATUS_NAMES)
+OUT_WIDTH = SENSED_AT + len(SENSED)
+
+
+@jitable
+def act(s: Any, t: Any, o: Any, scratch: Any) -> bool:
+    """The drive (row ``s``) acts on a request as :meth:`ErobCanFront.handle` makes its firmware act: its
+    watchdog is fed, then the op; True: refused (a start while the motor is not ready: 0x0027, nothing
+    latched)."""
+    K.frame(s)
+    op = t[OP]
+    if op == READ or op == READ_ACHIEVE:
+        r = s
+        if op == READ:  # one value of the status: the status op on a copy (a generic read runs no settle timer)
+            for k in range(s.shape[0]):
+                scratch[k] = s[k]
+            r = scratch
+        values = K.status(r, t[REPETITIVE] != 0.0)
+        for k in range(len(values)):
+            o[STATUS_AT + k] = values[k]
+        o[SENSED_AT] = s[K.TIME]
+        o[SENSED_AT + 1] = s[K.POS]
+        o[SENSED_AT + 2] = s[K.VEL]
+        o[SENSED_AT + 3] = s[K.I_OUT]
+        return False
+    if op == TARGET_POSITION:
+        s[K.TARGET_ABSOLUTE] = t[VALUE]
+        return False
+    if not K.ready(s):  # START
+        return True
+    K.start(s, t[MOTION], t[RELATIVE], t[VALUE])
+    return False
+
+
+@jitable
+def _due(seconds: float, st: Any, w: int, worlds: Any) -> int:
+    """``World._due``: book ``seconds`` on the world's target, the substeps now due."""
+    st[TARGET] += seconds
+    dt = st[DT]
+    return math.ceil((st[TARGET] - worlds[w, STEPS] * dt) / dt - 1e-9)  # type: ignore[no-any-return]
+
+
+@jitable
+def _until(e: float, n: int, st: Any, w: int, worlds: Any) -> int:
+    """``World._until_event(n)`` with the medium announcing ``e``."""
+    dt = st[DT]
+    s = worlds[w, STEPS]
+    if e <= (s + 1) * dt:
+        return 1
+    k = max(1, math.ceil(e / dt) - s)
+    while k > 1 and (s + k - 1) * dt >= e:
+        k -= 1
+    while (s + k) * dt < e:
+        k += 1
+    return int(min(k, n))
+
+
+@jitable
+def _steps(n: int, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any, worlds: Any,
+           dts: Any, active: Any) -> None:
+    """``n`` substeps, then the bus's tick (``World._tick_now``: the medium's and the bus's last tick)."""
+    if n > 0:
+        stepping._run(n, 1, mj_step, table, adr, ratio, order, worlds, dts, active)
+        worlds[w, STEPS] += n
+        st[TICKED] = worlds[w, STEPS] * st[DT]
+        st[TICKS] += 1.0
+
+
+@jitable
+def _wait(until: float, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any, worlds: Any,
+          dts: Any, active: Any) -> None:
+    """``ClockDriven._wait_until(until)`` with nothing due on the medium: the clock sleeps (``World.advance``)."""
+    behind = until - st[CLOCK]
+    if behind > 0:
+        st[BOOKED] = 0.0
+        _steps(_due(behind, st, w, worlds), st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+        st[CLOCK] = st[TARGET]
+        st[SEEN] = st[CLOCK]
+    st[NOW] = fmax(st[NOW], until)
+
+
+def exchanges(tx: Any, out: Any, scratch: Any, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any,
+              order: Any, worlds: Any, dts: Any, active: Any) -> None:
+    """The transactions ``tx`` in world ``w`` one after the other, as the host's link carries each over the
+    lockstep medium: ``st`` in and out, each one's instants (and its read's values) into ``out``. Stops after a
+    refused request; ``st[ODD]`` set: a branch of the medium the call does not model was met (the caller's
+    checks keep it from happening)."""
+    for k in range(tx.shape[0]):
+        t = tx[k]
+        o = out[k]
+        # Link._drain: receive(host, 0.0): the medium's _sync, then the poll (a wait until the medium's time
+        # where the clock is behind it)
+        c = st[CLOCK]
+        if c > st[SEEN]:
+            st[SEEN] = c
+            st[NOW] = fmax(st[NOW], c)
+        if not c >= st[NOW]:
+            _wait(st[NOW], st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+        # the request: submit (the medium's _sync, then on the bus at once: it is free)
+        deadline = st[CLOCK] + st[TIMEOUT]
+        c = st[CLOCK]
+        if c > st[SEEN]:
+            st[SEEN] = c
+            st[NOW] = fmax(st[NOW], c)
+        start = fmax(st[FREE], st[NOW])
+        if start > st[NOW]:
+            st[ODD] = 1.0
+            return
+        end = start + t[REQ_TOOK]
+        st[FRAMES] += 1.0
+        st[BITS] += t[REQ_BITS]
+        st[BUSY] += t[REQ_TOOK]
+        o[E0] = start
+        o[E1] = end
+        # receive(host, timeout): FrameFraming's and LockstepCanBus's timeouts, the medium's deadline
+        left = fmax(deadline - st[CLOCK], 0.0)
+        left = fmax(st[NOW] + fmax(left, 0.0) - st[NOW], 0.0)
+        limit = st[NOW] + fmax(left, 0.0)
+        if not end < limit:
+            st[ODD] = 1.0
+            return
+        # the request's end: processed at once where the physics stands past it (_skippable), else waited for
+        acted_at = -1.0
+        if end <= 2.0 * st[CLOCK] and end <= st[TICKED]:
+            refused = act(table[int(t[ROW])], t, o, scratch)
+        else:
+            behind = end - st[CLOCK]
+            acted = False
+            refused = False
+            if behind > 0:
+                st[BOOKED] = 0.0
+                n = _due(behind, st, w, worlds)
+                if n > 0:
+                    m = _until(end, n, st, w, worlds)
+                    if m < n:  # the tick after m substeps reaches the frame's end: the drive acts there
+                        _steps(m, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+                        refused = act(table[int(t[ROW])], t, o, scratch)
+                        acted = True
+                        acted_at = worlds[w, STEPS]
+                        n -= m
+                    _steps(n, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+                st[CLOCK] = st[TARGET]
+                st[SEEN] = st[CLOCK]
+            if not acted:
+                refused = act(table[int(t[ROW])], t, o, scratch)
+            st[NOW] = fmax(st[NOW], end)
+        o[REFUSED] = 1.0 if refused else 0.0
+        o[ACTED] = worlds[w, STEPS] if acted_at < 0 else acted_at
+        took = t[ERR_TOOK] if refused else t[REP_TOOK]
+        # the reply: queued after the drive's delay, on the bus when it is free (each edge processed without a
+        # wait: the peers only answer and the reply reaches no peer)
+        st[FREE] = end
+        begin = fmax(end, end + t[DELAY])
+        finish = begin + took
+        st[FRAMES] += 1.0
+        st[BITS] += t[ERR_BITS] if refused else t[REP_BITS]
+        st[BUSY] += took
+        if not (finish < limit and finish <= 2.0 * st[CLOCK]):
+            st[ODD] = 1.0
+            return
+        st[FREE] = finish
+        o[R0] = begin
+        o[R1] = finish
+        seen = finish
+        if t[LATENCY] > 0:  # the host adapter holds the frame that long; the host waits for it
+            seen = finish + t[LATENCY]
+            if seen <= st[NOW] + 1e-12 or not seen < limit or seen > 2.0 * st[CLOCK]:
+                st[ODD] = 1.0
+                return
+        _wait(seen, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+        o[HOST] = seen
+        o[CLOCK_AFTER] = st[CLOCK]
+        st[DONE] += 1.0
+        if refused:
+            return
+
+
+_COMPILED: list[Any] = []
+
+
+def _compiled() -> Any:
+    """:func:`exchanges` compiled (numba), or None without it (with ``JOINTS_COMPILED=0`` the world does not run
+    fused: the steady checks send the requests frame by frame)."""
+    if not _COMPILED:
+        ok = kernel.AVAILABLE and stepping._run_compiled is not None
+        _COMPILED.append(kernel.compiled(exchanges) if ok else None)
+    return _COMPILED[0]
+
+
+#: the methods the frames would go through, as defined (captured when this module is imported): a replaced one
+#: means no one-call exchange
+_STOCK = (*erob.STOCK, *((cls, name, getattr(cls, name)) for cls, names in (
+    (CanMedium, ("submit", "receive", "tick", "next_event", "_run", "_sync", "_deliver", "_deliver_to_all",
+                 "_skippable", "_next_event", "_wait_until", "_bits", "_enqueue", "time")),
+    (LockstepCanBus, ("send", "recv", "_matches_filters")),
+    (can_transport.PythonCanTransport, ("send", "recv")),
+    (ErobCanBus, ("on_frame", "exchange", "front", "turnaround", "tick", "next_event")),
+    (ErobCanFront, ("handle", "_read", "_write", "_command", "_setpoint", "_fw_read", "tick")),
+) for name in names))
+
+
+#: the reads whose value the drive's sensors report (the firmware's method, given the row as the read saw it)
+_SENSED_READS = {"actual_position": "_sensed_counts", "current_speed": "_sensed_speed",
+                 "motor_current": "_sensed_current"}
+
+
+@dataclass(frozen=True, slots=True)
+class _Shape:
+    """What requests of one shape (kind, index, subindex) have in common."""
+
+    op: int
+    name: str  #: the parameter
+    request: tuple[int, float]  #: the request frame's bits and wire time
+    reply: tuple[int, float]  #: the plain reply's
+    error: tuple[int, float]  #: an error reply's
+    extra: Any  #: a read: (status index or -1 for the status read, scale, lo, hi, the prepared status read)
+
+
+@dataclass(frozen=True, slots=True)
+class _Plan:
+    """The transaction rows of some requests, and what the steady checks need of them."""
+
+    requests: Sequence[Any]
+    shapes: list[_Shape]
+    fronts: list[ErobCanFront]
+    unique: tuple[ErobCanFront, ...]  #: the fronts, each once
+    tx: Any  #: the rows (an array)
+    span: float  #: s the transactions take at most, together
+    longest: float  #: s one of them takes at most
+    stamp: tuple[Any, ...]  #: :meth:`ErobCanExchange._stamp` when it was made
+
+
+class ErobCanExchange:
+    """The steady requests of the eRob twins on ``bus`` (an :class:`ErobCanBus`) from the host node ``host`` (a
+    :class:`LockstepCanBus` on its medium, the link's ``transport``), in ``world`` (see the module docstring)."""
+
+    def __init__(self, world: Any, bus: ErobCanBus, host: LockstepCanBus, transport: Any) -> None:
+        import numpy as np
+
+        self.world = world
+        self.bus = bus
+        self.medium: CanMedium = bus.medium
+        self.host = host
+        self.transport = transport
+        self.taken = 0  #: calls that ran
+        self.clocks: list[float] = []  #: the clock after each transaction of the last :meth:`run`
+        #: per transaction of the last :meth:`run`: (request start, end, reply start, end, the host has it, the
+        #: world's substeps when the drive acted)
+        self.instants: list[tuple[float, ...]] = []
+        self._st = np.zeros(STATE_WIDTH)
+        self._out: dict[int, Any] = {}  #: output rows per count
+        self._plans: dict[int, _Plan] = {}  #: id of a tuple of reads -> its plan
+        self._scratch: dict[int, Any] = {}  #: a row's copy (per table width)
+        self._shapes: dict[tuple[Any, ...], _Shape | None] = {}
+        self._rows: dict[int, tuple[Any, int]] = {}  #: node -> (group, its row there)
+
+    # -- the steady case ------------------------------------------------------------------------
+    def _steady(self, front: ErobCanFront) -> bool:
+        """Whether the world, medium, host, bus, front and firmware are as the compiled call assumes."""
+        world, medium, bus, host = self.world, self.medium, self.bus, self.host
+        group = world.group
+        if not (group.compiled and group.fusable[world.group_index]) or world._bind != world._bind_seen or \
+                world._booked or world._target != world.clock.now():
+            return False
+        if world._ticks != [bus.tick] or world._bus_watches or len(world._events or ()) != 1:
+            return False
+        if medium.ideal or medium.stuffing == "exact" or medium.clock is not world.clock or medium._cap is not None:
+            return False
+        if medium._wire is not None or medium._pending or medium._delivering is not None or not medium.answers_only:
+            return False
+        if medium._epoch_seen != getattr(world.clock, "epoch", None) or medium._free > medium.now:
+            return False
+        node = host._node
+        if len(medium._peers) != 1 or medium._peers[0].peer is not bus or len(medium._nodes) != 2 or \
+                node not in medium._nodes or node.rx or node.held or node.receive_own:
+            return False
+        if type(host) is not LockstepCanBus or host._is_shutdown or host._filters or \
+                type(self.transport) is not can_transport.PythonCanTransport or self.transport.bus is not host or \
+                self.transport._closed or self.transport.echoes:
+            return False
+        if type(bus) is not ErobCanBus or front not in bus.fronts or any(f.held is not None for f in bus.fronts):
+            return False
+        fw = front.firmware
+        if type(front) is not ErobCanFront or type(fw) is not ErobFirmware or fw.pending or fw.command_delay > 0:
+            return False
+        return L.stock(_STOCK)
+
+    def _shape(self, request: Any, front: ErobCanFront) -> _Shape | None:
+        kind = type(request)
+        key = (kind, request.node, request.index, getattr(request, "subindex", None),
+               getattr(request, "parameter", None))
+        shapes = self._shapes
+        if key not in shapes:
+            shapes[key] = self._make_shape(request, front)
+        return shapes[key]
+
+    def _timed(self, message: Any) -> tuple[int, float]:
+        frame = ec.encode(message)
+        bits = self.medium._bits(frame)  # (kept in the medium's cache, as the frame-by-frame path keeps it)
+        return bits, bits / self.medium.bitrate
+
+    def _make_shape(self, request: Any, front: ErobCanFront) -> _Shape | None:
+        fw = front.firmware
+        node = request.node
+        error = self._timed(ec.ErrorReply(node, sim_can.START_WHILE_OFF))
+        if type(request) is ec.Read:
+            try:
+                name = EROB_CAN.at(request.index, request.subindex)
+            except KeyError:
+                return None
+            key = EROB_CAN.key(name)
+            if key.reach is not Reach.VALUE or not EROB_CAN.access(name).readable or name not in K.STATUS_NAMES or \
+                    request.index == 0x0232:
+                return None
+            if fw.computed.get(name) is not fw._own_computed.get(name):
+                return None
+            lo, hi = fw._type_range[name]
+            plan = fw.reader((name,)) if name == "status_of_achieving_position" else None
+            if plan is not None and not isinstance(plan, erob._StatusRead):
+                return None
+            op = READ_ACHIEVE if plan is not None else READ
+            return _Shape(op, name, self._timed(request), self._timed(ec.ValueReply(node, 0)), error,
+                          (K.STATUS_NAMES.index(name), key.scale, lo, hi, plan))
+        if type(request) is ec.Write and request.subindex is None:
+            try:
+                name = EROB_CAN.at(request.index, None)
+            except KeyError:
+                return None
+            if name != "target_absolute_position":
+                return None
+            key = EROB_CAN.key(name)
+            if key.reach is not Reach.VALUE or not EROB_CAN.access(name).writable:
+                return None
+            return _Shape(TARGET_POSITION, name, self._timed(request), self._timed(ec.Ack(node)), error, None)
+        if type(request) is ec.Command and request.parameter is None and request.index == 0x0083:
+            return _Shape(START, "start_operating", self._timed(request), self._timed(ec.Ack(node)), error, None)
+        return None
+
+    def _row(self, front: ErobCanFront) -> int:
+        group = self.world.group
+        got = self._rows.get(front.node)
+        if got is None or got[0] is not group:
+            fw = front.firmware
+            got = self._rows[front.node] = (group, next(first for twin, first in group._owners if twin is fw))
+        return got[1]
+
+    def _tx(self, request: Any, front: ErobCanFront, target: dict[str, int]) -> tuple[list[float], _Shape] | None:
+        """The transaction row of ``request``, or None where it is not a steady one now."""
+        shape = self._shape(request, front)
+        if shape is None:
+            return None
+        fw = front.firmware
+        values = fw.values
+        delay = self.bus.turnarounds.get(front.node)
+        delay = self.medium._peers[0].latency if delay is None else delay
+        value = 0.0
+        motion = relative = repetitive = 0.0
+        if shape.op == TARGET_POSITION:
+            v = EROB_CAN.from_wire(shape.name, request.value)
+            writable, lo, hi = fw._limits[shape.name]
+            if not writable or type(v) is not int or not lo <= v <= hi:
+                return None
+            target[shape.name] = v
+            value = float(v)
+        elif shape.op == START:
+            if values["motion_mode"] not in tuple(MotionMode):
+                return None
+            writable, lo, hi = fw._limits["start_operating"]
+            if not writable or not lo <= 1 <= hi:
+                return None
+            value = float(target.get("target_absolute_position", values["target_absolute_position"]))
+            motion = float(values["motion_mode"])
+            relative = float(values["target_relative_position"])
+        else:
+            repetitive = 1.0 if values["motion_mode"] == int(MotionMode.REPETITIVE) else 0.0
+        req, rep, err = shape.request, shape.reply, shape.error
+        return [float(self._row(front)), req[1], float(req[0]), rep[1], float(rep[0]), err[1], float(err[0]),
+                delay, self.host._node.latency, float(shape.op), value, motion, relative, repetitive], shape
+
+    # -- the call -------------------------------------------------------------------------------
+    def _plan(self, requests: Sequence[Any]) -> _Plan | None:
+        """The transaction rows of ``requests`` now (kept for a tuple of reads: it is sent again and again), or
+        None where one is not a steady request now."""
+        plan = self._plans.get(id(requests))
+        if plan is not None and plan.requests is requests and plan.stamp == self._stamp(plan.fronts):
+            return plan
+        bus = self.bus
+        rows: list[list[float]] = []
+        shapes: list[_Shape] = []
+        fronts: list[ErobCanFront] = []
+        targets: dict[int, dict[str, int]] = {}
+        for r in requests:
+            front = bus.front(r.node)
+            if front is None:
+                return None
+            got = self._tx(r, front, targets.setdefault(r.node, {}))
+            if got is None:
+                return None
+            rows.append(got[0])
+            shapes.append(got[1])
+            fronts.append(front)
+        import numpy as np
+
+        dt = self.world.timestep
+        spans = [t[REQ_TOOK] + t[DELAY] + max(t[REP_TOOK], t[ERR_TOOK]) + t[LATENCY] + 2.0 * dt for t in rows]
+        plan = _Plan(requests, shapes, fronts, tuple(dict.fromkeys(fronts)), np.array(rows), sum(spans) + dt,
+                     max(spans), self._stamp(fronts))
+        if all(s.op in (READ, READ_ACHIEVE) for s in shapes) and isinstance(requests, tuple):
+            if len(self._plans) > 64:
+                self._plans.clear()
+            self._plans[id(requests)] = plan
+        return plan
+
+    def _stamp(self, fronts: Sequence[ErobCanFront]) -> tuple[Any, ...]:
+        """What a kept plan's rows depend on besides its requests: the table, the motion modes, the delays."""
+        turnarounds = self.bus.turnarounds
+        return (self.world.group, self.medium._peers[0].latency, self.host._node.latency,
+                tuple((f.firmware.values["motion_mode"], turnarounds.get(f.node)) for f in fronts))
+
+    def run(self, requests: Sequence[Any], timeout: float) -> list[Any] | None:
+        """The replies to ``requests`` (to the twins of this bus, sent one after the other by a link whose reply
+        timeout is ``timeout``), each once the host has it; a refused request's reply is the last. None (nothing
+        sent) where this is not the steady case."""
+        fn = _compiled()
+        if fn is None or not requests:
+            return None
+        plan = self._plan(requests)
+        if plan is None:
+            return None
+        for front in plan.unique:
+            if not self._steady(front):
+                return None
+        world, medium, bus = self.world, self.medium, self.bus
+        with world.lock:
+            clock = world.clock.now()
+            # the branches of the medium the call does not model (a frame within twice the clock's time of 0, a
+            # reply near the link's timeout) cannot be met: the whole call is well inside both
+            if not clock > 2.0 * (plan.span + max(medium.now - clock, 0.0)) or not plan.longest < 0.5 * timeout:
+                return None
+            tx = plan.tx
+            n = len(tx)
+            out = self._out.get(n)
+            if out is None:
+                import numpy as np
+
+                out = self._out[n] = np.zeros((n, OUT_WIDTH))
+            st = self._st
+            st[:] = (clock, world._target, 0.0, medium.now, medium._clock_seen, medium._free, medium._ticked,
+                     0.0, 0.0, medium.busy, world.timestep, 0.0, timeout, 0.0, 0.0)
+            scratch = self._scratch.get(world.group.table.shape[1])
+            if scratch is None:
+                import numpy as np
+
+                scratch = self._scratch[world.group.table.shape[1]] = np.zeros(world.group.table.shape[1])
+            state = L.fused(fn, world, st, tx, out, scratch)
+            medium.now = state[NOW]
+            medium._clock_seen = state[SEEN]
+            medium._free = state[FREE]
+            done = int(state[DONE])
+            frames = int(state[FRAMES])
+            medium.frames += frames
+            medium.bits += int(state[BITS])
+            medium.busy = state[BUSY]
+            medium._seq = itertools.count(next(medium._seq) + frames)
+            if state[TICKS]:
+                medium._ticked = bus._last_tick = state[TICKED]
+            if state[ODD] or done == 0:
+                raise RuntimeError(f"{bus.medium.channel}: the one-call exchange met a branch it does not model "
+                                   f"after {done} of {n} requests; this is a bug (the steady checks let it through)")
+            outs: list[list[float]] = out[:done].tolist()
+            replies: list[Any] = []
+            self.clocks = clocks = []
+            self.instants = [(o[E0], o[E1], o[R0], o[R1], o[HOST], o[ACTED]) for o in outs]
+            for r, shape, front, o in zip(requests, plan.shapes, plan.fronts, outs):
+                fw = front.firmware
+                front.requests += 1
+                node = r.node
+                if shape.op == TARGET_POSITION:
+                    fw._keep(((shape.name, EROB_CAN.from_wire(shape.name, r.value)),))
+                    replies.append(ec.Ack(node))
+                elif shape.op == START:
+                    if o[REFUSED]:
+                        replies.append(ec.ErrorReply(node, sim_can.START_WHILE_OFF))
+                    else:
+                        fw._keep((("start_operating", 1),))
+                        replies.append(ec.Ack(node))
+                else:
+                    replies.append(ec.ValueReply(node, self._value(fw, shape, o)))
+                clocks.append(o[CLOCK_AFTER])
+        self.taken += 1
+        return replies
+
+    @staticmethod
+    def _value(fw: ErobFirmware, shape: _Shape, o: Sequence[float]) -> int:
+        """What the front answers to a read: the firmware's value (the sensors' report of what they saw then),
+        saturated, in the protocol's scale, as int32."""
+        index, scale, lo, hi, plan = shape.extra
+        if plan is not None:  # the status read (its sensors report too, as the firmware's own read)
+            v = plan.finish([int(x) for x in o[STATUS_AT:SENSED_AT]], dict(zip(SENSED, o[SENSED_AT:])))[0]
+        else:
+            v = int(o[STATUS_AT + index])
+            sensed = _SENSED_READS.get(shape.name)
+            if sensed is not None and not fw.sensor.model.ideal:
+                v = getattr(fw, sensed)(dict(zip(SENSED, o[SENSED_AT:])).__getitem__)
+            if v < lo:
+                v = lo
+            elif v > hi:
+                v = hi
+        v //= scale
+        if v > 0x7FFFFFFF:
+            v -= 1 << 32
+        return int(v)
+
+
+def prepare(world: Any, bus: Any, host: Any, transport: Any) -> ErobCanExchange | None:
+    """The one-call exchange of the eRob twins on ``bus`` (an :class:`ErobCanBus` of ``world``) for the host node
+    ``host`` (a :class:`LockstepCanBus` on its medium, wrapped by the link's ``transport``), or None where those
+    are not such objects."""
+    if type(bus) is not ErobCanBus or type(host) is not LockstepCanBus or host.medium is not bus.medium:
+        return None
+    if not isinstance(transport, can_transport.PythonCanTransport) or world is None:
+        return None
+    return ErobCanExchange(world, bus, host, transport)
+

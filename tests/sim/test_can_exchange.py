@@ -1,0 +1,240 @@
+"""The one-call eRob CAN exchange (joints.sim.can_exchange, by joints.drivers.erob_can_steady) gives the frame by
+frame path's bits.
+
+``joints/ErobReach-v0`` at 20 ms on the eRob CAN custom protocol at 1 Mbit/s (``joints bench``'s CAN row) runs
+with the same seeds and actions on the compiled path and on the driver path (``compiled_path=False``): the
+observations, rewards and infos, every joint's last state and contact, every frame's end on the medium with what
+it carried, the instant the host had each reply, the world's substeps when the drive acted on each request, the
+medium's time and counters, the bus's last tick, the world and its clock, the firmware's parameter store, write
+log, kernel row and sensors, the front's request count, the link's counts and fence bookkeeping and the driver's
+cache must be equal; the one-call exchange must have carried the steady steps (where the world runs compiled).
+"""
+
+from __future__ import annotations
+
+import copy
+import sys
+from importlib import resources
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import envs  # noqa: F401 - registers the joints/ envs
+from joints.drivers.erob_can_steady import ErobCanStep
+from joints.errors import DeviceRejected
+from joints.sim import kernel
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+PERIOD = 0.02
+
+
+def _config() -> dict[str, Any]:
+    """The shipped ErobReach config with its joint on an eRob CAN bus at 1 Mbit/s (as ``joints bench`` runs it)."""
+    cfg: dict[str, Any] = tomllib.loads(
+        (resources.files("joints.configs") / "erob_reach.toml").read_text(encoding="utf-8"))
+    on_can = copy.deepcopy(cfg)
+    on_can["buses"] = {"can": {"protocol": "erob-can", "bitrate": 1_000_000}}
+    for j in on_can["joints"].values():
+        j["bus"] = "can"
+    return on_can
+
+
+def _info(info: dict[str, Any]) -> list[tuple[str, Any]]:
+    return [(k, (v.dtype.str, v.tobytes()) if isinstance(v, np.ndarray) else repr(v)) for k, v in sorted(info.items())]
+
+
+class _Recorder:
+    """What happens on the wire and at the drive, on either path: every frame's end (and identifier) as the
+    medium delivers it, the clock when the host has each reply, the world's substeps when the drive acts."""
+
+    def __init__(self, u: Any) -> None:
+        self.frames: list[tuple[float, int]] = []
+        self.host: list[float] = []
+        self.acted: list[int] = []
+        self.replies: list[str] = []  #: what the one-call exchange answered (its kinds)
+        world = u.rig.sim
+        bus = next(iter(world.buses.values()))
+        medium = bus.medium
+        deliver = medium._deliver
+
+        def delivered(pend: Any, t: float) -> None:
+            self.frames.append((t, pend.frame.arbitration_id))
+            deliver(pend, t)
+
+        medium._deliver = delivered
+        for front in bus.fronts:
+            def handled(r: Any, handle: Any = front.handle) -> Any:
+                self.acted.append(world.steps)
+                return handle(r)
+
+            front.handle = handled
+        for j in u.joints:
+            link = j.driver.link
+            request = link.request
+
+            def timed(r: Any, *, idempotent: bool = False, request: Any = request) -> Any:
+                try:
+                    return request(r, idempotent=idempotent)
+                finally:  # (a refusal too: the host had its reply)
+                    self.host.append(world.clock.now())
+
+            link.request = timed
+        self.steps = [s for s in (u.compiled_path._steppers if u.compiled_path else []) if isinstance(s, ErobCanStep)]
+        for s in self.steps:
+            run = s.exchange.run
+
+            def carried(requests: Any, timeout: float, run: Any = run, s: Any = s) -> Any:
+                out = run(requests, timeout)
+                if out is not None:
+                    self.replies += [type(reply).__name__ for reply in out]
+                    for r, (_e0, e1, _r0, r1, seen, acted) in zip(requests, s.exchange.instants):
+                        self.frames += [(e1, 0x640 + r.node), (r1, 0x5C0 + r.node)]
+                        self.host.append(seen)
+                        self.acted.append(int(acted))
+                    assert self.host[-1] == world.clock.now()
+                return out
+
+            s.exchange.run = carried
+
+
+def _state(u: Any) -> dict[str, Any]:
+    world = u.rig.sim
+    bus = next(iter(world.buses.values()))
+    medium = bus.medium
+    out: dict[str, Any] = {
+        "world": (world.steps, world._target, world._booked, world.clock.now(), u.rig.time),
+        "medium": (medium.now, medium._free, medium._clock_seen, medium._ticked, medium.frames, medium.bits,
+                   medium.busy, repr(medium._seq), medium._wire, len(medium._pending),
+                   [(len(n.rx), len(n.held)) for n in medium._nodes]),
+        "bus": (bus._last_tick, [(f.requests, f.held) for f in bus.fronts]),
+    }
+    for f in bus.fronts:
+        fw = f.firmware
+        out[f"fw{f.node}"] = (sorted(fw.values.items()), list(fw.write_log), np.asarray(fw._row, dtype=float).tobytes(),
+                              fw.sensor.rng.getstate(), fw.sensor._age, repr(fw.sensor._age_t))
+    for j in u.joints:
+        d = j.driver
+        out[j.name] = (repr(j.last_state), j.last_contact, j.enabled, sorted(d._cache.items()), d._temperature,
+                       d.link.transactions, d.link.fences, sorted(d.link._unsynced), d.link.retries_used,
+                       len(d.link.unsolicited))
+    return out
+
+
+def _run(compiled: bool, mode: str, steps: int, *, plant: Any = None) -> dict[str, Any]:
+    env = gym.make("joints/ErobReach-v0", config=_config(), control_period=PERIOD, action_mode=mode,
+                   compiled_path=compiled)
+    u: Any = env.unwrapped
+    try:
+        out: dict[str, Any] = {"steps": []}
+        obs, info = env.reset(seed=3)
+        out["reset"] = (obs.tobytes(), _info(info))
+        rec = _Recorder(u)
+        rng = np.random.default_rng(5)
+        for k in range(steps):
+            if plant is not None:
+                plant(k, u)
+            action = rng.uniform(-1.0, 1.0, env.action_space.shape).astype(np.float32)
+            try:
+                obs, reward, terminated, truncated, info = env.step(action)
+            except DeviceRejected as exc:
+                out["steps"].append(("refused", str(exc), exc.code))
+                break
+            out["steps"].append((obs.tobytes(), reward, terminated, truncated, _info(info)))
+            if terminated or truncated:
+                obs, info = env.reset()
+                out["steps"].append(("reset", obs.tobytes(), _info(info)))
+        out["state"] = _state(u)
+        out["frames"], out["host"], out["acted"], out["replies"] = rec.frames, rec.host, rec.acted, rec.replies
+        cp = u.compiled_path
+        out["taken"] = None if cp is None else (cp.taken, cp.fused, sum(s.exchange.taken for s in rec.steps))
+        return out
+    finally:
+        env.close()
+
+
+def _same(driver: dict[str, Any], compiled: dict[str, Any]) -> None:
+    for key in ("reset", "steps", "frames", "host", "acted", "state"):
+        if isinstance(driver[key], dict):
+            for k in driver[key]:
+                assert compiled[key][k] == driver[key][k], (key, k)
+        assert compiled[key] == driver[key], key
+
+
+@pytest.mark.parametrize("mode", ["position", "velocity", "torque"])
+def test_the_compiled_can_step_gives_the_frame_by_frame_bits(mode: str) -> None:
+    steps = 75  # 1.5 s: the temperature read (once a second) is among them
+    driver = _run(False, mode, steps)
+    compiled = _run(True, mode, steps)
+    assert driver["taken"] is None
+    assert len(driver["frames"]) > 14 * steps  # 7-8 transactions a step, two frames each
+    _same(driver, compiled)
+    taken, fused, calls = compiled["taken"]
+    if kernel.default_mode():  # the one-call exchange carried the steady steps (it needs the compiled world)
+        assert calls >= steps  # the state reads of every step (and the position commands)
+        if mode == "position":
+            assert taken >= steps - 1 and fused >= 8 * steps - 8
+        else:  # a speed or current set-point is the joint's own method; its state read is one call
+            assert taken == 0 and fused >= 6 * steps
+    else:
+        assert calls == 0 and fused == 0
+
+
+def test_a_start_the_drive_refuses_mid_step_is_refused_the_same_way() -> None:
+    """The drive is switched off behind the host's back: the host still takes the step for steady, the call
+    carries the target write, the drive answers the start with 0x0027 and the host raises what the link raises;
+    everything stands where the frame-by-frame path leaves it."""
+
+    def plant(k: int, u: Any) -> None:
+        if k == 12:
+            fw = next(iter(u.rig.sim.buses.values())).fronts[0].firmware
+            fw.write("enable_the_motor", 0)
+
+    driver = _run(False, "position", 20, plant=plant)
+    compiled = _run(True, "position", 20, plant=plant)
+    assert driver["steps"][-1][0] == "refused" and driver["steps"][-1][2] == 0x0027
+    _same(driver, compiled)
+    if kernel.default_mode():  # the call carried the steps, and the refused start (its last reply)
+        assert compiled["taken"][2] >= 2 * 12
+        assert compiled["replies"][-2:] == ["Ack", "ErrorReply"]
+
+
+def test_a_trace_or_a_replaced_method_leaves_the_steps_to_the_frame_by_frame_path(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """From step 10 a trace is hooked, from step 20 the front's read is wrapped (as a test planting replies
+    would): from then on nothing goes by the call, and the bits (and the trace) stay the frame-by-frame path's."""
+    from joints.sim.erob_can import ErobCanFront
+
+    records: list[Any] = []
+    calls: list[int] = []
+    original = ErobCanFront._read
+
+    def plant(k: int, u: Any) -> None:
+        if k == 10:
+            u.rig.trace(records.append)
+        elif k == 20:
+            u.rig.trace(None)
+            monkeypatch.setattr(ErobCanFront, "_read", lambda self, r: original(self, r))
+        cp = u.compiled_path
+        if cp is not None:
+            calls.append(cp.fused)
+
+    out = {}
+    for compiled in (False, True):
+        records.clear()
+        calls.clear()
+        monkeypatch.setattr(ErobCanFront, "_read", original)
+        out[compiled] = _run(compiled, "position", 30, plant=plant)
+        out[compiled]["trace"] = [(r.time, r.direction, r.data, r.meaning) for r in records]
+        out[compiled]["calls"] = list(calls)
+    _same(out[False], out[True])
+    assert len(out[True]["trace"]) > 100 and out[True]["trace"] == out[False]["trace"]
+    fused = out[True]["calls"]
+    if kernel.default_mode():
+        assert fused[10] > fused[1] > 0  # the call carried the first steps
+        assert fused[10] == fused[20] == fused[-1]  # traced, then a replaced method: never again
