@@ -412,9 +412,18 @@ class ZlacChannel:
     def _counts(self, r: Sequence[float], t: float) -> int:
         q = r[Z.Q]
         sensor = self.sensor
-        if not sensor.model.ideal:
+        if not sensor.ideal:
             q = sensor.position(t, q, r[Z.QD])
         return round((q - r[Z.ORIGIN]) * r[Z.COUNTS_PER_RAD])
+
+    def _sensed(self, r: Sequence[float], t: float) -> tuple[int, int, int]:
+        """``(_counts(r, t), _velocity_status(r), _current_status(r))``: one call of the sensor (the same draws in
+        the same order, :meth:`~joints.sim.sensors.Sensor.sense`)."""
+        q, v, i = r[Z.Q], r[Z.QD], r[Z.I_OUT]
+        sensor = self.sensor
+        if not sensor.ideal:
+            q, v, i = sensor.sense(t, q, v, i)
+        return round((q - r[Z.ORIGIN]) * r[Z.COUNTS_PER_RAD]), round(v / RPM * 10), round(i * 10)
 
     def rpm(self) -> float:
         return float(self._get(Z.QD)) / RPM
@@ -425,8 +434,9 @@ class ZlacChannel:
 
     def _velocity_status(self, r: Sequence[float]) -> int:
         v = r[Z.QD]
-        if not self.sensor.model.ideal:
-            v = self.sensor.velocity(r[Z.Q], v)
+        sensor = self.sensor
+        if not sensor.ideal:
+            v = sensor.velocity(r[Z.Q], v)
         return round(v / RPM * 10)
 
     def current_status(self) -> int:
@@ -435,8 +445,9 @@ class ZlacChannel:
 
     def _current_status(self, r: Sequence[float]) -> int:
         i = r[Z.I_OUT]
-        if not self.sensor.model.ideal:
-            i = self.sensor.current(i)
+        sensor = self.sensor
+        if not sensor.ideal:
+            i = sensor.current(i)
         return round(i * 10)
 
     def error_status(self) -> int:
@@ -748,24 +759,27 @@ class ZlacFirmware(Firmware):
 
     def _read_status(self) -> list[int]:
         """The status block's values (:data:`_STATUS` order), each as its ``computed`` function gives it (the same
-        channel conversions, each channel's row read once; every sensor draws in the order its own reads would)."""
+        channel conversions, each channel's row read once; every sensor draws in the order its own reads would:
+        each channel's sensor is its own stream, so one call per channel gives the same bits)."""
         left, right = self.left, self.right
         d = self._dget
         t = float(d(Z.D_TIME))
         e = 1 if d(Z.D_STATE) in _ENERGISED_CODES else 0
         lv, rv = left._values(), right._values()
+        l_counts, l_velocity, l_current = left._sensed(lv, t)
+        r_counts, r_velocity, r_current = right._sensed(rv, t)
         return [
             _pack(e, e),
             _pack(left._hall(lv), right._hall(rv)),
             _pack(round(lv[Z.TEMPERATURE]), round(rv[Z.TEMPERATURE])),
             int(lv[Z.FAULT_BITS]),
             int(rv[Z.FAULT_BITS]),
-            left._counts(lv, t),
-            right._counts(rv, t),
-            left._velocity_status(lv),
-            right._velocity_status(rv),
-            left._current_status(lv),
-            right._current_status(rv),
+            l_counts,
+            r_counts,
+            l_velocity,
+            r_velocity,
+            l_current,
+            r_current,
             int(d(Z.D_CONNECTED)),
         ]
 
