@@ -742,18 +742,12 @@ class ZlacFirmware(Firmware):
         if (tuple(names) != _STATUS or type(self).on_read is not Firmware.on_read
                 or any(self.computed.get(n) is not f for n, f in zip(_STATUS, self._status_fns))):
             return generic
-        ranges = tuple(self._type_range[n] for n in _STATUS)
+        los = tuple(self._type_range[n][0] for n in _STATUS)
+        his = tuple(self._type_range[n][1] for n in _STATUS)
         status = self._read_status
 
-        def read() -> list[int]:
-            out = status()
-            for i, (lo, hi) in enumerate(ranges):  # saturate, never wrap (as the generic reader)
-                v = out[i]
-                if v < lo:
-                    out[i] = lo
-                elif v > hi:
-                    out[i] = hi
-            return out
+        def read() -> list[int]:  # saturate, never wrap (as the generic reader)
+            return [lo if v < lo else hi if v > hi else v for v, lo, hi in zip(status(), los, his)]  # noqa: FURB136
 
         return read
 
