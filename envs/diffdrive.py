@@ -359,6 +359,7 @@ class DiffDriveGoalEnv(RigEnv):
         self._t0 = 0.0
         self._last_io = 0.0
         self._origin = np.zeros(3)  #: sim: the true pose at which the estimate restarted
+        self._frame = (0.0, 0.0, 1.0, 0.0, 0.0)  #: sim: :attr:`_origin` as (x, y, cos, sin, heading) floats
         self._noise = 0.0
         self._noise_rng: np.random.Generator | None = None
         self.randomization_sample: dict[str, Any] | None = None
@@ -444,6 +445,8 @@ class DiffDriveGoalEnv(RigEnv):
         self.odometry.restart(*self._angles)
         if self.sim:
             self._origin = self._world_pose()
+            ox, oy, oth = self._origin.tolist()
+            self._frame = (ox, oy, math.cos(oth), math.sin(oth), oth)
         self._t0 = self.rig.time
         self._distance = self._goal_terms()[0]
         obs = self._observation()
@@ -479,15 +482,16 @@ class DiffDriveGoalEnv(RigEnv):
         (a_left, a_right), watchdog = token
         states = self._read()
         x, y, _ = self.odometry.update(*self._angles)
-        d, e = self._goal_terms()
+        goal = self.goal.tolist()  # the goal's floats once for the step's terms, observation and info
+        d, e = self._goal_terms(goal)
         success = d < self.success_distance and abs(e) < self.success_heading
         r_progress = self.progress_weight * (self._distance - d)
         r_heading = -self.heading_weight * abs(e) / math.pi * math.exp(-d / self.heading_scale)
         r_action = -self.action_weight * (a_left * a_left + a_right * a_right)
         r_success = self.success_bonus if success else 0.0
         self._distance = d
-        obs = self._observation()
-        info = self._info(states, (d, e))
+        obs = self._observation(goal)
+        info = self._info(states, (d, e), goal)
         info["reward_progress"] = r_progress
         info["reward_heading"] = r_heading
         info["reward_action"] = r_action
@@ -496,10 +500,13 @@ class DiffDriveGoalEnv(RigEnv):
         out_of_arena = abs(x) > arena or abs(y) > arena
         info["out_of_arena"] = out_of_arena
         info["watchdog"] = watchdog
-        faulted = [n for n in self.wheel_names if states[n].fault is not None]
-        if faulted:
-            info["fault"] = fault_info(faulted[0], states[faulted[0]])
-        terminated = bool(faulted) or out_of_arena or watchdog or (success and self.terminate_on_success)
+        faulted = None
+        for n in self.wheel_names:  # the first wheel that reports a fault
+            if states[n].fault is not None:
+                faulted = n
+                info["fault"] = fault_info(n, states[n])
+                break
+        terminated = faulted is not None or out_of_arena or watchdog or (success and self.terminate_on_success)
         if terminated:
             self._safe_stop()
         if self.render_mode == "human":
@@ -521,16 +528,17 @@ class DiffDriveGoalEnv(RigEnv):
         heading = float(rng.uniform(-math.pi, math.pi))
         return np.array([dist * math.cos(bearing), dist * math.sin(bearing), heading])
 
-    def _goal_terms(self) -> tuple[float, float]:
-        """(distance [m], heading error [rad]) of the estimate to the goal."""
+    def _goal_terms(self, goal: list[float] | None = None) -> tuple[float, float]:
+        """(distance [m], heading error [rad]) of the estimate to the goal (``goal``: its floats if the caller has
+        them)."""
         x, y, th = self.odometry.pose
-        gx, gy, gh = self.goal.tolist()
+        gx, gy, gh = self.goal.tolist() if goal is None else goal
         return math.hypot(gx - x, gy - y), wrap_angle(gh - th)
 
-    def _observation(self) -> np.ndarray:
+    def _observation(self, goal: list[float] | None = None) -> np.ndarray:
         x, y, th = self.odometry.pose
         c, s = math.cos(th), math.sin(th)
-        gx, gy, gh = self.goal.tolist()
+        gx, gy, gh = self.goal.tolist() if goal is None else goal
         dx, dy = gx - x, gy - y
         e = gh - th
         states = self._states
@@ -541,8 +549,9 @@ class DiffDriveGoalEnv(RigEnv):
         np.minimum(obs, self._obs_high, out=obs)
         return obs
 
-    def _info(self, states: Mapping[str, joints.JointState], terms: tuple[float, float] | None = None) -> dict[str, Any]:
-        """The step's info; ``terms``: :meth:`_goal_terms` if the caller has them."""
+    def _info(self, states: Mapping[str, joints.JointState], terms: tuple[float, float] | None = None,
+              goal: list[float] | None = None) -> dict[str, Any]:
+        """The step's info; ``terms``: :meth:`_goal_terms` if the caller has them, ``goal``: the goal's floats."""
         d, e = self._goal_terms() if terms is None else terms
         left, right = self.wheel_names
         sl, sr = states[left], states[right]
@@ -561,7 +570,7 @@ class DiffDriveGoalEnv(RigEnv):
         if self.sim:
             tx, ty, th = self._true_xyth()
             info["true_pose"] = np.array([tx, ty, th])
-            gx, gy, _ = self.goal.tolist()
+            gx, gy, _ = self.goal.tolist() if goal is None else goal
             info["true_distance"] = math.hypot(gx - tx, gy - ty)
         return info
 
@@ -574,8 +583,7 @@ class DiffDriveGoalEnv(RigEnv):
     def _true_xyth(self) -> tuple[float, float, float]:
         """:meth:`true_pose` as Python floats (the same arithmetic as on numpy scalars, faster)."""
         x, y, th = self._world_xyth()
-        ox, oy, oth = self._origin.tolist()
-        c, s = math.cos(oth), math.sin(oth)
+        ox, oy, c, s, oth = self._frame  # (self._origin: its floats, cos and sin)
         return c * (x - ox) + s * (y - oy), -s * (x - ox) + c * (y - oy), wrap_angle(th - oth)
 
     def _world_pose(self) -> np.ndarray:
@@ -608,8 +616,9 @@ class DiffDriveGoalEnv(RigEnv):
 
     def _command(self, action: tuple[float, float]) -> None:
         """Both wheel speeds for ``action`` (clipped to [-1, 1]: :meth:`command_of` on plain floats)."""
-        if not all(j.enabled for j in self.wheels):  # faulted/disabled drive: the episode has ended
-            return
+        for j in self.wheels:
+            if not j.enabled:  # faulted/disabled drive: the episode has ended
+                return
         vl, vr = self._vlim
         cmd = [action[0] * vl, action[1] * vr]
         compiled = self.compiled_path

@@ -229,6 +229,7 @@ class _ZlacModbus:
         #: the joint index of the left and of the right wheel (velocity_words takes them in that order)
         channels = [d.channel for d in self.drivers]
         self._sides = (channels.index("left"), channels.index("right"))
+        self._pairs = tuple(zip(self.joints, self.drivers))  #: (joint, its wheel's driver), in joint order
         #: the steady FC16s in one compiled call (frames, physics, the twin's ops) where the twin offers it
         self.exchange = _velocity_exchange(self.lane, access.slave)
         self.taken = 0
@@ -239,14 +240,20 @@ class _ZlacModbus:
 
     def _send(self, ramps: tuple[int, ...] | None, targets: tuple[int, ...]) -> None:
         """The ramp FC16 (if any) and the target FC16: in one exchange where it takes them, else one by one."""
-        blocks = ([(self.ramps, ramps)] if ramps is not None else []) + [(self.targets, targets)]
+        ramp_block, target_block = self.ramps, self.targets
         exchange = self.exchange
-        if exchange is not None and exchange.write([block.request(values) for block, values in blocks]):
-            for block, values in blocks:
-                self.drive.note_words(block.names, values)
-            return
-        for block, values in blocks:
-            self._write(block, values)
+        if exchange is not None:
+            ramp = None if ramps is None else ramp_block.request(ramps)  # (in the order the lane's way builds them)
+            target = target_block.request(targets)
+            if exchange.write((target,) if ramp is None else (ramp, target)):
+                note = self.drive.note_words
+                if ramps is not None:
+                    note(ramp_block.names, ramps)
+                note(target_block.names, targets)
+                return
+        if ramps is not None:
+            self._write(ramp_block, ramps)
+        self._write(target_block, targets)
 
     def command_all(self, mode: str, values: Sequence[float], skip: Sequence[bool]) -> None:
         joints = self.joints
@@ -279,7 +286,7 @@ class _ZlacModbus:
         assert isinstance(reply, mb.ReadRegistersReply)
         block = self.decode(STATUS_START, reply.values)
         t = sampled_at(t0, clock.now())
-        return [j.to_si(d.state_from(block, t)) for j, d in zip(self.joints, self.drivers)]
+        return [j.to_si(d.state_from(block, t)) for j, d in self._pairs]
 
 
 def _velocity_exchange(lane: LinkLane, slave: int) -> Any:

@@ -350,6 +350,7 @@ class ZlacChannelDriver(JointDriver):
         #: this wheel's status parameters: error code, actual position, velocity, torque
         self._status = tuple(f"{stem}_{side}" for stem in ("error_code", "actual_motor_position", "actual_velocity",
                                                              "actual_torque"))
+        self._byte = 8 if side == "left" else 0  #: the shift of this wheel's byte in the status's two-wheel words
         lines = encoder_lines or int(getattr(profile, "encoder_lines", zr.COUNTS_PER_REV // 4))
         self.units = self._units(lines)  # until the drive told its own (ZlacDrive.identify)
         drive._channels.append(self)
@@ -513,7 +514,6 @@ class ZlacChannelDriver(JointDriver):
         (0x20AF) and no wheel faulted. A drive that quick-stopped because the host went silent
         (0x20AF = 0 while this host had it enabled) reports :data:`~joints.devices.zlac.faults.OFFLINE`.
         """
-        hi = self.side == "left"
         side = self.side
         drive = self.drive
         enabled = drive.state.enabled
@@ -533,8 +533,9 @@ class ZlacChannelDriver(JointDriver):
             drive.offline = True
         if not fault and drive.offline and (was_enabled or not enabled):
             fault = zf.OFFLINE_CODE
-        running = (v["motor_state"] >> 8) & 0xFF if hi else v["motor_state"] & 0xFF
-        temp = (v["motor_temperature"] >> 8) & 0xFF if hi else v["motor_temperature"] & 0xFF
+        shift = self._byte  # this wheel's byte of the two-wheel words (left: the high byte)
+        running = (v["motor_state"] >> shift) & 0xFF
+        temp = (v["motor_temperature"] >> shift) & 0xFF
         speed = v[velocity]
         return RawState(
             position=v[position],

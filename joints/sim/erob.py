@@ -424,7 +424,7 @@ class ErobFirmware(Firmware, K.Columns):
         """``actual_position`` as the drive reports it (:mod:`joints.sim.sensors`); ``get``: the row's columns as
         they stood when it was read (default: the row now)."""
         sensor = self.sensor
-        if sensor.model.ideal:
+        if sensor.ideal:
             return self.counts()
         get = self._get if get is None else get
         pos = sensor.position(get(K.TIME), get(K.POS) / COUNTS_PER_RAD, get(K.VEL) / COUNTS_PER_RAD)
@@ -433,16 +433,25 @@ class ErobFirmware(Firmware, K.Columns):
     def _sensed_speed(self, get: Callable[[int], float] | None = None) -> int:
         """``current_speed`` [count/s]: the drive's velocity estimate."""
         get = self._get if get is None else get
-        if self.sensor.model.ideal:
+        sensor = self.sensor
+        if sensor.ideal:
             return round(get(K.VEL))
-        return round(self.sensor.velocity(get(K.POS) / COUNTS_PER_RAD, get(K.VEL) / COUNTS_PER_RAD) * COUNTS_PER_RAD)
+        return round(sensor.velocity(get(K.POS) / COUNTS_PER_RAD, get(K.VEL) / COUNTS_PER_RAD) * COUNTS_PER_RAD)
 
     def _sensed_current(self, get: Callable[[int], float] | None = None) -> int:
         """``motor_current`` [mA] as the drive measures it."""
         i = (self._get if get is None else get)(K.I_OUT)
-        if self.sensor.model.ideal:
+        sensor = self.sensor
+        if sensor.ideal:
             return round(i)
-        return round(self.sensor.current(i * 1e-3) * 1e3)
+        return round(sensor.current(i * 1e-3) * 1e3)
+
+    def _sensed(self, get: Callable[[int], float]) -> tuple[int, int, int]:
+        """``(_sensed_counts(get), _sensed_speed(get), _sensed_current(get))`` of a sensor that is not ideal, in one
+        call of it (:meth:`~joints.sim.sensors.Sensor.sense`: the same draws in the same order, the same bits)."""
+        pos, vel, i = self.sensor.sense(get(K.TIME), get(K.POS) / COUNTS_PER_RAD, get(K.VEL) / COUNTS_PER_RAD,
+                                        get(K.I_OUT) * 1e-3)
+        return round(pos * COUNTS_PER_RAD) + self.offset, round(vel * COUNTS_PER_RAD), round(i * 1e3)
 
     # -- what the fronts call ---------------------------------------------------------------
     def frame_received(self) -> None:
@@ -617,10 +626,9 @@ class _StatusRead:
         order) as the drive reports them; ``row``: the row's columns the sensors see (column -> value) as they
         stood at the read (default: the row now)."""
         fw, values = self.fw, self.values
-        if not fw.sensor.model.ideal:  # what the drive reports (outside the kernel: same bits)
-            get = None if row is None else row.__getitem__
-            st = (*st[:4], fw._sensed_counts(get), *st[5:7], fw._sensed_speed(get), *st[8:10],
-                  fw._sensed_current(get), *st[11:])
+        if not fw.sensor.ideal:  # what the drive reports (outside the kernel: same bits)
+            counts, speed, current = fw._sensed(fw._get if row is None else row.__getitem__)
+            st = (*st[:4], counts, *st[5:7], speed, *st[8:10], current, *st[11:])
         # saturate, never wrap: ``lo if v < lo else min(v, hi)``, spelled out (min(v, hi) is v unless hi < v)
         return [values[name] if i < 0 else lo if (v := st[i]) < lo else hi if hi < v else v  # noqa: FURB136
                 for i, name, lo, hi in self.entries]

@@ -87,17 +87,51 @@ def _seed(key: str, world_seed: int) -> int:
 
 
 class Sensor:
-    """One drive's sensors: a model, its random stream and the velocity filter's state."""
+    """One drive's sensors: a model, its random stream and the velocity filter's state.
+
+    The model's numbers are taken apart once, when the model is set (:attr:`model`), and the stream's draws are
+    bound methods of its generator (:attr:`rng`), so a read costs its arithmetic and its draws; :meth:`sense`
+    gives a status read's position, velocity and current in one call, drawing exactly what :meth:`position`,
+    :meth:`velocity` and :meth:`current` would, in that order.
+    """
 
     def __init__(self, model: SensorModel, key: str, counts_per_rad: float) -> None:
         self.key = key  #: the twin's identity (family:address) the stream is seeded from
         self.nominal = model  #: the profile's model (:meth:`scale` acts on it)
-        self.model = model
         self.counts_per_rad = float(counts_per_rad)  #: the encoder the velocity is estimated from
         self.world_seed = 0
         self.rng = random.Random(_seed(key, 0))
+        self.model = model
         self._age = 0.0  #: the sample age drawn for the present read [s]
         self._age_t = math.nan  #: the drive time it was drawn at
+
+    @property
+    def rng(self) -> random.Random:
+        """The random stream (a generator set here is drawn from through its bound methods)."""
+        return self._rng
+
+    @rng.setter
+    def rng(self, rng: random.Random) -> None:
+        self._rng = rng
+        self._random = rng.random
+        self._gauss = rng.gauss
+
+    @property
+    def model(self) -> SensorModel:
+        """The model reads go through (:func:`ideal` and :func:`scale` set it)."""
+        return self._model
+
+    @model.setter
+    def model(self, model: SensorModel) -> None:
+        self._model = model
+        self.ideal = model.ideal  #: every number 0: reads report the exact values
+        self._jitter = model.sample_jitter
+        self._position_noise = model.position_noise
+        self._window = model.velocity_window
+        self._velocity_noise = model.velocity_noise
+        self._current_noise = model.current_noise
+        self._resolution = model.current_resolution
+        self._k_window = self.counts_per_rad * model.velocity_window  #: the estimate's divisor, k * window
 
     def reseed(self, world_seed: int | None = None) -> None:
         """Restart the random stream from ``world_seed`` (None: the last one; a power cycle does this)."""
@@ -109,42 +143,67 @@ class Sensor:
     def _sample_age(self, t: float) -> float:
         """The age of the values reported at drive time ``t`` (one draw per read time: position and
         velocity of one status read share it)."""
-        jitter = self.model.sample_jitter
+        jitter = self._jitter
         if not jitter:
             return 0.0
         if t != self._age_t:
             self._age_t = t
-            self._age = jitter * self.rng.random()
+            self._age = jitter * self._random()
         return self._age
 
     def position(self, t: float, q: float, v: float) -> float:
         """The position [rad] the drive reports at time ``t`` for a joint at ``q`` moving at ``v``."""
-        m = self.model
-        if m.sample_jitter:
+        if self._jitter:
             q -= v * self._sample_age(t)
-        if m.position_noise:
-            q += self.rng.gauss(0.0, m.position_noise)
+        if self._position_noise:
+            q += self._gauss(0.0, self._position_noise)
         return q
 
     def velocity(self, q: float, v: float) -> float:
         """The drive's velocity estimate [rad/s] of a joint at ``q`` moving at ``v``."""
-        m = self.model
-        window = m.velocity_window
+        window = self._window
         if window and v:
             k = self.counts_per_rad
-            v = (math.floor(q * k) - math.floor((q - v * window) * k)) / (k * window)
-        if m.velocity_noise:
-            v += self.rng.gauss(0.0, m.velocity_noise)
+            v = (math.floor(q * k) - math.floor((q - v * window) * k)) / self._k_window
+        if self._velocity_noise:
+            v += self._gauss(0.0, self._velocity_noise)
         return v
 
     def current(self, i: float) -> float:
         """The current [A] the drive measures when ``i`` flows."""
-        m = self.model
-        if m.current_noise and i:
-            i += self.rng.gauss(0.0, m.current_noise)
-        if m.current_resolution:
-            i = m.current_resolution * round(i / m.current_resolution)
+        if self._current_noise and i:
+            i += self._gauss(0.0, self._current_noise)
+        resolution = self._resolution
+        if resolution:
+            i = resolution * round(i / resolution)
         return i
+
+    def sense(self, t: float, q: float, v: float, i: float) -> tuple[float, float, float]:
+        """``(position(t, q, v), velocity(q, v), current(i))`` in one call: a status read of a joint at ``q``
+        moving at ``v`` with ``i`` flowing, the same draws in the same order (the same bits)."""
+        gauss = self._gauss
+        jitter = self._jitter
+        pos = q
+        if jitter:
+            if t != self._age_t:
+                self._age_t = t
+                self._age = jitter * self._random()
+            pos -= v * self._age
+        if self._position_noise:
+            pos += gauss(0.0, self._position_noise)
+        window = self._window
+        vel = v
+        if window and v:
+            k = self.counts_per_rad
+            vel = (math.floor(q * k) - math.floor((q - v * window) * k)) / self._k_window
+        if self._velocity_noise:
+            vel += gauss(0.0, self._velocity_noise)
+        if self._current_noise and i:
+            i += gauss(0.0, self._current_noise)
+        resolution = self._resolution
+        if resolution:
+            i = resolution * round(i / resolution)
+        return pos, vel, i
 
 
 def sensors_of(world: Any) -> list[Sensor]:

@@ -356,9 +356,18 @@ class ZlacChannel(Z.ChannelColumns):
     def _counts(self, r: Sequence[float], t: float) -> int:
         q = r[Z.Q]
         sensor = self.sensor
-        if not sensor.model.ideal:
+        if not sensor.ideal:
             q = sensor.position(t, q, r[Z.QD])
         return round((q - r[Z.ORIGIN]) * r[Z.COUNTS_PER_RAD])
+
+    def _sensed(self, r: Sequence[float], t: float) -> tuple[int, int, int]:
+        """``(_counts(r, t), _velocity_status(r), _current_status(r))``: one call of the sensor (the same draws in
+        the same order, :meth:`~joints.sim.sensors.Sensor.sense`)."""
+        q, v, i = r[Z.Q], r[Z.QD], r[Z.I_OUT]
+        sensor = self.sensor
+        if not sensor.ideal:
+            q, v, i = sensor.sense(t, q, v, i)
+        return round((q - r[Z.ORIGIN]) * r[Z.COUNTS_PER_RAD]), round(v / RPM * 10), round(i * 10)
 
     def rpm(self) -> float:
         return float(self._get(Z.QD)) / RPM
@@ -369,8 +378,9 @@ class ZlacChannel(Z.ChannelColumns):
 
     def _velocity_status(self, r: Sequence[float]) -> int:
         v = r[Z.QD]
-        if not self.sensor.model.ideal:
-            v = self.sensor.velocity(r[Z.Q], v)
+        sensor = self.sensor
+        if not sensor.ideal:
+            v = sensor.velocity(r[Z.Q], v)
         return round(v / RPM * 10)
 
     def current_status(self) -> int:
@@ -379,8 +389,9 @@ class ZlacChannel(Z.ChannelColumns):
 
     def _current_status(self, r: Sequence[float]) -> int:
         i = r[Z.I_OUT]
-        if not self.sensor.model.ideal:
-            i = self.sensor.current(i)
+        sensor = self.sensor
+        if not sensor.ideal:
+            i = sensor.current(i)
         return round(i * 10)
 
     def error_status(self) -> int:
@@ -624,41 +635,38 @@ class ZlacFirmware(Firmware, Z.DriveColumns):
         if (tuple(names) != _STATUS or type(self).on_read is not Firmware.on_read
                 or any(self.computed.get(n) is not f for n, f in zip(_STATUS, self._status_fns))):
             return generic
-        ranges = tuple(self._type_range[n] for n in _STATUS)
+        los = tuple(self._type_range[n][0] for n in _STATUS)
+        his = tuple(self._type_range[n][1] for n in _STATUS)
         status = self._read_status
 
-        def read() -> list[int]:
-            out = status()
-            for i, (lo, hi) in enumerate(ranges):  # saturate, never wrap (as the generic reader)
-                v = out[i]
-                if v < lo:
-                    out[i] = lo
-                elif v > hi:
-                    out[i] = hi
-            return out
+        def read() -> list[int]:  # saturate, never wrap (as the generic reader)
+            return [lo if v < lo else hi if v > hi else v for v, lo, hi in zip(status(), los, his)]  # noqa: FURB136
 
         return read
 
     def _read_status(self) -> list[int]:
         """The status block's values (:data:`_STATUS` order), each as its ``computed`` function gives it (the same
-        channel conversions, each channel's row read once; every sensor draws in the order its own reads would)."""
+        channel conversions, each channel's row read once; every sensor draws in the order its own reads would:
+        each channel's sensor is its own stream, so one call per channel gives the same bits)."""
         left, right = self.left, self.right
         d = self._dget
         t = float(d(Z.D_TIME))
         e = 1 if d(Z.D_STATE) in _ENERGISED_CODES else 0
         lv, rv = left._values(), right._values()
+        l_counts, l_velocity, l_current = left._sensed(lv, t)
+        r_counts, r_velocity, r_current = right._sensed(rv, t)
         return [
             _pack(e, e),
             _pack(left._hall(lv), right._hall(rv)),
             _pack(round(lv[Z.TEMPERATURE]), round(rv[Z.TEMPERATURE])),
             int(lv[Z.FAULT_BITS]),
             int(rv[Z.FAULT_BITS]),
-            left._counts(lv, t),
-            right._counts(rv, t),
-            left._velocity_status(lv),
-            right._velocity_status(rv),
-            left._current_status(lv),
-            right._current_status(rv),
+            l_counts,
+            r_counts,
+            l_velocity,
+            r_velocity,
+            l_current,
+            r_current,
             int(d(Z.D_CONNECTED)),
         ]
 

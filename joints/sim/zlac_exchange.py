@@ -130,8 +130,11 @@ class ZlacExchange(L.Carrier):
         if fn is None:
             return False
         lane = self.lane
+        if not lane._idle():  # LinkLane._open of each request: the lane's state once, then each request
+            return False
+        plain = lane._plain
         for r in requests:
-            if not lane._open(r):
+            if not plain(r):
                 return False
         parts = self._parts()
         if parts is None:
@@ -141,32 +144,36 @@ class ZlacExchange(L.Carrier):
         framing = lane.framing
         assert framing is not None
         rule = link.rule
+        check, is_reply, as_received, turnaround = rule.check, rule.is_reply, framing.as_received, framing._turnaround
         size = framing.size
         limits = fw._limits
+        table = front.table
         rows: list[list[float]] = []
         made: list[tuple[Any, list[tuple[str, int]]]] = []
         for r in requests:
-            rule.check(r)  # raises EncodeError before anything is sent, as the lane
+            check(r)  # raises EncodeError before anything is sent, as the lane
             words = r.values
-            block = _BLOCKS.get((r.address, len(words)))
-            if block is None:
+            plan = _plan(table, r.address, len(words))
+            if plan is None:
                 return False
-            op, names = block
-            items = _items(front, r, names)
-            if items is None:
-                return False
-            for name, value in items:
+            op, names, signed = plan
+            items: list[tuple[str, int]] = []
+            for word, name, sign in zip(words, names, signed):  # as ModbusFront.write makes them
+                value = word & 0xFFFF
+                if sign and value & 0x8000:
+                    value -= 0x10000
                 writable, lo, hi = limits[name]
                 if not (writable and lo <= value <= hi):
                     return False  # refused: the front answers it its way
+                items.append((name, value))
             if op == RAMPS:
                 values = [_ramp_seconds(v) for _, v in items]
             else:
                 values = [float(items[0][1]), float(items[1][1]), 0.0, 0.0]
             reply = mb.WriteMultipleRegistersReply(r.slave, r.address, len(words))
-            if framing.as_received(r, reply) is not reply or not rule.is_reply(r, reply):
+            if as_received(r, reply) is not reply or not is_reply(r, reply):
                 return False
-            turn = framing._turnaround(r)
+            turn = turnaround(r)
             rows.append([ZLAC, 0.0, float(size(r)), line.turnaround if turn is None else turn, float(size(reply)),
                          float(op), *values])
             made.append((reply, items))
@@ -248,27 +255,28 @@ class ZlacExchange(L.Carrier):
             return True, lane._finish(request, raw, deadline, idempotent)
 
 
-#: (register table, start address) -> each word's register is signed, or None where the table does not hold the
-#: block's one-word writable registers there (tables are immutable: checked once)
-_SIGNED: dict[tuple[int, int], tuple[bool, ...] | None] = {}
+_Plan = tuple[int, tuple[str, ...], tuple[bool, ...]]
+#: (id of a register table, start address, words) -> (the table, its plan: op, the parameters the front makes of
+#: the words, each word's register is signed - or None where the table does not hold the block's one-word writable
+#: registers there); tables are immutable: checked once per table
+_PLANS: dict[tuple[int, int, int], tuple[Any, _Plan | None]] = {}
 
 
-def _items(front: ModbusFront, request: mb.WriteMultipleRegisters, names: tuple[str, ...]
-           ) -> list[tuple[str, int]] | None:
-    """The firmware write (name, value) of an FC16 of one-word registers ``names`` (as ``ModbusFront.write``
-    makes it: each word masked, a signed register's two's complement); None where the front's table does not
-    hold exactly those registers there."""
-    table = front.table
-    key = (id(table), request.address)
-    if key not in _SIGNED:
-        regs = [table.owner(request.address + i) for i in range(len(names))]
-        ok = all(r is not None and r.name == n and r.words == 1 and r.access.writable for r, n in zip(regs, names))
-        _SIGNED[key] = tuple(r.signed for r in regs if r is not None) if ok else None
-    signed = _SIGNED[key]
-    if signed is None:
-        return None
-    out: list[tuple[str, int]] = []
-    for word, name, sign in zip(request.values, names, signed):
-        raw = word & 0xFFFF
-        out.append((name, raw - 0x10000 if sign and raw & 0x8000 else raw))
-    return out
+def _plan(table: Any, address: int, words: int) -> _Plan | None:
+    """What an FC16 of ``words`` words at ``address`` writes on a front with register ``table``: (op, names, signed)
+    of one of the two blocks (:data:`_BLOCKS`), or None (another block, or a table that does not hold it; as
+    ``ModbusFront.write`` makes the values: each word masked, a signed register's two's complement)."""
+    key = (id(table), address, words)
+    known = _PLANS.get(key)
+    if known is not None and known[0] is table:
+        return known[1]
+    block = _BLOCKS.get((address, words))
+    plan = None
+    if block is not None:
+        op, names = block
+        regs = [table.owner(address + i) for i in range(words)]
+        if all(r is not None and r.name == n and r.words == 1 and r.access.writable for r, n in zip(regs, names)):
+            plan = (op, names, tuple(r.signed for r in regs if r is not None))
+    _PLANS[key] = (table, plan)
+    return plan
+

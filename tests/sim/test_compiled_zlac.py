@@ -27,7 +27,7 @@ from joints.devices.zlac.profile import HubMotorProfile
 from joints.devices.zlac.registers import ZLAC8015D
 from joints.drivers.zlac_modbus import RAMP_NAMES, TARGET_NAMES, ZlacDrive
 from joints.errors import ParameterRefused
-from joints.sim import kernel
+from joints.sim import kernel, zlac_kernel
 from joints.sim.firmware import Firmware
 from joints.sim.modbus_front import ModbusDeviceBus, ModbusFront
 from joints.sim.zlac import ZlacFirmware
@@ -96,6 +96,9 @@ def _run(compiled: bool, steps: int = 80, counts: _Counts | None = None, **kwarg
         out["fused"] = u.compiled_path._steppers[0].exchange.taken if u.compiled_path is not None else None
         out["reads"] = u.compiled_path._steppers[0].exchange.reads if u.compiled_path is not None else None
         out["counts"] = {k: v - before[k] for k, v in counts.n.items()} if counts is not None else None
+        twins = [f.firmware for b in u.rig.sim.buses.values() for f in b.slaves.values()]
+        #: what ran compiled: the world's stepping, each twin's kernel ops (not the Python ones)
+        out["kernels"] = (u.rig.sim.group.compiled, [fw._k is not zlac_kernel.PY_OPS for fw in twins])
         return out
     finally:
         env.close()
@@ -141,13 +144,22 @@ def test_a_replaced_twin_method_sends_the_requests_the_lanes_way(monkeypatch: py
 
 
 def test_compiled_kernels_and_python_give_the_same_bits(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The twin's kernel op (set_velocity_target) compiled and as Python: one run each, the same bits."""
+    """The twin's kernel op (set_velocity_target) compiled and as Python: one run each, the same bits. The first
+    run is asserted compiled (wherever numba is installed): the world's stepping and the twin's ops compiled, every
+    step's FC16s and status read in one compiled call - a run that fell back to Python would compare Python with
+    Python."""
     runs = []
     for value in ("1", "0"):
         monkeypatch.setenv("JOINTS_COMPILED", value)
         runs.append(_run(compiled=True, steps=60, domain_randomization=True))
+    compiled, python = runs
+    assert compiled["kernels"] == (kernel.AVAILABLE, [kernel.AVAILABLE])
+    if kernel.AVAILABLE:
+        assert compiled["fused"] >= 58 and compiled["reads"] >= 60
+    assert python["kernels"] == (False, [False]) and python["fused"] == 0 and python["reads"] == 0
+    assert compiled["taken"] >= 2 * 60 and python["taken"] >= 2 * 60  # the compiled path, both runs
     for key in _COMPARED:
-        assert runs[0][key] == runs[1][key], key
+        assert compiled[key] == python[key], key
 
 
 # -- the twin's light write against the general one -----------------------------------------------------

@@ -1,0 +1,75 @@
+"""The sensor model's one-call read (``Sensor.sense``) against its three reads, bit for bit, and the model's
+numbers and stream taken apart once (a model or generator set later is the one reads use)."""
+
+from __future__ import annotations
+
+import math
+import random
+
+import pytest
+
+from joints.sim.sensors import IDEAL, Sensor, SensorModel
+
+MODELS = [
+    SensorModel(),
+    SensorModel(velocity_window=0.05, current_noise=0.05, sample_jitter=0.001),  # the ZLAC8015D's kind
+    SensorModel(velocity_window=0.002, velocity_noise=0.01, position_noise=1e-4, current_noise=0.02,
+                current_resolution=0.01, sample_jitter=5e-4),
+    SensorModel(position_noise=1e-3, current_resolution=0.1),
+    SensorModel(velocity_noise=0.3),
+]
+
+
+def _reads(seed: int, n: int) -> list[tuple[float, float, float, float]]:
+    """``n`` reads (t, q, v, i): times repeat (one draw of the sample age per read time), speeds and currents are
+    sometimes exactly 0 (no filter step, no current noise)."""
+    rng = random.Random(seed)
+    out = []
+    t = 0.0
+    for k in range(n):
+        if k % 3:
+            t += rng.choice((0.0, 1e-3, 0.02))
+        v = 0.0 if k % 5 == 0 else rng.uniform(-20.0, 20.0)
+        i = 0.0 if k % 7 == 0 else rng.uniform(-8.0, 8.0)
+        out.append((t, rng.uniform(-50.0, 50.0), v, i))
+    return out
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_sense_gives_the_three_reads_bits_and_leaves_the_stream_where_they_do(model: SensorModel) -> None:
+    apart = Sensor(model, "zlac:1:left", 16384 / (2 * math.pi))
+    together = Sensor(model, "zlac:1:left", 16384 / (2 * math.pi))
+    for s in (apart, together):
+        s.reseed(11)
+    for t, q, v, i in _reads(3, 400):
+        want = (apart.position(t, q, v), apart.velocity(q, v), apart.current(i))
+        got = together.sense(t, q, v, i)
+        assert [x.hex() for x in got] == [float(x).hex() for x in want]
+        assert together.rng.getstate() == apart.rng.getstate()
+        assert (together._age, together._age_t) == (apart._age, apart._age_t)
+
+
+def test_a_model_set_later_is_the_one_reads_use() -> None:
+    noisy = SensorModel(velocity_window=0.05, velocity_noise=0.1, position_noise=1e-3, current_noise=0.05,
+                        current_resolution=0.01, sample_jitter=1e-3)
+    s = Sensor(noisy, "erob:1", 1000.0)
+    assert not s.ideal
+    s.model = IDEAL
+    assert s.ideal and s.model is IDEAL
+    before = s.rng.getstate()
+    assert s.sense(0.1, 1.25, 3.0, 2.5) == (1.25, 3.0, 2.5)  # exact, no draw
+    assert s.rng.getstate() == before
+    s.model = noisy.scaled(0.0)  # noise off, the filter and resolution stay
+    assert s.current(0.123) == pytest.approx(0.12) and s.rng.getstate() == before
+
+
+def test_a_generator_set_later_is_the_one_reads_draw_from() -> None:
+    model = SensorModel(position_noise=1e-3)
+    s = Sensor(model, "mks:1", 1000.0)
+    s.rng = random.Random(5)
+    ref = random.Random(5)
+    assert s.position(0.0, 0.5, 0.0) == 0.5 + ref.gauss(0.0, 1e-3)
+    s.reseed(9)  # a new stream, drawn from
+    again = Sensor(model, "mks:1", 1000.0)
+    again.reseed(9)
+    assert s.position(0.0, 0.5, 0.0) == again.position(0.0, 0.5, 0.0)
