@@ -266,13 +266,9 @@ class ErobDriver(JointDriver):
                 return False
         return True
 
-    def validate(self, **values: int | None) -> None:
-        """The range checks a command makes before its first write (:meth:`_validate`'s: a value the drive holds
-        was checked when it was written)."""
-        cache = self._cache
-        for name, value in values.items():
-            if value is not None and cache.get(name) != value:
-                self.params[name].check(value)
+    #: the range checks a command makes before its first write (:meth:`_validate` itself, not a call of it: one
+    #: keyword packing, not two)
+    validate = _validate
 
     def note_written(self, name: str, value: int) -> None:
         """``value`` was written to ``name`` by another way than :meth:`write_param` (the compiled path)."""
