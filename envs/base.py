@@ -679,15 +679,18 @@ class JointsEnv(RigEnv):
     batchable = True
 
     def begin_step(self, action: np.ndarray) -> tuple[np.ndarray, list[float]]:
-        self._check_open()
+        if self._closed:
+            self._check_open()  # raises
         a = np.asarray(action, dtype=np.float64)
         if a.shape != self._action_shape:
             raise ValueError(f"action shape {a.shape} != {self.action_space.shape}")
-        values = a.tolist()
-        for v in values:
+        given = a.tolist()
+        values = []
+        for v in given:
             if v - v != 0.0:  # NaN or infinite
-                raise ValueError(f"action must be finite, got {values}")
-        values = [clip(v, -1.0, 1.0) for v in values]  # a.clip(-1.0, 1.0) on plain floats: the same bits
+                raise ValueError(f"action must be finite, got {given}")
+            # a.clip(-1.0, 1.0) on plain floats (clip() of a finite value: the same bits)
+            values.append(v if -1.0 <= v <= 1.0 else (-1.0 if v < -1.0 else 1.0))
         a = np.array(values)
         if self._queue:  # bus latency (domain randomisation): the action waits its turn
             self._queue.append(a)

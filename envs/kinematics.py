@@ -173,20 +173,25 @@ def erob_arm3_clearance_bound(q2: float, q3: float) -> float:
 BOUND_SLACK = 1e-9
 
 
-def erob_arm3_clears(q2: float, q3: float, less: float, need: float) -> bool:
+def erob_arm3_clears(q2: float, q3: float, less: float, need: float, less_upper: float | None = None) -> bool:
     """``erob_arm3_clearance_bound(q2, q3) - less - BOUND_SLACK >= need``, the same answer for every input,
     faster: each of the bound's terms is computed by the same IEEE operations, and since ``t - less - slack``
     never decreases as ``t`` grows, the smallest term passes exactly when every term passes - so the cheap
     terms go first and the first that fails ends it. (``min()`` keeps a NaN only as its first argument, the
-    upper arm - floor term: that term fails on NaN, the others on ``<`` alone, which a NaN never is.)"""
+    upper arm - floor term: that term fails on NaN, the others on ``<`` alone, which a NaN never is.)
+
+    ``less_upper`` (default ``less``): what the five terms of the upper arm and the elbow give away instead of
+    ``less`` - over a box of poses a point of the upper arm moves at most ``ARM3_UPPER * |dq2|``, one of the
+    forearm ``ARM3_UPPER * |dq2| + ARM3_FORE * |dq2 + dq3|``: each term then bounds its own pair over the box."""
     slack = BOUND_SLACK
+    lu = less if less_upper is None else less_upper
     h = ARM3_SHOULDER_HEIGHT
     ex, ez = ARM3_UPPER * math.cos(q2), h - ARM3_UPPER * math.sin(q2)
     r = ARM3_ELBOW_RADIUS
-    if ez - r - less - slack < need:  # elbow - floor
+    if ez - r - lu - slack < need:  # elbow - floor
         return False
     t = (h if not ez < h else ez) - ARM3_UPPER_RADIUS  # min(h, ez), NaN as min() has it
-    if not t - less - slack >= need:  # upper arm - floor (min()'s first argument)
+    if not t - lu - slack >= need:  # upper arm - floor (min()'s first argument)
         return False
     fx, fz = ex + ARM3_FORE * math.cos(q2 + q3), ez - ARM3_FORE * math.sin(q2 + q3)
     if (ez if not fz < ez else fz) - ARM3_FORE_RADIUS - less - slack < need:  # forearm - floor; min(ez, fz)
@@ -196,11 +201,11 @@ def erob_arm3_clears(q2: float, q3: float, less: float, need: float) -> bool:
     ax = abs(ex)
     dx, dz, w = ax - bh, b0 - ez, ez - b1
     dz = w if w > dz else dz  # noqa: FURB136
-    if math.hypot(0.0 if 0.0 > dx else dx, 0.0 if 0.0 > dz else dz) - r - less - slack < need:  # noqa: FURB136
+    if math.hypot(0.0 if 0.0 > dx else dx, 0.0 if 0.0 > dz else dz) - r - lu - slack < need:  # noqa: FURB136
         return False
     dx, dz, w = ax - lh, l0 - ez, ez - l1
     dz = w if w > dz else dz  # noqa: FURB136
-    if math.hypot(0.0 if 0.0 > dx else dx, 0.0 if 0.0 > dz else dz) - r - less - slack < need:  # noqa: FURB136
+    if math.hypot(0.0 if 0.0 > dx else dx, 0.0 if 0.0 > dz else dz) - r - lu - slack < need:  # noqa: FURB136
         return False
     r = ARM3_FORE_RADIUS
     if _apart(ex, ez, fx, fz, bh, b0, b1) - r - less - slack < need \
@@ -210,8 +215,8 @@ def erob_arm3_clears(q2: float, q3: float, less: float, need: float) -> bool:
             and _segment_column(ex, ez, fx, fz, lh, l0, l1) - r - less - slack < need:  # forearm - link1
         return False
     r = ARM3_UPPER_RADIUS  # upper arm - base
-    return not (_apart(0.0, h, ex, ez, bh, b0, b1) - r - less - slack < need
-                and _segment_column(0.0, h, ex, ez, bh, b0, b1) - r - less - slack < need)
+    return not (_apart(0.0, h, ex, ez, bh, b0, b1) - r - lu - slack < need
+                and _segment_column(0.0, h, ex, ez, bh, b0, b1) - r - lu - slack < need)
 
 
 #: m below the gap of two boxes that :func:`_segment_column` can read for it (its rounding is ~1e-16 m)

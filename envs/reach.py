@@ -14,6 +14,7 @@ from envs.kinematics import (
     ARM3_FORE,
     ARM3_REACH,
     ARM3_SHOULDER_HEIGHT,
+    ARM3_UPPER,
     erob_arm3_clearance,
     erob_arm3_clears,
     erob_arm3_ee,
@@ -401,8 +402,9 @@ class ErobArmReachEnv(JointsEnv):
             q3 = ((a3 + b3) / 2 - o3) * d3
             span2, span3 = ARM3_REACH * abs(b2 - a2), ARM3_FORE * abs(b3 - a3)
             bounds += 1
-            # erob_arm3_clearance_bound(q2, q3) - (span2 / 2 + span3 / 2) - 1e-9 >= CLEARANCE
-            if erob_arm3_clears(q2, q3, span2 / 2 + span3 / 2, need):
+            # each term of erob_arm3_clearance_bound(q2, q3), less how far its link moves over the box, - 1e-9
+            # >= CLEARANCE: the forearm's (span2 / 2 + span3 / 2), the upper arm's and the elbow's less
+            if erob_arm3_clears(q2, q3, span2 / 2 + span3 / 2, need, ARM3_UPPER * abs(b2 - a2) / 2):
                 continue
             if bounds >= self.BOUNDS:
                 return not self._short_on_grid(lo2, hi2, lo3, hi3) \

@@ -149,6 +149,8 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
         n = self.num_envs
         if actions.shape[:1] != (n,):
             raise ValueError(f"actions of shape {actions.shape}: expected {n} rows")
+        if actions.dtype.kind == "f" and actions.dtype != np.float64:  # (exact, and what each rig casts its row to)
+            actions = actions.astype(np.float64)
         rewards = np.zeros(n, dtype=np.float64)
         terminated = np.zeros(n, dtype=np.bool_)
         truncated = np.zeros(n, dtype=np.bool_)
@@ -203,14 +205,16 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
         elif acting:  # every rig's outcome, then each array at once
             done = [(i, envs[i].finish_step(token)) for i, token in acting if envs[i].batchable]
             if done:
-                rows = [i for i, _ in done]
+                rows: Any = [i for i, _ in done]
+                if len(rows) == n:  # every rig (in order): a slice, not a gather
+                    rows = slice(None)
                 obs_rows[rows] = [out[0] for _, out in done]
                 rewards[rows] = [out[1] for _, out in done]
                 terminated[rows] = [out[2] for _, out in done]
                 truncated[rows] = [out[3] for _, out in done]
                 for i, out in done:
                     infos_of[i] = out[4]
-            stepped = [i for i, _ in acting]
+            stepped: Any = slice(None) if len(acting) == n else [i for i, _ in acting]
             elapsed[stepped] += 1
             if limit is not None:
                 truncated[stepped] |= elapsed[stepped] >= limit
@@ -236,6 +240,7 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
                 return None
         n = len(infos)
         out: dict[str, Any] = {}
+        every = np.ones(n, dtype=np.bool_)  #: each key's mask is a copy of it
         for key in keys:
             if key.startswith("_") or key == "final_obs":
                 return None
@@ -265,7 +270,7 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
                 for i, v in enumerate(values):
                     array[i] = v
             out[key] = array
-            out["_" + key] = np.ones(n, dtype=np.bool_)
+            out["_" + key] = every.copy()
         return out
 
     def _add_info(self, vector_infos: dict[str, Any], env_info: dict[str, Any], env_num: int) -> dict[str, Any]:

@@ -30,7 +30,7 @@ from typing import Any
 from joints.clock import Clock
 from joints.configtypes import Limits, Motion
 from joints.devices.faults import Fault
-from joints.drivers.base import JointDriver, RawState, Units
+from joints.drivers.base import JointDriver, RawState, Units, slots_maker
 from joints.drivers.capabilities import CommunicationWatchdog, DriveLimits, MotionTargets
 from joints.errors import CommandError, DeviceFault, LimitError, MotionTimeout, StateError
 
@@ -51,6 +51,11 @@ class JointState:
     fault: Fault | None  #: the drive's fault by name, None when there is none
     time: float  #: s, on the rig's clock (simulated time in sim)
     raw: RawState | None = field(default=None, repr=False, compare=False)
+
+
+#: ``JointState(...)`` of every field, positionally (:func:`~joints.drivers.base.slots_maker`: a state per joint per
+#: read, at about half the cost of the frozen dataclass's ``__init__``)
+_joint_state = slots_maker(JointState)
 
 
 class Joint:
@@ -273,10 +278,12 @@ class Joint:
     ) -> tuple[int, int, int, int]:
         """Check a :meth:`move_to` against the limits, the last fault and the enable state; return it in
         device units (target, profile speed, acceleration, deceleration). Nothing is sent."""
-        position = self._finite("position", position)
+        if type(position) is not float or position - position != 0.0:  # not a finite float: _finite decides
+            position = self._finite("position", position)
         profile = (velocity, acceleration, deceleration)
         known = self._profiles.get(profile)
-        if known is None or known[0] != (self.motion, self.limits, self.units, self.direction):
+        units = self.driver.units
+        if known is None or known[0] != (self.motion, self.limits, units, self.direction):
             v = self._finite("velocity", self.motion.velocity if velocity is None else velocity)
             a = self._finite("acceleration", self.motion.acceleration if acceleration is None else acceleration)
             d = self._finite("deceleration", self.motion.deceleration if deceleration is None else deceleration)
@@ -286,16 +293,22 @@ class Joint:
             self._check_velocity(v, "profile velocity")
             self._check_accel(a, "acceleration")
             self._check_accel(d, "deceleration")
-            known = ((self.motion, self.limits, self.units, self.direction),
+            known = ((self.motion, self.limits, units, self.direction),
                      (abs(self._to_vel(v)), self._to_acc(a), self._to_acc(d)))
             if len(self._profiles) < 64:  # a checked profile is reused as it is (device units)
                 self._profiles[profile] = known
         else:  # the profile was checked before: only the position is new
-            self._check_position(position)
-        self._refuse_if_faulted("move_to")
-        self._require_enabled()
+            lim = self.limits.position
+            if lim is not None and not lim[0] <= position <= lim[1]:
+                self._check_position(position)  # raises
+        last = self.last_state
+        if last is not None and last.fault is not None:
+            self._refuse_if_faulted("move_to")  # raises
+        if not self.driver.is_enabled:
+            self._require_enabled()  # raises
         speed, acc, dec = known[1]
-        return self._to_pos(position), speed, acc, dec
+        # _to_pos, inlined
+        return round((position - self.offset) * self.direction / (units.position * self.scale)), speed, acc, dec
 
     def move_by(self, delta: float, **kw: float) -> None:
         """Move by ``delta`` [rad] from the present position (checked against the limits)."""
@@ -305,14 +318,27 @@ class Joint:
 
     def velocity_command(self, velocity: float, acceleration: float | None = None) -> tuple[int, int]:
         """Check a velocity command against the limits; return it in device units (velocity, ramp)."""
-        velocity = self._finite("velocity", velocity)
-        self._check_velocity(velocity)
-        a = self._finite("acceleration", self.motion.acceleration if acceleration is None else acceleration)
-        self._check_accel(a, "acceleration")
-        self._refuse_if_faulted("set_velocity")
-        self._require_enabled()
-        self._contact()
-        return self._to_vel(velocity), self._to_acc(a)
+        if type(velocity) is not float or velocity - velocity != 0.0:  # not a finite float: _finite decides
+            velocity = self._finite("velocity", velocity)
+        lim = self.limits.velocity
+        if lim is not None and abs(velocity) > lim:
+            self._check_velocity(velocity)  # raises
+        a = self.motion.acceleration if acceleration is None else acceleration
+        if type(a) is not float or a - a != 0.0:
+            a = self._finite("acceleration", a)
+        top = self.limits.acceleration
+        if a <= 0 or top is not None and a > top:
+            self._check_accel(a, "acceleration")  # raises
+        last = self.last_state
+        if last is not None and last.fault is not None:
+            self._refuse_if_faulted("set_velocity")  # raises
+        driver = self.driver
+        if not driver.is_enabled:
+            self._require_enabled()  # raises
+        self.last_contact = self.clock.now()  # _contact
+        # _to_vel and _to_acc, inlined
+        per = driver.units.velocity * self.scale
+        return round(velocity * self.direction / per), max(1, round(abs(a) / per))
 
     def set_velocity(self, velocity: float, *, acceleration: float | None = None) -> None:
         """Run at ``velocity`` [rad/s] (speed control) until stop() or another command."""
@@ -327,11 +353,19 @@ class Joint:
     def torque_command(self, torque: float) -> int:
         """Check a :meth:`set_torque` against the limit, the last fault and the enable state; return it in the
         driver's current units. Nothing is sent."""
-        torque = self._finite("torque", torque)
-        self._check_torque(torque)
-        self._refuse_if_faulted("set_torque")
-        self._require_enabled()
-        return self._to_current(torque)
+        if type(torque) is not float or torque - torque != 0.0:  # not a finite float: _finite decides
+            torque = self._finite("torque", torque)
+        lim = self.limits.torque
+        if lim is not None and abs(torque) > lim:
+            self._check_torque(torque)  # raises
+        last = self.last_state
+        if last is not None and last.fault is not None:
+            self._refuse_if_faulted("set_torque")  # raises
+        driver = self.driver
+        if not driver.is_enabled:
+            self._require_enabled()  # raises
+        u = driver.units
+        return round(torque * self.scale * self.direction / u.torque_constant / u.current)  # _to_current
 
     def cycle_target(self, value: float, kind: str) -> int:
         """A cyclic set-point (``Rig.cycle``) in device units, checked against the limits first.
@@ -376,22 +410,20 @@ class Joint:
 
     def to_si(self, raw: RawState) -> JointState:
         """A drive state in SI units; it becomes :attr:`last_state`."""
-        u = self.units
-        amps = raw.current * u.current * self.direction
-        s = JointState(
-            position=self._from_pos(raw.position),
-            velocity=raw.velocity * u.velocity * self.scale * self.direction,
-            torque=amps * u.torque_constant / self.scale,
-            current=amps,
-            temperature=raw.temperature,
-            enabled=raw.enabled,
-            moving=raw.moving,
-            fault=self.driver.fault(raw.fault) if raw.fault else None,
-            time=raw.time,
-            raw=raw,
-        )
+        driver = self.driver
+        u = driver.units
+        scale, direction = self.scale, self.direction
+        amps = raw.current * u.current * direction
+        fault = raw.fault
+        t = raw.time
+        # JointState(position, velocity, torque, current, temperature, enabled, moving, fault, time, raw); the
+        # position is _from_pos's, each product in the order it is written (the same bits)
+        s = _joint_state(raw.position * u.position * scale * direction + self.offset,
+                         raw.velocity * u.velocity * scale * direction,
+                         amps * u.torque_constant / scale, amps, raw.temperature, raw.enabled, raw.moving,
+                         driver.fault(fault) if fault else None, t, raw)
         self.last_state = s
-        self.last_contact = raw.time
+        self.last_contact = t
         return s
 
     def check(self) -> None:

@@ -7,6 +7,7 @@ is checkable.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -24,11 +25,13 @@ from joints.devices.erob.registers import (
     MotionStatus,
     OperationMode,
 )
+from joints.drivers.base import RawState, raw_state, slots_maker
 from joints.drivers.erob_modbus import ErobModbusDriver
 from joints.errors import (
     CommandError,
     ConfirmationRequired,
     DeviceFault,
+    LimitError,
     MotionTimeout,
     RegisterError,
     StateError,
@@ -504,3 +507,82 @@ def test_direction_must_be_plus_or_minus_one() -> None:
     link = ModbusLink(LoopbackTransport(slave.bus()), clock=clock)
     with pytest.raises(CommandError):
         Joint("j", ErobModbusDriver(link, 2, clock=clock), clock=clock, direction=2)
+
+
+# --- the per-step paths: inlined checks and conversions are the helpers' bits --------------------
+
+
+@pytest.mark.parametrize(("direction", "offset", "lead"), [(1, 0.0, None), (-1, 0.37, None), (-1, 0.01, 0.005)])
+def test_step_commands_and_state_are_the_helpers_bits(direction: int, offset: float, lead: float | None) -> None:
+    """position/velocity/torque_command and to_si inline _to_pos, _to_vel, _to_acc, _to_current and _from_pos
+    (the per-step path): the same numbers, bit for bit, for any direction, offset and lead."""
+    slave = FakeErob(2)
+    clock = ManualClock()
+    driver = ErobModbusDriver(ModbusLink(LoopbackTransport(slave.bus()), clock=clock), 2, clock=clock)
+    j = Joint("j", driver, clock=clock, direction=direction, offset=offset, lead=lead,
+              limits=Limits(position=(-3.0, 3.0), velocity=4.0, torque=30.0),
+              motion=Motion(velocity=1.3, acceleration=7.7, deceleration=5.1))
+    j.enable()
+    rng = np.random.default_rng(3)
+    for x in rng.uniform(-1.0, 1.0, 200).tolist():
+        target, speed, acc, dec = j.position_command(3.0 * x)
+        assert (target, speed, acc, dec) == (j._to_pos(3.0 * x), abs(j._to_vel(1.3)), j._to_acc(7.7), j._to_acc(5.1))
+        assert j.velocity_command(4.0 * x) == (j._to_vel(4.0 * x), j._to_acc(7.7))
+        assert j.torque_command(30.0 * x) == j._to_current(30.0 * x)
+    for counts_, speed_, amps in zip(rng.integers(-2**31, 2**31, 50).tolist(), rng.integers(-2**20, 2**20, 50).tolist(),
+                                      rng.integers(-30000, 30000, 50).tolist()):
+        raw = RawState(counts_, speed_, amps, 40.0, True, False, 0, 1.5)
+        s = j.to_si(raw)
+        u = j.units
+        assert s.position == j._from_pos(counts_)  # exact: the same operations in the same order
+        assert s.velocity == speed_ * u.velocity * j.scale * direction
+        assert s.current == amps * u.current * direction
+        assert s.torque == s.current * u.torque_constant / j.scale
+        assert (s.temperature, s.enabled, s.moving, s.fault, s.time, s.raw) == (40.0, True, False, None, 1.5, raw)
+        assert j.last_state is s and j.last_contact == 1.5
+
+
+def test_step_commands_refuse_in_the_same_order() -> None:
+    """The inlined checks raise the helpers' errors in the helpers' order: finite, limit, fault, enabled."""
+    b = bench(limits=Limits(position=(-1.0, 1.0), velocity=1.0, torque=5.0))
+    j = b.joint
+    with pytest.raises(CommandError, match="position must be a finite number"):
+        j.position_command(math.nan)
+    with pytest.raises(LimitError, match="outside the limits"):  # the limit before the (disabled) state
+        j.position_command(1.5)
+    with pytest.raises(LimitError, match="velocity 2.0000 rad/s exceeds"):
+        j.velocity_command(2.0)
+    with pytest.raises(LimitError, match="torque 6.000 N\\*m exceeds"):
+        j.torque_command(6.0)
+    for call in (lambda: j.position_command(0.5), lambda: j.position_command(0.25),  # profile new, then known
+                 lambda: j.velocity_command(0.5), lambda: j.torque_command(1.0)):
+        with pytest.raises(StateError, match="not enabled"):
+            call()
+    j.enable()
+    b.slave.fault(0x0FA2)
+    j.state()
+    for call in (lambda: j.position_command(0.5), lambda: j.velocity_command(0.5), lambda: j.torque_command(1.0)):
+        with pytest.raises(DeviceFault):
+            call()
+    with pytest.raises(CommandError, match="acceleration must be > 0"):
+        j.velocity_command(0.5, -1.0)
+
+
+def test_slots_maker_makes_the_dataclass_object() -> None:
+    """The per-read state objects are made by slots_maker: equal to the dataclass's own, every field set."""
+    values = (0.5, -1.25, 3.0, 0.2, 41.0, True, False, None, 2.5, RawState(1, 2, 3.0, 4.0, True, False, 0, 2.5))
+    made = slots_maker(JointState)(*values)
+    ref = JointState(*values)
+    assert type(made) is JointState and made == ref and repr(made) == repr(ref) and hash(made) == hash(ref)
+    assert [getattr(made, f.name) for f in dataclasses.fields(JointState)] == list(values)
+    raw = raw_state(1, 2, 3.0, 4.0, True, False, 7, 0.5, {"a": 1})
+    assert raw == RawState(1, 2, 3.0, 4.0, True, False, 7, 0.5, {"a": 1}) and raw.extra == {"a": 1}
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        made.position = 1.0  # type: ignore[misc]
+
+    @dataclass(frozen=True)
+    class NoSlots:
+        x: int
+
+    with pytest.raises(TypeError):
+        slots_maker(NoSlots)

@@ -12,9 +12,11 @@ synchronous multi-channel commands, a communication watchdog) are the typed prot
 from __future__ import annotations
 
 import abc
+import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import Any, TypeVar
 
 from joints.devices.faults import Fault
 from joints.devices.params import Param, ParamSet
@@ -37,6 +39,29 @@ class Units:
         return Units(rad, rad, current_unit, torque_constant)
 
 
+_T = TypeVar("_T")
+
+
+def slots_maker(cls: type[_T]) -> Callable[..., _T]:
+    """A function making an instance of the frozen slots dataclass ``cls`` from ALL its fields, positionally, in
+    their order: the same object as ``cls(...)`` (no ``__post_init__``, defaults not applied), each field set by its
+    slot's descriptor - what the generated ``__init__`` does through ``object.__setattr__``, at about half the
+    cost (a state is made per joint per read)."""
+    names = [f.name for f in dataclasses.fields(cls)]  # type: ignore[arg-type]
+    if hasattr(cls, "__post_init__") or "__slots__" not in cls.__dict__ or any(n.startswith("_") for n in names):
+        raise TypeError(f"slots_maker: {cls.__name__} is not a plain slots dataclass")
+    scope: dict[str, Any] = {"_new": object.__new__, "_cls": cls}
+    lines = [f"def make({', '.join(names)}):", "    o = _new(_cls)"]
+    for i, n in enumerate(names):
+        scope[f"_set{i}"] = cls.__dict__[n].__set__
+        lines.append(f"    _set{i}(o, {n})")
+    lines.append("    return o")
+    exec("\n".join(lines), scope)  # noqa: S102 - generated from the class's own field names, as dataclasses does
+    make: Callable[..., _T] = scope["make"]
+    make.__doc__ = f"{cls.__name__}({', '.join(names)}), every field given"
+    return make
+
+
 def sampled_at(sent: float, received: float) -> float:
     """When a status read between ``sent`` (before its request) and ``received`` (after its reply) was
     sampled: the drive samples after the request has arrived and before it answers, an instant the
@@ -57,6 +82,11 @@ class RawState:
     fault: int  #: device error code, 0 = none
     time: float  #: clock time of the sample: the middle of its transaction (:func:`sampled_at`)
     extra: Mapping[str, int] = field(default_factory=dict)
+
+
+#: ``RawState(position, velocity, current, temperature, enabled, moving, fault, time, extra)``, every field given
+#: (:func:`slots_maker`: the status read's per-joint object, at about half the cost)
+raw_state = slots_maker(RawState)
 
 
 class JointDriver(abc.ABC):

@@ -27,7 +27,7 @@ from joints.devices.erob.registers import (
 )
 from joints.devices.faults import Fault
 from joints.drivers.access import ParamAccess
-from joints.drivers.base import JointDriver, RawState, Units, sampled_at
+from joints.drivers.base import JointDriver, RawState, Units, raw_state, sampled_at
 from joints.errors import ConfirmationRequired, DeviceFault, OutcomeUnknown, StateError
 
 #: The manual: "After issuing the motor enable command, please wait for 500ms before issuing the
@@ -43,6 +43,8 @@ CMD_STOP_REPETITIVE = 0
 CMD_CLEAR_ERRORS = 1
 CMD_SAVE = 2
 CMD_RESET_ENCODER = 2
+#: the status values :meth:`ErobDriver.state_from` compares with, as plain ints (an enum compare costs more)
+_MOTOR_OFF, _OPERATION, _STOP = int(AchieveStatus.MOTOR_OFF), int(AchieveStatus.OPERATION), int(MotionStatus.STOP)
 #: what :meth:`ErobDriver.state` reads (the Modbus status block 0x0060..0x0078: one FC03)
 STATUS_NAMES = (
     "error_code", "motion_status", "status_of_achieving_position", "given_position", "actual_position",
@@ -227,24 +229,46 @@ class ErobDriver(JointDriver):
     _TORQUE_SETTINGS: Mapping[str, int] = {"operation_mode": int(OperationMode.TORQUE), "control_source": 0}
 
     # -- the steady case (the sim's compiled path, joints.compiled_path) ----------------------
+    #: the same settings as (name, value) pairs, for the steady checks' one pass
+    _STEADY_SETUP = (*_STEADY_HEAD.items(), *_STEADY_TAIL.items())
+    _SPEED_SETUP = tuple(_SPEED_SETTINGS.items())
+    _TORQUE_SETUP = tuple(_TORQUE_SETTINGS.items())
+
     def steady_move(self, speed: int, acceleration: int, deceleration: int) -> bool:
         """Whether :meth:`move_to` with this profile now writes nothing but its target and "start": the drive
         holds the setup and the profile, and the 500 ms after "enable" are over."""
-        return (self._settled() and self._holds(self._STEADY_HEAD) and self._holds(self._STEADY_TAIL)
-                and self._holds(self._profile(speed, acceleration, deceleration)))
+        if not self._settled():
+            return False
+        get = self._cache.get
+        for name, value in self._STEADY_SETUP:
+            if get(name) != value:
+                return False
+        return (get("profile_speed") == speed and get("profile_acceleration") == acceleration
+                and get("profile_deceleration") == deceleration)
 
     def steady_velocity(self, acceleration: int, deceleration: int) -> bool:
         """Whether :meth:`set_velocity` with these ramps now writes nothing but its target speed."""
-        return (self._settled() and self._holds(self._SPEED_SETTINGS)
-                and self._holds(self._profile(None, acceleration, deceleration)))
+        if not self._settled():
+            return False
+        get = self._cache.get
+        for name, value in self._SPEED_SETUP:
+            if get(name) != value:
+                return False
+        return get("profile_acceleration") == acceleration and get("profile_deceleration") == deceleration
 
     def steady_current(self) -> bool:
         """Whether :meth:`set_current` now writes nothing but its target current."""
-        return self._settled() and self._holds(self._TORQUE_SETTINGS)
+        if not self._settled():
+            return False
+        get = self._cache.get
+        for name, value in self._TORQUE_SETUP:
+            if get(name) != value:
+                return False
+        return True
 
-    def validate(self, **values: int | None) -> None:
-        """The range checks a command makes before its first write (:meth:`_validate`)."""
-        self._validate(**values)
+    #: the range checks a command makes before its first write (:meth:`_validate` itself, not a call of it: one
+    #: keyword packing, not two)
+    validate = _validate
 
     def note_written(self, name: str, value: int) -> None:
         """``value`` was written to ``name`` by another way than :meth:`write_param` (the compiled path)."""
@@ -411,23 +435,17 @@ class ErobDriver(JointDriver):
         status_of_achieving_position, actual_position, current_speed, motor_current,
         part_of_power_temperature)."""
         achieve = v["status_of_achieving_position"]
-        enabled = achieve != AchieveStatus.MOTOR_OFF
-        settling = self._enabled_at is not None and t - self._enabled_at < ENABLE_SETTLE + 0.1
-        if not enabled and self._enabled and (v["error_code"] or not settling):
-            # The drive disabled itself (fault, watchdog). During the 500 ms after "enable" it
-            # reports "motor off" while the brake releases: that is not a disable.
-            self._note_enable(False)
-        return RawState(
-            position=v["actual_position"],
-            velocity=v["current_speed"],
-            current=v["motor_current"],
-            temperature=float(v["part_of_power_temperature"]),
-            enabled=enabled,
-            moving=v["motion_status"] != MotionStatus.STOP or achieve == AchieveStatus.OPERATION,
-            fault=v["error_code"],
-            time=t,
-            extra=v,
-        )
+        enabled = achieve != _MOTOR_OFF
+        if not enabled and self._enabled:
+            settling = self._enabled_at is not None and t - self._enabled_at < ENABLE_SETTLE + 0.1
+            if v["error_code"] or not settling:
+                # The drive disabled itself (fault, watchdog). During the 500 ms after "enable" it
+                # reports "motor off" while the brake releases: that is not a disable.
+                self._note_enable(False)
+        # RawState(position, velocity, current, temperature, enabled, moving, fault, time, extra)
+        return raw_state(v["actual_position"], v["current_speed"], v["motor_current"],
+                         float(v["part_of_power_temperature"]), enabled,
+                         v["motion_status"] != _STOP or achieve == _OPERATION, v["error_code"], t, v)
 
     def fault_text(self, code: int) -> str:
         return faults.describe(code).text

@@ -125,6 +125,32 @@ def test_erob_arm3_clears_answers_as_the_bound() -> None:
     assert passed > 10000 and failed > 10000
 
 
+def test_erob_arm3_clears_per_link_bound_holds_over_the_box() -> None:
+    """With ``less_upper`` (the upper arm's and the elbow's own motion over a box of poses, ARM3_UPPER * |dq2|
+    / 2 from its centre) the early-exit test still only passes where every pose of the box keeps the gap
+    (checked on a 0.01 rad grid of the sampled clearance), and it passes for boxes the single bound leaves to
+    halving."""
+    from envs.kinematics import ARM3_FORE, ARM3_REACH, ARM3_UPPER, erob_arm3_clearance, erob_arm3_clears
+
+    rng = np.random.default_rng(8)
+    need = 0.02
+    tighter = checked = 0
+    for _ in range(3000):
+        q2, q3 = rng.uniform(-1.6, 1.6), rng.uniform(-2.4, 2.4)
+        h2, h3 = rng.uniform(0.0, 0.15, 2).tolist()
+        less, upper = ARM3_REACH * h2 + ARM3_FORE * h3, ARM3_UPPER * h2
+        split = erob_arm3_clears(q2, q3, less, need, upper)
+        one = erob_arm3_clears(q2, q3, less, need)
+        assert split or not one  # never stricter than the single bound
+        if split:
+            a2 = np.linspace(q2 - h2, q2 + h2, max(2, math.ceil(2 * h2 / 0.01) + 1))
+            a3 = np.linspace(q3 - h3, q3 + h3, max(2, math.ceil(2 * h3 / 0.01) + 1))
+            assert float(erob_arm3_clearance(a2[:, None], a3[None, :]).min()) >= need, (q2, q3, h2, h3)
+            checked += 1
+            tighter += not one
+    assert checked > 500 and tighter > 100, (checked, tighter)
+
+
 def test_a_pose_that_falls_short_has_a_sampled_gap_below_the_need() -> None:
     """erob_arm3_falls_short is only True where erob_arm3_clearance (the grid's value) is below ``need``, and
     it is True for most poses that are clearly below."""
