@@ -82,6 +82,11 @@ class _ErobModbus:
         fused = getattr(self.lane.framing.peer if self.lane.framing is not None else None, "fused", None)
         self.exchange: Any = fused(access.slave, self.lane.line) if callable(fused) and self.lane.line else None
 
+    def carried(self) -> tuple[Any, list[Any]] | None:
+        """(the compiled world, [the twin]) whose every frame the one-call exchange carries; None: it has none."""
+        exchange = self.exchange
+        return None if exchange is None else (exchange.world, [exchange.firmware])
+
     def _fused(self, requests: tuple[Any, ...], idempotent: bool) -> list[Any] | None:
         """The replies to ``requests`` by the twin's one-call exchange, or None (nothing sent)."""
         exchange = self.exchange
@@ -433,17 +438,18 @@ def _states_batch(units: list[_ErobModbus]) -> list[JointState] | None:
 
 
 def _hold_sleeps(steppers: Sequence[_Stepper]) -> None:
-    """Where every joint is an eRob whose steady requests go in the one-call exchange, on one compiled world every
-    drive of which is one of them (so every frame reaches a drive over a timed line, which settles the world
+    """Where every stepper's steady requests go in a one-call exchange (its ``carried()``: the compiled world the
+    exchange runs and the twins whose every frame it carries; None where it has none), on one compiled world
+    every drive of which is carried (so every frame reaches a drive over a timed line, which settles the world
     first): the world's sleeps book their time (``World.hold``) and the env's period hold runs at the start of
     the next call (the status read's) - one compiled call fewer per step, the same bits."""
-    units = [s for s in steppers if isinstance(s, _ErobModbus) and s.exchange is not None]
-    if not units or len(units) != len(steppers):
+    held = [carried() if callable(carried := getattr(s, "carried", None)) else None for s in steppers]
+    if not held or any(h is None for h in held):
         return
-    world = units[0].exchange.world
-    if not getattr(world, "compiled", False) or any(s.exchange.world is not world for s in units):
+    world = held[0][0]  # type: ignore[index]
+    if not getattr(world, "compiled", False) or any(h[0] is not world for h in held):  # type: ignore[index]
         return
-    ours = {id(s.exchange.firmware) for s in units}
+    ours = {id(twin) for h in held for twin in h[1]}  # type: ignore[index]
     if all(id(twin) in ours for twin in world.emulators()):
         world.hold_sleeps = True
 
