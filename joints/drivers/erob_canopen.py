@@ -43,7 +43,7 @@ from __future__ import annotations
 import functools
 import logging
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -159,6 +159,7 @@ class ErobCanopenDriver(ErobDriver):
         self._target = 0
         self._rpdo = ERUNNER_RPDO1[self.mode]
         self._tpdos: tuple[PdoConfig, ...] = ERUNNER_TPDOS
+        self._unpack: tuple[tuple[PdoConfig, ...], tuple[Callable[[bytes], tuple[int, ...]], ...]] | None = None
         self._subs: list[Any] = []
         self.statusword = 0
         self.position = 0
@@ -315,11 +316,18 @@ class ErobCanopenDriver(ErobDriver):
             self.enable()
 
     # -- PDOs -------------------------------------------------------------------------------
+    def _unpackers(self) -> tuple[Callable[[bytes], tuple[int, ...]], ...]:
+        """The decoding of each configured TPDO, prepared once per configuration (``co.pdo_unpacker``)."""
+        memo = self._unpack
+        if memo is None or memo[0] is not self._tpdos:
+            memo = self._unpack = (self._tpdos, tuple(co.pdo_unpacker(_entries(c)) for c in self._tpdos))
+        return memo[1]
+
     def on_tpdo(self, msg: co.Pdo) -> None:
         t = self.link.clock.now()
         if msg.cob_id == self.tpdo1_cob:
             try:
-                sw, pos, *current = co.unpack_pdo(_entries(self._tpdos[0]), msg.data)
+                sw, pos, *current = self._unpackers()[0](msg.data)
             except FrameError:
                 return
             if current:
@@ -331,7 +339,7 @@ class ErobCanopenDriver(ErobDriver):
             self.status_cycle = self.group.answered(self)
         elif len(self._tpdos) > 1:
             try:
-                self.velocity, self.current = co.unpack_pdo(_entries(self._tpdos[1]), msg.data)
+                self.velocity, self.current = self._unpackers()[1](msg.data)
             except FrameError:
                 return
 

@@ -54,6 +54,7 @@ real eRob, also listed in the README):
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
@@ -125,8 +126,8 @@ class _Pdo:
     last_data: bytes | None = None
     last_sent: float = -math.inf
     next_event: float = math.inf
-    #: a TPDO's mapped values as :meth:`CanopenFront.value` reads them, clamped (:meth:`CanopenFront._sampler`)
-    sample: Callable[[], list[int]] | None = None
+    #: a TPDO's frame as sampled now (:meth:`CanopenFront._frame_maker`), prepared at its first use
+    make: Callable[[], can.Message] | None = None
 
 
 def _carried(entry: tuple[int, int, int, bool]) -> tuple[int, int]:
@@ -532,21 +533,31 @@ class CanopenFront:
         return self._pdos
 
     def _tpdo_frame(self, pdo: _Pdo) -> can.Message:
-        sample = pdo.sample
-        if sample is None:
-            sample = pdo.sample = self._sampler(pdo.clamps)
-        return can.Message(arbitration_id=pdo.cob_id, is_extended_id=False, data=co.pack_pdo(pdo.entries, sample()))
+        make = pdo.make
+        if make is None:
+            make = pdo.make = self._frame_maker(pdo)
+        return make()
+
+    def _frame_maker(self, pdo: _Pdo) -> Callable[[], can.Message]:
+        """A TPDO's frame prepared once: its sample (:meth:`_sampler`) packed by the codec's packer for values
+        within their entries' ranges (:func:`joints.codecs.canopen.pdo_packer`: the bytes of ``pack_pdo``)."""
+        sample, pack, cob, message = self._sampler(pdo.clamps), co.pdo_packer(pdo.entries), pdo.cob_id, can.Message
+
+        def make() -> can.Message:
+            return message(arbitration_id=cob, is_extended_id=False, data=pack(sample()))
+
+        return make
 
     def _sampler(self, clamps: Sequence[tuple[str | None, int, int]]) -> Callable[[], list[int]]:
         """A prepared sample of a TPDO's mapped values: each as :meth:`value` reads it, clamped to what its bits
         carry, in mapping order; a run of firmware parameters through one prepared read of
         them all (:meth:`Firmware.reader`: the same reads in the same order), a dummy entry 0."""
-        plan: list[tuple[str | None, Any, tuple[tuple[int, int], ...]]] = []
+        plan: list[tuple[Callable[[], Any] | None, bool, tuple[tuple[int, int], ...]]] = []
         block: list[tuple[str, int, int]] = []
 
         def close() -> None:
             if block:
-                plan.append(("", self.firmware.reader([n for n, _lo, _hi in block]),
+                plan.append((self.firmware.reader([n for n, _lo, _hi in block]), True,
                              tuple((lo, hi) for _n, lo, hi in block)))
                 block.clear()
 
@@ -555,20 +566,27 @@ class CanopenFront:
                 block.append((name, lo, hi))
                 continue
             close()
-            plan.append((name, None, ((lo, hi),)))
+            if name is None:
+                plan.append((None, False, ((lo, hi),)))
+            else:  # what value(name) reads, without looking the name up each time
+                read = self.statusword if name == "statusword" else functools.partial(self.value, name)
+                plan.append((read, False, ((lo, hi),)))
         close()
+        steps = tuple(plan)
 
         def sample() -> list[int]:
             out: list[int] = []
-            for name, read, bounds in plan:
-                if read is not None:
-                    for v, (lo, hi) in zip(read(), bounds):
-                        out.append(max(lo, min(int(v), hi)))
-                elif name is None:
+            for read, many, bounds in steps:
+                if many:
+                    for v, (lo, hi) in zip(read(), bounds):  # type: ignore[misc]
+                        v = int(v)
+                        out.append(lo if v < lo else hi if v > hi else v)
+                elif read is None:
                     out.append(0)
                 else:
+                    v = read()
                     lo, hi = bounds[0]
-                    out.append(max(lo, min(self.value(name), hi)))
+                    out.append(lo if v < lo else hi if v > hi else v)
             return out
 
         return sample
@@ -605,7 +623,8 @@ class CanopenFront:
 
     def _sync(self) -> list[can.Message]:
         out: list[can.Message] = []
-        self.pdos()
+        if self._pdos is None:
+            self.pdos()
         for pdo in self._sync_tpdos:
             t = pdo.transmission_type
             if 1 <= t <= 240:
@@ -618,9 +637,12 @@ class CanopenFront:
                 if bytes(frame.data) != pdo.last_data:
                     pdo.last_data = bytes(frame.data)
                     out.append(frame)
-        for n in sorted(self.latched):
-            self._apply_rpdo(self.pdos()[("rpdo", n)], self.latched.pop(n))
-        return out + self._flush()
+        if self.latched:
+            for n in sorted(self.latched):
+                self._apply_rpdo(self.pdos()[("rpdo", n)], self.latched.pop(n))
+        if self._outbox:
+            out += self._flush()
+        return out
 
     # -- CiA 402 ------------------------------------------------------------------------------
     def _mode(self) -> Mode | None:
@@ -927,6 +949,7 @@ class ErobCanopenBus:
         self._clock: Any = None
         self._epoch: int | None = None
         self._dt: float | None = None  #: the world's substep (:meth:`bind_substep`); None: ticked every substep
+        self._routed: tuple[can.Message, co.Route] | None = None  #: the last frame :meth:`on_frame` classified
         for f in fronts:
             self.add(f)
 
@@ -944,7 +967,8 @@ class ErobCanopenBus:
     def turnaround(self, frame: can.Message) -> float | None:
         """The answer delay [s] of a frame: a node's turnaround for its SDO requests and guard requests; none for
         SYNC, NMT and PDOs (a CiA 402 drive samples its synchronous TPDOs at the SYNC and sends them then)."""
-        route = co.classify(frame)
+        routed = self._routed
+        route = routed[1] if routed is not None and routed[0] is frame else co.classify(frame)
         if route.kind in (co.Kind.SDO_RX, co.Kind.GUARD_REQUEST):
             return self.turnarounds.get(route.node)
         return 0.0
@@ -953,6 +977,7 @@ class ErobCanopenBus:
         if frame.is_extended_id or frame.is_error_frame:
             return ()
         route = co.classify(frame)
+        self._routed = (frame, route)  # the medium asks for its turnaround next
         kind = route.kind
         if kind in (co.Kind.NMT, co.Kind.SYNC, co.Kind.TIME):
             out: list[can.Message] = []

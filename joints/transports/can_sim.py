@@ -545,7 +545,7 @@ class LockstepCanBus(can.BusABC):
             msg = medium.receive(self._node, left)
             if msg is None:
                 return None
-            if self._matches_filters(msg):
+            if self._filters is None or self._matches_filters(msg):  # no filters: every frame matches
                 return msg
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:

@@ -55,7 +55,7 @@ class Kind(enum.Enum):
 
     @property
     def is_pdo(self) -> bool:
-        return self in _PDO_NUMBER
+        return self._value_ in _PDO_VALUES  # by the value: a str hashes in C, an enum member in Python
 
     @property
     def pdo_number(self) -> int:
@@ -68,6 +68,7 @@ class Kind(enum.Enum):
 
 _PDO_NUMBER = {Kind.TPDO1: 1, Kind.TPDO2: 2, Kind.TPDO3: 3, Kind.TPDO4: 4,
                Kind.RPDO1: 1, Kind.RPDO2: 2, Kind.RPDO3: 3, Kind.RPDO4: 4}
+_PDO_VALUES = frozenset(k.value for k in _PDO_NUMBER)
 
 #: function code (COB-ID >> 7) -> kind, for node ids 1..127
 _BY_FUNCTION: tuple[Kind, ...] = (

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import functools
 import struct
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -129,6 +129,46 @@ def pack_pdo(entries: Sequence[tuple[int, int, int, bool]], values: Sequence[int
         raw |= (value & ((1 << bits) - 1)) << offset
         offset += bits
     return raw.to_bytes((offset + 7) // 8, "little")
+
+
+def pdo_packer(entries: Sequence[tuple[int, int, int, bool]]) -> Callable[[Sequence[int]], bytes]:
+    """:func:`pack_pdo` of ``entries`` prepared once, for values already within their entries' ranges (a twin's
+    clamped sample): the layout's ``struct`` where it has one, else :func:`pack_pdo` itself (the same bytes)."""
+    entries = entries if isinstance(entries, tuple) else tuple(entries)
+    layout = _layout(entries)
+    fixed = layout.fixed
+    if fixed is None or layout.bits > MAX_PDO_BITS:
+        return functools.partial(pack_pdo, entries)
+    pack = fixed.pack
+    count = len(entries)
+
+    def packed(values: Sequence[int]) -> bytes:
+        if len(values) == count:
+            try:
+                return pack(*values)
+            except struct.error:
+                pass
+        return pack_pdo(entries, values)  # it says what is wrong
+
+    return packed
+
+
+def pdo_unpacker(entries: Sequence[tuple[int, int, int, bool]]) -> Callable[[bytes], tuple[int, ...]]:
+    """:func:`unpack_pdo` of ``entries`` prepared once (the same values and errors): the layout's ``struct``
+    where it has one, else :func:`unpack_pdo` itself."""
+    entries = entries if isinstance(entries, tuple) else tuple(entries)
+    layout = _layout(entries)
+    fixed = layout.fixed
+    if fixed is None or layout.bits > MAX_PDO_BITS:
+        return functools.partial(unpack_pdo, entries)
+    unpack_from, size = fixed.unpack_from, fixed.size
+
+    def unpacked(data: bytes) -> tuple[int, ...]:
+        if len(data) < size:
+            return unpack_pdo(entries, data)  # it raises the FrameError
+        return unpack_from(data)  # type: ignore[no-any-return]
+
+    return unpacked
 
 
 def unpack_pdo(entries: Sequence[tuple[int, int, int, bool]], data: bytes) -> tuple[int, ...]:
