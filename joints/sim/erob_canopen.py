@@ -580,13 +580,21 @@ class CanopenFront:
                 if many:
                     for v, (lo, hi) in zip(read(), bounds):  # type: ignore[misc]
                         v = int(v)
-                        out.append(lo if v < lo else hi if v > hi else v)
+                        if v < lo:
+                            v = lo
+                        elif v > hi:
+                            v = hi
+                        out.append(v)
                 elif read is None:
                     out.append(0)
                 else:
                     v = read()
                     lo, hi = bounds[0]
-                    out.append(lo if v < lo else hi if v > hi else v)
+                    if v < lo:
+                        v = lo
+                    elif v > hi:
+                        v = hi
+                    out.append(v)
             return out
 
         return sample

@@ -228,6 +228,10 @@ def _expedited_bits(data: bytes, size: int | None) -> int:
 def encode(message: Message) -> can.Message:
     """The frame of ``message`` (raises :class:`~joints.errors.EncodeError` on out-of-range fields)."""
     m = message
+    if type(m) is Pdo and not m.remote and 0 <= m.cob_id <= 0x7FF and len(m.data) <= 8:  # the cyclic frames first
+        return _frame(m.cob_id, m.data, extended=False)
+    if type(m) is Sync and m.counter is None:
+        return _frame(SYNC_ID)
     if isinstance(m, Nmt):
         check_node(m.node, broadcast=True)
         return _frame(NMT_ID, bytes((NmtCommand(m.command), m.node)))

@@ -166,7 +166,7 @@ def pdo_unpacker(entries: Sequence[tuple[int, int, int, bool]]) -> Callable[[byt
     def unpacked(data: bytes) -> tuple[int, ...]:
         if len(data) < size:
             return unpack_pdo(entries, data)  # it raises the FrameError
-        return unpack_from(data)  # type: ignore[no-any-return]
+        return unpack_from(data)
 
     return unpacked
 
