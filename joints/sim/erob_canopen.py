@@ -983,6 +983,7 @@ class ErobCanopenBus:
 
     def on_frame(self, frame: can.Message) -> Sequence[can.Message]:
         if frame.is_extended_id or frame.is_error_frame:
+            self._routed = None
             return ()
         route = co.classify(frame)
         self._routed = (frame, route)  # the medium asks for its turnaround next
