@@ -318,9 +318,7 @@ class ErobCanExchange:
         self.transport = transport
         self.taken = 0  #: calls that ran
         self.clocks: list[float] = []  #: the clock after each transaction of the last :meth:`run`
-        #: per transaction of the last :meth:`run`: (request start, end, reply start, end, the host has it, the
-        #: world's substeps when the drive acted)
-        self.instants: list[tuple[float, ...]] = []
+        self._outs: list[list[float]] = []  #: the output rows of the last :meth:`run`
         self._st = np.zeros(STATE_WIDTH)
         self._out: dict[int, Any] = {}  #: output rows per count
         self._plans: dict[int, _Plan] = {}  #: id of a tuple of reads -> its plan
@@ -592,7 +590,7 @@ class ErobCanExchange:
             outs: list[list[float]] = out[:done].tolist()
             replies: list[Any] = []
             self.clocks = clocks = []
-            self.instants = [(o[E0], o[E1], o[R0], o[R1], o[HOST], o[ACTED]) for o in outs]
+            self._outs = outs
             for r, shape, front, o in zip(requests, plan.shapes, plan.fronts, outs):
                 fw = front.firmware
                 front.requests += 1
@@ -611,6 +609,12 @@ class ErobCanExchange:
                 clocks.append(o[CLOCK_AFTER])
         self.taken += 1
         return replies
+
+    @property
+    def instants(self) -> list[tuple[float, ...]]:
+        """Per transaction of the last :meth:`run`: (request start, end, reply start, end, the host has it, the
+        world's substeps when the drive acted)."""
+        return [(o[E0], o[E1], o[R0], o[R1], o[HOST], o[ACTED]) for o in self._outs]
 
     @staticmethod
     def _value(fw: ErobFirmware, shape: _Shape, o: Sequence[float]) -> int:
