@@ -318,15 +318,17 @@ class ErobCanExchange:
         self.transport = transport
         self.taken = 0  #: calls that ran
         self.clocks: list[float] = []  #: the clock after each transaction of the last :meth:`run`
-        #: per transaction of the last :meth:`run`: (request start, end, reply start, end, the host has it, the
-        #: world's substeps when the drive acted)
-        self.instants: list[tuple[float, ...]] = []
+        self._outs: list[list[float]] = []  #: the output rows of the last :meth:`run`
         self._st = np.zeros(STATE_WIDTH)
         self._out: dict[int, Any] = {}  #: output rows per count
         self._plans: dict[int, _Plan] = {}  #: id of a tuple of reads -> its plan
         self._scratch: dict[int, Any] = {}  #: a row's copy (per table width)
         self._shapes: dict[tuple[Any, ...], _Shape | None] = {}
         self._rows: dict[int, tuple[Any, int]] = {}  #: node -> (group, its row there)
+        #: the requests' shapes (kind, node, index, subindex, parameter per request) -> the plan last made for them
+        #: with a write or command among them (a command: its rows but a few columns are the same every step)
+        self._commands: dict[tuple[Any, ...], _Plan] = {}
+        self.refilled = 0  #: plans made from a kept command plan (:meth:`_refill`)
 
     # -- the steady case ------------------------------------------------------------------------
     def _steady(self, front: ErobCanFront) -> bool:
@@ -453,11 +455,55 @@ class ErobCanExchange:
 
     # -- the call -------------------------------------------------------------------------------
     def _plan(self, requests: Sequence[Any]) -> _Plan | None:
-        """The transaction rows of ``requests`` now (kept for a tuple of reads: it is sent again and again), or
-        None where one is not a steady request now."""
+        """The transaction rows of ``requests`` now, or None where one is not a steady request now. Kept: a tuple
+        of reads (it is sent again and again), and the rows of a command's shapes (:meth:`_refill` puts each
+        request's own columns into them)."""
         plan = self._plans.get(id(requests))
         if plan is not None and plan.requests is requests and plan.stamp == self._stamp(plan.fronts):
             return plan
+        key = tuple([(type(r), r.node, r.index, getattr(r, "subindex", None), getattr(r, "parameter", None))
+                     for r in requests])
+        plan = self._commands.get(key)
+        if plan is not None and plan.stamp == self._stamp(plan.fronts):
+            self.refilled += 1
+            return plan if self._refill(plan, requests) else None
+        plan = self._fresh(requests)
+        if plan is None or all(s.op in (READ, READ_ACHIEVE) for s in plan.shapes):
+            return plan
+        if len(self._commands) > 64:
+            self._commands.clear()
+        self._commands[key] = plan
+        return plan
+
+    def _refill(self, plan: _Plan, requests: Sequence[Any]) -> bool:
+        """``plan`` (kept for requests of these shapes, its stamp still holding) made the plan of ``requests``: the
+        columns that depend on the request or on parameters outside the stamp (a target's value, a start's target
+        and relative position) as :meth:`_tx` makes them; False where one is not a steady request now."""
+        tx = plan.tx
+        targets: dict[int, int] = {}
+        for k, (r, shape, front) in enumerate(zip(requests, plan.shapes, plan.fronts)):
+            if front.node != r.node:  # (a node id changed at a power cycle)
+                return False
+            op = shape.op
+            fw = front.firmware
+            if op == TARGET_POSITION:
+                v = EROB_CAN.from_wire(shape.name, r.value)
+                writable, lo, hi = fw._limits[shape.name]
+                if not writable or type(v) is not int or not lo <= v <= hi:
+                    return False
+                targets[r.node] = v
+                tx[k, VALUE] = float(v)
+            elif op == START:  # (the motion mode is in the stamp: its check and column hold)
+                writable, lo, hi = fw._limits["start_operating"]
+                if not writable or not lo <= 1 <= hi:
+                    return False
+                values = fw.values
+                tx[k, VALUE] = float(targets.get(r.node, values["target_absolute_position"]))
+                tx[k, RELATIVE] = float(values["target_relative_position"])
+        return True
+
+    def _fresh(self, requests: Sequence[Any]) -> _Plan | None:
+        """The plan of ``requests`` made row by row (:meth:`_tx`); a tuple of reads kept by its identity."""
         bus = self.bus
         rows: list[list[float]] = []
         shapes: list[_Shape] = []
@@ -544,7 +590,7 @@ class ErobCanExchange:
             outs: list[list[float]] = out[:done].tolist()
             replies: list[Any] = []
             self.clocks = clocks = []
-            self.instants = [(o[E0], o[E1], o[R0], o[R1], o[HOST], o[ACTED]) for o in outs]
+            self._outs = outs
             for r, shape, front, o in zip(requests, plan.shapes, plan.fronts, outs):
                 fw = front.firmware
                 front.requests += 1
@@ -563,6 +609,12 @@ class ErobCanExchange:
                 clocks.append(o[CLOCK_AFTER])
         self.taken += 1
         return replies
+
+    @property
+    def instants(self) -> list[tuple[float, ...]]:
+        """Per transaction of the last :meth:`run`: (request start, end, reply start, end, the host has it, the
+        world's substeps when the drive acted)."""
+        return [(o[E0], o[E1], o[R0], o[R1], o[HOST], o[ACTED]) for o in self._outs]
 
     @staticmethod
     def _value(fw: ErobFirmware, shape: _Shape, o: Sequence[float]) -> int:

@@ -153,6 +153,7 @@ def _run(compiled: bool, mode: str, steps: int, *, plant: Any = None) -> dict[st
         out["frames"], out["host"], out["acted"], out["replies"] = rec.frames, rec.host, rec.acted, rec.replies
         cp = u.compiled_path
         out["taken"] = None if cp is None else (cp.taken, cp.fused, sum(s.exchange.taken for s in rec.steps))
+        out["refilled"] = sum(s.exchange.refilled for s in rec.steps)  # command plans made from a kept one
         return out
     finally:
         env.close()
@@ -179,6 +180,7 @@ def test_the_compiled_can_step_gives_the_frame_by_frame_bits(mode: str) -> None:
         assert calls >= steps  # the state reads of every step (and the position commands)
         if mode == "position":
             assert taken >= steps - 1 and fused >= 8 * steps - 8
+            assert compiled["refilled"] >= steps - 2  # the command's rows kept, its values put in each step
         else:  # a speed or current set-point is the joint's own method; its state read is one call
             assert taken == 0 and fused >= 6 * steps
     else:
