@@ -239,6 +239,12 @@ class _ZlacModbus:
         self.exchange = _velocity_exchange(self.lane, access.slave)
         self.taken = 0
 
+    def carried(self) -> tuple[Any, list[Any]] | None:
+        """(the compiled world, [the twin]) whose every frame the one-call exchange carries over a timed line;
+        None: it has none (:func:`_hold_sleeps`)."""
+        carried = getattr(self.exchange, "carried", None)
+        return carried() if callable(carried) else None
+
     def _write(self, block: _Block, values: tuple[int, ...]) -> None:
         self.lane.request(block.request(values), idempotent=True)
         self.drive.note_words(block.names, values)

@@ -95,8 +95,29 @@ class ZlacExchange(L.Carrier):
         self.lane = lane
         self.slave = slave
         self.reads = 0  #: status reads sent with the world's advance in one call (:meth:`read`)
+        #: calls that ran a held sleep's substeps (``World.hold``: the env's period hold) first, in the same call
+        self.held = 0
         self._world: Any = None
         self._bus: Any = None
+
+    def carried(self) -> tuple[Any, list[Any]] | None:
+        """(the world, [the twin]) where every frame to the twin goes over a timed line on the world's clock (which
+        settles the world before the twin acts on a frame: ``TimedSerialLine`` over the clock the world binds, or
+        this exchange); None otherwise (an untimed transport hands frames to the twin without settling)."""
+        lane = self.lane
+        line, framing = lane.line, lane.framing
+        if line is None or framing is None:
+            return None
+        bus = framing.peer
+        if type(bus) is not ModbusDeviceBus or line.peer is not bus:
+            return None
+        front = bus.slaves.get(self.slave)
+        if type(front) is not ModbusFront or type(front.firmware) is not ZlacFirmware:
+            return None
+        world = _world_of(bus, line.clock)
+        if world is None or line.clock is not world.clock or line._settle is None:
+            return None
+        return world, [front.firmware]
 
     def _fused_world(self, line: TimedSerialLine, bus: Any) -> Any:
         """The world between ``bus``'s frames where it runs fused on ``line``'s clock, else None."""
@@ -185,6 +206,8 @@ class ZlacExchange(L.Carrier):
             for row in rows:
                 row[L.ROW] = first
             n = len(rows)
+            if world._held:
+                self.held += 1
             link.transactions += n
             framing.exchanges += n
             outs = self.carry(fn, world, line, now, rows)
@@ -232,6 +255,8 @@ class ZlacExchange(L.Carrier):
             behind = due - clock.now()
             if behind > 0 or world._booked:  # the physics runs to the instant the drive acts (sleep, settle)
                 st = self._st
+                if world._held:
+                    self.held += 1
                 L.fill(st, world, line, now)
                 state = L.fused(fn, world, st, behind)
                 if behind > 0:
