@@ -7,7 +7,10 @@ times (0x2080) and the FC16 of both target velocities (0x2088): the line and wor
 :mod:`joints.sim.line_exchange`'s, the drive's act (:func:`act`) the kernel ops of :mod:`joints.sim.zlac_kernel`
 its own write path calls (the ramp columns the values :meth:`ZlacFirmware._cache_ramps` computes); afterwards
 Python brings the link's counts and the firmware's parameter store to where that path leaves them. A status
-read goes with the world's advance to its instant in one call (:meth:`ZlacExchange.read`).
+read goes with the world's advance to its instant in one call (:meth:`ZlacExchange.read`; a held sleep of the
+world, ``World.hold``, runs first, on its own): with the drive's receipt of the frame, its rows as they stand then
+(the status block is read from them after the call) and the reply's travel (:func:`status_read`) where the act
+is the twin's stock status block.
 
 It runs only in the steady case, checked before anything is sent: numba present, the lane open for every
 request, the world running fused, the bus, front, firmware and line the stock ones (nothing replaced, nothing
