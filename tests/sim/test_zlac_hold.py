@@ -61,7 +61,7 @@ def _calls_per_step(monkeypatch: pytest.MonkeyPatch, hold: bool | None, steps: i
         held, acts = exchange.held, exchange.acts
         for k in calls:
             calls[k] = 0
-        space = env.action_space
+        space: Any = env.action_space
         rng = np.random.default_rng(5)
         for _ in range(steps):
             _, _, terminated, truncated, _ = env.step(rng.uniform(space.low, space.high).astype(space.dtype))
@@ -136,7 +136,8 @@ def _rig_script(compiled: bool, settle: bool) -> tuple[list[Any], int]:
     with or without ``settle``) or by the rig's own methods - then a sleep or a command right after the read (booked
     time merged with what follows): states, substeps, clock, frames and physics; and the reads whose act ran in the
     compiled call."""
-    with gym.make(ENV, compiled_path=compiled) as env:
+    env = gym.make(ENV, compiled_path=compiled)
+    try:
         u: Any = env.unwrapped
         env.reset(seed=7)
         rig, world = u.rig, u.rig.sim
@@ -168,6 +169,8 @@ def _rig_script(compiled: bool, settle: bool) -> tuple[list[Any], int]:
         out.append((world.steps, rig.clock.now(), world.data.qpos.tobytes(), world.data.qvel.tobytes()))
         acts = u.compiled_path._steppers[0].exchange.acts - before if compiled else 0
         return out, acts
+    finally:
+        env.close()
 
 
 @pytest.mark.parametrize("settle", [False, True])
