@@ -142,6 +142,7 @@ class ZlacExchange(L.Carrier):
         #: of the reads, those whose drive's act (frame receipt, rows) ran in the call (:meth:`_status_act`)
         self.acts = 0
         self._snap: Any = None
+        self._blank: tuple[Any, int] | None = None
         self._world: Any = None
         self._bus: Any = None
 
@@ -325,7 +326,11 @@ class ZlacExchange(L.Carrier):
             st = self._st
             if act is not None:  # the advance, the drive's receipt and rows, the reply's travel: one call
                 plan, rows, fw = act
-                m = size(mb.ReadRegistersReply(request.slave, request.function, (0,) * request.count))
+                blank = self._blank  # the reply's characters (of its size alone), kept by the request's identity
+                if blank is None or blank[0] is not request:
+                    blank = self._blank = (request, size(mb.ReadRegistersReply(request.slave, request.function,
+                                                                               (0,) * request.count)))
+                m = blank[1]
                 d_start = max(due, free["device"])
                 d_end = d_start + m * line.char_time
                 seen = d_end + line.adapter_latency
