@@ -601,7 +601,8 @@ class DiffDriveGoalEnv(RigEnv):
         compiled = self.compiled_path
         left, right = self.wheel_names
         if compiled is not None:  # the same FC03, read as rig.read_states reads it
-            sl, sr = compiled.states()
+            # (the sim: the caller reads the physics next - the true pose - so the reply's travel may run in the read's call)
+            sl, sr = compiled.states(settle=True)
             self._states = {left: sl, right: sr}
         else:
             self._states = self.rig.read_states()  # one FC03 per drive

@@ -239,6 +239,12 @@ class _ZlacModbus:
         self.exchange = _velocity_exchange(self.lane, access.slave)
         self.taken = 0
 
+    def carried(self) -> tuple[Any, list[Any]] | None:
+        """(the compiled world, [the twin]) whose every frame the one-call exchange carries over a timed line;
+        None: it has none (:func:`_hold_sleeps`)."""
+        carried = getattr(self.exchange, "carried", None)
+        return carried() if callable(carried) else None
+
     def _write(self, block: _Block, values: tuple[int, ...]) -> None:
         self.lane.request(block.request(values), idempotent=True)
         self.drive.note_words(block.names, values)
@@ -280,12 +286,14 @@ class _ZlacModbus:
             else:
                 j.set_torque(v)
 
-    def states(self) -> list[JointState]:
+    def states(self, settle: bool = False) -> list[JointState]:
+        """Both wheels' states (one FC03); ``settle``: the caller's next access to the world runs its booked time
+        (:meth:`CompiledPath.states`)."""
         clock = self.clock
         t0 = clock.now()
         self.drive.identify()  # once per drive: a no-op after the first
         exchange = self.exchange
-        done, reply = exchange.read(self.status) if exchange is not None else (False, None)
+        done, reply = exchange.read(self.status, settle=settle) if exchange is not None else (False, None)
         if not done:
             reply = self.lane.request(self.status, idempotent=True)
         assert isinstance(reply, mb.ReadRegistersReply)
@@ -499,16 +507,19 @@ class CompiledPath:
         for idx, s in self._units:
             s.command_all(mode, [values[i] for i in idx], [skip is not None and skip[i] for i in idx])
 
-    def states(self) -> list[JointState]:
+    def states(self, *, settle: bool = False) -> list[JointState]:
         """Every joint's state, read in joint order (as ``[j.state() for j in joints]``; the wheels of a
-        ZLAC8015D as ``rig.read_states``: one read of their drive)."""
+        ZLAC8015D as ``rig.read_states``: one read of their drive). ``settle``: the caller's next access to the
+        world is one that runs its booked time (``World.sync``: the env reads the physics right after), so a
+        ZLAC read's one-call exchange may run the reply's travel in its call - the same substeps, counted the
+        same, one call fewer."""
         if self._batch is not None:
             got = _states_batch(self._batch)
             if got is not None:
                 return got
         out: list[Any] = [None] * len(self._joints)
         for idx, s in self._units:
-            for i, state in zip(idx, s.states()):
+            for i, state in zip(idx, s.states(settle) if isinstance(s, _ZlacModbus) else s.states()):
                 out[i] = state
         return out
 

@@ -617,6 +617,8 @@ class World:
             self.advance(seconds)
             return
         with self.lock:
+            if self._held:  # an earlier sleep's substeps, on their own (as advance runs them)
+                self.sync()
             self._target += seconds  # as advance: the sleep with any booked time before it, in one count
             self._booked = self._held = True
             self.clock.set(self._target)

@@ -481,6 +481,8 @@ class ZlacFirmware(Firmware, Z.DriveColumns):
         self._batch = 0  #: inside write_many: 1, 2 for a block of only ramp times and target velocities
         self._stale = False  #: settings written whose loop constants are not computed yet
         self._stale_ramps = False  #: (a block of ramps and targets) ramp times written, their columns not yet
+        #: the status block's fast reader and the same on rows (:meth:`reader`), or None
+        self.status_reader: tuple[Callable[[], list[int]], Callable[..., list[int]]] | None = None
         #: the firmware's quirks (joints.devices.quirks); default: the family's default firmware
         self.quirks = quirks if quirks is not None else firmware_profile("zlac8015d").quirks
         self.profile = profile
@@ -637,22 +639,37 @@ class ZlacFirmware(Firmware, Z.DriveColumns):
             return generic
         los = tuple(self._type_range[n][0] for n in _STATUS)
         his = tuple(self._type_range[n][1] for n in _STATUS)
-        status = self._read_status
+        status, status_of = self._read_status, self._status_of
 
         def read() -> list[int]:  # saturate, never wrap (as the generic reader)
             return [lo if v < lo else hi if v > hi else v for v, lo, hi in zip(status(), los, his)]  # noqa: FURB136
 
+        def read_rows(d: Sequence[float], lv: Sequence[float], rv: Sequence[float]) -> list[int]:
+            """``read()`` of the drive's rows ``d``, ``lv``, ``rv`` as they stood when the drive acted on the frame
+            (:mod:`joints.sim.zlac_exchange`'s compiled status read: the same values, the same draws)."""
+            values = status_of(d[Z.D_TIME], d[Z.D_STATE], d[Z.D_CONNECTED], lv, rv)
+            return [lo if v < lo else hi if v > hi else v for v, lo, hi in zip(values, los, his)]  # noqa: FURB136
+
+        #: the status block's fast reader and its twin on rows taken in a compiled call (where both are this class's)
+        stock = type(self)._read_status is ZlacFirmware._read_status and type(self)._status_of is \
+            ZlacFirmware._status_of and "_read_status" not in vars(self) and "_status_of" not in vars(self)
+        self.status_reader = (read, read_rows) if stock else None
         return read
 
     def _read_status(self) -> list[int]:
         """The status block's values (:data:`_STATUS` order), each as its ``computed`` function gives it (the same
         channel conversions, each channel's row read once; every sensor draws in the order its own reads would:
         each channel's sensor is its own stream, so one call per channel gives the same bits)."""
-        left, right = self.left, self.right
         d = self._dget
-        t = float(d(Z.D_TIME))
-        e = 1 if d(Z.D_STATE) in _ENERGISED_CODES else 0
-        lv, rv = left._values(), right._values()
+        return self._status_of(float(d(Z.D_TIME)), d(Z.D_STATE), d(Z.D_CONNECTED), self.left._values(),
+                               self.right._values())
+
+    def _status_of(self, t: float, state: float, connected: float, lv: Sequence[float], rv: Sequence[float]
+                   ) -> list[int]:
+        """:meth:`_read_status` of the drive row's time, state and connection and the channels' rows ``lv``,
+        ``rv``."""
+        left, right = self.left, self.right
+        e = 1 if state in _ENERGISED_CODES else 0
         l_counts, l_velocity, l_current = left._sensed(lv, t)
         r_counts, r_velocity, r_current = right._sensed(rv, t)
         return [
@@ -667,7 +684,7 @@ class ZlacFirmware(Firmware, Z.DriveColumns):
             r_velocity,
             l_current,
             r_current,
-            int(d(Z.D_CONNECTED)),
+            int(connected),
         ]
 
     def frame_received(self) -> None:

@@ -7,7 +7,10 @@ times (0x2080) and the FC16 of both target velocities (0x2088): the line and wor
 :mod:`joints.sim.line_exchange`'s, the drive's act (:func:`act`) the kernel ops of :mod:`joints.sim.zlac_kernel`
 its own write path calls (the ramp columns the values :meth:`ZlacFirmware._cache_ramps` computes); afterwards
 Python brings the link's counts and the firmware's parameter store to where that path leaves them. A status
-read goes with the world's advance to its instant in one call (:meth:`ZlacExchange.read`).
+read goes with the world's advance to its instant in one call (:meth:`ZlacExchange.read`; a held sleep of the
+world, ``World.hold``, runs first, on its own): with the drive's receipt of the frame, its rows as they stand then
+(the status block is read from them after the call) and the reply's travel (:func:`status_read`) where the act
+is the twin's stock status block.
 
 It runs only in the steady case, checked before anything is sent: numba present, the lane open for every
 request, the world running fused, the bus, front, firmware and line the stock ones (nothing replaced, nothing
@@ -23,6 +26,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from joints.codecs import modbus as mb
+from joints.sim import kernel
 from joints.sim import line_exchange as L
 from joints.sim import zlac_kernel as Z
 from joints.sim.kernel import jitable
@@ -31,7 +35,7 @@ from joints.sim.stepping import ZLAC
 from joints.sim.zlac import ZlacFirmware, _ramp_seconds
 from joints.transports.serial_sim import TimedSerialLine
 
-__all__ = ["ZlacExchange", "act"]
+__all__ = ["ZlacExchange", "act", "status_read"]
 
 #: ops (column OP of a transaction row)
 RAMPS, TARGETS = 0, 1
@@ -58,6 +62,38 @@ def act(table: Any, first: int, t: Any) -> None:
         Z.set_velocity_target(d, right, t[V1])
 
 
+@jitable
+def status_read(behind: float, seen: float, settle: bool, first: int, snap: Any, st: Any, w: int, mj_step: int,
+                table: Any, adr: Any, ratio: Any, order: Any, worlds: Any, dts: Any, active: Any) -> None:
+    """A status read in one call: the line's sleep to the instant the drive acts (``behind``: a held sleep's
+    substeps first, :func:`joints.sim.line_exchange.advance`), the drive's frame receipt
+    (:meth:`ZlacFirmware.frame_received`) and its three rows as they stand then into ``snap`` (the status block
+    is read from them after the call); the reply's travel to ``seen`` booked (``World.book``) and, if ``settle``,
+    its physics run (``World.sync``: what the caller's next access to the world runs)."""
+    L.advance(behind, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+    Z.frame(table[first])
+    for k in range(3):
+        snap[k, :] = table[first + k]
+    late = seen - st[L.CLOCK]
+    if late > 0:  # World.book
+        st[L.TARGET] += late
+        st[L.BOOKED] = 1.0
+        st[L.CLOCK] = st[L.TARGET]
+        st[L.SEEN] = st[L.CLOCK]
+    if settle:
+        L.advance(0.0, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+
+
+_STATUS_READ: list[Any] = []
+
+
+def _status_read() -> Any:
+    """:func:`status_read` compiled (numba), or None without it."""
+    if not _STATUS_READ:
+        _STATUS_READ.append(kernel.compiled(status_read) if L.compiled()[1] is not None else None)
+    return _STATUS_READ[0]
+
+
 #: the line's methods the read's advance assumes, as defined
 _LINE = ((TimedSerialLine, "_transact_idle", TimedSerialLine._transact_idle),
          (TimedSerialLine, "_plain_peer", TimedSerialLine._plain_peer))
@@ -67,6 +103,12 @@ _STOCK = ((ModbusDeviceBus, "exchange", ModbusDeviceBus.exchange), (ModbusFront,
           (ZlacFirmware, "_write_light", ZlacFirmware._write_light), (ZlacFirmware, "on_write", ZlacFirmware.on_write),
           (ZlacFirmware, "frame_received", ZlacFirmware.frame_received),
           (ZlacFirmware, "_cache_ramps", ZlacFirmware._cache_ramps), *_LINE)
+#: the stock methods a status read goes through (the bus's act, :meth:`ZlacExchange.read`)
+_STOCK_READ = ((ModbusDeviceBus, "exchange", ModbusDeviceBus.exchange), (ModbusFront, "handle", ModbusFront.handle),
+               (ModbusFront, "read", ModbusFront.read), (ModbusFront, "read_plan", ModbusFront.read_plan),
+               (ModbusFront, "pack", ModbusFront.pack), (ZlacFirmware, "frame_received", ZlacFirmware.frame_received),
+               (ZlacFirmware, "reader", ZlacFirmware.reader), (ZlacFirmware, "_read_status", ZlacFirmware._read_status),
+               (ZlacFirmware, "_status_of", ZlacFirmware._status_of), *_LINE)
 
 
 def _world_of(bus: Any, clock: Any) -> Any:
@@ -95,8 +137,33 @@ class ZlacExchange(L.Carrier):
         self.lane = lane
         self.slave = slave
         self.reads = 0  #: status reads sent with the world's advance in one call (:meth:`read`)
+        #: calls that ran a held sleep's substeps (``World.hold``: the env's period hold) first, in the same call
+        self.held = 0
+        #: of the reads, those whose drive's act (frame receipt, rows) ran in the call (:meth:`_status_act`)
+        self.acts = 0
+        self._snap: Any = None
+        self._blank: tuple[Any, int] | None = None
         self._world: Any = None
         self._bus: Any = None
+
+    def carried(self) -> tuple[Any, list[Any]] | None:
+        """(the world, [the twin]) where every frame to the twin goes over a timed line on the world's clock (which
+        settles the world before the twin acts on a frame: ``TimedSerialLine`` over the clock the world binds, or
+        this exchange); None otherwise (an untimed transport hands frames to the twin without settling)."""
+        lane = self.lane
+        line, framing = lane.line, lane.framing
+        if line is None or framing is None:
+            return None
+        bus = framing.peer
+        if type(bus) is not ModbusDeviceBus or line.peer is not bus:
+            return None
+        front = bus.slaves.get(self.slave)
+        if type(front) is not ModbusFront or type(front.firmware) is not ZlacFirmware:
+            return None
+        world = _world_of(bus, line.clock)
+        if world is None or line.clock is not world.clock or line._settle is None:
+            return None
+        return world, [front.firmware]
 
     def _fused_world(self, line: TimedSerialLine, bus: Any) -> Any:
         """The world between ``bus``'s frames where it runs fused on ``line``'s clock, else None."""
@@ -185,6 +252,8 @@ class ZlacExchange(L.Carrier):
             for row in rows:
                 row[L.ROW] = first
             n = len(rows)
+            if world._held:
+                self.held += 1
             link.transactions += n
             framing.exchanges += n
             outs = self.carry(fn, world, line, now, rows)
@@ -195,11 +264,33 @@ class ZlacExchange(L.Carrier):
         self.taken += 1
         return True
 
-    def read(self, request: mb.ReadHoldingRegisters, *, idempotent: bool = True) -> tuple[bool, Any]:
+    def _status_act(self, request: Any, bus: Any) -> tuple[Any, Any, Any] | None:
+        """(the front's read plan, the rows' reader, the firmware) where the bus's act on the status read
+        ``request`` is the twin's stock status block (frame receipt, then the fast reader:
+        :meth:`ZlacFirmware.reader`), so the rows it reads can be taken in the compiled call; else None."""
+        if type(request) is not mb.ReadHoldingRegisters or request.slave == 0 or type(bus) is not ModbusDeviceBus \
+                or not L.stock(_STOCK_READ):
+            return None
+        front = bus.slaves.get(request.slave)
+        if type(front) is not ModbusFront or type(front.firmware) is not ZlacFirmware:
+            return None
+        fw = front.firmware
+        plan = front.read_plan(request.address, request.count)
+        pair = fw.status_reader
+        if isinstance(plan, int) or pair is None or plan[0] is not pair[0]:
+            return None
+        return plan, pair[1], fw
+
+    def read(self, request: mb.ReadHoldingRegisters, *, idempotent: bool = True, settle: bool = False
+             ) -> tuple[bool, Any]:
         """``LinkLane.request(request)`` of a status read, the world's advance to the instant the drive acts on
         it in one compiled call: (True, the reply) - or (False, None), nothing sent, where the line or world is
-        not as assumed. The drive's act is the bus's own (``framing.peer.exchange``, whatever it answers); a
-        reply that is not the plain answer continues as the lane's does (the link's attempt and retries)."""
+        not as assumed. Where the drive's act is its stock status block (:meth:`_status_act`), the call also takes
+        the frame's receipt and the drive's rows then, books the reply's travel and - ``settle``: the caller's
+        next access to the world is one that runs booked time (``World.sync``) - runs its physics; the status
+        block is read from those rows after the call. Else the act is the bus's own (``framing.peer.exchange``,
+        whatever it answers). A reply that is not the plain answer continues as the lane's does (the link's
+        attempt and retries)."""
         fn = L.compiled()[1]
         lane = self.lane
         if fn is None or not lane._open(request):
@@ -210,6 +301,8 @@ class ZlacExchange(L.Carrier):
         world = self._fused_world(line, framing.peer)
         if world is None:
             return False, None
+        fast = _status_read()
+        act = None if fast is None else self._status_act(request, framing.peer)
         link = lane.link
         link.rule.check(request)  # raises EncodeError before anything is sent
         clock = world.clock
@@ -230,27 +323,59 @@ class ZlacExchange(L.Carrier):
             free["host"] = end + line.gap
             line.book_frames([(start, end, due, n, "host", None)])
             behind = due - clock.now()
-            if behind > 0 or world._booked:  # the physics runs to the instant the drive acts (sleep, settle)
-                st = self._st
+            st = self._st
+            if act is not None:  # the advance, the drive's receipt and rows, the reply's travel: one call
+                plan, rows, fw = act
+                blank = self._blank  # the reply's characters (of its size alone), kept by the request's identity
+                if blank is None or blank[0] is not request:
+                    blank = self._blank = (request, size(mb.ReadRegistersReply(request.slave, request.function,
+                                                                               (0,) * request.count)))
+                m = blank[1]
+                d_start = max(due, free["device"])
+                d_end = d_start + m * line.char_time
+                seen = d_end + line.adapter_latency
+                if world._held:
+                    self.held += 1
+                if self._snap is None:
+                    import numpy as np
+
+                    self._snap = np.zeros((3, Z.WIDTH))
                 L.fill(st, world, line, now)
-                state = L.fused(fn, world, st, behind)
-                if behind > 0:
-                    line._clock_seen = state[L.SEEN]
-            raw = framing.peer.exchange(request)  # the drive acts (the lane's act)
-            line.now = max(line.now, due)
-            if raw is not None:  # the reply (TimedSerialLine._put of the device's frame), booked while it travels
+                state = L.fused(fast, world, st, behind, seen, settle, self._first_row(world.group, fw), self._snap)
+                line._clock_seen = state[L.SEEN]
+                d, left, right = self._snap.tolist()
+                raw: Any = mb.ReadRegistersReply(request.slave, request.function,
+                                                 ModbusFront.pack(plan, rows(d, left, right), request.count))
+                line.now = max(line.now, due)
+                free["device"] = d_end + line.gap
+                line.book_frames([(d_start, d_end, seen, m, "device", raw)])
+                self.acts += 1
+            else:
+                if behind > 0 or world._booked:  # the physics runs to the instant the drive acts (sleep, settle)
+                    if world._held:
+                        self.held += 1
+                    L.fill(st, world, line, now)
+                    state = L.fused(fn, world, st, behind)
+                    if behind > 0:
+                        line._clock_seen = state[L.SEEN]
+                raw = framing.peer.exchange(request)  # the drive acts (the lane's act)
+                line.now = max(line.now, due)
+                if raw is None:
+                    self.reads += 1
+                    return True, lane._finish(request, raw, deadline, idempotent)
+                # the reply (TimedSerialLine._put of the device's frame), booked while it travels
                 m = size(raw)
                 d_start = max(due, free["device"])
                 d_end = d_start + m * line.char_time
                 seen = d_end + line.adapter_latency
                 free["device"] = d_end + line.gap
                 line.book_frames([(d_start, d_end, seen, m, "device", raw)])
-                behind = seen - clock.now()
-                if behind > 0:
-                    clock.book(behind)
+                late = seen - clock.now()
+                if late > 0:
+                    clock.book(late)
                     line._clock_seen = clock.now()
-                free["host"] = max(free["host"], seen + line.gap)
-                line.now = max(line.now, seen)
+            free["host"] = max(free["host"], seen + line.gap)
+            line.now = max(line.now, seen)
             self.reads += 1
             return True, lane._finish(request, raw, deadline, idempotent)
 

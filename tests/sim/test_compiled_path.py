@@ -46,6 +46,7 @@ def _links(env: Any) -> list[Any]:
 
 def _images(env: Any) -> list[tuple[str, int, tuple[tuple[int, int], ...]]]:
     out = []
+    env.rig.sim.sync()  # the twins' computed registers after the physics of booked time (a held sleep's too)
     for name, bus in sorted(env.rig.sim.buses.items()):
         for address, front in sorted(bus.slaves.items()):
             out.append((name, address, tuple(sorted(front.image().items()))))

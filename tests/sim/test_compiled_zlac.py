@@ -61,9 +61,12 @@ def _info(info: dict[str, Any]) -> list[tuple[str, Any]]:
     return [(k, (v.dtype.str, v.tobytes()) if isinstance(v, np.ndarray) else repr(v)) for k, v in sorted(info.items())]
 
 
-def _run(compiled: bool, steps: int = 80, counts: _Counts | None = None, **kwargs: Any) -> dict[str, Any]:
+def _run(compiled: bool, steps: int = 80, counts: _Counts | None = None, hold: bool | None = None,
+         **kwargs: Any) -> dict[str, Any]:
     env = gym.make(ENV, compiled_path=compiled, **kwargs)
     u: Any = env.unwrapped
+    if hold is not None:  # the world's sleeps booked (World.hold) or stepped at once, whatever the path set
+        u.rig.sim.hold_sleeps = hold
     try:
         out: dict[str, Any] = {"steps": []}
         before = dict(counts.n) if counts is not None else {}
@@ -95,6 +98,11 @@ def _run(compiled: bool, steps: int = 80, counts: _Counts | None = None, **kwarg
         out["lane"] = u.compiled_path.lane_taken if u.compiled_path is not None else None
         out["fused"] = u.compiled_path._steppers[0].exchange.taken if u.compiled_path is not None else None
         out["reads"] = u.compiled_path._steppers[0].exchange.reads if u.compiled_path is not None else None
+        #: of them, the reads whose drive's act (frame receipt, rows, reply's travel) ran in the compiled call
+        out["acts"] = u.compiled_path._steppers[0].exchange.acts if u.compiled_path is not None else None
+        #: the world's sleeps booked, and the one-call exchange's calls that ran a held sleep first
+        out["held"] = (u.rig.sim.hold_sleeps,
+                       u.compiled_path._steppers[0].exchange.held if u.compiled_path is not None else None)
         out["counts"] = {k: v - before[k] for k, v in counts.n.items()} if counts is not None else None
         twins = [f.firmware for b in u.rig.sim.buses.values() for f in b.slaves.values()]
         #: what ran compiled: the world's stepping, each twin's kernel ops (not the Python ones)
@@ -119,11 +127,14 @@ def test_the_steady_step_is_taken_and_gives_the_driver_paths_bits(mode: str, mon
     assert driver["taken"] is None
     assert compiled["taken"] >= 2 * 80  # both wheels, every step (the compiled path's FC16s)
     assert compiled["lane"] >= 2 * 80  # the steps' requests on the lane (the exchange counts its own there)
+    assert driver["held"] == (False, None)  # the driver path steps its sleeps at once
     if mode == "compiled":
         assert compiled["fused"] >= 78  # every step's FC16s in one call (not the steps after an ended episode)
         assert compiled["reads"] >= 80  # every step's status read with the world's advance in one call
+        assert compiled["held"][0] and compiled["held"][1] >= 80  # ... and with the env's period hold before it
+        assert compiled["acts"] == compiled["reads"]  # ... and the drive's act and the reply's travel after it
     else:
-        assert compiled["fused"] == 0 and compiled["reads"] == 0
+        assert compiled["fused"] == 0 and compiled["reads"] == 0 and compiled["held"] == (False, 0)
     # the drive's plan as register values, once per step on either path (velocity_plan is its dict view)
     assert compiled["counts"] == driver["counts"] and compiled["counts"]["velocity_words"] >= 80
     for key in _COMPARED:
@@ -156,10 +167,42 @@ def test_compiled_kernels_and_python_give_the_same_bits(monkeypatch: pytest.Monk
     assert compiled["kernels"] == (kernel.AVAILABLE, [kernel.AVAILABLE])
     if kernel.AVAILABLE:
         assert compiled["fused"] >= 58 and compiled["reads"] >= 60
+        assert compiled["held"][0] and compiled["held"][1] >= 60  # every step's period hold in the read's call
+        assert compiled["acts"] == compiled["reads"]
+    assert python["held"] == (False, 0)
     assert python["kernels"] == (False, [False]) and python["fused"] == 0 and python["reads"] == 0
     assert compiled["taken"] >= 2 * 60 and python["taken"] >= 2 * 60  # the compiled path, both runs
     for key in _COMPARED:
         assert compiled[key] == python[key], key
+
+
+@pytest.mark.parametrize("randomized", [False, True])
+def test_held_sleeps_give_the_eager_sleeps_bits(randomized: bool) -> None:
+    """The compiled path with the world's sleeps booked (``World.hold``: the env's period hold runs on its own at
+    the start of the status read's compiled call) against the same path with sleeps stepped at once: the same
+    bits, the held run's every step's hold carried by the read's call."""
+    if not kernel.default_mode():
+        pytest.skip("the compiled stepping is off (JOINTS_COMPILED=0 or no numba): no sleep is held")
+    held = _run(compiled=True, steps=70, domain_randomization=randomized)
+    eager = _run(compiled=True, steps=70, hold=False, domain_randomization=randomized)
+    assert held["held"][0] and held["held"][1] >= 70 and held["reads"] >= 70
+    assert eager["held"] == (False, 0) and eager["reads"] >= 70
+    for key in (*_COMPARED, "taken", "lane", "fused", "reads", "acts"):
+        assert held[key] == eager[key], key
+
+
+def test_a_replaced_status_block_is_read_by_the_bus(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The twin's status block replaced (here wrapped): the read's act is the bus's own (not taken from the rows
+    in the compiled call), the period hold still in the read's call - the driver path's bits."""
+    status_of = ZlacFirmware._status_of
+    monkeypatch.setattr(ZlacFirmware, "_status_of", lambda fw, *a: status_of(fw, *a))
+    driver = _run(compiled=False, steps=40)
+    compiled = _run(compiled=True, steps=40)
+    if kernel.default_mode():
+        assert compiled["reads"] >= 40 and compiled["held"][1] >= 40
+    assert compiled["acts"] == 0
+    for key in _COMPARED:
+        assert compiled[key] == driver[key], key
 
 
 # -- the twin's light write against the general one -----------------------------------------------------
