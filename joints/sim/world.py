@@ -346,7 +346,7 @@ class World:
         made = _make_twins(drives, inertia)
         self._drives: dict[str, Any] = {}  #: joint name -> its drive's twin (shared by channels)
         self.bus_specs = dict(buses)
-        self.buses: dict[str, Any] = {name: b.device_bus() for name, b in self.bus_specs.items()}
+        self._buses: dict[str, Any] = {name: b.device_bus() for name, b in self.bus_specs.items()}
         self._offer_world()
         self._bound: list[_Bound] = []
         fronts: set[tuple[str, int]] = set()
@@ -354,9 +354,9 @@ class World:
             twin, stepper = made[d.name]
             self._drives[d.name] = twin
             if (d.bus, d.address) not in fronts:
-                self.buses[d.bus].add(d.maker.front(d.protocol, twin, d.address))
+                self._buses[d.bus].add(d.maker.front(d.protocol, twin, d.address))
                 fronts.add((d.bus, d.address))
-                turnarounds = getattr(self.buses[d.bus], "turnarounds", None)  # bus timing: the drive's turnaround
+                turnarounds = getattr(self._buses[d.bus], "turnarounds", None)  # bus timing: the drive's turnaround
                 if turnarounds is not None:
                     turnarounds[d.address] = float(getattr(d.profile, "turnaround", 0.0))
             qa, da, aid = addr[d.name]
@@ -370,7 +370,7 @@ class World:
         self._bind = [(b.stepper.step, b.qadr, b.dadr, b.aid, b.ratio) for b in self._bound]
         self._bind_seen = list(self._bind)
         self._python_bind = self._stepped_in_python()
-        timed = [bus for bus in self.buses.values() if isinstance(bus, TimedDeviceBus)]
+        timed = [bus for bus in self._buses.values() if isinstance(bus, TimedDeviceBus)]
         for bus in timed:
             bus.bind_clock(self.clock)
             bind_substep = getattr(bus, "bind_substep", None)
@@ -436,7 +436,7 @@ class World:
     def _offer_world(self) -> None:
         """Device buses that take part in a one-call exchange (twin ops and the physics between frames in one
         compiled call: ``ModbusDeviceBus.fused``) learn which world steps between their frames."""
-        for bus in self.buses.values():
+        for bus in self._buses.values():
             if hasattr(bus, "world") and getattr(bus, "world", None) is None:
                 bus.world = self
 
@@ -574,6 +574,13 @@ class World:
         return self._data
 
     @property
+    def buses(self) -> dict[str, Any]:
+        """Bus name -> its emulated device bus (its fronts reach the twins: the physics first catches up: :meth:`sync`)."""
+        if self._booked:
+            self.sync()
+        return self._buses
+
+    @property
     def drives(self) -> dict[str, Any]:
         """Joint name -> its drive's twin (shared by channels; the physics first catches up: :meth:`sync`)."""
         if self._booked:
@@ -634,9 +641,9 @@ class World:
 
     def transport(self, bus: str) -> Any:
         """An in-process transport whose peer is every emulated drive on ``bus``."""
-        if bus not in self.buses:
-            raise ConfigError(f"no emulated bus {bus!r}", key="buses", allowed=sorted(self.buses))
-        return self.bus_specs[bus].transport(self.buses[bus], clock=self.clock)
+        if bus not in self._buses:
+            raise ConfigError(f"no emulated bus {bus!r}", key="buses", allowed=sorted(self._buses))
+        return self.bus_specs[bus].transport(self._buses[bus], clock=self.clock)
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics substeps (drives' loops every substep), one caller at a time.

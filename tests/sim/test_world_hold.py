@@ -38,6 +38,7 @@ ACCESS: dict[str, Callable[[Any], object]] = {
     "data": lambda w: w.data.qpos[0],
     "time": lambda w: w.time,
     "drives": lambda w: w.drives,
+    "buses": lambda w: w.buses,  # its fronts reach the twins
     "step": lambda w: w.step(0),
 }
 
