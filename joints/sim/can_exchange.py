@@ -532,10 +532,11 @@ class ErobCanExchange:
         return plan
 
     def _stamp(self, fronts: Sequence[ErobCanFront]) -> tuple[Any, ...]:
-        """What a kept plan's rows depend on besides its requests: the table, the motion modes, the delays."""
+        """What a kept plan's rows depend on besides its requests: the table, the fronts' node ids (one changes at
+        a power cycle), the motion modes, the delays."""
         turnarounds = self.bus.turnarounds
         return (self.world.group, self.medium._peers[0].latency, self.host._node.latency,
-                tuple((f.firmware.values["motion_mode"], turnarounds.get(f.node)) for f in fronts))
+                tuple((f.node, f.firmware.values["motion_mode"], turnarounds.get(f.node)) for f in fronts))
 
     def run(self, requests: Sequence[Any], timeout: float) -> list[Any] | None:
         """The replies to ``requests`` (to the twins of this bus, sent one after the other by a link whose reply

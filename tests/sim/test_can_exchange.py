@@ -23,7 +23,7 @@ import pytest
 
 import envs  # noqa: F401 - registers the joints/ envs
 from joints.drivers.erob_can_steady import ErobCanStep
-from joints.errors import DeviceRejected
+from joints.errors import DeviceRejected, ReplyTimeout
 from joints.sim import kernel
 
 if sys.version_info >= (3, 11):
@@ -126,7 +126,7 @@ def _state(u: Any) -> dict[str, Any]:
     return out
 
 
-def _run(compiled: bool, mode: str, steps: int, *, plant: Any = None) -> dict[str, Any]:
+def _run(compiled: bool, mode: str, steps: int, *, plant: Any = None, undo: Any = None) -> dict[str, Any]:
     env = gym.make("joints/ErobReach-v0", config=_config(), control_period=PERIOD, action_mode=mode,
                    compiled_path=compiled)
     u: Any = env.unwrapped
@@ -145,6 +145,9 @@ def _run(compiled: bool, mode: str, steps: int, *, plant: Any = None) -> dict[st
             except DeviceRejected as exc:
                 out["steps"].append(("refused", str(exc), exc.code))
                 break
+            except ReplyTimeout as exc:
+                out["steps"].append(("timeout", type(exc).__name__))  # (its text names the run's channel)
+                break
             out["steps"].append((obs.tobytes(), reward, terminated, truncated, _info(info)))
             if terminated or truncated:
                 obs, info = env.reset()
@@ -156,6 +159,8 @@ def _run(compiled: bool, mode: str, steps: int, *, plant: Any = None) -> dict[st
         out["refilled"] = sum(s.exchange.refilled for s in rec.steps)  # command plans made from a kept one
         return out
     finally:
+        if undo is not None:  # what the plant changed, put back so that closing reaches the drive
+            undo(u)
         env.close()
 
 
@@ -204,6 +209,34 @@ def test_a_start_the_drive_refuses_mid_step_is_refused_the_same_way() -> None:
     if kernel.default_mode():  # the call carried the steps, and the refused start (its last reply)
         assert compiled["taken"][2] >= 2 * 12
         assert compiled["replies"][-2:] == ["Ack", "ErrorReply"]
+
+
+def test_a_drive_at_another_node_id_is_not_reached_by_a_kept_plan() -> None:
+    """From step 12's period hold on, the drive answers at another node id (as after a saved node-id change and a
+    power cycle): the state read that follows, to the old id, goes unanswered on both paths - the read plan kept
+    from before does not carry it to the drive."""
+
+    def front(u: Any) -> Any:
+        return next(iter(u.rig.sim.buses.values())).fronts[0]
+
+    def plant(k: int, u: Any) -> None:
+        if k == 12:  # the command still reaches the drive; the node id changes during the hold
+            sleep = u.rig.sleep
+
+            def then_renumber(seconds: float) -> None:
+                sleep(seconds)
+                front(u)._node = front(u).node + 5
+                u.rig.sleep = sleep
+
+            u.rig.sleep = then_renumber
+
+    def undo(u: Any) -> None:
+        front(u)._node = None
+
+    driver = _run(False, "position", 20, plant=plant, undo=undo)
+    compiled = _run(True, "position", 20, plant=plant, undo=undo)
+    assert driver["steps"][-1][0] == "timeout"
+    _same(driver, compiled)
 
 
 def test_a_trace_or_a_replaced_method_leaves_the_steps_to_the_frame_by_frame_path(
