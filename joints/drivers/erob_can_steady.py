@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 from joints.codecs import erob_can as ec
 from joints.drivers.erob import CMD_START
 from joints.drivers.erob_can import ErobCanAccess, ErobCanDriver
+from joints.errors import UnexpectedReply
 from joints.link.base import FrameFraming, Link
 from joints.link.erob_can import ErobCanLink, ErobCanRule
 
@@ -100,7 +101,8 @@ class ErobCanStep:
         """``reply`` taken as the link takes it (an error reply raises here, as it raises there)."""
         link = self.link
         if not link.rule.is_reply(request, reply):  # (a steady reply always answers its request)
-            raise AssertionError(f"{link.name}: {reply!r} does not answer {request!r}")
+            raise UnexpectedReply(f"{link.name}: the twin's one-call exchange answered {request!r} with {reply!r}, "
+                                  "which does not answer it (a fault of the emulator: report it)")
         if isinstance(reply, ec.ValueReply):
             link._unsynced.discard(request.node)
         return reply

@@ -13,6 +13,7 @@ cache must be equal; the one-call exchange must have carried the steady steps (w
 from __future__ import annotations
 
 import copy
+import dataclasses
 import sys
 from importlib import resources
 from typing import Any
@@ -273,3 +274,29 @@ def test_a_trace_or_a_replaced_method_leaves_the_steps_to_the_frame_by_frame_pat
     if kernel.default_mode():
         assert fused[10] > fused[1] > 0  # the call carried the first steps
         assert fused[10] == fused[20] == fused[-1]  # traced, then a replaced method: never again
+
+
+@pytest.mark.skipif(not kernel.default_mode(), reason="the one-call exchange runs on a compiled world")
+def test_a_reply_of_the_call_that_does_not_answer_its_request_raises_unexpected_reply() -> None:
+    """A fault of the emulator's call (a reply from another node) is a typed error at the step, not a state."""
+    from joints.errors import UnexpectedReply
+
+    env = gym.make("joints/ErobReach-v0", config=_config(), control_period=PERIOD, compiled_path=True)
+    u: Any = env.unwrapped
+    try:
+        env.reset(seed=3)
+        (step,) = [s for s in u.compiled_path._steppers if isinstance(s, ErobCanStep)]
+        run = step.exchange.run
+
+        def misrouted(requests: Any, timeout: float) -> Any:  # the last reply from another node
+            replies = run(requests, timeout)
+            if replies:
+                replies[-1] = dataclasses.replace(replies[-1], node=replies[-1].node + 1)
+            return replies
+
+        step.exchange.run = misrouted
+        with pytest.raises(UnexpectedReply, match="does not answer it"):
+            env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+        step.exchange.run = run
+    finally:
+        env.close()
