@@ -16,6 +16,7 @@ does; the Python here brings the line, the world and the clock back afterwards (
 from __future__ import annotations
 
 import math
+import operator
 from collections.abc import Sequence
 from typing import Any
 
@@ -134,11 +135,32 @@ def compiled() -> tuple[Any, Any]:
 
 def stock(methods: Sequence[tuple[Any, str, Any]]) -> bool:
     """Whether none of ``methods`` ((class, name, the function as defined)) is replaced (a test planting replies
-    turns the one-call exchange off)."""
-    for cls, name, fn in methods:
-        if getattr(cls, name) is not fn:
+    turns the one-call exchange off). Each class's attributes are fetched by one ``attrgetter`` and compared by
+    identity (``getattr(cls, name) is fn`` for every item; the grouping is kept per ``methods`` object)."""
+    got = _STOCK_GROUPS.get(id(methods))
+    if got is None or got[0] is not methods:
+        got = _STOCK_GROUPS[id(methods)] = (methods, _stock_groups(methods))
+    for cls, fetch, fns in got[1]:
+        if not all(map(operator.is_, fetch(cls), fns)):
             return False
     return True
+
+
+def _stock_groups(methods: Sequence[tuple[Any, str, Any]]) -> tuple[tuple[Any, Any, tuple[Any, ...]], ...]:
+    """``methods`` grouped by class: (class, a getter of its names' attributes as a tuple, the functions)."""
+    by: dict[Any, list[tuple[str, Any]]] = {}
+    for cls, name, fn in methods:
+        by.setdefault(cls, []).append((name, fn))
+    out = []
+    for cls, items in by.items():
+        names = tuple(n for n, _ in items)
+        fetch = operator.attrgetter(*names) if len(names) > 1 else (lambda c, _n=names[0]: (getattr(c, _n),))
+        out.append((cls, fetch, tuple(f for _, f in items)))
+    return tuple(out)
+
+
+#: :func:`stock`'s grouping per methods tuple (id -> (the tuple, its groups))
+_STOCK_GROUPS: dict[int, tuple[Any, Any]] = {}
 
 
 def world_fused(world: Any) -> bool:
@@ -152,8 +174,14 @@ def clear(line: Any) -> float | None:
     """The line's time (``_sync``) where no frame of its log can overlap the next request, else None (an edited
     log, or a frame still on the line: the line's own way)."""
     now: float = line._sync()
-    if len(line._latest_end) != len(line._log) or line.latest_end() > max(now, line._free["host"]):
+    latest = line._latest_end
+    log = line._log
+    if len(latest) != len(log):
         return None
+    if len(log) > line._epoch and latest:  # (``line.latest_end()``, inline)
+        free = line._free["host"]
+        if latest[-1] > (free if free > now else now):  # max(now, free) as the builtin gives it
+            return None
     return now
 
 
@@ -223,12 +251,34 @@ class Carrier:
             buffers = self._buffers[n] = (np.zeros((n, TX_WIDTH)), np.zeros((n, self._out_width)))
         tx, out = buffers
         tx[:] = rows
+        # fill and fused, inline (the same values and operations; fused's arena check after)
         st = self._st
-        fill(st, world, line, now)
-        state = fused(fn, world, st, tx, out)
+        free = line._free
+        booked = world._booked
+        st[:] = (world.clock.now(), world._target, (HELD if world._held else 1.0) if booked else 0.0, now,
+                 line._clock_seen, free["host"], free["device"], line.char_time, line.gap, line.adapter_latency,
+                 world.timestep)
+        group = world.group
+        w = world.group_index
+        worlds = group.worlds_table
+        worlds[w, STEPS] = world.steps
+        order, active = group._plan(world._me)
+        try:
+            fn(tx, out, st, w, group.mj_step or 0, group.table, group.adr, group.ratio, order, worlds,
+               group.dts_array, active)
+        finally:
+            world.steps = int(worlds[w, STEPS])
+            state: list[float] = st.tolist()
+            world._target = state[TARGET]
+            booked = state[BOOKED]
+            world._booked = booked != 0.0
+            world._held = booked == HELD
+            world.clock.set(state[CLOCK])
+        if world._data.maxuse_arena > group._arena_limits[w]:  # as Group.run after its calls
+            world.leave_fused_path()
+            group.replan()
         line.now = state[NOW]
         line._clock_seen = state[SEEN]
-        free = line._free
         free["host"] = state[FREE_HOST]
         free["device"] = state[FREE_DEVICE]
         return out.tolist()  # type: ignore[no-any-return]
