@@ -16,7 +16,6 @@ does; the Python here brings the line, the world and the clock back afterwards (
 from __future__ import annotations
 
 import math
-import operator
 from collections.abc import Sequence
 from typing import Any
 
@@ -135,32 +134,11 @@ def compiled() -> tuple[Any, Any]:
 
 def stock(methods: Sequence[tuple[Any, str, Any]]) -> bool:
     """Whether none of ``methods`` ((class, name, the function as defined)) is replaced (a test planting replies
-    turns the one-call exchange off). Each class's attributes are fetched by one ``attrgetter`` and compared by
-    identity (``getattr(cls, name) is fn`` for every item; the grouping is kept per ``methods`` object)."""
-    got = _STOCK_GROUPS.get(id(methods))
-    if got is None or got[0] is not methods:
-        got = _STOCK_GROUPS[id(methods)] = (methods, _stock_groups(methods))
-    for cls, fetch, fns in got[1]:
-        if not all(map(operator.is_, fetch(cls), fns)):
+    turns the one-call exchange off)."""
+    for cls, name, fn in methods:
+        if getattr(cls, name) is not fn:
             return False
     return True
-
-
-def _stock_groups(methods: Sequence[tuple[Any, str, Any]]) -> tuple[tuple[Any, Any, tuple[Any, ...]], ...]:
-    """``methods`` grouped by class: (class, a getter of its names' attributes as a tuple, the functions)."""
-    by: dict[Any, list[tuple[str, Any]]] = {}
-    for cls, name, fn in methods:
-        by.setdefault(cls, []).append((name, fn))
-    out = []
-    for cls, items in by.items():
-        names = tuple(n for n, _ in items)
-        fetch = operator.attrgetter(*names) if len(names) > 1 else (lambda c, _n=names[0]: (getattr(c, _n),))
-        out.append((cls, fetch, tuple(f for _, f in items)))
-    return tuple(out)
-
-
-#: :func:`stock`'s grouping per methods tuple (id -> (the tuple, its groups))
-_STOCK_GROUPS: dict[int, tuple[Any, Any]] = {}
 
 
 def world_fused(world: Any) -> bool:
@@ -180,7 +158,7 @@ def clear(line: Any) -> float | None:
         return None
     if len(log) > line._epoch and latest:  # (``line.latest_end()``, inline)
         free = line._free["host"]
-        if latest[-1] > (free if free > now else now):  # max(now, free) as the builtin gives it
+        if latest[-1] > max(now, free):
             return None
     return now
 
