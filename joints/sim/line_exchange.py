@@ -229,34 +229,12 @@ class Carrier:
             buffers = self._buffers[n] = (np.zeros((n, TX_WIDTH)), np.zeros((n, self._out_width)))
         tx, out = buffers
         tx[:] = rows
-        # fill and fused, inline (the same values and operations; fused's arena check after)
         st = self._st
-        free = line._free
-        booked = world._booked
-        st[:] = (world.clock.now(), world._target, (HELD if world._held else 1.0) if booked else 0.0, now,
-                 line._clock_seen, free["host"], free["device"], line.char_time, line.gap, line.adapter_latency,
-                 world.timestep)
-        group = world.group
-        w = world.group_index
-        worlds = group.worlds_table
-        worlds[w, STEPS] = world.steps
-        order, active = group._plan(world._me)
-        try:
-            fn(tx, out, st, w, group.mj_step or 0, group.table, group.adr, group.ratio, order, worlds,
-               group.dts_array, active)
-        finally:
-            world.steps = int(worlds[w, STEPS])
-            state: list[float] = st.tolist()
-            world._target = state[TARGET]
-            booked = state[BOOKED]
-            world._booked = booked != 0.0
-            world._held = booked == HELD
-            world.clock.set(state[CLOCK])
-        if world._data.maxuse_arena > group._arena_limits[w]:  # as Group.run after its calls
-            world.leave_fused_path()
-            group.replan()
+        fill(st, world, line, now)
+        state = fused(fn, world, st, tx, out)
         line.now = state[NOW]
         line._clock_seen = state[SEEN]
+        free = line._free
         free["host"] = state[FREE_HOST]
         free["device"] = state[FREE_DEVICE]
         return out.tolist()  # type: ignore[no-any-return]
