@@ -109,9 +109,10 @@ class ModbusAccess(ParamAccess):
     def write_request(self, name: str, value: int) -> mb.Request:
         """The request :meth:`write` sends (range-checked): FC06 for one word, FC16 for a 32-bit pair."""
         reg = self.table.get(name)
-        if reg.words == 1:  # ``to_words`` of one word, inline: its checked value & 0xFFFF
-            return mb.WriteSingleRegister(self.slave, reg.address, reg.check(value) & 0xFFFF)
-        return mb.WriteMultipleRegisters(self.slave, reg.address, tuple(reg.to_words(value)))
+        words = reg.to_words(value)
+        if len(words) == 1:
+            return mb.WriteSingleRegister(self.slave, reg.address, words[0])
+        return mb.WriteMultipleRegisters(self.slave, reg.address, tuple(words))
 
     def block_plan(self, names: Sequence[str]) -> tuple[tuple[int, int], ...]:
         """The FC03 blocks (start, count) :meth:`read_many` reads for ``names`` (cached)."""

@@ -255,7 +255,6 @@ class ErobExchange(L.Carrier):
         made: list[Any] = []  # per request: a write's reply and firmware items, a read's plan
         written: dict[int, dict[str, int]] = {}
         group = world.group
-        line_turn = line.turnaround
         for ex, r in zip(mine, requests):
             if type(r) is mb.ReadHoldingRegisters:
                 got = ex._read_row(r, size, check)
@@ -267,16 +266,13 @@ class ErobExchange(L.Carrier):
                 shape = ex._shape(r, size)
                 if shape is None or shape.op == READ:
                     return None
-                mine_written = written.get(id(ex))
-                if mine_written is None:
-                    mine_written = written[id(ex)] = {}
-                wrote = ex._row(r, shape, mine_written, check)
+                wrote = ex._row(r, shape, written.setdefault(id(ex), {}), check)
                 if wrote is None:
                     return None
                 row = wrote[0]
                 made.append(wrote[1:])
             turn = ex.bus.message_turnaround(r)
-            row[TURN] = line_turn if turn is None else turn
+            row[TURN] = line.turnaround if turn is None else turn
             row[ROW] = float(ex._first_row(group, ex.firmware))
             rows.append(row)
         with world.lock:
@@ -296,8 +292,8 @@ class ErobExchange(L.Carrier):
                     ex.firmware._keep(items)  # the parameter store's part (the row's ran in the call)
                 replies.append(reply)
                 clocks.append(o[CLOCK_AFTER])
-                frames += ((o[L.H_START], o[L.H_END], o[L.H_DUE], int(t[L.REQUEST]), "host", None),
-                           (o[L.D_START], o[L.D_END], o[L.D_SEEN], int(t[L.REPLY]), "device", reply))
+                frames.append((o[L.H_START], o[L.H_END], o[L.H_DUE], int(t[L.REQUEST]), "host", None))
+                frames.append((o[L.D_START], o[L.D_END], o[L.D_SEEN], int(t[L.REPLY]), "device", reply))
             line.book_frames(frames)  # (joints.sim.line_exchange.book, in the same pass)
         self.taken += 1
         return replies

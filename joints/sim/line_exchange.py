@@ -152,14 +152,8 @@ def clear(line: Any) -> float | None:
     """The line's time (``_sync``) where no frame of its log can overlap the next request, else None (an edited
     log, or a frame still on the line: the line's own way)."""
     now: float = line._sync()
-    latest = line._latest_end
-    log = line._log
-    if len(latest) != len(log):
+    if len(line._latest_end) != len(line._log) or line.latest_end() > max(now, line._free["host"]):
         return None
-    if len(log) > line._epoch and latest:  # (``line.latest_end()``, inline)
-        free = line._free["host"]
-        if latest[-1] > max(now, free):
-            return None
     return now
 
 
