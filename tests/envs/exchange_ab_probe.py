@@ -75,8 +75,10 @@ def _versions(other: str) -> dict[str, list[tuple[Any, str, Any]]]:
 def main(other: str, env_id: str, mode: str) -> None:
     versions = _versions(other)
     this_sets = list(versions["this"])
-    env = gym.make(env_id, **({} if mode == "-" else {"action_mode": mode}))
-    actions = np.random.default_rng(0).uniform(-1, 1, (STEPS, *env.action_space.shape)).astype(np.float32)
+    kwargs: dict[str, Any] = {} if mode == "-" else {"action_mode": mode}
+    env = gym.make(env_id, **kwargs)
+    shape: tuple[int, ...] = env.action_space.shape or ()
+    actions = np.random.default_rng(0).uniform(-1, 1, (STEPS, *shape)).astype(np.float32)
 
     def use(tag: str) -> None:
         for obj, n, f in versions[tag]:
