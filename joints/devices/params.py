@@ -79,10 +79,16 @@ class Param:
     maximum: int | None = None  #: documented upper bound (inclusive), if any
     default: int = 0  #: power-on value where the manual gives one
     persistent: bool = False  #: writing it is persistent or dangerous (needs confirmation)
+    #: the range :meth:`check` accepts (the type's, narrowed by the documented bounds: ``check_value``'s)
+    _lo: int = field(init=False, repr=False, compare=False)
+    _hi: int = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.type not in TYPES:
             raise ValueError(f"parameter {self.name}: unknown type {self.type!r} (allowed: {', '.join(TYPES)})")
+        lo, hi, _ = TYPES[self.type]
+        object.__setattr__(self, "_lo", lo if self.minimum is None else max(lo, self.minimum))
+        object.__setattr__(self, "_hi", hi if self.maximum is None else min(hi, self.maximum))
 
     @property
     def type_range(self) -> tuple[int, int]:
@@ -95,6 +101,8 @@ class Param:
 
     def check(self, value: object) -> int:
         """Validate a value for writing; returns it as int or raises :class:`CommandError`."""
+        if type(value) is int and self._lo <= value <= self._hi:  # the usual case: what check_value returns
+            return value
         return check_value(self.name, self.type, value, self.minimum, self.maximum, self.unit)
 
 

@@ -101,21 +101,29 @@ class LinkLane:
         the lane or the exchange cannot take them all (nothing sent: send them the usual way). ``idempotent``:
         a lone request's, for the rest of its attempt where its reply is not the plain answer."""
         framing = self.framing
-        if framing is None or not self._idle() or not all(self._plain(r) for r in requests):
+        if framing is None or not self._idle():
             return None
         link = self.link
         rule = link.rule
+        expects = rule.expects_reply
+        for r in requests:  # _plain of each (nothing sent where one is not)
+            if not expects(r) or _single_write(r) == FAILED_VALUE:
+                return None
         for r in requests:
             rule.check(r)  # raises EncodeError before anything is sent
-        as_received = framing.as_received
+        check: Callable[[Any, Any], bool] | None = None
+        if len(requests) > 1:  # several replies are checked before anything is sent
+            as_received = framing.as_received
 
-        def plain(request: Any, reply: Any) -> bool:
-            return as_received(request, reply) is reply and bool(rule.is_reply(request, reply))
+            def plain(request: Any, reply: Any) -> bool:
+                return as_received(request, reply) is reply and bool(rule.is_reply(request, reply))
+
+            check = plain
 
         with link._lock:
             deadline = link.clock.now() + link.policy.timeout  # the last request's, when it is the only one
             # a lone request's reply is checked after, as the lane checks it; several are checked before
-            replies = run(requests, framing.size, plain if len(requests) > 1 else None)
+            replies = run(requests, framing.size, check)
             if replies is None:
                 return None
             n = len(requests)
