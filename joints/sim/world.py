@@ -593,6 +593,11 @@ class World:
         the physics or a twin: :attr:`model`, :attr:`data`, :attr:`drives`, a medium about to hand a frame to
         a drive) or at the next :meth:`advance` - in one compiled call with what follows. A world with ticks
         (timed device buses, delayed commands, measured joints, state friction) steps at once."""
+        self._defer(seconds, held=False)
+
+    def _defer(self, seconds: float, *, held: bool) -> None:
+        """Book ``seconds`` on the clock, the physics run later (:meth:`book`; ``held``: a sleep's, :meth:`hold`).
+        An earlier held sleep's substeps run first, on their own (as :meth:`advance` runs them)."""
         if seconds <= 0:
             return
         if self._ticks:
@@ -601,8 +606,9 @@ class World:
         with self.lock:
             if self._held:
                 self.sync()
-            self._target += seconds
+            self._target += seconds  # as advance: with any booked time before it, in one count
             self._booked = True
+            self._held = held
             self.clock.set(self._target)
 
     def _sleep(self, seconds: float) -> None:
@@ -618,17 +624,7 @@ class World:
         :meth:`advance`/:meth:`book` or one-call exchange (:mod:`joints.sim.line_exchange`), on its own: the
         same substeps as :meth:`advance` runs now, counted the same way. A world with ticks advances at once.
         The clock's sleep where :attr:`hold_sleeps`."""
-        if seconds <= 0:
-            return
-        if self._ticks:
-            self.advance(seconds)
-            return
-        with self.lock:
-            if self._held:  # an earlier sleep's substeps, on their own (as advance runs them)
-                self.sync()
-            self._target += seconds  # as advance: the sleep with any booked time before it, in one count
-            self._booked = self._held = True
-            self.clock.set(self._target)
+        self._defer(seconds, held=True)
 
     def sync(self) -> None:
         """Run the physics up to booked time: the substeps that end at or before it and the one that reaches
