@@ -143,6 +143,10 @@ class ErobCanDriver(ErobDriver):
     """One eRob actuator on an eRob CAN custom-protocol link (see the module docstring)."""
 
     start_check_names = ("motion_status", "status_of_achieving_position")
+    #: what :meth:`set_velocity` and :meth:`set_current` write before their set-point (besides the ramps): the
+    #: steady checks (``steady_velocity``, ``steady_current``) ask that the drive holds them
+    _SPEED_SETUP = (*ErobDriver._SPEED_SETUP, ("analog_quantity_type", 0))
+    _TORQUE_SETUP = (*ErobDriver._TORQUE_SETUP, ("analog_quantity_type", 0))
 
     def __init__(
         self,

@@ -61,7 +61,7 @@ class ErobCanStep:
         self.exchange = exchange
         self.node = access.node
         self.lane = _Counts()
-        self.taken = 0  #: joint steps (commands) sent by the exchange
+        self.taken = 0  #: joint steps (commands: a target + start, or a set-point) sent by the exchange
         self.start = access.message("start_operating", CMD_START)
         self.link.rule.check(self.start)
         self._reads: dict[tuple[str, ...], tuple[ec.Read, ...]] = {}
@@ -133,10 +133,36 @@ class ErobCanStep:
                     return
             driver.move_to(target, speed=speed, acceleration=acc, deceleration=dec)
             joint.note_contact()
-        elif mode == "velocity":
-            joint.set_velocity(value)
-        else:
-            joint.set_torque(value)
+        elif mode == "velocity":  # Joint.set_velocity: its checks (and contact), then ErobCanDriver.set_velocity
+            speed, ramp = joint.velocity_command(value)
+            if driver.steady_velocity(ramp, ramp):
+                driver.validate(analog_quantity_value=speed, target_speed=speed)
+                if self._setpoint(speed):
+                    return
+            driver.set_velocity(speed, acceleration=ramp, deceleration=ramp)
+        else:  # Joint.set_torque: its checks, ErobCanDriver.set_current, then the contact
+            current = joint.torque_command(value)
+            if driver.steady_current():
+                driver.validate(analog_quantity_value=current, target_current=current)
+                if self._setpoint(current):
+                    joint.note_contact()
+                    return
+            driver.set_current(current)
+            joint.note_contact()
+
+    def _setpoint(self, value: int) -> bool:
+        """The steady set-point (``ErobCanDriver._analog`` with its settings held and the settle wait over: one
+        write of the analog value 0x01FE) by one call of the twin's exchange; False: not sent (the driver's own
+        method sends it)."""
+        request = self.access.message("analog_quantity_value", value)
+        self.link.rule.check(request)  # raises EncodeError before anything is sent
+        replies = self._send((request,))
+        if replies is None:
+            return False
+        self._take(request, replies[0])
+        self.driver.note_written("analog_quantity_value", value)
+        self.taken += 1
+        return True
 
     def state(self) -> JointState:
         clock, driver = self.clock, self.driver

@@ -37,7 +37,8 @@ from typing import Any
 
 from joints.codecs import erob_can as ec
 from joints.devices.erob.can import EROB_CAN, Reach
-from joints.devices.erob.registers import MotionMode
+from joints.devices.erob.registers import MotionMode, OperationMode
+from joints.errors import ParameterRefused
 from joints.sim import erob, kernel, stepping
 from joints.sim import erob_can as sim_can
 from joints.sim import erob_kernel as K
@@ -52,6 +53,8 @@ from joints.transports.can_sim import CanMedium, LockstepCanBus
 
 __all__ = ["ErobCanExchange", "act", "exchanges"]
 
+_SPEED, _TORQUE = int(OperationMode.SPEED), int(OperationMode.TORQUE)
+
 #: columns of the state vector (the first three are :mod:`joints.sim.line_exchange`'s: ``L.fused`` brings the
 #: world and clock back): the clock, the world's target time, booked; the medium's time, the clock time it last
 #: saw, when the bus is free, its last tick; its frame, bit and busy-time counters; the world's timestep; ticks
@@ -64,14 +67,20 @@ ROW, REQ_TOOK, REQ_BITS, REP_TOOK, REP_BITS, ERR_TOOK, ERR_BITS, DELAY, LATENCY,
     REPETITIVE = range(14)
 TX_WIDTH = 14
 #: ops: a read (the status values of a copy of the row: no side effect), the read of
-#: ``status_of_achieving_position`` (the row itself: its settle timer runs), the target write, "start"
-READ, READ_ACHIEVE, TARGET_POSITION, START = range(4)
+#: ``status_of_achieving_position`` (the row itself: its settle timer runs), the target write, "start", the
+#: analog set-point 0x01FE (``analog_quantity_value``)
+READ, READ_ACHIEVE, TARGET_POSITION, START, SETPOINT = range(5)
+#: what a set-point write does (its MOTION column; :meth:`ErobCanFront._setpoint`): only stored (an external
+#: analog source, or neither speed nor torque mode), the target speed, the target current
+STORE, TO_SPEED, TO_CURRENT = 0.0, 1.0, 2.0
+#: the parameter a set-point of each kind writes
+SETPOINT_OF = {TO_SPEED: "target_speed", TO_CURRENT: "target_current"}
 #: columns of an output row: the request's start and end, the reply's start and end, when the host has it, the
-#: clock after; the reply refused (0x0027); the world's substeps when the drive acted; the status values; the
-#: row's columns the sensors see
-E0, E1, R0, R1, HOST, CLOCK_AFTER, REFUSED, ACTED = range(8)
-STATUS_AT = 8
-SENSED = (K.TIME, K.POS, K.VEL, K.I_OUT)
+#: clock after; the reply refused (0x0027); the world's substeps when the drive acted; a set-point held (the
+#: motor not ready); the status values; the row's columns the sensors see
+E0, E1, R0, R1, HOST, CLOCK_AFTER, REFUSED, ACTED, HELD = range(9)
+STATUS_AT = 9
+SENSED = K.SENSED
 SENSED_AT = STATUS_AT + len(K.STATUS_NAMES)
 OUT_WIDTH = SENSED_AT + len(SENSED)
 
@@ -80,25 +89,32 @@ OUT_WIDTH = SENSED_AT + len(SENSED)
 def act(s: Any, t: Any, o: Any, scratch: Any) -> bool:
     """The drive (row ``s``) acts on a request as :meth:`ErobCanFront.handle` makes its firmware act: its
     watchdog is fed, then the op; True: refused (a start while the motor is not ready: 0x0027, nothing
-    latched)."""
+    latched). A set-point the motor is not ready for is held (``o[HELD]``: the front keeps it)."""
     K.frame(s)
     op = t[OP]
+    o[HELD] = 0.0
     if op == READ or op == READ_ACHIEVE:
         r = s
         if op == READ:  # one value of the status: the status op on a copy (a generic read runs no settle timer)
             for k in range(s.shape[0]):
                 scratch[k] = s[k]
             r = scratch
-        values = K.status(r, t[REPETITIVE] != 0.0)
-        for k in range(len(values)):
-            o[STATUS_AT + k] = values[k]
-        o[SENSED_AT] = s[K.TIME]
-        o[SENSED_AT + 1] = s[K.POS]
-        o[SENSED_AT + 2] = s[K.VEL]
-        o[SENSED_AT + 3] = s[K.I_OUT]
+        K.status_out(s, r, t[REPETITIVE] != 0.0, o, STATUS_AT)
         return False
     if op == TARGET_POSITION:
         s[K.TARGET_ABSOLUTE] = t[VALUE]
+        return False
+    if op == SETPOINT:  # ErobCanFront._setpoint after the store (the firmware's write of 0x01FE acts on nothing)
+        kind = t[MOTION]
+        if kind != STORE:
+            v = t[VALUE]
+            if K.ready(s) or v == 0.0:
+                if kind == TO_SPEED:
+                    K.target_speed(s, v)
+                else:
+                    K.target_current(s, v)
+            else:
+                o[HELD] = 1.0
         return False
     if not K.ready(s):  # START
         return True
@@ -329,6 +345,8 @@ class ErobCanExchange:
         #: with a write or command among them (a command: its rows but a few columns are the same every step)
         self._commands: dict[tuple[Any, ...], _Plan] = {}
         self.refilled = 0  #: plans made from a kept command plan (:meth:`_refill`)
+        self.setpoints = 0  #: set-point writes (speed or current) carried
+        self.held = 0  #: of them, held by the front (the drive stopped being ready during the call)
 
     # -- the steady case ------------------------------------------------------------------------
     def _steady(self, front: ErobCanFront) -> bool:
@@ -402,12 +420,13 @@ class ErobCanExchange:
                 name = EROB_CAN.at(request.index, None)
             except KeyError:
                 return None
-            if name != "target_absolute_position":
+            if name not in ("target_absolute_position", "analog_quantity_value"):
                 return None
             key = EROB_CAN.key(name)
             if key.reach is not Reach.VALUE or not EROB_CAN.access(name).writable:
                 return None
-            return _Shape(TARGET_POSITION, name, self._timed(request), self._timed(ec.Ack(node)), error, None)
+            op = TARGET_POSITION if name == "target_absolute_position" else SETPOINT
+            return _Shape(op, name, self._timed(request), self._timed(ec.Ack(node)), error, None)
         if type(request) is ec.Command and request.parameter is None and request.index == 0x0083:
             return _Shape(START, "start_operating", self._timed(request), self._timed(ec.Ack(node)), error, None)
         return None
@@ -438,6 +457,11 @@ class ErobCanExchange:
                 return None
             target[shape.name] = v
             value = float(v)
+        elif shape.op == SETPOINT:
+            got = self._setpoint(fw, request)
+            if got is None:
+                return None
+            value, motion = got
         elif shape.op == START:
             if values["motion_mode"] not in tuple(MotionMode):
                 return None
@@ -452,6 +476,34 @@ class ErobCanExchange:
         req, rep, err = shape.request, shape.reply, shape.error
         return [float(self._row(front)), req[1], float(req[0]), rep[1], float(rep[0]), err[1], float(err[0]),
                 delay, self.host._node.latency, float(shape.op), value, motion, relative, repetitive], shape
+
+    @staticmethod
+    def _setpoint(fw: ErobFirmware, request: Any) -> tuple[float, float] | None:
+        """A set-point write's value and kind (what :meth:`ErobCanFront._write` and ``_setpoint`` do with it), or
+        None where it is not a steady request now: a value the firmware refuses (for 0x01FE or for the target it
+        sets), or a nonzero target while the drive is not READY (the call models a set-point held from then on
+        only where the drive cannot become ready during it: from READY only a fault leaves, and no command
+        comes back)."""
+        name = "analog_quantity_value"
+        v = EROB_CAN.from_wire(name, request.value)
+        writable, lo, hi = fw._limits[name]
+        if not writable or type(v) is not int or not lo <= v <= hi:
+            return None
+        values = fw.values
+        mode = values["operation_mode"]
+        if values["analog_quantity_type"] != 0 or mode not in (_SPEED, _TORQUE):
+            return float(v), STORE
+        target = "target_speed" if mode == _SPEED else "target_current"
+        writable, lo, hi = fw._limits[target]
+        if not writable or not lo <= v <= hi:
+            return None
+        try:
+            fw.check_write(target, v)
+        except ParameterRefused:
+            return None
+        if v != 0 and fw._row[K.STATE] != K.READY:
+            return None
+        return float(v), TO_SPEED if mode == _SPEED else TO_CURRENT
 
     # -- the call -------------------------------------------------------------------------------
     def _plan(self, requests: Sequence[Any]) -> _Plan | None:
@@ -493,6 +545,11 @@ class ErobCanExchange:
                     return False
                 targets[r.node] = v
                 tx[k, VALUE] = float(v)
+            elif op == SETPOINT:
+                got = self._setpoint(fw, r)
+                if got is None:
+                    return False
+                tx[k, VALUE], tx[k, MOTION] = got
             elif op == START:  # (the motion mode is in the stamp: its check and column hold)
                 writable, lo, hi = fw._limits["start_operating"]
                 if not writable or not lo <= 1 <= hi:
@@ -519,6 +576,8 @@ class ErobCanExchange:
             rows.append(got[0])
             shapes.append(got[1])
             fronts.append(front)
+        if len(shapes) > 1 and any(s.op == SETPOINT for s in shapes):
+            return None  # a set-point goes alone (one it holds changes how the world ticks for what follows)
         import numpy as np
 
         dt = self.world.timestep
@@ -592,12 +651,24 @@ class ErobCanExchange:
             replies: list[Any] = []
             self.clocks = clocks = []
             self._outs = outs
-            for r, shape, front, o in zip(requests, plan.shapes, plan.fronts, outs):
+            for k, (r, shape, front, o) in enumerate(zip(requests, plan.shapes, plan.fronts, outs)):
                 fw = front.firmware
                 front.requests += 1
                 node = r.node
                 if shape.op == TARGET_POSITION:
                     fw._keep(((shape.name, EROB_CAN.from_wire(shape.name, r.value)),))
+                    replies.append(ec.Ack(node))
+                elif shape.op == SETPOINT:
+                    value = EROB_CAN.from_wire(shape.name, r.value)
+                    fw._keep(((shape.name, value),))
+                    if o[HELD]:
+                        front.held = value
+                        self.held += 1
+                    else:
+                        target = SETPOINT_OF.get(float(tx[k, MOTION]))
+                        if target is not None:
+                            fw._keep(((target, value),))
+                    self.setpoints += 1
                     replies.append(ec.Ack(node))
                 elif shape.op == START:
                     if o[REFUSED]:

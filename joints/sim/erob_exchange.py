@@ -59,13 +59,7 @@ def act(s: Any, t: Any, out: Any) -> None:
     K.frame(s)
     op = t[OP]
     if op == READ:
-        values = K.status(s, t[REPETITIVE] != 0.0)
-        for k in range(len(values)):
-            out[STATUS_AT + k] = values[k]
-        out[SENSED_AT] = s[K.TIME]
-        out[SENSED_AT + 1] = s[K.POS]
-        out[SENSED_AT + 2] = s[K.VEL]
-        out[SENSED_AT + 3] = s[K.I_OUT]
+        K.status_out(s, s, t[REPETITIVE] != 0.0, out, STATUS_AT)
     elif op == TARGET_POSITION:
         s[K.TARGET_ABSOLUTE] = t[VALUE]
     elif op == START:

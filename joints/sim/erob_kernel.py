@@ -397,6 +397,25 @@ def status(s: Row, repetitive: bool) -> tuple[int, int, int, int, int, int, int,
             round_half_even(s[I_OUT]), round_half_even(s[TEMPERATURE]), round_half_even(s[I_OUT] * s[KT]))
 
 
+#: the row's columns a read's sensors see (what :func:`status_out` writes after the status values)
+SENSED = (TIME, POS, VEL, I_OUT)
+
+
+@jitable
+def status_out(s: Row, r: Row, repetitive: bool, o: Row, at: int) -> None:
+    """A status read's output row: :func:`status` of ``r`` (the drive's row ``s`` itself, or a copy of it where the
+    read must leave no trace) at ``o[at:]``, then ``s``'s :data:`SENSED` columns (the one-call exchanges'
+    read, Modbus and CAN alike)."""
+    values = status(r, repetitive)
+    for k in range(len(values)):
+        o[at + k] = values[k]
+    n = at + len(values)
+    o[n] = s[TIME]
+    o[n + 1] = s[POS]
+    o[n + 2] = s[VEL]
+    o[n + 3] = s[I_OUT]
+
+
 # -- the loops --------------------------------------------------------------------------------------
 @jitable
 def _brake_torque(s: Row, q: float, qd: float) -> float:

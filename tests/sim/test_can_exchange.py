@@ -25,6 +25,7 @@ import pytest
 import envs  # noqa: F401 - registers the joints/ envs
 from joints.drivers.erob_can_steady import ErobCanStep
 from joints.errors import DeviceRejected, ReplyTimeout
+from joints.sim import erob_kernel as K
 from joints.sim import kernel
 
 if sys.version_info >= (3, 11):
@@ -149,7 +150,8 @@ def _run(compiled: bool, mode: str, steps: int, *, plant: Any = None, undo: Any 
             except ReplyTimeout as exc:
                 out["steps"].append(("timeout", type(exc).__name__))  # (its text names the run's channel)
                 break
-            out["steps"].append((obs.tobytes(), reward, terminated, truncated, _info(info)))
+            out["steps"].append((obs.tobytes(), reward, terminated, truncated, _info(info),
+                                 [f.held for f in next(iter(u.rig.sim.buses.values())).fronts]))
             if terminated or truncated:
                 obs, info = env.reset()
                 out["steps"].append(("reset", obs.tobytes(), _info(info)))
@@ -158,6 +160,7 @@ def _run(compiled: bool, mode: str, steps: int, *, plant: Any = None, undo: Any 
         cp = u.compiled_path
         out["taken"] = None if cp is None else (cp.taken, cp.fused, sum(s.exchange.taken for s in rec.steps))
         out["refilled"] = sum(s.exchange.refilled for s in rec.steps)  # command plans made from a kept one
+        out["setpoints"] = [(s.exchange.setpoints, s.exchange.held) for s in rec.steps]
         return out
     finally:
         if undo is not None:  # what the plant changed, put back so that closing reaches the drive
@@ -187,8 +190,10 @@ def test_the_compiled_can_step_gives_the_frame_by_frame_bits(mode: str) -> None:
         if mode == "position":
             assert taken >= steps - 1 and fused >= 8 * steps - 8
             assert compiled["refilled"] >= steps - 2  # the command's rows kept, its values put in each step
-        else:  # a speed or current set-point is the joint's own method; its state read is one call
-            assert taken == 0 and fused >= 6 * steps
+        else:  # a speed or current set-point: one write of 0x01FE, in a call of its own; then the state read's
+            assert taken >= steps - 1 and fused >= 7 * steps - 1
+            ((setpoints, held),) = compiled["setpoints"]
+            assert setpoints >= steps - 1 and held == 0
     else:
         assert calls == 0 and fused == 0
 
@@ -210,6 +215,30 @@ def test_a_start_the_drive_refuses_mid_step_is_refused_the_same_way() -> None:
     if kernel.default_mode():  # the call carried the steps, and the refused start (its last reply)
         assert compiled["taken"][2] >= 2 * 12
         assert compiled["replies"][-2:] == ["Ack", "ErrorReply"]
+
+
+@pytest.mark.parametrize("mode", ["velocity", "torque"])
+def test_a_set_point_the_drive_is_no_longer_ready_for_is_held_the_same_way(mode: str) -> None:
+    """Step 12's command reaches the drive after a substep in which its communication watchdog trips (planted on
+    its row: the host checked it READY before sending): the front holds the set-point (0x01FE stored, no target
+    written, the bus ticking every substep from then on) - inside the call as frame by frame."""
+
+    def plant(k: int, u: Any) -> None:
+        if k == 12:
+            world = u.rig.sim
+            dt = world.timestep
+            # the clock 50 us before the substep end after the physics' last one: the command's request ends
+            # past it, so the drive acts after that substep (the one in which the watchdog trips)
+            u.rig.sleep(world.steps * dt + dt - 5e-5 - world.clock.now())
+            fw = next(iter(world.buses.values())).fronts[0].firmware
+            fw._row[K.WATCHDOG] = 1e-300
+
+    driver = _run(False, mode, 20, plant=plant)
+    compiled = _run(True, mode, 20, plant=plant)
+    _same(driver, compiled)
+    if kernel.default_mode():
+        ((setpoints, held),) = compiled["setpoints"]
+        assert held == 1 and setpoints >= 19  # the call met the hold
 
 
 def test_a_drive_at_another_node_id_is_not_reached_by_a_kept_plan() -> None:
