@@ -82,6 +82,7 @@ E0, E1, R0, R1, HOST, CLOCK_AFTER, REFUSED, ACTED, HELD = range(9)
 STATUS_AT = 9
 SENSED = K.SENSED
 SENSED_AT = STATUS_AT + len(K.STATUS_NAMES)
+_SENSED = SENSED_AT - STATUS_AT  #: where the sensed columns start, counted from the status values
 OUT_WIDTH = SENSED_AT + len(SENSED)
 
 
@@ -317,7 +318,8 @@ class _Plan:
     tx: Any  #: the rows (an array)
     span: float  #: s the transactions take at most, together
     longest: float  #: s one of them takes at most
-    stamp: tuple[Any, ...]  #: :meth:`ErobCanExchange._stamp` when it was made
+    stamp: tuple[Any, ...]  #: :meth:`ErobCanExchange._stamp` of its fronts (each once) when it was made
+    reads: bool  #: reads only
 
 
 class ErobCanExchange:
@@ -333,8 +335,7 @@ class ErobCanExchange:
         self.host = host
         self.transport = transport
         self.taken = 0  #: calls that ran
-        self.clocks: list[float] = []  #: the clock after each transaction of the last :meth:`run`
-        self._outs: list[list[float]] = []  #: the output rows of the last :meth:`run`
+        self._last: Any = np.zeros((0, OUT_WIDTH))  #: the output rows of the last :meth:`run`
         self._st = np.zeros(STATE_WIDTH)
         self._out: dict[int, Any] = {}  #: output rows per count
         self._plans: dict[int, _Plan] = {}  #: id of a tuple of reads -> its plan
@@ -511,16 +512,16 @@ class ErobCanExchange:
         of reads (it is sent again and again), and the rows of a command's shapes (:meth:`_refill` puts each
         request's own columns into them)."""
         plan = self._plans.get(id(requests))
-        if plan is not None and plan.requests is requests and plan.stamp == self._stamp(plan.fronts):
+        if plan is not None and plan.requests is requests and plan.stamp == self._stamp(plan.unique):
             return plan
         key = tuple([(type(r), r.node, r.index, getattr(r, "subindex", None), getattr(r, "parameter", None))
                      for r in requests])
         plan = self._commands.get(key)
-        if plan is not None and plan.stamp == self._stamp(plan.fronts):
+        if plan is not None and plan.stamp == self._stamp(plan.unique):
             self.refilled += 1
             return plan if self._refill(plan, requests) else None
         plan = self._fresh(requests)
-        if plan is None or all(s.op in (READ, READ_ACHIEVE) for s in plan.shapes):
+        if plan is None or plan.reads:
             return plan
         if len(self._commands) > 64:
             self._commands.clear()
@@ -582,9 +583,11 @@ class ErobCanExchange:
 
         dt = self.world.timestep
         spans = [t[REQ_TOOK] + t[DELAY] + max(t[REP_TOOK], t[ERR_TOOK]) + t[LATENCY] + 2.0 * dt for t in rows]
-        plan = _Plan(requests, shapes, fronts, tuple(dict.fromkeys(fronts)), np.array(rows), sum(spans) + dt,
-                     max(spans), self._stamp(fronts))
-        if all(s.op in (READ, READ_ACHIEVE) for s in shapes) and isinstance(requests, tuple):
+        unique = tuple(dict.fromkeys(fronts))
+        reads = all(s.op in (READ, READ_ACHIEVE) for s in shapes)
+        plan = _Plan(requests, shapes, fronts, unique, np.array(rows), sum(spans) + dt, max(spans),
+                     self._stamp(unique), reads)
+        if reads and isinstance(requests, tuple):
             if len(self._plans) > 64:
                 self._plans.clear()
             self._plans[id(requests)] = plan
@@ -592,7 +595,7 @@ class ErobCanExchange:
 
     def _stamp(self, fronts: Sequence[ErobCanFront]) -> tuple[Any, ...]:
         """What a kept plan's rows depend on besides its requests: the table, the fronts' node ids (one changes at
-        a power cycle), the motion modes, the delays."""
+        a power cycle), the motion modes, the delays (``fronts``: a plan's, each once)."""
         turnarounds = self.bus.turnarounds
         return (self.world.group, self.medium._peers[0].latency, self.host._node.latency,
                 tuple((f.node, f.firmware.values["motion_mode"], turnarounds.get(f.node)) for f in fronts))
@@ -647,11 +650,15 @@ class ErobCanExchange:
             if state[ODD] or done == 0:
                 raise RuntimeError(f"{bus.medium.channel}: the one-call exchange met a branch it does not model "
                                    f"after {done} of {n} requests; this is a bug (the steady checks let it through)")
-            outs: list[list[float]] = out[:done].tolist()
             replies: list[Any] = []
-            self.clocks = clocks = []
-            self._outs = outs
-            for k, (r, shape, front, o) in enumerate(zip(requests, plan.shapes, plan.fronts, outs)):
+            self._last = out[:done]
+            if plan.reads:  # (only the columns the replies are made of)
+                for r, shape, front, o in zip(requests, plan.shapes, plan.fronts, out[:done, STATUS_AT:].tolist()):
+                    front.requests += 1
+                    replies.append(ec.ValueReply(r.node, self._value(front.firmware, shape, o)))
+                self.taken += 1
+                return replies
+            for k, (r, shape, front, o) in enumerate(zip(requests, plan.shapes, plan.fronts, out[:done].tolist())):
                 fw = front.firmware
                 front.requests += 1
                 node = r.node
@@ -677,8 +684,7 @@ class ErobCanExchange:
                         fw._keep((("start_operating", 1),))
                         replies.append(ec.Ack(node))
                 else:
-                    replies.append(ec.ValueReply(node, self._value(fw, shape, o)))
-                clocks.append(o[CLOCK_AFTER])
+                    replies.append(ec.ValueReply(node, self._value(fw, shape, o[STATUS_AT:])))
         self.taken += 1
         return replies
 
@@ -686,20 +692,20 @@ class ErobCanExchange:
     def instants(self) -> list[tuple[float, ...]]:
         """Per transaction of the last :meth:`run`: (request start, end, reply start, end, the host has it, the
         world's substeps when the drive acted)."""
-        return [(o[E0], o[E1], o[R0], o[R1], o[HOST], o[ACTED]) for o in self._outs]
+        return [(o[E0], o[E1], o[R0], o[R1], o[HOST], o[ACTED]) for o in self._last.tolist()]
 
     @staticmethod
     def _value(fw: ErobFirmware, shape: _Shape, o: Sequence[float]) -> int:
         """What the front answers to a read: the firmware's value (the sensors' report of what they saw then),
-        saturated, in the protocol's scale, as int32."""
+        saturated, in the protocol's scale, as int32 (``o``: its output row from the status values on)."""
         index, scale, lo, hi, plan = shape.extra
         if plan is not None:  # the status read (its sensors report too, as the firmware's own read)
-            v = plan.finish([int(x) for x in o[STATUS_AT:SENSED_AT]], dict(zip(SENSED, o[SENSED_AT:])))[0]
+            v = plan.finish([int(x) for x in o[:_SENSED]], dict(zip(SENSED, o[_SENSED:])))[0]
         else:
-            v = int(o[STATUS_AT + index])
+            v = int(o[index])
             sensed = _SENSED_READS.get(shape.name)
             if sensed is not None and not fw.sensor.model.ideal:
-                v = getattr(fw, sensed)(dict(zip(SENSED, o[SENSED_AT:])).__getitem__)
+                v = getattr(fw, sensed)(dict(zip(SENSED, o[_SENSED:])).__getitem__)
             if v < lo:
                 v = lo
             elif v > hi:
