@@ -1,7 +1,8 @@
 """The compiled path's step of one eRob on the CAN custom protocol: its steady requests in one call of the twin.
 
 Rule: what :class:`~joints.drivers.erob_can.ErobCanDriver` and its :class:`~joints.link.erob_can.ErobCanLink`
-do for a steady command and a state read - the joint's checks, the driver's steady compare and range checks,
+do for a steady command (target + "start"; a speed or current set-point: one write of the analog value 0x01FE)
+and a state read - the joint's checks, the driver's steady compare and range checks,
 the same request objects (``ErobCanAccess.message``; the state's reads as ``ErobCanAccess.read`` makes them),
 encoded by the rule before anything is sent, counted by the link, each reply taken by the rule's ``is_reply``
 (an error reply raises its :class:`~joints.errors.DeviceRejected` as the link raises it), the link's fence

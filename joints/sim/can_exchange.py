@@ -9,18 +9,27 @@ the frame instants are the medium's own arithmetic on the fixed frame sizes (wor
 frame's bits depend on its data length only), each ``max`` spelled as Python's builtin. Inside the call the
 physics runs to the instant each request reaches the drive, and the drive acts through the kernel ops of
 :mod:`joints.sim.erob_kernel` its firmware's own writes and reads call (``frame``, ``ready`` + ``start``, the
-target's column, ``status``); afterwards Python brings the medium (its time, free instant, counters), the
-bus's last tick, the world and clock, the firmware's parameter store and write log, the front's request count
-and the sensors (what a read of position, speed or current reports, in the order of the reads) to where the
+target's column, ``status`` / ``status_out``; the analog set-point 0x01FE as :meth:`ErobCanFront._setpoint`
+makes it act: ``ready``, then ``target_speed`` or ``target_current``, or held where the motor is not ready);
+afterwards Python brings the medium (its time, free instant, counters), the bus's last tick, the world and
+clock, the firmware's parameter store and write log, the front's request count and held set-point and the
+sensors (what a read of position, speed or current reports, in the order of the reads) to where the
 frame-by-frame path leaves them, and makes the replies (``ValueReply``, ``Ack``, the ``ErrorReply`` 0x0027 of a
 start that found the motor not ready, which ends the call as it ends the host's move).
+
+A set-point held inside the call: from then on the world ticks the bus every substep (``ErobCanBus.next_event``
+is -inf) and each tick asks the drive ``ready()``. The call steps its substeps in stretches instead, which gives
+the same bits only because nothing is left for those ticks to do: a set-point is sent only while the drive is
+READY and goes alone, so a hold means a fault (or the watchdog) took the drive out of READY during the call, and
+from there no substep makes it ready again (only an enable command does); the medium's ticks meanwhile only move
+its last tick, which the call sets to the same final value.
 
 It runs only in the steady case, checked before anything is sent (:meth:`ErobCanExchange.run` returns None
 otherwise): the world runs fused with this bus's tick its only tick, the medium times frames (not ideal,
 stuffing not "exact"), nothing is on it, queued or waiting for the host, the host is the medium's only
 python-can node and the bus its only peer, the methods the frames go through are the stock ones (a test
 planting frames replaces one), no set-point is held, every write is one the firmware and the front accept
-now, and the clock is far enough from 0 and the link's timeout long enough that none of the medium's
+now (a nonzero set-point in speed or torque mode only while the drive is READY, and alone), and the clock is far enough from 0 and the link's timeout long enough that none of the medium's
 branches for those cases can be met. ``tests/sim/test_can_exchange.py`` compares both paths bit for bit.
 
 Not mirrored: the bus's cache of decoded request frames and the front's caches of prepared reads (they
