@@ -29,8 +29,9 @@ otherwise): the world runs fused with this bus's tick its only tick, the medium 
 stuffing not "exact"), nothing is on it, queued or waiting for the host, the host is the medium's only
 python-can node and the bus its only peer, the methods the frames go through are the stock ones (a test
 planting frames replaces one), no set-point is held, every write is one the firmware and the front accept
-now (a nonzero set-point in speed or torque mode only while the drive is READY, and alone), and the clock is far enough from 0 and the link's timeout long enough that none of the medium's
-branches for those cases can be met. ``tests/sim/test_can_exchange.py`` compares both paths bit for bit.
+now (a nonzero set-point in speed or torque mode only while the drive is READY, and alone), and the clock is
+far enough from 0 and the link's timeout long enough that none of the medium's branches for those cases can be
+met. ``tests/sim/test_can_exchange.py`` compares both paths bit for bit.
 
 Not mirrored: the bus's cache of decoded request frames and the front's caches of prepared reads (they
 only save work; what they hold does not change what a request does).
