@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from serving import stop
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -114,13 +115,7 @@ def _serve(config: Path, *, bus: str = "rs485", startup: float = 30.0) -> Iterat
         assert bus in ports and ports[bus].startswith("/dev/"), ports
         yield ports[bus]
     finally:
-        proc.terminate()
-        try:
-            rc = proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            raise
-        assert rc == 0, proc.stderr.read() if proc.stderr else rc
+        stop(proc)
 
 
 @pytest.fixture(scope="session")
@@ -157,7 +152,7 @@ class Served:
         answer: dict[str, Any] = json.loads(text)
         return answer
 
-    def command(self, text: str, timeout: float = 10.0) -> dict[str, Any]:
+    def command(self, text: str, timeout: float = 30.0) -> dict[str, Any]:
         """Send a control command (the server runs with --control) and return its JSON answer."""
         assert self.proc.stdin is not None
         self.proc.stdin.write(text + "\n")
@@ -187,13 +182,7 @@ def _serve_all(config: Path, *args: str, startup: float = 30.0) -> Iterator[Serv
             served.lines[line["bus"]] = line
         yield served
     finally:
-        proc.terminate()
-        try:
-            rc = proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            raise
-        assert rc == 0, proc.stderr.read() if proc.stderr else rc
+        stop(proc)
 
 
 @pytest.fixture(scope="session")

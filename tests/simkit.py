@@ -11,6 +11,8 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+from serving import stop
+
 from joints import registry
 from joints.config import BusConfig
 from joints.sim.world import BusSpec, DriveSpec, World
@@ -53,10 +55,4 @@ def served_can(config: Path, startup: float = 30.0) -> Iterator[dict[str, Any]]:
         assert proc.stdout is not None
         yield json.loads(proc.stdout.readline())
     finally:
-        proc.terminate()
-        try:
-            rc = proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            raise
-        assert rc == 0, proc.stderr.read() if proc.stderr else rc
+        stop(proc)

@@ -36,21 +36,23 @@ MODEL = """<mujoco model="every_family">
 </mujoco>
 """
 
-#: reply timeouts with room for a loaded machine (a served world steps its physics between frames)
+#: reply timeouts that only bound a failure: a served twin answers within ~10 ms, but on a loaded machine (run queue
+#: 8-9 on 2 cores) the OS delays the host or the served process: a reply came up to 0.84 s (99.9th percentile)
+#: and 7 s (once in 2500) after its request while the server took at most 45 ms from reading it to answering
 BUSES = """
 [buses.rs485]
 protocol = "modbus-rtu"
-timeout = 0.3
+timeout = 2.0
 [buses.mks]
 protocol = "mks-serial"
 baudrate = 38400
-timeout = 0.3
+timeout = 2.0
 [buses.can]
 protocol = "erob-can"
-timeout = 0.25
+timeout = 2.0
 [buses.co]
 protocol = "canopen"
-timeout = 0.25
+timeout = 2.0
 """
 
 LIMITS = 'limits = { position = [-3.0, 3.0], velocity = 2.0, torque = 20.0 }\n'

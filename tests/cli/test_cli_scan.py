@@ -67,3 +67,19 @@ def test_scan_of_an_empty_range_says_so(tmp_path: Path, capsys: pytest.CaptureFi
 def test_scan_needs_a_bus(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["scan"]) == 2
     assert "--port" in capsys.readouterr().err
+
+
+def test_scan_of_a_serial_bus_probes_addresses_1_to_32_unless_given_a_range(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Without ``--range`` a serial bus is probed at 1..32 (a full 1..247 sweep takes minutes on hardware): drives at
+    1 and 32 are found, one at 33 only when asked for (the served test scans a short range over the pty)."""
+    from clikit import LIMITS, write_world
+
+    joints = ('[joints.a]\ndevice = "erob"\nbus = "rs485"\naddress = 1\n' + LIMITS
+              + '[joints.b]\ndevice = "erob"\nbus = "rs485"\naddress = 32\n' + LIMITS
+              + '[joints.m]\ndevice = "mks-servo42d"\nbus = "rs485"\naddress = 33\n')
+    cfg = write_world(tmp_path, buses='[buses.rs485]\nprotocol = "modbus-rtu"\n', joints=joints)
+    assert main(["scan", "--config", str(cfg), "--json"]) == 0
+    assert [(f["address"], f["device"]) for f in json.loads(capsys.readouterr().out)] == [(1, "erob"), (32, "erob")]
+    assert main(["scan", "--config", str(cfg), "--json", "--range", "30-40"]) == 0
+    assert [(f["address"], f["device"]) for f in json.loads(capsys.readouterr().out)] == [(32, "erob"), (33, "mks")]
