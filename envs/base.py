@@ -504,12 +504,12 @@ class JointsEnv(RigEnv):
         return 0.0, {}
 
     @staticmethod
-    def _batch_task(envs: Sequence[Any], positions: np.ndarray, change: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    def _batch_task(envs: Sequence[Any], positions: np.ndarray, change: np.ndarray, terms: np.ndarray
+                    ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """:meth:`_task_terms` and :meth:`_reward` of every rig of a batch (``envs``, all of this type; ``positions``
-        (N, joints), ``change`` (N,)) by the same IEEE operations across the rigs: (task terms (N, k), rewards
-        (N,), one array per info term in ``_reward``'s order). A task that does not write it (the default) is
-        called rig by rig (:mod:`envs.batch`)."""
+        (N, joints), ``change`` (N,)) by the same IEEE operations across the rigs: the task terms written into
+        ``terms`` (N, k); returns the rewards (N,) and one array per info term, in ``_reward``'s order. A task
+        that does not write it (the default) is called rig by rig (:mod:`envs.batch`)."""
         raise NotImplementedError
 
     def _markers(self) -> list[tuple[np.ndarray, tuple[float, float, float, float]]]:

@@ -6,7 +6,7 @@ the velocity braking cap, the observation and its bounds, the termination, the i
 by rig is each rig's own I/O (its compiled path's command and state calls), a task's rule that is not written
 across rigs (the arm's shield; task terms and rewards of a task without :meth:`~envs.base.JointsEnv._batch_task`)
 and a reward's ``np.dot`` over several joints. The batched path is taken only in the steady case - every rig
-acting, open, on the compiled path, without a latency queue or a human render - and is declined
+acting, open and observed once, on the compiled path, without a human render - and is declined
 (:meth:`Batch.begin` returns None) before anything is sent otherwise; a step that ends a rig's episode (a fault,
 a limit violation) gets each rig's outcome from the single env's own code.
 """
@@ -81,24 +81,35 @@ class Batch:
     def begin(self, actions: np.ndarray) -> bool:
         """Every rig's ``begin_step`` (same checks, same commands, same bits); False, with nothing sent, where a
         rig's own ``begin_step`` must run (an action of the wrong shape or not finite: its error, in its
-        order; a closed rig; a latency queue)."""
+        order; a closed rig)."""
         envs = self.envs
         a = np.asarray(actions, dtype=np.float64)
         if a.shape != (len(envs), self.n) or not np.isfinite(a).all():
             return False
-        for e in envs:
-            if e._closed or e._queue or not e._states:
+        queued = []
+        for i, e in enumerate(envs):
+            if e._closed or not e._states:
                 return False
-        a = np.clip(a, -1.0, 1.0)  # a finite value's clip, as begin_step's: the same bits
+            if e._queue:
+                queued.append(i)
+        a = np.maximum(a, -1.0)  # begin_step's clip of a finite value (no bound is a signed zero): the same bits
+        np.minimum(a, 1.0, out=a)
+        sent = a
+        if queued:  # bus latency (domain randomisation): a rig's action waits its turn, an older one is sent
+            sent = a.copy()
+            for i in queued:
+                q = envs[i]._queue
+                q.append(a[i])
+                sent[i] = q.popleft()
         mode = self.mode
         if mode == "position":  # _commands: clip(lo + (v + 1) / 2 * (hi - lo), lo, hi)
             lo = self.pos_lo
-            c = _min(_max(lo + (a + 1.0) * 0.5 * self.span, lo), self.pos_hi)
+            c = _min(_max(lo + (sent + 1.0) * 0.5 * self.span, lo), self.pos_hi)
         elif mode == "torque":  # _commands, then _limit's clip
             m = self.torque
-            c = _min(_max(a * m, -m), m)
+            c = _min(_max(sent * m, -m), m)
         else:
-            c = self._velocity(a)
+            c = self._velocity(sent)
         if self.shielded and mode != "torque":  # _safe: the task's rule on position and velocity commands
             rows = c.tolist()
             for i, e in enumerate(envs):
@@ -157,9 +168,7 @@ class Batch:
         obs[:, n:2 * n] = np.array([s.velocity for s in flat]).reshape(len(envs), n)
         obs[:, 2 * n:3 * n] = np.array([s.torque for s in flat]).reshape(len(envs), n)
         if self.task:
-            terms, reward, info_terms = self.kind._batch_task(envs, p, change)
-            if terms.shape[1]:
-                obs[:, 3 * n:] = terms
+            reward, info_terms = self.kind._batch_task(envs, p, change, obs[:, 3 * n:])
         else:
             positions = p.tolist()
             rows, rewards, term_dicts = [], [], []

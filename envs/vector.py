@@ -33,6 +33,10 @@ from envs.batch import Batch
 __all__ = ["JointsVectorEnv", "make_vector_env", "vector_entry_point"]
 
 
+#: rigs from which a batch takes the batched path by default (:attr:`JointsVectorEnv.batched`)
+BATCH_MIN = 4
+
+
 def _load(entry_point: str | Callable[..., gym.Env[Any, Any]]) -> Callable[..., gym.Env[Any, Any]]:
     if callable(entry_point):
         return entry_point
@@ -92,8 +96,9 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
         self.closed = False
         #: the rigs' per-step Python across the batch (:mod:`envs.batch`), where their type allows it
         self._batch = Batch.of(self.envs)
-        #: take the batched path where it can be taken (False: every step rig by rig, the reference)
-        self.batched = True
+        #: take the batched path where it can be taken (False: every step rig by rig, the reference); by
+        #: default from BATCH_MIN rigs on (below, its fixed cost of array calls exceeds what it saves)
+        self.batched = num_envs >= BATCH_MIN
 
     # -- what a batch shares -------------------------------------------------------------------
     @property
