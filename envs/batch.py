@@ -167,11 +167,13 @@ class Batch:
         obs[:, :n] = p
         obs[:, n:2 * n] = np.array([s.velocity for s in flat]).reshape(len(envs), n)
         obs[:, 2 * n:3 * n] = np.array([s.torque for s in flat]).reshape(len(envs), n)
+        info_terms: dict[str, np.ndarray] | None
+        term_dicts: list[dict[str, Any]] = []
         if self.task:
             reward, info_terms = self.kind._batch_task(envs, p, change, obs[:, 3 * n:])
         else:
             positions = p.tolist()
-            rows, rewards, term_dicts = [], [], []
+            rows, rewards = [], []
             for i, e in enumerate(envs):
                 rows.append(e._task_terms(positions[i]))
                 r, t = e._reward(positions[i], float(change[i]))
