@@ -81,27 +81,26 @@ class Batch:
     def begin(self, actions: np.ndarray) -> bool:
         """Every rig's ``begin_step`` (same checks, same commands, same bits); False, with nothing sent, where a
         rig's own ``begin_step`` must run (an action of the wrong shape or not finite: its error, in its
-        order; a closed rig)."""
+        order; a closed rig; a rig whose action mode or render mode was changed since)."""
         envs = self.envs
         a = np.asarray(actions, dtype=np.float64)
         if a.shape != (len(envs), self.n) or not np.isfinite(a).all():
             return False
         queued = []
+        mode = self.mode
         for i, e in enumerate(envs):
-            if e._closed or not e._states:
+            if e._closed or not e._states or e.action_mode != mode or e.render_mode == "human":
                 return False
             if e._queue:
-                queued.append(i)
+                queued.append((i, e._queue))
         a = np.maximum(a, -1.0)  # begin_step's clip of a finite value (no bound is a signed zero): the same bits
         np.minimum(a, 1.0, out=a)
         sent = a
         if queued:  # bus latency (domain randomisation): a rig's action waits its turn, an older one is sent
             sent = a.copy()
-            for i in queued:
-                q = envs[i]._queue
+            for i, q in queued:
                 q.append(a[i])
                 sent[i] = q.popleft()
-        mode = self.mode
         if mode == "position":  # _commands: clip(lo + (v + 1) / 2 * (hi - lo), lo, hi)
             lo = self.pos_lo
             c = _min(_max(lo + (sent + 1.0) * 0.5 * self.span, lo), self.pos_hi)

@@ -253,14 +253,11 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
         spans: list[float] = []
         for env in self.envs:
             rig = env.rig
-            remaining = env._t0 + env._slip + env._tick * env.control_period - rig.time  # as RigEnv._wait_until
+            remaining = env.tick_time() - rig.time  # as RigEnv._wait_until
             if remaining > 0:
                 rigs.append(rig)
                 spans.append(remaining)
-            if -remaining <= 1e-9:  # note_overrun's in-time case
-                env._overrun = 0.0
-            else:
-                env.note_overrun(-remaining)
+            env.note_overrun(-remaining)
         if rigs:
             joints.sleep_together(rigs, spans)
         out = batch.finish()

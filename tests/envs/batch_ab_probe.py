@@ -9,6 +9,8 @@ the group's plan cache bounded at 256 plans, as before) and "batched" (this chec
 seeded uniform actions from the same reset, timed by ``time.thread_time`` (other processes' load does not count);
 the blocks alternate (``ROUNDS`` of each) and every block's observations and rewards must be bit-identical to the
 first's. Prints the best and median CPU time per rig step of each. Pin it to one core (``taskset -c 1``).
+``STUB=1``: the rigs' I/O stubbed (each rig's compiled command a no-op, its state read the last states read,
+``joints.sleep_together`` a no-op), so what is timed is the envs' own per-step Python (bits not compared).
 """
 
 from __future__ import annotations
@@ -23,10 +25,12 @@ import gymnasium as gym
 import numpy as np
 
 import envs  # noqa: F401 - registers the joints/ envs
+import joints
 from joints.sim import stepping
 from joints.sim import world as W
 
 ROUNDS = int(os.environ.get("ROUNDS", "8"))
+STUB = os.environ.get("STUB") == "1"
 SIZES = (1, 4, 16, 64, 256)
 
 
@@ -54,6 +58,14 @@ def main() -> None:
     for n in sizes:
         vec = gym.make_vec("joints/ErobReach-v0", num_envs=n, vectorization_mode="vector_entry_point")
         u = vec.unwrapped
+        if STUB:
+            vec.reset(seed=0)
+            u.max_episode_steps = None
+            for e in u.envs:
+                last = e.compiled_path.states()
+                e.compiled_path.command = lambda *args, **kwargs: None
+                e.compiled_path.states = lambda last=last, **kwargs: last
+            joints.sleep_together = lambda *args: None
         steps = max(8, 2048 // n)
         actions = np.random.default_rng(0).uniform(-1, 1, (steps, n, 1)).astype(np.float32)
         times: dict[bool, list[float]] = {False: [], True: []}
@@ -70,6 +82,8 @@ def main() -> None:
                     obs, reward, *_ = vec.step(a)
                     got.append((obs, reward))
                 times[batched].append((time.thread_time() - t) / (steps * n))
+                if STUB:
+                    continue
                 if first is None:
                     first = got
                 else:
