@@ -7,7 +7,7 @@ by rig is each rig's own I/O (its compiled path's command and state calls), a ta
 across rigs (the arm's shield; task terms and rewards of a task without :meth:`~envs.base.JointsEnv._batch_task`)
 and a reward's ``np.dot`` over several joints. The batched path is taken only in the steady case - every rig
 acting, open and observed once, on the compiled path, without a human render - and is declined
-(:meth:`Batch.begin` returns None) before anything is sent otherwise; a step that ends a rig's episode (a fault,
+(:meth:`Batch.begin` returns False) before anything is sent otherwise; a step that ends a rig's episode (a fault,
 a limit violation) gets each rig's outcome from the single env's own code.
 """
 
@@ -20,7 +20,11 @@ import numpy as np
 
 from envs.base import JointsEnv, braking_speed
 
-__all__ = ["Batch"]
+__all__ = ["WRITTEN_ACROSS", "Batch"]
+
+#: JointsEnv's methods whose work :class:`Batch` does across the rigs: a type that replaces one is stepped rig by rig
+WRITTEN_ACROSS = ("begin_step", "finish_step", "_finish", "_read", "_observation", "_command", "_commands", "_limit",
+                  "_safe", "tick_time", "note_overrun")
 
 
 def _max(x: np.ndarray, low: np.ndarray) -> np.ndarray:
@@ -65,10 +69,12 @@ class Batch:
     @classmethod
     def of(cls, envs: Sequence[Any]) -> Batch | None:
         """The batch of ``envs``, or None where their step cannot be written across them (not all one
-        :class:`~envs.base.JointsEnv` type in sim with a compiled path, different joints or action modes)."""
+        :class:`~envs.base.JointsEnv` type in sim with a compiled path, different joints or action modes, a type
+        that replaces a method of the step this module writes across the rigs)."""
         first = envs[0]
         kind = type(first)
-        if not issubclass(kind, JointsEnv) or not first.sim:
+        if not issubclass(kind, JointsEnv) or not first.sim \
+                or any(getattr(kind, name) is not getattr(JointsEnv, name) for name in WRITTEN_ACROSS):
             return None
         for e in envs:
             if type(e) is not kind or not e.sim or e.compiled_path is None or e.render_mode == "human" \

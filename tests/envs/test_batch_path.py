@@ -15,7 +15,7 @@ pytest.importorskip("mujoco")
 
 from gymnasium.vector import AutoresetMode
 
-import envs  # noqa: F401 - registers the joints/ envs
+import envs  # registers the joints/ envs
 from envs.vector import BATCH_MIN
 from joints.sim import kernel
 
@@ -185,3 +185,23 @@ def test_velocity_actions_braked_at_the_limits(env_id: str) -> None:
     finally:
         vec.close()
         ref.close()
+
+
+class _OwnObservation(envs.ErobReachEnv):
+    """A task that replaces a method the batch writes across the rigs."""
+
+    def _observation(self, states: Any, positions: Any = None) -> np.ndarray:
+        return super()._observation(states, positions) * 1.0
+
+
+def test_a_type_that_replaces_a_step_method_is_stepped_rig_by_rig() -> None:
+    from envs.vector import JointsVectorEnv
+
+    vec = JointsVectorEnv(_OwnObservation, N)
+    try:
+        assert vec._batch is None
+        vec.reset(seed=0)
+        vec.step(np.zeros((N, 1), dtype=np.float32))
+        assert vec.batched_steps == 0
+    finally:
+        vec.close()
