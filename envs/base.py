@@ -503,6 +503,15 @@ class JointsEnv(RigEnv):
         action's squared change ``sum((a_t - a_{t-1})^2)``."""
         return 0.0, {}
 
+    @staticmethod
+    def _batch_task(envs: Sequence[Any], positions: np.ndarray, change: np.ndarray, terms: np.ndarray
+                    ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """:meth:`_task_terms` and :meth:`_reward` of every rig of a batch (``envs``, all of this type; ``positions``
+        (N, joints), ``change`` (N,)) by the same IEEE operations across the rigs: the task terms written into
+        ``terms`` (N, k); returns the rewards (N,) and one array per info term, in ``_reward``'s order. A task
+        that does not write it (the default) is called rig by rig (:mod:`envs.batch`)."""
+        raise NotImplementedError
+
     def _markers(self) -> list[tuple[np.ndarray, tuple[float, float, float, float]]]:
         """Points to draw in renders: [(position [m], rgba)] (the task's goal)."""
         return []
@@ -702,8 +711,12 @@ class JointsEnv(RigEnv):
         return a, values
 
     def finish_step(self, token: tuple[np.ndarray, list[float]]) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        return self._finish(token, self._read())
+
+    def _finish(self, token: tuple[np.ndarray, list[float]], states: list[joints.JointState]
+                ) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """:meth:`finish_step` once the joints' ``states`` are read."""
         a, values = token
-        states = self._read()
         positions = [s.position for s in states]
         obs = self._observation(states, positions)
         if len(values) == 1:  # np.dot of one difference is its square

@@ -182,6 +182,23 @@ class ErobReachEnv(JointsEnv):
     def _markers(self) -> list[tuple[np.ndarray, tuple[float, float, float, float]]]:
         return [(erob_stand_tip(self._to_model(0, self.target)), (0.1, 0.9, 0.2, 0.6))]
 
+    @staticmethod
+    def _batch_task(envs: Sequence[Any], positions: np.ndarray, change: np.ndarray, terms: np.ndarray
+                    ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """:meth:`_task_terms` and :meth:`_reward` of a batch's rigs, their operations across the rigs."""
+        target = np.array([e.target for e in envs])
+        terms[:, 0] = target
+        to_target = np.subtract(target, positions[:, 0], out=terms[:, 1])
+        distance = np.abs(to_target)
+        r_dist = -distance
+        r_rate = -np.array([e.action_rate_weight for e in envs]) * change
+        return r_dist + r_rate, {
+            "reward_distance": r_dist,
+            "reward_action_rate": r_rate,
+            "distance": distance,
+            "is_success": distance < np.array([e.success_tolerance for e in envs]),
+        }
+
     def _reward(self, positions: list[float], action_change: float) -> tuple[float, dict[str, Any]]:
         distance = abs(self.target - positions[0])
         r_dist = -distance

@@ -28,8 +28,13 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 import joints
+from envs.batch import Batch
 
 __all__ = ["JointsVectorEnv", "make_vector_env", "vector_entry_point"]
+
+
+#: rigs from which a batch takes the batched path by default (:attr:`JointsVectorEnv.batched`)
+BATCH_MIN = 4
 
 
 def _load(entry_point: str | Callable[..., gym.Env[Any, Any]]) -> Callable[..., gym.Env[Any, Any]]:
@@ -89,6 +94,11 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
                                          dtype=self.single_observation_space.dtype)
         self._has_reset = False
         self.closed = False
+        #: the rigs' per-step Python across the batch (:mod:`envs.batch`), where their type allows it
+        self._batch = Batch.of(self.envs)
+        #: take the batched path where it can be taken (False: every step rig by rig, the reference); by
+        #: default from BATCH_MIN rigs on (below, its fixed cost of array calls exceeds what it saves)
+        self.batched = num_envs >= BATCH_MIN
 
     # -- what a batch shares -------------------------------------------------------------------
     @property
@@ -151,6 +161,10 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
             raise ValueError(f"actions of shape {actions.shape}: expected {n} rows")
         if actions.dtype.kind == "f" and actions.dtype != np.float64:  # (exact, and what each rig casts its row to)
             actions = actions.astype(np.float64)
+        batch = self._batch
+        if batch is not None and self.batched and self.autoreset_mode is not AutoresetMode.SAME_STEP \
+                and not self._autoreset.any() and batch.begin(actions):
+            return self._step_batch(batch)
         rewards = np.zeros(n, dtype=np.float64)
         terminated = np.zeros(n, dtype=np.bool_)
         truncated = np.zeros(n, dtype=np.bool_)
@@ -225,6 +239,49 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
                 if i in finals:
                     infos = self._add_info(infos, {"final_obs": finals[i][0], "final_info": finals[i][1]}, i)
                 infos = self._add_info(infos, infos_of[i], i)
+        self._autoreset = np.logical_or(terminated, truncated)
+        return self._obs.copy(), rewards, terminated, truncated, infos
+
+    @property
+    def batched_steps(self) -> int:
+        """Steps the batched path (:mod:`envs.batch`) took from the rigs' actions to the batch's arrays."""
+        return 0 if self._batch is None else self._batch.taken
+
+    def _step_batch(self, batch: Batch) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """:meth:`step` once ``batch`` sent every rig's commands (no rig was due for a reset)."""
+        rigs: list[joints.Rig] = []
+        spans: list[float] = []
+        for env in self.envs:
+            rig = env.rig
+            remaining = env.tick_time() - rig.time  # as RigEnv._wait_until
+            if remaining > 0:
+                rigs.append(rig)
+                spans.append(remaining)
+            env.note_overrun(-remaining)
+        if rigs:
+            joints.sleep_together(rigs, spans)
+        out = batch.finish()
+        n = self.num_envs
+        if isinstance(out, tuple):  # the batch's arrays: no episode ended
+            obs, rewards, infos = out
+            self._obs[:] = obs
+            terminated = np.zeros(n, dtype=np.bool_)
+            truncated = np.zeros(n, dtype=np.bool_)
+        else:  # each rig's outcome
+            self._obs[:] = [o[0] for o in out]
+            rewards = np.array([o[1] for o in out], dtype=np.float64)
+            terminated = np.array([o[2] for o in out], dtype=np.bool_)
+            truncated = np.array([o[3] for o in out], dtype=np.bool_)
+            infos_of = [o[4] for o in out]
+            got = self._batched_info(infos_of)
+            if got is None:
+                got = {}
+                for i, info in enumerate(infos_of):
+                    got = self._add_info(got, info, i)
+            infos = got
+        self._elapsed += 1
+        if self.max_episode_steps is not None:
+            truncated |= self._elapsed >= self.max_episode_steps
         self._autoreset = np.logical_or(terminated, truncated)
         return self._obs.copy(), rewards, terminated, truncated, infos
 

@@ -202,7 +202,7 @@ class Group:
                 plan = (np.array(order, dtype=np.int64), np.array(worlds, dtype=np.int64))
             else:
                 plan = (order, list(worlds))
-            if len(self._plans) >= 256:  # the sets a batch steps together vary little; never grow without bound
+            if len(self._plans) >= 256 + len(self.worlds):  # each world alone and a few sets of a batch; bounded
                 self._plans.clear()
             self._plans[worlds] = plan
         return plan

@@ -25,7 +25,6 @@ has end-stop inputs (:class:`EndStops`) the motor angles where the flag reaches 
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import math
 import threading
@@ -966,36 +965,57 @@ def advance_together(worlds: Sequence[World], seconds: Sequence[float]) -> None:
         raise ValueError(f"{len(worlds)} worlds but {len(seconds)} times")
     if len({id(w) for w in worlds}) != len(worlds):
         raise ValueError("a world appears twice")
-    with contextlib.ExitStack() as stack:
-        for w in sorted(worlds, key=id):  # one order for every caller: no lock-order deadlock
-            stack.enter_context(w.lock)
-        group = join(worlds)
+    locks = [w.lock for w in sorted(worlds, key=id)]  # one order for every caller: no lock-order deadlock
+    held = 0
+    try:
+        for lock in locks:
+            lock.acquire()
+            held += 1
+        _advance_locked(worlds, seconds)
+    finally:
+        for lock in reversed(locks[:held]):
+            lock.release()
+
+
+def _advance_locked(worlds: Sequence[World], seconds: Sequence[float]) -> None:
+    """:func:`advance_together` with every world's lock held: one pass over the worlds per compiled call."""
+    group = join(worlds)
+    due: list[int] = []
+    for w, s in zip(worlds, seconds):
+        if w._held:  # a sleep's substeps, on their own (as they ran at the sleep)
+            w.sync()
+        w._booked = False  # booked time runs now, with this
+        due.append(w._due(s) if s > 0 else 0)
+    try:
+        while True:
+            left: list[int] = []
+            n = 0
+            for i, w in enumerate(worlds):
+                d = due[i]
+                if d <= 0:
+                    continue
+                if w._bus_watches or not (group.compiled and group.fusable[w.group_index]):
+                    w._step_due(d)  # on its own: a world that cannot (or no longer can) run fused
+                    due[i] = 0
+                    continue
+                k = w._until_event(d) if w._events else d
+                n = k if not left or k < n else n
+                left.append(i)
+            if not left:
+                break
+            for i in left:
+                w = worlds[i]
+                if w._bind != w._bind_seen:
+                    w._step_prepare()
+            group.run([worlds[i].group_index for i in left], n)
+            for i in left:
+                due[i] -= n
+                if worlds[i]._ticks:
+                    worlds[i]._tick_now()
+    except BaseException:
         for w in worlds:
-            if w._held:  # a sleep's substeps, on their own (as they ran at the sleep)
-                w.sync()
-            w._booked = False  # booked time runs now, with this
-        due = [w._due(s) if s > 0 else 0 for w, s in zip(worlds, seconds)]
-        try:
-            while True:
-                for i, w in enumerate(worlds):  # on its own: a world that cannot (or no longer can) run fused
-                    if due[i] > 0 and (w._bus_watches or not (group.compiled and group.fusable[w.group_index])):
-                        w._step_due(due[i])
-                        due[i] = 0
-                left = [i for i, d in enumerate(due) if d > 0]
-                if not left:
-                    break
-                n = min([worlds[i]._until_event(due[i]) for i in left])
-                for i in left:
-                    worlds[i]._step_prepare()
-                group.run([worlds[i].group_index for i in left], n)
-                for i in left:
-                    due[i] -= n
-                    if worlds[i]._ticks:
-                        worlds[i]._tick_now()
-        except BaseException:
-            for w in worlds:
-                w._target = w.time
-            raise
-        finally:
-            for w in worlds:
-                w.clock.set(w._target)  # as World.advance: the exact instant booked
+            w._target = w.time
+        raise
+    finally:
+        for w in worlds:
+            w.clock.set(w._target)  # as World.advance: the exact instant booked
