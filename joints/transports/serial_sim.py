@@ -51,7 +51,7 @@ from joints.errors import TransportError
 from joints.transports.base import ByteTransport
 from joints.transports.simclock import ClockDriven, ClockLike
 
-__all__ = ["LinePeer", "Ticking", "TimedFrames", "TimedSerialLine", "Transmission"]
+__all__ = ["Deferred", "LinePeer", "Ticking", "TimedFrames", "TimedSerialLine", "Transmission"]
 
 #: s the line waits at most in one step while nothing is on it (frames a device sends by itself are
 #: picked up at least this often)
@@ -105,6 +105,17 @@ class Transmission:
         bad = "  COLLISION" if self.corrupted else ""
         what = self.data.hex(" ").upper() if self.data or not self.size else f"<{self.size} bytes: {self.payload!r}>"
         return f"{self.start * 1000:10.3f} ms {arrow} {what}{bad}"
+
+
+class Deferred:
+    """A direct-path reply known by what it carries, made as its message only when asked (:meth:`message`, once:
+    the same object every time). A frame booked by :meth:`TimedSerialLine.book_frames` may carry one: the log
+    holds its message, made when the log is read."""
+
+    __slots__ = ()
+
+    def message(self) -> Any:
+        raise NotImplementedError
 
 
 def _garbled(data: bytes) -> bytes:
@@ -170,7 +181,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
     def book_frames(self, frames: list[tuple[float, float, float, int, str, Any]]) -> None:
         """Frames a one-call exchange carried (``(start, end, due, size, side, payload)`` each, delivered, none
         overlapping another frame - its caller checked that): logged as :meth:`_put` logs them (the latest-end
-        bookkeeping, the trimming), made :class:`Transmission` objects when the log is read."""
+        bookkeeping, the trimming), made :class:`Transmission` objects when the log is read (a :class:`Deferred`
+        payload: its message)."""
         log: list[Any] = self._log
         latest = self._latest_end
         epoch = self._epoch
@@ -197,6 +209,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             item = log[k]
             if type(item) is tuple:
                 start, end, due, size, side, payload = item
+                if isinstance(payload, Deferred):
+                    payload = payload.message()
                 log[k] = Transmission(start, end, side, b"", delivered=True, due=due, size=size, payload=payload)
         self._raw_from = len(log)
 
