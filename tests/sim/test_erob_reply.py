@@ -13,6 +13,7 @@ it, is the one the front makes.
 from __future__ import annotations
 
 import random
+from types import SimpleNamespace
 from typing import Any
 
 import gymnasium as gym
@@ -78,6 +79,19 @@ def test_the_status_words_decode_to_the_values_for_every_status_register() -> No
             if k not in loose:
                 assert i >= 0 and reg.type_range[0] <= lo and hi <= reg.type_range[1]
         assert "bus_voltage" in {regs[k].name for k in loose}  # a stored value: the read does not saturate it
+        # a read that saturates a value to a range wider than its register's type leaves it to the check per read
+        k = s._names.index("actual_position")
+        wide = list(entries)
+        i, name, lo, hi = wide[k]
+        wide[k] = (i, name, lo, hi + 1)
+        reader = SimpleNamespace(names=plan[0].names, entries=tuple(wide))
+        registers, loose_wide = s.exchange._packed(start, count, (reader, *plan[1:]))
+        assert registers == regs
+        assert (k, *regs[k].type_range) in loose_wide and len(loose_wide) == len(shape.loose) + 1
+        # registers other than the reader's (a shorter block, another order): not packed by values
+        assert s.exchange._packed(start, count - 1, plan)[0] is None
+        other = SimpleNamespace(names=plan[0].names[::-1], entries=entries)
+        assert s.exchange._packed(start, count, (other, *plan[1:]))[0] is None
     finally:
         env.close()
 
