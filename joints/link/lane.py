@@ -103,8 +103,10 @@ class LinkLane:
 
     def _stock(self) -> bool:
         """Whether the reply check is the Modbus codec's and rule's own (``mb.as_received``,
-        ``ModbusRule.is_reply``): its answer for a read's blank reply depends only on the request (its slave,
-        function and count), so it can be asked before anything is sent, and kept per request."""
+        ``ModbusRule.is_reply``): a plain request's (:meth:`_plain`) own reply - a read's with its words plain, a
+        write's echo - it takes for the plain answer by the request's kind, slave, address and size alone
+        (never a failure reply: its value is not 0xFFFF, its count not 0), so it can be asked before anything
+        is sent, and its answer kept per request shape (:meth:`_stock_check` is the same object every call)."""
         framing = self.framing
         return framing is not None and framing.as_received is mb.as_received and getattr(
             self.link.rule.is_reply, "__func__", None) is ModbusRule.is_reply

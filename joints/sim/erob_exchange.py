@@ -87,7 +87,7 @@ def _compiled() -> Any:
 _STOCK = (*modbus_front.STOCK, *serial_sim.STOCK, *erob.STOCK)
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True, eq=False)
 class _Shape:
     """What requests of one shape (kind, slave, address, size) have in common."""
 
@@ -102,6 +102,9 @@ class _Shape:
     registers: tuple[Register, ...] | None = None
     #: a read's values not kept within their register's type by the read itself: (index, lowest, highest)
     loose: tuple[tuple[int, int, int], ...] = ()
+    #: the reply check that took :attr:`made` for a request of this shape (asked once per check: the lane's stock
+    #: check, the same object every call, answers it by the shape alone - :meth:`joints.link.lane.LinkLane.exchange`)
+    checked: Any = None
 
 
 class StatusReply(serial_sim.Deferred):
@@ -142,8 +145,7 @@ class ErobExchange(L.Carrier):
         self.line = line
         self.slave = front.address
         self._shapes: dict[tuple[Any, ...], _Shape | None] = {}
-        #: the last status read request, its shape and the reply check that passed for it (None: not asked)
-        self._read: tuple[Any, _Shape, Any] | None = None
+        self._read: tuple[Any, _Shape] | None = None  #: the last status read request and its shape
         #: the clock after each transaction of the last :meth:`run` (the host's per-joint instants)
         self.clocks: list[float] = []
 
@@ -253,8 +255,11 @@ class ErobExchange(L.Carrier):
             fw.check_write(name, value)
         except ParameterRefused:  # refused: the front answers it its way
             return None
-        if check is not None and not check(request, reply):  # a reply the host would not take as the plain answer
-            return None
+        if check is not None and (reply is not shape.made or shape.checked is not check):
+            if not check(request, reply):  # a reply the host would not take as the plain answer
+                return None
+            if reply is shape.made:
+                shape.checked = check
         values = fw.values
         written[name] = value
         if op == START:
@@ -270,15 +275,14 @@ class ErobExchange(L.Carrier):
                   ) -> tuple[list[float], tuple[Any, _Shape]] | None:
         """The transaction row of a status read and (the front's plan for it, its shape); None where it is not a
         steady request now (``request``: the same FC03 object step after step, its shape kept by identity; the
-        words a read packs are plain: a blank reply of its size stands for them in ``check``, whose answer is
-        kept for the same request and the same ``check``: the lane passes its own only where that answer is
-        fixed by the request, :meth:`joints.link.lane.LinkLane.exchange`)."""
+        words a read packs are plain: a blank reply of its size stands for them in ``check``, asked once per
+        shape and check, :attr:`_Shape.checked`)."""
         last = self._read
         if last is None or last[0] is not request:
             got = self._shape(request, size)
             if got is None or got.op != READ:
                 return None
-            last = self._read = (request, got, None)
+            last = self._read = (request, got)
         shape = last[1]
         plan = self.front.read_plan(request.address, request.count)  # the front's own, as it serves it now
         if plan is not shape.extra:  # the front planned it again (its cache was cleared): its shape again
@@ -289,11 +293,11 @@ class ErobExchange(L.Carrier):
             if got is None:
                 return None
             shape = got
-            last = self._read = (request, got, None)
-        if check is not None and last[2] is not check:
+            self._read = (request, got)
+        if check is not None and shape.checked is not check:
             if not check(request, shape.made):
                 return None
-            self._read = (request, shape, check)
+            shape.checked = check
         reader: Any = plan[0]
         return [EROB, 0.0, shape.request, 0.0, shape.reply, READ, 0.0, 0.0, 0.0, float(reader.repetitive())], \
             (plan, shape)
