@@ -74,6 +74,7 @@ class _ErobModbus:
             raise ValueError(f"{joint.name}: the eRob status is {len(plan)} blocks, not one FC03")
         start, count = plan[0]
         self.status = mb.ReadHoldingRegisters(access.slave, start, count)  # what read_many sends
+        self._status_alone = (self.status,)
         self.status_start = start
         self.decode = access.table.decode_block
         #: what the driver's status decode gives names to: the registers wholly in the block, in address order
@@ -210,7 +211,7 @@ class _ErobModbus:
         clock = self.clock
         t0 = clock.now()
         run = self._read
-        replies = None if run is None else self.lane.exchange(run, (self.status,), idempotent=True)
+        replies = None if run is None else self.lane.exchange(run, self._status_alone, idempotent=True)
         reply = self.lane.request(self.status, idempotent=True) if replies is None else replies[0]
         return self.state_of(reply, t0, clock.now())
 
