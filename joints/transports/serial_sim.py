@@ -249,7 +249,7 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         self._pending.clear()
         self._rx.clear()
         self._free = {"host": -math.inf, "device": -math.inf}
-        self._epoch = len(self.log)  # frames of the old timeline never overlap the new one's
+        self._epoch = len(self._log)  # frames of the old timeline never overlap the new one's
         self.now = self._clock_seen = c
 
     # -- the line ---------------------------------------------------------------------------------
@@ -269,7 +269,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             due = end + self.adapter_latency
         tx = Transmission(start, end, side, data if type(data) is bytes else bytes(data), due=due, size=n, handler=handler, payload=payload)
         self._free[side] = end + self.gap
-        log, latest = self.log, self._latest_end
+        log: list[Any] = self._log  # (booked frames become transmissions where the search reaches them)
+        latest = self._latest_end
         if len(latest) != len(log):  # the log was edited from outside: check every frame of it from now on
             latest[:] = [math.inf] * len(log)
             self._epoch = min(self._epoch, len(log))
@@ -277,6 +278,9 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             if latest[k] <= start:
                 break  # no frame up to this one ends after the new one starts: none of them overlaps it
             other = log[k]
+            if type(other) is tuple:
+                self._materialize()
+                other = log[k]
             if other.end <= start - 1.0:
                 break  # older than any frame still able to overlap
             if other.side != side and other.start < tx.end and start < other.end:
