@@ -204,3 +204,24 @@ def test_a_replaced_reply_check_is_asked_after_the_exchange() -> None:
     finally:
         plain.close()
         checked.close()
+
+
+def test_the_replies_are_made_only_when_the_log_is_read() -> None:
+    """The status replies of the line's log stay values through steps and a reset (a new timeline), and become
+    the front's messages when the log is read."""
+    env = _env()
+    try:
+        line = _joint(env).driver.access.link.transport
+
+        def unmade() -> int:
+            return sum(type(x) is tuple and isinstance(x[5], StatusReply) and x[5]._message is None for x in line._log)
+
+        _steps(env, 10)
+        assert unmade() >= 10
+        env.reset()
+        _steps(env, 3)
+        assert unmade() >= 13
+        payloads = [tx.payload for tx in line.log if isinstance(tx.payload, mb.ReadRegistersReply)]
+        assert unmade() == 0 and len(payloads) >= 13
+    finally:
+        env.close()
