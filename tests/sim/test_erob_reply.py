@@ -225,3 +225,21 @@ def test_the_replies_are_made_only_when_the_log_is_read() -> None:
         assert unmade() == 0 and len(payloads) >= 13
     finally:
         env.close()
+
+
+def test_a_read_planned_again_by_the_front_is_shaped_again() -> None:
+    """The front's plans are a bounded cache: a status read planned again gets its shape (and proof) again and
+    stays on the values path."""
+    env = _env()
+    try:
+        _steps(env, 2)
+        s = _stepper(env)
+        old = _shape(s)
+        before = s.taken_values
+        s.exchange.front._read_plans.clear()
+        _steps(env, 2)
+        new = s.exchange._read[1]
+        assert new is not old and new.extra is not old.extra and new.registers == old.registers
+        assert s.taken_values == before + 2
+    finally:
+        env.close()
