@@ -163,8 +163,9 @@ _SETTINGS = tuple(p.name for p in EROB_PARAMS if p.access.value == "R/W")
 ARRIVAL_WINDOW = K.ARRIVAL_WINDOW
 _STATUS_INDEX = {name: i for i, name in enumerate(K.STATUS_NAMES)}
 _STATUS_COUNT = len(K.STATUS_NAMES)
-#: the status values the sensors report (:meth:`_StatusRead.finish`)
-_COUNTS, _SPEED, _CURRENT = (_STATUS_INDEX[n] for n in ("actual_position", "current_speed", "motor_current"))
+#: where the status values the sensors report are (:meth:`_StatusRead.finish`)
+_SENSED_COUNTS, _SENSED_SPEED, _SENSED_CURRENT = (_STATUS_INDEX[n]
+                                                  for n in ("actual_position", "current_speed", "motor_current"))
 _REPETITIVE = int(MotionMode.REPETITIVE)
 
 
@@ -647,7 +648,8 @@ class _StatusRead:
         st = list(map(int, o[at:at + _STATUS_COUNT]))
         if not fw.sensor.ideal:  # what the drive reports (outside the kernel: same bits)
             end = at + _STATUS_COUNT
-            st[_COUNTS], st[_SPEED], st[_CURRENT] = fw._sensed_at(o[end], o[end + 1], o[end + 2], o[end + 3])
+            st[_SENSED_COUNTS], st[_SENSED_SPEED], st[_SENSED_CURRENT] = fw._sensed_at(o[end], o[end + 1], o[end + 2],
+                                                                                       o[end + 3])
         values = self.values
         return [values[name] if i < 0 else lo if (v := st[i]) < lo else hi if hi < v else v  # noqa: FURB136
                 for i, name, lo, hi in self.entries]
