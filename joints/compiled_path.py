@@ -52,6 +52,7 @@ from joints.errors import OutcomeUnknown
 from joints.joint import Joint, JointState
 from joints.link.base import DirectFraming
 from joints.link.lane import LinkLane
+from joints.transports.serial_sim import Deferred
 
 __all__ = ["CompiledPath", "supported"]
 
@@ -73,14 +74,22 @@ class _ErobModbus:
             raise ValueError(f"{joint.name}: the eRob status is {len(plan)} blocks, not one FC03")
         start, count = plan[0]
         self.status = mb.ReadHoldingRegisters(access.slave, start, count)  # what read_many sends
+        self._status_alone = (self.status,)
         self.status_start = start
         self.decode = access.table.decode_block
+        #: what the driver's status decode gives names to: the registers wholly in the block, in address order
+        self._names = tuple(self.decode(start, (0,) * count))
+        self._registers = tuple(access.table[n] for n in self._names)
+        self._proven: Any = None  #: the twin's registers of a status reply proven to be these (by identity)
         self.start = access.write_request("start_operating", CMD_START)  # a constant command
         self.taken = 0
+        self.taken_values = 0  #: status reads whose state came from the values, not the words (:meth:`_values`)
         #: the twin's one-call exchange (the sim's eRob: frames, physics and register ops in one compiled call,
         #: :meth:`LinkLane.exchange`), where the peer offers one
         fused = getattr(self.lane.framing.peer if self.lane.framing is not None else None, "fused", None)
         self.exchange: Any = fused(access.slave, self.lane.line) if callable(fused) and self.lane.line else None
+        #: the status read by it: a reply known by its values (:meth:`state_of`)
+        self._read = None if self.exchange is None else functools.partial(self.exchange.run, lazy=True)
 
     def carried(self) -> tuple[Any, list[Any]] | None:
         """(the compiled world, [the twin]) whose every frame the one-call exchange carries; None: it has none."""
@@ -124,9 +133,28 @@ class _ErobModbus:
 
     def state_of(self, reply: Any, t0: float, t1: float) -> JointState:
         """The state from the status read's ``reply``, sent at ``t0`` and answered at ``t1`` (clock instants)."""
-        assert isinstance(reply, mb.ReadRegistersReply)
-        values = self.decode(self.status_start, reply.values)
+        if type(reply) is mb.ReadRegistersReply:
+            values = self.decode(self.status_start, reply.values)
+        else:
+            values = self._values(reply)
         return self.joint.to_si(self.driver.state_from(values, sampled_at(t0, t1)))
+
+    def _values(self, reply: Any) -> dict[str, int]:
+        """What the status decode gives for a reply known by its values (a twin's
+        :class:`~joints.transports.serial_sim.Deferred` reply: ``registers``, the registers its words pack, in
+        block order; ``values``, each an int within its register's type): those values by name where the
+        registers are the ones the decode names (equal registers: the same address, type and word order - the
+        words unpack to the values packed), else the decode of its words."""
+        assert isinstance(reply, Deferred)
+        registers = getattr(reply, "registers", None)
+        if registers is not self._proven:
+            if registers != self._registers:
+                words = reply.message()
+                assert isinstance(words, mb.ReadRegistersReply)
+                return self.decode(self.status_start, words.values)
+            self._proven = registers
+        self.taken_values += 1
+        return dict(zip(self._names, reply.values))  # type: ignore[attr-defined]
 
     def command_all(self, mode: str, values: Sequence[float], skip: Sequence[bool]) -> None:
         if not skip[0]:
@@ -182,7 +210,8 @@ class _ErobModbus:
     def state(self) -> JointState:
         clock = self.clock
         t0 = clock.now()
-        replies = self._fused((self.status,), True)
+        run = self._read
+        replies = None if run is None else self.lane.exchange(run, self._status_alone, idempotent=True)
         reply = self.lane.request(self.status, idempotent=True) if replies is None else replies[0]
         return self.state_of(reply, t0, clock.now())
 
@@ -432,7 +461,7 @@ def _states_batch(units: list[_ErobModbus]) -> list[JointState] | None:
     each stamped with its own transaction's instants); None (nothing sent) where that is not the steady case."""
     first = units[0]
     t0 = first.clock.now()
-    run = functools.partial(first.exchange.run, exchanges=[s.exchange for s in units])
+    run = functools.partial(first.exchange.run, exchanges=[s.exchange for s in units], lazy=True)
     replies = first.lane.exchange(run, [s.status for s in units], idempotent=True)
     if replies is None:
         return None

@@ -20,10 +20,11 @@ import functools
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from joints.codecs import modbus as mb
 from joints.errors import FrameError, PeerProtocolError, ReplyTimeout
 from joints.link.base import DirectFraming, Link
-from joints.link.modbus import FAILED_VALUE, _single_write
-from joints.transports.serial_sim import TimedSerialLine
+from joints.link.modbus import FAILED_VALUE, ModbusRule, _single_write
+from joints.transports.serial_sim import Deferred, TimedSerialLine
 
 __all__ = ["LinkLane"]
 
@@ -39,6 +40,9 @@ class LinkLane:
         self.line = line if isinstance(line, TimedSerialLine) else None
         self.taken = 0  #: requests that took the lane
         self.fused = 0  #: of them, requests sent by a twin's one-call exchange (:meth:`exchange`)
+        #: the stock reply check (one bound method, the same object every call: a one-call exchange may keep a
+        #: read's answer by it, :meth:`exchange`)
+        self._stock_check = self._plain_reply
 
     def _open(self, request: Any) -> bool:
         """Whether the lane can take ``request`` now (nothing sent yet either way)."""
@@ -91,15 +95,34 @@ class LinkLane:
             link._discard_late()
             return link._attempts(request, None, idempotent, failed=exc)
 
+    def _plain_reply(self, request: Any, reply: Any) -> bool:
+        """Whether the host takes ``reply`` as the plain answer to ``request`` (``as_received`` + ``is_reply``)."""
+        framing = self.framing
+        assert framing is not None
+        return framing.as_received(request, reply) is reply and bool(self.link.rule.is_reply(request, reply))
+
+    def _stock(self) -> bool:
+        """Whether the reply check is the Modbus codec's and rule's own (``mb.as_received``,
+        ``ModbusRule.is_reply``): a plain request's (:meth:`_plain`) own reply - a read's with its words plain, a
+        write's echo - it takes for the plain answer by the request's kind, slave, address and size alone
+        (never a failure reply: its value is not 0xFFFF, its count not 0), so it can be asked before anything
+        is sent, and its answer kept per request shape (:meth:`_stock_check` is the same object every call)."""
+        framing = self.framing
+        return framing is not None and framing.as_received is mb.as_received and getattr(
+            self.link.rule.is_reply, "__func__", None) is ModbusRule.is_reply
+
     def exchange(self, run: Callable[..., list[Any] | None], requests: Sequence[Any], *,
                  idempotent: bool = False) -> list[Any] | None:
         """:meth:`request` of each of ``requests`` by ``run(requests, size, check)``, a twin's one-call exchange
         (the frames, the physics between them and the drives' ops in one compiled call, e.g.
         :meth:`joints.sim.erob_exchange.ErobExchange.run`: ``check(request, reply)`` tells it before anything is
-        sent whether the host takes a reply as the plain answer - None for a lone request, whose reply is
-        checked after, as :meth:`request` checks it - ``size`` a message's characters); None where
-        the lane or the exchange cannot take them all (nothing sent: send them the usual way). ``idempotent``:
-        a lone request's, for the rest of its attempt where its reply is not the plain answer."""
+        sent whether the host takes a reply as the plain answer - with the stock check (:meth:`_stock`) for
+        every request, else for several, and None for a lone request, whose reply is then checked after, as
+        :meth:`request` checks it - ``size`` a message's characters); None where the lane or the exchange
+        cannot take them all (nothing sent: send them the usual way). A reply may be a
+        :class:`~joints.transports.serial_sim.Deferred` one (its message made when asked), where ``run`` gives
+        one. ``idempotent``: a lone request's, for the rest of its attempt where its reply is not the plain
+        answer."""
         framing = self.framing
         if framing is None or not self._idle():
             return None
@@ -111,8 +134,11 @@ class LinkLane:
                 return None
         for r in requests:
             rule.check(r)  # raises EncodeError before anything is sent
+        n = len(requests)
         check: Callable[[Any, Any], bool] | None = None
-        if len(requests) > 1:  # several replies are checked before anything is sent
+        if self._stock():  # every reply checked before anything is sent
+            check = self._stock_check
+        elif n > 1:  # several replies are checked before anything is sent
             as_received = framing.as_received
 
             def plain(request: Any, reply: Any) -> bool:
@@ -121,17 +147,24 @@ class LinkLane:
             check = plain
 
         with link._lock:
-            deadline = link.clock.now() + link.policy.timeout  # the last request's, when it is the only one
-            # a lone request's reply is checked after, as the lane checks it; several are checked before
-            replies = run(requests, framing.size, check)
+            if check is not None:
+                replies = run(requests, framing.size, check)
+                if replies is None:
+                    return None
+                link.transactions += n
+                framing.exchanges += n
+                self.fused += n
+                self.taken += n  # their replies were checked before anything was sent: plain
+                return replies
+            deadline = link.clock.now() + link.policy.timeout  # the request's, as the link's
+            # a lone request's reply is checked after, as the lane checks it
+            replies = run(requests, framing.size, None)
             if replies is None:
                 return None
-            n = len(requests)
-            link.transactions += n
-            framing.exchanges += n
-            self.fused += n
-            if n > 1:  # their replies were checked before anything was sent: plain
-                self.taken += n
-                return replies
-            replies[0] = self._finish(requests[0], replies[0], deadline, idempotent)
+            link.transactions += 1
+            framing.exchanges += 1
+            self.fused += 1
+            raw = replies[0]
+            replies[0] = self._finish(requests[0], raw.message() if isinstance(raw, Deferred) else raw, deadline,
+                                      idempotent)
             return replies

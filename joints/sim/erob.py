@@ -162,6 +162,10 @@ def power_on_defaults(profile: ErobProfile, address: int) -> dict[str, int]:
 _SETTINGS = tuple(p.name for p in EROB_PARAMS if p.access.value == "R/W")
 ARRIVAL_WINDOW = K.ARRIVAL_WINDOW
 _STATUS_INDEX = {name: i for i, name in enumerate(K.STATUS_NAMES)}
+_STATUS_COUNT = len(K.STATUS_NAMES)
+#: where the status values the sensors report are (:meth:`_StatusRead.finish`)
+_SENSED_COUNTS, _SENSED_SPEED, _SENSED_CURRENT = (_STATUS_INDEX[n]
+                                                  for n in ("actual_position", "current_speed", "motor_current"))
 _REPETITIVE = int(MotionMode.REPETITIVE)
 
 
@@ -449,9 +453,12 @@ class ErobFirmware(Firmware, K.Columns):
     def _sensed(self, get: Callable[[int], float]) -> tuple[int, int, int]:
         """``(_sensed_counts(get), _sensed_speed(get), _sensed_current(get))`` of a sensor that is not ideal, in one
         call of it (:meth:`~joints.sim.sensors.Sensor.sense`: the same draws in the same order, the same bits)."""
-        pos, vel, i = self.sensor.sense(get(K.TIME), get(K.POS) / COUNTS_PER_RAD, get(K.VEL) / COUNTS_PER_RAD,
-                                        get(K.I_OUT) * 1e-3)
-        return round(pos * COUNTS_PER_RAD) + self.offset, round(vel * COUNTS_PER_RAD), round(i * 1e3)
+        return self._sensed_at(get(K.TIME), get(K.POS), get(K.VEL), get(K.I_OUT))
+
+    def _sensed_at(self, t: float, pos: float, vel: float, i: float) -> tuple[int, int, int]:
+        """:meth:`_sensed` of the row's time, position, velocity and current (its columns' values)."""
+        p, v, c = self.sensor.sense(t, pos / COUNTS_PER_RAD, vel / COUNTS_PER_RAD, i * 1e-3)
+        return round(p * COUNTS_PER_RAD) + self.offset, round(v * COUNTS_PER_RAD), round(c * 1e3)
 
     # -- what the fronts call ---------------------------------------------------------------
     def frame_received(self) -> None:
@@ -630,6 +637,20 @@ class _StatusRead:
             counts, speed, current = fw._sensed(fw._get if row is None else row.__getitem__)
             st = (*st[:4], counts, *st[5:7], speed, *st[8:10], current, *st[11:])
         # saturate, never wrap: ``lo if v < lo else min(v, hi)``, spelled out (min(v, hi) is v unless hi < v)
+        return [values[name] if i < 0 else lo if (v := st[i]) < lo else hi if hi < v else v  # noqa: FURB136
+                for i, name, lo, hi in self.entries]
+
+    def finish_row(self, o: Sequence[float], at: int) -> list[int]:
+        """:meth:`finish` of the kernel's status values as floats in ``o`` from column ``at`` (in
+        :data:`~joints.sim.erob_kernel.STATUS_NAMES` order), followed by the row's time, position, velocity and
+        current as they stood at the read (the one-call exchange's output row)."""
+        fw = self.fw
+        st = list(map(int, o[at:at + _STATUS_COUNT]))
+        if not fw.sensor.ideal:  # what the drive reports (outside the kernel: same bits)
+            end = at + _STATUS_COUNT
+            st[_SENSED_COUNTS], st[_SENSED_SPEED], st[_SENSED_CURRENT] = fw._sensed_at(o[end], o[end + 1], o[end + 2],
+                                                                                       o[end + 3])
+        values = self.values
         return [values[name] if i < 0 else lo if (v := st[i]) < lo else hi if hi < v else v  # noqa: FURB136
                 for i, name, lo, hi in self.entries]
 

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from joints.codecs import modbus as mb
+from joints.devices.registers import Access, Register
 from joints.errors import ParameterRefused
 from joints.sim import erob, modbus_front
 from joints.sim import erob_kernel as K
@@ -35,7 +36,7 @@ from joints.sim.stepping import EROB
 from joints.transports import serial_sim
 from joints.transports.serial_sim import TimedSerialLine
 
-__all__ = ["ErobExchange", "act", "prepare"]
+__all__ = ["ErobExchange", "StatusReply", "act", "prepare"]
 
 #: ops (column OP of a transaction row): what the drive does with the frame
 READ, TARGET_POSITION, START, TARGET_SPEED, TARGET_CURRENT = range(5)
@@ -80,7 +81,7 @@ def _compiled() -> Any:
 _STOCK = (*modbus_front.STOCK, *serial_sim.STOCK, *erob.STOCK)
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True, eq=False)
 class _Shape:
     """What requests of one shape (kind, slave, address, size) have in common."""
 
@@ -90,6 +91,39 @@ class _Shape:
     reply: int  #: characters of the reply
     made: Any  #: a write's reply (an FC06's for its first value); a read's reply with every word 0
     extra: Any  #: a read's plan (:meth:`ModbusFront.read_plan`); a write's limits (writable, lowest, highest)
+    #: a read's registers, in block order, whose values its words pack (``ModbusFront.pack``: each by its type,
+    #: high word first, every register within the block), or None where they are not that
+    registers: tuple[Register, ...] | None = None
+    #: a read's values not kept within their register's type by the read itself: (index, lowest, highest)
+    loose: tuple[tuple[int, int, int], ...] = ()
+    #: the reply check that took :attr:`made` for a request of this shape (asked once per check: the lane's stock
+    #: check, the same object every call, answers it by the shape alone - :meth:`joints.link.lane.LinkLane.exchange`)
+    checked: Any = None
+
+
+class StatusReply(serial_sim.Deferred):
+    """The reply to a status read known by its values (``values``: the typed values of ``registers``, in block
+    order, each an int within its register's type, as :meth:`ErobExchange.run` checked): the words are
+    ``ModbusFront.pack``'s of them, and the :class:`~joints.codecs.modbus.ReadRegistersReply` is made only when
+    asked (:meth:`message`: the line's log, a host that decodes words), once."""
+
+    __slots__ = ("_message", "plan", "registers", "request", "values")
+
+    def __init__(self, request: Any, plan: Any, values: list[int], registers: tuple[Register, ...]) -> None:
+        self.request = request
+        self.plan = plan
+        self.values = values
+        self.registers = registers
+        self._message: mb.ReadRegistersReply | None = None
+
+    def message(self) -> mb.ReadRegistersReply:
+        """The reply as the front makes it (``ReadRegistersReply`` of the packed words)."""
+        made = self._message
+        if made is None:
+            r = self.request
+            made = self._message = mb.ReadRegistersReply(r.slave, r.function,
+                                                         ModbusFront.pack(self.plan, self.values, r.count))
+        return made
 
 
 class ErobExchange(L.Carrier):
@@ -154,7 +188,8 @@ class ErobExchange(L.Carrier):
             if isinstance(plan, int) or not isinstance(plan[0], _StatusRead):
                 return None
             blank = mb.ReadRegistersReply(request.slave, request.function, (0,) * request.count)
-            return _Shape(READ, "", size(request), size(blank), blank, plan)
+            registers, loose = self._packed(request.address, request.count, plan)
+            return _Shape(READ, "", size(request), size(blank), blank, plan, registers, loose)
         if type(request) is mb.WriteMultipleRegisters:
             words = request.values
             reply: Any = mb.WriteMultipleRegistersReply(request.slave, request.address, len(words))
@@ -170,6 +205,27 @@ class ErobExchange(L.Carrier):
         if op is None or limits is None or not limits[0]:
             return None
         return _Shape(op, items[0][0], size(request), size(reply), reply, limits)
+
+    def _packed(self, start: int, count: int, plan: Any) -> tuple[tuple[Register, ...] | None,
+                                                                   tuple[tuple[int, int, int], ...]]:
+        """(the registers, the loose values) of a status read of ``count`` words from ``start`` served by ``plan``
+        (see :class:`_Shape`): the registers the front's plan packs (``ModbusFront._read_plan``: those in the
+        block that are not commands, in address order), where they are the reader's names, each wholly in the
+        block and packed in one call (no low word first); the values the reader saturates to a range outside
+        their register's type, or does not saturate, are checked per read."""
+        reader, packer = plan[0], plan[1]
+        end = start + count
+        regs = tuple(r for r in self.front.table
+                     if r.address < end and r.address + r.words > start and r.access is not Access.COMMAND)
+        if packer is None or tuple(r.name for r in regs) != reader.names or any(
+                r.address < start or r.address + r.words > end for r in regs):
+            return None, ()
+        loose: list[tuple[int, int, int]] = []
+        for k, ((i, _name, lo, hi), reg) in enumerate(zip(reader.entries, regs)):
+            rlo, rhi = reg.type_range
+            if i < 0 or lo < rlo or rhi < hi:
+                loose.append((k, rlo, rhi))
+        return regs, tuple(loose)
 
     def _row(self, request: Any, shape: _Shape, written: dict[str, int], check: Callable[[Any, Any], bool] | None
              ) -> tuple[list[float], Any, Any] | None:
@@ -193,8 +249,11 @@ class ErobExchange(L.Carrier):
             fw.check_write(name, value)
         except ParameterRefused:  # refused: the front answers it its way
             return None
-        if check is not None and not check(request, reply):  # a reply the host would not take as the plain answer
-            return None
+        if check is not None and (reply is not shape.made or shape.checked is not check):
+            if not check(request, reply):  # a reply the host would not take as the plain answer
+                return None
+            if reply is shape.made:
+                shape.checked = check
         values = fw.values
         written[name] = value
         if op == START:
@@ -207,10 +266,11 @@ class ErobExchange(L.Carrier):
                 reply, items)
 
     def _read_row(self, request: Any, size: Callable[[Any], int], check: Callable[[Any, Any], bool] | None
-                  ) -> tuple[list[float], Any] | None:
-        """The transaction row of a status read and the front's plan for it; None where it is not a steady
-        request now (``request``: the same FC03 object step after step, its shape kept by identity; the words
-        a read packs are plain: a blank reply of its size stands for them in ``check``)."""
+                  ) -> tuple[list[float], tuple[Any, _Shape]] | None:
+        """The transaction row of a status read and (the front's plan for it, its shape); None where it is not a
+        steady request now (``request``: the same FC03 object step after step, its shape kept by identity; the
+        words a read packs are plain: a blank reply of its size stands for them in ``check``, asked once per
+        shape and check, :attr:`_Shape.checked`)."""
         last = self._read
         if last is None or last[0] is not request:
             got = self._shape(request, size)
@@ -219,19 +279,47 @@ class ErobExchange(L.Carrier):
             last = self._read = (request, got)
         shape = last[1]
         plan = self.front.read_plan(request.address, request.count)  # the front's own, as it serves it now
-        if isinstance(plan, int) or not isinstance(plan[0], _StatusRead) or (
-                check is not None and not check(request, shape.made)):
-            return None
-        return [EROB, 0.0, shape.request, 0.0, shape.reply, READ, 0.0, 0.0, 0.0, float(plan[0].repetitive())], plan
+        if plan is not shape.extra:  # the front planned it again (its cache was cleared): its shape again
+            if isinstance(plan, int) or not isinstance(plan[0], _StatusRead):
+                return None
+            got = self._shapes[(mb.ReadHoldingRegisters, request.slave, request.address, request.count)] = \
+                self._make_shape(request, size)
+            if got is None:
+                return None
+            shape = got
+            self._read = (request, got)
+        if check is not None and shape.checked is not check:
+            if not check(request, shape.made):
+                return None
+            shape.checked = check
+        reader: Any = plan[0]
+        return [EROB, 0.0, shape.request, 0.0, shape.reply, READ, 0.0, 0.0, 0.0, float(reader.repetitive())], \
+            (plan, shape)
+
+    @staticmethod
+    def _status_reply(request: Any, o: Sequence[float], plan: Any, shape: _Shape, lazy: bool) -> Any:
+        """The reply to the status read ``request`` whose kernel values and sensed columns are in the output row
+        ``o``: a :class:`StatusReply` where ``lazy`` and its values are proven to be the words' (every value an
+        int within its register's type), else the ``ReadRegistersReply``."""
+        values = plan[0].finish_row(o, STATUS_AT)
+        reply = StatusReply(request, plan, values, shape.registers)  # type: ignore[arg-type]
+        if not lazy or shape.registers is None:
+            return reply.message()
+        for k, lo, hi in shape.loose:
+            v = values[k]
+            if type(v) is not int or not lo <= v <= hi:
+                return reply.message()
+        return reply
 
     def run(self, requests: Sequence[Any], size: Callable[[Any], int], check: Callable[[Any, Any], bool] | None,
-            exchanges: Sequence[ErobExchange] | None = None) -> list[Any] | None:
+            exchanges: Sequence[ErobExchange] | None = None, *, lazy: bool = False) -> list[Any] | None:
         """The replies to ``requests`` (sent one after the other), each as the bus gives it, once the host would
         have received it; None (nothing sent) where this is not the steady case. ``size``: a message's
         characters on the line; ``check(request, reply)``: whether the host takes the reply as the plain answer
         (asked before anything is sent; a read's with its words 0; None: the caller checks the replies after);
         ``exchanges``: per request, the exchange of the drive it is for (default: this one's; all on this one's
-        line and world: a rig's eRobs on one bus go in one call)."""
+        line and world: a rig's eRobs on one bus go in one call); ``lazy``: a status read's reply may be a
+        :class:`StatusReply` (its values by register; the message made when asked)."""
         fn = _compiled()
         if fn is None or not self._line_steady():
             return None
@@ -239,23 +327,24 @@ class ErobExchange(L.Carrier):
         if exchanges is None:
             if not self._drive_steady():
                 return None
-            mine: Sequence[ErobExchange] = (self,) * len(requests)
         else:
-            mine = exchanges
             for ex in {id(ex): ex for ex in exchanges}.values():
                 if ex.line is not line or ex.world is not world or not ex._drive_steady():
                     return None
         rows: list[list[float]] = []
-        made: list[Any] = []  # per request: a write's reply and firmware items, a read's plan
+        extra: Any
+        made: list[Any] = []  # per request: (its exchange, a write's reply and firmware items | a read's plan, shape)
         written: dict[int, dict[str, int]] = {}
         group = world.group
-        for ex, r in zip(mine, requests):
+        ex = self
+        for k, r in enumerate(requests):
+            if exchanges is not None:
+                ex = exchanges[k]
             if type(r) is mb.ReadHoldingRegisters:
                 got = ex._read_row(r, size, check)
                 if got is None:
                     return None
                 row, extra = got
-                made.append(extra)
             else:
                 shape = ex._shape(r, size)
                 if shape is None or shape.op == READ:
@@ -263,12 +352,12 @@ class ErobExchange(L.Carrier):
                 wrote = ex._row(r, shape, written.setdefault(id(ex), {}), check)
                 if wrote is None:
                     return None
-                row = wrote[0]
-                made.append(wrote[1:])
+                row, *extra = wrote
             turn = ex.bus.message_turnaround(r)
             row[TURN] = line.turnaround if turn is None else turn
             row[ROW] = float(ex._first_row(group, ex.firmware))
             rows.append(row)
+            made.append((ex, *extra))
         with world.lock:
             now = L.clear(line)
             if now is None:
@@ -277,13 +366,12 @@ class ErobExchange(L.Carrier):
             replies: list[Any] = []
             self.clocks = clocks = []
             frames: list[tuple[float, float, float, int, str, Any]] = []
-            for ex, r, t, o, extra in zip(mine, requests, rows, outs, made):
+            for r, t, o, (ex, a, b) in zip(requests, rows, outs, made):
                 if t[OP] == READ:
-                    values = extra[0].finish(list(map(int, o[STATUS_AT:SENSED_AT])), dict(zip(SENSED, o[SENSED_AT:])))
-                    reply = mb.ReadRegistersReply(r.slave, r.function, ModbusFront.pack(extra, values, r.count))
+                    reply = self._status_reply(r, o, a, b, lazy)
                 else:
-                    reply, items = extra
-                    ex.firmware._keep(items)  # the parameter store's part (the row's ran in the call)
+                    reply = a
+                    ex.firmware._keep(b)  # the parameter store's part (the row's ran in the call)
                 replies.append(reply)
                 clocks.append(o[CLOCK_AFTER])
                 frames.append((o[L.H_START], o[L.H_END], o[L.H_DUE], int(t[L.REQUEST]), "host", None))

@@ -51,7 +51,7 @@ from joints.errors import TransportError
 from joints.transports.base import ByteTransport
 from joints.transports.simclock import ClockDriven, ClockLike
 
-__all__ = ["LinePeer", "Ticking", "TimedFrames", "TimedSerialLine", "Transmission"]
+__all__ = ["Deferred", "LinePeer", "Ticking", "TimedFrames", "TimedSerialLine", "Transmission"]
 
 #: s the line waits at most in one step while nothing is on it (frames a device sends by itself are
 #: picked up at least this often)
@@ -105,6 +105,17 @@ class Transmission:
         bad = "  COLLISION" if self.corrupted else ""
         what = self.data.hex(" ").upper() if self.data or not self.size else f"<{self.size} bytes: {self.payload!r}>"
         return f"{self.start * 1000:10.3f} ms {arrow} {what}{bad}"
+
+
+class Deferred:
+    """A direct-path reply known by what it carries, made as its message only when asked (:meth:`message`, once:
+    the same object every time). A frame booked by :meth:`TimedSerialLine.book_frames` may carry one: the log
+    holds its message, made when the log is read."""
+
+    __slots__ = ()
+
+    def message(self) -> Any:
+        raise NotImplementedError
 
 
 def _garbled(data: bytes) -> bytes:
@@ -170,7 +181,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
     def book_frames(self, frames: list[tuple[float, float, float, int, str, Any]]) -> None:
         """Frames a one-call exchange carried (``(start, end, due, size, side, payload)`` each, delivered, none
         overlapping another frame - its caller checked that): logged as :meth:`_put` logs them (the latest-end
-        bookkeeping, the trimming), made :class:`Transmission` objects when the log is read."""
+        bookkeeping, the trimming), made :class:`Transmission` objects when the log is read (a :class:`Deferred`
+        payload: its message)."""
         log: list[Any] = self._log
         latest = self._latest_end
         epoch = self._epoch
@@ -197,6 +209,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             item = log[k]
             if type(item) is tuple:
                 start, end, due, size, side, payload = item
+                if isinstance(payload, Deferred):
+                    payload = payload.message()
                 log[k] = Transmission(start, end, side, b"", delivered=True, due=due, size=size, payload=payload)
         self._raw_from = len(log)
 
@@ -235,7 +249,7 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         self._pending.clear()
         self._rx.clear()
         self._free = {"host": -math.inf, "device": -math.inf}
-        self._epoch = len(self.log)  # frames of the old timeline never overlap the new one's
+        self._epoch = len(self._log)  # frames of the old timeline never overlap the new one's
         self.now = self._clock_seen = c
 
     # -- the line ---------------------------------------------------------------------------------
@@ -255,7 +269,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             due = end + self.adapter_latency
         tx = Transmission(start, end, side, data if type(data) is bytes else bytes(data), due=due, size=n, handler=handler, payload=payload)
         self._free[side] = end + self.gap
-        log, latest = self.log, self._latest_end
+        log: list[Any] = self._log  # (booked frames become transmissions where the search reaches them)
+        latest = self._latest_end
         if len(latest) != len(log):  # the log was edited from outside: check every frame of it from now on
             latest[:] = [math.inf] * len(log)
             self._epoch = min(self._epoch, len(log))
@@ -263,6 +278,9 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             if latest[k] <= start:
                 break  # no frame up to this one ends after the new one starts: none of them overlaps it
             other = log[k]
+            if type(other) is tuple:
+                self._materialize()
+                other = log[k]
             if other.end <= start - 1.0:
                 break  # older than any frame still able to overlap
             if other.side != side and other.start < tx.end and start < other.end:
