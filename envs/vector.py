@@ -45,6 +45,22 @@ def _load(entry_point: str | Callable[..., gym.Env[Any, Any]]) -> Callable[..., 
     return made
 
 
+def _wait_together(envs: Sequence[Any]) -> None:
+    """Each of ``envs`` waits for its tick (as ``RigEnv._wait_until``: an overrun noted), the rigs that must sleep
+    together in one call."""
+    rigs: list[joints.Rig] = []
+    spans: list[float] = []
+    for env in envs:
+        rig = env.rig
+        remaining = env.tick_time() - rig.time
+        if remaining > 0:
+            rigs.append(rig)
+            spans.append(remaining)
+        env.note_overrun(-remaining)
+    if rigs:
+        joints.sleep_together(rigs, spans)
+
+
 class JointsVectorEnv(VectorEnv[Any, Any, Any]):
     """``num_envs`` rigs of one env type in this process, stepped together (see the module docstring).
 
@@ -187,20 +203,7 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
                 acting.append((i, None))
                 obs, rewards[i], terminated[i], truncated[i], infos_of[i] = env.step(actions[i])
                 obs_rows[i] = obs
-        rigs: list[joints.Rig] = []
-        spans: list[float] = []
-        for i, token in acting:
-            env = envs[i]
-            if token is None or not env.batchable:
-                continue
-            rig = env.rig
-            remaining = env.tick_time() - rig.time  # as RigEnv._wait_until
-            if remaining > 0:
-                rigs.append(rig)
-                spans.append(remaining)
-            env.note_overrun(-remaining)
-        if rigs:
-            joints.sleep_together(rigs, spans)
+        _wait_together([envs[i] for i, token in acting if token is not None and envs[i].batchable])
         limit = self.max_episode_steps
         elapsed = self._elapsed
         if mode is AutoresetMode.SAME_STEP:  # rig by rig: a rig that ends is reset at once
@@ -249,17 +252,7 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
 
     def _step_batch(self, batch: Batch) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """:meth:`step` once ``batch`` sent every rig's commands (no rig was due for a reset)."""
-        rigs: list[joints.Rig] = []
-        spans: list[float] = []
-        for env in self.envs:
-            rig = env.rig
-            remaining = env.tick_time() - rig.time  # as RigEnv._wait_until
-            if remaining > 0:
-                rigs.append(rig)
-                spans.append(remaining)
-            env.note_overrun(-remaining)
-        if rigs:
-            joints.sleep_together(rigs, spans)
+        _wait_together(self.envs)
         out = batch.finish()
         n = self.num_envs
         if isinstance(out, tuple):  # the batch's arrays: no episode ended
