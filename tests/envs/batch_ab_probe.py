@@ -15,7 +15,6 @@ first's. Prints the best and median CPU time per rig step of each. Pin it to one
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import sys
 import time
@@ -25,6 +24,10 @@ import gymnasium as gym
 import numpy as np
 
 import envs  # noqa: F401 - registers the joints/ envs
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # tests/, for probekit
+from probekit import load_as
+
 import joints
 from joints.sim import stepping
 from joints.sim import world as W
@@ -34,19 +37,10 @@ STUB = os.environ.get("STUB") == "1"
 SIZES = (1, 4, 16, 64, 256)
 
 
-def _load(root: str, rel: str, name: str) -> Any:
-    spec = importlib.util.spec_from_file_location(name, os.path.join(root, rel))
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 def main() -> None:
     other = sys.argv[1]
     sizes = [int(a) for a in sys.argv[2:]] or list(SIZES)
-    old_advance = _load(other, "joints/sim/world.py", "other_world").advance_together
+    old_advance = load_as(other, "joints/sim/world.py", "other_world").advance_together
     new_advance, new_plan = W.advance_together, stepping.Group._plan
 
     def old_plan(self: Any, worlds: tuple[int, ...]) -> Any:  # the plan cache as it was: cleared at 256 plans

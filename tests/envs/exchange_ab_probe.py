@@ -9,12 +9,13 @@ archive`` of the commit to compare with) loads OTHER's ``line_exchange``, ``erob
 (and ``line_exchange``'s module functions) on the live classes. Each block is ``STEPS`` steps of the same seeded
 uniform actions from the same reset, timed by ``time.thread_time``; the blocks alternate (``ROUNDS`` of each) and
 every block's observations, rewards and ends must be bit-identical to the first block's. Prints the best and
-median CPU time per env step of each. Pin it to one core (``taskset -c 1``).
+median CPU time per env step of each. Pin it to one core (``taskset -c 1``). The two checkouts' classes must keep
+the same attributes (methods are swapped on live objects): against a commit before g1-reply's ``_Shape.checked`` it
+stops with an AttributeError.
 """
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import sys
 import time
@@ -24,6 +25,10 @@ import gymnasium as gym
 import numpy as np
 
 import envs  # noqa: F401 - registers the joints/ envs
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # tests/, for probekit
+from probekit import load_as
+
 from joints import compiled_path as CP
 from joints.devices import params as P
 from joints.drivers import access as A
@@ -35,25 +40,16 @@ STEPS = int(os.environ.get("STEPS", "300"))
 ROUNDS = int(os.environ.get("ROUNDS", "10"))
 
 
-def _load(root: str, rel: str, name: str) -> Any:
-    spec = importlib.util.spec_from_file_location(name, os.path.join(root, rel))
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 def _versions(other: str) -> dict[str, list[tuple[Any, str, Any]]]:
     """Per version ("this", "other"): (object, attribute, value) to set."""
-    o_l = _load(other, "joints/sim/line_exchange.py", "other_line_exchange")
+    o_l = load_as(other, "joints/sim/line_exchange.py", "other_line_exchange")
     o_l._COMPILED = L._COMPILED  # the same compiled kernels (compiling again would take minutes)
-    o_e = _load(other, "joints/sim/erob_exchange.py", "other_erob_exchange")
+    o_e = load_as(other, "joints/sim/erob_exchange.py", "other_erob_exchange")
     o_e.L = o_l
-    o_ln = _load(other, "joints/link/lane.py", "other_lane")
-    o_p = _load(other, "joints/devices/params.py", "other_params")
-    o_a = _load(other, "joints/drivers/access.py", "other_access")
-    o_cp = _load(other, "joints/compiled_path.py", "other_compiled_path")
+    o_ln = load_as(other, "joints/link/lane.py", "other_lane")
+    o_p = load_as(other, "joints/devices/params.py", "other_params")
+    o_a = load_as(other, "joints/drivers/access.py", "other_access")
+    o_cp = load_as(other, "joints/compiled_path.py", "other_compiled_path")
     pairs: list[tuple[Any, Any, list[str] | None]] = [
         (E.ErobExchange, o_e.ErobExchange, None), (L.Carrier, o_l.Carrier, None), (LN.LinkLane, o_ln.LinkLane, None),
         (P.Param, o_p.Param, ["check"]), (A.ModbusAccess, o_a.ModbusAccess, ["write_request"]),

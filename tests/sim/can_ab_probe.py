@@ -14,47 +14,33 @@ Prints the best and median CPU time per env step of each. Pin it to one core (``
 
 from __future__ import annotations
 
-import copy
-import importlib.util
 import os
 import statistics
 import sys
 import time
-from importlib import resources
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 import envs  # noqa: F401 - registers the joints/ envs
-from joints.drivers import erob_can_steady as S
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # tests/, for probekit
+from probekit import load_as
+
+from joints.bench import _baseline_config
+from joints.drivers import erob_can_steady as S
 
 STEPS = int(os.environ.get("STEPS", "300"))
 ROUNDS = int(os.environ.get("ROUNDS", "10"))
 
 
-def _load(root: str, rel: str, name: str) -> Any:
-    spec = importlib.util.spec_from_file_location(name, os.path.join(root, rel))
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 def _config() -> dict[str, Any]:
-    cfg: dict[str, Any] = tomllib.loads(
-        (resources.files("joints.configs") / "erob_reach.toml").read_text(encoding="utf-8"))
-    on_can = copy.deepcopy(cfg)
-    on_can["buses"] = {"can": {"protocol": "erob-can", "bitrate": 1_000_000}}
-    for j in on_can["joints"].values():
-        j["bus"] = "can"
-    return on_can
+    """ErobReach's shipped config on eRob CAN at 1 Mbit/s, as ``joints bench`` builds its CAN row."""
+    found = _baseline_config("joints/ErobReach-v0")
+    assert found is not None and found[1].startswith("erob-can"), found
+    config: dict[str, Any] = found[0]
+    return config
 
 
 def _block(env: Any, step: Any, actions: list[Any]) -> tuple[float, list[Any]]:
@@ -74,8 +60,8 @@ def _block(env: Any, step: Any, actions: list[Any]) -> tuple[float, list[Any]]:
 
 
 def main(other: str, mode: str) -> None:
-    o_ce = _load(other, "joints/sim/can_exchange.py", "other_can_exchange")
-    o_s = _load(other, "joints/drivers/erob_can_steady.py", "other_erob_can_steady")
+    o_ce = load_as(other, "joints/sim/can_exchange.py", "other_can_exchange")
+    o_s = load_as(other, "joints/drivers/erob_can_steady.py", "other_erob_can_steady")
     env = gym.make("joints/ErobReach-v0", config=_config(), control_period=0.02, action_mode=mode)
     u: Any = env.unwrapped
     env.reset(seed=7)

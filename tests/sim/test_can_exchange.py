@@ -12,10 +12,7 @@ cache must be equal; the one-call exchange must have carried the steady steps (w
 
 from __future__ import annotations
 
-import copy
 import dataclasses
-import sys
-from importlib import resources
 from typing import Any
 
 import gymnasium as gym
@@ -23,28 +20,21 @@ import numpy as np
 import pytest
 
 import envs  # noqa: F401 - registers the joints/ envs
+from joints.bench import _baseline_config
 from joints.drivers.erob_can_steady import ErobCanStep
 from joints.errors import DeviceRejected, ReplyTimeout
 from joints.sim import erob_kernel as K
 from joints.sim import kernel
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
 
 PERIOD = 0.02
 
 
 def _config() -> dict[str, Any]:
     """The shipped ErobReach config with its joint on an eRob CAN bus at 1 Mbit/s (as ``joints bench`` runs it)."""
-    cfg: dict[str, Any] = tomllib.loads(
-        (resources.files("joints.configs") / "erob_reach.toml").read_text(encoding="utf-8"))
-    on_can = copy.deepcopy(cfg)
-    on_can["buses"] = {"can": {"protocol": "erob-can", "bitrate": 1_000_000}}
-    for j in on_can["joints"].values():
-        j["bus"] = "can"
-    return on_can
+    found = _baseline_config("joints/ErobReach-v0")
+    assert found is not None and found[1].startswith("erob-can"), found
+    config: dict[str, Any] = found[0]
+    return config
 
 
 def _info(info: dict[str, Any]) -> list[tuple[str, Any]]:
