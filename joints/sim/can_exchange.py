@@ -345,7 +345,8 @@ class ErobCanExchange:
         self.host = host
         self.transport = transport
         self.taken = 0  #: calls that ran
-        self._last: Any = np.zeros((0, OUT_WIDTH))  #: the output rows of the last :meth:`run`
+        self._last: Any = np.zeros((0, OUT_WIDTH))  #: the output rows of the last :meth:`run` (its first ``_done``)
+        self._done = 0
         self._st = np.zeros(STATE_WIDTH)
         self._out: dict[int, Any] = {}  #: output rows per count
         self._plans: dict[int, _Plan] = {}  #: id of a tuple of reads -> its plan
@@ -610,64 +611,83 @@ class ErobCanExchange:
         return (self.world.group, self.medium._peers[0].latency, self.host._node.latency,
                 tuple((f.node, f.firmware.values["motion_mode"], turnarounds.get(f.node)) for f in fronts))
 
-    def run(self, requests: Sequence[Any], timeout: float) -> list[Any] | None:
-        """The replies to ``requests`` (to the twins of this bus, sent one after the other by a link whose reply
-        timeout is ``timeout``), each once the host has it; a refused request's reply is the last. None (nothing
-        sent) where this is not the steady case."""
+    def _call(self, requests: Sequence[Any], timeout: float, reads: bool) -> tuple[_Plan, Any, int] | None:
+        """The compiled call of ``requests`` (the world's lock held) and the medium brought back: the plan, the
+        output rows and how many transactions were done; None (nothing sent) where this is not the steady case
+        (or ``reads`` and a request is not a read)."""
         fn = _compiled()
         if fn is None or not requests:
             return None
         plan = self._plan(requests)
-        if plan is None:
+        if plan is None or (reads and not plan.reads):
             return None
         for front in plan.unique:
             if not self._steady(front):
                 return None
         world, medium, bus = self.world, self.medium, self.bus
-        with world.lock:
-            clock = world.clock.now()
-            # the branches of the medium the call does not model (a frame within twice the clock's time of 0, a
-            # reply near the link's timeout) cannot be met: the whole call is well inside both
-            if not clock > 2.0 * (plan.span + max(medium.now - clock, 0.0)) or not plan.longest < 0.5 * timeout:
+        clock = world.clock.now()
+        # the branches of the medium the call does not model (a frame within twice the clock's time of 0, a reply
+        # near the link's timeout) cannot be met: the whole call is well inside both
+        if not clock > 2.0 * (plan.span + max(medium.now - clock, 0.0)) or not plan.longest < 0.5 * timeout:
+            return None
+        tx = plan.tx
+        n = len(tx)
+        out = self._out.get(n)
+        if out is None:
+            import numpy as np
+
+            out = self._out[n] = np.zeros((n, OUT_WIDTH))
+        st = self._st
+        st[:] = (clock, world._target, 0.0, medium.now, medium._clock_seen, medium._free, medium._ticked,
+                 0.0, 0.0, medium.busy, world.timestep, 0.0, timeout, 0.0, 0.0)
+        scratch = self._scratch.get(world.group.table.shape[1])
+        if scratch is None:
+            import numpy as np
+
+            scratch = self._scratch[world.group.table.shape[1]] = np.zeros(world.group.table.shape[1])
+        state = L.fused(fn, world, st, tx, out, scratch)
+        medium.now = state[NOW]
+        medium._clock_seen = state[SEEN]
+        medium._free = state[FREE]
+        done = int(state[DONE])
+        frames = int(state[FRAMES])
+        medium.frames += frames
+        medium.bits += int(state[BITS])
+        medium.busy = state[BUSY]
+        medium._seq = itertools.count(next(medium._seq) + frames)
+        if state[TICKS]:
+            medium._ticked = bus._last_tick = state[TICKED]
+        if state[ODD] or done == 0:
+            raise RuntimeError(f"{bus.medium.channel}: the one-call exchange met a branch it does not model "
+                               f"after {done} of {n} requests; this is a bug (the steady checks let it through)")
+        self._last, self._done = out, done
+        self.taken += 1
+        return plan, out, done
+
+    def values(self, reads: tuple[Any, ...], timeout: float) -> list[int] | None:
+        """The values the twins answer to ``reads`` (a tuple of reads, sent one after the other as by :meth:`run`):
+        each read's :class:`~joints.codecs.erob_can.ValueReply` value, without the reply (a read is always
+        answered by one, from the node it asked: see :meth:`run`). None (nothing sent) where this is not the
+        steady case or a request is not a read."""
+        with self.world.lock:
+            got = self._call(reads, timeout, True)
+            if got is None:
                 return None
+            return self._read_values(*got)
+
+    def run(self, requests: Sequence[Any], timeout: float) -> list[Any] | None:
+        """The replies to ``requests`` (to the twins of this bus, sent one after the other by a link whose reply
+        timeout is ``timeout``), each once the host has it; a refused request's reply is the last. None (nothing
+        sent) where this is not the steady case."""
+        with self.world.lock:
+            got = self._call(requests, timeout, False)
+            if got is None:
+                return None
+            plan, out, done = got
+            if plan.reads:
+                return [ec.ValueReply(r.node, v) for r, v in zip(requests, self._read_values(plan, out, done))]
             tx = plan.tx
-            n = len(tx)
-            out = self._out.get(n)
-            if out is None:
-                import numpy as np
-
-                out = self._out[n] = np.zeros((n, OUT_WIDTH))
-            st = self._st
-            st[:] = (clock, world._target, 0.0, medium.now, medium._clock_seen, medium._free, medium._ticked,
-                     0.0, 0.0, medium.busy, world.timestep, 0.0, timeout, 0.0, 0.0)
-            scratch = self._scratch.get(world.group.table.shape[1])
-            if scratch is None:
-                import numpy as np
-
-                scratch = self._scratch[world.group.table.shape[1]] = np.zeros(world.group.table.shape[1])
-            state = L.fused(fn, world, st, tx, out, scratch)
-            medium.now = state[NOW]
-            medium._clock_seen = state[SEEN]
-            medium._free = state[FREE]
-            done = int(state[DONE])
-            frames = int(state[FRAMES])
-            medium.frames += frames
-            medium.bits += int(state[BITS])
-            medium.busy = state[BUSY]
-            medium._seq = itertools.count(next(medium._seq) + frames)
-            if state[TICKS]:
-                medium._ticked = bus._last_tick = state[TICKED]
-            if state[ODD] or done == 0:
-                raise RuntimeError(f"{bus.medium.channel}: the one-call exchange met a branch it does not model "
-                                   f"after {done} of {n} requests; this is a bug (the steady checks let it through)")
             replies: list[Any] = []
-            self._last = out[:done]
-            if plan.reads:  # (only the columns the replies are made of)
-                for r, shape, front, o in zip(requests, plan.shapes, plan.fronts, out[:done, STATUS_AT:].tolist()):
-                    front.requests += 1
-                    replies.append(ec.ValueReply(r.node, self._value(front.firmware, shape, o)))
-                self.taken += 1
-                return replies
             for k, (r, shape, front, o) in enumerate(zip(requests, plan.shapes, plan.fronts, out[:done].tolist())):
                 fw = front.firmware
                 front.requests += 1
@@ -695,14 +715,21 @@ class ErobCanExchange:
                         replies.append(ec.Ack(node))
                 else:
                     replies.append(ec.ValueReply(node, self._value(fw, shape, o[STATUS_AT:])))
-        self.taken += 1
         return replies
 
     @property
     def instants(self) -> list[tuple[float, ...]]:
         """Per transaction of the last :meth:`run`: (request start, end, reply start, end, the host has it, the
         world's substeps when the drive acted)."""
-        return [(o[E0], o[E1], o[R0], o[R1], o[HOST], o[ACTED]) for o in self._last.tolist()]
+        return [(o[E0], o[E1], o[R0], o[R1], o[HOST], o[ACTED]) for o in self._last[:self._done].tolist()]
+
+    def _read_values(self, plan: _Plan, out: Any, done: int) -> list[int]:
+        """The values a reads plan's fronts answer (each counts its request), from ``out``'s first ``done`` rows."""
+        values: list[int] = []
+        for shape, front, o in zip(plan.shapes, plan.fronts, out[:done, STATUS_AT:].tolist()):  # (those columns)
+            front.requests += 1
+            values.append(self._value(front.firmware, shape, o))
+        return values
 
     @staticmethod
     def _value(fw: ErobFirmware, shape: _Shape, o: Sequence[float]) -> int:

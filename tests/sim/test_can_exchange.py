@@ -79,20 +79,20 @@ class _Recorder:
             link.request = timed
         self.steps = [s for s in (u.compiled_path._steppers if u.compiled_path else []) if isinstance(s, ErobCanStep)]
         for s in self.steps:
-            run = s.exchange.run
+            for method in ("run", "values"):  # (the replies, or a read's values without them)
+                def carried(requests: Any, timeout: float, run: Any = getattr(s.exchange, method), s: Any = s,
+                            method: str = method) -> Any:
+                    out = run(requests, timeout)
+                    if out is not None:
+                        self.replies += [type(reply).__name__ if method == "run" else "value" for reply in out]
+                        for r, (_e0, e1, _r0, r1, seen, acted) in zip(requests, s.exchange.instants):
+                            self.frames += [(e1, 0x640 + r.node), (r1, 0x5C0 + r.node)]
+                            self.host.append(seen)
+                            self.acted.append(int(acted))
+                        assert self.host[-1] == world.clock.now()
+                    return out
 
-            def carried(requests: Any, timeout: float, run: Any = run, s: Any = s) -> Any:
-                out = run(requests, timeout)
-                if out is not None:
-                    self.replies += [type(reply).__name__ for reply in out]
-                    for r, (_e0, e1, _r0, r1, seen, acted) in zip(requests, s.exchange.instants):
-                        self.frames += [(e1, 0x640 + r.node), (r1, 0x5C0 + r.node)]
-                        self.host.append(seen)
-                        self.acted.append(int(acted))
-                    assert self.host[-1] == world.clock.now()
-                return out
-
-            s.exchange.run = carried
+                setattr(s.exchange, method, carried)
 
 
 def _state(u: Any) -> dict[str, Any]:
