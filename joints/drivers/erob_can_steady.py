@@ -37,7 +37,8 @@ _STOCK = tuple((cls, name, getattr(cls, name)) for cls, names in (
     (ErobCanLink, ("_once", "_guarded", "_fence")),
     (ErobCanRule, ("is_reply", "encode", "check", "expects_reply")),
     (FrameFraming, ("write", "receive")),
-) for name in names) + ((ec, "answers", ec.answers),)  # (what the stock ``is_reply`` asks)
+) for name in names) + ((ec, "answers", ec.answers), (ec, "encode", ec.encode))  # (what the stock rule calls)
+_I32 = (-0x80000000, 0x7FFFFFFF)
 
 
 class _Counts:
@@ -68,6 +69,10 @@ class ErobCanStep:
         self._reads: dict[tuple[str, ...], tuple[ec.Read, ...]] = {}
         #: reads tuples whose value replies the stock ``is_reply`` was seen to take (see :meth:`_send_values`)
         self._answered: set[int] = set()
+        #: (node, index, subindex) of writes the stock rule encoded (see :meth:`_check`); (request type, node) of
+        #: requests whose ``Ack`` the stock ``is_reply`` took (see :meth:`_take`)
+        self._encoded: set[tuple[int, int, int | None]] = set()
+        self._acked: set[tuple[type, int]] = set()
         self.values_taken = 0  #: state reads taken by their values (:meth:`_send_values`)
 
     def _reads_of(self, names: tuple[str, ...]) -> tuple[ec.Read, ...]:
@@ -91,10 +96,24 @@ class ErobCanStep:
             type(link.rule) is ErobCanRule and type(link.framing) is FrameFraming and \
             all(getattr(cls, name) is fn for cls, name, fn in _STOCK)
 
-    def _send(self, requests: Sequence[Any]) -> list[Any] | None:
+    def _check(self, request: ec.Write, steady: bool) -> None:
+        """``rule.check(request)``: raises :class:`~joints.errors.EncodeError` before anything is sent. With the
+        stock rule (``steady``: :meth:`_steady` held just now) the frame is built once per (node, index, subindex):
+        ``ec.encode`` of a write checks those and its value's int32 range only, and the range is checked here."""
+        key = (request.node, request.index, request.subindex)
+        value = request.value
+        if steady and type(value) is int and _I32[0] <= value <= _I32[1] and key in self._encoded and \
+                type(request) is ec.Write:
+            return
+        self.link.rule.check(request)
+        if steady and type(request) is ec.Write:
+            self._encoded.add(key)
+
+    def _send(self, requests: Sequence[Any], steady: bool) -> list[Any] | None:
         """The twin's replies to ``requests`` by one call of its exchange (counted as the link counts them; each
-        to be taken by :meth:`_take`, in order), or None (nothing sent) where the link is not in the steady case."""
-        if not self._steady():
+        to be taken by :meth:`_take`, in order), or None (nothing sent) where the link is not in the steady case
+        (``steady``: :meth:`_steady`, asked by the caller just before)."""
+        if not steady:
             return None
         link = self.link
         with link._lock:
@@ -132,8 +151,15 @@ class ErobCanStep:
         return values
 
     def _take(self, request: Any, reply: Any) -> Any:
-        """``reply`` taken as the link takes it (an error reply raises here, as it raises there)."""
+        """``reply`` taken as the link takes it (an error reply raises here, as it raises there). An ``Ack`` from
+        the request's node is taken by the stock ``is_reply`` (checked before the call) by the request's type and
+        node alone: asked once per (type, node), by the rule itself."""
+        if type(reply) is ec.Ack and reply.node == request.node and (type(request), request.node) in self._acked:
+            return reply
         link = self.link
+        if type(reply) is ec.Ack and reply.node == request.node and link.rule.is_reply(request, reply):
+            self._acked.add((type(request), request.node))
+            return reply
         if not link.rule.is_reply(request, reply):  # (a steady reply always answers its request)
             raise UnexpectedReply(f"{link.name}: the twin's one-call exchange answered {request!r} with {reply!r}, "
                                   "which does not answer it (a fault of the emulator: report it)")
@@ -156,8 +182,9 @@ class ErobCanStep:
             if driver.steady_move(speed, acc, dec):
                 driver.validate(target_absolute_position=target)
                 request = self.access.message("target_absolute_position", target)
-                self.link.rule.check(request)  # raises EncodeError before anything is sent
-                replies = self._send((request, self.start))
+                steady = self._steady()
+                self._check(request, steady)  # raises EncodeError before anything is sent
+                replies = self._send((request, self.start), steady)
                 if replies is not None:
                     self._take(request, replies[0])
                     driver.note_written("target_absolute_position", target)
@@ -189,8 +216,9 @@ class ErobCanStep:
         write of the analog value 0x01FE) by one call of the twin's exchange; False: not sent (the driver's own
         method sends it)."""
         request = self.access.message("analog_quantity_value", value)
-        self.link.rule.check(request)  # raises EncodeError before anything is sent
-        replies = self._send((request,))
+        steady = self._steady()
+        self._check(request, steady)  # raises EncodeError before anything is sent
+        replies = self._send((request,), steady)
         if replies is None:
             return False
         self._take(request, replies[0])

@@ -93,6 +93,7 @@ STATUS_AT = 9
 SENSED = K.SENSED
 SENSED_AT = STATUS_AT + len(K.STATUS_NAMES)
 _SENSED = SENSED_AT - STATUS_AT  #: where the sensed columns start, counted from the status values
+_TIME, _POS, _VEL, _I_OUT = SENSED  #: (in this order)
 OUT_WIDTH = SENSED_AT + len(SENSED)
 
 
@@ -359,6 +360,7 @@ class ErobCanExchange:
         self.refilled = 0  #: plans made from a kept command plan (:meth:`_refill`)
         self.setpoints = 0  #: set-point writes (speed or current) carried
         self.held = 0  #: of them, held by the front (the drive stopped being ready during the call)
+        self._row_seen: dict[int, float] = dict.fromkeys(SENSED, 0.0)  #: :meth:`_sensed_row`'s
 
     # -- the steady case ------------------------------------------------------------------------
     def _steady(self, front: ErobCanFront) -> bool:
@@ -726,23 +728,23 @@ class ErobCanExchange:
     def _read_values(self, plan: _Plan, out: Any, done: int) -> list[int]:
         """The values a reads plan's fronts answer (each counts its request), from ``out``'s first ``done`` rows."""
         values: list[int] = []
+        value = self._value
         for shape, front, o in zip(plan.shapes, plan.fronts, out[:done, STATUS_AT:].tolist()):  # (those columns)
             front.requests += 1
-            values.append(self._value(front.firmware, shape, o))
+            values.append(value(front.firmware, shape, o))
         return values
 
-    @staticmethod
-    def _value(fw: ErobFirmware, shape: _Shape, o: Sequence[float]) -> int:
+    def _value(self, fw: ErobFirmware, shape: _Shape, o: Sequence[float]) -> int:
         """What the front answers to a read: the firmware's value (the sensors' report of what they saw then),
         saturated, in the protocol's scale, as int32 (``o``: its output row from the status values on)."""
         index, scale, lo, hi, plan = shape.extra
         if plan is not None:  # the status read (its sensors report too, as the firmware's own read)
-            v = plan.finish([int(x) for x in o[:_SENSED]], dict(zip(SENSED, o[_SENSED:])))[0]
+            v = plan.finish(list(map(int, o[:_SENSED])), self._sensed_row(o))[0]
         else:
             v = int(o[index])
             sensed = _SENSED_READS.get(shape.name)
             if sensed is not None and not fw.sensor.model.ideal:
-                v = getattr(fw, sensed)(dict(zip(SENSED, o[_SENSED:])).__getitem__)
+                v = getattr(fw, sensed)(self._sensed_row(o).__getitem__)
             if v < lo:
                 v = lo
             elif v > hi:
@@ -751,6 +753,13 @@ class ErobCanExchange:
         if v > 0x7FFFFFFF:
             v -= 1 << 32
         return int(v)
+
+    def _sensed_row(self, o: Sequence[float]) -> dict[int, float]:
+        """The row's columns the sensors see (column -> value) as they stood at the read, from its output row ``o``:
+        one dict kept between reads, its values put in (each read's sensors use it before the next is made)."""
+        row = self._row_seen
+        row[_TIME], row[_POS], row[_VEL], row[_I_OUT] = o[_SENSED:]
+        return row
 
 
 def prepare(world: Any, bus: Any, host: Any, transport: Any) -> ErobCanExchange | None:

@@ -80,8 +80,9 @@ class _Recorder:
         self.steps = [s for s in (u.compiled_path._steppers if u.compiled_path else []) if isinstance(s, ErobCanStep)]
         for s in self.steps:
             for method in ("run", "values"):  # (the replies, or a read's values without them)
-                def carried(requests: Any, timeout: float, run: Any = getattr(s.exchange, method), s: Any = s,
-                            method: str = method) -> Any:
+                call = getattr(s.exchange, method)
+
+                def carried(requests: Any, timeout: float, run: Any = call, s: Any = s, method: str = method) -> Any:
                     out = run(requests, timeout)
                     if out is not None:
                         self.replies += [type(reply).__name__ if method == "run" else "value" for reply in out]
