@@ -96,7 +96,7 @@ class ErobCanStep:
             type(link.rule) is ErobCanRule and type(link.framing) is FrameFraming and \
             all(getattr(cls, name) is fn for cls, name, fn in _STOCK)
 
-    def _check(self, request: ec.Write, steady: bool) -> None:
+    def _check(self, request: Any, steady: bool) -> None:
         """``rule.check(request)``: raises :class:`~joints.errors.EncodeError` before anything is sent. With the
         stock rule (``steady``: :meth:`_steady` held just now) the frame is built once per (node, index, subindex):
         ``ec.encode`` of a write checks those and its value's int32 range only, and the range is checked here."""

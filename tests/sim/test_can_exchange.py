@@ -152,6 +152,8 @@ def _run(compiled: bool, mode: str, steps: int, *, plant: Any = None, undo: Any 
         out["taken"] = None if cp is None else (cp.taken, cp.fused, sum(s.exchange.taken for s in rec.steps))
         out["refilled"] = sum(s.exchange.refilled for s in rec.steps)  # command plans made from a kept one
         out["setpoints"] = [(s.exchange.setpoints, s.exchange.held) for s in rec.steps]
+        out["values"] = sum(s.values_taken for s in rec.steps)  # state reads taken by their values
+        out["proofs"] = [(sorted(s._encoded), sorted((t.__name__, n) for t, n in s._acked)) for s in rec.steps]
         return out
     finally:
         if undo is not None:  # what the plant changed, put back so that closing reaches the drive
@@ -178,15 +180,46 @@ def test_the_compiled_can_step_gives_the_frame_by_frame_bits(mode: str) -> None:
     taken, fused, calls = compiled["taken"]
     if kernel.default_mode():  # the one-call exchange carried the steady steps (it needs the compiled world)
         assert calls >= steps  # the state reads of every step (and the position commands)
+        assert compiled["values"] >= steps  # every step's state read taken by its values, without replies
+        ((encoded, acked),) = compiled["proofs"]  # a command's frame built once, its Acks asked once
+        assert len(encoded) == 1 and ("Write", encoded[0][0]) in acked
         if mode == "position":
             assert taken >= steps - 1 and fused >= 8 * steps - 8
+            assert ("Command", encoded[0][0]) in acked
             assert compiled["refilled"] >= steps - 2  # the command's rows kept, its values put in each step
         else:  # a speed or current set-point: one write of 0x01FE, in a call of its own; then the state read's
             assert taken >= steps - 1 and fused >= 7 * steps - 1
             ((setpoints, held),) = compiled["setpoints"]
             assert setpoints >= steps - 1 and held == 0
     else:
-        assert calls == 0 and fused == 0
+        assert calls == 0 and fused == 0 and compiled["values"] == 0
+
+
+def test_a_replaced_reply_check_leaves_the_steps_to_the_frame_by_frame_path(monkeypatch: pytest.MonkeyPatch) -> None:
+    """From step 10 the codec's ``answers`` (what the stock ``is_reply`` asks, and what the state read's proof by
+    one reply of value 0 rests on) is wrapped: from then on nothing goes by the call, with the same bits."""
+    from joints.codecs import erob_can as ec
+
+    original = ec.answers
+    calls: list[tuple[int, int]] = []
+
+    def plant(k: int, u: Any) -> None:
+        if k == 10:
+            monkeypatch.setattr(ec, "answers", lambda request, reply: original(request, reply))
+        cp = u.compiled_path
+        if cp is not None:
+            (step,) = [s for s in cp._steppers if isinstance(s, ErobCanStep)]
+            calls.append((cp.fused, step.values_taken))
+
+    out = {}
+    for compiled in (False, True):
+        monkeypatch.setattr(ec, "answers", original)
+        calls.clear()
+        out[compiled] = _run(compiled, "position", 20, plant=plant)
+    _same(out[False], out[True])
+    if kernel.default_mode():
+        assert calls[10][0] > calls[1][0] > 0 and calls[10][1] > calls[1][1] > 0  # the call carried the first steps
+        assert calls[10] == calls[-1]  # then never again
 
 
 def test_a_start_the_drive_refuses_mid_step_is_refused_the_same_way() -> None:
@@ -314,6 +347,9 @@ def test_a_reply_of_the_call_that_does_not_answer_its_request_raises_unexpected_
                 replies[-1] = dataclasses.replace(replies[-1], node=replies[-1].node + 1)
             return replies
 
+        for _ in range(3):  # (the Acks of the command's requests asked once of the rule: then taken by their node)
+            env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+        assert step._acked
         step.exchange.run = misrouted
         with pytest.raises(UnexpectedReply, match="does not answer it"):
             env.step(np.zeros(env.action_space.shape, dtype=np.float32))
