@@ -41,6 +41,14 @@ _STOCK = tuple((cls, name, getattr(cls, name)) for cls, names in (
 _I32 = (-0x80000000, 0x7FFFFFFF)
 
 
+def _stock() -> bool:
+    """Whether none of :data:`_STOCK` is replaced."""
+    for cls, name, fn in _STOCK:
+        if getattr(cls, name) is not fn:
+            return False
+    return True
+
+
 class _Counts:
     """Requests sent by the one-call exchange (``fused``; all of them ``taken`` by it), as a lane counts them."""
 
@@ -93,8 +101,7 @@ class ErobCanStep:
         """Whether the link is in the steady case: no trace, no node to fence, the stock classes and methods."""
         link = self.link
         return link.trace is None and self.node not in link._unsynced and type(link) is ErobCanLink and \
-            type(link.rule) is ErobCanRule and type(link.framing) is FrameFraming and \
-            all(getattr(cls, name) is fn for cls, name, fn in _STOCK)
+            type(link.rule) is ErobCanRule and type(link.framing) is FrameFraming and _stock()
 
     def _check(self, request: Any, steady: bool) -> None:
         """``rule.check(request)``: raises :class:`~joints.errors.EncodeError` before anything is sent. With the

@@ -298,12 +298,25 @@ _STOCK = (*erob.STOCK, *((cls, name, getattr(cls, name)) for cls, names in (
     (can_transport.PythonCanTransport, ("send", "recv")),
     (ErobCanBus, ("on_frame", "exchange", "front", "turnaround", "tick", "next_event")),
     (ErobCanFront, ("handle", "_read", "_write", "_command", "_setpoint", "_fw_read", "tick")),
+    (erob._StatusRead, ("finish",)),
 ) for name in names))
 
 
 #: the reads whose value the drive's sensors report (the firmware's method, given the row as the read saw it)
 _SENSED_READS = {"actual_position": "_sensed_counts", "current_speed": "_sensed_speed",
                  "motor_current": "_sensed_current"}
+
+
+def _direct(plan: Any) -> tuple[int, int, int] | None:
+    """Where a prepared status read of one value (``ErobFirmware.reader``) finds it and its saturation, where its
+    ``finish`` (stock, checked before every call) gives that value as its status value saturated, after the
+    sensors' report whose values it does not use (the value is none of the three they report); else None."""
+    if type(plan) is not erob._StatusRead or len(plan.entries) != 1:
+        return None
+    ((at, _name, lo, hi),) = plan.entries
+    if at < 0 or at in (erob._SENSED_COUNTS, erob._SENSED_SPEED, erob._SENSED_CURRENT):
+        return None
+    return at, lo, hi
 
 
 @dataclass(frozen=True, slots=True)
@@ -315,7 +328,7 @@ class _Shape:
     request: tuple[int, float]  #: the request frame's bits and wire time
     reply: tuple[int, float]  #: the plain reply's
     error: tuple[int, float]  #: an error reply's
-    extra: Any  #: a read: (status index or -1 for the status read, scale, lo, hi, the prepared status read)
+    extra: Any  #: a read: (status index, scale, lo, hi, the prepared status read or None, its :func:`_direct`)
 
 
 @dataclass(frozen=True, slots=True)
@@ -428,7 +441,7 @@ class ErobCanExchange:
                 return None
             op = READ_ACHIEVE if plan is not None else READ
             return _Shape(op, name, self._timed(request), self._timed(ec.ValueReply(node, 0)), error,
-                          (K.STATUS_NAMES.index(name), key.scale, lo, hi, plan))
+                          (K.STATUS_NAMES.index(name), key.scale, lo, hi, plan, _direct(plan)))
         if type(request) is ec.Write and request.subindex is None:
             try:
                 name = EROB_CAN.at(request.index, None)
@@ -737,8 +750,14 @@ class ErobCanExchange:
     def _value(self, fw: ErobFirmware, shape: _Shape, o: Sequence[float]) -> int:
         """What the front answers to a read: the firmware's value (the sensors' report of what they saw then),
         saturated, in the protocol's scale, as int32 (``o``: its output row from the status values on)."""
-        index, scale, lo, hi, plan = shape.extra
-        if plan is not None:  # the status read (its sensors report too, as the firmware's own read)
+        index, scale, lo, hi, plan, direct = shape.extra
+        if direct is not None:  # the status read's finish (see _direct): its sensors report, its value saturated
+            if not plan.fw.sensor.ideal:
+                plan.fw._sensed(self._sensed_row(o).__getitem__)
+            at, lo, hi = direct
+            v = int(o[at])
+            v = lo if v < lo else hi if hi < v else v  # noqa: FURB136 - (as finish spells it)
+        elif plan is not None:  # the status read (its sensors report too, as the firmware's own read)
             v = plan.finish(list(map(int, o[:_SENSED])), self._sensed_row(o))[0]
         else:
             v = int(o[index])
