@@ -236,8 +236,9 @@ class ErobCanopenDriver(ErobDriver):
         link = self.link
         cobs = (self.tpdo1_cob, self.tpdo2_cob)
         self._subs.append(link.subscribe(lambda m: isinstance(m, co.Pdo) and m.cob_id in cobs and not m.remote,
-                                         self.on_tpdo))
-        self._subs.append(link.subscribe(lambda m: isinstance(m, co.Emcy) and m.node == self.node, self._on_emcy))
+                                         self.on_tpdo, only=cobs))
+        self._subs.append(link.subscribe(lambda m: isinstance(m, co.Emcy) and m.node == self.node, self._on_emcy,
+                                         only=(co.Emcy,)))
 
     def _pdo_writes(self, configs: Sequence[PdoConfig], known: dict[tuple[int, int], int]) -> None:
         for cfg in configs:
