@@ -944,6 +944,9 @@ class CanopenFront:
 class ErobCanopenBus:
     """The device side of one CANopen bus: fronts by node id, routed by COB-ID, on a timed medium."""
 
+    #: every frame the fronts send is encoded for that sending and never kept (the medium may hand it over)
+    fresh_answers = True
+
     def __init__(self, fronts: Iterable[CanopenFront] = (), *, name: str = "canopen", bitrate: int = 1_000_000,
                  latency: float = 0.0, ideal: bool = False) -> None:
         self.fronts: list[CanopenFront] = []
