@@ -16,7 +16,7 @@ import functools
 import logging
 import threading
 from collections import deque
-from collections.abc import Callable, Hashable, Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
@@ -160,10 +160,9 @@ class Rule(abc.ABC, Generic[M]):
         """What to check when ``request`` got no reply."""
         return "check wiring, address, bit rate and that the device is powered"
 
-    def route_key(self, message: M) -> Hashable | None:
-        """A key that sorts received messages for the subscribers (:meth:`Link.subscribe`'s ``only``): equal for
-        every message a subscriber's predicate may tell apart only by looking; None: unknown (every subscriber
-        is asked)."""
+    def route_key(self, message: M) -> object:
+        """A hashable key of a received message: a subscriber is offered only the messages whose key its ``only``
+        lists (:meth:`Link.subscribe`); None: no key (every subscriber is asked)."""
         return None
 
 
@@ -176,7 +175,7 @@ class Subscription(Generic[M]):
     link: Link[M] | None = None
     #: the route keys (:meth:`Rule.route_key`) of every frame ``predicate`` can accept (None: any frame); a
     #: frame with another key is not offered to it, one whose key the rule cannot tell always is
-    only: frozenset[Hashable] | None = None
+    only: frozenset[object] | None = None
 
     def cancel(self) -> None:
         if self.link is not None:
@@ -206,7 +205,7 @@ class Link(Generic[M]):
         self.name = name
         self._lock = threading.RLock()
         self._subscriptions: list[Subscription[M]] = []
-        self._routes: dict[Hashable, tuple[Subscription[M], ...]] = {}  #: route key -> the subscribers offered it
+        self._routes: dict[object, tuple[Subscription[M], ...]] = {}  #: route key -> the subscribers offered it
         #: unsolicited frames nobody subscribed to (bounded; :attr:`unsolicited_dropped` counts overflow)
         self.unsolicited: deque[tuple[float, M]] = deque(maxlen=UNSOLICITED_LOG)
         self.unsolicited_dropped = 0
@@ -278,7 +277,7 @@ class Link(Generic[M]):
 
     # -- unsolicited frames -----------------------------------------------------------------
     def subscribe(self, predicate: Callable[[M], bool], callback: Callable[[M], None], *,
-                  only: Iterable[Hashable] | None = None) -> Subscription[M]:
+                  only: Iterable[object] | None = None) -> Subscription[M]:
         """Deliver every unsolicited frame for which ``predicate`` holds to ``callback``.
 
         Callbacks run in the thread that reads the bus (during a request, :meth:`poll` or

@@ -22,7 +22,7 @@ Node monitoring (:class:`NodeMonitor`), evaluated on the link's clock whenever t
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Hashable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -141,7 +141,7 @@ class CanopenRule(Rule[Any]):
     def parse_request(self, frame: Any) -> Any:
         return co.decode(frame)
 
-    def route_key(self, message: Any) -> Hashable:
+    def route_key(self, message: Any) -> object:
         """A PDO's COB-ID (its subscribers are the nodes that mapped it), else the message's class."""
         kind = type(message)
         return message.cob_id if kind is co.Pdo else kind

@@ -175,6 +175,7 @@ class CanMedium(ClockDriven):
         # statistics
         self.frames = 0
         self.bits = 0
+        self.handed_over = 0  #: deliveries that handed a peer's fresh answer over instead of a copy
         self.busy = 0.0
         self._mark = (self.now, 0, 0, 0.0)
         self.channel = self._register(channel) if register else (channel or "joints-sim")
@@ -398,6 +399,7 @@ class CanMedium(ClockDriven):
             if handoff:  # the copy's fields, set on the frame nobody else holds
                 msg = frame
                 msg.timestamp, msg.channel, msg.is_rx = t, self.channel, True
+                self.handed_over += 1
             else:
                 msg = can.Message(
                     timestamp=t, arbitration_id=frame.arbitration_id, is_extended_id=frame.is_extended_id,
