@@ -241,7 +241,12 @@ def test_a_subscriber_is_offered_only_the_frames_of_its_keys() -> None:
     asked: list[int] = []
     keyed: list[int] = []
     everything: list[int] = []
-    link.subscribe(lambda m: asked.append(m.arbitration_id) is None, lambda m: keyed.append(m.data[0]), only=(0x181,))
+
+    def asking(m: can.Message) -> bool:
+        asked.append(m.arbitration_id)
+        return True
+
+    link.subscribe(asking, lambda m: keyed.append(m.data[0]), only=(0x181,))
     link.subscribe(lambda m: True, lambda m: everything.append(m.data[0]))
     bus.rx.extend([msg(0x181, 1), msg(0x182, 2), msg(0x181, 3)])
     link.poll()
