@@ -350,7 +350,10 @@ class Mode(enum.IntEnum):
     @property
     def cyclic(self) -> bool:
         """A mode whose targets come once per SYNC cycle (CSP, CSV, CST, IP)."""
-        return self in (Mode.CSP, Mode.CSV, Mode.CST, Mode.IP)
+        return self in _CYCLIC_MODES
+
+
+_CYCLIC_MODES = frozenset((Mode.CSP, Mode.CSV, Mode.CST, Mode.IP))  #: :attr:`Mode.cyclic` (asked per frame)
 
 
 #: bit of each mode in "supported drive modes" 0x6502

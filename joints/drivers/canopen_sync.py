@@ -105,8 +105,7 @@ class SyncCycle:
             link.wait_bus(self.next_due)  # TPDOs of earlier cycles still arriving are delivered as such
         self._n += 1
         due = self._grid + self._n * self.period  # on a grid: no drift
-        link.poll(0.0)
-        for driver, target in targets.items():
+        for driver, target in targets.items():  # each send first delivers what arrived before it
             driver.cycle_send(target)
         link.sync()
         self.sync_time = link.bus_now()

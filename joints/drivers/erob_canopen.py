@@ -160,6 +160,7 @@ class ErobCanopenDriver(ErobDriver):
         self._rpdo = ERUNNER_RPDO1[self.mode]
         self._tpdos: tuple[PdoConfig, ...] = ERUNNER_TPDOS
         self._unpack: tuple[tuple[PdoConfig, ...], tuple[Callable[[bytes], tuple[int, ...]], ...]] | None = None
+        self._pack: tuple[PdoConfig, Callable[[Sequence[int]], bytes], int] | None = None
         self._subs: list[Any] = []
         self.statusword = 0
         self.position = 0
@@ -236,8 +237,9 @@ class ErobCanopenDriver(ErobDriver):
         link = self.link
         cobs = (self.tpdo1_cob, self.tpdo2_cob)
         self._subs.append(link.subscribe(lambda m: isinstance(m, co.Pdo) and m.cob_id in cobs and not m.remote,
-                                         self.on_tpdo))
-        self._subs.append(link.subscribe(lambda m: isinstance(m, co.Emcy) and m.node == self.node, self._on_emcy))
+                                         self.on_tpdo, only=cobs))
+        self._subs.append(link.subscribe(lambda m: isinstance(m, co.Emcy) and m.node == self.node, self._on_emcy,
+                                         only=(co.Emcy,)))
 
     def _pdo_writes(self, configs: Sequence[PdoConfig], known: dict[tuple[int, int], int]) -> None:
         for cfg in configs:
@@ -323,6 +325,14 @@ class ErobCanopenDriver(ErobDriver):
             memo = self._unpack = (self._tpdos, tuple(co.pdo_unpacker(_entries(c)) for c in self._tpdos))
         return memo[1]
 
+    def _send_rpdo(self, values: Sequence[int]) -> None:
+        """RPDO1 with ``values``: its COB-ID and packing prepared once per configuration (``co.pdo_packer``: the
+        bytes and errors of ``pack_pdo``)."""
+        memo = self._pack
+        if memo is None or memo[0] is not self._rpdo:
+            memo = self._pack = (self._rpdo, co.pdo_packer(_entries(self._rpdo)), self._rpdo.cob_id(self.node))
+        self.link.send_pdo(memo[2], memo[1](values))
+
     def on_tpdo(self, msg: co.Pdo) -> None:
         t = self.link.clock.now()
         if msg.cob_id == self.tpdo1_cob:
@@ -354,15 +364,14 @@ class ErobCanopenDriver(ErobDriver):
             self._target = target
         self._cw = cw
         values = [cw, self._target] + [0] * (len(self._rpdo.objects) - 2)
-        self.link.send_pdo(self._rpdo.cob_id(self.node), co.pack_pdo(_entries(self._rpdo), values))
+        self._send_rpdo(values)
         if self.cyclic:
             self.link.sync()
 
     def _snapshot(self) -> None:
         """One SYNC and this node's TPDOs of it (statusword, position; velocity and current)."""
         link = self.link
-        link.poll(0.0)
-        link.sync()
+        link.sync()  # what arrived before it is delivered first (the send drains the bus)
         self.group.synced(link.bus_now())  # every node in a cyclic mode answers it: the SYNC cycle keeps count
         want = {c for c in (self.tpdo1_cob, self.tpdo2_cob)[:len(self._tpdos)]}
         deadline = link.clock.now() + link.policy.timeout
@@ -690,7 +699,7 @@ class ErobCanopenDriver(ErobDriver):
         self._target = value
         self._cw = (self._cw | 0x000F) & ~cia402.CW_HALT if self._enabled else self._cw
         values = [self._cw, value] + [0] * (len(self._rpdo.objects) - 2)
-        self.link.send_pdo(self._rpdo.cob_id(self.node), co.pack_pdo(_entries(self._rpdo), values))
+        self._send_rpdo(values)
 
     # -- host-side contracts ----------------------------------------------------------------
     def set_communication_timeout(self, milliseconds: int) -> None:

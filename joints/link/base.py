@@ -16,7 +16,7 @@ import functools
 import logging
 import threading
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
@@ -160,6 +160,11 @@ class Rule(abc.ABC, Generic[M]):
         """What to check when ``request`` got no reply."""
         return "check wiring, address, bit rate and that the device is powered"
 
+    def route_key(self, message: M) -> object:
+        """A hashable key of a received message: a subscriber is offered only the messages whose key its ``only``
+        lists (:meth:`Link.subscribe`); None: no key (every subscriber is asked)."""
+        return None
+
 
 @dataclass(eq=False)
 class Subscription(Generic[M]):
@@ -168,10 +173,14 @@ class Subscription(Generic[M]):
     predicate: Callable[[M], bool]
     callback: Callable[[M], None]
     link: Link[M] | None = None
+    #: the route keys (:meth:`Rule.route_key`) of every frame ``predicate`` can accept (None: any frame); a
+    #: frame with another key is not offered to it, one whose key the rule cannot tell always is
+    only: frozenset[object] | None = None
 
     def cancel(self) -> None:
         if self.link is not None:
             self.link._subscriptions = [s for s in self.link._subscriptions if s is not self]
+            self.link._routes.clear()
             self.link = None
 
 
@@ -196,6 +205,7 @@ class Link(Generic[M]):
         self.name = name
         self._lock = threading.RLock()
         self._subscriptions: list[Subscription[M]] = []
+        self._routes: dict[object, tuple[Subscription[M], ...]] = {}  #: route key -> the subscribers offered it
         #: unsolicited frames nobody subscribed to (bounded; :attr:`unsolicited_dropped` counts overflow)
         self.unsolicited: deque[tuple[float, M]] = deque(maxlen=UNSOLICITED_LOG)
         self.unsolicited_dropped = 0
@@ -266,15 +276,20 @@ class Link(Generic[M]):
             self.framing.write(message, frame)
 
     # -- unsolicited frames -----------------------------------------------------------------
-    def subscribe(self, predicate: Callable[[M], bool], callback: Callable[[M], None]) -> Subscription[M]:
+    def subscribe(self, predicate: Callable[[M], bool], callback: Callable[[M], None], *,
+                  only: Iterable[object] | None = None) -> Subscription[M]:
         """Deliver every unsolicited frame for which ``predicate`` holds to ``callback``.
 
         Callbacks run in the thread that reads the bus (during a request, :meth:`poll` or
         :meth:`wait_for`); an exception in one is logged and counted, never raised into the bus.
+        ``only``: the route keys (:meth:`Rule.route_key`) of every frame ``predicate`` can accept, so a
+        frame of another key is not offered to it (the subscribers of a key are listed once, not scanned
+        per frame); None: every frame.
         """
-        sub = Subscription(predicate, callback, self)
+        sub = Subscription(predicate, callback, self, None if only is None else frozenset(only))
         with self._lock:
             self._subscriptions.append(sub)
+            self._routes.clear()
         return sub
 
     def poll(self, timeout: float = 0.0) -> int:
@@ -389,7 +404,15 @@ class Link(Generic[M]):
             self._record("rx", got.data, f"error: {got}")
             return
         claimed = False
-        for sub in tuple(self._subscriptions):
+        key = self.rule.route_key(got)
+        if key is None:
+            subs = tuple(self._subscriptions)
+        else:
+            found = self._routes.get(key)
+            if found is None:
+                found = self._routes[key] = tuple(s for s in self._subscriptions if s.only is None or key in s.only)
+            subs = found
+        for sub in subs:
             try:
                 if sub.predicate(got):
                     claimed = True

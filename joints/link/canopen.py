@@ -141,6 +141,11 @@ class CanopenRule(Rule[Any]):
     def parse_request(self, frame: Any) -> Any:
         return co.decode(frame)
 
+    def route_key(self, message: Any) -> object:
+        """A PDO's COB-ID (its subscribers are the nodes that mapped it), else the message's class."""
+        kind = type(message)
+        return message.cob_id if kind is co.Pdo else kind
+
     def timeout_text(self, request: Any) -> str:
         node = co.classify(self.encode(request)).node
         return (f"node {node} did not answer on 0x{co.SDO_TX_BASE + node:03X}: check the node id, the bit rate, "
@@ -219,7 +224,8 @@ class CanopenLink(Link[Any]):
         self.sync_cycle: object | None = None
         #: the bus's bit rate (bit/s; from its config) for bus-load decisions
         self.bitrate = 1_000_000
-        self.subscribe(lambda m: isinstance(m, (co.Heartbeat, co.BootUp)), self._error_control)
+        self.subscribe(lambda m: isinstance(m, (co.Heartbeat, co.BootUp)), self._error_control,
+                       only=(co.Heartbeat, co.BootUp))
 
     def _decode(self, frame: can.Message) -> co.Message:
         if self.bus_clock and frame.timestamp > self._stamp:

@@ -128,6 +128,9 @@ class _Pdo:
     next_event: float = math.inf
     #: a TPDO's frame as sampled now (:meth:`CanopenFront._frame_maker`), prepared at its first use
     make: Callable[[], can.Message] | None = None
+    bits: int = 0  #: the mapped length
+    #: an RPDO's data as its mapped values (``co.pdo_unpacker``: the values and errors of ``unpack_pdo``)
+    unpack: Callable[[bytes], tuple[int, ...]] | None = None
 
 
 def _carried(entry: tuple[int, int, int, bool]) -> tuple[int, int]:
@@ -520,6 +523,7 @@ class CanopenFront:
                         pdo.last_data, pdo.last_sent = old.last_data, old.last_sent
                     pdo.next_event = self.now + event if event > 0 else math.inf
                     pdo.clamps = tuple((name, *_carried(e)) for name, e in zip(pdo.names, pdo.entries))
+                    pdo.bits = sum(e[2] for e in pdo.entries)
                     out[(kind, n)] = pdo
             self._pdos = out
             self._pdo_state = out
@@ -605,7 +609,7 @@ class CanopenFront:
         if pdo is None:
             return
         data = bytes(frame.data)
-        if len(data) * 8 < sum(e[2] for e in pdo.entries):
+        if len(data) * 8 < pdo.bits:
             self._emcy(PDO_LENGTH_ERROR)
             return
         if pdo.transmission_type <= 240:
@@ -614,7 +618,10 @@ class CanopenFront:
             self._apply_rpdo(pdo, data)
 
     def _apply_rpdo(self, pdo: _Pdo, data: bytes) -> None:
-        values = co.unpack_pdo(pdo.entries, data)
+        unpack = pdo.unpack
+        if unpack is None:
+            unpack = pdo.unpack = co.pdo_unpacker(pdo.entries)
+        values = unpack(data)
         control: int | None = None
         for name, value in zip(pdo.names, values):
             if name is None:
@@ -943,6 +950,9 @@ class CanopenFront:
 
 class ErobCanopenBus:
     """The device side of one CANopen bus: fronts by node id, routed by COB-ID, on a timed medium."""
+
+    #: every frame the fronts send is encoded for that sending and never kept (the medium may hand it over)
+    fresh_answers = True
 
     def __init__(self, fronts: Iterable[CanopenFront] = (), *, name: str = "canopen", bitrate: int = 1_000_000,
                  latency: float = 0.0, ideal: bool = False) -> None:

@@ -76,6 +76,11 @@ class FramePeer(Protocol):
     def on_frame(self, frame: can.Message) -> Sequence[can.Message]: ...
 
 
+# A peer may also have ``fresh_answers = True``: every frame it answers with (or sends by ``send_at``) is a new
+# object it never touches again, so the medium may hand it to the one python-can node that receives it (its
+# received copy's timestamp, channel and ``is_rx`` set on it) instead of building a copy.
+
+
 @dataclass(frozen=True, slots=True)
 class BusLoad:
     """Traffic on a medium over a time window."""
@@ -109,6 +114,9 @@ class _Node:
     turnaround: Callable[[can.Message], float | None] | None = None  #: a peer's own answer delay per frame
     rx_dropped: int = 0
     rx_limit: int = 100_000
+    #: a peer's answers are new frames it never touches again (:attr:`FramePeer.fresh_answers`): one that only
+    #: one python-can node receives is handed to it as its received frame, not copied
+    fresh: bool = False
 
 
 @dataclass(eq=False, slots=True)
@@ -158,6 +166,7 @@ class CanMedium(ClockDriven):
         self._nodes: list[_Node] = []
         self._delivery_order: tuple[_Node, ...] = ()
         self._peers: tuple[_Node, ...] = ()
+        self._handoff = False
         self._pending: list[_Pending] = []
         self._wire: tuple[float, float, _Pending] | None = None  # (start, end, frame) on the bus
         self._free = self.now  # when the bus is idle again
@@ -166,6 +175,7 @@ class CanMedium(ClockDriven):
         # statistics
         self.frames = 0
         self.bits = 0
+        self.handed_over = 0  #: deliveries that handed a peer's fresh answer over instead of a copy
         self.busy = 0.0
         self._mark = (self.now, 0, 0, 0.0)
         self.channel = self._register(channel) if register else (channel or "joints-sim")
@@ -205,7 +215,8 @@ class CanMedium(ClockDriven):
         if latency < 0 or not math.isfinite(latency):
             raise ValueError(f"latency must be a finite number >= 0, got {latency!r}")
         turnaround = getattr(peer, "turnaround", None)
-        node = _Node(name, peer=peer, latency=latency, turnaround=turnaround if callable(turnaround) else None)
+        node = _Node(name, peer=peer, latency=latency, turnaround=turnaround if callable(turnaround) else None,
+                     fresh=getattr(peer, "fresh_answers", False) is True)
         self._nodes.append(node)
         self._attached()
         return node
@@ -219,6 +230,8 @@ class CanMedium(ClockDriven):
         """The nodes changed: the snapshot a delivery walks, and the peers among them."""
         self._delivery_order = tuple(self._nodes)
         self._peers = tuple(n for n in self._nodes if n.peer is not None)
+        #: a fresh answer of the only peer reaches one python-can node only: it may be handed over as it is
+        self._handoff = len(self._peers) == 1 and len(self._nodes) == 2
 
     # -- time -----------------------------------------------------------------------------
     def bind_clock(self, clock: ClockLike) -> None:
@@ -363,6 +376,7 @@ class CanMedium(ClockDriven):
         frame = pend.frame
         sender = pend.sender
         ideal = self.ideal
+        handoff = sender.fresh and self._handoff  # the sender is the only peer, the other node a python-can one
         for node in self._delivery_order:  # the nodes as they are now (a peer may attach or detach meanwhile)
             own = node is sender
             if own and not node.receive_own:
@@ -382,11 +396,16 @@ class CanMedium(ClockDriven):
             if len(rx) + len(held) >= node.rx_limit:
                 (held if not rx else rx).popleft()
                 node.rx_dropped += 1
-            msg = can.Message(
-                timestamp=t, arbitration_id=frame.arbitration_id, is_extended_id=frame.is_extended_id,
-                is_remote_frame=frame.is_remote_frame, is_error_frame=frame.is_error_frame, dlc=frame.dlc,
-                data=frame.data, channel=self.channel, is_rx=not own, check=False,
-            )
+            if handoff:  # the copy's fields, set on the frame nobody else holds
+                msg = frame
+                msg.timestamp, msg.channel, msg.is_rx = t, self.channel, True
+                self.handed_over += 1
+            else:
+                msg = can.Message(
+                    timestamp=t, arbitration_id=frame.arbitration_id, is_extended_id=frame.is_extended_id,
+                    is_remote_frame=frame.is_remote_frame, is_error_frame=frame.is_error_frame, dlc=frame.dlc,
+                    data=frame.data, channel=self.channel, is_rx=not own, check=False,
+                )
             if node.latency > 0 and not ideal:
                 held.append((t + node.latency, msg))  # the host adapter passes it on later
             else:

@@ -225,3 +225,49 @@ def test_modbus_late_reply_before_a_request_is_unsolicited_not_an_answer() -> No
     transport.inject(stale)
     assert link.read_registers(2, 0x0066, 2) == (0, 1234)
     assert [m for _, m in link.unsolicited] == [mb.ReadRegistersReply(2, 3, (0, 999))]
+
+
+class KeyedRule(FakeRule):
+    """FakeRule whose frames are keyed by their identifier (``Rule.route_key``)."""
+
+    def route_key(self, message: can.Message) -> object:
+        return message.arbitration_id
+
+
+def test_a_subscriber_is_offered_only_the_frames_of_its_keys() -> None:
+    bus = FakeBus(lambda f: [])
+    clock = ManualClock()
+    link = Link(FrameFraming(bus, lambda f: f, clock), KeyedRule(), clock=clock, name="can-test")
+    asked: list[int] = []
+    keyed: list[int] = []
+    everything: list[int] = []
+
+    def asking(m: can.Message) -> bool:
+        asked.append(m.arbitration_id)
+        return True
+
+    link.subscribe(asking, lambda m: keyed.append(m.data[0]), only=(0x181,))
+    link.subscribe(lambda m: True, lambda m: everything.append(m.data[0]))
+    bus.rx.extend([msg(0x181, 1), msg(0x182, 2), msg(0x181, 3)])
+    link.poll()
+    assert asked == [0x181, 0x181]  # the predicate never saw 0x182
+    assert keyed == [1, 3] and everything == [1, 2, 3]
+    late: list[int] = []  # a subscriber added later is offered its key's frames too (the key's list is rebuilt)
+    sub = link.subscribe(lambda m: True, lambda m: late.append(m.data[0]), only=(0x182,))
+    bus.rx.extend([msg(0x182, 4), msg(0x181, 5)])
+    link.poll()
+    assert late == [4] and keyed == [1, 3, 5] and everything == [1, 2, 3, 4, 5]
+    sub.cancel()
+    bus.rx.append(msg(0x182, 6))
+    link.poll()
+    assert late == [4] and everything[-1] == 6
+
+
+def test_a_rule_without_keys_asks_every_subscriber() -> None:
+    bus = FakeBus(lambda f: [])
+    link = make_link(bus)  # FakeRule: no route key
+    heard: list[int] = []
+    link.subscribe(lambda m: True, lambda m: heard.append(m.arbitration_id), only=(0x181,))
+    bus.rx.extend([msg(0x181, 1), msg(0x182, 2)])
+    link.poll()
+    assert heard == [0x181, 0x182]  # ``only`` sorts by key; a frame without one is offered to everyone

@@ -510,3 +510,50 @@ def test_edges_processed_without_their_waits_give_what_waiting_for_each_gives(
     reference, reference_waits = _transactions(answers_only, False, monkeypatch)
     assert fast_waits < fewer * reference_waits, (fast_waits, reference_waits)
     assert fast == reference
+
+
+class FreshEcho(Echo):
+    """:class:`Echo` with new answer frames each time (``fresh_answers``: the medium may hand them over)."""
+
+    fresh_answers = True
+
+    def on_frame(self, frame: can.Message) -> Sequence[can.Message]:
+        self.sent = [msg(f.arbitration_id, bytes(f.data)) for f in super().on_frame(frame)]
+        return self.sent
+
+
+@pytest.mark.parametrize("latency", [0.0, 200 * US])
+def test_a_fresh_answer_to_the_only_host_is_handed_over_as_a_received_frame(latency: float) -> None:
+    clock = ManualClock()
+    medium = CanMedium(clock=clock, channel="handover")
+    peer = FreshEcho(medium)
+    medium.attach_peer(peer)
+    bus = LockstepCanBus(medium=medium, adapter_latency=latency)
+    copy_medium = CanMedium(clock=ManualClock(), channel="handover-copied")  # the same, its peer not fresh
+    copy_medium.attach_peer(Echo(copy_medium))
+    copied_bus = LockstepCanBus(medium=copy_medium, adapter_latency=latency)
+    bus.send(msg(0x641, b"\x00\x02"))
+    copied_bus.send(msg(0x641, b"\x00\x02"))
+    got, copied = bus.recv(0.1), copied_bus.recv(0.1)
+    assert got is peer.sent[0] and medium.handed_over == 1  # no second object made
+    assert copy_medium.handed_over == 0
+    assert copied is not None and got is not None
+    fields = ("timestamp", "arbitration_id", "is_extended_id", "is_remote_frame", "is_error_frame", "dlc", "is_rx",
+              "is_fd", "bitrate_switch", "error_state_indicator")
+    assert [getattr(got, f) for f in fields] == [getattr(copied, f) for f in fields]
+    assert bytes(got.data) == bytes(copied.data) and (got.channel, copied.channel) == (medium.channel, copy_medium.channel)
+    bus.shutdown()
+    copied_bus.shutdown()
+
+
+def test_a_fresh_answer_two_python_can_nodes_receive_is_copied_for_each() -> None:
+    medium = CanMedium(clock=ManualClock())
+    peer = FreshEcho(medium)
+    medium.attach_peer(peer)
+    bus, tap = LockstepCanBus(medium=medium), LockstepCanBus(medium=medium)
+    bus.send(msg(0x641, b"\x00\x02"))
+    a, b = bus.recv(0.1), tap.recv(0.1)
+    assert a is not None and b is not None and a is not b and peer.sent[0] not in (a, b)
+    assert medium.handed_over == 0
+    bus.shutdown()
+    tap.shutdown()
