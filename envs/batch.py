@@ -151,6 +151,12 @@ class Batch:
                 return None
         return rigs
 
+    def joined(self) -> bool:
+        """Whether the rigs' state read goes in one call that may run their sleeps too
+        (:meth:`joints.CompiledRigs.joined`)."""
+        rigs = self._rigs()
+        return rigs is not None and rigs.joined()
+
     def _velocity(self, a: np.ndarray) -> np.ndarray:
         """Velocity commands: ``_commands``, ``_limit``'s clip to the speed cap, the braking cap of ``_safe``."""
         envs = self.envs

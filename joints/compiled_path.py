@@ -607,7 +607,19 @@ class CompiledRigs:
         self._reads = [[s.status for s in u] for u in self._units]
         self._read_exchanges = [[s.exchange for s in u] for u in self._units]
         self._buffers: dict[tuple[int, int], Any] = {}
+        self._worlds = [u[0].exchange.world for u in self._units]
         self.taken = 0  #: compiled calls across the rigs (one per batch command or state read)
+
+    def joined(self) -> bool:
+        """Whether every rig's world is in one stepping group (so one call carries them all) and books its sleeps
+        (``World.hold_sleeps``, as a single env's: :func:`_hold_sleeps`): then each rig's own sleep books its
+        period and the batch's state read runs it, each world's substeps in the one call."""
+        worlds = self._worlds
+        group = worlds[0].group
+        for w in worlds:
+            if w.group is not group or not w.hold_sleeps:
+                return False
+        return True
 
     @classmethod
     def build(cls, paths: Sequence[CompiledPath | None]) -> CompiledRigs | None:
