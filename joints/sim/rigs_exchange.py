@@ -95,12 +95,13 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
     group = exchanges[0][0].world.group
     rows: list[list[float]] = []
     made: list[tuple[Any, Any, Any]] = []
+    reads = False
     for reqs, exs, size, check in zip(requests, exchanges, sizes, checks):
         first = exs[0]
         line, world = first.line, first.world
         if world.group is not group or not _line_ok(first):
             return None
-        for ex in {id(ex): ex for ex in exs}.values():
+        for ex in exs if len(exs) == 1 else {id(ex): ex for ex in exs}.values():
             if ex.line is not line or ex.world is not world or not ex._drive_steady():
                 return None
         written: dict[int, dict[str, int]] = {}
@@ -111,6 +112,7 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
                 if got is None:
                     return None
                 row, extra = got
+                reads = True
             else:
                 shape = ex._shape(r, size)
                 if shape is None or shape.op == E.READ:
@@ -130,7 +132,7 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
         for lock in locks:
             lock.acquire()
             held += 1
-        return _carry_locked(fn, group, requests, exchanges, rows, made, lazy, buffers)
+        return _carry_locked(fn, group, requests, exchanges, rows, made, reads, lazy, buffers)
     finally:
         for lock in reversed(locks[:held]):
             lock.release()
@@ -138,8 +140,9 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
 
 def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
                   exchanges: Sequence[Sequence[Any]], rows: list[list[float]], made: list[tuple[Any, Any, Any]],
-                  lazy: bool, buffers: dict[tuple[int, int], Any]) -> list[list[Any]] | None:
-    """:func:`carry_rigs` with every rig's link and world locked, its rows built."""
+                  reads: bool, lazy: bool, buffers: dict[tuple[int, int], Any]) -> list[list[Any]] | None:
+    """:func:`carry_rigs` with every rig's link and world locked, its rows built (``reads``: a status read among
+    them)."""
     import numpy as np
 
     nows = []
@@ -156,20 +159,29 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
             buffers.clear()
         buf = buffers[key] = _Buffers(rigs, len(rows), E.OUT_WIDTH)
     buf.tx[:] = rows
-    st, ws, starts = buf.st, buf.ws, buf.starts
+    st = buf.st
     worlds_table = group.worlds_table
     plans = []
+    filled = []
+    ws = []
+    starts = [0]
+    steps = []
     at = 0
+    plan = group._plan
     for r, exs in enumerate(exchanges):
         world = exs[0].world
-        L.fill(st[r], world, exs[0].line, nows[r])
-        w = world.group_index
-        ws[r] = w
-        starts[r] = at
+        vector = [0.0] * STATE_WIDTH
+        L.fill(vector, world, exs[0].line, nows[r])  # (its slice assignment fills a list as it fills a row)
+        filled.append(vector)
+        ws.append(world.group_index)
         at += len(requests[r])
-        worlds_table[w, STEPS] = world.steps
-        plans.append(group._plan(world._me)[0])
-    starts[rigs] = at
+        starts.append(at)
+        steps.append(world.steps)
+        plans.append(plan(world._me)[0])
+    st[:] = filled
+    buf.ws[:] = ws
+    buf.starts[:] = starts
+    worlds_table[buf.ws, STEPS] = steps
     if len(plans) != len(buf.plans) or any(p is not q for p, q in zip(plans, buf.plans)):
         buf.orders = np.concatenate(plans) if plans else np.zeros(0, dtype=np.int64)
         bounds = np.zeros(rigs + 1, dtype=np.int64)
@@ -177,14 +189,14 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
         buf.order_at = bounds
         buf.plans = plans
     try:
-        fn(buf.tx, buf.out, st, ws, starts, buf.orders, buf.order_at, group.mj_step or 0, group.table, group.adr,
+        fn(buf.tx, buf.out, st, buf.ws, buf.starts, buf.orders, buf.order_at, group.mj_step or 0, group.table, group.adr,
            group.ratio, worlds_table, group.dts_array)
     finally:
         states: list[list[float]] = st.tolist()
+        counted: list[int] = worlds_table[buf.ws, STEPS].tolist()
         for r, exs in enumerate(exchanges):  # as line_exchange.fused, rig by rig
             world = exs[0].world
-            w = world.group_index
-            world.steps = int(worlds_table[w, STEPS])
+            world.steps = counted[r]
             state = states[r]
             world._target = state[L.TARGET]
             booked = state[L.BOOKED]
@@ -197,7 +209,9 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
         if world._data.maxuse_arena > limits[world.group_index]:
             world.leave_fused_path()
             group.replan()
-    outs: list[list[float]] = buf.out.tolist()
+    # the output rows as floats: a read's whole row (its status and sensed columns), a write's frame columns only
+    out = buf.out
+    outs: list[list[float]] = out.tolist() if reads else out[:, :L.OUTS].tolist()
     tx = rows
     replies_of: list[list[Any]] = []
     k = 0
