@@ -8,9 +8,10 @@ parameter store, the frame log, the counts), only the dispatch is one call and t
 every rig (the stock methods, the compiled entry) are asked once. Worlds are separate models and separate rows of
 the group's table, so one rig's physics never sees another's: the order of the rigs in the call changes no bit.
 
-It runs only in the steady case of EVERY rig, checked before anything is sent (each rig's lane idle and its reply
-check the stock one, each world fused in the one group, each line idle, each drive steady, each request a steady
-one); otherwise :func:`carry_rigs` returns None and every rig sends its requests its own way.
+It runs only in the steady case of EVERY rig, checked before anything is sent (each world fused and in the one
+group, each line idle, each drive steady, each request a steady one; the caller, :class:`joints.CompiledRigs`,
+checks each rig's link lane); otherwise :func:`carry_rigs` returns None and every rig sends its requests its own
+way. A world's booked sleep (``World.hold``) runs at the start of its rig's transactions, as in its own call.
 """
 
 from __future__ import annotations

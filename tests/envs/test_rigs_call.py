@@ -90,7 +90,8 @@ def test_rigs_in_one_call_give_each_rig_its_single_env_bits(env_id: str, kwargs:
         _run(vec, ref, rng.uniform(-1.2, 1.2, (steps, *vec.action_space.shape)).astype(np.float32),
              AutoresetMode.NEXT_STEP)
         _each_rig_same(vec, ref)
-        if kernels == "compiled":  # each batched step: its commands in one call, its reads in another
+        if kernels == "compiled":  # each batched step: its commands in one call, its reads (and sleeps) in another
+            assert u._batch.joined()
             assert _calls(vec) >= 2 * (u.batched_steps - 3), (_calls(vec), u.batched_steps)
             assert u.batched_steps >= steps // 2
         else:  # no compiled world: never taken, every rig its own way
