@@ -637,7 +637,8 @@ class CompiledRigs:
                     return None
                 kind = type(s.exchange)
             units.append(u)
-        if len(units) < 2:
+        if len(units) < 2 or len({id(u[0].exchange.world) for u in units}) != len(units) \
+                or len({id(u[0].exchange.line) for u in units}) != len(units):  # each rig its own world and line
             return None
         return cls(paths, units)  # type: ignore[arg-type]
 

@@ -78,18 +78,14 @@ class _Buffers:
         self.order_at: Any = None
 
 
-#: batch calls that ran (each of every rig's transactions)
-TAKEN = [0]
-
-
 def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[Any]],
                sizes: Sequence[Callable[[Any], int]], checks: Sequence[Callable[[Any, Any], bool]], lazy: bool,
                buffers: dict[tuple[int, int], Any]) -> list[list[Any]] | None:
     """Rig ``r``'s ``requests[r]`` (each for the drive whose exchange is ``exchanges[r][k]``, all on one line and
-    world) as ``exchanges[r][0].run(requests[r], sizes[r], checks[r], exchanges[r], lazy=lazy)`` sends them (a
-    reply check is required: every reply is checked before anything is sent), every rig in one compiled call:
-    each rig's replies; None (nothing sent) where any rig is not the steady case. ``buffers``: the caller's, kept
-    between calls."""
+    world, each rig's its own) as ``exchanges[r][0].run(requests[r], sizes[r], checks[r], exchanges[r], lazy=lazy)``
+    sends them (a reply check is required: every reply is checked before anything is sent), every rig in one
+    compiled call: each rig's replies; None (nothing sent) where any rig is not the steady case. ``buffers``: the
+    caller's, kept between calls."""
     fn = compiled()
     if fn is None or not L.stock(E._STOCK):
         return None
@@ -243,5 +239,4 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
         line.book_frames(frames)
         first.taken += 1
         replies_of.append(replies)
-    TAKEN[0] += 1
     return replies_of
