@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+import joints
 from envs.base import JointsEnv, braking_speed
 
 __all__ = ["WRITTEN_ACROSS", "Batch"]
@@ -64,6 +65,10 @@ class Batch:
         self.shielded = self.kind._shield is not JointsEnv._shield
         self.task = self.kind._batch_task is not JointsEnv._batch_task
         self.taken = 0  #: steps the batched path took (begin to finish)
+        #: every rig's commands in one compiled call, and every rig's state read in another, where every rig is a
+        #: rig of eRobs on one-call exchanges (:class:`joints.compiled_path.CompiledRigs`; None: rig by rig)
+        self.paths = [e.compiled_path for e in self.envs]
+        self.rigs = joints.CompiledRigs.build(self.paths)
         self._pending: tuple[np.ndarray, np.ndarray, list[list[float]]] | None = None
 
     @classmethod
@@ -122,12 +127,35 @@ class Batch:
             c = np.array(rows)
         else:
             rows = c.tolist()
-        for i, e in enumerate(envs):
-            e._sent = c[i]
-            e.compiled_path.command(mode, rows[i], [not j.enabled for j in e.joints])  # type: ignore[union-attr]
-            e._tick += 1
+        skips = [[not j.enabled for j in e.joints] for e in envs]
+        rigs = self._rigs()
+        if rigs is not None and rigs.command(mode, rows, skips):  # every rig's in one call
+            for i, e in enumerate(envs):
+                e._sent = c[i]
+                e._tick += 1
+        else:
+            for i, e in enumerate(envs):
+                e._sent = c[i]
+                e.compiled_path.command(mode, rows[i], skips[i])  # type: ignore[union-attr]
+                e._tick += 1
         self._pending = (a, c, a.tolist())
         return True
+
+    def _rigs(self) -> joints.CompiledRigs | None:
+        """The rigs' one call (:attr:`rigs`) while every rig keeps the compiled path it was built with."""
+        rigs = self.rigs
+        if rigs is None:
+            return None
+        for e, p in zip(self.envs, self.paths):
+            if e.compiled_path is not p:
+                return None
+        return rigs
+
+    def joined(self) -> bool:
+        """Whether the rigs' state read goes in one call that may run their sleeps too
+        (:meth:`joints.CompiledRigs.joined`)."""
+        rigs = self._rigs()
+        return rigs is not None and rigs.joined()
 
     def _velocity(self, a: np.ndarray) -> np.ndarray:
         """Velocity commands: ``_commands``, ``_limit``'s clip to the speed cap, the braking cap of ``_safe``."""
@@ -155,7 +183,14 @@ class Batch:
         self._pending = None
         envs = self.envs
         n = self.n
-        states = [e._read() for e in envs]
+        rigs = self._rigs()
+        read = None if rigs is None else rigs.states()  # every rig's in one call
+        if read is None:
+            states = [e._read() for e in envs]
+        else:
+            states = read
+            for e, st in zip(envs, read):
+                e._states = st
         flat = [s for st in states for s in st]
         p = np.array([s.position for s in flat]).reshape(len(envs), n)
         if any(s.fault is not None for s in flat) \

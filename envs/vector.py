@@ -45,9 +45,10 @@ def _load(entry_point: str | Callable[..., gym.Env[Any, Any]]) -> Callable[..., 
     return made
 
 
-def _wait_together(envs: Sequence[Any]) -> None:
+def _wait_together(envs: Sequence[Any], own: bool = False) -> None:
     """Each of ``envs`` waits for its tick (as ``RigEnv._wait_until``: an overrun noted), the rigs that must sleep
-    together in one call."""
+    together in one call; ``own``: each rig sleeps its own sleep (a world that books its sleeps: the batch's state
+    read runs them, every rig's in one call - :meth:`joints.CompiledRigs.joined`)."""
     rigs: list[joints.Rig] = []
     spans: list[float] = []
     for env in envs:
@@ -57,7 +58,10 @@ def _wait_together(envs: Sequence[Any]) -> None:
             rigs.append(rig)
             spans.append(remaining)
         env.note_overrun(-remaining)
-    if rigs:
+    if rigs and own:
+        for rig, span in zip(rigs, spans):
+            rig.sleep(span)
+    elif rigs:
         joints.sleep_together(rigs, spans)
 
 
@@ -252,7 +256,7 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
 
     def _step_batch(self, batch: Batch) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """:meth:`step` once ``batch`` sent every rig's commands (no rig was due for a reset)."""
-        _wait_together(self.envs)
+        _wait_together(self.envs, batch.joined())
         out = batch.finish()
         n = self.num_envs
         if isinstance(out, tuple):  # the batch's arrays: no episode ended

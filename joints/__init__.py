@@ -8,7 +8,7 @@
 from __future__ import annotations
 
 from joints.bench import check_rate, cycle_times
-from joints.compiled_path import CompiledPath
+from joints.compiled_path import CompiledPath, CompiledRigs
 from joints.configtypes import Limits, Motion
 from joints.errors import (
     ConfigError,
@@ -25,6 +25,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "CompiledPath",
+    "CompiledRigs",
     "ConfigError",
     "ConfirmationRequired",
     "DeviceFault",

@@ -52,9 +52,10 @@ from joints.errors import OutcomeUnknown
 from joints.joint import Joint, JointState
 from joints.link.base import DirectFraming
 from joints.link.lane import LinkLane
+from joints.link.modbus import FAILED_VALUE, _single_write
 from joints.transports.serial_sim import Deferred
 
-__all__ = ["CompiledPath", "supported"]
+__all__ = ["CompiledPath", "CompiledRigs", "supported"]
 
 ACTION_MODES = ("position", "velocity", "torque")
 
@@ -555,3 +556,187 @@ class CompiledPath:
     def __repr__(self) -> str:
         names: list[Any] = [j.name for j in self._joints]
         return f"CompiledPath({names})"
+
+
+def _rig_units(path: CompiledPath) -> list[_ErobModbus] | None:
+    """The eRobs of a rig's compiled path whose every request goes in their one-call exchange (one eRob, or
+    several on one line and world: :func:`_erob_batch`), in joint order; None: another kind of rig."""
+    if path._batch is not None:
+        return path._batch
+    steppers = path._steppers
+    if len(steppers) == 1 and isinstance(steppers[0], _ErobModbus) and steppers[0].exchange is not None:
+        return [steppers[0]]
+    return None
+
+
+def _lane_ready(lane: LinkLane, requests: Sequence[Any]) -> bool:
+    """What :meth:`LinkLane.exchange` checks before it hands ``requests`` to a one-call exchange with its stock
+    reply check (idle, the check the stock one, every request plain and encodable): False where the rig's own way
+    must decide (nothing sent either way)."""
+    if lane.framing is None or not lane._idle() or not lane._stock():
+        return False
+    rule = lane.link.rule
+    expects = rule.expects_reply
+    for r in requests:
+        if not expects(r) or _single_write(r) == FAILED_VALUE:
+            return False
+    try:
+        for r in requests:
+            rule.check(r)
+    except Exception:  # noqa: BLE001 - an EncodeError: the rig's own way raises it, in its turn
+        return False
+    return True
+
+
+class CompiledRigs:
+    """The compiled paths of several rigs (a batch of single envs in one process) whose every joint is an eRob on
+    its twin's one-call exchange: a step's commands of ALL rigs in one compiled call, and their state reads in
+    another (:meth:`~joints.sim.erob_exchange.ErobExchange.carry_rigs`).
+
+    Rule: each rig gets what its own :meth:`CompiledPath.command` / :meth:`CompiledPath.states` gives it - the
+    same checks (each joint's :meth:`_ErobModbus.plan`), requests, frames, physics, counts, bookkeeping and
+    states. It is taken only where EVERY rig's every joint is the steady case (checked before anything is sent);
+    otherwise :meth:`command` / :meth:`states` return False / None, nothing sent, and each rig goes its own way
+    (its errors raised in its order). :attr:`taken` counts the calls it made."""
+
+    def __init__(self, paths: Sequence[CompiledPath], units: Sequence[list[_ErobModbus]]) -> None:
+        self.paths = list(paths)
+        self._units = [list(u) for u in units]
+        self._lanes = [u[0].lane for u in self._units]
+        self._carry = self._units[0][0].exchange.carry_rigs
+        self._reads = [[s.status for s in u] for u in self._units]
+        self._read_exchanges = [[s.exchange for s in u] for u in self._units]
+        self._buffers: dict[tuple[int, int], Any] = {}
+        self._worlds = [u[0].exchange.world for u in self._units]
+        self.taken = 0  #: compiled calls across the rigs (one per batch command or state read)
+
+    def joined(self) -> bool:
+        """Whether every rig's world is in one stepping group (so one call carries them all) and books its sleeps
+        (``World.hold_sleeps``, as a single env's: :func:`_hold_sleeps`): then each rig's own sleep books its
+        period and the batch's state read runs it, each world's substeps in the one call."""
+        worlds = self._worlds
+        group = worlds[0].group
+        for w in worlds:
+            if w.group is not group or not w.hold_sleeps:
+                return False
+        return True
+
+    @classmethod
+    def build(cls, paths: Sequence[CompiledPath | None]) -> CompiledRigs | None:
+        """The rigs of ``paths`` in one call, or None where one is not a rig of eRobs on one-call exchanges of one
+        kind."""
+        units: list[list[_ErobModbus]] = []
+        kind: Any = None
+        for p in paths:
+            u = None if p is None else _rig_units(p)
+            if u is None:
+                return None
+            for s in u:
+                if not callable(getattr(s.exchange, "carry_rigs", None)) or (kind is not None
+                                                                            and type(s.exchange) is not kind):
+                    return None
+                kind = type(s.exchange)
+            units.append(u)
+        if len(units) < 2 or len({id(u[0].exchange.world) for u in units}) != len(units) \
+                or len({id(u[0].exchange.line) for u in units}) != len(units):  # each rig its own world and line
+            return None
+        return cls(paths, units)  # type: ignore[arg-type]
+
+    def _send(self, requests: list[list[Any]], exchanges: list[list[Any]], lanes: list[LinkLane],
+              lazy: bool) -> list[list[Any]] | None:
+        """Each rig's ``requests`` over its lane (``lanes[r]``) in one call, counted as the lane counts them; None
+        (nothing sent) where a rig's lane or exchange is not the steady case."""
+        for lane, reqs in zip(lanes, requests):
+            if not _lane_ready(lane, reqs):
+                return None
+        links = sorted({id(lane.link): lane.link._lock for lane in lanes}.values(), key=id)
+        held = 0
+        try:
+            for lock in links:
+                lock.acquire()
+                held += 1
+            replies: list[list[Any]] | None = self._carry(
+                requests, exchanges, [lane.framing.size for lane in lanes],  # type: ignore[union-attr]
+                [lane._stock_check for lane in lanes], lazy, self._buffers)
+            if replies is None:
+                return None
+            for lane, reqs in zip(lanes, requests):  # as LinkLane.exchange with its stock check
+                n = len(reqs)
+                lane.link.transactions += n
+                lane.framing.exchanges += n  # type: ignore[union-attr]
+                lane.fused += n
+                lane.taken += n
+        finally:
+            for lock in reversed(links[:held]):
+                lock.release()
+        self.taken += 1
+        return replies
+
+    def command(self, mode: str, values: Sequence[Sequence[float]], skips: Sequence[Sequence[bool]]) -> bool:
+        """Rig ``r``'s :meth:`CompiledPath.command` ``(mode, values[r], skips[r])`` for every rig, in one call;
+        False (nothing sent) where a rig's joint is not the steady case or its checks refuse the command (then
+        each rig's own command sends it, or raises, in its turn)."""
+        if mode not in ACTION_MODES:
+            return False
+        plans: list[list[tuple[_ErobModbus, tuple[tuple[Any, ...], str, int]]]] = []
+        requests: list[list[Any]] = []
+        exchanges: list[list[Any]] = []
+        lanes: list[LinkLane] = []
+        for units, row, skip in zip(self._units, values, skips):
+            planned = []
+            reqs: list[Any] = []
+            exs: list[Any] = []
+            for k, s in enumerate(units):
+                if skip[k]:
+                    continue
+                try:
+                    p = s.plan(mode, row[k])
+                except Exception:  # noqa: BLE001 - a refusal: the rig's own command raises it again, in its turn
+                    return False
+                if p is None:
+                    return False
+                planned.append((s, p))
+                reqs.extend(p[0])
+                exs.extend([s.exchange] * len(p[0]))
+            if planned:
+                plans.append(planned)
+                requests.append(reqs)
+                exchanges.append(exs)
+                lanes.append(units[0].lane)
+        if not requests:
+            return True
+        befores = [p[0][0].clock.now() for p in plans]
+        replies = self._send(requests, exchanges, lanes, False)
+        if replies is None:
+            return False
+        for planned, exs, before in zip(plans, exchanges, befores):  # as _command_batch's bookkeeping
+            clocks = exs[0].clocks
+            at = 0
+            for s, (sent, name, value) in planned:
+                at += len(sent)
+                after = clocks[at - 1]
+                s.done(mode, name, value, before, after)
+                before = after
+        return True
+
+    def states(self) -> list[list[JointState]] | None:
+        """Every rig's :meth:`CompiledPath.states` in one call; None (nothing sent) where a rig is not the steady
+        case."""
+        units_of = self._units
+        befores = [u[0].clock.now() for u in units_of]
+        replies = self._send(self._reads, self._read_exchanges, self._lanes, True)
+        if replies is None:
+            return None
+        out: list[list[JointState]] = []
+        for units, got, before in zip(units_of, replies, befores):
+            if len(units) == 1:  # as _ErobModbus.state: stamped with the clock after the call
+                s = units[0]
+                out.append([s.state_of(got[0], before, s.clock.now())])
+                continue
+            clocks = units[0].exchange.clocks  # as _states_batch
+            states = []
+            for s, reply, after in zip(units, got, clocks):
+                states.append(s.state_of(reply, before, after))
+                before = after
+            out.append(states)
+        return out

@@ -380,6 +380,13 @@ class ErobExchange(L.Carrier):
         self.taken += 1
         return replies
 
+    @staticmethod
+    def carry_rigs(*args: Any, **kwargs: Any) -> list[list[Any]] | None:
+        """Several rigs' :meth:`run` in one compiled call (:func:`joints.sim.rigs_exchange.carry_rigs`)."""
+        from joints.sim.rigs_exchange import carry_rigs
+
+        return carry_rigs(*args, **kwargs)
+
 
 def prepare(world: Any, bus: Any, front: Any, line: Any) -> ErobExchange | None:
     """The one-call exchange of the eRob twin behind ``front`` on ``bus`` of ``world`` over ``line`` (the host's
