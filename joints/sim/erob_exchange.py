@@ -311,31 +311,17 @@ class ErobExchange(L.Carrier):
                 return reply.message()
         return reply
 
-    def run(self, requests: Sequence[Any], size: Callable[[Any], int], check: Callable[[Any, Any], bool] | None,
-            exchanges: Sequence[ErobExchange] | None = None, *, lazy: bool = False) -> list[Any] | None:
-        """The replies to ``requests`` (sent one after the other), each as the bus gives it, once the host would
-        have received it; None (nothing sent) where this is not the steady case. ``size``: a message's
-        characters on the line; ``check(request, reply)``: whether the host takes the reply as the plain answer
-        (asked before anything is sent; a read's with its words 0; None: the caller checks the replies after);
-        ``exchanges``: per request, the exchange of the drive it is for (default: this one's; all on this one's
-        line and world: a rig's eRobs on one bus go in one call); ``lazy``: a status read's reply may be a
-        :class:`StatusReply` (its values by register; the message made when asked)."""
-        fn = _compiled()
-        if fn is None or not self._line_steady():
-            return None
-        line, world = self.line, self.world
-        if exchanges is None:
-            if not self._drive_steady():
-                return None
-        else:
-            for ex in {id(ex): ex for ex in exchanges}.values():
-                if ex.line is not line or ex.world is not world or not ex._drive_steady():
-                    return None
+    def _rows(self, requests: Sequence[Any], exchanges: Sequence[ErobExchange] | None,
+              size: Callable[[Any], int], check: Callable[[Any, Any], bool] | None, group: Any
+              ) -> tuple[list[list[float]], list[Any]] | None:
+        """The transaction rows of ``requests`` over this exchange's line (``exchanges``: per request, the
+        exchange of its drive; None: this one's) and, per request, (its exchange, a write's reply and firmware
+        items | a read's plan and shape); None where one is not a steady request now (see :meth:`run`)."""
+        line = self.line
         rows: list[list[float]] = []
-        extra: Any
-        made: list[Any] = []  # per request: (its exchange, a write's reply and firmware items | a read's plan, shape)
+        made: list[Any] = []
         written: dict[int, dict[str, int]] = {}
-        group = world.group
+        extra: Any
         ex = self
         for k, r in enumerate(requests):
             if exchanges is not None:
@@ -358,6 +344,32 @@ class ErobExchange(L.Carrier):
             row[ROW] = float(ex._first_row(group, ex.firmware))
             rows.append(row)
             made.append((ex, *extra))
+        return rows, made
+
+    def run(self, requests: Sequence[Any], size: Callable[[Any], int], check: Callable[[Any, Any], bool] | None,
+            exchanges: Sequence[ErobExchange] | None = None, *, lazy: bool = False) -> list[Any] | None:
+        """The replies to ``requests`` (sent one after the other), each as the bus gives it, once the host would
+        have received it; None (nothing sent) where this is not the steady case. ``size``: a message's
+        characters on the line; ``check(request, reply)``: whether the host takes the reply as the plain answer
+        (asked before anything is sent; a read's with its words 0; None: the caller checks the replies after);
+        ``exchanges``: per request, the exchange of the drive it is for (default: this one's; all on this one's
+        line and world: a rig's eRobs on one bus go in one call); ``lazy``: a status read's reply may be a
+        :class:`StatusReply` (its values by register; the message made when asked)."""
+        fn = _compiled()
+        if fn is None or not self._line_steady():
+            return None
+        line, world = self.line, self.world
+        if exchanges is None:
+            if not self._drive_steady():
+                return None
+        else:
+            for ex in {id(ex): ex for ex in exchanges}.values():
+                if ex.line is not line or ex.world is not world or not ex._drive_steady():
+                    return None
+        got = self._rows(requests, exchanges, size, check, world.group)
+        if got is None:
+            return None
+        rows, made = got
         with world.lock:
             now = L.clear(line)
             if now is None:

@@ -24,7 +24,7 @@ from joints.sim import erob_exchange as E
 from joints.sim import kernel
 from joints.sim import line_exchange as L
 from joints.sim.kernel import jitable
-from joints.sim.line_exchange import CLOCK_AFTER, ROW, STATE_WIDTH, TURN, TX_WIDTH
+from joints.sim.line_exchange import CLOCK_AFTER, STATE_WIDTH, TX_WIDTH
 from joints.sim.stepping import STEPS
 
 __all__ = ["carry_rigs", "compiled", "rigs_exchanges"]
@@ -101,28 +101,12 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
         for ex in exs if len(exs) == 1 else {id(ex): ex for ex in exs}.values():
             if ex.line is not line or ex.world is not world or not ex._drive_steady():
                 return None
-        written: dict[int, dict[str, int]] = {}
-        for r, ex in zip(reqs, exs):
-            extra: Any
-            if type(r) is mb.ReadHoldingRegisters:
-                got = ex._read_row(r, size, check)
-                if got is None:
-                    return None
-                row, extra = got
-                reads = True
-            else:
-                shape = ex._shape(r, size)
-                if shape is None or shape.op == E.READ:
-                    return None
-                wrote = ex._row(r, shape, written.setdefault(id(ex), {}), check)
-                if wrote is None:
-                    return None
-                row, *extra = wrote
-            turn = ex.bus.message_turnaround(r)
-            row[TURN] = line.turnaround if turn is None else turn
-            row[ROW] = float(ex._first_row(group, ex.firmware))
-            rows.append(row)
-            made.append((ex, *extra))
+        got = first._rows(reqs, exs, size, check, group)
+        if got is None:
+            return None
+        rows.extend(got[0])
+        made.extend(got[1])
+        reads = reads or any(type(r) is mb.ReadHoldingRegisters for r in reqs)
     locks = sorted({id(exs[0].world): exs[0].world.lock for exs in exchanges}.values(), key=id)
     held = 0
     try:
