@@ -48,11 +48,10 @@ from joints.drivers.base import sampled_at
 from joints.drivers.erob import CMD_START, STATUS_NAMES
 from joints.drivers.erob_modbus import ErobModbusDriver
 from joints.drivers.zlac_modbus import STATUS_START, STATUS_WORDS, ZlacChannelDriver, ZlacDrive
-from joints.errors import OutcomeUnknown
+from joints.errors import EncodeError, OutcomeUnknown
 from joints.joint import Joint, JointState
 from joints.link.base import DirectFraming
 from joints.link.lane import LinkLane
-from joints.link.modbus import FAILED_VALUE, _single_write
 from joints.transports.serial_sim import Deferred
 
 __all__ = ["CompiledPath", "CompiledRigs", "supported"]
@@ -573,19 +572,10 @@ def _lane_ready(lane: LinkLane, requests: Sequence[Any]) -> bool:
     """What :meth:`LinkLane.exchange` checks before it hands ``requests`` to a one-call exchange with its stock
     reply check (idle, the check the stock one, every request plain and encodable): False where the rig's own way
     must decide (nothing sent either way)."""
-    if lane.framing is None or not lane._idle() or not lane._stock():
-        return False
-    rule = lane.link.rule
-    expects = rule.expects_reply
-    for r in requests:
-        if not expects(r) or _single_write(r) == FAILED_VALUE:
-            return False
     try:
-        for r in requests:
-            rule.check(r)
-    except Exception:  # noqa: BLE001 - an EncodeError: the rig's own way raises it, in its turn
+        return lane.framing is not None and lane._stock() and lane.ready(requests)
+    except EncodeError:  # the rig's own way raises it, in its turn
         return False
-    return True
 
 
 class CompiledRigs:
@@ -661,11 +651,7 @@ class CompiledRigs:
             if replies is None:
                 return None
             for lane, reqs in zip(lanes, requests):  # as LinkLane.exchange with its stock check
-                n = len(reqs)
-                lane.link.transactions += n
-                lane.framing.exchanges += n  # type: ignore[union-attr]
-                lane.fused += n
-                lane.taken += n
+                lane.count_fused(len(reqs), plain=True)
         finally:
             for lock in reversed(links[:held]):
                 lock.release()

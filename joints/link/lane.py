@@ -111,6 +111,32 @@ class LinkLane:
         return framing is not None and framing.as_received is mb.as_received and getattr(
             self.link.rule.is_reply, "__func__", None) is ModbusRule.is_reply
 
+    def ready(self, requests: Sequence[Any]) -> bool:
+        """Whether :meth:`exchange` may hand ``requests`` to a one-call exchange now: the lane idle (:meth:`_idle`)
+        and every request plain (:meth:`_plain`); each is then checked by the rule, which raises
+        :class:`~joints.errors.EncodeError` before anything is sent."""
+        if self.framing is None or not self._idle():
+            return False
+        rule = self.link.rule
+        expects = rule.expects_reply
+        for r in requests:  # _plain of each (nothing sent where one is not)
+            if not expects(r) or _single_write(r) == FAILED_VALUE:
+                return False
+        for r in requests:
+            rule.check(r)
+        return True
+
+    def count_fused(self, n: int, *, plain: bool) -> None:
+        """``n`` requests a one-call exchange sent, counted as the link counts them (``plain``: their replies
+        were checked before anything was sent, so they took the lane)."""
+        framing = self.framing
+        assert framing is not None
+        self.link.transactions += n
+        framing.exchanges += n
+        self.fused += n
+        if plain:
+            self.taken += n
+
     def exchange(self, run: Callable[..., list[Any] | None], requests: Sequence[Any], *,
                  idempotent: bool = False) -> list[Any] | None:
         """:meth:`request` of each of ``requests`` by ``run(requests, size, check)``, a twin's one-call exchange
@@ -124,16 +150,10 @@ class LinkLane:
         one. ``idempotent``: a lone request's, for the rest of its attempt where its reply is not the plain
         answer."""
         framing = self.framing
-        if framing is None or not self._idle():
+        if framing is None or not self.ready(requests):
             return None
         link = self.link
         rule = link.rule
-        expects = rule.expects_reply
-        for r in requests:  # _plain of each (nothing sent where one is not)
-            if not expects(r) or _single_write(r) == FAILED_VALUE:
-                return None
-        for r in requests:
-            rule.check(r)  # raises EncodeError before anything is sent
         n = len(requests)
         check: Callable[[Any, Any], bool] | None = None
         if self._stock():  # every reply checked before anything is sent
@@ -151,19 +171,14 @@ class LinkLane:
                 replies = run(requests, framing.size, check)
                 if replies is None:
                     return None
-                link.transactions += n
-                framing.exchanges += n
-                self.fused += n
-                self.taken += n  # their replies were checked before anything was sent: plain
+                self.count_fused(n, plain=True)  # their replies were checked before anything was sent: plain
                 return replies
             deadline = link.clock.now() + link.policy.timeout  # the request's, as the link's
             # a lone request's reply is checked after, as the lane checks it
             replies = run(requests, framing.size, None)
             if replies is None:
                 return None
-            link.transactions += 1
-            framing.exchanges += 1
-            self.fused += 1
+            self.count_fused(1, plain=False)
             raw = replies[0]
             replies[0] = self._finish(requests[0], raw.message() if isinstance(raw, Deferred) else raw, deadline,
                                       idempotent)
