@@ -40,7 +40,7 @@ def _frames(line: Any) -> list[tuple[Any, ...]]:
 
 def _rig_bits(u: Any) -> tuple[Any, ...]:
     """What a rig keeps beyond its step's outcomes: register images and parameter stores of every twin, each link's
-    counts and each line's frame log, the compiled path's counts, the clock and the substeps."""
+    counts, each line's frame log, time and UART free times, the compiled path's counts, the clock and the substeps."""
     images = []
     for name, bus in sorted(u.rig.sim.buses.items()):
         for address, front in sorted(bus.slaves.items()):
@@ -49,8 +49,9 @@ def _rig_bits(u: Any) -> tuple[Any, ...]:
     links = {}
     for j in u.rig.joints.values():
         link = j.driver.access.link
-        links[id(link)] = (link.transactions, link.framing.exchanges, link.retries_used,
-                           _frames(link.framing.transport))
+        line = link.framing.transport  # its frame log, and where its time and its UARTs stand
+        links[id(link)] = (link.transactions, link.framing.exchanges, link.retries_used, _frames(line),
+                           line.now, line._clock_seen, tuple(sorted(line._free.items())))
     path = u.compiled_path
     counts = (path.taken, path.fused, path.lane_taken)
     states = [(s.position, s.velocity, s.torque, s.time) for s in u._states]
