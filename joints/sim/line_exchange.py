@@ -24,7 +24,8 @@ from joints.sim.erob_kernel import fmax  # ``max`` as Python's builtin, in compi
 from joints.sim.kernel import jitable
 from joints.sim.stepping import EROB, STEPS, ZLAC
 
-__all__ = ["Carrier", "advance", "book", "clear", "compiled", "exchanges", "fill", "fused", "stock", "world_fused"]
+__all__ = ["Carrier", "advance", "arena_check", "book", "clear", "compiled", "exchanges", "fill", "fused", "line_back",
+           "stock", "world_back", "world_fused"]
 
 #: columns of the state vector: the clock's time, the world's target time, whether time is booked (1, or
 #: :data:`HELD`), the line's time, the time the line last saw on the clock, when the host's / device's UART is
@@ -177,17 +178,39 @@ def fused(fn: Any, world: Any, st: Any, *head: Any) -> list[float]:
         fn(*head, st, w, group.mj_step or 0, group.table, group.adr, group.ratio, order, worlds, group.dts_array,
            active)
     finally:
-        world.steps = int(worlds[w, STEPS])
         state: list[float] = st.tolist()
-        world._target = state[TARGET]
-        booked = state[BOOKED]
-        world._booked = booked != 0.0
-        world._held = booked == HELD
-        world.clock.set(state[CLOCK])
-    if world._data.maxuse_arena > group._arena_limits[w]:  # as Group.run after its calls
+        world_back(world, int(worlds[w, STEPS]), state)
+    arena_check(world)
+    return state
+
+
+def world_back(world: Any, steps: int, state: Sequence[float]) -> None:
+    """``world`` and its clock brought back from a call's state vector ``state`` (``steps``: its substeps)."""
+    world.steps = steps
+    world._target = state[TARGET]
+    booked = state[BOOKED]
+    world._booked = booked != 0.0
+    world._held = booked == HELD
+    world.clock.set(state[CLOCK])
+
+
+def arena_check(world: Any) -> None:
+    """``Group.run``'s check after its calls: a world whose MuJoCo arena grew past its group's limit leaves the
+    fused path and the group plans again."""
+    group = world.group
+    if world._data.maxuse_arena > group._arena_limits[world.group_index]:
         world.leave_fused_path()
         group.replan()
-    return state
+
+
+def line_back(line: Any, state: Sequence[float]) -> None:
+    """``line``'s times brought back from a call's state vector ``state`` (its frames are the caller's to book,
+    :func:`book`)."""
+    line.now = state[NOW]
+    line._clock_seen = state[SEEN]
+    free = line._free
+    free["host"] = state[FREE_HOST]
+    free["device"] = state[FREE_DEVICE]
 
 
 class Carrier:
@@ -225,12 +248,7 @@ class Carrier:
         tx[:] = rows
         st = self._st
         fill(st, world, line, now)
-        state = fused(fn, world, st, tx, out)
-        line.now = state[NOW]
-        line._clock_seen = state[SEEN]
-        free = line._free
-        free["host"] = state[FREE_HOST]
-        free["device"] = state[FREE_DEVICE]
+        line_back(line, fused(fn, world, st, tx, out))
         return out.tolist()  # type: ignore[no-any-return]
 
 

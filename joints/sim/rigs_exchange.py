@@ -176,20 +176,9 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
         states: list[list[float]] = st.tolist()
         counted: list[int] = worlds_table[buf.ws, STEPS].tolist()
         for r, exs in enumerate(exchanges):  # as line_exchange.fused, rig by rig
-            world = exs[0].world
-            world.steps = counted[r]
-            state = states[r]
-            world._target = state[L.TARGET]
-            booked = state[L.BOOKED]
-            world._booked = booked != 0.0
-            world._held = booked == L.HELD
-            world.clock.set(state[L.CLOCK])
-    limits = group._arena_limits
-    for exs in exchanges:  # as line_exchange.fused: Group.run's arena check
-        world = exs[0].world
-        if world._data.maxuse_arena > limits[world.group_index]:
-            world.leave_fused_path()
-            group.replan()
+            L.world_back(exs[0].world, counted[r], states[r])
+    for exs in exchanges:
+        L.arena_check(exs[0].world)
     # the output rows as floats: a read's whole row (its status and sensed columns), a write's frame columns only
     out = buf.out
     outs: list[list[float]] = out.tolist() if reads else out[:, :L.OUTS].tolist()
@@ -199,12 +188,7 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
     for r, (reqs, exs) in enumerate(zip(requests, exchanges)):
         first = exs[0]
         line = first.line
-        state = states[r]
-        line.now = state[L.NOW]  # as Carrier.carry
-        line._clock_seen = state[L.SEEN]
-        free = line._free
-        free["host"] = state[L.FREE_HOST]
-        free["device"] = state[L.FREE_DEVICE]
+        L.line_back(line, states[r])  # as Carrier.carry
         replies: list[Any] = []
         first.clocks = clocks = []
         frames: list[tuple[float, float, float, int, str, Any]] = []
