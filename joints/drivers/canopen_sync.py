@@ -77,6 +77,7 @@ class SyncCycle:
         self.drivers: list[CyclicNode] = []
         self._expect: list[CyclicNode] = []
         self._asked: dict[int, deque[tuple[int, float]]] = {}  #: node -> (cycle, SYNC time) not yet answered
+        self._restarts = getattr(link, "restarts", 0)  #: the link's clock restarts the grid was laid after
 
     @classmethod
     def of(cls, link: Any, period: float) -> SyncCycle:
@@ -99,6 +100,11 @@ class SyncCycle:
         link = self.link
         now = link.bus_now()
         eps = 1e-9
+        restarts = getattr(link, "restarts", 0)
+        if restarts != self._restarts:  # the clock restarted (a sim reset): the old grid's times are void
+            self._restarts = restarts
+            self.next_due = None
+            self._asked.clear()
         if self.next_due is None or now > self.next_due + self.period + eps:
             self._grid, self._n = now, 0  # first cycle, or the caller fell behind: restart the grid
         elif now < self.next_due - eps:

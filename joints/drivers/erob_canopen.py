@@ -682,10 +682,17 @@ class ErobCanopenDriver(ErobDriver):
         self.emcy = None
 
     def forget(self) -> None:
+        """Also the times kept on the clock (a sim reset restarts it): the temperature is read at the next
+        state(), the guarding and the cyclic velocity start again."""
         super().forget()
         self._up = None
         self._cw = 0
         self.emcy = None
+        self.temperature = math.nan
+        self._temperature_time = -math.inf
+        self._last_guard = -math.inf
+        self.status_time = -math.inf
+        self._prev_position = None
         self.link.monitor(self.node).reset()
         self.link.consume(self.node, 0.0)
 
