@@ -269,6 +269,21 @@ class CanopenLink(Link[Any]):
                 self._stamp = max(self._stamp, start + timeout)
             raise
 
+    def deliver_until(self, done: Callable[[], bool], timeout: float) -> bool:
+        """Deliver what arrives to the subscribers (unsolicited frames, none taken as a reply) until ``done()``
+        holds or ``timeout`` s passed; whether it holds."""
+        start = self.bus_now()
+        with self._lock:
+            deadline = self.clock.now() + timeout
+            while not done():
+                got = self.framing.receive(deadline)
+                if got is None:
+                    if self.bus_clock:
+                        self._stamp = max(self._stamp, start + timeout)
+                    return False
+                self._unsolicited(got)
+        return True
+
     def wait_bus(self, until: float) -> None:
         """Let the bus run until ``until`` (bus time), delivering what arrives."""
         left = until - self.bus_now()
