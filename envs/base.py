@@ -755,9 +755,32 @@ class JointsEnv(RigEnv):
         return obs, float(reward), terminated, False, info
 
     def _read(self) -> list[joints.JointState]:
+        """Every joint's state: the compiled path's, else joint by joint - the joints one broadcast samples
+        together (the CANopen joints of a bus: one SYNC, ``rig.samples_together``) by one ``rig.read_states`` of
+        them all, at the first of them."""
         compiled = self.compiled_path
-        self._states = compiled.states() if compiled is not None else [j.state() for j in self.joints]
-        return self._states
+        if compiled is not None:
+            self._states = compiled.states()
+            return self._states
+        plan = self.__dict__.get("_sample_plan")
+        if plan is None or plan[0] is not self.joints:
+            shared = [n for n in self.joint_names if self.rig.samples_together(n)]
+            plan = self._sample_plan = (self.joints, shared or None)
+        together = plan[1]
+        if together is None:
+            self._states = [j.state() for j in self.joints]
+            return self._states
+        states: list[joints.JointState] = []
+        read: dict[str, joints.JointState] | None = None
+        for name, j in zip(self.joint_names, self.joints):
+            if name not in together:
+                states.append(j.state())
+                continue
+            if read is None:
+                read = self.rig.read_states(together)
+            states.append(read[name])
+        self._states = states
+        return states
 
     def _observation(self, states: Sequence[joints.JointState], positions: list[float] | None = None) -> np.ndarray:
         if positions is None:

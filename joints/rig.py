@@ -27,13 +27,14 @@ from typing import Any, TypeGuard
 from joints import exits, registry
 from joints.clock import Clock, MonotonicClock
 from joints.config import BusConfig, RigConfig, load, parse
-from joints.drivers.base import sampled_at
+from joints.drivers.base import RawState, sampled_at
 from joints.drivers.capabilities import (
     CommunicationWatchdog,
     CycleGroup,
     CyclicJoint,
     DriveGroup,
     GroupedChannel,
+    SampledTogether,
     SyncVelocityGroup,
 )
 from joints.errors import CommandError, ConfigError, DeviceFault, JointsError, UnknownJoint
@@ -89,6 +90,7 @@ class Rig:
         self._shut: set[str] = set()
         self._order: list[tuple[str, Joint]] | None = None
         self._channels: dict[str, GroupedChannel | None] = {}
+        self._together: dict[str, SampledTogether | None] = {}
         self._sync_groups: dict[int, tuple[DriveGroup, bool]] = {}
         exits.register(self)
 
@@ -155,17 +157,28 @@ class Rig:
         """State of every joint (or of ``names``), bus by bus: one status transaction per drive.
 
         Joints that are channels of one drive (the two wheels of a ZLAC8015D) are served by one
-        status read of that drive.
+        status read of that drive; the joints one broadcast samples together (the CANopen joints of a
+        bus: one SYNC) by one read of them all, at the first of them.
         """
         wanted = set(self.joints) if names is None else {self.joints[n].name for n in names}
         out: dict[str, JointState] = {}
         groups: dict[int, tuple[Mapping[str, int], float]] = {}
+        sampled: dict[int, Mapping[Any, RawState]] = {}
         for name, j in self._bus_order():
             if name not in wanted:
                 continue
             driver = self._grouped(name)
             if driver is None:
-                out[name] = j.state()
+                together = self._sampled_together(name)
+                if together is None:
+                    out[name] = j.state()
+                    continue
+                sample = together.sample_group
+                if id(sample) not in sampled:
+                    sampled[id(sample)] = sample.read_states(
+                        [self.joints[n].driver for n, _ in self._bus_order() if n in wanted
+                         and (other := self._sampled_together(n)) is not None and other.sample_group is sample])
+                out[name] = j.to_si(sampled[id(sample)][j.driver])
                 continue
             group: DriveGroup = driver.group
             if id(group) not in groups:
@@ -183,6 +196,18 @@ class Rig:
             order = self._order = [(name, j) for bus in self.buses for name, j in self.joints.items()
                                    if self.config.joints[name].bus == bus]
         return order
+
+    def samples_together(self, name: str) -> bool:
+        """Whether joint ``name`` is sampled with others of its bus by one broadcast (a CANopen SYNC):
+        :meth:`read_states` reads those together, one sample instant for all."""
+        return self._sampled_together(self.joints[name].name) is not None
+
+    def _sampled_together(self, name: str) -> SampledTogether | None:
+        """The joint's driver if its bus samples it with others (checked once per joint)."""
+        if name not in self._together:
+            driver = self.joints[name].driver
+            self._together[name] = driver if isinstance(driver, SampledTogether) else None
+        return self._together[name]
 
     def _grouped(self, name: str) -> GroupedChannel | None:
         """The joint's driver if it is a channel of a multi-channel drive (checked once per joint)."""

@@ -1,4 +1,9 @@
-"""The SYNC cycle of one CANopen bus: each cyclic node's RPDO, one SYNC, that cycle's TPDOs.
+"""The SYNC cycle of one CANopen bus: each cyclic node's RPDO, one SYNC, that cycle's TPDOs; and the bus's reads.
+
+A SYNC is a broadcast (CiA 301): every started node answers each one with its synchronous TPDOs. A read
+(:meth:`SyncCycle.read_states`, :meth:`SyncCycle.sample`) is one SYNC for all the nodes it reads and waits for
+every one of their TPDOs of it; before it sends its SYNC it waits out the TPDOs still owed for an earlier SYNC
+(:meth:`SyncCycle.settle`), so a TPDO taken after the SYNC answers that SYNC and no earlier one.
 
 Rule: one per bus, held by the bus's link (:attr:`joints.link.canopen.CanopenLink.sync_cycle`,
 :meth:`SyncCycle.of`), shared by the drivers of that bus; it knows nodes only through
@@ -8,7 +13,7 @@ Rule: one per bus, held by the bus's link (:attr:`joints.link.canopen.CanopenLin
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any, Protocol
 
 from joints.codecs import canopen as co
@@ -49,6 +54,19 @@ class CyclicNode(Protocol):
 
     def fault_text(self, code: int) -> str: ...
 
+    @property
+    def sync_cobs(self) -> tuple[int, ...]:
+        """The COB-IDs of the TPDOs the node sends on every SYNC (none while not started or lost)."""
+        ...
+
+    def begin_read(self) -> bool:
+        """Before a read's SYNC: the node brought up, guarded; whether it is to be sampled (not lost)."""
+        ...
+
+    def end_read(self, at: float | None) -> RawState:
+        """The node's state from the TPDOs of the SYNC sent at ``at`` (clock time; None: not sampled)."""
+        ...
+
 
 class SyncCycle:
     """The SYNC cycle of one CANopen bus: each cyclic joint's RPDO, one SYNC, that cycle's TPDO1s.
@@ -77,6 +95,11 @@ class SyncCycle:
         self.drivers: list[CyclicNode] = []
         self._expect: list[CyclicNode] = []
         self._asked: dict[int, deque[tuple[int, float]]] = {}  #: node -> (cycle, SYNC time) not yet answered
+        self._restarts = getattr(link, "restarts", 0)  #: the link's clock restarts the grid was laid after
+        self._owed: dict[int, int] = {}  #: COB-ID -> TPDOs still owed for SYNCs sent (every SYNC: each sync_cobs)
+        self._owed_at = 0.0  #: clock time of the last SYNC sent
+        self.samples = 0  #: SYNCs sent by reads (:meth:`sample`)
+        self.settled = 0  #: TPDOs of earlier SYNCs waited out before a read's SYNC
 
     @classmethod
     def of(cls, link: Any, period: float) -> SyncCycle:
@@ -99,6 +122,12 @@ class SyncCycle:
         link = self.link
         now = link.bus_now()
         eps = 1e-9
+        restarts = getattr(link, "restarts", 0)
+        if restarts != self._restarts:  # the clock restarted (a sim reset): the old grid's times are void
+            self._restarts = restarts
+            self.next_due = None
+            self._asked.clear()
+            self._owed.clear()
         if self.next_due is None or now > self.next_due + self.period + eps:
             self._grid, self._n = now, 0  # first cycle, or the caller fell behind: restart the grid
         elif now < self.next_due - eps:
@@ -108,11 +137,78 @@ class SyncCycle:
         for driver, target in targets.items():  # each send first delivers what arrived before it
             driver.cycle_send(target)
         link.sync()
+        self.owe(link.clock.now())
         self.sync_time = link.bus_now()
         self.cycles += 1
         self.next_due = due
         self._expect = list(targets)
         self.synced(self.sync_time)
+
+    # -- reads: one SYNC for the nodes read, every TPDO taken answering it -------------------------
+    def owe(self, at: float) -> None:
+        """A SYNC went out at clock time ``at``: every started node of the bus owes its synchronous TPDOs of it."""
+        owed = self._owed
+        for d in self.drivers:
+            for cob in d.sync_cobs:
+                owed[cob] = owed.get(cob, 0) + 1
+        self._owed_at = at
+
+    def paid(self, cob: int) -> None:
+        """A TPDO with COB-ID ``cob`` came (its node's driver calls this for each one)."""
+        owed = self._owed
+        n = owed.get(cob)
+        if n is not None:
+            if n > 1:
+                owed[cob] = n - 1
+            else:
+                del owed[cob]
+
+    def settle(self) -> None:
+        """Wait out the TPDOs still owed for earlier SYNCs, delivered to their nodes' drivers as they come (not
+        taken by a read), at most until the link's reply timeout after the last SYNC; one that has not come by
+        then is given up (the node is late or gone)."""
+        owed = self._owed
+        if not owed:
+            return
+        owners = {cob for d in self.drivers for cob in d.sync_cobs}
+        for cob in [c for c in owed if c not in owners]:  # the node stopped or was lost meanwhile
+            del owed[cob]
+        if owed:
+            link = self.link
+            n = sum(owed.values())
+            link.deliver_until(lambda: not owed, self._owed_at + link.policy.timeout - link.clock.now())
+            self.settled += n - sum(owed.values())
+        owed.clear()
+
+    def sample(self, nodes: Sequence[CyclicNode]) -> float:
+        """One SYNC and every TPDO of ``nodes`` answering it (each to its driver); returns the clock time the SYNC
+        was sent: the nodes sample when it has crossed the bus. TPDOs owed for an earlier SYNC are waited out
+        first (:meth:`settle`): a node answers the SYNCs in order, so what comes after this SYNC answers it."""
+        link = self.link
+        self.settle()
+        link.sync()  # what arrived before it is delivered first (the send drains the bus)
+        at = float(link.clock.now())
+        self.samples += 1
+        self.synced(link.bus_now())  # every node in a cyclic mode answers it: the SYNC cycle keeps count
+        self.owe(at)
+        waiting = {cob: d for d in nodes for cob in d.sync_cobs}
+        deadline = at + link.policy.timeout
+        while waiting:
+            left = deadline - link.clock.now()
+            try:
+                msg = link.wait_for(lambda m: isinstance(m, co.Pdo) and m.cob_id in waiting, max(left, 0.0))
+            except ReplyTimeout:
+                late = sorted({d.node for d in waiting.values()})
+                raise ReplyTimeout(f"{waiting[min(waiting)].name}: no TPDO from node(s) {late} after SYNC within "
+                                   f"{link.policy.timeout * 1e3:.0f} ms; check that the node is OPERATIONAL") from None
+            waiting.pop(msg.cob_id).on_tpdo(msg)
+        return at
+
+    def read_states(self, members: Sequence[CyclicNode]) -> dict[CyclicNode, RawState]:
+        """The states of ``members`` (nodes of this bus) from one SYNC: one sample instant for all of them."""
+        live = [d for d in members if d.begin_read()]
+        at = self.sample(live) if live else None
+        return {d: d.end_read(at if d in live else None) for d in members}
 
     def synced(self, at: float) -> None:
         """A SYNC went out at ``at`` (the cycle's, or one a driver sent for a state read): each node that

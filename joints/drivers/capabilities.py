@@ -6,8 +6,8 @@ the CLI ask ``isinstance(driver, Capability)`` and use the typed methods.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Protocol, runtime_checkable
+from collections.abc import Mapping, Sequence
+from typing import Any, Protocol, runtime_checkable
 
 from joints.drivers.base import RawState
 
@@ -44,6 +44,23 @@ class GroupedChannel(Protocol):
     def state_from(self, status: Mapping[str, int], time: float) -> RawState:
         """This channel's state from a status read of its group."""
         ...
+
+
+@runtime_checkable
+class SampleGroup(Protocol):
+    """The drives of one bus that one broadcast samples together (CANopen: a SYNC)."""
+
+    def read_states(self, members: Sequence[Any]) -> Mapping[Any, RawState]:
+        """The states of ``members`` (drivers of the group) from one sample instant."""
+        ...
+
+
+@runtime_checkable
+class SampledTogether(Protocol):
+    """A joint whose state is best read with the others of its :class:`SampleGroup` (one sample for all)."""
+
+    @property
+    def sample_group(self) -> SampleGroup: ...
 
 
 @runtime_checkable

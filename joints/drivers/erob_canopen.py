@@ -74,7 +74,6 @@ from joints.errors import (
     DeviceFault,
     FrameError,
     PeerProtocolError,
-    ReplyTimeout,
     StateError,
 )
 
@@ -333,7 +332,23 @@ class ErobCanopenDriver(ErobDriver):
             memo = self._pack = (self._rpdo, co.pdo_packer(_entries(self._rpdo)), self._rpdo.cob_id(self.node))
         self.link.send_pdo(memo[2], memo[1](values))
 
+    @property
+    def sync_cobs(self) -> tuple[int, ...]:
+        """The TPDOs the node sends on every SYNC (TPDO1 [+ TPDO2]): none before it is started or once lost."""
+        if self._up is None:
+            return ()
+        m = self.link.monitors.get(self.node)
+        if m is not None and m.lost is not None:
+            return ()
+        return (self.tpdo1_cob, self.tpdo2_cob)[:len(self._tpdos)]
+
+    @property
+    def sample_group(self) -> SyncCycle:
+        """The bus's reads (:meth:`SyncCycle.read_states`): the joints of one bus are sampled by one SYNC."""
+        return self.group
+
     def on_tpdo(self, msg: co.Pdo) -> None:
+        self.group.paid(msg.cob_id)
         t = self.link.clock.now()
         if msg.cob_id == self.tpdo1_cob:
             try:
@@ -367,23 +382,12 @@ class ErobCanopenDriver(ErobDriver):
         self._send_rpdo(values)
         if self.cyclic:
             self.link.sync()
+            self.group.owe(self.clock.now())
 
-    def _snapshot(self) -> None:
-        """One SYNC and this node's TPDOs of it (statusword, position; velocity and current)."""
-        link = self.link
-        link.sync()  # what arrived before it is delivered first (the send drains the bus)
-        self.group.synced(link.bus_now())  # every node in a cyclic mode answers it: the SYNC cycle keeps count
-        want = {c for c in (self.tpdo1_cob, self.tpdo2_cob)[:len(self._tpdos)]}
-        deadline = link.clock.now() + link.policy.timeout
-        while want:
-            left = deadline - link.clock.now()
-            try:
-                msg = link.wait_for(lambda m: isinstance(m, co.Pdo) and m.cob_id in want, max(left, 0.0))
-            except ReplyTimeout:
-                raise ReplyTimeout(f"{self.name}: no TPDO from node {self.node} after SYNC within "
-                                   f"{link.policy.timeout * 1e3:.0f} ms; check that the node is OPERATIONAL") from None
-            want.discard(msg.cob_id)
-            self.on_tpdo(msg)
+    def _snapshot(self) -> float:
+        """One SYNC and this node's TPDOs of it (statusword, position; velocity and current), TPDOs owed for an
+        earlier SYNC waited out first (:meth:`SyncCycle.sample`); the clock time of the SYNC."""
+        return self.group.sample((self,))
 
     def lost(self) -> str | None:
         """Why the node counts as lost (heartbeat consumer, node guarding), or None."""
@@ -402,16 +406,26 @@ class ErobCanopenDriver(ErobDriver):
         return cia402.state_of(self.statusword)
 
     def state(self) -> RawState:
-        """One SYNC and this node's TPDOs (guarding the node first while the watchdog is armed)."""
+        """One SYNC and this node's TPDOs (guarding the node first while the watchdog is armed), stamped with
+        the SYNC's time; the joints of one bus read together share one SYNC (:meth:`SyncCycle.read_states`)."""
+        return self.group.read_states((self,))[self]
+
+    def begin_read(self) -> bool:
+        """Before the read's SYNC: the node up in its mode, guarded; whether it is sampled (not lost)."""
         self._ensure()
         self._keepalive()
-        if self.lost() is None:
-            self._snapshot()
-            now = self.clock.now()
-            if now - self._temperature_time >= TEMPERATURE_PERIOD:
-                self._temperature_time = now
-                self.temperature = float(self.read("part_of_power_temperature"))
-        return self._raw(self.clock.now())
+        return self.lost() is None
+
+    def end_read(self, at: float | None) -> RawState:
+        """The state from the TPDOs of the SYNC sent at ``at`` (None: lost, not sampled), the temperature read by
+        SDO when it is :data:`TEMPERATURE_PERIOD` old."""
+        if at is None:
+            return self._raw(self.clock.now())
+        now = self.clock.now()
+        if now - self._temperature_time >= TEMPERATURE_PERIOD:
+            self._temperature_time = now
+            self.temperature = float(self.read("part_of_power_temperature"))
+        return self._raw(at)
 
     def observe(self) -> RawState:
         """The state by SDO reads only - no NMT, no bring-up, no PDO or mode change (for tools that only look).
@@ -682,10 +696,17 @@ class ErobCanopenDriver(ErobDriver):
         self.emcy = None
 
     def forget(self) -> None:
+        """Also the times kept on the clock (a sim reset restarts it): the temperature is read at the next
+        state(), the guarding and the cyclic velocity start again."""
         super().forget()
         self._up = None
         self._cw = 0
         self.emcy = None
+        self.temperature = math.nan
+        self._temperature_time = -math.inf
+        self._last_guard = -math.inf
+        self.status_time = -math.inf
+        self._prev_position = None
         self.link.monitor(self.node).reset()
         self.link.consume(self.node, 0.0)
 

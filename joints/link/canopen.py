@@ -215,6 +215,10 @@ class CanopenLink(Link[Any]):
         #: edge while the physics clock moves in whole substeps): bus time is the last frame's stamp
         self.bus_clock = bus_clock
         self._stamp = clock.now()
+        #: the clock's restarts (a sim reset: a new ``epoch`` of :class:`joints.clock.ManualClock`) the link has
+        #: seen: the bus time starts again at the clock's time (who keeps bus time, e.g. the SYNC cycle, compares)
+        self.restarts = 0
+        self._epoch = getattr(clock, "epoch", None)
         self.monitors: dict[int, NodeMonitor] = {}
         self._clients: dict[int, co.SdoClient] = {}
         self.sdo_transfers = 0
@@ -228,12 +232,25 @@ class CanopenLink(Link[Any]):
                        only=(co.Heartbeat, co.BootUp))
 
     def _decode(self, frame: can.Message) -> co.Message:
-        if self.bus_clock and frame.timestamp > self._stamp:
-            self._stamp = float(frame.timestamp)
+        if self.bus_clock:
+            if self._epoch is not None and self.clock.epoch != self._epoch:  # type: ignore[attr-defined]
+                self._restart()
+            if frame.timestamp > self._stamp:
+                self._stamp = float(frame.timestamp)
         return decode_host(frame)
 
+    def _restart(self) -> None:
+        """The clock restarted (a new epoch): bus time starts again at the clock's time, as at construction
+        (the medium dropped what was in flight at the same restart)."""
+        self._epoch = self.clock.epoch  # type: ignore[attr-defined]
+        self._stamp = self.clock.now()
+        self.restarts += 1
+
     def bus_now(self) -> float:
-        """The bus's present time: the clock, or (sim) where the timed bus is (it may lag a coarse clock)."""
+        """The bus's present time: the clock, or (sim) where the timed bus is (it may lag a coarse clock);
+        after a restart of the clock (a new epoch), from the clock's new time on."""
+        if self._epoch is not None and self.clock.epoch != self._epoch:  # type: ignore[attr-defined]
+            self._restart()
         return max(self._stamp, self.clock.now()) if not self.bus_clock else self._stamp
 
     def poll(self, timeout: float = 0.0) -> int:
@@ -251,6 +268,21 @@ class CanopenLink(Link[Any]):
             if self.bus_clock:
                 self._stamp = max(self._stamp, start + timeout)
             raise
+
+    def deliver_until(self, done: Callable[[], bool], timeout: float) -> bool:
+        """Deliver what arrives to the subscribers (unsolicited frames, none taken as a reply) until ``done()``
+        holds or ``timeout`` s passed; whether it holds."""
+        start = self.bus_now()
+        with self._lock:
+            deadline = self.clock.now() + timeout
+            while not done():
+                got = self.framing.receive(deadline)
+                if got is None:
+                    if self.bus_clock:
+                        self._stamp = max(self._stamp, start + timeout)
+                    return False
+                self._unsolicited(got)
+        return True
 
     def wait_bus(self, until: float) -> None:
         """Let the bus run until ``until`` (bus time), delivering what arrives."""

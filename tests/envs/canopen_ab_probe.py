@@ -8,8 +8,9 @@ bench``'s CANopen row, :func:`joints.bench._baseline_config`) twice in one proce
 one checkout's modules at a time and is switched before each block, so the lazy imports of either find their own).
 Block by block each env runs ``STEPS`` steps of the same seeded uniform actions from the same reset, timed by
 ``time.thread_time``; the blocks alternate (``ROUNDS`` of each), and every block's observations, rewards and ends
-must be bit-identical to the first block's. Prints the best and median CPU time per env step of each and the
-frames per step on the medium. Pin it to one core (``taskset -c 1``).
+must be bit-identical to the first block's (``SAME_BITS=0``: to the first block of the same checkout, for a change
+of behaviour). Prints the best and median CPU time per env step of each, and per step the frames, the bits and the
+SYNCs on the medium and the bus load at the step's period. Pin it to one core (``taskset -c 1``).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import numpy as np
 
 STEPS = int(os.environ.get("STEPS", "300"))
 ROUNDS = int(os.environ.get("ROUNDS", "10"))
+SAME_BITS = os.environ.get("SAME_BITS", "1") != "0"
 ENV = "joints/ErobArmReach-v0"
 _OURS = ("joints", "envs")
 
@@ -65,11 +67,20 @@ def _make(modules: dict[str, Any], mode: str | None) -> Any:
     return env
 
 
-def _block(env: Any, modules: dict[str, Any], actions: list[Any]) -> tuple[float, float, list[Any]]:
+def _block(env: Any, modules: dict[str, Any], actions: list[Any]) -> tuple[float, tuple[float, ...], list[Any]]:
     _use(modules)
     obs, _ = env.reset(seed=7)
-    medium = next(iter(env.unwrapped.rig.sim.buses.values())).medium
-    f0 = medium.frames
+    bus = next(iter(env.unwrapped.rig.sim.buses.values()))
+    medium = bus.medium
+    syncs = [0]
+    on_frame = type(bus).on_frame
+
+    def counting(frame: Any) -> Any:
+        syncs[0] += frame.arbitration_id == 0x80
+        return on_frame(bus, frame)
+
+    bus.on_frame = counting  # the medium asks its peer at each frame
+    f0, b0 = medium.frames, medium.bits
     record: list[Any] = [obs.tobytes()]
     t0 = time.thread_time()
     for a in actions:
@@ -78,7 +89,9 @@ def _block(env: Any, modules: dict[str, Any], actions: list[Any]) -> tuple[float
         if terminated or truncated:
             obs, _ = env.reset()
     t = (time.thread_time() - t0) / len(actions)
-    return t, (medium.frames - f0) / len(actions), record
+    del bus.on_frame
+    n = len(actions)
+    return t, ((medium.frames - f0) / n, (medium.bits - b0) / n, syncs[0] / n, medium.bitrate), record
 
 
 def main(other: str, mode: str | None = None) -> None:
@@ -90,20 +103,24 @@ def main(other: str, mode: str | None = None) -> None:
     space = envs["this"].action_space
     actions = [rng.uniform(space.low, space.high).astype(space.dtype) for _ in range(STEPS)]
     times: dict[str, list[float]] = {"this": [], "other": []}
-    frames: dict[str, float] = {}
-    first: list[Any] | None = None
+    frames: dict[str, tuple[float, ...]] = {}
+    first: dict[str, list[Any]] = {}
     for name, env in envs.items():  # a first block of each: the host's state after a first bring-up differs
         _block(env, trees[name], actions)  # (its temperature read's time is not reset with the clock)
     for _ in range(ROUNDS):
         for name, env in envs.items():
             t, frames[name], record = _block(env, trees[name], actions)
-            if first is None:
-                first = record
-            assert record == first, f"{name}: the bits differ from the first block's"
+            ref = first.setdefault("this" if SAME_BITS else name, record)
+            assert record == ref, f"{name}: the bits differ from the first block's"
             times[name].append(t)
+    if not SAME_BITS:
+        print("bits: " + ("the same" if first["this"] == first["other"] else "differ (SAME_BITS=0: not required)"))
+    period = envs["this"].unwrapped.control_period
     for name, ts in times.items():
+        n, bits, syncs, rate = frames[name]
         print(f"{name:6s} best {min(ts) * 1e6:7.1f} us  median {statistics.median(ts) * 1e6:7.1f} us per env step "
-              f"({ROUNDS} blocks of {STEPS} steps, CPU time; {frames[name]:.1f} frames per step)")
+              f"({ROUNDS} blocks of {STEPS} steps, CPU time); per step {n:.1f} frames, {bits:.0f} bits, "
+              f"{syncs:.2f} SYNCs, bus load {bits / rate / period:.1%} at {period * 1e3:g} ms")
     b = min(times["this"]) / min(times["other"]) - 1
     m = statistics.median(times["this"]) / statistics.median(times["other"]) - 1
     print(f"this vs other: best {b * 100:+.1f} %, median {m * 100:+.1f} %")
