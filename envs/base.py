@@ -754,6 +754,9 @@ class JointsEnv(RigEnv):
             self.render()
         return obs, float(reward), terminated, False, info
 
+    #: (the joints, the names of those read together by ``rig.read_states`` or None), made at the first read
+    _sample_plan: tuple[list[joints.Joint], list[str] | None] | None = None
+
     def _read(self) -> list[joints.JointState]:
         """Every joint's state: the compiled path's, else joint by joint - the joints one broadcast samples
         together (the CANopen joints of a bus: one SYNC, ``rig.samples_together``) by one ``rig.read_states`` of
@@ -762,7 +765,7 @@ class JointsEnv(RigEnv):
         if compiled is not None:
             self._states = compiled.states()
             return self._states
-        plan = self.__dict__.get("_sample_plan")
+        plan = self._sample_plan
         if plan is None or plan[0] is not self.joints:
             shared = [n for n in self.joint_names if self.rig.samples_together(n)]
             plan = self._sample_plan = (self.joints, shared or None)
