@@ -37,7 +37,9 @@ Time model (docs/timing.md):
   broadcast is executed while the host sleeps); otherwise the line runs at the host's reads and writes.
 
 :attr:`TimedSerialLine.log` keeps the transmissions (time, side, bytes, corrupted): the wire trace, its
-latest :data:`LOG_KEEP` frames at least (older ones go in batches, once they can overlap no new frame).
+latest :attr:`TimedSerialLine.log_keep` frames at least (:data:`LOG_KEEP`, 1,000, unless set on the line; older
+ones go in batches, once they can overlap no new frame). A kept frame costs memory (~250 bytes with its reply) and
+the garbage collector's full passes walk it: keep more only where the trace is read (docs/speed.md).
 """
 
 from __future__ import annotations
@@ -56,8 +58,9 @@ __all__ = ["Deferred", "LinePeer", "Ticking", "TimedFrames", "TimedSerialLine", 
 #: s the line waits at most in one step while nothing is on it (frames a device sends by itself are
 #: picked up at least this often)
 IDLE_STEP = 0.001
-#: transmissions :attr:`TimedSerialLine.log` keeps at least (at most twice as many): a long run's memory stays flat
-LOG_KEEP = 10_000
+#: transmissions :attr:`TimedSerialLine.log` keeps at least (at most twice as many, and every frame of the last
+#: second): a long run's memory stays flat; a line's own :attr:`TimedSerialLine.log_keep` starts at this
+LOG_KEEP = 1_000
 
 
 class LinePeer(Protocol):
@@ -144,6 +147,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         self.adapter_latency = adapter_latency
         self.gap = gap
         self._log: list[Transmission] = []
+        #: transmissions :attr:`log` keeps at least (at most twice as many, and every frame of the last second)
+        self.log_keep = LOG_KEEP
         #: the log's first entry that may still be a booked frame's tuple (:meth:`book_frames`)
         self._raw_from = 0
         #: per logged frame, the latest end of it and every frame logged before it since the epoch: a new
@@ -186,12 +191,13 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         log: list[Any] = self._log
         latest = self._latest_end
         epoch = self._epoch
+        keep = self.log_keep
         for item in frames:
             end = item[1]
             latest.append(max(end, latest[-1]) if len(log) > epoch else end)
             log.append(item)
-            if len(log) > 2 * LOG_KEEP:
-                cut = len(log) - LOG_KEEP
+            if len(log) > 2 * keep:
+                cut = len(log) - keep
                 if cut <= epoch or latest[cut - 1] <= item[0] - 1.0:
                     del log[:cut], latest[:cut]
                     self._epoch = epoch = max(0, epoch - cut)
@@ -291,8 +297,9 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         log.append(tx)
         if pend:
             self._pending.append(tx)
-        if len(log) > 2 * LOG_KEEP:
-            cut = len(log) - LOG_KEEP  # the oldest frames go once none of them can overlap a new one
+        keep = self.log_keep
+        if len(log) > 2 * keep:
+            cut = len(log) - keep  # the oldest frames go once none of them can overlap a new one
             if cut <= self._epoch or latest[cut - 1] <= start - 1.0:
                 del log[:cut], latest[:cut]
                 self._epoch = max(0, self._epoch - cut)

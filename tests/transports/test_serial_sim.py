@@ -3,6 +3,7 @@ the MKS driver survives them (reads retried, the move never sent twice, a lost c
 
 from __future__ import annotations
 
+from itertools import pairwise
 from pathlib import Path
 
 import pytest
@@ -171,3 +172,33 @@ def test_the_log_stays_bounded_and_keeps_every_frame_that_can_still_overlap(monk
     line.write(request)  # collides with the drive's own frame, as on a fresh line
     line.read(0.05)
     assert line.collisions == 1
+
+
+def test_a_line_keeps_its_latest_log_keep_frames_at_least_and_each_line_sets_its_own() -> None:
+    """The documented guarantee at the shipped number: the wire trace holds the latest LOG_KEEP frames at least and
+    at most twice as many (frames spaced so the last second's floor holds fewer); a line's ``log_keep`` is its own."""
+    from joints.transports.serial_sim import LOG_KEEP
+
+    clock = ManualClock()
+    request, reply = mks.encode(mks.ReadSpeed(1)), mks.encode(mks.SpeedReply(1, 7))
+    short = TimedSerialLine(Echo(reply), baudrate=38400, clock=clock, turnaround=0.0005)
+    long = TimedSerialLine(Echo(reply), baudrate=38400, clock=clock, turnaround=0.0005)
+    assert short.log_keep == long.log_keep == LOG_KEEP
+    short.log_keep, long.log_keep = 50, 3 * LOG_KEEP
+    default = TimedSerialLine(Echo(reply), baudrate=38400, clock=clock, turnaround=0.0005)
+    sizes: dict[str, list[int]] = {"default": [], "short": [], "long": []}
+    for _ in range(3 * LOG_KEEP):  # 6 * LOG_KEEP frames each, 20 a second
+        clock.advance(0.1)
+        for name, line in (("default", default), ("short", short), ("long", long)):
+            line.write(request)
+            assert line.read(0.1) == reply
+            sizes[name].append(len(line.log))
+    first = [tx.start for tx in default.log[:1]]
+    assert min(sizes["default"][2 * LOG_KEEP:]) >= LOG_KEEP and max(sizes["default"]) <= 2 * LOG_KEEP + 1
+    assert first and first[0] > 0.1 * LOG_KEEP  # the oldest frames went
+    assert 50 <= min(sizes["short"][100:]) and max(sizes["short"]) <= 100 + 1
+    assert sizes["long"] == list(range(2, 2 * 3 * LOG_KEEP + 1, 2))  # nothing went yet
+    kept = default.log
+    assert [tx.side for tx in kept] == ["host", "device"] * (len(kept) // 2) and kept[-1].data == reply
+    assert all(a.start < b.start for a, b in pairwise(kept))  # the latest frames, in order, none missing
+    assert all(b.start - a.start < 0.2 for a, b in zip(kept[::2], kept[2::2]))  # 0.1 s apart and the reads
