@@ -7,7 +7,8 @@ STEPS steps timed in CPU time (``time.process_time``) with every collection time
 the CPU time per rig step, the collectors' share of it per generation, the passes, what they collected; the
 frames in the simulated lines' logs per rig, the bytes those logs hold per rig (``sys.getsizeof`` of every
 object reachable from the log entries, each counted once), and the process's RSS growth per rig.
-Pin it to one core (``taskset -c 1``); compare two checkouts by running each, alternating, with ``PYTHONPATH``.
+``GC_PROBE_ENV``: another env id; ``GC_PROBE_CAN=1``: the bench's CAN row of it (one rig); ``GC_PROBE_LOG_KEEP``:
+another :data:`~joints.transports.serial_sim.LOG_KEEP` for the run. Pin it to one core (``taskset -c 1``); compare two checkouts by running each, alternating, with ``PYTHONPATH``.
 """
 
 from __future__ import annotations
@@ -61,10 +62,18 @@ def main() -> None:
     rigs, steps = int(sys.argv[1]), int(sys.argv[2])
     warm = int(sys.argv[3]) if len(sys.argv) > 3 else 100
     rss0 = _rss()
-    if rigs == 1:
-        env: Any = gym.make(ENV_ID)
+    env_id = os.environ.get("GC_PROBE_ENV", ENV_ID)
+    if os.environ.get("GC_PROBE_CAN"):  # the bench's CAN row of that env (its config on CAN at 1 Mbit/s, 50 Hz)
+        from joints import bench
+
+        found = bench._baseline_config(env_id.split(":")[-1])
+        assert found is not None and rigs == 1, "a CAN row: one rig of an env the bench has a CAN row of"
+        env: Any = gym.make(env_id, config=found[0], control_period=bench.BASELINE_PERIOD)
+        print(f"on {found[1]}")
+    elif rigs == 1:
+        env = gym.make(env_id)
     else:
-        env = gym.make_vec(ENV_ID, num_envs=rigs, vectorization_mode="vector_entry_point")
+        env = gym.make_vec(env_id, num_envs=rigs, vectorization_mode="vector_entry_point")
     env.action_space.seed(0)
     env.reset(seed=0)
     action = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
