@@ -37,13 +37,14 @@ Time model (docs/timing.md):
   broadcast is executed while the host sleeps); otherwise the line runs at the host's reads and writes.
 
 :attr:`TimedSerialLine.log` keeps the transmissions (time, side, bytes, corrupted): the wire trace, its
-latest :attr:`TimedSerialLine.log_keep` frames at least (:data:`LOG_KEEP`, 1,000, unless set on the line; older
-ones go in batches, once they can overlap no new frame). A kept frame costs memory (~250 bytes with its reply) and
+latest :attr:`TimedSerialLine.log_keep` frames at least (:data:`LOG_KEEP`, 1,000, unless set on the line) and
+those of the last second (older ones go in batches, once they can overlap no new frame). A kept frame costs memory (~250 bytes with its reply) and
 the garbage collector's full passes walk it: keep more only where the trace is read (docs/speed.md).
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -58,7 +59,7 @@ __all__ = ["Deferred", "LinePeer", "Ticking", "TimedFrames", "TimedSerialLine", 
 #: s the line waits at most in one step while nothing is on it (frames a device sends by itself are
 #: picked up at least this often)
 IDLE_STEP = 0.001
-#: transmissions :attr:`TimedSerialLine.log` keeps at least (at most twice as many, and every frame of the last
+#: transmissions :attr:`TimedSerialLine.log` keeps at least (at most about twice as many beyond those of the last
 #: second): a long run's memory stays flat; a line's own :attr:`TimedSerialLine.log_keep` starts at this
 LOG_KEEP = 1_000
 
@@ -147,8 +148,9 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         self.adapter_latency = adapter_latency
         self.gap = gap
         self._log: list[Transmission] = []
-        #: transmissions :attr:`log` keeps at least (at most twice as many, and every frame of the last second)
+        #: transmissions :attr:`log` keeps at least (at most about twice as many beyond those of the last second)
         self.log_keep = LOG_KEEP
+        self._over = 0  #: frames the last trim kept beyond ``log_keep`` (those of the last second)
         #: the log's first entry that may still be a booked frame's tuple (:meth:`book_frames`)
         self._raw_from = 0
         #: per logged frame, the latest end of it and every frame logged before it since the epoch: a new
@@ -191,17 +193,13 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         log: list[Any] = self._log
         latest = self._latest_end
         epoch = self._epoch
-        keep = self.log_keep
         for item in frames:
             end = item[1]
             latest.append(max(end, latest[-1]) if len(log) > epoch else end)
             log.append(item)
-            if len(log) > 2 * keep:
-                cut = len(log) - keep
-                if cut <= epoch or latest[cut - 1] <= item[0] - 1.0:
-                    del log[:cut], latest[:cut]
-                    self._epoch = epoch = max(0, epoch - cut)
-                    self._raw_from = max(0, self._raw_from - cut)
+            if len(log) > 2 * self.log_keep + self._over:
+                self._trim(item[0])
+                epoch = self._epoch
 
     def latest_end(self) -> float:
         """The latest end of any frame of the present timeline (-inf: none)."""
@@ -297,14 +295,23 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         log.append(tx)
         if pend:
             self._pending.append(tx)
-        keep = self.log_keep
-        if len(log) > 2 * keep:
-            cut = len(log) - keep  # the oldest frames go once none of them can overlap a new one
-            if cut <= self._epoch or latest[cut - 1] <= start - 1.0:
-                del log[:cut], latest[:cut]
-                self._epoch = max(0, self._epoch - cut)
-                self._raw_from = max(0, self._raw_from - cut)
+        if len(log) > 2 * self.log_keep + self._over:
+            self._trim(start)
         return tx
+
+    def _trim(self, start: float) -> None:
+        """The oldest frames go, all but the latest ``log_keep``, once none of them can overlap a new frame (one
+        starting at ``start`` or later): those of the present timeline that ended a second before ``start``."""
+        log, latest, epoch = self._log, self._latest_end, self._epoch
+        keep = max(self.log_keep, 1)
+        cut = len(log) - keep
+        if cut > epoch and latest[cut - 1] > start - 1.0:  # (latest: the running latest end since the epoch)
+            cut = bisect.bisect_right(latest, start - 1.0, epoch, cut)
+        if cut > 0:
+            del log[:cut], latest[:cut]
+            self._epoch = max(0, epoch - cut)
+            self._raw_from = max(0, self._raw_from - cut)
+        self._over = max(0, len(log) - keep)  # frames of the last second: the next trim waits for keep more
 
     def _run(self, until: float) -> None:
         """Everything that happens on the line up to ``until`` (the clock's time), in time order."""

@@ -202,3 +202,23 @@ def test_a_line_keeps_its_latest_log_keep_frames_at_least_and_each_line_sets_its
     assert [tx.side for tx in kept] == ["host", "device"] * (len(kept) // 2) and kept[-1].data == reply
     assert all(a.start < b.start for a, b in pairwise(kept))  # the latest frames, in order, none missing
     assert all(b.start - a.start < 0.2 for a, b in zip(kept[::2], kept[2::2]))  # 0.1 s apart and the reads
+
+
+def test_a_line_busier_than_its_log_keep_a_second_stays_bounded_and_keeps_its_last_second() -> None:
+    """More than ``log_keep`` frames a second: the frames beyond the latest ``log_keep`` that ended a second
+    before go (the log does not grow for ever); the last second's frames stay (a new frame may overlap them)."""
+    clock = ManualClock()
+    request, reply = mks.encode(mks.ReadSpeed(1)), mks.encode(mks.SpeedReply(1, 7))
+    line = TimedSerialLine(Echo(reply), baudrate=38400, clock=clock, turnaround=0.0005)
+    line.log_keep = 3
+    sizes = []
+    for _ in range(400):  # 40 frames a second for 10 s
+        clock.advance(0.05)
+        line.write(request)
+        assert line.read(0.1) == reply
+        sizes.append(len(line.log))
+        kept = line.log  # the last second, whole: no transaction missing, and reaching a second back
+        assert all(b.start - a.start < 0.06 for a, b in zip(kept[::2], kept[2::2]))
+        assert kept[0].start <= kept[-1].start - 0.95 or len(kept) == 2 * len(sizes)
+    assert max(sizes) <= 2 * 3 + 2 * 41 and min(sizes[100:]) >= 38
+    assert line.collisions == 0 and line.latest_end() == line.log[-1].end
