@@ -148,9 +148,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         self.adapter_latency = adapter_latency
         self.gap = gap
         self._log: list[Transmission] = []
-        #: transmissions :attr:`log` keeps at least (at most about twice as many beyond those of the last second)
-        self.log_keep = LOG_KEEP
-        self._over = 0  #: frames the last trim kept beyond ``log_keep`` (those of the last second)
+        self._keep = LOG_KEEP
+        self._trim_at = 2 * LOG_KEEP  #: the log's length that makes it trimmed
         #: the log's first entry that may still be a booked frame's tuple (:meth:`book_frames`)
         self._raw_from = 0
         #: per logged frame, the latest end of it and every frame logged before it since the epoch: a new
@@ -179,6 +178,19 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         return f"TimedSerialLine({self.baudrate} bd)"
 
     @property
+    def log_keep(self) -> int:
+        """Transmissions :attr:`log` keeps at least (at most about twice as many beyond those of the last second;
+        :data:`LOG_KEEP` unless set)."""
+        return self._keep
+
+    @log_keep.setter
+    def log_keep(self, n: int) -> None:
+        if n < 1:
+            raise ValueError(f"log_keep must be >= 1 (the latest frame stays), got {n!r}")
+        self._keep = n
+        self._trim_at = 2 * n
+
+    @property
     def log(self) -> list[Transmission]:
         """The transmissions, oldest first (see the module docstring)."""
         if self._raw_from < len(self._log):
@@ -197,7 +209,7 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             end = item[1]
             latest.append(max(end, latest[-1]) if len(log) > epoch else end)
             log.append(item)
-            if len(log) > 2 * self.log_keep + self._over:
+            if len(log) > self._trim_at:
                 self._trim(item[0])
                 epoch = self._epoch
 
@@ -295,7 +307,7 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         log.append(tx)
         if pend:
             self._pending.append(tx)
-        if len(log) > 2 * self.log_keep + self._over:
+        if len(log) > self._trim_at:
             self._trim(start)
         return tx
 
@@ -303,7 +315,7 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         """The oldest frames go, all but the latest ``log_keep``, once none of them can overlap a new frame (one
         starting at ``start`` or later): those of the present timeline that ended a second before ``start``."""
         log, latest, epoch = self._log, self._latest_end, self._epoch
-        keep = max(self.log_keep, 1)
+        keep = self._keep
         cut = len(log) - keep
         if cut > epoch and latest[cut - 1] > start - 1.0:  # (latest: the running latest end since the epoch)
             cut = bisect.bisect_right(latest, start - 1.0, epoch, cut)
@@ -311,7 +323,7 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             del log[:cut], latest[:cut]
             self._epoch = max(0, epoch - cut)
             self._raw_from = max(0, self._raw_from - cut)
-        self._over = max(0, len(log) - keep)  # frames of the last second: the next trim waits for keep more
+        self._trim_at = len(log) + keep  # (beyond keep, the frames of the last second): the next waits for keep more
 
     def _run(self, until: float) -> None:
         """Everything that happens on the line up to ``until`` (the clock's time), in time order."""

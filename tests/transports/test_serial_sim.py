@@ -185,6 +185,8 @@ def test_a_line_keeps_its_latest_log_keep_frames_at_least_and_each_line_sets_its
     long = TimedSerialLine(Echo(reply), baudrate=38400, clock=clock, turnaround=0.0005)
     assert short.log_keep == long.log_keep == LOG_KEEP
     short.log_keep, long.log_keep = 50, 3 * LOG_KEEP
+    with pytest.raises(ValueError, match="log_keep"):
+        short.log_keep = 0  # the latest frame always stays (the overlap check's latest end)
     default = TimedSerialLine(Echo(reply), baudrate=38400, clock=clock, turnaround=0.0005)
     sizes: dict[str, list[int]] = {"default": [], "short": [], "long": []}
     for _ in range(3 * LOG_KEEP):  # 6 * LOG_KEEP frames each, 20 a second
