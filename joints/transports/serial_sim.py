@@ -38,8 +38,9 @@ Time model (docs/timing.md):
 
 :attr:`TimedSerialLine.log` keeps the transmissions (time, side, bytes, corrupted): the wire trace, its
 latest :attr:`TimedSerialLine.log_keep` frames at least (:data:`LOG_KEEP`, 1,000, unless set on the line) and
-those of the last second (older ones go in batches, once they can overlap no new frame). A kept frame costs memory (~250 bytes with its reply) and
-the garbage collector's full passes walk it: keep more only where the trace is read (docs/speed.md).
+those of the last second (older ones go in batches, once they can overlap no new frame). A kept frame costs
+memory (~250 bytes with its reply) and the garbage collector's full passes walk it: keep more only where the
+trace is read (docs/speed.md).
 """
 
 from __future__ import annotations
