@@ -8,7 +8,9 @@ the CPU time per rig step, the collectors' share of it per generation, the passe
 frames in the simulated lines' logs per rig, the bytes those logs hold per rig (``sys.getsizeof`` of every
 object reachable from the log entries, each counted once), and the process's RSS growth per rig.
 ``GC_PROBE_ENV``: another env id; ``GC_PROBE_CAN=1``: the bench's CAN row of it (one rig); ``GC_PROBE_LOG_KEEP``:
-another :data:`~joints.transports.serial_sim.LOG_KEEP` for the run. Pin it to one core (``taskset -c 1``); compare two checkouts by running each, alternating, with ``PYTHONPATH``.
+another :data:`~joints.transports.serial_sim.LOG_KEEP` for the run. Pin it to one core (``taskset -c 1``);
+compare two checkouts by running each, alternating, with ``PYTHONPATH``. "frames per rig step" is the log's
+growth: right only while no trim fell in the timed steps.
 """
 
 from __future__ import annotations
@@ -112,7 +114,7 @@ def main() -> None:
           f"{len(lines)} lines")
     print(f"  CPU per rig step {total / n * 1e6:7.1f} us; gc gen0 {us[0]:.2f}, gen1 {us[1]:.2f}, gen2 {us[2]:.2f} us "
           f"= {sum(us):.2f} us ({sum(spent) / total:.1%}); passes {passes}, collected {collected[0]}")
-    print(f"  frames per rig step {(frames1 - frames0) / n:.2f} (before trims); log frames per rig now "
+    print(f"  frames per rig step {(frames1 - frames0) / n:.2f} (the log's growth); log frames per rig now "
           f"{frames1 / rigs:,.0f}; log bytes per rig {_log_bytes(lines) / rigs / 1e6:.2f} MB "
           f"({_log_bytes(lines) / max(frames1, 1):.0f} B per frame)")
     print(f"  tracked objects {tracked0:,} -> {tracked1:,} ({(tracked1 - tracked0) / rigs:+,.0f} per rig); "
