@@ -8,7 +8,9 @@ the CPU time per rig step, the collectors' share of it per generation, the passe
 frames in the simulated lines' logs per rig, the bytes those logs hold per rig (``sys.getsizeof`` of every
 object reachable from the log entries, each counted once), and the process's RSS growth per rig.
 ``GC_PROBE_ENV``: another env id; ``GC_PROBE_CAN=1``: the bench's CAN row of it (one rig); ``GC_PROBE_LOG_KEEP``:
-another :data:`~joints.transports.serial_sim.LOG_KEEP` for the run. Pin it to one core (``taskset -c 1``);
+another :data:`~joints.transports.serial_sim.LOG_KEEP` for the run; ``GC_PROBE_DROP_PAYLOADS=1``: booked frames
+logged without their replies (not the library's behaviour: what the GC costs when the log holds no tracked
+object). Pin it to one core (``taskset -c 1``);
 compare two checkouts by running each, alternating, with ``PYTHONPATH``. "frames per rig step" is the log's
 growth: right only while no trim fell in the timed steps.
 """
@@ -64,6 +66,9 @@ def main() -> None:
     rigs, steps = int(sys.argv[1]), int(sys.argv[2])
     warm = int(sys.argv[3]) if len(sys.argv) > 3 else 100
     rss0 = _rss()
+    if os.environ.get("GC_PROBE_DROP_PAYLOADS"):  # not the library's behaviour: the GC if the log held no reply
+        book = TimedSerialLine.book_frames
+        TimedSerialLine.book_frames = lambda line, frames: book(line, [f[:5] + (None,) for f in frames])  # type: ignore[method-assign]
     env_id = os.environ.get("GC_PROBE_ENV", ENV_ID)
     if os.environ.get("GC_PROBE_CAN"):  # the bench's CAN row of that env (its config on CAN at 1 Mbit/s, 50 Hz)
         from joints import bench
