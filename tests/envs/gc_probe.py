@@ -68,7 +68,11 @@ def main() -> None:
     rss0 = _rss()
     if os.environ.get("GC_PROBE_DROP_PAYLOADS"):  # not the library's behaviour: the GC if the log held no reply
         book = TimedSerialLine.book_frames
-        TimedSerialLine.book_frames = lambda line, frames: book(line, [f[:5] + (None,) for f in frames])  # type: ignore[method-assign]
+
+        def bare(line: TimedSerialLine, frames: list[tuple[float, float, float, int, str, Any]]) -> None:
+            book(line, [(*f[:5], None) for f in frames])
+
+        TimedSerialLine.book_frames = bare  # type: ignore[method-assign]
     env_id = os.environ.get("GC_PROBE_ENV", ENV_ID)
     if os.environ.get("GC_PROBE_CAN"):  # the bench's CAN row of that env (its config on CAN at 1 Mbit/s, 50 Hz)
         from joints import bench
