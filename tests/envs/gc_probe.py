@@ -72,7 +72,7 @@ def main() -> None:
         def bare(line: TimedSerialLine, frames: list[tuple[float, float, float, int, str, Any]]) -> None:
             book(line, [(*f[:5], None) for f in frames])
 
-        TimedSerialLine.book_frames = bare  # type: ignore[method-assign]
+        TimedSerialLine.book_frames = bare  # type: ignore[method-assign, assignment]
     env_id = os.environ.get("GC_PROBE_ENV", ENV_ID)
     if os.environ.get("GC_PROBE_CAN"):  # the bench's CAN row of that env (its config on CAN at 1 Mbit/s, 50 Hz)
         from joints import bench
