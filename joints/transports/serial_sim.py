@@ -37,11 +37,15 @@ Time model (docs/timing.md):
   broadcast is executed while the host sleeps); otherwise the line runs at the host's reads and writes.
 
 :attr:`TimedSerialLine.log` keeps the transmissions (time, side, bytes, corrupted): the wire trace, its
-latest :data:`LOG_KEEP` frames at least (older ones go in batches, once they can overlap no new frame).
+latest :attr:`TimedSerialLine.log_keep` frames at least (:data:`LOG_KEEP`, 1,000, unless set on the line) and
+those of the last second (older ones go in batches, once they can overlap no new frame). A kept frame costs
+memory (~250 bytes with its reply) and the garbage collector's full passes walk it: keep more only where the
+trace is read (docs/speed.md).
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -56,8 +60,9 @@ __all__ = ["Deferred", "LinePeer", "Ticking", "TimedFrames", "TimedSerialLine", 
 #: s the line waits at most in one step while nothing is on it (frames a device sends by itself are
 #: picked up at least this often)
 IDLE_STEP = 0.001
-#: transmissions :attr:`TimedSerialLine.log` keeps at least (at most twice as many): a long run's memory stays flat
-LOG_KEEP = 10_000
+#: transmissions :attr:`TimedSerialLine.log` keeps at least (at most about twice as many beyond those of the last
+#: second): a long run's memory stays flat; a line's own :attr:`TimedSerialLine.log_keep` starts at this
+LOG_KEEP = 1_000
 
 
 class LinePeer(Protocol):
@@ -144,6 +149,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         self.adapter_latency = adapter_latency
         self.gap = gap
         self._log: list[Transmission] = []
+        self._keep = LOG_KEEP
+        self._trim_at = 2 * LOG_KEEP  #: the log's length that makes it trimmed
         #: the log's first entry that may still be a booked frame's tuple (:meth:`book_frames`)
         self._raw_from = 0
         #: per logged frame, the latest end of it and every frame logged before it since the epoch: a new
@@ -172,6 +179,19 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         return f"TimedSerialLine({self.baudrate} bd)"
 
     @property
+    def log_keep(self) -> int:
+        """Transmissions :attr:`log` keeps at least (at most about twice as many beyond those of the last second;
+        :data:`LOG_KEEP` unless set)."""
+        return self._keep
+
+    @log_keep.setter
+    def log_keep(self, n: int) -> None:
+        if n < 1:
+            raise ValueError(f"log_keep must be >= 1 (the latest frame stays), got {n!r}")
+        self._keep = n
+        self._trim_at = 2 * n
+
+    @property
     def log(self) -> list[Transmission]:
         """The transmissions, oldest first (see the module docstring)."""
         if self._raw_from < len(self._log):
@@ -190,12 +210,9 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             end = item[1]
             latest.append(max(end, latest[-1]) if len(log) > epoch else end)
             log.append(item)
-            if len(log) > 2 * LOG_KEEP:
-                cut = len(log) - LOG_KEEP
-                if cut <= epoch or latest[cut - 1] <= item[0] - 1.0:
-                    del log[:cut], latest[:cut]
-                    self._epoch = epoch = max(0, epoch - cut)
-                    self._raw_from = max(0, self._raw_from - cut)
+            if len(log) > self._trim_at:
+                self._trim(item[0])
+                epoch = self._epoch
 
     def latest_end(self) -> float:
         """The latest end of any frame of the present timeline (-inf: none)."""
@@ -291,13 +308,23 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         log.append(tx)
         if pend:
             self._pending.append(tx)
-        if len(log) > 2 * LOG_KEEP:
-            cut = len(log) - LOG_KEEP  # the oldest frames go once none of them can overlap a new one
-            if cut <= self._epoch or latest[cut - 1] <= start - 1.0:
-                del log[:cut], latest[:cut]
-                self._epoch = max(0, self._epoch - cut)
-                self._raw_from = max(0, self._raw_from - cut)
+        if len(log) > self._trim_at:
+            self._trim(start)
         return tx
+
+    def _trim(self, start: float) -> None:
+        """The oldest frames go, all but the latest ``log_keep``, once none of them can overlap a new frame (one
+        starting at ``start`` or later): those of the present timeline that ended a second before ``start``."""
+        log, latest, epoch = self._log, self._latest_end, self._epoch
+        keep = self._keep
+        cut = len(log) - keep
+        if cut > epoch and latest[cut - 1] > start - 1.0:  # (latest: the running latest end since the epoch)
+            cut = bisect.bisect_right(latest, start - 1.0, epoch, cut)
+        if cut > 0:
+            del log[:cut], latest[:cut]
+            self._epoch = max(0, epoch - cut)
+            self._raw_from = max(0, self._raw_from - cut)
+        self._trim_at = len(log) + keep  # (beyond keep, the frames of the last second): the next waits for keep more
 
     def _run(self, until: float) -> None:
         """Everything that happens on the line up to ``until`` (the clock's time), in time order."""

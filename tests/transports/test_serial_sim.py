@@ -3,6 +3,7 @@ the MKS driver survives them (reads retried, the move never sent twice, a lost c
 
 from __future__ import annotations
 
+from itertools import pairwise
 from pathlib import Path
 
 import pytest
@@ -171,3 +172,55 @@ def test_the_log_stays_bounded_and_keeps_every_frame_that_can_still_overlap(monk
     line.write(request)  # collides with the drive's own frame, as on a fresh line
     line.read(0.05)
     assert line.collisions == 1
+
+
+def test_a_line_keeps_its_latest_log_keep_frames_at_least_and_each_line_sets_its_own() -> None:
+    """The documented guarantee at the shipped number: the wire trace holds the latest LOG_KEEP frames at least and
+    at most twice as many (frames spaced so the last second's floor holds fewer); a line's ``log_keep`` is its own."""
+    from joints.transports.serial_sim import LOG_KEEP
+
+    clock = ManualClock()
+    request, reply = mks.encode(mks.ReadSpeed(1)), mks.encode(mks.SpeedReply(1, 7))
+    short = TimedSerialLine(Echo(reply), baudrate=38400, clock=clock, turnaround=0.0005)
+    long = TimedSerialLine(Echo(reply), baudrate=38400, clock=clock, turnaround=0.0005)
+    assert short.log_keep == long.log_keep == LOG_KEEP
+    short.log_keep, long.log_keep = 50, 3 * LOG_KEEP
+    with pytest.raises(ValueError, match="log_keep"):
+        short.log_keep = 0  # the latest frame always stays (the overlap check's latest end)
+    default = TimedSerialLine(Echo(reply), baudrate=38400, clock=clock, turnaround=0.0005)
+    sizes: dict[str, list[int]] = {"default": [], "short": [], "long": []}
+    for _ in range(3 * LOG_KEEP):  # 6 * LOG_KEEP frames each, 20 a second
+        clock.advance(0.1)
+        for name, line in (("default", default), ("short", short), ("long", long)):
+            line.write(request)
+            assert line.read(0.1) == reply
+            sizes[name].append(len(line.log))
+    first = [tx.start for tx in default.log[:1]]
+    assert min(sizes["default"][2 * LOG_KEEP:]) >= LOG_KEEP and max(sizes["default"]) <= 2 * LOG_KEEP + 1
+    assert first and first[0] > 0.1 * LOG_KEEP  # the oldest frames went
+    assert 50 <= min(sizes["short"][100:]) and max(sizes["short"]) <= 100 + 1
+    assert sizes["long"] == list(range(2, 2 * 3 * LOG_KEEP + 1, 2))  # nothing went yet
+    kept = default.log
+    assert [tx.side for tx in kept] == ["host", "device"] * (len(kept) // 2) and kept[-1].data == reply
+    assert all(a.start < b.start for a, b in pairwise(kept))  # the latest frames, in order, none missing
+    assert all(b.start - a.start < 0.2 for a, b in zip(kept[::2], kept[2::2]))  # 0.1 s apart and the reads
+
+
+def test_a_line_busier_than_its_log_keep_a_second_stays_bounded_and_keeps_its_last_second() -> None:
+    """More than ``log_keep`` frames a second: the frames beyond the latest ``log_keep`` that ended a second
+    before go (the log does not grow for ever); the last second's frames stay (a new frame may overlap them)."""
+    clock = ManualClock()
+    request, reply = mks.encode(mks.ReadSpeed(1)), mks.encode(mks.SpeedReply(1, 7))
+    line = TimedSerialLine(Echo(reply), baudrate=38400, clock=clock, turnaround=0.0005)
+    line.log_keep = 3
+    sizes = []
+    for _ in range(400):  # 40 frames a second for 10 s
+        clock.advance(0.05)
+        line.write(request)
+        assert line.read(0.1) == reply
+        sizes.append(len(line.log))
+        kept = line.log  # the last second, whole: no transaction missing, and reaching a second back
+        assert all(b.start - a.start < 0.06 for a, b in zip(kept[::2], kept[2::2]))
+        assert kept[0].start <= kept[-1].start - 0.95 or len(kept) == 2 * len(sizes)
+    assert max(sizes) <= 2 * 3 + 2 * 41 and min(sizes[100:]) >= 38
+    assert line.collisions == 0 and line.latest_end() == line.log[-1].end
