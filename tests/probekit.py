@@ -6,6 +6,7 @@ from __future__ import annotations
 import importlib.util
 import os
 import sys
+import time
 from typing import Any
 
 
@@ -17,3 +18,16 @@ def load_as(root: str, rel: str, name: str) -> Any:
     sys.modules[name] = module
     spec.loader.exec_module(module)
     return module
+
+
+def timed_steps(env: Any, obs: Any, actions: Any) -> tuple[float, list[Any]]:
+    """``env`` stepped through ``actions`` from the observation ``obs`` (reset at each episode's end): the CPU
+    seconds per step (``time.thread_time``) and the record the probes compare (observations, rewards, ends)."""
+    record: list[Any] = [obs.tobytes()]
+    t0 = time.thread_time()
+    for a in actions:
+        obs, reward, terminated, truncated, _ = env.step(a)
+        record.append((obs.tobytes(), reward, terminated, truncated))
+        if terminated or truncated:
+            obs, _ = env.reset()
+    return (time.thread_time() - t0) / len(actions), record

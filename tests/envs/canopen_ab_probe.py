@@ -19,11 +19,13 @@ import logging
 import os
 import statistics
 import sys
-import time
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # tests/, for probekit
+from probekit import timed_steps
 
 STEPS = int(os.environ.get("STEPS", "300"))
 ROUNDS = int(os.environ.get("ROUNDS", "10"))
@@ -81,14 +83,7 @@ def _block(env: Any, modules: dict[str, Any], actions: list[Any]) -> tuple[float
 
     bus.on_frame = counting  # the medium asks its peer at each frame
     f0, b0 = medium.frames, medium.bits
-    record: list[Any] = [obs.tobytes()]
-    t0 = time.thread_time()
-    for a in actions:
-        obs, reward, terminated, truncated, _ = env.step(a)
-        record.append((obs.tobytes(), reward, terminated, truncated))
-        if terminated or truncated:
-            obs, _ = env.reset()
-    t = (time.thread_time() - t0) / len(actions)
+    t, record = timed_steps(env, obs, actions)
     del bus.on_frame
     n = len(actions)
     return t, ((medium.frames - f0) / n, (medium.bits - b0) / n, syncs[0] / n, medium.bitrate), record

@@ -17,7 +17,6 @@ from __future__ import annotations
 import os
 import statistics
 import sys
-import time
 from typing import Any
 
 import gymnasium as gym
@@ -26,7 +25,7 @@ import numpy as np
 import envs  # noqa: F401 - registers the joints/ envs
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # tests/, for probekit
-from probekit import load_as
+from probekit import load_as, timed_steps
 
 from joints.bench import _baseline_config
 from joints.drivers import erob_can_steady as S
@@ -49,14 +48,7 @@ def _block(env: Any, step: Any, actions: list[Any]) -> tuple[float, list[Any]]:
     obs, _ = env.reset(seed=7)
     cp._units = [((0,), step)]
     cp._steppers = [step]
-    record: list[Any] = [obs.tobytes()]
-    t0 = time.thread_time()
-    for a in actions:
-        obs, reward, terminated, truncated, _ = env.step(a)
-        record.append((obs.tobytes(), reward, terminated, truncated))
-        if terminated or truncated:
-            obs, _ = env.reset()
-    return (time.thread_time() - t0) / len(actions), record
+    return timed_steps(env, obs, actions)
 
 
 def main(other: str, mode: str) -> None:
