@@ -816,6 +816,10 @@ class JointsEnv(RigEnv):
         if compiled is not None:  # faulted/disabled drives: the episode has ended; never command them
             compiled.command(mode, cmd, [not j.enabled for j in self.joints])
             return
+        plan = self._sample_plan
+        if mode == "position" and plan is not None and plan[1] is not None:  # CANopen: one SYNC acknowledges all
+            self.rig.move_together({n: c for n, j, c in zip(self.joint_names, self.joints, cmd) if j.enabled})
+            return
         for j, c in zip(self.joints, cmd):
             if not j.enabled:  # faulted/disabled drive: the episode has ended; never command it
                 continue

@@ -34,6 +34,7 @@ from joints.drivers.capabilities import (
     CyclicJoint,
     DriveGroup,
     GroupedChannel,
+    MovedTogether,
     SampledTogether,
     SyncVelocityGroup,
 )
@@ -91,6 +92,7 @@ class Rig:
         self._order: list[tuple[str, Joint]] | None = None
         self._channels: dict[str, GroupedChannel | None] = {}
         self._together: dict[str, SampledTogether | None] = {}
+        self._moved: dict[str, MovedTogether | None] = {}
         self._sync_groups: dict[int, tuple[DriveGroup, bool]] = {}
         exits.register(self)
 
@@ -242,6 +244,40 @@ class Rig:
                     continue
             driver.set_velocity(v, acceleration=acc, deceleration=acc)
             done.add(name)
+
+    def move_together(self, positions: Mapping[str, float]) -> None:
+        """Move several joints to positions [rad], each with its configured profile (as ``joint.move_to``); every
+        command is checked first.
+
+        The joints whose set-points one broadcast acknowledges (the CANopen joints of a bus in profile position:
+        each RPDO, then one SYNC for all) are sent together at the first of them; the others one by one.
+        """
+        checked = {name: self.joints[name].position_command(p) for name, p in positions.items()}
+        done: set[str] = set()
+        for name, (target, speed, acc, dec) in checked.items():
+            if name in done:
+                continue
+            joint = self.joints[name]
+            mover = self._moved_together(name)
+            if mover is None:
+                joint.driver.move_to(target, speed=speed, acceleration=acc, deceleration=dec)
+                joint.note_contact()
+                done.add(name)
+                continue
+            group = mover.setpoint_group
+            members = [n for n in checked if n not in done
+                       and (other := self._moved_together(n)) is not None and other.setpoint_group is group]
+            group.move_together({self.joints[n].driver: checked[n] for n in members})
+            for n in members:
+                self.joints[n].note_contact()
+            done.update(members)
+
+    def _moved_together(self, name: str) -> MovedTogether | None:
+        """The joint's driver if its bus acknowledges its set-points with others' (checked once per joint)."""
+        if name not in self._moved:
+            driver = self.joints[name].driver
+            self._moved[name] = driver if isinstance(driver, MovedTogether) else None
+        return self._moved[name]
 
     def _sync(self, group: DriveGroup) -> TypeGuard[SyncVelocityGroup]:
         """Whether a drive takes its channels' velocities in one command (checked once per drive)."""

@@ -20,7 +20,7 @@ from joints.codecs import canopen as co
 from joints.drivers.base import RawState
 from joints.errors import DeviceFault, ReplyTimeout
 
-__all__ = ["NODE_LOST", "CyclicNode", "SyncCycle"]
+__all__ = ["NODE_LOST", "CyclicNode", "SetpointNode", "SyncCycle"]
 
 from joints.devices.faults import HOST_DEFINED
 
@@ -68,6 +68,31 @@ class CyclicNode(Protocol):
         ...
 
 
+class SetpointNode(CyclicNode, Protocol):
+    """A CANopen node whose profile-position set-points the bus's :class:`SyncCycle` acknowledges by SYNC."""
+
+    def check_move(self, target: int, speed: int | None, acc: int | None, dec: int | None) -> None:
+        """The move's values against the node's ranges; raises, nothing sent."""
+        ...
+
+    def start_setpoint(self, target: int, speed: int | None, acc: int | None, dec: int | None, *,
+                       relative: bool) -> None:
+        """The node in PP, its profile, its RPDO with the new set-point (controlword bit 4)."""
+        ...
+
+    def setpoint_acknowledged(self, since: float) -> bool:
+        """Whether its last statusword acknowledges the set-point; raises on a fault or once too long ``since``."""
+        ...
+
+    def end_setpoint(self) -> None:
+        """Its RPDO with controlword bit 4 cleared."""
+        ...
+
+    def pause(self) -> None:
+        """Wait a moment, keeping the bus's nodes guarded."""
+        ...
+
+
 class SyncCycle:
     """The SYNC cycle of one CANopen bus: each cyclic joint's RPDO, one SYNC, that cycle's TPDO1s.
 
@@ -100,6 +125,7 @@ class SyncCycle:
         self._owed_at = 0.0  #: clock time of the last SYNC sent
         self.samples = 0  #: SYNCs sent by reads (:meth:`sample`)
         self.settled = 0  #: TPDOs of earlier SYNCs waited out before a read's SYNC
+        self.acknowledges = 0  #: SYNCs sent for PP set-points' acknowledge (:meth:`setpoints`: one for all its nodes)
 
     @classmethod
     def of(cls, link: Any, period: float) -> SyncCycle:
@@ -209,6 +235,42 @@ class SyncCycle:
         live = [d for d in members if d.begin_read()]
         at = self.sample(live) if live else None
         return {d: d.end_read(at if d in live else None) for d in members}
+
+    # -- PP set-points: each node's RPDO, then one SYNC acknowledging them all -----------------------
+    def move_together(self, moves: Mapping[SetpointNode, tuple[int, int | None, int | None, int | None]]) -> None:
+        """Each node's PP move (target, profile speed, acceleration, deceleration in its units), every one checked
+        before anything is sent (:meth:`SetpointNode.check_move`), then :meth:`setpoints`."""
+        for d, (target, speed, acc, dec) in moves.items():
+            d.check_move(target, speed, acc, dec)
+        self.setpoints(moves, relative=False)
+
+    def setpoints(self, moves: Mapping[SetpointNode, tuple[int, int | None, int | None, int | None]], *,
+                  relative: bool) -> None:
+        """CiA 402's set-point handshake for the nodes of ``moves`` together: each node's RPDO with the new
+        set-point (controlword bit 4), then one SYNC that every node answers with its statusword (a SYNC is a
+        broadcast), repeated for the nodes whose bit 12 does not acknowledge it yet, then each node's RPDO
+        clearing bit 4. A node that shows a fault or does not acknowledge in time raises
+        :class:`~joints.errors.StateError` after every started node's bit 4 is cleared."""
+        started: list[SetpointNode] = []
+        try:
+            for d, (target, speed, acc, dec) in moves.items():
+                d.start_setpoint(target, speed, acc, dec, relative=relative)
+                started.append(d)
+            since = float(self.link.clock.now())
+            pending = started
+            while pending:
+                self.acknowledges += 1
+                try:
+                    self.sample(pending)
+                except ReplyTimeout:  # the host cannot reach the bus: nothing more is sent
+                    started = []
+                    raise
+                pending = [d for d in pending if not d.setpoint_acknowledged(since)]
+                if pending:
+                    pending[0].pause()
+        finally:
+            for d in started:
+                d.end_setpoint()
 
     def synced(self, at: float) -> None:
         """A SYNC went out at ``at`` (the cycle's, or one a driver sent for a state read): each node that

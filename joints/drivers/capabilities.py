@@ -64,6 +64,25 @@ class SampledTogether(Protocol):
 
 
 @runtime_checkable
+class SetpointGroup(Protocol):
+    """The drives of one bus whose position set-points one broadcast acknowledges together (CANopen PP: each
+    drive's RPDO, then one SYNC that every drive answers with its statusword)."""
+
+    def move_together(self, moves: Mapping[Any, tuple[int, int, int, int]]) -> None:
+        """driver -> (target, profile speed, acceleration, deceleration) in the drivers' units; each checked
+        before anything is sent."""
+        ...
+
+
+@runtime_checkable
+class MovedTogether(Protocol):
+    """A joint whose position set-point is best sent with the others of its :class:`SetpointGroup`."""
+
+    @property
+    def setpoint_group(self) -> SetpointGroup: ...
+
+
+@runtime_checkable
 class CommunicationWatchdog(Protocol):
     """A drive that stops (or faults) when the host stays silent longer than a set time."""
 

@@ -156,6 +156,7 @@ class ErobCanopenDriver(ErobDriver):
         self._torque_limit_warned = False
         self._cw = 0
         self._target = 0
+        self._pp_base = 0x000F | cia402.CW_CHANGE_SET_IMMEDIATELY  #: PP's controlword without bit 4
         self._rpdo = ERUNNER_RPDO1[self.mode]
         self._tpdos: tuple[PdoConfig, ...] = ERUNNER_TPDOS
         self._unpack: tuple[tuple[PdoConfig, ...], tuple[Callable[[bytes], tuple[int, ...]], ...]] | None = None
@@ -523,6 +524,10 @@ class ErobCanopenDriver(ErobDriver):
                                  f"(it reports {st.value}, statusword 0x{self.statusword:04X})")
             self._pause()
 
+    def pause(self) -> None:
+        """Wait a moment; the other nodes of the bus stay guarded meanwhile (their life guarding)."""
+        self._pause()
+
     def _pause(self) -> None:
         """Wait a moment; the other nodes of the bus stay guarded meanwhile (their life guarding)."""
         for d in self.group.drivers:
@@ -597,36 +602,51 @@ class ErobCanopenDriver(ErobDriver):
 
     def move_to(self, position: int, *, speed: int | None = None, acceleration: int | None = None,
                 deceleration: int | None = None) -> None:
-        """PP: profile (0x6081/0x6083/0x6084), target 0x607A + new set-point, acknowledge, clear bit 4."""
-        self._validate(target_absolute_position=position, profile_speed=speed, profile_acceleration=acceleration,
-                       profile_deceleration=deceleration)
-        self._pp(position, speed, acceleration, deceleration, relative=False)
+        """PP: profile (0x6081/0x6083/0x6084), target 0x607A + new set-point, acknowledge, clear bit 4; the joints
+        of one bus moved together share the acknowledge's SYNC (:meth:`SyncCycle.move_together`)."""
+        self.group.move_together({self: (position, speed, acceleration, deceleration)})
 
     def move_by(self, delta: int, *, speed: int | None = None, acceleration: int | None = None,
                 deceleration: int | None = None) -> None:
         """PP relative (controlword bit 6)."""
         self._validate(target_relative_position=delta, profile_speed=speed, profile_acceleration=acceleration,
                        profile_deceleration=deceleration)
-        self._pp(delta, speed, acceleration, deceleration, relative=True)
+        self.group.setpoints({self: (delta, speed, acceleration, deceleration)}, relative=True)
 
-    def _pp(self, target: int, speed: int | None, acc: int | None, dec: int | None, *, relative: bool) -> None:
+    @property
+    def setpoint_group(self) -> SyncCycle:
+        """The bus's PP set-points (:meth:`SyncCycle.move_together`): acknowledged by one SYNC for all."""
+        return self.group
+
+    def check_move(self, target: int, speed: int | None, acc: int | None, dec: int | None) -> None:
+        """A :meth:`move_to`'s values against the objects' ranges (:class:`CommandError`); nothing is sent."""
+        self._validate(target_absolute_position=target, profile_speed=speed, profile_acceleration=acc,
+                       profile_deceleration=dec)
+
+    def start_setpoint(self, target: int, speed: int | None, acc: int | None, dec: int | None, *,
+                       relative: bool) -> None:
+        """PP (brought up and enabled first), the profile by SDO where it changed, then RPDO1: the target with
+        controlword bit 4 (new set-point) rising - bit 4 is cleared first if it is still set."""
         self._run(Mode.PP)
         self._set_many(self._profile(speed, acc, dec))
-        base = 0x000F | cia402.CW_CHANGE_SET_IMMEDIATELY | (cia402.CW_RELATIVE if relative else 0)
+        base = self._pp_base = 0x000F | cia402.CW_CHANGE_SET_IMMEDIATELY | (cia402.CW_RELATIVE if relative else 0)
         if self._cw & cia402.CW_NEW_SETPOINT:
             self._control(base, target)
         self._control(base | cia402.CW_NEW_SETPOINT, target)
-        deadline = self.clock.now() + STATE_TIMEOUT
-        while True:
-            self._snapshot()
-            if cia402.setpoint_acknowledged(self.statusword):
-                break
-            if cia402.is_fault(self.statusword) or self.clock.now() >= deadline:
-                self._control(base, target)
-                raise StateError(f"{self.name}: the drive did not acknowledge the set-point (statusword "
-                                 f"0x{self.statusword:04X})")
-            self._pause()
-        self._control(base, target)
+
+    def setpoint_acknowledged(self, since: float) -> bool:
+        """Whether the last TPDO1's statusword acknowledges the set-point (bit 12); :class:`StateError` if it
+        shows a fault or :data:`STATE_TIMEOUT` has passed since ``since`` (clock time) without it."""
+        sw = self.statusword
+        if cia402.setpoint_acknowledged(sw):
+            return True
+        if cia402.is_fault(sw) or self.clock.now() >= since + STATE_TIMEOUT:
+            raise StateError(f"{self.name}: the drive did not acknowledge the set-point (statusword 0x{sw:04X})")
+        return False
+
+    def end_setpoint(self) -> None:
+        """RPDO1 with controlword bit 4 cleared (the set-point handshake's end), the target kept."""
+        self._control(self._pp_base, self._target)
 
     def move_continuous(self, speed: int, *, acceleration: int | None = None, deceleration: int | None = None) -> None:
         raise CommandError(f"{self.name}: CiA 402 has no continuous position move; use set_velocity (PV)")

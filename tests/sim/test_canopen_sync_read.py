@@ -5,8 +5,9 @@
   episodes reset with the same seed are the same episode - the first one after ``gym.make`` too.
 * A read takes only TPDOs that answer its own SYNC (each node answers every SYNC, and the host adapter's
   latency and arbitration keep the answers to a previous SYNC queued when the next read sends its own): the
-  state read of the arm is one SYNC for its three joints, one sample instant, and a lone read (``move_to``'s
-  set-point acknowledge) waits out the TPDOs still owed for the previous SYNC before it sends its own.
+  state read of the arm is one SYNC for its three joints, one sample instant, so is the acknowledge of its three
+  set-points (``Rig.move_together``), and every read waits out the TPDOs still owed for the previous SYNC before it
+  sends its own.
 """
 
 from __future__ import annotations
@@ -122,7 +123,7 @@ def test_every_tpdo_a_read_takes_answers_that_read_s_sync(monkeypatch: pytest.Mo
     stamps: dict[int, tuple[Any, float]] = {}  # id of a decoded message -> (it, its frame's end on the wire)
     on_frame, sync, on_tpdo = ErobCanopenBus.on_frame, CanopenLink.sync, ErobCanopenDriver.on_tpdo
     decode = CanopenLink._decode
-    snapshot, raw = ErobCanopenDriver._snapshot, ErobCanopenDriver._raw
+    acknowledged, raw = ErobCanopenDriver.setpoint_acknowledged, ErobCanopenDriver._raw
 
     def seeing(self: Any, frame: Any) -> Any:
         if frame.arbitration_id == 0x80:
@@ -150,10 +151,9 @@ def test_every_tpdo_a_read_takes_answers_that_read_s_sync(monkeypatch: pytest.Mo
             if not last[cob] > end:
                 stale.append((what, cob, last[cob], end))
 
-    def acknowledging(self: Any) -> Any:
-        out = snapshot(self)
+    def acknowledging(self: Any, since: float) -> Any:
         check(self, "acknowledge")
-        return out
+        return acknowledged(self, since)
 
     def reading(self: Any, t: float) -> Any:
         check(self, "state")
@@ -162,7 +162,7 @@ def test_every_tpdo_a_read_takes_answers_that_read_s_sync(monkeypatch: pytest.Mo
     monkeypatch.setattr(ErobCanopenBus, "on_frame", seeing)
     monkeypatch.setattr(CanopenLink, "sync", counting)
     monkeypatch.setattr(ErobCanopenDriver, "on_tpdo", taking)
-    monkeypatch.setattr(ErobCanopenDriver, "_snapshot", acknowledging)
+    monkeypatch.setattr(ErobCanopenDriver, "setpoint_acknowledged", acknowledging)
     monkeypatch.setattr(ErobCanopenDriver, "_raw", reading)
     monkeypatch.setattr(CanopenLink, "_decode", decoding)
     found = _baseline_config(ENV)
@@ -185,11 +185,12 @@ def _run(arm: Any, check: Any, checked: dict[str, int], stale: list[Any]) -> Non
     rng = np.random.default_rng(9)
     instants = per_step = 0
     for _ in range(250):
-        before = getattr(group, "samples", 0)
+        before, acks = group.samples, group.acknowledges
         _obs, _r, terminated, truncated, _info = arm.step(rng.uniform(-1, 1, arm.action_space.shape)
                                                           .astype(np.float32))
         instants += len({s.time for s in u._states})
-        per_step += getattr(group, "samples", 0) - before == 4  # the path taken: one SYNC per state read, one per acknowledge
+        # the path taken: one SYNC for the state read, one acknowledging the three set-points
+        per_step += group.samples - before == 2 and group.acknowledges - acks == 1
         if terminated or truncated:
             arm.reset()
     assert checked["state"] >= 750 and checked["acknowledge"] >= 750, checked
