@@ -1,9 +1,11 @@
-"""The SYNC cycle of one CANopen bus: each cyclic node's RPDO, one SYNC, that cycle's TPDOs; and the bus's reads.
+"""The SYNC cycle of one CANopen bus: each cyclic node's RPDO, one SYNC, that cycle's TPDOs; the bus's reads and
+its profile-position set-points.
 
 A SYNC is a broadcast (CiA 301): every started node answers each one with its synchronous TPDOs. A read
 (:meth:`SyncCycle.read_states`, :meth:`SyncCycle.sample`) is one SYNC for all the nodes it reads and waits for
 every one of their TPDOs of it; before it sends its SYNC it waits out the TPDOs still owed for an earlier SYNC
-(:meth:`SyncCycle.settle`), so a TPDO taken after the SYNC answers that SYNC and no earlier one.
+(:meth:`SyncCycle.settle`), so a TPDO taken after the SYNC answers that SYNC and no earlier one. PP set-points
+(:meth:`SyncCycle.move_together`) are each node's RPDO, then one such read whose statuswords acknowledge them all.
 
 Rule: one per bus, held by the bus's link (:attr:`joints.link.canopen.CanopenLink.sync_cycle`,
 :meth:`SyncCycle.of`), shared by the drivers of that bus; it knows nodes only through

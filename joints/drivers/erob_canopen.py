@@ -13,7 +13,8 @@ NMT start. A mode change disables first (the drive refuses 0x6060 in OPERATION E
 0x08000022) and repeats the bring-up; the joint is enabled again if it was.
 
 Modes (config ``mode``): ``pp`` (the default; ``move_to``: target + new set-point with change
-set immediately, wait for the set-point acknowledge, clear bit 4; target reached = bit 10),
+set immediately, wait for the set-point acknowledge, clear bit 4 - the joints of a bus moved together,
+:meth:`joints.rig.Rig.move_together`, share the acknowledge's SYNC; target reached = bit 10),
 ``pv`` (``set_velocity``), ``pt`` (``set_torque``: 0x6071 in per mille of rated torque), and the
 cyclic ``csp``, ``csv``, ``cst``, ``ip``, driven by :meth:`joints.rig.Rig.cycle` through
 :class:`SyncCycle` (one RPDO per joint and one SYNC per bus per cycle; ``sync_period``).
