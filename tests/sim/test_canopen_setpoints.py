@@ -142,3 +142,29 @@ def test_a_node_that_does_not_acknowledge_leaves_no_set_point_up(monkeypatch: py
         assert all(not cw & cia402.CW_NEW_SETPOINT for cw in last.values()), last  # every node's bit 4 is down
     finally:
         arm.close()
+
+
+def test_joints_no_broadcast_acknowledges_are_moved_one_by_one(monkeypatch: pytest.MonkeyPatch) -> None:
+    env = gym.make(ENV, compiled_path=False)  # the arm on its shipped RS485 bus (eRob Modbus)
+    try:
+        env.reset(seed=3)
+        rig = env.unwrapped.rig
+        here = {n: s.position for n, s in rig.read_states().items()}
+        targets = {n: here[n] + 0.01 * (i + 1) for i, n in enumerate(reversed(list(rig.joints)))}
+        calls: list[tuple[str, int, int | None, float]] = []
+        for name, j in rig.joints.items():
+            move_to = j.driver.move_to
+
+            def recording(target: int, *, speed: int | None = None, _n: str = name, _m: Any = move_to,
+                          **kw: Any) -> None:
+                calls.append((_n, target, speed, rig.clock.now()))
+                _m(target, speed=speed, **kw)
+
+            monkeypatch.setattr(j.driver, "move_to", recording)
+        rig.move_together(targets)
+        want = [(n, *rig.joints[n].position_command(p)[:2]) for n, p in targets.items()]
+        assert [c[:3] for c in calls] == want  # in the order given, each joint's own move_to
+        assert calls[0][3] < calls[1][3] < calls[2][3]  # one after the other on the bus
+        assert all(rig.joints[n].last_contact > t for n, _, _, t in calls)  # each joint's contact noted after it
+    finally:
+        env.close()
