@@ -175,6 +175,12 @@ class ErobCanStep:
         return reply
 
     # -- what the compiled path calls -----------------------------------------------------------
+    def carried(self) -> tuple[Any, list[Any]] | None:
+        """(the world, the twins of the exchange's bus) for ``compiled_path._hold_sleeps``: the world's sleeps may
+        be held (``World.hold``, where the bus lets them: its ``holds()``) and run by the next call."""
+        exchange = self.exchange
+        return exchange.world, [f.firmware for f in exchange.bus.fronts]
+
     def command_all(self, mode: str, values: Sequence[float], skip: Sequence[bool]) -> None:
         if not skip[0]:
             self.command(mode, values[0])

@@ -61,7 +61,7 @@ from joints.sim.stepping import STEPS
 from joints.transports import can as can_transport
 from joints.transports.can_sim import CanMedium, LockstepCanBus
 
-__all__ = ["ErobCanExchange", "act", "exchanges"]
+__all__ = ["ErobCanExchange", "act", "exchanges", "holds"]
 
 _SPEED, _TORQUE = int(OperationMode.SPEED), int(OperationMode.TORQUE)
 
@@ -186,7 +186,17 @@ def exchanges(tx: Any, out: Any, scratch: Any, st: Any, w: int, mj_step: int, ta
     """The transactions ``tx`` in world ``w`` one after the other, as the host's link carries each over the
     lockstep medium: ``st`` in and out, each one's instants (and its read's values) into ``out``. Stops after a
     refused request; ``st[ODD]`` set: a branch of the medium the call does not model was met (the caller's
-    checks keep it from happening)."""
+    checks keep it from happening). A sleep the world held (``st[BOOKED]`` is ``L.HELD``: ``World.hold``) runs
+    first, as ``World.sync`` runs it at the medium's first ``_sync``: its substeps, the bus's tick at the last
+    one's end (the medium's, with no wait of its own: its time moves there), the clock at the sleep's end."""
+    if st[BOOKED] == L.HELD:
+        st[BOOKED] = 0.0
+        _steps(_due(0.0, st, w, worlds), st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+        t = st[TICKED]
+        if st[TICKS] > 0.0 and t > st[NOW]:  # CanMedium.tick
+            st[NOW] = t
+            st[SEEN] = fmax(st[SEEN], t)
+        st[CLOCK] = st[TARGET]
     for k in range(tx.shape[0]):
         t = tx[k]
         o = out[k]
@@ -302,6 +312,36 @@ _STOCK = (*erob.STOCK, *((cls, name, getattr(cls, name)) for cls, names in (
 ) for name in names))
 
 
+#: what a held sleep rests on (:func:`holds`): the medium's entries that settle the world first (``_sync``), its
+#: ticks and waits, the host's frames
+_HOLD_STOCK = tuple((cls, name, getattr(cls, name)) for cls, names in (
+    (CanMedium, ("_sync", "tick", "next_event", "_next_event", "receive", "submit", "send_at", "time", "load",
+                 "reset_load", "_wait_until")),
+    (LockstepCanBus, ("send", "recv")),
+    (ErobCanBus, ("tick", "next_event", "holds")),
+) for name in names)
+
+
+def holds(bus: ErobCanBus) -> bool:
+    """Whether the world may hold a sleep with ``bus`` ticking (``World.hold``): its substeps and the bus's tick
+    run later - at the medium's next ``_sync`` (a frame sent or received, its time or load asked), at the next
+    one-call exchange (which runs them first) or at any access to the physics (``World.sync``) - the same as at
+    the sleep, since until then nothing reaches the medium or the drives. Held only where the bus's ticks would
+    do nothing but move its time over the sleep and the medium is not sleeping the clock itself (``_cap``: a wait
+    of its own is never held): nothing on the wire, queued, being delivered or waiting for a node, no set-point
+    held by a front; the methods that settle and tick, stock."""
+    medium = bus.medium
+    if medium._cap is not None or medium._wire is not None or medium._pending or medium._delivering is not None:
+        return False
+    for n in medium._nodes:
+        if n.rx or n.held:
+            return False
+    for f in bus.fronts:
+        if f.held is not None:
+            return False
+    return L.stock(_HOLD_STOCK)
+
+
 #: the reads whose value the drive's sensors report (the firmware's method, given the row as the read saw it)
 _SENSED_READS = {"actual_position": "_sensed_counts", "current_speed": "_sensed_speed",
                  "motor_current": "_sensed_current"}
@@ -373,6 +413,7 @@ class ErobCanExchange:
         self.refilled = 0  #: plans made from a kept command plan (:meth:`_refill`)
         self.setpoints = 0  #: set-point writes (speed or current) carried
         self.held = 0  #: of them, held by the front (the drive stopped being ready during the call)
+        self.sleeps = 0  #: calls that ran a sleep the world held first (``World.hold``; :func:`holds`)
         self._row_seen: dict[int, float] = dict.fromkeys(SENSED, 0.0)  #: :meth:`_sensed_row`'s
 
     # -- the steady case ------------------------------------------------------------------------
@@ -381,7 +422,7 @@ class ErobCanExchange:
         world, medium, bus, host = self.world, self.medium, self.bus, self.host
         group = world.group
         if not (group.compiled and group.fusable[world.group_index]) or world._bind != world._bind_seen or \
-                world._booked or world._target != world.clock.now():
+                (world._booked and not world._held) or world._target != world.clock.now():
             return False
         if world._ticks != [bus.tick] or world._bus_watches or len(world._events or ()) != 1:
             return False
@@ -641,9 +682,11 @@ class ErobCanExchange:
                 return None
         world, medium, bus = self.world, self.medium, self.bus
         clock = world.clock.now()
+        held = world._booked  # (a held sleep: _steady) its substeps run first, the medium's time up to a step past
+        ahead = max(medium.now - clock, 0.0) + (world.timestep if held else 0.0)
         # the branches of the medium the call does not model (a frame within twice the clock's time of 0, a reply
         # near the link's timeout) cannot be met: the whole call is well inside both
-        if not clock > 2.0 * (plan.span + max(medium.now - clock, 0.0)) or not plan.longest < 0.5 * timeout:
+        if not clock > 2.0 * (plan.span + ahead) or not plan.longest < 0.5 * timeout:
             return None
         tx = plan.tx
         n = len(tx)
@@ -653,7 +696,8 @@ class ErobCanExchange:
 
             out = self._out[n] = np.zeros((n, OUT_WIDTH))
         st = self._st
-        st[:] = (clock, world._target, 0.0, medium.now, medium._clock_seen, medium._free, medium._ticked,
+        st[:] = (clock, world._target, L.HELD if held else 0.0, medium.now, medium._clock_seen, medium._free,
+                 medium._ticked,
                  0.0, 0.0, medium.busy, world.timestep, 0.0, timeout, 0.0, 0.0)
         scratch = self._scratch.get(world.group.table.shape[1])
         if scratch is None:
@@ -677,6 +721,8 @@ class ErobCanExchange:
                                f"after {done} of {n} requests; this is a bug (the steady checks let it through)")
         self._last, self._done = out, done
         self.taken += 1
+        if held:
+            self.sleeps += 1
         return plan, out, done
 
     def values(self, reads: tuple[Any, ...], timeout: float) -> list[int] | None:

@@ -153,6 +153,7 @@ def _run(compiled: bool, mode: str, steps: int, *, plant: Any = None, undo: Any 
         out["refilled"] = sum(s.exchange.refilled for s in rec.steps)  # command plans made from a kept one
         out["setpoints"] = [(s.exchange.setpoints, s.exchange.held) for s in rec.steps]
         out["values"] = sum(s.values_taken for s in rec.steps)  # state reads taken by their values
+        out["sleeps"] = sum(s.exchange.sleeps for s in rec.steps)  # calls that ran the world's held period sleep
         out["proofs"] = [(sorted(s._encoded), sorted((t.__name__, n) for t, n in s._acked)) for s in rec.steps]
         return out
     finally:
@@ -181,6 +182,7 @@ def test_the_compiled_can_step_gives_the_frame_by_frame_bits(mode: str) -> None:
     if kernel.default_mode():  # the one-call exchange carried the steady steps (it needs the compiled world)
         assert calls >= steps  # the state reads of every step (and the position commands)
         assert compiled["values"] >= steps  # every step's state read taken by its values, without replies
+        assert compiled["sleeps"] >= steps - 1  # the period's sleep held by the world, run by the read's call
         ((encoded, acked),) = compiled["proofs"]  # a command's frame built once, its Acks asked once
         assert len(encoded) == 1 and ("Write", encoded[0][0]) in acked
         if mode == "position":
@@ -192,7 +194,45 @@ def test_the_compiled_can_step_gives_the_frame_by_frame_bits(mode: str) -> None:
             ((setpoints, held),) = compiled["setpoints"]
             assert setpoints >= steps - 1 and held == 0
     else:
-        assert calls == 0 and fused == 0 and compiled["values"] == 0
+        assert calls == 0 and fused == 0 and compiled["values"] == 0 and compiled["sleeps"] == 0
+
+
+@pytest.mark.skipif(not kernel.default_mode(), reason="the world holds sleeps for the one-call exchange (compiled)")
+def test_the_world_holds_the_period_sleep_never_a_wait_of_the_medium_s_own(monkeypatch: pytest.MonkeyPatch) -> None:
+    """On the compiled path the world holds the env's period sleep (``World.hold``: the read's call runs it) and,
+    under a trace (every request frame by frame: the medium's ``_sync`` settles the world first), still the period
+    sleep - never a wait the medium makes itself (its ``_cap`` set: a held one would tick it without its cap)."""
+    env = gym.make("joints/ErobReach-v0", config=_config(), control_period=PERIOD, compiled_path=True)
+    u: Any = env.unwrapped
+    try:
+        env.reset(seed=3)
+        world = u.rig.sim
+        medium = next(iter(world.buses.values())).medium
+        (step,) = [s for s in u.compiled_path._steppers if isinstance(s, ErobCanStep)]
+        seen: list[tuple[bool, bool]] = []  # (the medium waiting itself, the world held the sleep) per sleep
+        defer = world._defer
+
+        def deferring(seconds: float, *, held: bool) -> None:
+            waiting = medium._cap is not None
+            defer(seconds, held=held)
+            if held:
+                seen.append((waiting, world._held))
+
+        monkeypatch.setattr(world, "_defer", deferring)
+        action = np.zeros(env.action_space.shape, dtype=np.float32)
+        for _ in range(5):
+            env.step(action)
+        assert [h for _, h in seen] == [True] * 5 and step.exchange.sleeps == 5  # each run by the read's call
+        u.rig.trace(lambda record: None)
+        for _ in range(5):
+            env.step(action)
+        u.rig.trace(None)
+        waits = [h for w, h in seen if w]
+        periods = [h for w, h in seen if not w]
+        assert waits and not any(waits)  # the frame-by-frame requests' own waits: never held
+        assert periods == [True] * 10 and step.exchange.sleeps == 5  # held, then settled by the medium's _sync
+    finally:
+        env.close()
 
 
 def test_a_replaced_reply_check_leaves_the_steps_to_the_frame_by_frame_path(monkeypatch: pytest.MonkeyPatch) -> None:
