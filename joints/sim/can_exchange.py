@@ -747,36 +747,59 @@ class ErobCanExchange:
             plan, out, done = got
             if plan.reads:
                 return [ec.ValueReply(r.node, v) for r, v in zip(requests, self._read_values(plan, out, done))]
-            tx = plan.tx
             replies: list[Any] = []
-            for k, (r, shape, front, o) in enumerate(zip(requests, plan.shapes, plan.fronts, out[:done].tolist())):
-                fw = front.firmware
-                front.requests += 1
-                node = r.node
-                if shape.op == TARGET_POSITION:
-                    fw._keep(((shape.name, EROB_CAN.from_wire(shape.name, r.value)),))
-                    replies.append(ec.Ack(node))
-                elif shape.op == SETPOINT:
-                    value = EROB_CAN.from_wire(shape.name, r.value)
-                    fw._keep(((shape.name, value),))
-                    if o[HELD]:
-                        front.held = value
-                        self.held += 1
-                    else:
-                        target = SETPOINT_OF.get(float(tx[k, MOTION]))
-                        if target is not None:
-                            fw._keep(((target, value),))
-                    self.setpoints += 1
-                    replies.append(ec.Ack(node))
-                elif shape.op == START:
-                    if o[REFUSED]:
-                        replies.append(ec.ErrorReply(node, sim_can.START_WHILE_OFF))
-                    else:
-                        fw._keep((("start_operating", 1),))
-                        replies.append(ec.Ack(node))
-                else:
-                    replies.append(ec.ValueReply(node, self._value(fw, shape, o[STATUS_AT:])))
+            self._written(plan, requests, out, done, replies)
         return replies
+
+    def acks(self, requests: Sequence[Any], timeout: float) -> tuple[int, Any] | None:
+        """:meth:`run` of writes and commands without their replies: (how many were done, the refused start's
+        :class:`~joints.codecs.erob_can.ErrorReply` - the last done - or None); :meth:`run` answers each other
+        one done ``Ack(request.node)``. None (nothing sent) where this is not the steady case or one is a read."""
+        for r in requests:
+            if type(r) is ec.Read:
+                return None
+        with self.world.lock:
+            got = self._call(requests, timeout, False)
+            if got is None:
+                return None
+            plan, out, done = got
+            return done, self._written(plan, requests, out, done, None)
+
+    def _written(self, plan: _Plan, requests: Sequence[Any], out: Any, done: int, replies: list[Any] | None) -> Any:
+        """The fronts and firmware after the call of a plan with writes (``out``'s first ``done`` rows): the
+        store and write log, the request counts, a held set-point; each reply into ``replies`` (where given).
+        Returns the refused start's error reply (the last done), or None."""
+        tx = plan.tx
+        refusal = None
+        for k in range(done):
+            r, shape, front = requests[k], plan.shapes[k], plan.fronts[k]
+            fw = front.firmware
+            front.requests += 1
+            op = shape.op
+            reply: Any = None  # (an Ack)
+            if op == TARGET_POSITION:
+                fw._keep(((shape.name, EROB_CAN.from_wire(shape.name, r.value)),))
+            elif op == SETPOINT:
+                value = EROB_CAN.from_wire(shape.name, r.value)
+                fw._keep(((shape.name, value),))
+                if out[k, HELD]:
+                    front.held = value
+                    self.held += 1
+                else:
+                    target = SETPOINT_OF.get(float(tx[k, MOTION]))
+                    if target is not None:
+                        fw._keep(((target, value),))
+                self.setpoints += 1
+            elif op == START:
+                if out[k, REFUSED]:
+                    reply = refusal = ec.ErrorReply(r.node, sim_can.START_WHILE_OFF)
+                else:
+                    fw._keep((("start_operating", 1),))
+            else:  # a read among writes (run only: acks refuses reads before anything is sent)
+                reply = ec.ValueReply(r.node, self._value(fw, shape, out[k, STATUS_AT:].tolist()))
+            if replies is not None:
+                replies.append(ec.Ack(r.node) if reply is None else reply)
+        return refusal
 
     @property
     def instants(self) -> list[tuple[float, ...]]:
