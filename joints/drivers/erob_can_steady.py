@@ -4,8 +4,10 @@ Rule: what :class:`~joints.drivers.erob_can.ErobCanDriver` and its :class:`~join
 do for a steady command (target + "start"; a speed or current set-point: one write of the analog value 0x01FE)
 and a state read - the joint's checks, the driver's steady compare and range checks,
 the same request objects (``ErobCanAccess.message``; the state's reads as ``ErobCanAccess.read`` makes them),
-encoded by the rule before anything is sent, counted by the link, each reply taken by the rule's ``is_reply``
-(an error reply raises its :class:`~joints.errors.DeviceRejected` as the link raises it), the link's fence
+encoded by the rule before anything is sent, counted by the link, each reply taken as the rule's ``is_reply``
+takes it (an error reply raises its :class:`~joints.errors.DeviceRejected` as the link raises it; an ``Ack`` or
+a read's value, which the stock rule takes by the request's type and node alone, proven once by the rule and
+then taken without the reply object), the link's fence
 bookkeeping, the driver's cache and temperature bookkeeping, the joint's contact - with the frames, the physics
 between them and the drive's ops in one call of the twin's one-call exchange (the sim's
 :mod:`joints.sim.can_exchange`, reached through the in-process medium's peer: nothing of the sim is imported

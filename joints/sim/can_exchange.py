@@ -24,6 +24,11 @@ READY and goes alone, so a hold means a fault (or the watchdog) took the drive o
 from there no substep makes it ready again (only an enable command does); the medium's ticks meanwhile only move
 its last tick, which the call sets to the same final value.
 
+A sleep the world held (``World.hold`` where the bus lets it: :func:`holds`, nothing in flight) runs first in the
+next call, as ``World.sync`` would run it at the medium's first ``_sync``: its substeps, the bus's tick at the
+last one's end (the medium's time moves there), the clock at the sleep's end. ``acks`` gives a command's outcome
+without its ``Ack`` objects (the host proves once that its rule takes them).
+
 It runs only in the steady case, checked before anything is sent (:meth:`ErobCanExchange.run` returns None
 otherwise): the world runs fused with this bus's tick its only tick, the medium times frames (not ideal,
 stuffing not "exact"), nothing is on it, queued or waiting for the host, the host is the medium's only
