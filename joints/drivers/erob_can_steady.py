@@ -4,8 +4,10 @@ Rule: what :class:`~joints.drivers.erob_can.ErobCanDriver` and its :class:`~join
 do for a steady command (target + "start"; a speed or current set-point: one write of the analog value 0x01FE)
 and a state read - the joint's checks, the driver's steady compare and range checks,
 the same request objects (``ErobCanAccess.message``; the state's reads as ``ErobCanAccess.read`` makes them),
-encoded by the rule before anything is sent, counted by the link, each reply taken by the rule's ``is_reply``
-(an error reply raises its :class:`~joints.errors.DeviceRejected` as the link raises it), the link's fence
+encoded by the rule before anything is sent, counted by the link, each reply taken as the rule's ``is_reply``
+takes it (an error reply raises its :class:`~joints.errors.DeviceRejected` as the link raises it; an ``Ack`` or
+a read's value, which the stock rule takes by the request's type and node alone, proven once by the rule and
+then taken without the reply object), the link's fence
 bookkeeping, the driver's cache and temperature bookkeeping, the joint's contact - with the frames, the physics
 between them and the drive's ops in one call of the twin's one-call exchange (the sim's
 :mod:`joints.sim.can_exchange`, reached through the in-process medium's peer: nothing of the sim is imported
@@ -82,6 +84,7 @@ class ErobCanStep:
         self._encoded: set[tuple[int, int, int | None]] = set()
         self._acked: set[tuple[type, int]] = set()
         self.values_taken = 0  #: state reads taken by their values (:meth:`_send_values`)
+        self.acks_taken = 0  #: commands whose Acks were taken without the objects (:meth:`_send_acks`)
 
     def _reads_of(self, names: tuple[str, ...]) -> tuple[ec.Read, ...]:
         """The reads ``ErobCanAccess.read`` sends for ``names`` (checked once: constants)."""
@@ -116,25 +119,38 @@ class ErobCanStep:
         if steady and type(request) is ec.Write:
             self._encoded.add(key)
 
-    def _send(self, requests: Sequence[Any], steady: bool) -> list[Any] | None:
-        """The twin's replies to ``requests`` by one call of its exchange (counted as the link counts them; each
-        to be taken by :meth:`_take`, in order), or None (nothing sent) where the link is not in the steady case
-        (``steady``: :meth:`_steady`, asked by the caller just before)."""
+    def _send_acks(self, requests: tuple[Any, ...], steady: bool) -> tuple[int, Any] | None:
+        """The twin's answers to ``requests`` (writes and commands) by one call of its exchange, without the
+        ``Ack`` objects (counted as the link counts them): (how many were done, the refused start's error reply -
+        the last done - or None, for :meth:`_take`); None (nothing sent) where the link is not in the steady case
+        (``steady``: :meth:`_steady`, asked by the caller just before).
+
+        The proof, once per (request type, node): the exchange answers every request it does not refuse with
+        ``Ack(request.node)`` (``ErobCanExchange.acks``); the stock ``ErobCanRule.is_reply`` (with the stock
+        ``ec.answers``, both checked before every call) takes such an ``Ack`` by the request's type and node alone,
+        so it takes each one where it took one - asked here once, by the rule itself (as :meth:`_take` asks)."""
         if not steady:
             return None
         link = self.link
+        acked = self._acked
+        for r in requests:
+            if (type(r), r.node) not in acked:
+                if not link.rule.is_reply(r, ec.Ack(r.node)):
+                    return None
+                acked.add((type(r), r.node))
         with link._lock:
-            replies: list[Any] | None = self.exchange.run(requests, link.policy.timeout)
-            if replies is None:
+            got: tuple[int, Any] | None = self.exchange.acks(requests, link.policy.timeout)
+            if got is None:
                 return None
-            link.transactions += len(replies)
-        self.lane.fused += len(replies)
-        self.lane.taken += len(replies)
-        return replies
+            link.transactions += got[0]
+        self.lane.fused += got[0]
+        self.lane.taken += got[0]
+        self.acks_taken += 1
+        return got
 
     def _send_values(self, reads: tuple[ec.Read, ...]) -> list[int] | None:
         """The values the twin answers to ``reads`` (a tuple of :meth:`_reads_of`) by one call of its exchange, taken
-        as :meth:`_take` takes their replies, without the replies; None (nothing sent) as for :meth:`_send`.
+        as :meth:`_take` takes their replies, without the replies; None (nothing sent) as for :meth:`_send_acks`.
 
         The proof, once per tuple: the exchange answers a read only by ``ValueReply(read.node, value)``; the stock
         ``ErobCanRule.is_reply`` (with the stock ``ec.answers``, both checked before every call) asks of such a
@@ -175,6 +191,12 @@ class ErobCanStep:
         return reply
 
     # -- what the compiled path calls -----------------------------------------------------------
+    def carried(self) -> tuple[Any, list[Any]] | None:
+        """(the world, the twins of the exchange's bus) for ``compiled_path._hold_sleeps``: the world's sleeps may
+        be held (``World.hold``, where the bus lets them: its ``holds()``) and run by the next call."""
+        exchange = self.exchange
+        return exchange.world, [f.firmware for f in exchange.bus.fronts]
+
     def command_all(self, mode: str, values: Sequence[float], skip: Sequence[bool]) -> None:
         if not skip[0]:
             self.command(mode, values[0])
@@ -191,11 +213,11 @@ class ErobCanStep:
                 request = self.access.message("target_absolute_position", target)
                 steady = self._steady()
                 self._check(request, steady)  # raises EncodeError before anything is sent
-                replies = self._send((request, self.start), steady)
-                if replies is not None:
-                    self._take(request, replies[0])
+                got = self._send_acks((request, self.start), steady)
+                if got is not None:  # (the target write is acknowledged: the call carries only writes it takes)
                     driver.note_written("target_absolute_position", target)
-                    self._take(self.start, replies[1])
+                    if got[1] is not None:
+                        self._take((request, self.start)[got[0] - 1], got[1])  # refused: raises DeviceRejected
                     self.taken += 1
                     joint.note_contact()
                     return
@@ -225,10 +247,11 @@ class ErobCanStep:
         request = self.access.message("analog_quantity_value", value)
         steady = self._steady()
         self._check(request, steady)  # raises EncodeError before anything is sent
-        replies = self._send((request,), steady)
-        if replies is None:
+        got = self._send_acks((request,), steady)
+        if got is None:
             return False
-        self._take(request, replies[0])
+        if got[1] is not None:
+            self._take(request, got[1])  # (never: a set-point is not refused; as the link takes a refusal)
         self.driver.note_written("analog_quantity_value", value)
         self.taken += 1
         return True

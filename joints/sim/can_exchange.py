@@ -24,6 +24,11 @@ READY and goes alone, so a hold means a fault (or the watchdog) took the drive o
 from there no substep makes it ready again (only an enable command does); the medium's ticks meanwhile only move
 its last tick, which the call sets to the same final value.
 
+A sleep the world held (``World.hold`` where the bus lets it: :func:`holds`, nothing in flight) runs first in the
+next call, as ``World.sync`` would run it at the medium's first ``_sync``: its substeps, the bus's tick at the
+last one's end (the medium's time moves there), the clock at the sleep's end. ``acks`` gives a command's outcome
+without its ``Ack`` objects (the host proves once that its rule takes them).
+
 It runs only in the steady case, checked before anything is sent (:meth:`ErobCanExchange.run` returns None
 otherwise): the world runs fused with this bus's tick its only tick, the medium times frames (not ideal,
 stuffing not "exact"), nothing is on it, queued or waiting for the host, the host is the medium's only
@@ -61,7 +66,7 @@ from joints.sim.stepping import STEPS
 from joints.transports import can as can_transport
 from joints.transports.can_sim import CanMedium, LockstepCanBus
 
-__all__ = ["ErobCanExchange", "act", "exchanges"]
+__all__ = ["ErobCanExchange", "act", "exchanges", "holds"]
 
 _SPEED, _TORQUE = int(OperationMode.SPEED), int(OperationMode.TORQUE)
 
@@ -186,7 +191,17 @@ def exchanges(tx: Any, out: Any, scratch: Any, st: Any, w: int, mj_step: int, ta
     """The transactions ``tx`` in world ``w`` one after the other, as the host's link carries each over the
     lockstep medium: ``st`` in and out, each one's instants (and its read's values) into ``out``. Stops after a
     refused request; ``st[ODD]`` set: a branch of the medium the call does not model was met (the caller's
-    checks keep it from happening)."""
+    checks keep it from happening). A sleep the world held (``st[BOOKED]`` is ``L.HELD``: ``World.hold``) runs
+    first, as ``World.sync`` runs it at the medium's first ``_sync``: its substeps, the bus's tick at the last
+    one's end (the medium's, with no wait of its own: its time moves there), the clock at the sleep's end."""
+    if st[BOOKED] == L.HELD:
+        st[BOOKED] = 0.0
+        _steps(_due(0.0, st, w, worlds), st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+        t = st[TICKED]
+        if st[TICKS] > 0.0 and t > st[NOW]:  # CanMedium.tick
+            st[NOW] = t
+            st[SEEN] = fmax(st[SEEN], t)
+        st[CLOCK] = st[TARGET]
     for k in range(tx.shape[0]):
         t = tx[k]
         o = out[k]
@@ -302,6 +317,36 @@ _STOCK = (*erob.STOCK, *((cls, name, getattr(cls, name)) for cls, names in (
 ) for name in names))
 
 
+#: what a held sleep rests on (:func:`holds`): the medium's entries that settle the world first (``_sync``), its
+#: ticks and waits, the host's frames
+_HOLD_STOCK = tuple((cls, name, getattr(cls, name)) for cls, names in (
+    (CanMedium, ("_sync", "tick", "next_event", "_next_event", "receive", "submit", "send_at", "time", "load",
+                 "reset_load", "_wait_until")),
+    (LockstepCanBus, ("send", "recv")),
+    (ErobCanBus, ("tick", "next_event", "holds")),
+) for name in names)
+
+
+def holds(bus: ErobCanBus) -> bool:
+    """Whether the world may hold a sleep with ``bus`` ticking (``World.hold``): its substeps and the bus's tick
+    run later - at the medium's next ``_sync`` (a frame sent or received, its time or load asked), at the next
+    one-call exchange (which runs them first) or at any access to the physics (``World.sync``) - the same as at
+    the sleep, since until then nothing reaches the medium or the drives. Held only where the bus's ticks would
+    do nothing but move its time over the sleep and the medium is not sleeping the clock itself (``_cap``: a wait
+    of its own is never held): nothing on the wire, queued, being delivered or waiting for a node, no set-point
+    held by a front; the methods that settle and tick, stock."""
+    medium = bus.medium
+    if medium._cap is not None or medium._wire is not None or medium._pending or medium._delivering is not None:
+        return False
+    for n in medium._nodes:
+        if n.rx or n.held:
+            return False
+    for f in bus.fronts:
+        if f.held is not None:
+            return False
+    return L.stock(_HOLD_STOCK)
+
+
 #: the reads whose value the drive's sensors report (the firmware's method, given the row as the read saw it)
 _SENSED_READS = {"actual_position": "_sensed_counts", "current_speed": "_sensed_speed",
                  "motor_current": "_sensed_current"}
@@ -373,6 +418,7 @@ class ErobCanExchange:
         self.refilled = 0  #: plans made from a kept command plan (:meth:`_refill`)
         self.setpoints = 0  #: set-point writes (speed or current) carried
         self.held = 0  #: of them, held by the front (the drive stopped being ready during the call)
+        self.sleeps = 0  #: calls that ran a sleep the world held first (``World.hold``; :func:`holds`)
         self._row_seen: dict[int, float] = dict.fromkeys(SENSED, 0.0)  #: :meth:`_sensed_row`'s
 
     # -- the steady case ------------------------------------------------------------------------
@@ -381,7 +427,7 @@ class ErobCanExchange:
         world, medium, bus, host = self.world, self.medium, self.bus, self.host
         group = world.group
         if not (group.compiled and group.fusable[world.group_index]) or world._bind != world._bind_seen or \
-                world._booked or world._target != world.clock.now():
+                (world._booked and not world._held) or world._target != world.clock.now():
             return False
         if world._ticks != [bus.tick] or world._bus_watches or len(world._events or ()) != 1:
             return False
@@ -641,9 +687,11 @@ class ErobCanExchange:
                 return None
         world, medium, bus = self.world, self.medium, self.bus
         clock = world.clock.now()
+        held = world._booked  # (a held sleep: _steady) its substeps run first, the medium's time up to a step past
+        ahead = max(medium.now - clock, 0.0) + (world.timestep if held else 0.0)
         # the branches of the medium the call does not model (a frame within twice the clock's time of 0, a reply
         # near the link's timeout) cannot be met: the whole call is well inside both
-        if not clock > 2.0 * (plan.span + max(medium.now - clock, 0.0)) or not plan.longest < 0.5 * timeout:
+        if not clock > 2.0 * (plan.span + ahead) or not plan.longest < 0.5 * timeout:
             return None
         tx = plan.tx
         n = len(tx)
@@ -653,7 +701,8 @@ class ErobCanExchange:
 
             out = self._out[n] = np.zeros((n, OUT_WIDTH))
         st = self._st
-        st[:] = (clock, world._target, 0.0, medium.now, medium._clock_seen, medium._free, medium._ticked,
+        st[:] = (clock, world._target, L.HELD if held else 0.0, medium.now, medium._clock_seen, medium._free,
+                 medium._ticked,
                  0.0, 0.0, medium.busy, world.timestep, 0.0, timeout, 0.0, 0.0)
         scratch = self._scratch.get(world.group.table.shape[1])
         if scratch is None:
@@ -677,6 +726,8 @@ class ErobCanExchange:
                                f"after {done} of {n} requests; this is a bug (the steady checks let it through)")
         self._last, self._done = out, done
         self.taken += 1
+        if held:
+            self.sleeps += 1
         return plan, out, done
 
     def values(self, reads: tuple[Any, ...], timeout: float) -> list[int] | None:
@@ -701,36 +752,59 @@ class ErobCanExchange:
             plan, out, done = got
             if plan.reads:
                 return [ec.ValueReply(r.node, v) for r, v in zip(requests, self._read_values(plan, out, done))]
-            tx = plan.tx
             replies: list[Any] = []
-            for k, (r, shape, front, o) in enumerate(zip(requests, plan.shapes, plan.fronts, out[:done].tolist())):
-                fw = front.firmware
-                front.requests += 1
-                node = r.node
-                if shape.op == TARGET_POSITION:
-                    fw._keep(((shape.name, EROB_CAN.from_wire(shape.name, r.value)),))
-                    replies.append(ec.Ack(node))
-                elif shape.op == SETPOINT:
-                    value = EROB_CAN.from_wire(shape.name, r.value)
-                    fw._keep(((shape.name, value),))
-                    if o[HELD]:
-                        front.held = value
-                        self.held += 1
-                    else:
-                        target = SETPOINT_OF.get(float(tx[k, MOTION]))
-                        if target is not None:
-                            fw._keep(((target, value),))
-                    self.setpoints += 1
-                    replies.append(ec.Ack(node))
-                elif shape.op == START:
-                    if o[REFUSED]:
-                        replies.append(ec.ErrorReply(node, sim_can.START_WHILE_OFF))
-                    else:
-                        fw._keep((("start_operating", 1),))
-                        replies.append(ec.Ack(node))
-                else:
-                    replies.append(ec.ValueReply(node, self._value(fw, shape, o[STATUS_AT:])))
+            self._written(plan, requests, out, done, replies)
         return replies
+
+    def acks(self, requests: Sequence[Any], timeout: float) -> tuple[int, Any] | None:
+        """:meth:`run` of writes and commands without their replies: (how many were done, the refused start's
+        :class:`~joints.codecs.erob_can.ErrorReply` - the last done - or None); :meth:`run` answers each other
+        one done ``Ack(request.node)``. None (nothing sent) where this is not the steady case or one is a read."""
+        for r in requests:
+            if type(r) is ec.Read:
+                return None
+        with self.world.lock:
+            got = self._call(requests, timeout, False)
+            if got is None:
+                return None
+            plan, out, done = got
+            return done, self._written(plan, requests, out, done, None)
+
+    def _written(self, plan: _Plan, requests: Sequence[Any], out: Any, done: int, replies: list[Any] | None) -> Any:
+        """The fronts and firmware after the call of a plan with writes (``out``'s first ``done`` rows): the
+        store and write log, the request counts, a held set-point; each reply into ``replies`` (where given).
+        Returns the refused start's error reply (the last done), or None."""
+        tx = plan.tx
+        refusal = None
+        for k in range(done):
+            r, shape, front = requests[k], plan.shapes[k], plan.fronts[k]
+            fw = front.firmware
+            front.requests += 1
+            op = shape.op
+            reply: Any = None  # (an Ack)
+            if op == TARGET_POSITION:
+                fw._keep(((shape.name, EROB_CAN.from_wire(shape.name, r.value)),))
+            elif op == SETPOINT:
+                value = EROB_CAN.from_wire(shape.name, r.value)
+                fw._keep(((shape.name, value),))
+                if out[k, HELD]:
+                    front.held = value
+                    self.held += 1
+                else:
+                    target = SETPOINT_OF.get(float(tx[k, MOTION]))
+                    if target is not None:
+                        fw._keep(((target, value),))
+                self.setpoints += 1
+            elif op == START:
+                if out[k, REFUSED]:
+                    reply = refusal = ec.ErrorReply(r.node, sim_can.START_WHILE_OFF)
+                else:
+                    fw._keep((("start_operating", 1),))
+            else:  # a read among writes (run only: acks refuses reads before anything is sent)
+                reply = ec.ValueReply(r.node, self._value(fw, shape, out[k, STATUS_AT:].tolist()))
+            if replies is not None:
+                replies.append(ec.Ack(r.node) if reply is None else reply)
+        return refusal
 
     @property
     def instants(self) -> list[tuple[float, ...]]:

@@ -365,6 +365,11 @@ class ErobCanBus:
                 return -math.inf
         return self.medium.next_event()
 
+    def holds(self) -> bool:
+        """Whether the world may hold a sleep (``World.hold``: its physics and this bus's ticks run later, at the
+        medium's next use or the next one-call exchange): see :func:`joints.sim.can_exchange.holds`."""
+        return can_exchange.holds(self)
+
     def tick(self, t: float) -> None:
         if t < self._last_tick:  # the world was reset: the drives were power-cycled
             for f in self.fronts:

@@ -599,7 +599,7 @@ class World:
         An earlier held sleep's substeps run first, on their own (as :meth:`advance` runs them)."""
         if seconds <= 0:
             return
-        if self._ticks:
+        if self._ticks and not (held and self._ticks_hold()):
             self.advance(seconds)
             return
         with self.lock:
@@ -609,6 +609,15 @@ class World:
             self._booked = True
             self._held = held
             self.clock.set(self._target)
+
+    def _ticks_hold(self) -> bool:
+        """Whether a sleep may be held on this world with ticks: each tick's owner says so (its ``holds()``: its
+        ticks would only move its time over the sleep, and whatever it carries settles the world before use)."""
+        for tick in self._ticks:
+            holds = getattr(getattr(tick, "__self__", None), "holds", None)
+            if holds is None or not holds():
+                return False
+        return True
 
     def _sleep(self, seconds: float) -> None:
         """The clock's sleep: :meth:`hold` where :attr:`hold_sleeps`, else :meth:`advance`."""
@@ -621,7 +630,8 @@ class World:
         """:meth:`advance` by ``seconds``, its physics run lazily - at the next :meth:`sync` (any access to the
         physics or a twin, a timed medium about to hand a frame to a drive), or at the start of the next
         :meth:`advance`/:meth:`book` or one-call exchange (:mod:`joints.sim.line_exchange`), on its own: the
-        same substeps as :meth:`advance` runs now, counted the same way. A world with ticks advances at once.
+        same substeps as :meth:`advance` runs now, counted the same way. A world with ticks advances at once,
+        unless every tick's owner holds the sleep (:meth:`_ticks_hold`: an eRob CAN bus with nothing in flight).
         The clock's sleep where :attr:`hold_sleeps`."""
         self._defer(seconds, held=True)
 
@@ -633,6 +643,8 @@ class World:
                 return
             self._booked = self._held = False
             self._step_due(self._due(0.0))
+            if self._ticks:  # (a held sleep: its last tick set the clock to the substep's end) as advance leaves it
+                self.clock.set(self._target)
 
     def transport(self, bus: str) -> Any:
         """An in-process transport whose peer is every emulated drive on ``bus``."""

@@ -257,10 +257,15 @@ class CanMedium(ClockDriven):
         if (seen is None or getattr(clock, "epoch", None) != seen) and self._restarted(c):
             self._restart(c)
         elif c > self._clock_seen:
-            self._clock_seen = c
-            if c > self.now:
-                self._run(c)
-                self.now = c
+            settle = getattr(clock, "settle", None)
+            if settle is not None:  # a sleep the world held (``World.hold``): its physics and ticks run first
+                settle()
+                c = clock.now()
+            if c > self._clock_seen:
+                self._clock_seen = c
+                if c > self.now:
+                    self._run(c)
+                    self.now = c
 
     def tick(self, t: float) -> None:
         """The clock reached ``t`` (the world calls this at substep ends, at least at each :meth:`next_event`):

@@ -7,7 +7,8 @@ mode of ``joints/ErobReach-v0``) runs that env at 20 ms on eRob CAN at 1 Mbit/s 
 loads OTHER's ``joints/sim/can_exchange.py`` and ``joints/drivers/erob_can_steady.py`` under other names (its
 ``exchanges`` compiled from its own file). Block by block the env's compiled path steps its joint with this
 checkout's :class:`~joints.drivers.erob_can_steady.ErobCanStep` (and exchange) or OTHER's, each block ``STEPS``
-steps of the same seeded uniform actions from the same reset, timed by ``time.thread_time``; the blocks alternate
+steps of the same seeded uniform actions from the same reset, timed by ``time.thread_time`` (the world holding its
+sleeps for a step that offers ``carried()``, as ``joints.compiled_path`` sets it); the blocks alternate
 (``ROUNDS`` of each) and every block's observations, rewards and ends must be bit-identical to the first block's.
 Prints the best and median CPU time per env step of each. Pin it to one core (``taskset -c 1``).
 """
@@ -45,6 +46,9 @@ def _config() -> dict[str, Any]:
 def _block(env: Any, step: Any, actions: list[Any]) -> tuple[float, list[Any]]:
     u = env.unwrapped
     cp = u.compiled_path
+    # the world holds its sleeps for a step that offers ``carried()`` (``compiled_path._hold_sleeps``; the read's
+    # call runs them), else it sleeps at once (a checkout before that)
+    step.exchange.world.hold_sleeps = callable(getattr(step, "carried", None))
     obs, _ = env.reset(seed=7)
     cp._units = [((0,), step)]
     cp._steppers = [step]

@@ -12,7 +12,6 @@ cache must be equal; the one-call exchange must have carried the steady steps (w
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 import gymnasium as gym
@@ -79,13 +78,17 @@ class _Recorder:
             link.request = timed
         self.steps = [s for s in (u.compiled_path._steppers if u.compiled_path else []) if isinstance(s, ErobCanStep)]
         for s in self.steps:
-            for method in ("run", "values"):  # (the replies, or a read's values without them)
+            for method in ("run", "values", "acks"):  # (the replies, a read's values or a command's count)
                 call = getattr(s.exchange, method)
 
                 def carried(requests: Any, timeout: float, run: Any = call, s: Any = s, method: str = method) -> Any:
                     out = run(requests, timeout)
                     if out is not None:
-                        self.replies += [type(reply).__name__ if method == "run" else "value" for reply in out]
+                        if method == "acks":  # (done, the refusal or None): the Acks, and the refusal last
+                            self.replies += ["Ack"] * (out[0] - (out[1] is not None))
+                            self.replies += [] if out[1] is None else [type(out[1]).__name__]
+                        else:
+                            self.replies += [type(reply).__name__ if method == "run" else "value" for reply in out]
                         for r, (_e0, e1, _r0, r1, seen, acted) in zip(requests, s.exchange.instants):
                             self.frames += [(e1, 0x640 + r.node), (r1, 0x5C0 + r.node)]
                             self.host.append(seen)
@@ -153,6 +156,8 @@ def _run(compiled: bool, mode: str, steps: int, *, plant: Any = None, undo: Any 
         out["refilled"] = sum(s.exchange.refilled for s in rec.steps)  # command plans made from a kept one
         out["setpoints"] = [(s.exchange.setpoints, s.exchange.held) for s in rec.steps]
         out["values"] = sum(s.values_taken for s in rec.steps)  # state reads taken by their values
+        out["acks"] = sum(s.acks_taken for s in rec.steps)  # commands taken without their Ack objects
+        out["sleeps"] = sum(s.exchange.sleeps for s in rec.steps)  # calls that ran the world's held period sleep
         out["proofs"] = [(sorted(s._encoded), sorted((t.__name__, n) for t, n in s._acked)) for s in rec.steps]
         return out
     finally:
@@ -181,6 +186,8 @@ def test_the_compiled_can_step_gives_the_frame_by_frame_bits(mode: str) -> None:
     if kernel.default_mode():  # the one-call exchange carried the steady steps (it needs the compiled world)
         assert calls >= steps  # the state reads of every step (and the position commands)
         assert compiled["values"] >= steps  # every step's state read taken by its values, without replies
+        assert compiled["acks"] >= steps - 1  # every step's command (or set-point) taken without its Ack objects
+        assert compiled["sleeps"] >= steps - 1  # the period's sleep held by the world, run by the read's call
         ((encoded, acked),) = compiled["proofs"]  # a command's frame built once, its Acks asked once
         assert len(encoded) == 1 and ("Write", encoded[0][0]) in acked
         if mode == "position":
@@ -192,7 +199,45 @@ def test_the_compiled_can_step_gives_the_frame_by_frame_bits(mode: str) -> None:
             ((setpoints, held),) = compiled["setpoints"]
             assert setpoints >= steps - 1 and held == 0
     else:
-        assert calls == 0 and fused == 0 and compiled["values"] == 0
+        assert calls == 0 and fused == 0 and compiled["values"] == compiled["acks"] == compiled["sleeps"] == 0
+
+
+@pytest.mark.skipif(not kernel.default_mode(), reason="the world holds sleeps for the one-call exchange (compiled)")
+def test_the_world_holds_the_period_sleep_never_a_wait_of_the_medium_s_own(monkeypatch: pytest.MonkeyPatch) -> None:
+    """On the compiled path the world holds the env's period sleep (``World.hold``: the read's call runs it) and,
+    under a trace (every request frame by frame: the medium's ``_sync`` settles the world first), still the period
+    sleep - never a wait the medium makes itself (its ``_cap`` set: a held one would tick it without its cap)."""
+    env = gym.make("joints/ErobReach-v0", config=_config(), control_period=PERIOD, compiled_path=True)
+    u: Any = env.unwrapped
+    try:
+        env.reset(seed=3)
+        world = u.rig.sim
+        medium = next(iter(world.buses.values())).medium
+        (step,) = [s for s in u.compiled_path._steppers if isinstance(s, ErobCanStep)]
+        seen: list[tuple[bool, bool]] = []  # (the medium waiting itself, the world held the sleep) per sleep
+        defer = world._defer
+
+        def deferring(seconds: float, *, held: bool) -> None:
+            waiting = medium._cap is not None
+            defer(seconds, held=held)
+            if held:
+                seen.append((waiting, world._held))
+
+        monkeypatch.setattr(world, "_defer", deferring)
+        action = np.zeros(env.action_space.shape, dtype=np.float32)
+        for _ in range(5):
+            env.step(action)
+        assert [h for _, h in seen] == [True] * 5 and step.exchange.sleeps == 5  # each run by the read's call
+        u.rig.trace(lambda record: None)
+        for _ in range(5):
+            env.step(action)
+        u.rig.trace(None)
+        waits = [h for w, h in seen if w]
+        periods = [h for w, h in seen if not w]
+        assert waits and not any(waits)  # the frame-by-frame requests' own waits: never held
+        assert periods == [True] * 10 and step.exchange.sleeps == 5  # held, then settled by the medium's _sync
+    finally:
+        env.close()
 
 
 def test_a_replaced_reply_check_leaves_the_steps_to_the_frame_by_frame_path(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -332,6 +377,7 @@ def test_a_trace_or_a_replaced_method_leaves_the_steps_to_the_frame_by_frame_pat
 @pytest.mark.skipif(not kernel.default_mode(), reason="the one-call exchange runs on a compiled world")
 def test_a_reply_of_the_call_that_does_not_answer_its_request_raises_unexpected_reply() -> None:
     """A fault of the emulator's call (a reply from another node) is a typed error at the step, not a state."""
+    from joints.codecs import erob_can as ec
     from joints.errors import UnexpectedReply
 
     env = gym.make("joints/ErobReach-v0", config=_config(), control_period=PERIOD, compiled_path=True)
@@ -339,20 +385,20 @@ def test_a_reply_of_the_call_that_does_not_answer_its_request_raises_unexpected_
     try:
         env.reset(seed=3)
         (step,) = [s for s in u.compiled_path._steppers if isinstance(s, ErobCanStep)]
-        run = step.exchange.run
+        acks = step.exchange.acks
 
-        def misrouted(requests: Any, timeout: float) -> Any:  # the last reply from another node
-            replies = run(requests, timeout)
-            if replies:
-                replies[-1] = dataclasses.replace(replies[-1], node=replies[-1].node + 1)
-            return replies
+        def misrouted(requests: Any, timeout: float) -> Any:  # the start refused, by another node
+            got = acks(requests, timeout)
+            if got is not None and len(requests) == 2:
+                got = (got[0], ec.ErrorReply(requests[-1].node + 1, 0x0027))
+            return got
 
         for _ in range(3):  # (the Acks of the command's requests asked once of the rule: then taken by their node)
             env.step(np.zeros(env.action_space.shape, dtype=np.float32))
         assert step._acked
-        step.exchange.run = misrouted
+        step.exchange.acks = misrouted
         with pytest.raises(UnexpectedReply, match="does not answer it"):
             env.step(np.zeros(env.action_space.shape, dtype=np.float32))
-        step.exchange.run = run
+        step.exchange.acks = acks
     finally:
         env.close()
