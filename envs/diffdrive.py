@@ -349,7 +349,7 @@ class DiffDriveGoalEnv(RigEnv):
 
         self._renderer: SceneRenderer | None = None
         self._twin: tuple[Any, Any, int, list[int]] | None = None
-        self.goal = np.zeros(3)  #: goal (x, y, heading) in the episode frame
+        self.goal = np.zeros(3)
         self._queue: deque[tuple[float, float]] = deque()
         self._states: dict[str, joints.JointState] = {}
         self._angles = (0.0, 0.0)  #: the wheel angles the odometry sees [rad] (with the encoder noise)
@@ -366,6 +366,18 @@ class DiffDriveGoalEnv(RigEnv):
         self.overruns = 0  #: steps whose tick had passed before their commands were sent
         self.overrun_time = 0.0  #: s, the total of those steps' lateness
         self._overrun = 0.0
+
+    @property
+    def goal(self) -> np.ndarray:
+        """The episode's goal (x [m], y [m], heading [rad]) in the episode frame (read-only: set the whole goal, e.g.
+        ``reset(options={"goal": ...})``)."""
+        return self._goal
+
+    @goal.setter
+    def goal(self, goal: Sequence[float] | np.ndarray) -> None:
+        self._goal = np.array(goal, dtype=np.float64)  # a copy of its own
+        self._goal.flags.writeable = False
+        self._goal_list: list[float] = self._goal.tolist()  #: its floats, for the per-step terms
 
     @property
     def model(self) -> Any:
@@ -482,16 +494,15 @@ class DiffDriveGoalEnv(RigEnv):
         (a_left, a_right), watchdog = token
         states = self._read()
         x, y, _ = self.odometry.update(*self._angles)
-        goal = self.goal.tolist()  # the goal's floats once for the step's terms, observation and info
-        d, e = self._goal_terms(goal)
+        d, e = self._goal_terms()
         success = d < self.success_distance and abs(e) < self.success_heading
         r_progress = self.progress_weight * (self._distance - d)
         r_heading = -self.heading_weight * abs(e) / math.pi * math.exp(-d / self.heading_scale)
         r_action = -self.action_weight * (a_left * a_left + a_right * a_right)
         r_success = self.success_bonus if success else 0.0
         self._distance = d
-        obs = self._observation(goal)
-        info = self._info(states, (d, e), goal)
+        obs = self._observation()
+        info = self._info(states, (d, e))
         info["reward_progress"] = r_progress
         info["reward_heading"] = r_heading
         info["reward_action"] = r_action
@@ -528,17 +539,16 @@ class DiffDriveGoalEnv(RigEnv):
         heading = float(rng.uniform(-math.pi, math.pi))
         return np.array([dist * math.cos(bearing), dist * math.sin(bearing), heading])
 
-    def _goal_terms(self, goal: list[float] | None = None) -> tuple[float, float]:
-        """(distance [m], heading error [rad]) of the estimate to the goal (``goal``: its floats if the caller has
-        them)."""
+    def _goal_terms(self) -> tuple[float, float]:
+        """(distance [m], heading error [rad]) of the estimate to the goal."""
         x, y, th = self.odometry.pose
-        gx, gy, gh = self.goal.tolist() if goal is None else goal
+        gx, gy, gh = self._goal_list
         return math.hypot(gx - x, gy - y), wrap_angle(gh - th)
 
-    def _observation(self, goal: list[float] | None = None) -> np.ndarray:
+    def _observation(self) -> np.ndarray:
         x, y, th = self.odometry.pose
         c, s = math.cos(th), math.sin(th)
-        gx, gy, gh = self.goal.tolist() if goal is None else goal
+        gx, gy, gh = self._goal_list
         dx, dy = gx - x, gy - y
         e = gh - th
         states = self._states
@@ -549,9 +559,9 @@ class DiffDriveGoalEnv(RigEnv):
         np.minimum(obs, self._obs_high, out=obs)
         return obs
 
-    def _info(self, states: Mapping[str, joints.JointState], terms: tuple[float, float] | None = None,
-              goal: list[float] | None = None) -> dict[str, Any]:
-        """The step's info; ``terms``: :meth:`_goal_terms` if the caller has them, ``goal``: the goal's floats."""
+    def _info(self, states: Mapping[str, joints.JointState], terms: tuple[float, float] | None = None
+              ) -> dict[str, Any]:
+        """The step's info; ``terms``: :meth:`_goal_terms` if the caller has them."""
         d, e = self._goal_terms() if terms is None else terms
         left, right = self.wheel_names
         sl, sr = states[left], states[right]
@@ -570,7 +580,7 @@ class DiffDriveGoalEnv(RigEnv):
         if self.sim:
             tx, ty, th = self._true_xyth()
             info["true_pose"] = np.array([tx, ty, th])
-            gx, gy, _ = self.goal.tolist() if goal is None else goal
+            gx, gy, _ = self._goal_list
             info["true_distance"] = math.hypot(gx - tx, gy - ty)
         return info
 

@@ -121,14 +121,15 @@ class Rig:
         Meanwhile every enabled joint whose drive has a communication watchdog is read at least
         every quarter of its watchdog time (its state refreshed, its watchdog fed).
         """
-        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not math.isfinite(seconds) \
-                or seconds < 0:
+        if (type(seconds) is not float or not 0.0 <= seconds < math.inf) and (  # a finite float >= 0 is fine
+                isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not math.isfinite(seconds)
+                or seconds < 0):
             raise ValueError(f"cannot sleep {seconds!r} s (need a finite time >= 0)")
         clock = self.clock
         end = clock.now() + seconds
         while True:
             now = clock.now()
-            due, names = self._keepalive_due()
+            due, names = self._keepalive_due(end)
             if due is None or due >= end:
                 if end > now:
                     clock.sleep(end - now)
@@ -137,9 +138,17 @@ class Rig:
                 clock.sleep(due - now)
             self.read_states(names)
 
-    def _keepalive_due(self) -> tuple[float | None, list[str]]:
-        """The earliest time an enabled joint must be talked to, and which joints are due then."""
+    def _keepalive_due(self, before: float = math.inf) -> tuple[float | None, list[str]]:
+        """The earliest time an enabled joint must be talked to, and which joints are due then. Where no joint with
+        a watchdog, enabled or not, falls due before ``before``: (None, []) without asking which are enabled (a
+        caller that waits until ``before`` does the same either way: the earliest time is not before it)."""
         if not self.keepalive:
+            return None, []
+        for j in self.joints.values():
+            w = j.watchdog_ms
+            if w and j.last_contact + w * 1e-3 * KEEPALIVE_FRACTION < before:
+                break
+        else:
             return None, []
         due: float | None = None
         names: list[str] = []
