@@ -443,6 +443,7 @@ class JointsEnv(RigEnv):
                                2 * self.torque_limits, t_hi]).astype(np.float64)
         self.observation_space = spaces.Box(low, high, dtype=np.float64)
         self._obs_low, self._obs_high = self.observation_space.low.copy(), self.observation_space.high.copy()
+        self._obs_lo, self._obs_hi = self._obs_low.tolist(), self._obs_high.tolist()  #: the bounds as plain floats
         self._obs_dim = int(low.shape[0])
         self._lo_stop = self.position_limits[:, 0] - LIMIT_MARGIN
         self._hi_stop = self.position_limits[:, 1] + LIMIT_MARGIN
@@ -456,6 +457,7 @@ class JointsEnv(RigEnv):
         self._inset_lo = (self.position_limits[:, 0] + LIMIT_INSET).tolist()
         self._inset_hi = (self.position_limits[:, 1] - LIMIT_INSET).tolist()
         self._action_shape = (n,)
+        self._shielded = type(self)._shield is not JointsEnv._shield  #: the task has a rule of its own
 
         self._mjcf_joints = [rig.config.joints[nm].mjcf_joint or nm for nm in self.joint_names]
 
@@ -601,7 +603,7 @@ class JointsEnv(RigEnv):
                 # np.clip(c, -braking_speed(p - lo, a, dt, -v), braking_speed(hi - p, a, dt, v)), per joint
                 capped.append(clip_to(c, -braking_speed_of(p - lo, a, dt, -v), braking_speed_of(hi - p, a, dt, v)))
             values = capped
-        return self._shield(values)
+        return self._shield(values) if self._shielded else values
 
     def _shield(self, command: list[float]) -> list[float]:
         """The task's own safety rule on a position or velocity command (SI, within the limits, one
@@ -748,7 +750,8 @@ class JointsEnv(RigEnv):
         self._prev_values = values
         faults: dict[str, str | None] = {}
         faulted = None
-        for name, s in zip(self.joint_names, states):
+        violation = False
+        for name, s, p, lo, hi in zip(self.joint_names, states, positions, self._lo_list, self._hi_list):
             f = s.fault
             if f is None:
                 faults[name] = None
@@ -756,14 +759,11 @@ class JointsEnv(RigEnv):
                 faults[name] = f.name
                 if faulted is None:
                     faulted = (name, s)
-        info = {"time": float(self.rig.time), "overrun": self._overrun, "faults": faults}
-        info.update(terms)
-        violation = False
-        for p, lo, hi in zip(positions, self._lo_list, self._hi_list):
             if p < lo or p > hi:
                 violation = True
-        info["limit_violation"] = violation
-        info["command"] = self._sent  # a new array every step, never changed in place
+        # "command": a new array every step, never changed in place
+        info = {"time": float(self.rig.time), "overrun": self._overrun, "faults": faults, **terms,
+                "limit_violation": violation, "command": self._sent}
         if faulted is not None:
             info["fault"] = fault_info(*faulted)
         terminated = violation or faulted is not None
@@ -807,14 +807,18 @@ class JointsEnv(RigEnv):
     def _observation(self, states: Sequence[joints.JointState], positions: list[float] | None = None) -> np.ndarray:
         if positions is None:
             positions = [s.position for s in states]
-        obs = np.array(positions + [s.velocity for s in states] + [s.torque for s in states]
-                       + self._task_terms(positions))
+        row = positions + [s.velocity for s in states] + [s.torque for s in states] + self._task_terms(positions)
         if self._noise_rng is not None and self._noisy:
+            obs = np.array(row)
             n = len(positions)
             obs[:n] += self._noise_rng.normal(0.0, 1.0, n) * self._noise
-        np.maximum(obs, self._obs_low, out=obs)
-        np.minimum(obs, self._obs_high, out=obs)
-        return obs
+            np.maximum(obs, self._obs_low, out=obs)
+            np.minimum(obs, self._obs_high, out=obs)
+            return obs
+        # np.minimum(np.maximum(row, low), high) on plain floats: the value unless beyond a bound, NaN kept (a value
+        # equal to a bound is kept: the bits differ only where a bound is a signed zero and the value the other one)
+        return np.array([lo if v < lo else hi if v > hi else v  # noqa: FURB136 - min(), max() without calls
+                         for v, lo, hi in zip(row, self._obs_lo, self._obs_hi)])
 
     def _info(self, states: Sequence[joints.JointState]) -> dict[str, Any]:
         return {

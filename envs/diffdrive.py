@@ -337,7 +337,7 @@ class DiffDriveGoalEnv(RigEnv):
         a, g, v = self.arena, self.goal_distance[1], self.velocity_limits
         low = np.array([-2 * a, -2 * a, -1, -1, -2 * a - g, -2 * a - g, -1, -1, -2 * v[0], -2 * v[1]], np.float64)
         self.observation_space = spaces.Box(low, -low, dtype=np.float64)
-        self._obs_low, self._obs_high = low, -low
+        self._obs_lo, self._obs_hi = low.tolist(), (-low).tolist()  #: the bounds as plain floats
 
         #: the compiled command/state path (sim, both wheels a twin it knows, read in the rig's order), else None
         compiled = self.sim and self._want_compiled and self.wheel_names == list(rig.joints)
@@ -553,11 +553,11 @@ class DiffDriveGoalEnv(RigEnv):
         e = gh - th
         states = self._states
         left, right = self.wheel_names
-        obs = np.array([x, y, c, s, c * dx + s * dy, -s * dx + c * dy, math.cos(e), math.sin(e),
-                        states[left].velocity, states[right].velocity])
-        np.maximum(obs, self._obs_low, out=obs)  # np.clip's bits (the values are finite), one array each
-        np.minimum(obs, self._obs_high, out=obs)
-        return obs
+        row = [x, y, c, s, c * dx + s * dy, -s * dx + c * dy, math.cos(e), math.sin(e),
+               states[left].velocity, states[right].velocity]
+        # np.minimum(np.maximum(row, low), high) on plain floats (no bound is a signed zero: the same bits)
+        return np.array([lo if v < lo else hi if v > hi else v  # noqa: FURB136 - min(), max() without calls
+                         for v, lo, hi in zip(row, self._obs_lo, self._obs_hi)])
 
     def _info(self, states: Mapping[str, joints.JointState], terms: tuple[float, float] | None = None
               ) -> dict[str, Any]:

@@ -129,7 +129,15 @@ class Rig:
         end = clock.now() + seconds
         while True:
             now = clock.now()
-            due, names = self._keepalive_due(end)
+            for j in self.joints.values() if self.keepalive else ():
+                w = j.watchdog_ms
+                if w and j.last_contact + w * 1e-3 * KEEPALIVE_FRACTION < end:
+                    break  # this joint's keep-alive falls due before the end, if it is enabled
+            else:  # no joint's falls due before the end, enabled or not: nothing to ask
+                if end > now:
+                    clock.sleep(end - now)
+                return
+            due, names = self._keepalive_due()
             if due is None or due >= end:
                 if end > now:
                     clock.sleep(end - now)
@@ -138,17 +146,9 @@ class Rig:
                 clock.sleep(due - now)
             self.read_states(names)
 
-    def _keepalive_due(self, before: float = math.inf) -> tuple[float | None, list[str]]:
-        """The earliest time an enabled joint must be talked to, and which joints are due then. Where no joint with
-        a watchdog, enabled or not, falls due before ``before``: (None, []) without asking which are enabled (a
-        caller that waits until ``before`` does the same either way: the earliest time is not before it)."""
+    def _keepalive_due(self) -> tuple[float | None, list[str]]:
+        """The earliest time an enabled joint must be talked to, and which joints are due then."""
         if not self.keepalive:
-            return None, []
-        for j in self.joints.values():
-            w = j.watchdog_ms
-            if w and j.last_contact + w * 1e-3 * KEEPALIVE_FRACTION < before:
-                break
-        else:
             return None, []
         due: float | None = None
         names: list[str] = []
