@@ -460,9 +460,10 @@ class DiffDriveGoalEnv(RigEnv):
             ox, oy, oth = self._origin.tolist()
             self._frame = (ox, oy, math.cos(oth), math.sin(oth), oth)
         self._t0 = self.rig.time
-        self._distance = self._goal_terms()[0]
-        obs = self._observation()
-        info = self._info(states)
+        pose = self.odometry.pose
+        self._distance = self._goal_terms(pose)[0]
+        obs = self._observation(pose)
+        info = self._info(states, pose)
         if self.randomization_sample is not None:
             info["randomization"] = self.randomization_sample
         if self.render_mode == "human":
@@ -493,16 +494,17 @@ class DiffDriveGoalEnv(RigEnv):
         """Read both wheels (one FC03), integrate the odometry, observe, reward - on plain floats."""
         (a_left, a_right), watchdog = token
         states = self._read()
-        x, y, _ = self.odometry.update(*self._angles)
-        d, e = self._goal_terms()
+        pose = self.odometry.update(*self._angles)
+        x, y, _ = pose
+        d, e = self._goal_terms(pose)
         success = d < self.success_distance and abs(e) < self.success_heading
         r_progress = self.progress_weight * (self._distance - d)
         r_heading = -self.heading_weight * abs(e) / math.pi * math.exp(-d / self.heading_scale)
         r_action = -self.action_weight * (a_left * a_left + a_right * a_right)
         r_success = self.success_bonus if success else 0.0
         self._distance = d
-        obs = self._observation()
-        info = self._info(states, (d, e))
+        obs = self._observation(pose)
+        info = self._info(states, pose, (d, e, success))
         info["reward_progress"] = r_progress
         info["reward_heading"] = r_heading
         info["reward_action"] = r_action
@@ -539,14 +541,15 @@ class DiffDriveGoalEnv(RigEnv):
         heading = float(rng.uniform(-math.pi, math.pi))
         return np.array([dist * math.cos(bearing), dist * math.sin(bearing), heading])
 
-    def _goal_terms(self) -> tuple[float, float]:
-        """(distance [m], heading error [rad]) of the estimate to the goal."""
-        x, y, th = self.odometry.pose
+    def _goal_terms(self, pose: tuple[float, float, float]) -> tuple[float, float]:
+        """(distance [m], heading error [rad]) of the estimate ``pose`` (the odometry's) to the goal."""
+        x, y, th = pose
         gx, gy, gh = self._goal_list
         return math.hypot(gx - x, gy - y), wrap_angle(gh - th)
 
-    def _observation(self) -> np.ndarray:
-        x, y, th = self.odometry.pose
+    def _observation(self, pose: tuple[float, float, float]) -> np.ndarray:
+        """The observation for the odometry's ``pose`` and the last wheel states."""
+        x, y, th = pose
         c, s = math.cos(th), math.sin(th)
         gx, gy, gh = self._goal_list
         dx, dy = gx - x, gy - y
@@ -559,10 +562,15 @@ class DiffDriveGoalEnv(RigEnv):
         return np.array([lo if v < lo else hi if v > hi else v  # noqa: FURB136 - min(), max() without calls
                          for v, lo, hi in zip(row, self._obs_lo, self._obs_hi)])
 
-    def _info(self, states: Mapping[str, joints.JointState], terms: tuple[float, float] | None = None
-              ) -> dict[str, Any]:
-        """The step's info; ``terms``: :meth:`_goal_terms` if the caller has them."""
-        d, e = self._goal_terms() if terms is None else terms
+    def _info(self, states: Mapping[str, joints.JointState], pose: tuple[float, float, float],
+              terms: tuple[float, float, bool] | None = None) -> dict[str, Any]:
+        """The step's info for the odometry's ``pose``; ``terms``: :meth:`_goal_terms` and the success if the caller
+        has them."""
+        if terms is None:
+            d, e = self._goal_terms(pose)
+            success = d < self.success_distance and abs(e) < self.success_heading
+        else:
+            d, e, success = terms
         left, right = self.wheel_names
         sl, sr = states[left], states[right]
         fl, fr = sl.fault, sr.fault
@@ -572,9 +580,9 @@ class DiffDriveGoalEnv(RigEnv):
             "faults": {left: None if fl is None else fl.name, right: None if fr is None else fr.name},
             "distance": d,
             "heading_error": e,
-            "is_success": bool(d < self.success_distance and abs(e) < self.success_heading),
-            "pose_estimate": np.array(self.odometry.pose),
-            "goal": self.goal.copy(),
+            "is_success": bool(success),
+            "pose_estimate": np.array(pose),
+            "goal": self._goal.copy(),
             "wheel_velocities": np.array([sl.velocity, sr.velocity]),
         }
         if self.sim:
