@@ -807,7 +807,12 @@ class JointsEnv(RigEnv):
     def _observation(self, states: Sequence[joints.JointState], positions: list[float] | None = None) -> np.ndarray:
         if positions is None:
             positions = [s.position for s in states]
-        row = positions + [s.velocity for s in states] + [s.torque for s in states] + self._task_terms(positions)
+        row = list(positions)  # [positions, velocities, torques, task terms]
+        for s in states:
+            row.append(s.velocity)
+        for s in states:
+            row.append(s.torque)
+        row += self._task_terms(positions)
         if self._noise_rng is not None and self._noisy:
             obs = np.array(row)
             n = len(positions)
