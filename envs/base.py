@@ -457,7 +457,7 @@ class JointsEnv(RigEnv):
         self._inset_lo = (self.position_limits[:, 0] + LIMIT_INSET).tolist()
         self._inset_hi = (self.position_limits[:, 1] - LIMIT_INSET).tolist()
         self._action_shape = (n,)
-        self._shielded = type(self)._shield is not JointsEnv._shield  #: the task has a rule of its own
+        self._shielded = type(self)._shield is not type(self)._no_shield  #: the task has a rule of its own
 
         self._mjcf_joints = [rig.config.joints[nm].mjcf_joint or nm for nm in self.joint_names]
 
@@ -610,6 +610,9 @@ class JointsEnv(RigEnv):
         float per joint); default: none. See :meth:`_reach` and :meth:`_stop_command` for the motion it
         may predict."""
         return command
+
+    #: the default :meth:`_shield` (no rule): a task whose ``_shield`` is another has a rule of its own
+    _no_shield = _shield
 
     def _stop_command(self, i: int) -> float:
         """The command that stops joint ``i`` as soon as the drive can: the target where its
