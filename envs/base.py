@@ -443,6 +443,7 @@ class JointsEnv(RigEnv):
                                2 * self.torque_limits, t_hi]).astype(np.float64)
         self.observation_space = spaces.Box(low, high, dtype=np.float64)
         self._obs_low, self._obs_high = self.observation_space.low.copy(), self.observation_space.high.copy()
+        self._obs_lo, self._obs_hi = self._obs_low.tolist(), self._obs_high.tolist()  #: the bounds as plain floats
         self._obs_dim = int(low.shape[0])
         self._lo_stop = self.position_limits[:, 0] - LIMIT_MARGIN
         self._hi_stop = self.position_limits[:, 1] + LIMIT_MARGIN
@@ -450,16 +451,20 @@ class JointsEnv(RigEnv):
         #: the limits as plain floats (per-step arithmetic on a few joints)
         self._pos_lo, self._pos_hi = self.position_limits[:, 0].tolist(), self.position_limits[:, 1].tolist()
         self._vel_list, self._torque_list = self.velocity_limits.tolist(), self.torque_limits.tolist()
+        self._pos_span = (self.position_limits[:, 1] - self.position_limits[:, 0]).tolist()  #: hi - lo per joint
+        self._profile_floats()
         #: where velocity actions brake to: LIMIT_INSET inside the limits (plain floats)
         self._inset_lo = (self.position_limits[:, 0] + LIMIT_INSET).tolist()
         self._inset_hi = (self.position_limits[:, 1] - LIMIT_INSET).tolist()
         self._action_shape = (n,)
+        self._shielded = type(self)._shield is not type(self)._no_shield  #: the task has a rule of its own
 
         self._mjcf_joints = [rig.config.joints[nm].mjcf_joint or nm for nm in self.joint_names]
 
         self._renderer: SceneRenderer | None = None
         self._twin: tuple[Any, Any, np.ndarray] | None = None  # hardware: (model, data, qpos addresses)
         self._queue: deque[np.ndarray] = deque()
+        #: the last action (clipped): as an array (several joints, np.dot's operand) and as plain floats
         self._prev_action = np.zeros(n)
         self._prev_values = self._prev_action.tolist()
         self._states: list[joints.JointState] = []
@@ -481,6 +486,14 @@ class JointsEnv(RigEnv):
     def _select_joints(self, rig: joints.Rig) -> list[str]:
         """The joints this env drives, in action/observation order (default: the config's order)."""
         return list(rig.joints)
+
+    def _profile_floats(self) -> None:
+        """The episode's profiles and speed cap as plain floats for the per-step safety arithmetic (they change at
+        construction and at reset only: :meth:`_derate`)."""
+        self._acc_list: list[float] = self.profile_acceleration.tolist()
+        self._dec_list: list[float] = self.profile_deceleration.tolist()
+        self._cruise_list: list[float] = self.profile_velocity.tolist()
+        self._cap_list: list[float] = self.speed_cap.tolist()
 
     # -- task hooks (subclasses) ------------------------------------------------------------
     def _task_bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -531,7 +544,11 @@ class JointsEnv(RigEnv):
         """:meth:`command_of` of an action already clipped to [-1, 1], on plain floats (the same IEEE
         operations as the arrays, the same bits)."""
         if self.action_mode == "position":
-            return [clip(lo + (v + 1.0) * 0.5 * (hi - lo), lo, hi) for v, lo, hi in zip(a, self._pos_lo, self._pos_hi)]
+            out = []
+            for v, lo, hi, span in zip(a, self._pos_lo, self._pos_hi, self._pos_span):
+                x = lo + (v + 1.0) * 0.5 * span
+                out.append(x if x != x else min(max(x, lo), hi))  # noqa: PLR0124 - clip(x, lo, hi), NaN kept
+            return out
         scale = self._vel_list if self.action_mode == "velocity" else self._torque_list
         return [v * s for v, s in zip(a, scale)]
 
@@ -569,7 +586,7 @@ class JointsEnv(RigEnv):
         mode = self.action_mode
         if mode == "position":
             return [clip(v, lo, hi) for v, lo, hi in zip(values, self._pos_lo, self._pos_hi)]
-        cap = self.speed_cap.tolist() if mode == "velocity" else self._torque_list
+        cap = self._cap_list if mode == "velocity" else self._torque_list
         return [clip(v, -m, m) for v, m in zip(values, cap)]
 
     def _safe(self, values: list[float]) -> list[float]:
@@ -579,14 +596,14 @@ class JointsEnv(RigEnv):
             return values
         if mode == "velocity":
             dt = self.control_period + self.bus_lag
-            acc = self.profile_acceleration.tolist()
+            acc = self._acc_list
             capped = []
             for c, s, a, lo, hi in zip(values, self._states, acc, self._inset_lo, self._inset_hi):
                 p, v = s.position, s.velocity
                 # np.clip(c, -braking_speed(p - lo, a, dt, -v), braking_speed(hi - p, a, dt, v)), per joint
                 capped.append(clip_to(c, -braking_speed_of(p - lo, a, dt, -v), braking_speed_of(hi - p, a, dt, v)))
             values = capped
-        return self._shield(values)
+        return self._shield(values) if self._shielded else values
 
     def _shield(self, command: list[float]) -> list[float]:
         """The task's own safety rule on a position or velocity command (SI, within the limits, one
@@ -594,13 +611,16 @@ class JointsEnv(RigEnv):
         may predict."""
         return command
 
+    #: the default :meth:`_shield` (no rule): a task whose ``_shield`` is another has a rule of its own
+    _no_shield = _shield
+
     def _stop_command(self, i: int) -> float:
         """The command that stops joint ``i`` as soon as the drive can: the target where its
         profile stops it (position mode, within the limits) or zero speed (velocity mode)."""
         if self.action_mode == "velocity":
             return 0.0
         s = self._states[i]
-        stop = s.position + s.velocity * abs(s.velocity) / (2.0 * float(self.profile_deceleration[i]))
+        stop = s.position + s.velocity * abs(s.velocity) / (2.0 * self._dec_list[i])
         return clip(stop, self._pos_lo[i], self._pos_hi[i])  # np.clip of a scalar: the value on a tie, NaN kept
 
     def _reach(self, command: Sequence[float]) -> tuple[list[float], list[float]]:
@@ -609,10 +629,10 @@ class JointsEnv(RigEnv):
         drive's deceleration - a conservative envelope of the drive's own profile
         (:meth:`_joint_reach` of each joint)."""
         dt = self.control_period + self.bus_lag  # the state is older, the command later, by up to a bus cycle
-        acc = self.profile_acceleration.tolist()
+        acc = self._acc_list
         velocity = self.action_mode == "velocity"
-        dec = acc if velocity else self.profile_deceleration.tolist()
-        cruise = self.profile_velocity.tolist()
+        dec = acc if velocity else self._dec_list
+        cruise = self._cruise_list
         lows: list[float] = []
         highs: list[float] = []
         for i, (s, c) in enumerate(zip(self._states, list(command))):
@@ -687,10 +707,12 @@ class JointsEnv(RigEnv):
 
     batchable = True
 
-    def begin_step(self, action: np.ndarray) -> tuple[np.ndarray, list[float]]:
+    def begin_step(self, action: np.ndarray) -> tuple[np.ndarray | None, list[float]]:
         if self._closed:
             self._check_open()  # raises
-        a = np.asarray(action, dtype=np.float64)
+        # a float array's own floats (float32 widened exactly, as float64 would have them); else as float64
+        a = action if type(action) is np.ndarray and action.dtype.kind == "f" and action.itemsize <= 8 \
+            else np.asarray(action, dtype=np.float64)
         if a.shape != self._action_shape:
             raise ValueError(f"action shape {a.shape} != {self.action_space.shape}")
         given = a.tolist()
@@ -700,20 +722,20 @@ class JointsEnv(RigEnv):
                 raise ValueError(f"action must be finite, got {given}")
             # a.clip(-1.0, 1.0) on plain floats (clip() of a finite value: the same bits)
             values.append(v if -1.0 <= v <= 1.0 else (-1.0 if v < -1.0 else 1.0))
-        a = np.array(values)
         if self._queue:  # bus latency (domain randomisation): the action waits its turn
-            self._queue.append(a)
-            sent = self._queue.popleft()
-            self._command(sent.tolist())
+            self._queue.append(np.array(values))
+            self._command(self._queue.popleft().tolist())
         else:
             self._command(values)
         self._tick += 1
-        return a, values
+        # the action as an array for np.dot's change (several joints); one joint's change is a square of floats
+        return (np.array(values) if len(values) > 1 else None), values
 
-    def finish_step(self, token: tuple[np.ndarray, list[float]]) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+    def finish_step(self, token: tuple[np.ndarray | None, list[float]]
+                    ) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         return self._finish(token, self._read())
 
-    def _finish(self, token: tuple[np.ndarray, list[float]], states: list[joints.JointState]
+    def _finish(self, token: tuple[np.ndarray | None, list[float]], states: list[joints.JointState]
                 ) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """:meth:`finish_step` once the joints' ``states`` are read."""
         a, values = token
@@ -723,13 +745,16 @@ class JointsEnv(RigEnv):
             d = values[0] - self._prev_values[0]
             change = d * d
         else:
+            assert a is not None
             diff = a - self._prev_action
             change = float(np.dot(diff, diff))
+            self._prev_action = a
         reward, terms = self._reward(positions, change)
-        self._prev_action, self._prev_values = a, values
+        self._prev_values = values
         faults: dict[str, str | None] = {}
         faulted = None
-        for name, s in zip(self.joint_names, states):
+        violation = False
+        for name, s, p, lo, hi in zip(self.joint_names, states, positions, self._lo_list, self._hi_list):
             f = s.fault
             if f is None:
                 faults[name] = None
@@ -737,14 +762,11 @@ class JointsEnv(RigEnv):
                 faults[name] = f.name
                 if faulted is None:
                     faulted = (name, s)
-        info = {"time": float(self.rig.time), "overrun": self._overrun, "faults": faults}
-        info.update(terms)
-        violation = False
-        for p, lo, hi in zip(positions, self._lo_list, self._hi_list):
             if p < lo or p > hi:
                 violation = True
-        info["limit_violation"] = violation
-        info["command"] = self._sent  # a new array every step, never changed in place
+        # "command": a new array every step, never changed in place
+        info = {"time": float(self.rig.time), "overrun": self._overrun, "faults": faults, **terms,
+                "limit_violation": violation, "command": self._sent}
         if faulted is not None:
             info["fault"] = fault_info(*faulted)
         terminated = violation or faulted is not None
@@ -788,14 +810,23 @@ class JointsEnv(RigEnv):
     def _observation(self, states: Sequence[joints.JointState], positions: list[float] | None = None) -> np.ndarray:
         if positions is None:
             positions = [s.position for s in states]
-        obs = np.array(positions + [s.velocity for s in states] + [s.torque for s in states]
-                       + self._task_terms(positions))
+        row = list(positions)  # [positions, velocities, torques, task terms]
+        for s in states:
+            row.append(s.velocity)
+        for s in states:
+            row.append(s.torque)
+        row += self._task_terms(positions)
         if self._noise_rng is not None and self._noisy:
+            obs = np.array(row)
             n = len(positions)
             obs[:n] += self._noise_rng.normal(0.0, 1.0, n) * self._noise
-        np.maximum(obs, self._obs_low, out=obs)
-        np.minimum(obs, self._obs_high, out=obs)
-        return obs
+            np.maximum(obs, self._obs_low, out=obs)
+            np.minimum(obs, self._obs_high, out=obs)
+            return obs
+        # np.minimum(np.maximum(row, low), high) on plain floats: the value unless beyond a bound, NaN kept (a value
+        # equal to a bound is kept: the bits differ only where a bound is a signed zero and the value the other one)
+        return np.array([lo if v < lo else hi if v > hi else v  # noqa: FURB136 - min(), max() without calls
+                         for v, lo, hi in zip(row, self._obs_lo, self._obs_hi)])
 
     def _info(self, states: Sequence[joints.JointState]) -> dict[str, Any]:
         return {
@@ -888,6 +919,7 @@ class JointsEnv(RigEnv):
         self.profile_velocity[i] = j.motion.velocity
         self.profile_acceleration[i] = j.motion.acceleration
         self.profile_deceleration[i] = j.motion.deceleration
+        self._profile_floats()
 
     def _randomize(self) -> None:
         sim = self.rig.sim

@@ -337,7 +337,7 @@ class DiffDriveGoalEnv(RigEnv):
         a, g, v = self.arena, self.goal_distance[1], self.velocity_limits
         low = np.array([-2 * a, -2 * a, -1, -1, -2 * a - g, -2 * a - g, -1, -1, -2 * v[0], -2 * v[1]], np.float64)
         self.observation_space = spaces.Box(low, -low, dtype=np.float64)
-        self._obs_low, self._obs_high = low, -low
+        self._obs_lo, self._obs_hi = low.tolist(), (-low).tolist()  #: the bounds as plain floats
 
         #: the compiled command/state path (sim, both wheels a twin it knows, read in the rig's order), else None
         compiled = self.sim and self._want_compiled and self.wheel_names == list(rig.joints)
@@ -349,7 +349,7 @@ class DiffDriveGoalEnv(RigEnv):
 
         self._renderer: SceneRenderer | None = None
         self._twin: tuple[Any, Any, int, list[int]] | None = None
-        self.goal = np.zeros(3)  #: goal (x, y, heading) in the episode frame
+        self.goal = np.zeros(3)
         self._queue: deque[tuple[float, float]] = deque()
         self._states: dict[str, joints.JointState] = {}
         self._angles = (0.0, 0.0)  #: the wheel angles the odometry sees [rad] (with the encoder noise)
@@ -366,6 +366,18 @@ class DiffDriveGoalEnv(RigEnv):
         self.overruns = 0  #: steps whose tick had passed before their commands were sent
         self.overrun_time = 0.0  #: s, the total of those steps' lateness
         self._overrun = 0.0
+
+    @property
+    def goal(self) -> np.ndarray:
+        """The episode's goal (x [m], y [m], heading [rad]) in the episode frame (read-only: set the whole goal, e.g.
+        ``reset(options={"goal": ...})``)."""
+        return self._goal
+
+    @goal.setter
+    def goal(self, goal: Sequence[float] | np.ndarray) -> None:
+        self._goal = np.array(goal, dtype=np.float64)  # a copy of its own
+        self._goal.flags.writeable = False
+        self._goal_list: list[float] = self._goal.tolist()  #: its floats, for the per-step terms
 
     @property
     def model(self) -> Any:
@@ -448,9 +460,10 @@ class DiffDriveGoalEnv(RigEnv):
             ox, oy, oth = self._origin.tolist()
             self._frame = (ox, oy, math.cos(oth), math.sin(oth), oth)
         self._t0 = self.rig.time
-        self._distance = self._goal_terms()[0]
-        obs = self._observation()
-        info = self._info(states)
+        pose = self.odometry.pose
+        self._distance = self._goal_terms(pose)[0]
+        obs = self._observation(pose)
+        info = self._info(states, pose)
         if self.randomization_sample is not None:
             info["randomization"] = self.randomization_sample
         if self.render_mode == "human":
@@ -481,17 +494,17 @@ class DiffDriveGoalEnv(RigEnv):
         """Read both wheels (one FC03), integrate the odometry, observe, reward - on plain floats."""
         (a_left, a_right), watchdog = token
         states = self._read()
-        x, y, _ = self.odometry.update(*self._angles)
-        goal = self.goal.tolist()  # the goal's floats once for the step's terms, observation and info
-        d, e = self._goal_terms(goal)
+        pose = self.odometry.update(*self._angles)
+        x, y, _ = pose
+        d, e = self._goal_terms(pose)
         success = d < self.success_distance and abs(e) < self.success_heading
         r_progress = self.progress_weight * (self._distance - d)
         r_heading = -self.heading_weight * abs(e) / math.pi * math.exp(-d / self.heading_scale)
         r_action = -self.action_weight * (a_left * a_left + a_right * a_right)
         r_success = self.success_bonus if success else 0.0
         self._distance = d
-        obs = self._observation(goal)
-        info = self._info(states, (d, e), goal)
+        obs = self._observation(pose)
+        info = self._info(states, pose, (d, e, success))
         info["reward_progress"] = r_progress
         info["reward_heading"] = r_heading
         info["reward_action"] = r_action
@@ -528,31 +541,36 @@ class DiffDriveGoalEnv(RigEnv):
         heading = float(rng.uniform(-math.pi, math.pi))
         return np.array([dist * math.cos(bearing), dist * math.sin(bearing), heading])
 
-    def _goal_terms(self, goal: list[float] | None = None) -> tuple[float, float]:
-        """(distance [m], heading error [rad]) of the estimate to the goal (``goal``: its floats if the caller has
-        them)."""
-        x, y, th = self.odometry.pose
-        gx, gy, gh = self.goal.tolist() if goal is None else goal
+    def _goal_terms(self, pose: tuple[float, float, float]) -> tuple[float, float]:
+        """(distance [m], heading error [rad]) of the estimate ``pose`` (the odometry's) to the goal."""
+        x, y, th = pose
+        gx, gy, gh = self._goal_list
         return math.hypot(gx - x, gy - y), wrap_angle(gh - th)
 
-    def _observation(self, goal: list[float] | None = None) -> np.ndarray:
-        x, y, th = self.odometry.pose
+    def _observation(self, pose: tuple[float, float, float]) -> np.ndarray:
+        """The observation for the odometry's ``pose`` and the last wheel states."""
+        x, y, th = pose
         c, s = math.cos(th), math.sin(th)
-        gx, gy, gh = self.goal.tolist() if goal is None else goal
+        gx, gy, gh = self._goal_list
         dx, dy = gx - x, gy - y
         e = gh - th
         states = self._states
         left, right = self.wheel_names
-        obs = np.array([x, y, c, s, c * dx + s * dy, -s * dx + c * dy, math.cos(e), math.sin(e),
-                        states[left].velocity, states[right].velocity])
-        np.maximum(obs, self._obs_low, out=obs)  # np.clip's bits (the values are finite), one array each
-        np.minimum(obs, self._obs_high, out=obs)
-        return obs
+        row = [x, y, c, s, c * dx + s * dy, -s * dx + c * dy, math.cos(e), math.sin(e),
+               states[left].velocity, states[right].velocity]
+        # np.minimum(np.maximum(row, low), high) on plain floats (no bound is a signed zero: the same bits)
+        return np.array([lo if v < lo else hi if v > hi else v  # noqa: FURB136 - min(), max() without calls
+                         for v, lo, hi in zip(row, self._obs_lo, self._obs_hi)])
 
-    def _info(self, states: Mapping[str, joints.JointState], terms: tuple[float, float] | None = None,
-              goal: list[float] | None = None) -> dict[str, Any]:
-        """The step's info; ``terms``: :meth:`_goal_terms` if the caller has them, ``goal``: the goal's floats."""
-        d, e = self._goal_terms() if terms is None else terms
+    def _info(self, states: Mapping[str, joints.JointState], pose: tuple[float, float, float],
+              terms: tuple[float, float, bool] | None = None) -> dict[str, Any]:
+        """The step's info for the odometry's ``pose``; ``terms``: :meth:`_goal_terms` and the success if the caller
+        has them."""
+        if terms is None:
+            d, e = self._goal_terms(pose)
+            success = d < self.success_distance and abs(e) < self.success_heading
+        else:
+            d, e, success = terms
         left, right = self.wheel_names
         sl, sr = states[left], states[right]
         fl, fr = sl.fault, sr.fault
@@ -562,15 +580,15 @@ class DiffDriveGoalEnv(RigEnv):
             "faults": {left: None if fl is None else fl.name, right: None if fr is None else fr.name},
             "distance": d,
             "heading_error": e,
-            "is_success": bool(d < self.success_distance and abs(e) < self.success_heading),
-            "pose_estimate": np.array(self.odometry.pose),
-            "goal": self.goal.copy(),
+            "is_success": bool(success),
+            "pose_estimate": np.array(pose),
+            "goal": self._goal.copy(),
             "wheel_velocities": np.array([sl.velocity, sr.velocity]),
         }
         if self.sim:
             tx, ty, th = self._true_xyth()
             info["true_pose"] = np.array([tx, ty, th])
-            gx, gy, _ = self.goal.tolist() if goal is None else goal
+            gx, gy, _ = self._goal_list
             info["true_distance"] = math.hypot(gx - tx, gy - ty)
         return info
 

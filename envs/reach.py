@@ -327,6 +327,17 @@ class ErobArmReachEnv(JointsEnv):
                 self.close()
                 raise joints.ConfigError("the model has no site 'ee'", file=self.rig.config.source, key="sim.model")
 
+    @property
+    def target(self) -> np.ndarray:
+        """The episode's target point [m] (read-only: set the whole point, e.g. ``reset(options={"target": ...})``)."""
+        return self._target
+
+    @target.setter
+    def target(self, point: Sequence[float] | np.ndarray) -> None:
+        self._target = np.array(point, dtype=np.float64)  # a copy of its own
+        self._target.flags.writeable = False
+        self._target_list: list[float] = self._target.tolist()  #: its floats, for the per-step task terms
+
     def _select_joints(self, rig: joints.Rig) -> list[str]:
         by_model = {(c.mjcf_joint or n): n for n, c in rig.config.joints.items()}
         if len(rig.joints) != 3 or any(m not in by_model for m in self.MODEL_JOINTS):
@@ -464,10 +475,10 @@ class ErobArmReachEnv(JointsEnv):
             return command
         # the shoulder's and the elbow's reach (joint1 does not matter), for their command and their stop
         dt = self.control_period + self.bus_lag
-        acc = self.profile_acceleration.tolist()
+        acc = self._acc_list
         velocity = self.action_mode == "velocity"
-        dec = acc if velocity else self.profile_deceleration.tolist()
-        cruise = self.profile_velocity.tolist()
+        dec = acc if velocity else self._dec_list
+        cruise = self._cruise_list
         states = self._states
         reach = self._joint_reach
         go = [reach(states[i].position, states[i].velocity, command[i], dt, acc[i], dec[i], cruise[i], velocity)
@@ -494,7 +505,7 @@ class ErobArmReachEnv(JointsEnv):
             ee = self.rig.world.data.site_xpos[self._site].tolist()
         else:
             ee = self.end_effector(np.array(positions)).tolist()
-        target: list[float] = self.target.tolist()
+        target = self._target_list
         to_target = [t - e for t, e in zip(target, ee)]  # the arrays' subtraction, element by element
         self._ee = ee
         self._to_target = to_target

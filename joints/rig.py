@@ -123,13 +123,22 @@ class Rig:
         Meanwhile every enabled joint whose drive has a communication watchdog is read at least
         every quarter of its watchdog time (its state refreshed, its watchdog fed).
         """
-        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not math.isfinite(seconds) \
-                or seconds < 0:
+        if (type(seconds) is not float or not 0.0 <= seconds < math.inf) and (  # a finite float >= 0 is fine
+                isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not math.isfinite(seconds)
+                or seconds < 0):
             raise ValueError(f"cannot sleep {seconds!r} s (need a finite time >= 0)")
         clock = self.clock
         end = clock.now() + seconds
         while True:
             now = clock.now()
+            for j in self.joints.values() if self.keepalive else ():
+                w = j.watchdog_ms
+                if w and j.last_contact + w * 1e-3 * KEEPALIVE_FRACTION < end:
+                    break  # this joint's keep-alive falls due before the end, if it is enabled
+            else:  # no joint's falls due before the end, enabled or not: nothing to ask
+                if end > now:
+                    clock.sleep(end - now)
+                return
             due, names = self._keepalive_due()
             if due is None or due >= end:
                 if end > now:

@@ -246,3 +246,46 @@ def test_each_step_gives_the_array_formulas_bits(env_id: str, mode: str) -> None
             prev = a
         if n == 3 and mode == "position":
             assert held >= {(), (1,), (2,)}, held  # the shield's variants were compared too
+
+
+KINDS = {
+    "float32": lambda x: x.astype(np.float32),
+    "float64": lambda x: x.astype(np.float64),
+    "float16": lambda x: x.astype(np.float16),
+    "longdouble": lambda x: x.astype(np.longdouble),
+    "int64": lambda x: np.rint(x * 2).astype(np.int64),
+    "float64 view": lambda x: np.repeat(x.astype(np.float64), 2)[::2],  # not contiguous
+}
+
+
+@pytest.mark.parametrize("kind", list(KINDS))
+@pytest.mark.parametrize("env_id", ["joints/ErobReach-v0", "joints/ErobArmReach-v0"])
+def test_an_action_of_any_numeric_array_gives_the_bits_of_its_float64_values(env_id: str, kind: str) -> None:
+    """begin_step reads a float array's own floats (float32 and float16 widen exactly) and converts anything else
+    with np.asarray(float64): either way the bits of the same values given as a list of Python floats (the
+    float64 conversion's), step for step - observation, reward, the command sent - and the same errors."""
+    make = KINDS[kind]
+    rng = np.random.default_rng(5)
+    with gym.make(env_id) as env:
+        n = env.action_space.shape[0]
+        actions = [make(rng.uniform(-1.3, 1.3, n)) for _ in range(30)]
+        runs = []
+        for as_list in (False, True):
+            env.reset(seed=4)
+            run = []
+            for a in actions:
+                given = np.asarray(a, dtype=np.float64).tolist() if as_list else a
+                obs, reward, terminated, truncated, info = env.step(given)
+                run.append((obs.tobytes(), _bits(reward), terminated, truncated, info["command"].tobytes()))
+            runs.append(run)
+        assert runs[0] == runs[1]
+        bad = make(np.full(n, 0.5))
+        if bad.dtype.kind == "f":
+            bad = bad.copy()
+            bad[0] = np.nan
+            for given in (bad, np.asarray(bad, dtype=np.float64).tolist()):
+                with pytest.raises(ValueError, match="action must be finite"):
+                    env.step(given)
+        for given in (make(np.zeros(n + 1)), np.zeros(n + 1).tolist()):
+            with pytest.raises(ValueError, match=rf"action shape \({n + 1},\) != \({n},\)"):
+                env.step(given)
