@@ -62,6 +62,25 @@ def _line_ok(ex: E.ErobExchange) -> bool:
     return not (line._pending or line._cap is not None or line._closed or not line._plain_peer())
 
 
+class _StatusMaker:
+    """The status replies of one read (its request, the front's plan, its registers) made from their values: what a
+    line's log keeps of such a reply (a packed reply, :meth:`~joints.transports.serial_sim.TimedSerialLine.book_frames`:
+    the values a tuple of ints, this one object shared by every step's) - the message the reply itself makes."""
+
+    __slots__ = ("plan", "registers", "request")
+
+    def __init__(self, reply: E.StatusReply) -> None:
+        self.request = reply.request
+        self.plan = reply.plan
+        self.registers = reply.registers
+
+    def fits(self, reply: E.StatusReply) -> bool:
+        return reply.request is self.request and reply.plan is self.plan and reply.registers is self.registers
+
+    def __call__(self, values: tuple[int, ...]) -> Any:
+        return E.StatusReply(self.request, self.plan, list(values), self.registers).message()
+
+
 class _Buffers:
     """The call's arrays, kept per (rigs, transactions)."""
 
@@ -76,6 +95,7 @@ class _Buffers:
         self.plans: list[Any] = []  #: the plans ``orders`` was built from (by identity)
         self.orders: Any = None
         self.order_at: Any = None
+        self.makers: list[_StatusMaker | None] = [None] * rigs  #: per rig, its status replies' (the last read's)
 
 
 def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[Any]],
@@ -183,6 +203,7 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
     out = buf.out
     outs: list[list[float]] = out.tolist() if reads else out[:, :L.OUTS].tolist()
     tx = rows
+    makers = buf.makers
     replies_of: list[list[Any]] = []
     k = 0
     for r, (reqs, exs) in enumerate(zip(requests, exchanges)):
@@ -191,7 +212,7 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
         L.line_back(line, states[r])  # as Carrier.carry
         replies: list[Any] = []
         first.clocks = clocks = []
-        frames: list[tuple[float, float, float, int, str, Any]] = []
+        frames: list[tuple[Any, ...]] = []
         for req in reqs:  # as ErobExchange.run
             t, o, (ex, a, b) = tx[k], outs[k], made[k]
             k += 1
@@ -203,7 +224,14 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
             replies.append(reply)
             clocks.append(o[CLOCK_AFTER])
             frames.append((o[L.H_START], o[L.H_END], o[L.H_DUE], int(t[L.REQUEST]), "host", None))
-            frames.append((o[L.D_START], o[L.D_END], o[L.D_SEEN], int(t[L.REPLY]), "device", reply))
+            if type(reply) is E.StatusReply:  # kept by the log as its values (no object per step for the collector)
+                maker = makers[r]
+                if maker is None or not maker.fits(reply):
+                    maker = makers[r] = _StatusMaker(reply)
+                frames.append((o[L.D_START], o[L.D_END], o[L.D_SEEN], int(t[L.REPLY]), "device", maker,
+                               reply.values))
+            else:
+                frames.append((o[L.D_START], o[L.D_END], o[L.D_SEEN], int(t[L.REPLY]), "device", reply))
         line.book_frames(frames)
         first.taken += 1
         replies_of.append(replies)
