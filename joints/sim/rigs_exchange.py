@@ -112,6 +112,7 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
     group = exchanges[0][0].world.group
     rows: list[list[float]] = []
     made: list[tuple[Any, Any, Any]] = []
+    worlds: list[Any] = []
     reads = False
     for reqs, exs, size, check in zip(requests, exchanges, sizes, checks):
         first = exs[0]
@@ -126,8 +127,9 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
             return None
         rows.extend(got[0])
         made.extend(got[1])
+        worlds.append(world)
         reads = reads or any(type(r) is mb.ReadHoldingRegisters for r in reqs)
-    locks = sorted({id(exs[0].world): exs[0].world.lock for exs in exchanges}.values(), key=id)
+    locks = sorted({id(w): w.lock for w in worlds}.values(), key=id)
     held = 0
     try:
         for lock in locks:
@@ -146,12 +148,28 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
     them)."""
     import numpy as np
 
-    nows = []
-    for exs in exchanges:
-        now = L.clear(exs[0].line)
+    plans = []
+    filled = []
+    ws = []
+    starts = [0]
+    steps = []
+    at = 0
+    plan = group._plan
+    for reqs, exs in zip(requests, exchanges):  # each rig's line's time (nothing sent where one is not clear)
+        first = exs[0]
+        line = first.line
+        now = L.clear(line)
         if now is None:
             return None
-        nows.append(now)
+        world = first.world
+        vector = [0.0] * STATE_WIDTH
+        L.fill(vector, world, line, now)  # (its slice assignment fills a list as it fills a row)
+        filled.append(vector)
+        ws.append(world.group_index)
+        at += len(reqs)
+        starts.append(at)
+        steps.append(world.steps)
+        plans.append(plan(world._me)[0])
     rigs = len(exchanges)
     key = (rigs, len(rows))
     buf = buffers.get(key)
@@ -162,23 +180,6 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
     buf.tx[:] = rows
     st = buf.st
     worlds_table = group.worlds_table
-    plans = []
-    filled = []
-    ws = []
-    starts = [0]
-    steps = []
-    at = 0
-    plan = group._plan
-    for r, exs in enumerate(exchanges):
-        world = exs[0].world
-        vector = [0.0] * STATE_WIDTH
-        L.fill(vector, world, exs[0].line, nows[r])  # (its slice assignment fills a list as it fills a row)
-        filled.append(vector)
-        ws.append(world.group_index)
-        at += len(requests[r])
-        starts.append(at)
-        steps.append(world.steps)
-        plans.append(plan(world._me)[0])
     st[:] = filled
     buf.ws[:] = ws
     buf.starts[:] = starts
@@ -197,8 +198,6 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
         counted: list[int] = worlds_table[buf.ws, STEPS].tolist()
         for r, exs in enumerate(exchanges):  # as line_exchange.fused, rig by rig
             L.world_back(exs[0].world, counted[r], states[r])
-    for exs in exchanges:
-        L.arena_check(exs[0].world)
     # the output rows as floats: a read's whole row (its status and sensed columns), a write's frame columns only
     out = buf.out
     outs: list[list[float]] = out.tolist() if reads else out[:, :L.OUTS].tolist()
@@ -208,6 +207,7 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
     k = 0
     for r, (reqs, exs) in enumerate(zip(requests, exchanges)):
         first = exs[0]
+        L.arena_check(first.world)  # as line_exchange.fused (every world brought back first, as each rig's own)
         line = first.line
         L.line_back(line, states[r])  # as Carrier.carry
         replies: list[Any] = []

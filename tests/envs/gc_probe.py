@@ -36,8 +36,8 @@ def _log_bytes(lines: list[Any]) -> int:
     """Bytes of everything reachable from the lines' log entries (each object once; classes and modules not)."""
     seen: set[int] = set()
     total = 0
-    stack: list[Any] = [e for line in lines for e in (*line._log, *line._replies)]  # (the booked frames' replies)
-    total += sum(sys.getsizeof(line._log) + sys.getsizeof(line._replies) + sys.getsizeof(line._latest_end)
+    stack: list[Any] = [e for line in lines for e in (*line._log, *getattr(line, "_replies", ()))]  # booked replies
+    total += sum(sys.getsizeof(line._log) + sys.getsizeof(getattr(line, "_replies", ())) + sys.getsizeof(line._latest_end)
                  + 24 * len(line._latest_end) for line in lines)
     while stack:
         o = stack.pop()
