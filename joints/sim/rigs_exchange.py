@@ -65,7 +65,7 @@ def _line_ok(ex: E.ErobExchange) -> bool:
 class _StatusMaker:
     """The status replies of one read (its request, the front's plan, its registers) made from their values: what a
     line's log keeps of such a reply (a packed reply, :meth:`~joints.transports.serial_sim.TimedSerialLine.book_frames`:
-    the values a tuple of ints, this one object shared by every step's) - the message the reply itself makes."""
+    its values, this one object shared by every step's) - the message the reply itself makes."""
 
     __slots__ = ("plan", "registers", "request")
 

@@ -39,7 +39,7 @@ Time model (docs/timing.md):
 :attr:`TimedSerialLine.log` keeps the transmissions (time, side, bytes, corrupted): the wire trace, its
 latest :attr:`TimedSerialLine.log_keep` frames at least (:data:`LOG_KEEP`, 1,000, unless set on the line) and
 those of the last second (older ones go in batches, once they can overlap no new frame). A kept frame costs
-memory (~200 bytes): keep more only where the trace is read (docs/speed.md). The frames a one-call exchange books
+memory (~230 bytes): keep more only where the trace is read (docs/speed.md). The frames a one-call exchange books
 (:meth:`TimedSerialLine.book_frames`) are kept as tuples of plain values (the collector untracks them: its passes do
 not walk them step after step), their replies apart (shared reply objects by reference, a packed reply as its
 values), made :class:`Transmission` objects when the log is read.
