@@ -42,7 +42,7 @@ def main() -> None:
     print(f"load {os.getloadavg()[0]:.1f}; CPU time per rig step, best / median of {ROUNDS} blocks")
     for n in sizes:
         vec = gym.make_vec("joints/ErobReach-v0", num_envs=n, vectorization_mode="vector_entry_point")
-        u = vec.unwrapped
+        u: Any = vec.unwrapped
         rigs = u._batch.rigs
         assert rigs is not None
         steps = max(32, 8192 // n)
