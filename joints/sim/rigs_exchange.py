@@ -62,6 +62,25 @@ def _line_ok(ex: E.ErobExchange) -> bool:
     return not (line._pending or line._cap is not None or line._closed or not line._plain_peer())
 
 
+class _StatusMaker:
+    """The status replies of one read (its request, the front's plan, its registers) made from their values: what a
+    line's log keeps of such a reply (a packed reply, :meth:`~joints.transports.serial_sim.TimedSerialLine.book_frames`:
+    its values, this one object shared by every step's) - the message the reply itself makes."""
+
+    __slots__ = ("plan", "registers", "request")
+
+    def __init__(self, reply: E.StatusReply) -> None:
+        self.request = reply.request
+        self.plan = reply.plan
+        self.registers = reply.registers
+
+    def fits(self, reply: E.StatusReply) -> bool:
+        return reply.request is self.request and reply.plan is self.plan and reply.registers is self.registers
+
+    def __call__(self, values: tuple[int, ...]) -> Any:
+        return E.StatusReply(self.request, self.plan, list(values), self.registers).message()
+
+
 class _Buffers:
     """The call's arrays, kept per (rigs, transactions)."""
 
@@ -76,6 +95,7 @@ class _Buffers:
         self.plans: list[Any] = []  #: the plans ``orders`` was built from (by identity)
         self.orders: Any = None
         self.order_at: Any = None
+        self.makers: list[_StatusMaker | None] = [None] * rigs  #: per rig, its status replies' (the last read's)
 
 
 def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[Any]],
@@ -92,6 +112,7 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
     group = exchanges[0][0].world.group
     rows: list[list[float]] = []
     made: list[tuple[Any, Any, Any]] = []
+    worlds: list[Any] = []
     reads = False
     for reqs, exs, size, check in zip(requests, exchanges, sizes, checks):
         first = exs[0]
@@ -106,8 +127,9 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
             return None
         rows.extend(got[0])
         made.extend(got[1])
+        worlds.append(world)
         reads = reads or any(type(r) is mb.ReadHoldingRegisters for r in reqs)
-    locks = sorted({id(exs[0].world): exs[0].world.lock for exs in exchanges}.values(), key=id)
+    locks = sorted({id(w): w.lock for w in worlds}.values(), key=id)
     held = 0
     try:
         for lock in locks:
@@ -126,12 +148,28 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
     them)."""
     import numpy as np
 
-    nows = []
-    for exs in exchanges:
-        now = L.clear(exs[0].line)
+    plans = []
+    filled = []
+    ws = []
+    starts = [0]
+    steps = []
+    at = 0
+    plan = group._plan
+    for reqs, exs in zip(requests, exchanges):  # each rig's line's time (nothing sent where one is not clear)
+        first = exs[0]
+        line = first.line
+        now = L.clear(line)
         if now is None:
             return None
-        nows.append(now)
+        world = first.world
+        vector = [0.0] * STATE_WIDTH
+        L.fill(vector, world, line, now)  # (its slice assignment fills a list as it fills a row)
+        filled.append(vector)
+        ws.append(world.group_index)
+        at += len(reqs)
+        starts.append(at)
+        steps.append(world.steps)
+        plans.append(plan(world._me)[0])
     rigs = len(exchanges)
     key = (rigs, len(rows))
     buf = buffers.get(key)
@@ -142,23 +180,6 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
     buf.tx[:] = rows
     st = buf.st
     worlds_table = group.worlds_table
-    plans = []
-    filled = []
-    ws = []
-    starts = [0]
-    steps = []
-    at = 0
-    plan = group._plan
-    for r, exs in enumerate(exchanges):
-        world = exs[0].world
-        vector = [0.0] * STATE_WIDTH
-        L.fill(vector, world, exs[0].line, nows[r])  # (its slice assignment fills a list as it fills a row)
-        filled.append(vector)
-        ws.append(world.group_index)
-        at += len(requests[r])
-        starts.append(at)
-        steps.append(world.steps)
-        plans.append(plan(world._me)[0])
     st[:] = filled
     buf.ws[:] = ws
     buf.starts[:] = starts
@@ -177,21 +198,21 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
         counted: list[int] = worlds_table[buf.ws, STEPS].tolist()
         for r, exs in enumerate(exchanges):  # as line_exchange.fused, rig by rig
             L.world_back(exs[0].world, counted[r], states[r])
-    for exs in exchanges:
-        L.arena_check(exs[0].world)
     # the output rows as floats: a read's whole row (its status and sensed columns), a write's frame columns only
     out = buf.out
     outs: list[list[float]] = out.tolist() if reads else out[:, :L.OUTS].tolist()
     tx = rows
+    makers = buf.makers
     replies_of: list[list[Any]] = []
     k = 0
     for r, (reqs, exs) in enumerate(zip(requests, exchanges)):
         first = exs[0]
+        L.arena_check(first.world)  # as line_exchange.fused (every world brought back first, as each rig's own)
         line = first.line
         L.line_back(line, states[r])  # as Carrier.carry
         replies: list[Any] = []
         first.clocks = clocks = []
-        frames: list[tuple[float, float, float, int, str, Any]] = []
+        frames: list[tuple[Any, ...]] = []
         for req in reqs:  # as ErobExchange.run
             t, o, (ex, a, b) = tx[k], outs[k], made[k]
             k += 1
@@ -203,7 +224,14 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
             replies.append(reply)
             clocks.append(o[CLOCK_AFTER])
             frames.append((o[L.H_START], o[L.H_END], o[L.H_DUE], int(t[L.REQUEST]), "host", None))
-            frames.append((o[L.D_START], o[L.D_END], o[L.D_SEEN], int(t[L.REPLY]), "device", reply))
+            if type(reply) is E.StatusReply:  # kept by the log as its values (no object per step for the collector)
+                maker = makers[r]
+                if maker is None or not maker.fits(reply):
+                    maker = makers[r] = _StatusMaker(reply)
+                frames.append((o[L.D_START], o[L.D_END], o[L.D_SEEN], int(t[L.REPLY]), "device", maker,
+                               reply.values))
+            else:
+                frames.append((o[L.D_START], o[L.D_END], o[L.D_SEEN], int(t[L.REPLY]), "device", reply))
         line.book_frames(frames)
         first.taken += 1
         replies_of.append(replies)

@@ -39,15 +39,17 @@ Time model (docs/timing.md):
 :attr:`TimedSerialLine.log` keeps the transmissions (time, side, bytes, corrupted): the wire trace, its
 latest :attr:`TimedSerialLine.log_keep` frames at least (:data:`LOG_KEEP`, 1,000, unless set on the line) and
 those of the last second (older ones go in batches, once they can overlap no new frame). A kept frame costs
-memory (~250 bytes with its reply) and the garbage collector's full passes walk it: keep more only where the
-trace is read (docs/speed.md).
+memory (~230 bytes): keep more only where the trace is read (docs/speed.md). The frames a one-call exchange books
+(:meth:`TimedSerialLine.book_frames`) are kept as tuples of plain values (the collector untracks them: its passes do
+not walk them step after step), their replies apart (shared reply objects by reference, a packed reply as its
+values), made :class:`Transmission` objects when the log is read.
 """
 
 from __future__ import annotations
 
 import bisect
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
@@ -153,6 +155,8 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         self._trim_at = 2 * LOG_KEEP  #: the log's length that makes it trimmed
         #: the log's first entry that may still be a booked frame's tuple (:meth:`book_frames`)
         self._raw_from = 0
+        #: the replies of the booked frames still tuples, in log order (see :meth:`book_frames`)
+        self._replies: list[Any] = []
         #: per logged frame, the latest end of it and every frame logged before it since the epoch: a new
         #: frame's overlap check stops where nothing older can reach it
         self._latest_end: list[float] = []
@@ -198,17 +202,30 @@ class TimedSerialLine(ByteTransport, ClockDriven):
             self._materialize()
         return self._log
 
-    def book_frames(self, frames: list[tuple[float, float, float, int, str, Any]]) -> None:
-        """Frames a one-call exchange carried (``(start, end, due, size, side, payload)`` each, delivered, none
-        overlapping another frame - its caller checked that): logged as :meth:`_put` logs them (the latest-end
-        bookkeeping, the trimming), made :class:`Transmission` objects when the log is read (a :class:`Deferred`
-        payload: its message)."""
+    def book_frames(self, frames: Sequence[tuple[Any, ...]]) -> None:
+        """Frames a one-call exchange carried, each ``(start, end, due, size, side, reply)`` or ``(start, end, due,
+        size, side, make, values)`` (a packed reply: ``make(values)`` is its message, ``make`` one object for many
+        replies, ``values`` ints), delivered, none overlapping another frame - its caller checked that:
+        logged as :meth:`_put` logs them (the latest-end bookkeeping, the trimming), made :class:`Transmission`
+        objects when the log is read (a :class:`Deferred` reply: its message).
+
+        Rule: a booked frame holds no object the garbage collector tracks, so a long log costs the collector nothing
+        step after step: its entry is ``(start, end, due, size, side, mark, *values)``, ``mark`` None (no reply),
+        True (the reply is the next of :attr:`_replies`) or False (a packed reply: ``make`` is the next of
+        :attr:`_replies`, its values follow - flat, as a tuple in a tuple keeps the outer one tracked);
+        :attr:`_replies` holds the booked entries' replies in log order, by reference (a shared reply adds no
+        object)."""
         log: list[Any] = self._log
         latest = self._latest_end
+        replies = self._replies
         epoch = self._epoch
         for item in frames:
             end = item[1]
             latest.append(max(end, latest[-1]) if len(log) > epoch else end)
+            reply = item[5]
+            if reply is not None:
+                replies.append(reply)
+                item = item[:5] + (False, *item[6]) if len(item) > 6 else (*item[:5], True)
             log.append(item)
             if len(log) > self._trim_at:
                 self._trim(item[0])
@@ -222,13 +239,20 @@ class TimedSerialLine(ByteTransport, ClockDriven):
     def _materialize(self) -> None:
         """Booked frames (:meth:`book_frames`) become transmissions."""
         log: list[Any] = self._log
+        replies = iter(self._replies)
         for k in range(self._raw_from, len(log)):
             item = log[k]
             if type(item) is tuple:
-                start, end, due, size, side, payload = item
-                if isinstance(payload, Deferred):
-                    payload = payload.message()
+                start, end, due, size, side, mark = item[:6]
+                payload = None
+                if mark is not None:
+                    payload = next(replies)
+                    if mark is False:  # a packed reply: made of its values
+                        payload = payload(item[6:])
+                    elif isinstance(payload, Deferred):
+                        payload = payload.message()
                 log[k] = Transmission(start, end, side, b"", delivered=True, due=due, size=size, payload=payload)
+        self._replies.clear()
         self._raw_from = len(log)
 
     def wire_time(self, n: int) -> float:
@@ -321,6 +345,10 @@ class TimedSerialLine(ByteTransport, ClockDriven):
         if cut > epoch and latest[cut - 1] > start - 1.0:  # (latest: the running latest end since the epoch)
             cut = bisect.bisect_right(latest, start - 1.0, epoch, cut)
         if cut > 0:
+            if self._replies:  # the replies of the booked entries that go
+                raw: list[Any] = log[self._raw_from:cut]
+                gone = sum(1 for item in raw if type(item) is tuple and item[5] is not None)
+                del self._replies[:gone]
             del log[:cut], latest[:cut]
             self._epoch = max(0, epoch - cut)
             self._raw_from = max(0, self._raw_from - cut)

@@ -9,8 +9,7 @@ frames in the simulated lines' logs per rig, the bytes those logs hold per rig (
 object reachable from the log entries, each counted once), and the process's RSS growth per rig.
 ``GC_PROBE_ENV``: another env id; ``GC_PROBE_CAN=1``: the bench's CAN row of it (one rig); ``GC_PROBE_LOG_KEEP``:
 another :data:`~joints.transports.serial_sim.LOG_KEEP` for the run; ``GC_PROBE_DROP_PAYLOADS=1``: booked frames
-logged without their replies (not the library's behaviour: what the GC costs when the log holds no tracked
-object). Pin it to one core (``taskset -c 1``);
+logged without their replies (not the library's behaviour: what the GC costs when the log holds no reply at all). Pin it to one core (``taskset -c 1``);
 compare two checkouts by running each, alternating, with ``PYTHONPATH``. "frames per rig step" is the log's
 growth: right only while no trim fell in the timed steps.
 """
@@ -37,9 +36,9 @@ def _log_bytes(lines: list[Any]) -> int:
     """Bytes of everything reachable from the lines' log entries (each object once; classes and modules not)."""
     seen: set[int] = set()
     total = 0
-    stack: list[Any] = [e for line in lines for e in line._log]
-    total += sum(sys.getsizeof(line._log) + sys.getsizeof(line._latest_end) + 24 * len(line._latest_end)
-                 for line in lines)
+    stack: list[Any] = [e for line in lines for e in (*line._log, *getattr(line, "_replies", ()))]  # booked replies
+    total += sum(sys.getsizeof(line._log) + sys.getsizeof(getattr(line, "_replies", ())) + sys.getsizeof(line._latest_end)
+                 + 24 * len(line._latest_end) for line in lines)
     while stack:
         o = stack.pop()
         if id(o) in seen or isinstance(o, (type, type(sys))) or callable(o):

@@ -3,14 +3,16 @@ the MKS driver survives them (reads retried, the move never sent twice, a lost c
 
 from __future__ import annotations
 
+import gc
 from itertools import pairwise
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from joints.clock import ManualClock
 from joints.codecs import mks
-from joints.transports.serial_sim import TimedSerialLine
+from joints.transports.serial_sim import Deferred, TimedSerialLine, Transmission
 
 
 class Echo:
@@ -224,3 +226,67 @@ def test_a_line_busier_than_its_log_keep_a_second_stays_bounded_and_keeps_its_la
         assert kept[0].start <= kept[-1].start - 0.95 or len(kept) == 2 * len(sizes)
     assert max(sizes) <= 2 * 3 + 2 * 41 and min(sizes[100:]) >= 38
     assert line.collisions == 0 and line.latest_end() == line.log[-1].end
+
+
+class _Made:
+    """A packed reply's maker (``TimedSerialLine.book_frames``): the message of values is ("packed", values)."""
+
+    def __call__(self, values: tuple[int, ...]) -> tuple[str, tuple[int, ...]]:
+        return ("packed", values)
+
+
+class _Lazy(Deferred):
+    """A deferred reply whose message is ("lazy", n)."""
+
+    __slots__ = ("n",)
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+
+    def message(self) -> tuple[str, int]:
+        return ("lazy", self.n)
+
+
+def test_booked_frames_hold_no_tracked_object_and_each_keeps_its_reply_through_trims_and_reads() -> None:
+    """Frames a one-call exchange books (no reply, a shared reply, a packed reply, a deferred one), among frames of
+    the byte path, the log read now and then and cut many times: every entry still booked holds nothing the garbage
+    collector tracks, and every frame read from the log carries the reply it was booked with."""
+    clock = ManualClock()
+    request, reply = mks.encode(mks.ReadSpeed(1)), mks.encode(mks.SpeedReply(1, 7))
+    line = TimedSerialLine(Echo(reply), baudrate=38400, clock=clock, turnaround=0.0005)
+    line.log_keep = 5
+    shared, made = mks.SpeedReply(1, 7), _Made()  # (a dataclass: an object the collector tracks)
+    want: dict[float, Any] = {}
+    t, cuts, reads = 0.0, 0, 0
+    for k in range(240):
+        t += 0.3  # a frame of more than a second ago goes once the log passes twice log_keep
+        host = (t, t + 0.001, t + 0.002, 4, "host", None)
+        kind = k % 4
+        payload: Any = (shared, (made, [k, k + 1]), _Lazy(k), None)[kind]
+        dev = (t + 0.002, t + 0.003, t + 0.004, 4, "device", *(payload if kind == 1 else (payload,)))
+        want[t + 0.002] = (shared, ("packed", (k, k + 1)), ("lazy", k), None)[kind]
+        before = len(line._log)
+        line.book_frames([host, dev])
+        cuts += len(line._log) < before + 2
+        if k % 37 == 36:  # read now and then: what was booked becomes transmissions
+            reads += 1
+            assert [tx.payload for tx in line.log if tx.side == "device" and tx.start in want] == \
+                [want[tx.start] for tx in line.log if tx.side == "device" and tx.start in want]
+        if k % 11 == 10:  # a byte-path transaction among the booked frames
+            t += 0.1
+            clock.advance(t - clock.now())
+            line.write(request)
+            assert line.read(0.1) == reply
+        if k % 20 == 19:  # the collector untracks what holds nothing it tracks
+            gc.collect()
+            raw: list[Any] = line._log
+            booked = [x for x in raw if type(x) is tuple]
+            assert booked and not any(gc.is_tracked(x) for x in booked)
+            assert len(line._replies) == sum(x[5] is not None for x in booked)
+    assert cuts > 20 and reads > 5 and line.collisions == 0
+    kept = line.log
+    devices = [tx for tx in kept if tx.side == "device" and tx.start in want]
+    assert len(devices) >= 4 and {type(tx.payload) for tx in devices} >= {type(shared), tuple, type(None)}
+    assert [tx.payload for tx in devices] == [want[tx.start] for tx in devices]
+    assert all(tx.payload is shared for tx in devices if want[tx.start] is shared)  # the reply itself, not a copy
+    assert not line._replies and all(type(tx) is Transmission for tx in kept)
