@@ -56,3 +56,16 @@ def served_can(config: Path, startup: float = 30.0) -> Iterator[dict[str, Any]]:
         yield json.loads(proc.stdout.readline())
     finally:
         stop(proc)
+
+
+def canopen_arm() -> Any:
+    """``joints/ErobArmReach-v0`` on its CANopen bus at the bench's 20 ms (``joints.bench._baseline_config``): the
+    arm the CANopen read and set-point tests step."""
+    import gymnasium as gym
+
+    import envs  # noqa: F401  (registers the joints/ ids)
+    from joints.bench import BASELINE_PERIOD, _baseline_config
+
+    found = _baseline_config("joints/ErobArmReach-v0")
+    assert found is not None and found[1].startswith("canopen"), found
+    return gym.make("joints/ErobArmReach-v0", config=found[0], control_period=BASELINE_PERIOD)

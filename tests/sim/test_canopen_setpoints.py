@@ -8,7 +8,6 @@ node's RPDO clearing bit 4 (:meth:`SyncCycle.setpoints`); a lone ``joint.move_to
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -18,25 +17,14 @@ pytest.importorskip("mujoco")
 gym = pytest.importorskip("gymnasium")
 
 import envs  # noqa: F401  (registers the joints/ ids)
-from joints.bench import BASELINE_PERIOD, _baseline_config
 from joints.devices import cia402
 from joints.drivers.erob_canopen import ErobCanopenDriver
 from joints.errors import CommandError, LimitError, StateError
 from joints.link.canopen import CanopenLink
 from joints.sim.erob_canopen import CanopenFront
+from simkit import canopen_arm
 
 ENV = "joints/ErobArmReach-v0"
-
-
-@pytest.fixture
-def arm() -> Iterator[Any]:
-    found = _baseline_config(ENV)
-    assert found is not None and found[1].startswith("canopen"), found
-    env = gym.make(ENV, config=found[0], control_period=BASELINE_PERIOD)
-    try:
-        yield env
-    finally:
-        env.close()
 
 
 def _host_frames(monkeypatch: pytest.MonkeyPatch) -> list[tuple[str, int, int]]:
@@ -123,9 +111,7 @@ def test_a_node_that_does_not_acknowledge_leaves_no_set_point_up(monkeypatch: py
         return sw & ~cia402.SW_SETPOINT_ACKNOWLEDGE if self.node in deaf else sw
 
     monkeypatch.setattr(CanopenFront, "statusword", never_acknowledging)  # before the twins prepare their TPDOs
-    found = _baseline_config(ENV)
-    assert found is not None
-    arm = gym.make(ENV, config=found[0], control_period=BASELINE_PERIOD)
+    arm = canopen_arm()
     try:
         arm.reset(seed=3)
         rig = arm.unwrapped.rig

@@ -13,33 +13,19 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
 import pytest
 
 pytest.importorskip("mujoco")
-gym = pytest.importorskip("gymnasium")
+pytest.importorskip("gymnasium")
 
 import envs  # noqa: F401  (registers the joints/ ids)
-from joints.bench import BASELINE_PERIOD, _baseline_config
 from joints.drivers.erob_canopen import ErobCanopenDriver
 from joints.link.canopen import CanopenLink
 from joints.sim.erob_canopen import ErobCanopenBus
-
-ENV = "joints/ErobArmReach-v0"
-
-
-@pytest.fixture
-def arm() -> Iterator[Any]:
-    found = _baseline_config(ENV)
-    assert found is not None and found[1].startswith("canopen"), found
-    env = gym.make(ENV, config=found[0], control_period=BASELINE_PERIOD)
-    try:
-        yield env
-    finally:
-        env.close()
+from simkit import canopen_arm
 
 
 def _episode(env: Any, seed: int, steps: int) -> list[Any]:
@@ -165,9 +151,7 @@ def test_every_tpdo_a_read_takes_answers_that_read_s_sync(monkeypatch: pytest.Mo
     monkeypatch.setattr(ErobCanopenDriver, "setpoint_acknowledged", acknowledging)
     monkeypatch.setattr(ErobCanopenDriver, "_raw", reading)
     monkeypatch.setattr(CanopenLink, "_decode", decoding)
-    found = _baseline_config(ENV)
-    assert found is not None
-    arm = gym.make(ENV, config=found[0], control_period=BASELINE_PERIOD)
+    arm = canopen_arm()
     try:
         _run(arm, check, checked, stale)
     finally:
