@@ -525,16 +525,14 @@ class ErobCanopenDriver(ErobDriver):
                                  f"(it reports {st.value}, statusword 0x{self.statusword:04X})")
             self._pause()
 
-    def pause(self) -> None:
-        """Wait a moment; the other nodes of the bus stay guarded meanwhile (their life guarding)."""
-        self._pause()
-
     def _pause(self) -> None:
         """Wait a moment; the other nodes of the bus stay guarded meanwhile (their life guarding)."""
         for d in self.group.drivers:
             if isinstance(d, ErobCanopenDriver):
                 d._keepalive()
         self.clock.sleep(POLL)
+
+    pause = _pause  #: :class:`~joints.drivers.canopen_sync.SetpointNode`'s name for it
 
     def _hold_target(self) -> int:
         """The target that keeps the joint where it is in the present mode."""
