@@ -9,6 +9,8 @@ import sys
 import time
 from typing import Any
 
+import numpy as np
+
 
 def load_as(root: str, rel: str, name: str) -> Any:
     """The module at ``root``/``rel`` (another checkout's file), imported as ``name``."""
@@ -31,3 +33,22 @@ def timed_steps(env: Any, obs: Any, actions: Any) -> tuple[float, list[Any]]:
         if terminated or truncated:
             obs, _ = env.reset()
     return (time.thread_time() - t0) / len(actions), record
+
+
+def timed_vec_steps(vec: Any, actions: Any) -> tuple[float, list[Any]]:
+    """A batched env (reset by the caller) stepped through ``actions``: the CPU seconds per rig step
+    (``time.thread_time``) and each step's (observations, rewards)."""
+    got: list[Any] = []
+    t0 = time.thread_time()
+    for a in actions:
+        obs, reward, *_ = vec.step(a)
+        got.append((obs, reward))
+    return (time.thread_time() - t0) / (len(actions) * vec.num_envs), got
+
+
+def same_as_first(first: list[Any] | None, got: list[Any]) -> list[Any]:
+    """The first block's record (``got`` if there was none yet); asserts ``got`` has its bits."""
+    if first is None:
+        return got
+    assert all(np.array_equal(x[0], y[0]) and np.array_equal(x[1], y[1]) for x, y in zip(got, first))
+    return first

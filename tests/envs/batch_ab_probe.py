@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import os
 import sys
-import time
 from typing import Any
 
 import gymnasium as gym
@@ -26,7 +25,7 @@ import numpy as np
 import envs  # noqa: F401 - registers the joints/ envs
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # tests/, for probekit
-from probekit import load_as
+from probekit import load_as, same_as_first, timed_vec_steps
 
 import joints
 from joints.sim import stepping
@@ -70,18 +69,11 @@ def main() -> None:
                 W.advance_together = new_advance if batched else old_advance
                 stepping.Group._plan = new_plan if batched else old_plan  # type: ignore[method-assign]
                 vec.reset(seed=0)
-                got = []
-                t = time.thread_time()
-                for a in actions:
-                    obs, reward, *_ = vec.step(a)
-                    got.append((obs, reward))
-                times[batched].append((time.thread_time() - t) / (steps * n))
+                seconds, got = timed_vec_steps(vec, actions)
+                times[batched].append(seconds)
                 if STUB:
                     continue
-                if first is None:
-                    first = got
-                else:
-                    assert all(np.array_equal(x[0], y[0]) and np.array_equal(x[1], y[1]) for x, y in zip(got, first))
+                first = same_as_first(first, got)
         W.advance_together, stepping.Group._plan = new_advance, new_plan  # type: ignore[method-assign]
         vec.close()
         line = [f"N={n:4d}"]

@@ -17,13 +17,15 @@ from __future__ import annotations
 
 import os
 import sys
-import time
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 import envs  # noqa: F401 - registers the joints/ envs
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # tests/, for probekit
+from probekit import same_as_first, timed_vec_steps
 
 ROUNDS = int(os.environ.get("ROUNDS", "8"))
 SIZES = (1, 4, 16, 64, 256)
@@ -57,18 +59,11 @@ def main() -> None:
                     batch.joined = joined if setting == "one call" else (lambda: False)  # type: ignore[method-assign]
                 vec.reset(seed=0)
                 before = 0 if rigs is None else rigs.taken
-                got = []
-                t = time.thread_time()
-                for a in actions:
-                    obs, reward, *_ = vec.step(a)
-                    got.append((obs, reward))
-                times[setting].append((time.thread_time() - t) / (steps * n))
+                seconds, got = timed_vec_steps(vec, actions)
+                times[setting].append(seconds)
                 if setting == "one call" and rigs is not None:
                     calls = rigs.taken - before
-                if first is None:
-                    first = got
-                else:
-                    assert all(np.array_equal(x[0], y[0]) and np.array_equal(x[1], y[1]) for x, y in zip(got, first))
+                first = same_as_first(first, got)
         vec.close()
         line = [f"N={n:4d}"]
         for setting in SETTINGS:

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import os
 import sys
-import time
 from typing import Any
 
 import gymnasium as gym
@@ -24,7 +23,7 @@ import numpy as np
 import envs  # noqa: F401 - registers the joints/ envs
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # tests/, for probekit
-from probekit import load_as
+from probekit import load_as, same_as_first, timed_vec_steps
 
 from joints import compiled_path as CP
 from joints.sim import rigs_exchange as R
@@ -57,17 +56,10 @@ def main() -> None:
                 CP.CompiledRigs._send = send  # type: ignore[method-assign]
                 vec.reset(seed=0)
                 before = rigs.taken
-                got = []
-                t = time.thread_time()
-                for a in actions:
-                    obs, reward, *_ = vec.step(a)
-                    got.append((obs, reward))
-                times[tag].append((time.thread_time() - t) / (steps * n))
+                seconds, got = timed_vec_steps(vec, actions)
+                times[tag].append(seconds)
                 assert rigs.taken - before >= steps, "the one call was not taken"
-                if first is None:
-                    first = got
-                else:
-                    assert all(np.array_equal(x[0], y[0]) and np.array_equal(x[1], y[1]) for x, y in zip(got, first))
+                first = same_as_first(first, got)
         vec.close()
         line = [f"N={n:4d}"]
         for tag in versions:
