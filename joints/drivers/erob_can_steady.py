@@ -22,6 +22,8 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from joints.codecs import erob_can as ec
+from joints.devices.erob.can import CanMap
+from joints.devices.params import ParamMap
 from joints.drivers.erob import CMD_START
 from joints.drivers.erob_can import ErobCanAccess, ErobCanDriver
 from joints.errors import UnexpectedReply
@@ -40,12 +42,14 @@ _STOCK = tuple((cls, name, getattr(cls, name)) for cls, names in (
     (ErobCanRule, ("is_reply", "encode", "check", "expects_reply")),
     (FrameFraming, ("write", "receive")),
 ) for name in names) + ((ec, "answers", ec.answers), (ec, "encode", ec.encode))  # (what the stock rule calls)
+#: what a read's value goes through on the host (``CanMap.from_wire`` and the map's lookups it calls), as defined
+_DECODE = ((CanMap, "from_wire", CanMap.from_wire), (CanMap, "param", ParamMap.param), (CanMap, "key", ParamMap.key))
 _I32 = (-0x80000000, 0x7FFFFFFF)
 
 
-def _stock() -> bool:
-    """Whether none of :data:`_STOCK` is replaced."""
-    for cls, name, fn in _STOCK:
+def _stock(methods: tuple[tuple[Any, str, Any], ...] = _STOCK) -> bool:
+    """Whether none of ``methods`` (:data:`_STOCK`) is replaced."""
+    for cls, name, fn in methods:
         if getattr(cls, name) is not fn:
             return False
     return True
@@ -77,6 +81,8 @@ class ErobCanStep:
         self.start = access.message("start_operating", CMD_START)
         self.link.rule.check(self.start)
         self._reads: dict[tuple[str, ...], tuple[ec.Read, ...]] = {}
+        #: names whose ``from_wire`` is the wire value itself (see :meth:`_plain`), for the map they were seen in
+        self._plain_of: tuple[Any, set[tuple[str, ...]]] = (None, set())
         #: reads tuples whose value replies the stock ``is_reply`` was seen to take (see :meth:`_send_values`)
         self._answered: set[int] = set()
         #: (node, index, subindex) of writes the stock rule encoded (see :meth:`_check`); (request type, node) of
@@ -263,9 +269,31 @@ class ErobCanStep:
         values = self._send_values(self._reads_of(names))
         if values is None:
             return self.joint.state()
-        from_wire = self.access.map.from_wire
-        v = {name: from_wire(name, value) for name, value in zip(names, values)}
+        if self._plain(names):
+            v = dict(zip(names, values))
+        else:
+            from_wire = self.access.map.from_wire
+            v = {name: from_wire(name, value) for name, value in zip(names, values)}
         return self.joint.to_si(driver.state_read(v, t0, clock.now()))
+
+    def _plain(self, names: tuple[str, ...]) -> bool:
+        """Whether ``map.from_wire(name, raw)`` is ``raw`` for each of ``names`` (checked once per names and map):
+        the stock ``CanMap.from_wire`` (and the lookups it calls, checked before every use) masks a ``uint32``
+        parameter's raw value and multiplies by the key's scale; a parameter of another type with scale 1 gives
+        ``raw * 1``, the same int. (The map's parameters and keys are frozen records: as the twin's exchange, this
+        takes a name's type and scale as constants of its map.)"""
+        cmap = self.access.map
+        if type(cmap) is not CanMap or not _stock(_DECODE):
+            return False
+        seen, plain = self._plain_of
+        if seen is not cmap:
+            plain = set()
+            self._plain_of = (cmap, plain)
+        if names not in plain:
+            if any(cmap.param(n).type == "uint32" or cmap.key(n).scale != 1 for n in names):
+                return False
+            plain.add(names)
+        return True
 
 
 def stepper(joint: Joint) -> ErobCanStep | None:

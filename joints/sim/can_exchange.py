@@ -314,6 +314,7 @@ _STOCK = (*erob.STOCK, *((cls, name, getattr(cls, name)) for cls, names in (
     (ErobCanBus, ("on_frame", "exchange", "front", "turnaround", "tick", "next_event")),
     (ErobCanFront, ("handle", "_read", "_write", "_command", "_setpoint", "_fw_read", "tick")),
     (erob._StatusRead, ("finish",)),
+    (ErobFirmware, ("_sensed",)),
 ) for name in names))
 
 
@@ -773,7 +774,9 @@ class ErobCanExchange:
     def _written(self, plan: _Plan, requests: Sequence[Any], out: Any, done: int, replies: list[Any] | None) -> Any:
         """The fronts and firmware after the call of a plan with writes (``out``'s first ``done`` rows): the
         store and write log, the request counts, a held set-point; each reply into ``replies`` (where given).
-        Returns the refused start's error reply (the last done), or None."""
+        Returns the refused start's error reply (the last done), or None. A write's value is its row's VALUE:
+        the request's ``from_wire`` that :meth:`_tx` / :meth:`_refill` put there, an int the firmware's limits
+        hold (int32), so exact as a float."""
         tx = plan.tx
         refusal = None
         for k in range(done):
@@ -783,9 +786,9 @@ class ErobCanExchange:
             op = shape.op
             reply: Any = None  # (an Ack)
             if op == TARGET_POSITION:
-                fw._keep(((shape.name, EROB_CAN.from_wire(shape.name, r.value)),))
+                fw._keep(((shape.name, int(tx[k, VALUE])),))
             elif op == SETPOINT:
-                value = EROB_CAN.from_wire(shape.name, r.value)
+                value = int(tx[k, VALUE])
                 fw._keep(((shape.name, value),))
                 if out[k, HELD]:
                     front.held = value
@@ -826,8 +829,9 @@ class ErobCanExchange:
         saturated, in the protocol's scale, as int32 (``o``: its output row from the status values on)."""
         index, scale, lo, hi, plan, direct = shape.extra
         if direct is not None:  # the status read's finish (see _direct): its sensors report, its value saturated
-            if not plan.fw.sensor.ideal:
-                plan.fw._sensed(self._sensed_row(o).__getitem__)
+            fw = plan.fw
+            if not fw.sensor.ideal:  # (its stock ``_sensed`` of the row as the read saw it: SENSED's order)
+                fw._sensed_at(*o[_SENSED:])
             at, lo, hi = direct
             v = int(o[at])
             v = lo if v < lo else hi if hi < v else v  # noqa: FURB136 - (as finish spells it)

@@ -20,6 +20,8 @@ import pytest
 
 import envs  # noqa: F401 - registers the joints/ envs
 from joints.bench import _baseline_config
+from joints.devices.erob.can import CanMap
+from joints.drivers.erob_can import CAN_STATUS_NAMES, TEMPERATURE
 from joints.drivers.erob_can_steady import ErobCanStep
 from joints.errors import DeviceRejected, ReplyTimeout
 from joints.sim import erob_kernel as K
@@ -159,6 +161,7 @@ def _run(compiled: bool, mode: str, steps: int, *, plant: Any = None, undo: Any 
         out["acks"] = sum(s.acks_taken for s in rec.steps)  # commands taken without their Ack objects
         out["sleeps"] = sum(s.exchange.sleeps for s in rec.steps)  # calls that ran the world's held period sleep
         out["proofs"] = [(sorted(s._encoded), sorted((t.__name__, n) for t, n in s._acked)) for s in rec.steps]
+        out["plain"] = [sorted(s._plain_of[1]) for s in rec.steps]  # names read without from_wire (proven)
         return out
     finally:
         if undo is not None:  # what the plant changed, put back so that closing reaches the drive
@@ -189,6 +192,8 @@ def test_the_compiled_can_step_gives_the_frame_by_frame_bits(mode: str) -> None:
         assert compiled["acks"] >= steps - 1  # every step's command (or set-point) taken without its Ack objects
         assert compiled["sleeps"] >= steps - 1  # the period's sleep held by the world, run by the read's call
         ((encoded, acked),) = compiled["proofs"]  # a command's frame built once, its Acks asked once
+        ((plain),) = compiled["plain"]  # both reads' names (with the temperature, without) decoded as read
+        assert plain == sorted([CAN_STATUS_NAMES, (*CAN_STATUS_NAMES, TEMPERATURE)])
         assert len(encoded) == 1 and ("Write", encoded[0][0]) in acked
         if mode == "position":
             assert taken >= steps - 1 and fused >= 8 * steps - 8
@@ -265,6 +270,43 @@ def test_a_replaced_reply_check_leaves_the_steps_to_the_frame_by_frame_path(monk
     if kernel.default_mode():
         assert calls[10][0] > calls[1][0] > 0 and calls[10][1] > calls[1][1] > 0  # the call carried the first steps
         assert calls[10] == calls[-1]  # then never again
+
+
+def test_a_replaced_value_decode_decodes_each_value_by_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    """From step 10 ``CanMap.from_wire`` (what the state read's values skip where it is the identity) is wrapped:
+    from then on every value the compiled path reads goes through it, with the same bits; a name whose
+    ``from_wire`` is not the identity (a uint32, a scaled value) is never taken as read."""
+    original = CanMap.from_wire
+    decoded: list[str] = []
+
+    def from_wire(self: CanMap, name: str, raw: int) -> int:
+        decoded.append(name)
+        return original(self, name, raw)
+
+    def plant(k: int, u: Any) -> None:
+        if k == 10:
+            monkeypatch.setattr(CanMap, "from_wire", from_wire)
+
+    out = {}
+    for compiled in (False, True):
+        monkeypatch.setattr(CanMap, "from_wire", original)
+        decoded.clear()
+        out[compiled] = _run(compiled, "position", 20, plant=plant)
+        if compiled and kernel.default_mode():
+            assert out[True]["values"] >= 19 and decoded.count("actual_position") == 10  # steps 10-19, by it
+    _same(out[False], out[True])
+    monkeypatch.setattr(CanMap, "from_wire", original)
+    env = gym.make("joints/ErobReach-v0", config=_config(), control_period=PERIOD, compiled_path=True)
+    try:
+        env.reset(seed=3)
+        u: Any = env.unwrapped
+        if kernel.default_mode():
+            (step,) = [s for s in u.compiled_path._steppers if isinstance(s, ErobCanStep)]
+            assert step._plain(CAN_STATUS_NAMES)
+            assert not step._plain((*CAN_STATUS_NAMES, "dwell_time"))  # scaled (20)
+            assert not step._plain(("digital_inputs",))  # uint32
+    finally:
+        env.close()
 
 
 def test_a_start_the_drive_refuses_mid_step_is_refused_the_same_way() -> None:
