@@ -112,7 +112,7 @@ def numbers(model: SensorModel, counts_per_rad: float) -> list[float]:
 def estimate(m: Any, q: float, v: float) -> float:
     """The drive's velocity estimate without noise: the encoder counts moved over the window (the position
     ``window`` ago taken as ``q - v * window``) divided by it; ``v`` itself without a window or at rest."""
-    window = m[WINDOW]
+    window: float = m[WINDOW]
     if window and v:
         k: float = m[K]
         divisor: float = m[K_WINDOW]
