@@ -47,6 +47,16 @@ def test_a_seeded_stream_is_random_Random_s(seed: int, compiled: bool) -> None:
     assert s.getstate() == ref.getstate()
 
 
+@pytest.mark.parametrize("seed", SEEDS)
+def test_seed_as_python_is_random_seed(seed: int) -> None:
+    """:func:`joints.sim.stream.seed` run as Python (a Python stream seeds by CPython's own words, a compiled one
+    by the compiled function, checked above)."""
+    row = stream.row(stream.WIDTH, False)
+    row[stream.CACHED] = 1.0
+    stream.seed(row, stream.key_of(seed))
+    assert tuple(row[:stream.INDEX + 1]) == random.Random(seed).getstate()[1] and not row[stream.CACHED]
+
+
 def _fill(s: Any, out: Any) -> None:
     """``out`` filled with draws of the stream row ``s`` as :func:`_draws` makes them (compiled in the test)."""
     for k in range(len(out)):
