@@ -1,11 +1,12 @@
 """Sensors as the drives report them: the drive's velocity estimate, current measurement, noise, sample age.
 
 Rule: a twin's physics and loops see the exact state; what a READ returns goes through the drive's
-:class:`Sensor` first, applied where the register is read (the twins' read paths), outside the
-compiled kernels, so the bits never depend on the kernel choice. The numbers are the device
-profile's (fields below, each with its source in the profile's ``sources``); noise is drawn from
-one generator per twin, seeded from the twin's identity (family, address) and the world's seed
-(:func:`seed`), so a lockstep run is reproducible and two twins never share a stream.
+:class:`Sensor` first, applied where the register is read (the twins' read paths). The numbers are the
+device profile's (fields below, each with its source in the profile's ``sources``); noise is drawn from
+one stream per twin, ``random.Random``'s numbers (:mod:`joints.sim.stream`, its state in the sensor's row),
+seeded from the twin's identity (family, address) and the world's seed (:func:`seed`), so a lockstep run
+is reproducible and two twins never share a stream. The reads are jitable functions of the sensor's rows
+(:func:`sense`): compiled or Python, called from Python or from inside a compiled call, the same bits.
 
 =====================  ===============================================================================
 profile field          what the drive does to a reported value
