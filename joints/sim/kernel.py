@@ -77,7 +77,7 @@ jitable(motion.move_step)
 #: function it caches, so the cache lives in a directory named by a hash of all of them
 _SOURCES = ("joints/sim/kernel.py", "joints/sim/erob_kernel.py", "joints/sim/zlac_kernel.py",
             "joints/sim/stepping.py", "joints/sim/line_exchange.py", "joints/sim/erob_exchange.py",
-            "joints/sim/zlac_exchange.py", "joints/devices/motion.py")
+            "joints/sim/zlac_exchange.py", "joints/sim/stream.py", "joints/sim/sensors.py", "joints/devices/motion.py")
 
 
 def cache_dir() -> str:

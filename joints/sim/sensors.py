@@ -1,11 +1,12 @@
 """Sensors as the drives report them: the drive's velocity estimate, current measurement, noise, sample age.
 
 Rule: a twin's physics and loops see the exact state; what a READ returns goes through the drive's
-:class:`Sensor` first, applied where the register is read (the twins' read paths), outside the
-compiled kernels, so the bits never depend on the kernel choice. The numbers are the device
-profile's (fields below, each with its source in the profile's ``sources``); noise is drawn from
-one generator per twin, seeded from the twin's identity (family, address) and the world's seed
-(:func:`seed`), so a lockstep run is reproducible and two twins never share a stream.
+:class:`Sensor` first, applied where the register is read (the twins' read paths). The numbers are the
+device profile's (fields below, each with its source in the profile's ``sources``); noise is drawn from
+one stream per twin, ``random.Random``'s numbers (:mod:`joints.sim.stream`, its state in the sensor's row),
+seeded from the twin's identity (family, address) and the world's seed (:func:`seed`), so a lockstep run
+is reproducible and two twins never share a stream. The reads are jitable functions of the sensor's rows
+(:func:`sense`): compiled or Python, called from Python or from inside a compiled call, the same bits.
 
 =====================  ===============================================================================
 profile field          what the drive does to a reported value
@@ -33,17 +34,23 @@ or the joint's profile table (``profile = { velocity_noise = 0.0, ... }``).
 from __future__ import annotations
 
 import math
-import random
 import zlib
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
-from typing import Any
+from types import SimpleNamespace
+from typing import Any, Protocol
+
+from joints.sim import kernel, stream
+from joints.sim.kernel import jitable
+from joints.sim.stream import gauss as _gauss
+from joints.sim.stream import uniform as _uniform
 
 #: the profile fields of a sensor model (each family's profile has them, with sources)
 FIELDS = ("velocity_window", "velocity_noise", "position_noise", "current_noise", "current_resolution",
           "sample_jitter")
 
-__all__ = ["FIELDS", "Sensor", "SensorModel", "ideal", "model_of", "scale", "seed", "sensors_of"]
+__all__ = ["FIELDS", "Draws", "Sensor", "SensorModel", "current", "ideal", "model_of", "numbers", "position",
+           "scale", "seed", "sense", "sensors_of", "velocity"]
 
 
 @dataclass(frozen=True)
@@ -75,8 +82,6 @@ class SensorModel:
 IDEAL = SensorModel()
 
 
-
-
 def model_of(profile: Any) -> SensorModel:
     """The sensor model a device profile states (fields it lacks are 0)."""
     return SensorModel(**{name: float(getattr(profile, name, 0.0)) for name in FIELDS})
@@ -86,13 +91,151 @@ def _seed(key: str, world_seed: int) -> int:
     return zlib.crc32(f"{world_seed}:{key}".encode())
 
 
-class Sensor:
-    """One drive's sensors: a model, its random stream and the velocity filter's state.
+# -- a sensor's numbers and state as rows: the reads as jitable functions of them ---------------------------
 
-    The model's numbers are taken apart once, when the model is set (:attr:`model`), and the stream's draws are
-    bound methods of its generator (:attr:`rng`), so a read costs its arithmetic and its draws; :meth:`sense`
-    gives a status read's position, velocity and current in one call, drawing exactly what :meth:`position`,
-    :meth:`velocity` and :meth:`current` would, in that order.
+#: the columns of a model's numbers (:func:`numbers`)
+JITTER, POSITION_NOISE, WINDOW, VELOCITY_NOISE, CURRENT_NOISE, RESOLUTION, K, K_WINDOW = range(8)
+#: the columns of a sensor's state row after its stream's (:mod:`joints.sim.stream`): the sample age drawn for
+#: the present read [s] and the drive time it was drawn at
+AGE, AGE_T = stream.WIDTH, stream.WIDTH + 1
+STATE_WIDTH = stream.WIDTH + 2
+
+
+def numbers(model: SensorModel, counts_per_rad: float) -> list[float]:
+    """``model``'s numbers as the reads take them (columns :data:`JITTER` ... :data:`K_WINDOW`): with the encoder's
+    counts per rad ``k`` and the velocity estimate's divisor ``k * window``."""
+    k = float(counts_per_rad)
+    return [model.sample_jitter, model.position_noise, model.velocity_window, model.velocity_noise,
+            model.current_noise, model.current_resolution, k, k * model.velocity_window]
+
+
+@jitable
+def estimate(m: Any, q: float, v: float) -> float:
+    """The drive's velocity estimate without noise: the encoder counts moved over the window (the position
+    ``window`` ago taken as ``q - v * window``) divided by it; ``v`` itself without a window or at rest."""
+    window: float = m[WINDOW]
+    if window and v:
+        k: float = m[K]
+        divisor: float = m[K_WINDOW]
+        return (math.floor(q * k) - math.floor((q - v * window) * k)) / divisor
+    return v
+
+
+@jitable
+def quantised(m: Any, i: float) -> float:
+    """The current ``i`` in steps of the measurement's resolution (``i`` itself without one)."""
+    resolution: float = m[RESOLUTION]
+    if resolution:
+        return resolution * round(i / resolution)
+    return i
+
+
+@jitable
+def sample_age(s: Any, m: Any, t: float) -> float:
+    """The age of the values reported at drive time ``t``: one draw per read time (position and velocity of one
+    status read share it)."""
+    if t != s[AGE_T]:
+        s[AGE_T] = t
+        s[AGE] = m[JITTER] * _uniform(s)
+    age: float = s[AGE]
+    return age
+
+
+@jitable
+def position(s: Any, m: Any, t: float, q: float, v: float) -> float:
+    """The position [rad] the drive reports at time ``t`` for a joint at ``q`` moving at ``v``."""
+    if m[JITTER]:
+        q -= v * sample_age(s, m, t)
+    if m[POSITION_NOISE]:
+        q += _gauss(s, 0.0, m[POSITION_NOISE])
+    return q
+
+
+@jitable
+def velocity(s: Any, m: Any, q: float, v: float) -> float:
+    """The drive's velocity estimate [rad/s] of a joint at ``q`` moving at ``v``."""
+    v = estimate(m, q, v)
+    if m[VELOCITY_NOISE]:
+        v += _gauss(s, 0.0, m[VELOCITY_NOISE])
+    return v
+
+
+@jitable
+def current(s: Any, m: Any, i: float) -> float:
+    """The current [A] the drive measures when ``i`` flows."""
+    if m[CURRENT_NOISE] and i:
+        i += _gauss(s, 0.0, m[CURRENT_NOISE])
+    return quantised(m, i)
+
+
+@jitable
+def sense(s: Any, m: Any, t: float, q: float, v: float, i: float) -> tuple[float, float, float]:
+    """``(position, velocity, current)`` of a status read of a joint at ``q`` moving at ``v`` with ``i`` flowing:
+    the three reads' draws in that order."""
+    return position(s, m, t, q, v), velocity(s, m, q, v), current(s, m, i)
+
+
+#: the reads as Python
+PY_OPS = SimpleNamespace(position=position, velocity=velocity, current=current, sense=sense)
+
+
+def compiled_ops() -> Any:
+    """:data:`PY_OPS` compiled (made once per process; :data:`PY_OPS` itself without numba)."""
+    return kernel.compiled_ops(PY_OPS)
+
+
+class Draws(Protocol):
+    """What a generator set as :attr:`Sensor.rng` offers (``random.Random`` does)."""
+
+    def random(self) -> float: ...
+
+    def gauss(self, mu: float, sigma: float) -> float: ...
+
+
+class _Drawing:
+    """The reads of :data:`PY_OPS` drawing from a generator set by the user (``rng``'s bound methods) instead of
+    the row's stream: the same rule, the same order of draws; the sample age is still the row's."""
+
+    def __init__(self, rng: Draws) -> None:
+        self.random = rng.random
+        self.gauss = rng.gauss
+
+    def position(self, s: Any, m: list[float], t: float, q: float, v: float) -> float:
+        if m[JITTER]:
+            if t != s[AGE_T]:
+                s[AGE_T] = t
+                s[AGE] = m[JITTER] * self.random()
+            q -= v * float(s[AGE])
+        if m[POSITION_NOISE]:
+            q += self.gauss(0.0, m[POSITION_NOISE])
+        return q
+
+    def velocity(self, s: Any, m: list[float], q: float, v: float) -> float:
+        v = estimate(m, q, v)
+        if m[VELOCITY_NOISE]:
+            v += self.gauss(0.0, m[VELOCITY_NOISE])
+        return v
+
+    def current(self, s: Any, m: list[float], i: float) -> float:
+        if m[CURRENT_NOISE] and i:
+            i += self.gauss(0.0, m[CURRENT_NOISE])
+        return quantised(m, i)
+
+    def sense(self, s: Any, m: list[float], t: float, q: float, v: float, i: float) -> tuple[float, float, float]:
+        return self.position(s, m, t, q, v), self.velocity(s, m, q, v), self.current(s, m, i)
+
+
+class Sensor:
+    """One drive's sensors: a model, its random stream and the sample age's state.
+
+    The stream is :mod:`joints.sim.stream`'s (``random.Random``'s numbers) in the sensor's state row
+    (:data:`STATE_WIDTH` columns, the sample age after the stream's), the model's numbers a row too
+    (:func:`numbers`, made when the model is set): each read is one call of the jitable function of the same
+    name (:func:`position`, :func:`velocity`, :func:`current`; :func:`sense` gives all three with the same
+    draws in the same order), compiled unless ``JOINTS_COMPILED=0`` or numba is missing (rows: arrays or
+    lists), so compiled code can make the same reads from the same rows. A generator set as :attr:`rng` (a
+    ``random.Random``, or anything with ``random()`` and ``gauss(mu, sigma)``) is drawn from instead, in Python;
+    :meth:`reseed` goes back to the row's stream.
     """
 
     def __init__(self, model: SensorModel, key: str, counts_per_rad: float) -> None:
@@ -100,21 +243,25 @@ class Sensor:
         self.nominal = model  #: the profile's model (:meth:`scale` acts on it)
         self.counts_per_rad = float(counts_per_rad)  #: the encoder the velocity is estimated from
         self.world_seed = 0
-        self.rng = random.Random(_seed(key, 0))
+        self.stream = stream.Stream(_seed(key, 0), width=STATE_WIDTH)  #: the row's stream
+        self.compiled = self.stream.compiled  #: the rows are arrays and the reads run compiled
+        self.state: Any = self.stream.state  #: the state row: the stream's, then :data:`AGE`, :data:`AGE_T`
+        self.state[AGE_T] = math.nan
+        self._ops: Any = compiled_ops() if self.compiled else PY_OPS
+        self.rng = self.stream
         self.model = model
-        self._age = 0.0  #: the sample age drawn for the present read [s]
-        self._age_t = math.nan  #: the drive time it was drawn at
 
     @property
-    def rng(self) -> random.Random:
-        """The random stream (a generator set here is drawn from through its bound methods)."""
+    def rng(self) -> Draws:
+        """The random stream: :attr:`stream` (the row's), or a generator set here (drawn from in Python)."""
         return self._rng
 
     @rng.setter
-    def rng(self, rng: random.Random) -> None:
+    def rng(self, rng: Draws) -> None:
         self._rng = rng
-        self._random = rng.random
-        self._gauss = rng.gauss
+        self._reads: Any = self._ops if rng is self.stream else _Drawing(rng)  #: the reads' functions
+        if hasattr(self, "_floats"):
+            self._bind()
 
     @property
     def model(self) -> SensorModel:
@@ -125,85 +272,56 @@ class Sensor:
     def model(self, model: SensorModel) -> None:
         self._model = model
         self.ideal = model.ideal  #: every number 0: reads report the exact values
-        self._jitter = model.sample_jitter
-        self._position_noise = model.position_noise
-        self._window = model.velocity_window
-        self._velocity_noise = model.velocity_noise
-        self._current_noise = model.current_noise
-        self._resolution = model.current_resolution
-        self._k_window = self.counts_per_rad * model.velocity_window  #: the estimate's divisor, k * window
+        self._floats = numbers(model, self.counts_per_rad)  #: the numbers as Python floats
+        self.numbers: Any = kernel.rows([self._floats], self.compiled)[0]  #: the numbers as the reads take them
+        self._bind()
+
+    def _bind(self) -> None:
+        """The numbers the present reads take: the row, or Python floats for a generator set by the user."""
+        self._m: Any = self.numbers if self._reads is self._ops else self._floats
+
+    @property
+    def _age(self) -> float:
+        """The sample age drawn for the present read [s]."""
+        return float(self.state[AGE])
+
+    @_age.setter
+    def _age(self, age: float) -> None:
+        self.state[AGE] = age
+
+    @property
+    def _age_t(self) -> float:
+        """The drive time the sample age was drawn at (NaN: none yet)."""
+        return float(self.state[AGE_T])
+
+    @_age_t.setter
+    def _age_t(self, t: float) -> None:
+        self.state[AGE_T] = t
 
     def reseed(self, world_seed: int | None = None) -> None:
         """Restart the random stream from ``world_seed`` (None: the last one; a power cycle does this)."""
         if world_seed is not None:
             self.world_seed = int(world_seed)
-        self.rng = random.Random(_seed(self.key, self.world_seed))
-        self._age_t = math.nan
-
-    def _sample_age(self, t: float) -> float:
-        """The age of the values reported at drive time ``t`` (one draw per read time: position and
-        velocity of one status read share it)."""
-        jitter = self._jitter
-        if not jitter:
-            return 0.0
-        if t != self._age_t:
-            self._age_t = t
-            self._age = jitter * self._random()
-        return self._age
+        self.stream.seed(_seed(self.key, self.world_seed))
+        self.rng = self.stream
+        self.state[AGE_T] = math.nan
 
     def position(self, t: float, q: float, v: float) -> float:
         """The position [rad] the drive reports at time ``t`` for a joint at ``q`` moving at ``v``."""
-        if self._jitter:
-            q -= v * self._sample_age(t)
-        if self._position_noise:
-            q += self._gauss(0.0, self._position_noise)
-        return q
+        return self._reads.position(self.state, self._m, t, q, v)  # type: ignore[no-any-return]
 
     def velocity(self, q: float, v: float) -> float:
         """The drive's velocity estimate [rad/s] of a joint at ``q`` moving at ``v``."""
-        window = self._window
-        if window and v:
-            k = self.counts_per_rad
-            v = (math.floor(q * k) - math.floor((q - v * window) * k)) / self._k_window
-        if self._velocity_noise:
-            v += self._gauss(0.0, self._velocity_noise)
-        return v
+        return self._reads.velocity(self.state, self._m, q, v)  # type: ignore[no-any-return]
 
     def current(self, i: float) -> float:
         """The current [A] the drive measures when ``i`` flows."""
-        if self._current_noise and i:
-            i += self._gauss(0.0, self._current_noise)
-        resolution = self._resolution
-        if resolution:
-            i = resolution * round(i / resolution)
-        return i
+        return self._reads.current(self.state, self._m, i)  # type: ignore[no-any-return]
 
     def sense(self, t: float, q: float, v: float, i: float) -> tuple[float, float, float]:
         """``(position(t, q, v), velocity(q, v), current(i))`` in one call: a status read of a joint at ``q``
         moving at ``v`` with ``i`` flowing, the same draws in the same order (the same bits)."""
-        gauss = self._gauss
-        jitter = self._jitter
-        pos = q
-        if jitter:
-            if t != self._age_t:
-                self._age_t = t
-                self._age = jitter * self._random()
-            pos -= v * self._age
-        if self._position_noise:
-            pos += gauss(0.0, self._position_noise)
-        window = self._window
-        vel = v
-        if window and v:
-            k = self.counts_per_rad
-            vel = (math.floor(q * k) - math.floor((q - v * window) * k)) / self._k_window
-        if self._velocity_noise:
-            vel += gauss(0.0, self._velocity_noise)
-        if self._current_noise and i:
-            i += gauss(0.0, self._current_noise)
-        resolution = self._resolution
-        if resolution:
-            i = resolution * round(i / resolution)
-        return pos, vel, i
+        return self._reads.sense(self.state, self._m, t, q, v, i)  # type: ignore[no-any-return]
 
 
 def sensors_of(world: Any) -> list[Sensor]:
