@@ -35,6 +35,7 @@ def main() -> None:
     other = sys.argv[1]
     sizes = [int(a) for a in sys.argv[2:]] or [16, 256]
     o_r = load_as(other, "joints/sim/rigs_exchange.py", "other_rigs_exchange")
+    R.compiled()  # compiled first: the other module would otherwise compile its own (and cache it as its own name)
     o_r._COMPILED = R._COMPILED  # the same compiled kernel (compiling again would take minutes)
     o_cp = load_as(other, "joints/compiled_path.py", "other_compiled_path")
     versions = {"this": (R.carry_rigs, CP.CompiledRigs._send), "other": (o_r.carry_rigs, o_cp.CompiledRigs._send)}
