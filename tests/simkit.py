@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import random
 import select
 import subprocess
 import sys
@@ -69,3 +70,18 @@ def canopen_arm() -> Any:
     found = _baseline_config("joints/ErobArmReach-v0")
     assert found is not None and found[1].startswith("canopen"), found
     return gym.make("joints/ErobArmReach-v0", config=found[0], control_period=BASELINE_PERIOD)
+
+
+def sensor_reads(seed: int, n: int) -> list[tuple[float, float, float, float]]:
+    """``n`` sensor reads (t, q, v, i) from ``seed``: read times repeat (one draw of the sample age per read time),
+    speeds and currents are sometimes exactly 0 (no filter step, no current noise)."""
+    rng = random.Random(seed)
+    out = []
+    t = 0.0
+    for k in range(n):
+        if k % 3:
+            t += rng.choice((0.0, 1e-3, 0.02))
+        v = 0.0 if k % 5 == 0 else rng.uniform(-20.0, 20.0)
+        i = 0.0 if k % 7 == 0 else rng.uniform(-8.0, 8.0)
+        out.append((t, rng.uniform(-50.0, 50.0), v, i))
+    return out

@@ -9,6 +9,7 @@ import random
 import pytest
 
 from joints.sim.sensors import IDEAL, Sensor, SensorModel
+from simkit import sensor_reads
 
 MODELS = [
     SensorModel(),
@@ -20,20 +21,6 @@ MODELS = [
 ]
 
 
-def _reads(seed: int, n: int) -> list[tuple[float, float, float, float]]:
-    """``n`` reads (t, q, v, i): times repeat (one draw of the sample age per read time), speeds and currents are
-    sometimes exactly 0 (no filter step, no current noise)."""
-    rng = random.Random(seed)
-    out = []
-    t = 0.0
-    for k in range(n):
-        if k % 3:
-            t += rng.choice((0.0, 1e-3, 0.02))
-        v = 0.0 if k % 5 == 0 else rng.uniform(-20.0, 20.0)
-        i = 0.0 if k % 7 == 0 else rng.uniform(-8.0, 8.0)
-        out.append((t, rng.uniform(-50.0, 50.0), v, i))
-    return out
-
 
 @pytest.mark.parametrize("model", MODELS)
 def test_sense_gives_the_three_reads_bits_and_leaves_the_stream_where_they_do(model: SensorModel) -> None:
@@ -41,7 +28,7 @@ def test_sense_gives_the_three_reads_bits_and_leaves_the_stream_where_they_do(mo
     together = Sensor(model, "zlac:1:left", 16384 / (2 * math.pi))
     for s in (apart, together):
         s.reseed(11)
-    for t, q, v, i in _reads(3, 400):
+    for t, q, v, i in sensor_reads(3, 400):
         want = (apart.position(t, q, v), apart.velocity(q, v), apart.current(i))
         got = together.sense(t, q, v, i)
         assert [x.hex() for x in got] == [float(x).hex() for x in want]

@@ -14,6 +14,7 @@ import pytest
 
 from joints.sim import kernel, sensors, stream
 from joints.sim.sensors import Sensor, SensorModel
+from simkit import sensor_reads
 
 #: the row kinds under test: Python (lists) always, compiled (arrays) unless JOINTS_COMPILED=0 or no numba
 MODES = sorted({False, kernel.default_mode()})
@@ -158,19 +159,6 @@ MODELS = [
 COUNTS = [524288 / (2 * math.pi), 16384 / (2 * math.pi), 4096 / (2 * math.pi)]
 
 
-def _reads(seed: int, n: int) -> list[tuple[float, float, float, float]]:
-    """``n`` reads (t, q, v, i): read times repeat, speeds and currents are sometimes exactly 0."""
-    rng = random.Random(seed)
-    out = []
-    t = 0.0
-    for k in range(n):
-        if k % 3:
-            t += rng.choice((0.0, 1e-3, 0.02))
-        v = 0.0 if k % 5 == 0 else rng.uniform(-20.0, 20.0)
-        i = 0.0 if k % 7 == 0 else rng.uniform(-8.0, 8.0)
-        out.append((t, rng.uniform(-50.0, 50.0), v, i))
-    return out
-
 
 def _sensor(model: SensorModel, counts: float, compiled: bool, monkeypatch: pytest.MonkeyPatch) -> Sensor:
     monkeypatch.setenv(kernel.SWITCH, "1" if compiled else "0")
@@ -188,7 +176,7 @@ def test_a_sensor_s_reads_are_main_s(model: SensorModel, counts: float, compiled
     """``sense`` and the three reads alone, 1500 reads each: the same bits and the same stream after."""
     s = _sensor(model, counts, compiled, monkeypatch)
     ref = _Reference(model, "erob:3", counts, 4)
-    for n, (t, q, v, i) in enumerate(_reads(COUNTS.index(counts), 3000)):
+    for n, (t, q, v, i) in enumerate(sensor_reads(COUNTS.index(counts), 3000)):
         if n % 2:
             got, want = s.sense(t, q, v, i), ref.sense(t, q, v, i)
         else:
@@ -208,7 +196,7 @@ def test_a_generator_set_as_rng_is_drawn_from_and_reseed_goes_back_to_the_row(
     mine = s.rng.getstate()
     s.rng = ref_rng = random.Random(21)
     ref.rng = random.Random(21)
-    for t, q, v, i in _reads(8, 300):
+    for t, q, v, i in sensor_reads(8, 300):
         assert _bits(s.sense(t, q, v, i)) == _bits(ref.sense(t, q, v, i))
     assert ref_rng.getstate() == ref.rng.getstate()  # the user's generator was drawn from
     assert s.stream.getstate() == mine  # the row's stream was not
@@ -233,12 +221,12 @@ def test_reads_made_inside_a_compiled_function_are_main_s(model: SensorModel,
     sensor where main's leaves it (the Python reads after it continue the same stream)."""
     s = _sensor(model, COUNTS[1], True, monkeypatch)
     ref = _Reference(model, "erob:3", COUNTS[1], 4)
-    reads = np.array(_reads(2, 2000))
+    reads = np.array(sensor_reads(2, 2000))
     out = np.zeros((len(reads), 3))
     inside = kernel.numba.njit(_sense_all)
     inside(s.state, s.numbers, reads, out)
     assert inside.signatures  # the compiled loop ran
     assert _bits(out) == _bits([ref.sense(*r) for r in reads.tolist()])
     assert s.rng.getstate() == ref.rng.getstate()
-    for t, q, v, i in _reads(9, 200):
+    for t, q, v, i in sensor_reads(9, 200):
         assert _bits(s.sense(t, q, v, i)) == _bits(ref.sense(t, q, v, i))
