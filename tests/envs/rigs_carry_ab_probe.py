@@ -17,13 +17,12 @@ import os
 import sys
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
 import envs  # noqa: F401 - registers the joints/ envs
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # tests/, for probekit
-from probekit import load_as, same_as_first, timed_vec_steps
+from probekit import other_rigs, rigs_vec, same_as_first, timed_vec_steps
 
 from joints import compiled_path as CP
 from joints.sim import rigs_exchange as R
@@ -34,20 +33,12 @@ ROUNDS = int(os.environ.get("ROUNDS", "8"))
 def main() -> None:
     other = sys.argv[1]
     sizes = [int(a) for a in sys.argv[2:]] or [16, 256]
-    o_r = load_as(other, "joints/sim/rigs_exchange.py", "other_rigs_exchange")
-    R.compiled()  # compiled first: the other module would otherwise compile its own (and cache it as its own name)
-    o_r._COMPILED = R._COMPILED  # the same compiled kernel (compiling again would take minutes)
-    o_cp = load_as(other, "joints/compiled_path.py", "other_compiled_path")
+    o_r, o_cp = other_rigs(other)
     versions = {"this": (R.carry_rigs, CP.CompiledRigs._send), "other": (o_r.carry_rigs, o_cp.CompiledRigs._send)}
     print(f"load {os.getloadavg()[0]:.1f}; CPU time per rig step, best / median of {ROUNDS} blocks")
     for n in sizes:
-        vec = gym.make_vec("joints/ErobReach-v0", num_envs=n, vectorization_mode="vector_entry_point")
-        u: Any = vec.unwrapped
-        rigs = u._batch.rigs
-        assert rigs is not None
         steps = max(32, 8192 // n)
-        u.max_episode_steps = None
-        actions = np.random.default_rng(0).uniform(-1, 1, (steps, n, 1)).astype(np.float32)
+        vec, rigs, actions = rigs_vec(n, steps)
         times: dict[str, list[float]] = {k: [] for k in versions}
         first: list[Any] | None = None
         for r in range(ROUNDS):

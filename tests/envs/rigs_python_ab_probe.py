@@ -21,13 +21,12 @@ import sys
 import time
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
 import envs  # noqa: F401 - registers the joints/ envs
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # tests/, for probekit
-from probekit import load_as, same_as_first, timed_vec_steps
+from probekit import load_as, other_rigs, rigs_vec, same_as_first, timed_vec_steps
 
 from envs import batch as B
 from joints import compiled_path as CP
@@ -53,10 +52,7 @@ class _Timed:
 
 def _versions(other: str) -> dict[str, tuple[Any, dict[str, Any], dict[str, Any]]]:
     """Per checkout: (its ``carry_rigs``, its ``Batch`` functions, its ``CompiledRigs`` functions)."""
-    o_r = load_as(other, "joints/sim/rigs_exchange.py", "other_rigs_exchange")
-    R.compiled()  # compiled first: the other module would otherwise compile its own (and cache it as its own name)
-    o_r._COMPILED = R._COMPILED  # the same compiled kernel (compiling again would take minutes)
-    o_cp = load_as(other, "joints/compiled_path.py", "other_compiled_path")
+    o_r, o_cp = other_rigs(other)
     o_b = load_as(other, "envs/batch.py", "other_batch")
 
     def funcs(batch: Any, rigs: Any) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -73,13 +69,8 @@ def main() -> None:
     R._COMPILED[0] = timed
     print(f"load {os.getloadavg()[0]:.1f}; CPU time per rig step, best / median of {ROUNDS} blocks")
     for n in sizes:
-        vec = gym.make_vec("joints/ErobReach-v0", num_envs=n, vectorization_mode="vector_entry_point")
-        u: Any = vec.unwrapped
-        rigs = u._batch.rigs
-        assert rigs is not None
         steps = max(32, 8192 // n)
-        u.max_episode_steps = None
-        actions = np.random.default_rng(0).uniform(-1, 1, (steps, n, 1)).astype(np.float32)
+        vec, rigs, actions = rigs_vec(n, steps)
         whole: dict[str, list[float]] = {k: [] for k in versions}
         python: dict[str, list[float]] = {k: [] for k in versions}
         first: list[Any] | None = None
