@@ -19,8 +19,10 @@ call).
 
 from __future__ import annotations
 
+import functools
 import math
 import random
+from array import array
 from types import SimpleNamespace
 from typing import Any
 
@@ -42,6 +44,7 @@ _LOWER = 0x7FFFFFFF  #: the other 31
 _MASK = 0xFFFFFFFF
 _TWOPI = 2.0 * math.pi
 _SCALE = 1.0 / 9007199254740992.0  #: 2**-53
+_WORD = "L"  #: an unsigned C type of at least 32 bits: a state's words as a buffer (numpy converts it at C speed)
 
 
 @jitable
@@ -97,6 +100,13 @@ def gauss(s: Any, mu: float, sigma: float) -> float:
     return mu + z * sigma
 
 
+@functools.lru_cache(maxsize=1024)
+def _seeded(n: int) -> array[int]:
+    """``random.Random(n)``'s words (``random.seed(n)``'s state) as a buffer, made once per seed: a world's reset
+    reseeds each twin with the seed it had."""
+    return array(_WORD, random.Random(n).getstate()[1])
+
+
 #: the stream's functions as Python
 PY_OPS = SimpleNamespace(word=word, uniform=uniform, gauss=gauss)
 
@@ -132,7 +142,7 @@ class Stream:
     def seed(self, n: int) -> None:
         """``random.seed(int(n))`` (``n``: anything ``int()`` takes): CPython's own initialisation's words put in
         the row, the gauss cache dropped."""
-        self._put(random.Random(int(n)).getstate()[1], None)
+        self._put(_seeded(int(n)), None)
 
     def random(self) -> float:
         """``random.random()``."""
@@ -154,10 +164,11 @@ class Stream:
         if version != 3 or len(words) != N + 1 or not all(isinstance(w, int) and 0 <= w <= _MASK for w in words) \
                 or words[INDEX] > N:
             raise ValueError("invalid state for a random stream (random.Random's version 3 expected)")
-        self._put(words, cached)
+        self._put(array(_WORD, words), cached)
 
-    def _put(self, words: tuple[int, ...], cached: float | None) -> None:
-        """The row from a valid state's words and gauss cache (one slice: a list keeps the words as ints)."""
+    def _put(self, words: array[int], cached: float | None) -> None:
+        """The row from a valid state's words (one slice: an array's at C speed, a list's as ints) and gauss
+        cache."""
         s = self.state
         s[:INDEX + 1] = words
         s[GAUSS] = 0.0 if cached is None else float(cached)
