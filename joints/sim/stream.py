@@ -7,28 +7,29 @@ list with the words as ints in Python). The functions below are jitable (:func:`
 plain Python when called from Python, compiled into the kernels that call them; both give the bits of
 ``random.Random(n)``:
 
-- :func:`seed` is ``random.seed(n)`` for an int ``n`` (the words of ``abs(n)``, least significant first,
-  into MT19937's array initialisation; ``0`` is the one word ``0``), which also drops the gauss cache;
 - :func:`uniform` is ``random()``: two words, ``(a * 2**26 + b) / 2**53`` of their top 27 and 26 bits;
 - :func:`gauss` is ``gauss(mu, sigma)``: Box-Muller of two ``random()``, the second value cached for the next
   call, ``mu + z * sigma`` (the expressions in CPython's order: ``math`` is the same libm compiled or not).
 
 :class:`Stream` offers a row as a ``random.Random`` does (``random``, ``gauss``, ``seed``, ``getstate``,
-``setstate``, states interchangeable with ``random.Random``'s).
+``setstate``, states interchangeable with ``random.Random``'s). Seeding is Python's only: ``Stream.seed(n)`` puts
+``random.Random(int(n))``'s words in the row (a seed is set when a twin is made or reset, never inside a compiled
+call).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import random
+from array import array
 from types import SimpleNamespace
 from typing import Any
 
 from joints.sim import kernel
 from joints.sim.kernel import jitable
 
-__all__ = ["CACHED", "GAUSS", "INDEX", "WIDTH", "N", "Stream", "gauss", "key_of", "seed", "twist", "uniform",
-           "word"]
+__all__ = ["CACHED", "GAUSS", "INDEX", "WIDTH", "N", "Stream", "gauss", "twist", "uniform", "word"]
 
 N = 624  #: MT19937's words
 _M = 397  #: the recurrence's middle term
@@ -43,6 +44,7 @@ _LOWER = 0x7FFFFFFF  #: the other 31
 _MASK = 0xFFFFFFFF
 _TWOPI = 2.0 * math.pi
 _SCALE = 1.0 / 9007199254740992.0  #: 2**-53
+_WORD = "L"  #: an unsigned C type of at least 32 bits: a state's words as a buffer (numpy converts it at C speed)
 
 
 @jitable
@@ -98,53 +100,15 @@ def gauss(s: Any, mu: float, sigma: float) -> float:
     return mu + z * sigma
 
 
-@jitable
-def seed(s: Any, key: Any) -> None:
-    """``random.seed(n)`` given ``key``, the 32-bit words of ``abs(n)`` least significant first
-    (:func:`key_of`): MT19937's initialisation by an array; the gauss cache dropped."""
-    s[0] = 19650218
-    for k in range(1, N):
-        p = int(s[k - 1])
-        s[k] = (1812433253 * (p ^ (p >> 30)) + k) & _MASK
-    n = len(key)
-    i = 1
-    j = 0
-    for _ in range(max(N, n)):
-        p = int(s[i - 1])
-        s[i] = ((int(s[i]) ^ ((p ^ (p >> 30)) * 1664525)) + int(key[j]) + j) & _MASK
-        i += 1
-        j += 1
-        if i >= N:
-            s[0] = s[N - 1]
-            i = 1
-        if j >= n:
-            j = 0
-    for _ in range(N - 1):
-        p = int(s[i - 1])
-        s[i] = ((int(s[i]) ^ ((p ^ (p >> 30)) * 1566083941)) - i) & _MASK
-        i += 1
-        if i >= N:
-            s[0] = s[N - 1]
-            i = 1
-    s[0] = _UPPER
-    s[INDEX] = N
-    s[GAUSS] = 0.0
-    s[CACHED] = 0.0
-
-
-def key_of(n: int) -> list[int]:
-    """The 32-bit words of ``abs(n)``, least significant first (``[0]`` for 0): what ``random.seed(n)`` starts
-    MT19937 from."""
-    n = abs(int(n))
-    key = [n & _MASK]
-    while n > _MASK:
-        n >>= 32
-        key.append(n & _MASK)
-    return key
+@functools.lru_cache(maxsize=1024)
+def _seeded(n: int) -> array[int]:
+    """``random.Random(n)``'s words (``random.seed(n)``'s state) as a buffer, made once per seed: a world's reset
+    reseeds each twin with the seed it had."""
+    return array(_WORD, random.Random(n).getstate()[1])
 
 
 #: the stream's functions as Python
-PY_OPS = SimpleNamespace(seed=seed, word=word, uniform=uniform, gauss=gauss)
+PY_OPS = SimpleNamespace(word=word, uniform=uniform, gauss=gauss)
 
 
 def compiled_ops() -> Any:
@@ -176,14 +140,9 @@ class Stream:
         self.seed(n)
 
     def seed(self, n: int) -> None:
-        """``random.seed(n)`` for an int ``n``: :func:`seed` compiled, or (Python: its 1900 steps would take
-        milliseconds) CPython's own initialisation's words put in the row."""
-        if self.compiled:
-            import numpy as np
-
-            self.ops.seed(self.state, np.array(key_of(n), dtype=np.int64))
-        else:
-            self.setstate(random.Random(n).getstate())
+        """``random.seed(int(n))`` (``n``: anything ``int()`` takes): CPython's own initialisation's words put in
+        the row, the gauss cache dropped."""
+        self._put(_seeded(int(n)), None)
 
     def random(self) -> float:
         """``random.random()``."""
@@ -205,8 +164,12 @@ class Stream:
         if version != 3 or len(words) != N + 1 or not all(isinstance(w, int) and 0 <= w <= _MASK for w in words) \
                 or words[INDEX] > N:
             raise ValueError("invalid state for a random stream (random.Random's version 3 expected)")
+        self._put(array(_WORD, words), cached)
+
+    def _put(self, words: array[int], cached: float | None) -> None:
+        """The row from a valid state's words (one slice: an array's at C speed, a list's as ints) and gauss
+        cache."""
         s = self.state
-        for k, w in enumerate(words):
-            s[k] = w
+        s[:INDEX + 1] = words
         s[GAUSS] = 0.0 if cached is None else float(cached)
         s[CACHED] = 0.0 if cached is None else 1.0

@@ -3,7 +3,9 @@
 
 Not a test (pytest does not collect it): a measuring tool. ``python tests/sim/sensor_probe.py CASE [ROUNDS]``
 with CASE ``sense`` (the eRob profile's model: 1 ms velocity window, 0.02 A current noise, current flowing),
-``erob`` (``ErobReach-v0``, position mode, its shipped Modbus at 1 kHz) or ``erobcan`` (the same env on its CAN
+``reseed`` (``Sensor.reseed()``: the stream seeded again with its seed, what a world reset costs per sensor),
+``seed`` (``Sensor.reseed(k)``, each call a new seed), ``erob`` (``ErobReach-v0``,
+position mode, its shipped Modbus at 1 kHz) or ``erobcan`` (the same env on its CAN
 protocol at 20 ms, the bench's row). Prints the best and median CPU microseconds per call / step
 (``time.thread_time`` around each block, resets at episode ends included) over ROUNDS blocks, and a digest of every output (the same on both checkouts: same bits).
 """
@@ -37,6 +39,25 @@ def _sense(rounds: int) -> tuple[list[float], str]:
         out = [sense(t, q, v, i) for t, q, v, i in reads]
         times.append((time.thread_time() - t0) / n)
         digest.update(np.array(out).tobytes())
+    return times, digest.hexdigest()[:16]
+
+
+def _reseed(rounds: int, new: bool) -> tuple[list[float], str]:
+    from joints.sim.sensors import Sensor, SensorModel
+
+    s = Sensor(SensorModel(velocity_window=0.001, current_noise=0.02), "erob:1", 524288 / (2 * math.pi))
+    n = 2000
+    digest = hashlib.sha256()
+    times = []
+    for r in range(rounds):
+        reseed = s.reseed
+        t0 = time.thread_time()
+        for k in range(r * n, (r + 1) * n):
+            reseed(k if new else None)
+        times.append((time.thread_time() - t0) / n)
+        digest.update(repr(s.stream.getstate()).encode())
+        s.sense(0.0, 0.1, 1.0, 0.5)
+        digest.update(repr(s.stream.getstate()).encode())
     return times, digest.hexdigest()[:16]
 
 
@@ -80,7 +101,7 @@ def main() -> None:
     rounds = int(sys.argv[2]) if len(sys.argv) > 2 else 10
     import joints
 
-    times, digest = _sense(rounds) if case == "sense" else _env(case, rounds)
+    times, digest = _sense(rounds) if case == "sense" else _reseed(rounds, case == "seed") if case in ("reseed", "seed") else _env(case, rounds)
     us = sorted(t * 1e6 for t in times[1:])  # the first block warms up
     print(f"{case} {joints.__file__.rsplit('/joints/', 1)[0]}: best {us[0]:.3f} us, median "
           f"{statistics.median(us):.3f} us, digest {digest}")

@@ -48,14 +48,26 @@ def test_a_seeded_stream_is_random_Random_s(seed: int, compiled: bool) -> None:
     assert s.getstate() == ref.getstate()
 
 
-@pytest.mark.parametrize("seed", SEEDS)
-def test_seed_as_python_is_random_seed(seed: int) -> None:
-    """:func:`joints.sim.stream.seed` run as Python (a Python stream seeds by CPython's own words, a compiled one
-    by the compiled function, checked above)."""
-    row = stream.row(stream.WIDTH, False)
-    row[stream.CACHED] = 1.0
-    stream.seed(row, stream.key_of(seed))
-    assert tuple(row[:stream.INDEX + 1]) == random.Random(seed).getstate()[1] and not row[stream.CACHED]
+#: seeds of other kinds than int: each is ``int(n)``'s (a sensor's seed is a crc32, an int)
+OTHER_KINDS = [True, 3.7, -2.0, "12", b"12", bytearray(b"-12"), np.int64(9), np.uint32(2**32 - 1), np.float64(2.5)]
+
+
+@pytest.mark.parametrize("compiled", MODES)
+@pytest.mark.parametrize("seed", OTHER_KINDS, ids=repr)
+def test_a_seed_is_int_n(seed: Any, compiled: bool) -> None:
+    assert stream.Stream(seed, compiled=compiled).getstate() == random.Random(int(seed)).getstate()
+
+
+@pytest.mark.parametrize("compiled", MODES)
+@pytest.mark.parametrize(("seed", "error"), [(None, TypeError), ("abc", ValueError), ([1], TypeError),
+                                             (1 + 2j, TypeError), (math.inf, OverflowError), (math.nan, ValueError)])
+def test_a_seed_int_refuses_is_refused_as_int_refuses_it(seed: Any, error: type, compiled: bool) -> None:
+    with pytest.raises(error):
+        int(seed)
+    s = stream.Stream(3, compiled=compiled)
+    with pytest.raises(error):
+        s.seed(seed)
+    assert s.getstate() == random.Random(3).getstate()  # the row untouched
 
 
 def _fill(s: Any, out: Any) -> None:
@@ -202,6 +214,21 @@ def test_a_generator_set_as_rng_is_drawn_from_and_reseed_goes_back_to_the_row(
     assert s.stream.getstate() == mine  # the row's stream was not
     s.reseed()
     assert s.rng is s.stream and s.rng.getstate() == random.Random(zlib.crc32(b"4:erob:3")).getstate()
+
+
+@pytest.mark.parametrize("compiled", MODES)
+def test_a_sensor_s_world_seed_is_int_world_seed(compiled: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+    """What ``reseed`` takes: anything ``int()`` takes (None: the last seed); the stream is ``random.Random`` of
+    the crc32 of ``int(world_seed)`` and the key."""
+    s = _sensor(MODELS[0], COUNTS[0], compiled, monkeypatch)
+    want = random.Random(zlib.crc32(b"4:erob:3")).getstate()
+    for world_seed in (None, 4, "4", 4.9, np.int64(4), None):
+        s.stream.gauss()
+        s.reseed(world_seed)
+        assert s.world_seed == 4 and s.stream.getstate() == want
+    for bad, error in (("x", ValueError), ([4], TypeError)):
+        with pytest.raises(error):
+            s.reseed(bad)  # type: ignore[arg-type]
 
 
 def _sense_all(s: Any, m: Any, reads: Any, out: Any) -> None:
