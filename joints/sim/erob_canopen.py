@@ -103,9 +103,23 @@ _COMM_NAMES = tuple(n for n, o in objects() if o.index in _COMM)
 _PDO_AREA = range(0x1400, 0x1C00)
 #: 0x6060 value -> its mode (what ``Mode(value)`` gives, without the enum call)
 _MODE_OF = {int(m): m for m in Mode}
+#: (state, target reached, bit 12, bit 13) -> the statusword :func:`cia402.make_statusword` makes of them: it is a
+#: pure function of its arguments (module constants and bit tests only), so each word is made once per process
+_STATUSWORDS: dict[tuple[State, bool, bool, bool], int] = {}
 #: objects the front computes on read (the others are the firmware's parameters)
 _STATUS = frozenset({"statusword", "modes_of_operation_display", "error_register", "error_code",
                      "target_torque", "torque_actual_value"})
+
+
+def _statusword_of(state: State, reached: bool, bit12: bool, bit13: bool) -> int:
+    """The twin's statusword (:func:`cia402.make_statusword`, remote, no warning) of ``state`` and those flags,
+    made once per process for each (state, flags): a pure function of them (module constants and bit tests)."""
+    key = (state, bool(reached), bool(bit12), bool(bit13))
+    word = _STATUSWORDS.get(key)
+    if word is None:
+        word = _STATUSWORDS[key] = cia402.make_statusword(state, target_reached=reached, bit12=bit12, bit13=bit13,
+                                                          warning=False, remote=True)
+    return word
 
 
 @dataclass
@@ -294,6 +308,13 @@ class CanopenFront:
         if kind.is_pdo and nmt is co.NmtState.OPERATIONAL and not frame.is_remote_frame:
             self._rpdo(frame)
         return self._flush()
+
+    def ignores_pdo(self, cob: int) -> bool:
+        """Whether :meth:`on_frame` of a PDO frame with COB-ID ``cob`` (in OPERATIONAL) only counts it in
+        :attr:`frames_in`: powered, the PDOs configured (:meth:`pdos` built), no valid RPDO with that COB-ID, nothing
+        in the outbox and no answer due later - so it changes nothing else and answers nothing."""
+        return (self.powered and self._pdos is not None and cob not in self._rpdo_by_cob and not self._outbox
+                and not self.later)
 
     def _flush(self) -> list[can.Message]:
         out, self._outbox = self._outbox, []
@@ -695,8 +716,7 @@ class CanopenFront:
                 reached = True
             if self.halted and abs(fw.v_ref) < 1:
                 reached = True
-        return cia402.make_statusword(state, target_reached=reached, bit12=bit12, bit13=bit13,
-                                      warning=False, remote=True)
+        return _statusword_of(state, reached, bit12, bit13)
 
     def _controlword(self, cw: int) -> None:
         prev = self.controlword_prev
@@ -968,6 +988,7 @@ class ErobCanopenBus:
         self._epoch: int | None = None
         self._dt: float | None = None  #: the world's substep (:meth:`bind_substep`); None: ticked every substep
         self._routed: tuple[can.Message, co.Route] | None = None  #: the last frame :meth:`on_frame` classified
+        self.pdos_ignored = 0  #: PDOs offered to a front that has not mapped them (:meth:`CanopenFront.ignores_pdo`)
         for f in fronts:
             self.add(f)
 
@@ -1008,8 +1029,13 @@ class ErobCanopenBus:
             return () if front is None else self._answers(front, frame, route)
         if kind.is_pdo:
             out = []
+            cob = frame.arbitration_id
             for f in self.fronts:  # PDOs are routed by COB-ID: any front may have mapped it
                 if f.nmt is co.NmtState.OPERATIONAL:
+                    if f.ignores_pdo(cob):
+                        f.frames_in += 1  # all CanopenFront.on_frame would do with it
+                        self.pdos_ignored += 1
+                        continue
                     out.extend(self._answers(f, frame, route))
             return out
         return ()
