@@ -13,9 +13,10 @@ target's column, ``status`` / ``status_out``; the analog set-point 0x01FE as :me
 makes it act: ``ready``, then ``target_speed`` or ``target_current``, or held where the motor is not ready);
 afterwards Python brings the medium (its time, free instant, counters), the bus's last tick, the world and
 clock, the firmware's parameter store and write log, the front's request count and held set-point and the
-sensors (what a read of position, speed or current reports, in the order of the reads) to where the
-frame-by-frame path leaves them, and makes the replies (``ValueReply``, ``Ack``, the ``ErrorReply`` 0x0027 of a
-start that found the motor not ready, which ends the call as it ends the host's move).
+sensors (what a read of position, speed or current reports, in the order of the reads, where the call did not
+make those reports itself at each read's act: :func:`report`) to where the frame-by-frame path leaves them, and
+makes the replies (``ValueReply``, ``Ack``, the ``ErrorReply`` 0x0027 of a start that found the motor not ready,
+which ends the call as it ends the host's move).
 
 A set-point held inside the call: from then on the world ticks the bus every substep (``ErobCanBus.next_event``
 is -inf) and each tick asks the drive ``ready()``. The call steps its substeps in stretches instead, which gives
