@@ -13,9 +13,10 @@ target's column, ``status`` / ``status_out``; the analog set-point 0x01FE as :me
 makes it act: ``ready``, then ``target_speed`` or ``target_current``, or held where the motor is not ready);
 afterwards Python brings the medium (its time, free instant, counters), the bus's last tick, the world and
 clock, the firmware's parameter store and write log, the front's request count and held set-point and the
-sensors (what a read of position, speed or current reports, in the order of the reads) to where the
-frame-by-frame path leaves them, and makes the replies (``ValueReply``, ``Ack``, the ``ErrorReply`` 0x0027 of a
-start that found the motor not ready, which ends the call as it ends the host's move).
+sensors (what a read of position, speed or current reports, in the order of the reads, where the call did not
+make those reports itself at each read's act: :func:`report`) to where the frame-by-frame path leaves them, and
+makes the replies (``ValueReply``, ``Ack``, the ``ErrorReply`` 0x0027 of a start that found the motor not ready,
+which ends the call as it ends the host's move).
 
 A set-point held inside the call: from then on the world ticks the bus every substep (``ErobCanBus.next_event``
 is -inf) and each tick asks the drive ``ready()``. The call steps its substeps in stretches instead, which gives
@@ -46,7 +47,8 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
+import sys
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -54,7 +56,7 @@ from joints.codecs import erob_can as ec
 from joints.devices.erob.can import EROB_CAN, Reach
 from joints.devices.erob.registers import MotionMode, OperationMode
 from joints.errors import ParameterRefused
-from joints.sim import erob, kernel, stepping
+from joints.sim import erob, kernel, sensors, stepping
 from joints.sim import erob_can as sim_can
 from joints.sim import erob_kernel as K
 from joints.sim import line_exchange as L
@@ -62,25 +64,27 @@ from joints.sim.erob import ErobFirmware
 from joints.sim.erob_can import ErobCanBus, ErobCanFront
 from joints.sim.erob_kernel import fmax
 from joints.sim.kernel import jitable
+from joints.sim.sensors import Sensor
 from joints.sim.stepping import STEPS
 from joints.transports import can as can_transport
 from joints.transports.can_sim import CanMedium, LockstepCanBus
 
-__all__ = ["ErobCanExchange", "act", "exchanges", "holds"]
+__all__ = ["ErobCanExchange", "Stock", "act", "exchanges", "holds"]
 
 _SPEED, _TORQUE = int(OperationMode.SPEED), int(OperationMode.TORQUE)
 
 #: columns of the state vector (the first three are :mod:`joints.sim.line_exchange`'s: ``L.fused`` brings the
 #: world and clock back): the clock, the world's target time, booked; the medium's time, the clock time it last
 #: saw, when the bus is free, its last tick; its frame, bit and busy-time counters; the world's timestep; ticks
-#: made; the link's timeout; transactions done; whether a branch the call does not model was met
-CLOCK, TARGET, BOOKED, NOW, SEEN, FREE, TICKED, FRAMES, BITS, BUSY, DT, TICKS, TIMEOUT, DONE, ODD = range(15)
-STATE_WIDTH = 15
+#: made; the link's timeout; transactions done; whether a branch the call does not model was met; whether the
+#: reads' sensor reports are made in the call (:func:`report`; cleared after one met a value that is not finite)
+CLOCK, TARGET, BOOKED, NOW, SEEN, FREE, TICKED, FRAMES, BITS, BUSY, DT, TICKS, TIMEOUT, DONE, ODD, REPORTS = range(16)
+STATE_WIDTH = 16
 #: columns of a transaction row: the drive's row, the request's wire time and bits, the reply's, an error
-#: reply's, the drive's answer delay, the host adapter's latency; the op and its arguments
+#: reply's, the drive's answer delay, the host adapter's latency; the op and its arguments; a read's sensor report
 ROW, REQ_TOOK, REQ_BITS, REP_TOOK, REP_BITS, ERR_TOOK, ERR_BITS, DELAY, LATENCY, OP, VALUE, MOTION, RELATIVE, \
-    REPETITIVE = range(14)
-TX_WIDTH = 14
+    REPETITIVE, SENSE = range(15)
+TX_WIDTH = 15
 #: ops: a read (the status values of a copy of the row: no side effect), the read of
 #: ``status_of_achieving_position`` (the row itself: its settle timer runs), the target write, "start", the
 #: analog set-point 0x01FE (``analog_quantity_value``)
@@ -100,6 +104,13 @@ SENSED_AT = STATUS_AT + len(K.STATUS_NAMES)
 _SENSED = SENSED_AT - STATUS_AT  #: where the sensed columns start, counted from the status values
 _TIME, _POS, _VEL, _I_OUT = SENSED  #: (in this order)
 OUT_WIDTH = SENSED_AT + len(SENSED)
+#: a read's sensor report (its SENSE column; :func:`report`): none, the firmware's ``_sensed_counts``,
+#: ``_sensed_speed``, ``_sensed_current`` (each into its status value), ``_sensed_at`` (the status read's: its
+#: three values unused, its draws made; a value that is not finite goes into the read's own status value)
+NO_REPORT, REPORT_POSITION, REPORT_SPEED, REPORT_CURRENT, REPORT_ALL = range(5)
+_AT_POSITION, _AT_SPEED, _AT_CURRENT, _AT_ACHIEVE = (STATUS_AT + K.STATUS_NAMES.index(n) for n in (
+    "actual_position", "current_speed", "motor_current", "status_of_achieving_position"))
+_C = K.COUNTS_PER_RAD
 
 
 @jitable
@@ -137,6 +148,48 @@ def act(s: Any, t: Any, o: Any, scratch: Any) -> bool:
         return True
     K.start(s, t[MOTION], t[RELATIVE], t[VALUE])
     return False
+
+
+@jitable
+def report(s: Any, t: Any, o: Any, st: Any, sensor: Any, m: Any) -> None:
+    """The read ``t``'s sensor report where the call makes them (``st[REPORTS]``), as the firmware's
+    ``_sensed_counts``, ``_sensed_speed``, ``_sensed_current`` or ``_sensed_at`` makes it from the row as the read
+    saw it (``o``'s sensed columns) with the sensor's rows (``sensor``: its state, the stream first; ``m``: its
+    model's numbers) and the drive's row ``s`` (its position offset): the same draws, the same floats, the value
+    (rounded as ``round``) into the read's status value. A value that is not finite goes there as it is (the host's
+    ``int`` of it raises as the firmware's ``round`` would) and no later read of the call reports (Python stops
+    there)."""
+    kind = t[SENSE]
+    if kind == NO_REPORT or st[REPORTS] == 0.0:
+        return
+    time, pos, vel, i = o[SENSED_AT], o[SENSED_AT + 1], o[SENSED_AT + 2], o[SENSED_AT + 3]
+    if kind == REPORT_POSITION:
+        x = sensors.position(sensor, m, time, pos / _C, vel / _C) * _C
+        at = _AT_POSITION
+    elif kind == REPORT_SPEED:
+        x = sensors.velocity(sensor, m, pos / _C, vel / _C) * _C
+        at = _AT_SPEED
+    elif kind == REPORT_CURRENT:
+        x = sensors.current(sensor, m, i * 1e-3) * 1e3
+        at = _AT_CURRENT
+    else:  # the status read's: the first of its three values that is not finite, if any
+        p, v, c = sensors.sense(sensor, m, time, pos / _C, vel / _C, i * 1e-3)
+        at = _AT_ACHIEVE
+        x = 0.0
+        for y in (p * _C, v * _C, c * 1e3):
+            if not math.isfinite(y):
+                x = y
+                break
+        if math.isfinite(x):
+            return
+    if not math.isfinite(x):
+        o[at] = x
+        st[REPORTS] = 0.0
+    elif abs(x) >= 4503599627370496.0:  # (2**52) an integer already, past any register with any offset: the host
+        o[at] = x  # saturates it as it saturates round(x) + offset
+    else:
+        v = float(K.round_half_even(x))
+        o[at] = v + float(int(s[K.OFFSET])) if kind == REPORT_POSITION else v  # (exact: both < 2**52)
 
 
 @jitable
@@ -186,10 +239,11 @@ def _wait(until: float, st: Any, w: int, mj_step: int, table: Any, adr: Any, rat
     st[NOW] = fmax(st[NOW], until)
 
 
-def exchanges(tx: Any, out: Any, scratch: Any, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any,
-              order: Any, worlds: Any, dts: Any, active: Any) -> None:
+def exchanges(tx: Any, out: Any, scratch: Any, sensor: Any, m: Any, st: Any, w: int, mj_step: int, table: Any,
+              adr: Any, ratio: Any, order: Any, worlds: Any, dts: Any, active: Any) -> None:
     """The transactions ``tx`` in world ``w`` one after the other, as the host's link carries each over the
-    lockstep medium: ``st`` in and out, each one's instants (and its read's values) into ``out``. Stops after a
+    lockstep medium: ``st`` in and out, each one's instants (and its read's values, with their sensor reports
+    where ``st[REPORTS]``: :func:`report` with the sensor's rows ``sensor`` and ``m``) into ``out``. Stops after a
     refused request; ``st[ODD]`` set: a branch of the medium the call does not model was met (the caller's
     checks keep it from happening). A sleep the world held (``st[BOOKED]`` is ``L.HELD``: ``World.hold``) runs
     first, as ``World.sync`` runs it at the medium's first ``_sync``: its substeps, the bus's tick at the last
@@ -238,8 +292,10 @@ def exchanges(tx: Any, out: Any, scratch: Any, st: Any, w: int, mj_step: int, ta
             return
         # the request's end: processed at once where the physics stands past it (_skippable), else waited for
         acted_at = -1.0
+        s = table[int(t[ROW])]
         if end <= 2.0 * st[CLOCK] and end <= st[TICKED]:
-            refused = act(table[int(t[ROW])], t, o, scratch)
+            refused = act(s, t, o, scratch)
+            report(s, t, o, st, sensor, m)
         else:
             behind = end - st[CLOCK]
             acted = False
@@ -248,18 +304,20 @@ def exchanges(tx: Any, out: Any, scratch: Any, st: Any, w: int, mj_step: int, ta
                 st[BOOKED] = 0.0
                 n = _due(behind, st, w, worlds)
                 if n > 0:
-                    m = _until(end, n, st, w, worlds)
-                    if m < n:  # the tick after m substeps reaches the frame's end: the drive acts there
-                        _steps(m, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
-                        refused = act(table[int(t[ROW])], t, o, scratch)
+                    j = _until(end, n, st, w, worlds)
+                    if j < n:  # the tick after m substeps reaches the frame's end: the drive acts there
+                        _steps(j, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+                        refused = act(s, t, o, scratch)
+                        report(s, t, o, st, sensor, m)
                         acted = True
                         acted_at = worlds[w, STEPS]
-                        n -= m
+                        n -= j
                     _steps(n, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
                 st[CLOCK] = st[TARGET]
                 st[SEEN] = st[CLOCK]
             if not acted:
-                refused = act(table[int(t[ROW])], t, o, scratch)
+                refused = act(s, t, o, scratch)
+                report(s, t, o, st, sensor, m)
             st[NOW] = fmax(st[NOW], end)
         o[REFUSED] = 1.0 if refused else 0.0
         o[ACTED] = worlds[w, STEPS] if acted_at < 0 else acted_at
@@ -292,7 +350,95 @@ def exchanges(tx: Any, out: Any, scratch: Any, st: Any, w: int, mj_step: int, ta
             return
 
 
+def _version_tags() -> Callable[[type], Any] | None:
+    """A reader of a class's version tag (CPython's ``tp_version_tag``, as a ``ctypes.c_uint`` over it), or None
+    where this interpreter is not known to keep the rule :class:`Stock` rests on: CPython 3.11 and later give a
+    class tag 0 whenever an attribute of it or of one of its bases is set or deleted (``type.__setattr__``:
+    ``PyType_Modified``, which resets the class's subclasses too), and a new tag, never used before, at its next
+    lookup. The struct's offsets are checked on a class made here (its size, flags, base, bases, MRO and dict
+    offsets at their places) and the rule itself on it (a set attribute resets its subclass's tag; a lookup gives
+    a new one): anything else, None."""
+    if sys.implementation.name != "cpython" or sys.version_info < (3, 11):
+        return None
+    import ctypes
+
+    word = ctypes.sizeof(ctypes.c_void_p)
+    if ctypes.sizeof(ctypes.c_ssize_t) != word or ctypes.sizeof(ctypes.c_ulong) != word:
+        return None
+
+    def at(cls: type, k: int, kind: Any = ctypes.c_ssize_t) -> Any:
+        return kind.from_address(id(cls) + k * word).value
+
+    base = type("_TagProbe", (), {"probe": lambda self: 0})
+    sub = type("_TagProbeSub", (base,), {})
+    for cls in (base, sub):  # tp_basicsize, tp_flags, tp_weaklistoffset, tp_base, tp_dictoffset, tp_bases, tp_mro
+        if (at(cls, 4), at(cls, 21, ctypes.c_ulong), at(cls, 26), at(cls, 32), at(cls, 36), at(cls, 42),
+                at(cls, 43)) != (cls.__basicsize__, cls.__flags__, cls.__weakrefoffset__, id(cls.__base__),
+                                 cls.__dictoffset__, id(cls.__bases__), id(cls.__mro__)):
+            return None
+
+    def tag(cls: type) -> Any:
+        return ctypes.c_uint.from_address(id(cls) + 48 * word)  # tp_version_tag: after tp_del
+
+    seen = tag(sub)
+    _ = sub.probe  # (a lookup: the class gets a tag)
+    first = seen.value
+    base.probe = lambda self: 1
+    reset = seen.value
+    _ = sub.probe
+    if first == 0 or reset != 0 or seen.value in (0, first):
+        return None
+    return tag
+
+
+_TAG = _version_tags()
+
+
+class Stock:
+    """Whether none of ``methods`` ((class or module, name, the function as defined)) is replaced, as
+    :func:`~joints.sim.line_exchange.stock` tells, that check made once per version of their classes.
+
+    Rule: a class's version tag (:func:`_version_tags`) changes whenever an attribute of it or of a base is set or
+    deleted (a monkeypatched method), and is never reused; so where every class's tag is what it was around a
+    check that passed, each ``getattr`` of that check still gives the same function. A module's attributes have no
+    tag: those are checked every time. Without tags (another interpreter) every call is the full check. (A class's
+    dict changed behind ``type.__setattr__``'s back, e.g. through ``gc``, is not seen; neither is it by the
+    attribute checks of an instance.)"""
+
+    def __init__(self, methods: Sequence[tuple[Any, str, Any]]) -> None:
+        self.methods = tuple(methods)
+        self._modules = tuple(m for m in self.methods if not isinstance(m[0], type))
+        classes = list(dict.fromkeys(m[0] for m in self.methods if isinstance(m[0], type)))
+        # a base's change resets its subclasses' tags: the classes no other listed class derives from carry all
+        leaves = [c for c in classes if not any(d is not c and c in d.__mro__ for d in classes)]
+        self._tags = None if _TAG is None else tuple(_TAG(c) for c in leaves)
+        self._proven: tuple[int, ...] | None = None  #: the tags around the last check that passed
+        self.checks = 0  #: full checks made
+
+    def __call__(self) -> bool:
+        tags = self._tags
+        if tags is None:
+            self.checks += 1
+            return L.stock(self.methods)
+        before = tuple([t.value for t in tags])
+        if before == self._proven:
+            return L.stock(self._modules)
+        self.checks += 1
+        ok = L.stock(self.methods)
+        after = tuple([t.value for t in tags])
+        self._proven = after if ok and after == before and 0 not in after else None
+        return ok
+
+
 _COMPILED: list[Any] = []
+_SENSOR_OPS: list[Any] = []
+
+
+def _sensor_ops() -> Any:
+    """The sensors' compiled reads (``sensors.compiled_ops()``: what a stock :class:`Sensor` calls, compiled)."""
+    if not _SENSOR_OPS:
+        _SENSOR_OPS.append(sensors.compiled_ops())
+    return _SENSOR_OPS[0]
 
 
 def _compiled() -> Any:
@@ -314,8 +460,10 @@ _STOCK = (*erob.STOCK, *((cls, name, getattr(cls, name)) for cls, names in (
     (ErobCanBus, ("on_frame", "exchange", "front", "turnaround", "tick", "next_event")),
     (ErobCanFront, ("handle", "_read", "_write", "_command", "_setpoint", "_fw_read", "tick")),
     (erob._StatusRead, ("finish",)),
-    (ErobFirmware, ("_sensed",)),
+    (ErobFirmware, ("_sensed", "_sensed_at", "_sensed_counts", "_sensed_speed", "_sensed_current", "offset")),
+    (Sensor, ("position", "velocity", "current", "sense")),
 ) for name in names))
+_STOCK_PROOF = Stock(_STOCK)
 
 
 #: what a held sleep rests on (:func:`holds`): the medium's entries that settle the world first (``_sync``), its
@@ -326,6 +474,7 @@ _HOLD_STOCK = tuple((cls, name, getattr(cls, name)) for cls, names in (
     (LockstepCanBus, ("send", "recv")),
     (ErobCanBus, ("tick", "next_event", "holds")),
 ) for name in names)
+_HOLD_PROOF = Stock(_HOLD_STOCK)
 
 
 def holds(bus: ErobCanBus) -> bool:
@@ -345,12 +494,14 @@ def holds(bus: ErobCanBus) -> bool:
     for f in bus.fronts:
         if f.held is not None:
             return False
-    return L.stock(_HOLD_STOCK)
+    return _HOLD_PROOF()
 
 
 #: the reads whose value the drive's sensors report (the firmware's method, given the row as the read saw it)
 _SENSED_READS = {"actual_position": "_sensed_counts", "current_speed": "_sensed_speed",
                  "motor_current": "_sensed_current"}
+#: their reports made in the call (:func:`report`)
+_REPORT_OF = {"actual_position": REPORT_POSITION, "current_speed": REPORT_SPEED, "motor_current": REPORT_CURRENT}
 
 
 def _direct(plan: Any) -> tuple[int, int, int] | None:
@@ -375,6 +526,7 @@ class _Shape:
     reply: tuple[int, float]  #: the plain reply's
     error: tuple[int, float]  #: an error reply's
     extra: Any  #: a read: (status index, scale, lo, hi, the prepared status read or None, its :func:`_direct`)
+    sense: int = NO_REPORT  #: a read's sensor report (:func:`report`); -1: one the call cannot make
 
 
 @dataclass(frozen=True, slots=True)
@@ -390,6 +542,7 @@ class _Plan:
     longest: float  #: s one of them takes at most
     stamp: tuple[Any, ...]  #: :meth:`ErobCanExchange._stamp` of its fronts (each once) when it was made
     reads: bool  #: reads only
+    reports: bool  #: reads with sensor reports, each one the call can make, of one front
 
 
 class ErobCanExchange:
@@ -421,8 +574,16 @@ class ErobCanExchange:
         self.held = 0  #: of them, held by the front (the drive stopped being ready during the call)
         self.sleeps = 0  #: calls that ran a sleep the world held first (``World.hold``; :func:`holds`)
         self._row_seen: dict[int, float] = dict.fromkeys(SENSED, 0.0)  #: :meth:`_sensed_row`'s
+        self._reported = False  #: the last call made its reads' sensor reports (:meth:`_reporting`)
+        self.reported = 0  #: calls that made their reads' sensor reports
+        self._none = np.zeros(1)  #: the sensor rows given to a call that makes no reports
 
     # -- the steady case ------------------------------------------------------------------------
+    @staticmethod
+    def stock(methods: Sequence[tuple[Any, str, Any]]) -> Stock:
+        """A :class:`Stock` proof of ``methods`` (the host's, whose step cannot import the sim)."""
+        return Stock(methods)
+
     def _steady(self, front: ErobCanFront) -> bool:
         """Whether the world, medium, host, bus, front and firmware are as the compiled call assumes."""
         world, medium, bus, host = self.world, self.medium, self.bus, self.host
@@ -451,7 +612,7 @@ class ErobCanExchange:
         fw = front.firmware
         if type(front) is not ErobCanFront or type(fw) is not ErobFirmware or fw.pending or fw.command_delay > 0:
             return False
-        return L.stock(_STOCK)
+        return _STOCK_PROOF()
 
     def _shape(self, request: Any, front: ErobCanFront) -> _Shape | None:
         kind = type(request)
@@ -487,8 +648,10 @@ class ErobCanExchange:
             if plan is not None and not isinstance(plan, erob._StatusRead):
                 return None
             op = READ_ACHIEVE if plan is not None else READ
+            direct = _direct(plan)
+            sense = _REPORT_OF.get(name, NO_REPORT) if plan is None else REPORT_ALL if direct is not None else -1
             return _Shape(op, name, self._timed(request), self._timed(ec.ValueReply(node, 0)), error,
-                          (K.STATUS_NAMES.index(name), key.scale, lo, hi, plan, _direct(plan)))
+                          (K.STATUS_NAMES.index(name), key.scale, lo, hi, plan, direct), sense)
         if type(request) is ec.Write and request.subindex is None:
             try:
                 name = EROB_CAN.at(request.index, None)
@@ -549,7 +712,8 @@ class ErobCanExchange:
             repetitive = 1.0 if values["motion_mode"] == int(MotionMode.REPETITIVE) else 0.0
         req, rep, err = shape.request, shape.reply, shape.error
         return [float(self._row(front)), req[1], float(req[0]), rep[1], float(rep[0]), err[1], float(err[0]),
-                delay, self.host._node.latency, float(shape.op), value, motion, relative, repetitive], shape
+                delay, self.host._node.latency, float(shape.op), value, motion, relative, repetitive,
+                float(max(shape.sense, NO_REPORT))], shape
 
     @staticmethod
     def _setpoint(fw: ErobFirmware, request: Any) -> tuple[float, float] | None:
@@ -658,8 +822,10 @@ class ErobCanExchange:
         spans = [t[REQ_TOOK] + t[DELAY] + max(t[REP_TOOK], t[ERR_TOOK]) + t[LATENCY] + 2.0 * dt for t in rows]
         unique = tuple(dict.fromkeys(fronts))
         reads = all(s.op in (READ, READ_ACHIEVE) for s in shapes)
+        senses = [s.sense for s in shapes]
+        reports = len(unique) == 1 and any(senses) and min(senses) >= 0
         plan = _Plan(requests, shapes, fronts, unique, np.array(rows), sum(spans) + dt, max(spans),
-                     self._stamp(unique), reads)
+                     self._stamp(unique), reads, reports)
         if reads and isinstance(requests, tuple):
             if len(self._plans) > 64:
                 self._plans.clear()
@@ -701,16 +867,22 @@ class ErobCanExchange:
             import numpy as np
 
             out = self._out[n] = np.zeros((n, OUT_WIDTH))
+        sensor = self._reporting(plan)
+        self._reported = sensor is not None
+        self.reported += self._reported
         st = self._st
         st[:] = (clock, world._target, L.HELD if held else 0.0, medium.now, medium._clock_seen, medium._free,
                  medium._ticked,
-                 0.0, 0.0, medium.busy, world.timestep, 0.0, timeout, 0.0, 0.0)
+                 0.0, 0.0, medium.busy, world.timestep, 0.0, timeout, 0.0, 0.0, 1.0 if self._reported else 0.0)
         scratch = self._scratch.get(world.group.table.shape[1])
         if scratch is None:
             import numpy as np
 
             scratch = self._scratch[world.group.table.shape[1]] = np.zeros(world.group.table.shape[1])
-        state = L.fused(fn, world, st, tx, out, scratch)
+        if sensor is None:
+            state = L.fused(fn, world, st, tx, out, scratch, self._none, self._none)
+        else:
+            state = L.fused(fn, world, st, tx, out, scratch, sensor.state, sensor._m)
         medium.now = state[NOW]
         medium._clock_seen = state[SEEN]
         medium._free = state[FREE]
@@ -730,6 +902,20 @@ class ErobCanExchange:
         if held:
             self.sleeps += 1
         return plan, out, done
+
+    @staticmethod
+    def _reporting(plan: _Plan) -> Sensor | None:
+        """The sensor whose reports the call makes for ``plan`` (:func:`report`), or None (its reads' reports made
+        by the firmware's methods after it, as before): a plan with reports of one front (``plan.reports``), whose
+        firmware's sensor is a :class:`~joints.sim.sensors.Sensor` reporting (not ideal) from its own stream by its
+        compiled stock reads (``_reads``; a generator set as its ``rng``: Python) on its rows (``state``, ``_m``:
+        what those reads are given), its and the firmware's methods stock (:data:`_STOCK`, checked before)."""
+        if not plan.reports:
+            return None
+        sensor = plan.unique[0].firmware.sensor
+        if type(sensor) is not Sensor or sensor.ideal or sensor.model.ideal or sensor._reads is not _sensor_ops():
+            return None
+        return sensor
 
     def values(self, reads: tuple[Any, ...], timeout: float) -> list[int] | None:
         """The values the twins answer to ``reads`` (a tuple of reads, sent one after the other as by :meth:`run`):
@@ -830,7 +1016,7 @@ class ErobCanExchange:
         index, scale, lo, hi, plan, direct = shape.extra
         if direct is not None:  # the status read's finish (see _direct): its sensors report, its value saturated
             fw = plan.fw
-            if not fw.sensor.ideal:  # (its stock ``_sensed`` of the row as the read saw it: SENSED's order)
+            if not self._reported and not fw.sensor.ideal:  # (its stock ``_sensed`` of the row as the read saw it)
                 fw._sensed_at(*o[_SENSED:])
             at, lo, hi = direct
             v = int(o[at])
@@ -840,7 +1026,7 @@ class ErobCanExchange:
         else:
             v = int(o[index])
             sensed = _SENSED_READS.get(shape.name)
-            if sensed is not None and not fw.sensor.model.ideal:
+            if sensed is not None and not self._reported and not fw.sensor.model.ideal:
                 v = getattr(fw, sensed)(self._sensed_row(o).__getitem__)
             if v < lo:
                 v = lo
