@@ -18,7 +18,7 @@ the driver path's in every case. Used by :mod:`joints.compiled_path`.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from joints.codecs import erob_can as ec
@@ -47,6 +47,14 @@ _DECODE = ((CanMap, "from_wire", CanMap.from_wire), (CanMap, "param", ParamMap.p
 _I32 = (-0x80000000, 0x7FFFFFFF)
 
 
+def _stock(methods: tuple[tuple[Any, str, Any], ...] = _STOCK) -> bool:
+    """Whether none of ``methods`` (:data:`_STOCK`) is replaced."""
+    for cls, name, fn in methods:
+        if getattr(cls, name) is not fn:
+            return False
+    return True
+
+
 class _Counts:
     """Requests sent by the one-call exchange (``fused``; all of them ``taken`` by it), as a lane counts them."""
 
@@ -67,10 +75,6 @@ class ErobCanStep:
         self.link: ErobCanLink = driver.link
         self.clock = driver.clock
         self.exchange = exchange
-        #: whether none of :data:`_STOCK` (:data:`_DECODE`) is replaced: the exchange's proof, once per version of
-        #: their classes (``can_exchange.Stock``)
-        self._stock: Callable[[], bool] = exchange.stock(_STOCK)
-        self._decode: Callable[[], bool] = exchange.stock(_DECODE)
         self.node = access.node
         self.lane = _Counts()
         self.taken = 0  #: joint steps (commands: a target + start, or a set-point) sent by the exchange
@@ -106,7 +110,7 @@ class ErobCanStep:
         """Whether the link is in the steady case: no trace, no node to fence, the stock classes and methods."""
         link = self.link
         return link.trace is None and self.node not in link._unsynced and type(link) is ErobCanLink and \
-            type(link.rule) is ErobCanRule and type(link.framing) is FrameFraming and self._stock()
+            type(link.rule) is ErobCanRule and type(link.framing) is FrameFraming and _stock()
 
     def _check(self, request: Any, steady: bool) -> None:
         """``rule.check(request)``: raises :class:`~joints.errors.EncodeError` before anything is sent. With the
@@ -279,7 +283,7 @@ class ErobCanStep:
         ``raw * 1``, the same int. (The map's parameters and keys are frozen records: as the twin's exchange, this
         takes a name's type and scale as constants of its map.)"""
         cmap = self.access.map
-        if type(cmap) is not CanMap or not self._decode():
+        if type(cmap) is not CanMap or not _stock(_DECODE):
             return False
         seen, plain = self._plain_of
         if seen is not cmap:

@@ -47,8 +47,7 @@ from __future__ import annotations
 
 import itertools
 import math
-import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -69,7 +68,7 @@ from joints.sim.stepping import STEPS
 from joints.transports import can as can_transport
 from joints.transports.can_sim import CanMedium, LockstepCanBus
 
-__all__ = ["ErobCanExchange", "Stock", "act", "exchanges", "holds"]
+__all__ = ["ErobCanExchange", "act", "exchanges", "holds"]
 
 _SPEED, _TORQUE = int(OperationMode.SPEED), int(OperationMode.TORQUE)
 
@@ -350,86 +349,6 @@ def exchanges(tx: Any, out: Any, scratch: Any, sensor: Any, m: Any, st: Any, w: 
             return
 
 
-def _version_tags() -> Callable[[type], Any] | None:
-    """A reader of a class's version tag (CPython's ``tp_version_tag``, as a ``ctypes.c_uint`` over it), or None
-    where this interpreter is not known to keep the rule :class:`Stock` rests on: CPython 3.11 and later give a
-    class tag 0 whenever an attribute of it or of one of its bases is set or deleted (``type.__setattr__``:
-    ``PyType_Modified``, which resets the class's subclasses too), and a new tag, never used before, at its next
-    lookup. The struct's offsets are checked on a class made here (its size, flags, base, bases, MRO and dict
-    offsets at their places) and the rule itself on it (a set attribute resets its subclass's tag; a lookup gives
-    a new one): anything else, None."""
-    if sys.implementation.name != "cpython" or sys.version_info < (3, 11):
-        return None
-    import ctypes
-
-    word = ctypes.sizeof(ctypes.c_void_p)
-    if ctypes.sizeof(ctypes.c_ssize_t) != word or ctypes.sizeof(ctypes.c_ulong) != word:
-        return None
-
-    def at(cls: type, k: int, kind: Any = ctypes.c_ssize_t) -> Any:
-        return kind.from_address(id(cls) + k * word).value
-
-    base = type("_TagProbe", (), {"probe": lambda self: 0})
-    sub = type("_TagProbeSub", (base,), {})
-    for cls in (base, sub):  # tp_basicsize, tp_flags, tp_weaklistoffset, tp_base, tp_dictoffset, tp_bases, tp_mro
-        if (at(cls, 4), at(cls, 21, ctypes.c_ulong), at(cls, 26), at(cls, 32), at(cls, 36), at(cls, 42),
-                at(cls, 43)) != (cls.__basicsize__, cls.__flags__, cls.__weakrefoffset__, id(cls.__base__),
-                                 cls.__dictoffset__, id(cls.__bases__), id(cls.__mro__)):
-            return None
-
-    def tag(cls: type) -> Any:
-        return ctypes.c_uint.from_address(id(cls) + 48 * word)  # tp_version_tag: after tp_del
-
-    seen = tag(sub)
-    _ = sub.probe  # (a lookup: the class gets a tag)
-    first = seen.value
-    base.probe = lambda self: 1
-    reset = seen.value
-    _ = sub.probe
-    if first == 0 or reset != 0 or seen.value in (0, first):
-        return None
-    return tag
-
-
-_TAG = _version_tags()
-
-
-class Stock:
-    """Whether none of ``methods`` ((class or module, name, the function as defined)) is replaced, as
-    :func:`~joints.sim.line_exchange.stock` tells, that check made once per version of their classes.
-
-    Rule: a class's version tag (:func:`_version_tags`) changes whenever an attribute of it or of a base is set or
-    deleted (a monkeypatched method), and is never reused; so where every class's tag is what it was around a
-    check that passed, each ``getattr`` of that check still gives the same function. A module's attributes have no
-    tag: those are checked every time. Without tags (another interpreter) every call is the full check. (A class's
-    dict changed behind ``type.__setattr__``'s back, e.g. through ``gc``, is not seen; neither is it by the
-    attribute checks of an instance.)"""
-
-    def __init__(self, methods: Sequence[tuple[Any, str, Any]]) -> None:
-        self.methods = tuple(methods)
-        self._modules = tuple(m for m in self.methods if not isinstance(m[0], type))
-        classes = list(dict.fromkeys(m[0] for m in self.methods if isinstance(m[0], type)))
-        # a base's change resets its subclasses' tags: the classes no other listed class derives from carry all
-        leaves = [c for c in classes if not any(d is not c and c in d.__mro__ for d in classes)]
-        self._tags = None if _TAG is None else tuple(_TAG(c) for c in leaves)
-        self._proven: tuple[int, ...] | None = None  #: the tags around the last check that passed
-        self.checks = 0  #: full checks made
-
-    def __call__(self) -> bool:
-        tags = self._tags
-        if tags is None:
-            self.checks += 1
-            return L.stock(self.methods)
-        before = tuple([t.value for t in tags])
-        if before == self._proven:
-            return L.stock(self._modules)
-        self.checks += 1
-        ok = L.stock(self.methods)
-        after = tuple([t.value for t in tags])
-        self._proven = after if ok and after == before and 0 not in after else None
-        return ok
-
-
 _COMPILED: list[Any] = []
 _SENSOR_OPS: list[Any] = []
 
@@ -463,7 +382,6 @@ _STOCK = (*erob.STOCK, *((cls, name, getattr(cls, name)) for cls, names in (
     (ErobFirmware, ("_sensed", "_sensed_at", "_sensed_counts", "_sensed_speed", "_sensed_current", "offset")),
     (Sensor, ("position", "velocity", "current", "sense")),
 ) for name in names))
-_STOCK_PROOF = Stock(_STOCK)
 
 
 #: what a held sleep rests on (:func:`holds`): the medium's entries that settle the world first (``_sync``), its
@@ -474,7 +392,6 @@ _HOLD_STOCK = tuple((cls, name, getattr(cls, name)) for cls, names in (
     (LockstepCanBus, ("send", "recv")),
     (ErobCanBus, ("tick", "next_event", "holds")),
 ) for name in names)
-_HOLD_PROOF = Stock(_HOLD_STOCK)
 
 
 def holds(bus: ErobCanBus) -> bool:
@@ -494,7 +411,7 @@ def holds(bus: ErobCanBus) -> bool:
     for f in bus.fronts:
         if f.held is not None:
             return False
-    return _HOLD_PROOF()
+    return L.stock(_HOLD_STOCK)
 
 
 #: the reads whose value the drive's sensors report (the firmware's method, given the row as the read saw it)
@@ -579,10 +496,6 @@ class ErobCanExchange:
         self._none = np.zeros(1)  #: the sensor rows given to a call that makes no reports
 
     # -- the steady case ------------------------------------------------------------------------
-    @staticmethod
-    def stock(methods: Sequence[tuple[Any, str, Any]]) -> Stock:
-        """A :class:`Stock` proof of ``methods`` (the host's, whose step cannot import the sim)."""
-        return Stock(methods)
 
     def _steady(self, front: ErobCanFront) -> bool:
         """Whether the world, medium, host, bus, front and firmware are as the compiled call assumes."""
@@ -612,7 +525,7 @@ class ErobCanExchange:
         fw = front.firmware
         if type(front) is not ErobCanFront or type(fw) is not ErobFirmware or fw.pending or fw.command_delay > 0:
             return False
-        return _STOCK_PROOF()
+        return L.stock(_STOCK)
 
     def _shape(self, request: Any, front: ErobCanFront) -> _Shape | None:
         kind = type(request)

@@ -1,8 +1,7 @@
 """The eRob CAN one-call exchange's steady proofs and its reads' sensor reports (joints.sim.can_exchange).
 
-- ``Stock``: the stock-method check made once per version of the classes (CPython's type version tags): a method
-  replaced on a listed class, on a base of one, or on a listed module is seen at the next call; a replaced one put
-  back is stock again; steady steps make no full check.
+- The stock-method check: a method replaced on a base of the host link's class is seen at the next step, and
+  once put back the steps take the call again.
 - The reads' sensor reports made inside the compiled call (``report``): with noisy sensors (every draw of the
   model: sample age, position, velocity and current noise) and several seeds, the compiled path gives the frame by
   frame path's bits (the sensors' streams and sample ages among them) and made the reports in its calls; a sensor
@@ -14,8 +13,6 @@ from __future__ import annotations
 
 import math
 import random
-import sys
-import types
 from typing import Any
 
 import numpy as np
@@ -38,55 +35,13 @@ def _steps(u: Any) -> list[ErobCanStep]:
     return [s for s in (u.compiled_path._steppers if u.compiled_path else []) if isinstance(s, ErobCanStep)]
 
 
-# -- Stock --------------------------------------------------------------------------------------------------
-def test_the_version_tags_are_read_where_cpython_keeps_their_rule() -> None:
-    if sys.implementation.name == "cpython" and sys.version_info >= (3, 11):
-        assert CE._TAG is not None
-    else:
-        assert CE._TAG is None
-
-
-def test_a_stock_proof_sees_a_replaced_method_at_its_next_call(monkeypatch: pytest.MonkeyPatch) -> None:
-    class Base:
-        def f(self) -> int:
-            return 0
-
-    class Leaf(Base):
-        def g(self) -> int:
-            return 1
-
-    module = types.ModuleType("planted")
-    module.h = lambda: 2  # type: ignore[attr-defined]
-    proof = CE.Stock([(Base, "f", Base.f), (Leaf, "g", Leaf.g), (module, "h", module.h)])  # type: ignore[attr-defined]
-    assert proof() and proof()
-    warm = proof.checks
-    for _ in range(10):
-        assert proof()
-    assert proof.checks == (warm if CE._TAG is not None else warm + 10)  # proven once per version
-    for owner, name in ((Base, "f"), (Leaf, "g"), (Leaf, "f"), (module, "h")):
-        assert proof() and proof()
-        warm = proof.checks
-        assert proof() and proof.checks == (warm if CE._TAG is not None else warm + 1)  # proven: no full check
-        with monkeypatch.context() as m:
-            m.setattr(owner, name, lambda *a: 9)
-            replaced = proof()
-        # (Leaf.f shadowing Base.f: the check asks Base.f, as line_exchange.stock does)
-        assert replaced == (owner is Leaf and name == "f"), (owner, name)
-        assert proof()  # put back: stock again
-    Base.other = 1  # type: ignore[attr-defined]  # (any attribute set: a new version, full checks again)
-    before = proof.checks
-    assert proof() and proof() and proof.checks > before
-    proven = proof.checks  # (the class's new tag is given at the first check's lookups: proven by the second)
-    assert proof() and proof.checks == (proven if CE._TAG is not None else proven + 1)
-
-
+# -- the stock-method check --------------------------------------------------------------------------------
 def test_a_method_replaced_on_a_base_of_the_host_s_link_leaves_the_steps_to_the_frame_by_frame_path(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    """From step 10 ``Link._drain`` (on the base of the link's class: the proof reads the leaf's tag) is wrapped,
-    from step 20 put back: the call carries none of steps 10-19 and carries the others, with the same bits; the
-    steady steps make no full check of the stock methods."""
+    """From step 10 ``Link._drain`` (on the base of the link's class) is wrapped, from step 20 put back: the call
+    carries none of steps 10-19 and carries the others, with the same bits."""
     original = Link._drain
-    calls: list[tuple[int, int, int]] = []
+    calls: list[int] = []
 
     def plant(k: int, u: Any) -> None:
         if k == 10:
@@ -96,7 +51,7 @@ def test_a_method_replaced_on_a_base_of_the_host_s_link_leaves_the_steps_to_the_
         steps = _steps(u)
         if steps:
             (step,) = steps
-            calls.append((step.values_taken, step._stock.checks, CE._STOCK_PROOF.checks))
+            calls.append(step.values_taken)
 
     out = {}
     for compiled in (False, True):
@@ -105,11 +60,7 @@ def test_a_method_replaced_on_a_base_of_the_host_s_link_leaves_the_steps_to_the_
         out[compiled] = _run(compiled, "position", 30, plant=plant)
     _same(out[False], out[True])
     if kernel.default_mode():
-        taken = [c[0] for c in calls]
-        assert taken[10] > taken[1] > 0 and taken[10] == taken[20] and taken[-1] >= taken[20] + 9
-        if CE._TAG is not None:
-            assert calls[9][1:] == calls[3][1:]  # steady: no full check
-            assert calls[29][1:] == calls[23][1:]
+        assert calls[10] > calls[1] > 0 and calls[10] == calls[20] and calls[-1] >= calls[20] + 9
 
 
 # -- the sensor reports in the call -------------------------------------------------------------------------
