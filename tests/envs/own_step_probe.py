@@ -106,9 +106,9 @@ def batched(rigs: int) -> float:
     for e in vec.unwrapped.envs:
         _instrument(e)
     batch = vec.unwrapped._batch
-    rigs = None if batch is None else batch.rigs  # every rig's command (and state read) in one compiled call
-    if rigs is not None:
-        rigs.command, rigs.states = _timed(rigs.command, "rig"), _timed(rigs.states, "rig")
+    one_call = None if batch is None else batch.rigs  # every rig's command (and state read) in one compiled call
+    if one_call is not None:
+        one_call.command, one_call.states = _timed(one_call.command, "rig"), _timed(one_call.states, "rig")
     together = joints.sleep_together
     joints.sleep_together = _timed(together, "rig")
     batches = max(4, 1024 // rigs)
