@@ -69,7 +69,8 @@ class Batch:
         #: rig of eRobs on one-call exchanges (:class:`joints.compiled_path.CompiledRigs`; None: rig by rig)
         self.paths = [e.compiled_path for e in self.envs]
         self.rigs = joints.CompiledRigs.build(self.paths)
-        self._pending: tuple[np.ndarray, np.ndarray, list[list[float]]] | None = None
+        #: the step under way: (actions, commands, actions as lists, the rigs' one call or None), begin to finish
+        self._pending: tuple[np.ndarray, np.ndarray, list[list[float]], joints.CompiledRigs | None] | None = None
 
     @classmethod
     def of(cls, envs: Sequence[Any]) -> Batch | None:
@@ -138,7 +139,7 @@ class Batch:
                 e._sent = c[i]
                 e.compiled_path.command(mode, rows[i], skips[i])  # type: ignore[union-attr]
                 e._tick += 1
-        self._pending = (a, c, a.tolist())
+        self._pending = (a, c, a.tolist(), rigs)  # (no rig's path can change before finish: the vector step's own)
         return True
 
     def _rigs(self) -> joints.CompiledRigs | None:
@@ -153,8 +154,8 @@ class Batch:
 
     def joined(self) -> bool:
         """Whether the rigs' state read goes in one call that may run their sleeps too
-        (:meth:`joints.CompiledRigs.joined`)."""
-        rigs = self._rigs()
+        (:meth:`joints.CompiledRigs.joined`): the one call of the step under way, else :meth:`_rigs`."""
+        rigs = self._rigs() if self._pending is None else self._pending[3]
         return rigs is not None and rigs.joined()
 
     def _velocity(self, a: np.ndarray) -> np.ndarray:
@@ -179,11 +180,10 @@ class Batch:
         """Every rig's ``finish_step``: (observations, rewards, the batch's info arrays) where no rig's episode
         ended, else each rig's own outcome (obs, reward, terminated, truncated, info), from its own code."""
         assert self._pending is not None
-        a, c, values = self._pending
+        a, c, values, rigs = self._pending  # the one call that sent this step's commands, or None
         self._pending = None
         envs = self.envs
         n = self.n
-        rigs = self._rigs()
         read = None if rigs is None else rigs.states()  # every rig's in one call
         if read is None:
             states = [e._read() for e in envs]

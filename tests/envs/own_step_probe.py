@@ -8,9 +8,14 @@ random actions (seed 0), less the time inside the rig's work: the compiled path'
 step: action checks and scaling, the safety cap and shield, observation, reward, info, termination (and
 gymnasium's wrappers). Best of ``BLOCKS`` identical blocks (same seed, same actions; resets not timed), so
 a burst of load on a shared machine does not count; the arm's shield is also shown alone. Then the batched
-env (``gym.make_vec(..., vectorization_mode="vector_entry_point")``) per rig step, less the rigs' work and
-``joints.sleep_together``. Pin it to one core (``taskset -c 1``); compare two checkouts by running the
-probe of each, alternating, with ``PYTHONPATH`` set to the checkout.
+env (``gym.make_vec(..., vectorization_mode="vector_entry_point")``) per rig step, less the rigs' work (the
+batch's one-call command and state read, :class:`joints.CompiledRigs`, where it has them) and
+``joints.sleep_together``. Pin it to one core (``taskset -c 1``); compare two checkouts by running the probe of
+each, alternating, with ``PYTHONPATH`` set to the checkout.
+
+Environment: ``OWN_CLOCK=thread`` times by this thread's CPU time (``time.thread_time``: a machine shared with
+other work does not count its preemptions; default ``perf_counter``); ``OWN_ONLY=Reach,16`` runs only the
+cases whose line contains one of those words (an env id's part, a mode, a rig count).
 """
 
 from __future__ import annotations
@@ -34,7 +39,12 @@ CASES = [("joints/ErobReach-v0", mode) for mode in ("position", "velocity", "tor
         [("joints/DiffDriveGoal-v0", None)]
 RIGS = (16, 256)
 
-clock = time.perf_counter
+clock = time.thread_time if os.environ.get("OWN_CLOCK") == "thread" else time.perf_counter
+ONLY = [w for w in os.environ.get("OWN_ONLY", "").split(",") if w]
+
+
+def _wanted(label: str) -> bool:
+    return not ONLY or any(w in label for w in ONLY)
 spent = {"rig": 0.0, "shield": 0.0}
 
 
@@ -95,6 +105,10 @@ def batched(rigs: int) -> float:
     vec = gym.make_vec("joints/ErobReach-v0", num_envs=rigs, vectorization_mode="vector_entry_point")
     for e in vec.unwrapped.envs:
         _instrument(e)
+    batch = vec.unwrapped._batch
+    one_call = None if batch is None else batch.rigs  # every rig's command (and state read) in one compiled call
+    if one_call is not None:
+        one_call.command, one_call.states = _timed(one_call.command, "rig"), _timed(one_call.states, "rig")
     together = joints.sleep_together
     joints.sleep_together = _timed(together, "rig")
     batches = max(4, 1024 // rigs)
@@ -116,11 +130,16 @@ def batched(rigs: int) -> float:
 
 
 def main() -> None:
-    print(f"Python {sys.version.split()[0]}, load {os.getloadavg()[0]:.1f}; us per step, best of {BLOCKS} x {STEPS}")
+    print(f"Python {sys.version.split()[0]}, load {os.getloadavg()[0]:.1f}; us per step, best of {BLOCKS} x {STEPS}"
+          f" ({clock.__name__})")
     for env_id, mode in CASES:
+        if not _wanted(f"{env_id} {mode or ''}"):
+            continue
         own, shield = single(env_id, mode)
         print(f"{env_id:26s} {mode or '':9s} own {own * 1e6:6.1f}" + (f"  (shield {shield * 1e6:5.1f})" if shield else ""))
     for n in RIGS:
+        if not _wanted(f"{n} rigs"):
+            continue
         print(f"{n:3d} rigs batched (ErobReach) own {batched(n) * 1e6:6.1f} per rig step")
 
 

@@ -205,3 +205,30 @@ def test_a_type_that_replaces_a_step_method_is_stepped_rig_by_rig() -> None:
         assert vec.batched_steps == 0
     finally:
         vec.close()
+
+
+def test_a_rig_given_another_compiled_path_is_not_carried_by_the_one_call() -> None:
+    """The rigs' one call is checked at a step's begin and kept to its finish: after a rig's compiled path is
+    replaced, neither the batch's commands nor its state reads go by the one call (each rig its own), same bits."""
+    import joints
+
+    vec, ref = _pair("joints/ErobReach-v0", {}, AutoresetMode.NEXT_STEP)
+    try:
+        u = vec.unwrapped
+        if not kernel.default_mode():
+            pytest.skip("the rigs' one call needs the compiled world")
+        rigs = u._batch.rigs
+        actions = np.random.default_rng(4).uniform(-1, 1, (6, N, 1)).astype(np.float32)
+        _same(vec.reset(seed=3), ref.reset(seed=3), "reset")
+        for t in range(3):
+            _same(vec.step(actions[t]), ref.step(actions[t]), f"step {t}")
+        calls = rigs.taken
+        assert calls >= 3  # the one call carried the first steps
+        rig = u.envs[0]
+        rig.compiled_path = joints.CompiledPath.build(rig.joints)
+        for t in range(3, 6):
+            _same(vec.step(actions[t]), ref.step(actions[t]), f"step {t}")
+        assert rigs.taken == calls and u.batched_steps == 6  # batched, each rig by its own path
+    finally:
+        vec.close()
+        ref.close()
