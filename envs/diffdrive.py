@@ -608,17 +608,10 @@ class DiffDriveGoalEnv(RigEnv):
         """Sim: (x, y, heading) of the chassis site ``base`` in the world frame."""
         return np.array(self._world_xyth())
 
-    #: the MuJoCo data whose chassis rows :attr:`_base_rows` are (sim)
-    _base_data: Any = None
-
     def _world_xyth(self) -> tuple[float, float, float]:
-        data = self.rig.sim.data  # (the physics catch up first)
-        if data is not self._base_data:  # the site's rows as views, made once per MuJoCo data object
-            self._base_rows: tuple[np.ndarray, np.ndarray] = (data.site_xpos[self._site], data.site_xmat[self._site])
-            self._base_data = data
-        xpos, xmat = self._base_rows
-        x, y, _ = xpos.tolist()
-        m = xmat.tolist()
+        data = self.rig.sim.data
+        x, y, _ = data.site_xpos[self._site].tolist()
+        m = data.site_xmat[self._site].tolist()
         return x, y, math.atan2(m[3], m[0])
 
     # -- bus --------------------------------------------------------------------------------

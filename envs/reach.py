@@ -385,7 +385,7 @@ class ErobArmReachEnv(JointsEnv):
         """End-effector position [m]: MuJoCo's ``ee`` site in sim, forward kinematics on hardware
         (or of ``positions`` [rad] when given)."""
         if positions is None and self.sim:
-            return np.array(self._ee_row())
+            return np.array(self.rig.world.data.site_xpos[self._site])
         if positions is None:
             positions = np.array([s.position for s in self._states])
         return erob_arm3_ee(self._to_model_all(np.asarray(positions, dtype=np.float64)))
@@ -499,23 +499,10 @@ class ErobArmReachEnv(JointsEnv):
                 return c
         return c  # nothing keeps it (the arm is there already): stop both
 
-    #: the MuJoCo data whose ``ee`` row :attr:`_ee_view` is (sim)
-    _ee_data: Any = None
-
-    def _ee_row(self) -> np.ndarray:
-        """Sim: the ``ee`` site's row of ``site_xpos``, the physics caught up (``world.data``): a view made once per
-        MuJoCo data object (its arrays stay where they are while it lives), not the binding's array and an index
-        per step."""
-        data = self.rig.world.data
-        if data is not self._ee_data:
-            self._ee_view: np.ndarray = data.site_xpos[self._site]
-            self._ee_data = data
-        return self._ee_view
-
     def _task_terms(self, positions: list[float]) -> list[float]:
         ee: list[float]
         if self.sim:
-            ee = self._ee_row().tolist()
+            ee = self.rig.world.data.site_xpos[self._site].tolist()
         else:
             ee = self.end_effector(np.array(positions)).tolist()
         target = self._target_list
