@@ -9,7 +9,9 @@ world ran. After each block it times raw ``mj_step`` on the same model (one Pyth
 reference) and prints per env step:
 
 * the step, and its compiled calls (frames, drive kernels and physics in one call each);
-* the rest: Python (the command's and the read's, the env's own, gymnasium's wrappers);
+* the rest: Python, split into the one-call exchanges' own (``LinkLane.exchange`` of each joint's lane, less the
+  compiled calls inside: the steady checks, rows, the state vector, the world's bring-back, the frames booked)
+  and everything else (the joints' checks and states, the env's own step, gymnasium's wrappers);
 * the ratio with no Python at all (the substeps' raw ``mj_step`` over the compiled calls): the ceiling;
 * the Python a step may keep for a ratio goal (``GOAL``): the substeps' raw ``mj_step`` / goal less the calls.
 
@@ -20,6 +22,7 @@ the same way for scale: its whole overhead is Python. Pin it to one core (``task
 
 from __future__ import annotations
 
+import os
 import statistics
 import sys
 import time
@@ -39,14 +42,32 @@ GOAL = 0.6
 
 
 class _Calls:
-    """The one-call exchange, timed: CPU seconds and substeps of the calls since :meth:`clear`."""
+    """The one-call exchange, timed: CPU seconds and substeps of the calls since :meth:`clear`, and CPU seconds in
+    the lanes' ``exchange`` (:meth:`lanes`) around them."""
 
     def __init__(self) -> None:
         self.fn, self.advance = line_exchange.compiled()
         assert self.fn is not None, "the one-call exchange is not compiled (numba missing or JOINTS_COMPILED=0)"
         self.seconds = 0.0
         self.substeps = 0
+        self.lane_seconds = 0.0
         line_exchange._COMPILED[0] = (self, self.advance)
+
+    def lanes(self, env: Any) -> None:
+        """Time ``exchange`` of every lane of ``env``'s compiled path (an instance attribute over the method)."""
+        path = getattr(env.unwrapped, "compiled_path", None)
+        lanes = {id(s.lane): s.lane for s in (path._steppers if path is not None else []) if hasattr(s, "lane")}
+        for lane in lanes.values():
+            lane.exchange = self._timed(lane.exchange)
+
+    def _timed(self, exchange: Any) -> Any:
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            t = time.thread_time()
+            try:
+                return exchange(*args, **kwargs)
+            finally:
+                self.lane_seconds += time.thread_time() - t
+        return timed
 
     def __call__(self, tx: Any, out: Any, st: Any, w: int, *rest: Any) -> None:
         worlds = rest[5]
@@ -59,6 +80,7 @@ class _Calls:
     def clear(self) -> None:
         self.seconds = 0.0
         self.substeps = 0
+        self.lane_seconds = 0.0
 
 
 def _raw(model: Any, n: int) -> float:
@@ -71,10 +93,10 @@ def _raw(model: Any, n: int) -> float:
     return (time.thread_time() - t) / n
 
 
-def _blocks(env: Any, model: Any, calls: _Calls | None) -> list[tuple[float, float, float, float]]:
-    """Per block: (step, compiled calls, substeps, raw ``mj_step``) per env step, the raw reference timed right
-    after the block's steps (as many substeps), so that both see the same load; the same seeded actions each
-    block."""
+def _blocks(env: Any, model: Any, calls: _Calls | None) -> list[tuple[float, float, float, float, float]]:
+    """Per block: (step, compiled calls, substeps, raw ``mj_step``, lanes' exchanges) per env step, the raw
+    reference timed right after the block's steps (as many substeps), so that both see the same load; the same
+    seeded actions each block."""
     got = []
     for _ in range(BLOCKS):
         env.reset(seed=0)
@@ -89,24 +111,25 @@ def _blocks(env: Any, model: Any, calls: _Calls | None) -> list[tuple[float, flo
                 env.reset()
         step = (time.thread_time() - t) / PER_BLOCK
         if calls is None:
-            sub, spent = float(env.unwrapped.frame_skip), 0.0
+            sub, spent, lanes = float(env.unwrapped.frame_skip), 0.0, 0.0
         else:
-            sub, spent = calls.substeps / PER_BLOCK, calls.seconds / PER_BLOCK
-        got.append((step, spent, sub, _raw(model, int(sub * PER_BLOCK))))
+            sub, spent, lanes = calls.substeps / PER_BLOCK, calls.seconds / PER_BLOCK, calls.lane_seconds / PER_BLOCK
+        got.append((step, spent, sub, _raw(model, int(sub * PER_BLOCK)), lanes))
     return got
 
 
-def _report(name: str, blocks: list[tuple[float, float, float, float]], compiled: bool) -> None:
+def _report(name: str, blocks: list[tuple[float, float, float, float, float]], compiled: bool) -> None:
     """The best block (the highest ratio) and the median one."""
     ranked = sorted(blocks, key=lambda b: b[2] * b[3] / b[0], reverse=True)
-    for label, (step, calls, sub, raw) in (("best", ranked[0]), ("median", ranked[len(ranked) // 2])):
+    for label, (step, calls, sub, raw, lanes) in (("best", ranked[0]), ("median", ranked[len(ranked) // 2])):
         physics = sub * raw
         line = f"{name} [{label}]: step {step * 1e6:.0f} us, {sub:.2f} substeps x raw {raw * 1e6:.2f} us = " \
                f"{physics * 1e6:.0f} us, ratio {physics / step:.2f}"
         if compiled:
-            line += f"; compiled calls {calls * 1e6:.0f} us, the rest (Python) {(step - calls) * 1e6:.0f} us; " \
-                    f"ratio with no Python {physics / calls:.2f}; Python left for {GOAL}: " \
-                    f"{(physics / GOAL - calls) * 1e6:.0f} us"
+            line += f"; compiled calls {calls * 1e6:.0f} us, the rest (Python) {(step - calls) * 1e6:.0f} us " \
+                    f"(the exchanges' own {(lanes - calls) * 1e6:.0f} us, everything else " \
+                    f"{(step - lanes) * 1e6:.0f} us); ratio with no Python {physics / calls:.2f}; Python left " \
+                    f"for {GOAL}: {(physics / GOAL - calls) * 1e6:.0f} us"
         else:
             line += f"; overhead (all Python) {(step - physics) * 1e6:.0f} us"
         print(line)
@@ -119,12 +142,15 @@ def main(ids: list[str]) -> None:
     for env_id in ids:
         env = gym.make(env_id)
         env.reset(seed=0)
-        _report(env_id, _blocks(env, env.unwrapped.rig.world.model, calls), compiled=True)
+        calls.lanes(env)
+        u: Any = env.unwrapped
+        _report(env_id, _blocks(env, u.rig.world.model, calls), compiled=True)
         env.close()
     ref = gym.make("Reacher-v5")
-    _report("Reacher-v5", _blocks(ref, ref.unwrapped.model, None), compiled=False)
+    reacher: Any = ref.unwrapped
+    _report("Reacher-v5", _blocks(ref, reacher.model, None), compiled=False)
     ref.close()
-    print(f"load {' '.join(f'{x:.2f}' for x in __import__('os').getloadavg())}, numpy {np.__version__}")
+    print(f"load {' '.join(f'{x:.2f}' for x in os.getloadavg())}, numpy {np.__version__}")
 
 
 if __name__ == "__main__":
