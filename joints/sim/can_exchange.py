@@ -304,7 +304,7 @@ def exchanges(tx: Any, out: Any, scratch: Any, sensor: Any, m: Any, st: Any, w: 
                 n = _due(behind, st, w, worlds)
                 if n > 0:
                     j = _until(end, n, st, w, worlds)
-                    if j < n:  # the tick after m substeps reaches the frame's end: the drive acts there
+                    if j < n:  # the tick after j substeps reaches the frame's end: the drive acts there
                         _steps(j, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
                         refused = act(s, t, o, scratch)
                         report(s, t, o, st, sensor, m)
@@ -350,14 +350,6 @@ def exchanges(tx: Any, out: Any, scratch: Any, sensor: Any, m: Any, st: Any, w: 
 
 
 _COMPILED: list[Any] = []
-_SENSOR_OPS: list[Any] = []
-
-
-def _sensor_ops() -> Any:
-    """The sensors' compiled reads (``sensors.compiled_ops()``: what a stock :class:`Sensor` calls, compiled)."""
-    if not _SENSOR_OPS:
-        _SENSOR_OPS.append(sensors.compiled_ops())
-    return _SENSOR_OPS[0]
 
 
 def _compiled() -> Any:
@@ -496,7 +488,6 @@ class ErobCanExchange:
         self._none = np.zeros(1)  #: the sensor rows given to a call that makes no reports
 
     # -- the steady case ------------------------------------------------------------------------
-
     def _steady(self, front: ErobCanFront) -> bool:
         """Whether the world, medium, host, bus, front and firmware are as the compiled call assumes."""
         world, medium, bus, host = self.world, self.medium, self.bus, self.host
@@ -826,7 +817,7 @@ class ErobCanExchange:
         if not plan.reports:
             return None
         sensor = plan.unique[0].firmware.sensor
-        if type(sensor) is not Sensor or sensor.ideal or sensor.model.ideal or sensor._reads is not _sensor_ops():
+        if type(sensor) is not Sensor or sensor.ideal or sensor.model.ideal or sensor._reads is not sensors.compiled_ops():
             return None
         return sensor
 

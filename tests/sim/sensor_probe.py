@@ -4,9 +4,8 @@
 Not a test (pytest does not collect it): a measuring tool. ``python tests/sim/sensor_probe.py CASE [ROUNDS]``
 with CASE ``sense`` (the eRob profile's model: 1 ms velocity window, 0.02 A current noise, current flowing),
 ``reseed`` (``Sensor.reseed()``: the stream seeded again with its seed, what a world reset costs per sensor),
-``seed`` (``Sensor.reseed(k)``, each call a new seed), ``erob`` (``ErobReach-v0``,
-position mode, its shipped Modbus at 1 kHz) or ``erobcan`` (the same env on its CAN
-protocol at 20 ms, the bench's row). Prints the best and median CPU microseconds per call / step
+``seed`` (``Sensor.reseed(k)``, each call a new seed), ``erob`` (``ErobReach-v0``, position mode, its shipped
+Modbus at 1 kHz) or ``erobcan`` (the same env on its CAN protocol at 20 ms, the bench's row). Prints the best and median CPU microseconds per call / step
 (``time.thread_time`` around each block, resets at episode ends included) over ROUNDS blocks, and a digest of every output (the same on both checkouts: same bits).
 """
 
@@ -101,7 +100,12 @@ def main() -> None:
     rounds = int(sys.argv[2]) if len(sys.argv) > 2 else 10
     import joints
 
-    times, digest = _sense(rounds) if case == "sense" else _reseed(rounds, case == "seed") if case in ("reseed", "seed") else _env(case, rounds)
+    if case == "sense":
+        times, digest = _sense(rounds)
+    elif case in ("reseed", "seed"):
+        times, digest = _reseed(rounds, new=case == "seed")
+    else:
+        times, digest = _env(case, rounds)
     us = sorted(t * 1e6 for t in times[1:])  # the first block warms up
     print(f"{case} {joints.__file__.rsplit('/joints/', 1)[0]}: best {us[0]:.3f} us, median "
           f"{statistics.median(us):.3f} us, digest {digest}")

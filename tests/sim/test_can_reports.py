@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import random
 from typing import Any
@@ -124,13 +125,10 @@ def test_a_sensor_drawing_from_a_generator_of_its_own_reports_in_python(monkeypa
         assert seen[20][1] > seen[10][1] and seen[20][1] == seen[-1][1]  # the calls went on to step 20, then none
 
 
-_COMPILED_REPORT: list[Any] = []
-
-
+@functools.cache
 def _compiled_report() -> Any:
-    if not _COMPILED_REPORT:
-        _COMPILED_REPORT.append(kernel.compiled(CE.report))
-    return _COMPILED_REPORT[0]
+    """:func:`joints.sim.can_exchange.report` compiled, once per test session."""
+    return kernel.compiled(CE.report)
 
 
 @pytest.mark.skipif(not kernel.default_mode(), reason="the reports are made in the compiled call")

@@ -171,7 +171,6 @@ MODELS = [
 COUNTS = [524288 / (2 * math.pi), 16384 / (2 * math.pi), 4096 / (2 * math.pi)]
 
 
-
 def _sensor(model: SensorModel, counts: float, compiled: bool, monkeypatch: pytest.MonkeyPatch) -> Sensor:
     monkeypatch.setenv(kernel.SWITCH, "1" if compiled else "0")
     s = Sensor(model, "erob:3", counts)
