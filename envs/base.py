@@ -231,9 +231,9 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
         self._wait_until(self.tick_time())
         return self.finish_step(token)
 
-    def tick_time(self) -> float:
-        """Rig time of the tick the last action waits for."""
-        return self._t0 + self._slip + self._tick * self.control_period
+    def tick_time(self, ahead: int = 0) -> float:
+        """Rig time of the tick the last action waits for (``ahead``: of the tick that many later)."""
+        return self._t0 + self._slip + (self._tick + ahead) * self.control_period
 
     def begin_step(self, action: np.ndarray) -> Any:
         """The first half of :meth:`step`: check ``action`` and send its commands (returns what
@@ -707,7 +707,30 @@ class JointsEnv(RigEnv):
 
     batchable = True
 
-    def begin_step(self, action: np.ndarray) -> tuple[np.ndarray | None, list[float]]:
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """:meth:`RigEnv.step`; on the compiled path, where it can, the command, the wait for the tick and the
+        state read in one call (:meth:`~joints.compiled_path.CompiledPath.step`: the same frames, substeps and
+        bits)."""
+        compiled = self.compiled_path
+        if compiled is None or not compiled.steps or self.raise_on_overrun:
+            return super().step(action)
+        values = self._action_values(action)
+        cmd = self._safe_command(self._queued(values))
+        mode = self.action_mode
+        got = compiled.step(mode, cmd, [not j.enabled for j in self.joints], self.tick_time(1), self.rig)
+        if got is None:  # not the steady case (nothing sent): the command, the wait and the read one by one
+            compiled.command(mode, cmd, [not j.enabled for j in self.joints])
+            self._tick += 1
+            self._wait_until(self.tick_time())
+            return self._finish(self._token(values), self._read())
+        self._tick += 1
+        states, remaining = got
+        self.note_overrun(-remaining)
+        self._states = states
+        return self._finish(self._token(values), states)
+
+    def _action_values(self, action: np.ndarray) -> list[float]:
+        """``action`` checked (shape, finite) and clipped to [-1, 1], as plain floats."""
         if self._closed:
             self._check_open()  # raises
         # a float array's own floats (float32 widened exactly, as float64 would have them); else as float64
@@ -722,14 +745,27 @@ class JointsEnv(RigEnv):
                 raise ValueError(f"action must be finite, got {given}")
             # a.clip(-1.0, 1.0) on plain floats (clip() of a finite value: the same bits)
             values.append(v if -1.0 <= v <= 1.0 else (-1.0 if v < -1.0 else 1.0))
-        if self._queue:  # bus latency (domain randomisation): the action waits its turn
+        return values
+
+    def _queued(self, values: list[float]) -> list[float]:
+        """The action sent this step: ``values``, or with a bus latency (domain randomisation) the one whose turn
+        it is (``values`` wait theirs)."""
+        if self._queue:
             self._queue.append(np.array(values))
-            self._command(self._queue.popleft().tolist())
-        else:
-            self._command(values)
-        self._tick += 1
-        # the action as an array for np.dot's change (several joints); one joint's change is a square of floats
+            return self._queue.popleft().tolist()  # type: ignore[no-any-return]
+        return values
+
+    @staticmethod
+    def _token(values: list[float]) -> tuple[np.ndarray | None, list[float]]:
+        """What :meth:`finish_step` needs of the step's action ``values``: the action as an array for np.dot's
+        change (several joints; one joint's change is a square of floats), and the values."""
         return (np.array(values) if len(values) > 1 else None), values
+
+    def begin_step(self, action: np.ndarray) -> tuple[np.ndarray | None, list[float]]:
+        values = self._action_values(action)
+        self._command(self._queued(values))
+        self._tick += 1
+        return self._token(values)
 
     def finish_step(self, token: tuple[np.ndarray | None, list[float]]
                     ) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
@@ -835,14 +871,19 @@ class JointsEnv(RigEnv):
             "faults": {n: (s.fault.name if s.fault else None) for n, s in zip(self.joint_names, states)},
         }
 
-    def _command(self, action: list[float]) -> None:
-        """Send the safe command of ``action`` (clipped to [-1, 1], plain floats)."""
-        mode = self.action_mode
+    def _safe_command(self, action: list[float]) -> list[float]:
+        """The safe command of ``action`` (clipped to [-1, 1], plain floats), kept as what was sent."""
         values = self._commands(action)
-        if mode != "position":  # the limit clip (position: command_of clipped to the limits already)
+        if self.action_mode != "position":  # the limit clip (position: command_of clipped to the limits already)
             values = self._limit(values)
         cmd = self._safe(values)
         self._sent = np.array(cmd)
+        return cmd
+
+    def _command(self, action: list[float]) -> None:
+        """Send the safe command of ``action`` (clipped to [-1, 1], plain floats)."""
+        mode = self.action_mode
+        cmd = self._safe_command(action)
         compiled = self.compiled_path
         if compiled is not None:  # faulted/disabled drives: the episode has ended; never command them
             compiled.command(mode, cmd, [not j.enabled for j in self.joints])

@@ -163,6 +163,30 @@ class _ErobModbus:
     def states(self) -> list[JointState]:
         return [self.state()]
 
+    def step(self, mode: str, values: Sequence[float], tick: float) -> tuple[list[JointState], float] | None:
+        """:meth:`CompiledPath.step` of this joint: its steady command, the hold to ``tick`` and the status read
+        in one call of the one-call exchange; None (nothing sent) where that is not the steady case."""
+        exchange = self.exchange
+        if exchange is None:
+            return None
+        try:
+            p = self.plan(mode, values[0])
+        except Exception:  # noqa: BLE001 - a refusal: the command's own way raises it again
+            return None
+        if p is None:
+            return None
+        sent, name, value = p
+        n = len(sent)
+        before = self.clock.now()
+        run = functools.partial(exchange.run, lazy=True, hold=(n, tick))
+        replies = self.lane.exchange(run, (*sent, self.status), idempotent=True)
+        if replies is None:
+            return None
+        clocks = exchange.clocks
+        self.done(mode, name, value, before, clocks[n - 1])
+        remaining, held = exchange.held
+        return [self.state_of(replies[n], held, clocks[n])], remaining
+
     def _write(self, name: str, value: int) -> None:
         request = self.access.write_request(name, value)
         if self._fused((request,), True) is None:
@@ -474,7 +498,47 @@ def _states_batch(units: list[_ErobModbus]) -> list[JointState] | None:
     return out
 
 
-def _hold_sleeps(steppers: Sequence[_Stepper]) -> None:
+def _step_batch(units: list[_ErobModbus], mode: str, values: Sequence[float], tick: float
+                ) -> tuple[list[JointState], float] | None:
+    """:meth:`CompiledPath.step` of one eRob per joint on one line (:func:`_erob_batch`): every joint's steady
+    command (:func:`_command_batch`'s), the hold to ``tick`` and every status read (:func:`_states_batch`'s) in
+    one call; None (nothing sent) where one joint is not the steady case or its checks refuse."""
+    planned: list[tuple[_ErobModbus, tuple[tuple[Any, ...], str, int]]] = []
+    for s, v in zip(units, values):
+        try:
+            p = s.plan(mode, v)
+        except Exception:  # noqa: BLE001 - a refusal: the command's own way raises it again
+            return None
+        if p is None:
+            return None
+        planned.append((s, p))
+    first = units[0]
+    requests = [r for _, p in planned for r in p[0]]
+    exchanges = [s.exchange for s, p in planned for _ in p[0]]
+    n = len(requests)
+    requests += [s.status for s in units]
+    exchanges += [s.exchange for s in units]
+    t0 = first.clock.now()
+    run = functools.partial(first.exchange.run, exchanges=exchanges, lazy=True, hold=(n, tick))
+    replies = first.lane.exchange(run, requests, idempotent=True)
+    if replies is None:
+        return None
+    clocks = first.exchange.clocks
+    before, at = t0, 0
+    for s, (reqs, name, value) in planned:  # as _command_batch's bookkeeping
+        at += len(reqs)
+        after = clocks[at - 1]
+        s.done(mode, name, value, before, after)
+        before = after
+    remaining, before = first.exchange.held
+    states: list[JointState] = []
+    for s, reply, after in zip(units, replies[n:], clocks[n:]):  # as _states_batch's
+        states.append(s.state_of(reply, before, after))
+        before = after
+    return states, remaining
+
+
+def _hold_sleeps(steppers: Sequence[_Stepper]) -> Any:
     """Where every stepper's steady requests go in a one-call exchange (its ``carried()``: the compiled world the
     exchange runs and the twins whose every frame it carries; None where it has none), on one compiled world
     every drive of which is carried (so every frame reaches a drive over a timed line, which settles the world
@@ -482,24 +546,35 @@ def _hold_sleeps(steppers: Sequence[_Stepper]) -> None:
     the next call (the status read's) - one compiled call fewer per step, the same bits."""
     held = [carried() if callable(carried := getattr(s, "carried", None)) else None for s in steppers]
     if not held or any(h is None for h in held):
-        return
+        return None
     world = held[0][0]  # type: ignore[index]
     if not getattr(world, "compiled", False) or any(h[0] is not world for h in held):  # type: ignore[index]
-        return
+        return None
     ours = {id(twin) for h in held for twin in h[1]}  # type: ignore[index]
     if all(id(twin) in ours for twin in world.emulators()):
         world.hold_sleeps = True
+        return world
+    return None
 
 
 class CompiledPath:
     """The commands and state reads of a list of joints, each joint's in order (see the module docstring)."""
 
     def __init__(self, joints: Sequence[Joint]) -> None:
+        self.steps_taken = 0  #: env steps that went in one call (:meth:`step`)
         self._joints = list(joints)
         self._units = _steppers(joints)
         self._steppers = [s for _, s in self._units]
         self._batch = _erob_batch(self._steppers)
-        _hold_sleeps(self._steppers)
+        #: the world whose sleeps the steppers' exchanges hold (:func:`_hold_sleeps`), or None
+        self._world = _hold_sleeps(self._steppers)
+        #: a whole env step in one call (:meth:`step`): the batch's, or the one stepper's own ``step``
+        self._step: Any = None
+        if self._world is not None:
+            if self._batch is not None:
+                self._step = functools.partial(_step_batch, self._batch)
+            elif len(self._steppers) == 1:
+                self._step = getattr(self._steppers[0], "step", None)
 
     @classmethod
     def build(cls, joints: Sequence[Joint]) -> CompiledPath | None:
@@ -535,6 +610,33 @@ class CompiledPath:
             return
         for idx, s in self._units:
             s.command_all(mode, [values[i] for i in idx], [skip is not None and skip[i] for i in idx])
+
+    @property
+    def steps(self) -> bool:
+        """Whether :meth:`step` may take an env's whole step (else it always answers None)."""
+        return self._step is not None
+
+    def step(self, mode: str, values: Sequence[float], skip: Sequence[bool] | None, tick: float, rig: Any
+             ) -> tuple[list[JointState], float] | None:
+        """An env step in one call of the twins' one-call exchange where it is the steady case: every joint's
+        command (:meth:`command`), the env's wait for its tick at rig time ``tick`` (``RigEnv._wait_until``:
+        ``remaining``, the tick less the clock after the command; where > 0, ``rig``'s sleep of it, which the
+        world holds) and every joint's state (:meth:`states`) - the same requests, frames, substeps and bits as
+        those three one after the other. Returns (the states, ``remaining``), or None with nothing sent where it
+        is not the steady case: a joint skipped or not steady (or refused by its checks), the rig's sleep not the
+        world's hold alone (a keep-alive read due, another clock) - then the caller does the three."""
+        if mode not in ACTION_MODES:
+            raise ValueError(f"mode {mode!r} is not one of {ACTION_MODES}")
+        fused = self._step
+        if fused is None or (skip is not None and any(skip)):
+            return None
+        world = self._world
+        if rig.clock is not world.clock or not world.hold_sleeps or not rig.sleeps_quietly(tick):
+            return None
+        got: tuple[list[JointState], float] | None = fused(mode, values, tick)
+        if got is not None:
+            self.steps_taken += 1
+        return got
 
     def states(self, *, settle: bool = False) -> list[JointState]:
         """Every joint's state, read in joint order (as ``[j.state() for j in joints]``; the wheels of a

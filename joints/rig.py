@@ -148,6 +148,17 @@ class Rig:
                 clock.sleep(due - now)
             self.read_states(names)
 
+    def sleeps_quietly(self, end: float) -> bool:
+        """Whether :meth:`sleep` until rig time ``end`` (give or take a microsecond) would ask no joint: no
+        joint's keep-alive falls due before it (the sleep is then the clock's alone)."""
+        if self.keepalive:
+            margin = end + 1e-6
+            for j in self.joints.values():
+                w = j.watchdog_ms
+                if w and j.last_contact + w * 1e-3 * KEEPALIVE_FRACTION < margin:
+                    return False
+        return True
+
     def _keepalive_due(self) -> tuple[float | None, list[str]]:
         """The earliest time an enabled joint must be talked to, and which joints are due then."""
         if not self.keepalive:

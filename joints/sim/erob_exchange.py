@@ -142,6 +142,8 @@ class ErobExchange(L.Carrier):
         self._read: tuple[Any, _Shape] | None = None  #: the last status read request and its shape
         #: the clock after each transaction of the last :meth:`run` (the host's per-joint instants)
         self.clocks: list[float] = []
+        #: of the last :meth:`run` with a hold: what was left to the tick (<= 0: late) and the clock after the hold
+        self.held = (0.0, 0.0)
 
     def _steady(self) -> bool:
         """Whether the world, line, bus, front and firmware are as the compiled call assumes (checked first)."""
@@ -347,14 +349,18 @@ class ErobExchange(L.Carrier):
         return rows, made
 
     def run(self, requests: Sequence[Any], size: Callable[[Any], int], check: Callable[[Any, Any], bool] | None,
-            exchanges: Sequence[ErobExchange] | None = None, *, lazy: bool = False) -> list[Any] | None:
+            exchanges: Sequence[ErobExchange] | None = None, *, lazy: bool = False,
+            hold: tuple[int, float] | None = None) -> list[Any] | None:
         """The replies to ``requests`` (sent one after the other), each as the bus gives it, once the host would
         have received it; None (nothing sent) where this is not the steady case. ``size``: a message's
         characters on the line; ``check(request, reply)``: whether the host takes the reply as the plain answer
         (asked before anything is sent; a read's with its words 0; None: the caller checks the replies after);
         ``exchanges``: per request, the exchange of the drive it is for (default: this one's; all on this one's
         line and world: a rig's eRobs on one bus go in one call); ``lazy``: a status read's reply may be a
-        :class:`StatusReply` (its values by register; the message made when asked)."""
+        :class:`StatusReply` (its values by register; the message made when asked); ``hold`` (index, tick): the
+        host's wait for the env's tick at that clock time before the request at that index (``RigEnv._wait_until``
+        with the world holding the rig's sleep: :func:`joints.sim.line_exchange.hold`), what was left to the tick
+        and the clock after it then in :attr:`held`."""
         fn = _compiled()
         if fn is None or not self._line_steady():
             return None
@@ -370,11 +376,17 @@ class ErobExchange(L.Carrier):
         if got is None:
             return None
         rows, made = got
+        if hold is not None:
+            rows.insert(hold[0], [L.HOLD, 0.0, 0.0, 0.0, 0.0, hold[1], 0.0, 0.0, 0.0, 0.0])
         with world.lock:
             now = L.clear(line)
             if now is None:
                 return None
             outs = self.carry(fn, world, line, now, rows)
+            if hold is not None:
+                del rows[hold[0]]
+                h = outs.pop(hold[0])
+                self.held = (h[L.REMAINING], h[CLOCK_AFTER])
             replies: list[Any] = []
             self.clocks = clocks = []
             frames: list[tuple[float, float, float, int, str, Any]] = []

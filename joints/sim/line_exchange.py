@@ -24,8 +24,8 @@ from joints.sim.erob_kernel import fmax  # ``max`` as Python's builtin, in compi
 from joints.sim.kernel import jitable
 from joints.sim.stepping import EROB, STEPS, ZLAC
 
-__all__ = ["Carrier", "advance", "arena_check", "book", "clear", "compiled", "exchanges", "fill", "fused", "line_back",
-           "stock", "world_back", "world_fused"]
+__all__ = ["HOLD", "Carrier", "advance", "arena_check", "book", "clear", "compiled", "exchanges", "fill", "fused",
+           "hold", "line_back", "stock", "world_back", "world_fused"]
 
 #: columns of the state vector: the clock's time, the world's target time, whether time is booked (1, or
 #: :data:`HELD`), the line's time, the time the line last saw on the clock, when the host's / device's UART is
@@ -44,6 +44,11 @@ TX_WIDTH = ARGS + 5
 #: transaction; then the family's own from :data:`OUTS`
 H_START, H_END, H_DUE, D_START, D_END, D_SEEN, CLOCK_AFTER = range(7)
 OUTS = 7
+#: :data:`KIND` of a row that is no transaction but the host's sleep to a tick (:func:`hold`): the tick's time in
+#: column :data:`UNTIL`; its output row has what was left to the tick (:data:`REMAINING`, <= 0: late) and the clock
+HOLD = -1.0
+UNTIL = ARGS
+REMAINING = H_START
 
 
 @jitable
@@ -77,14 +82,39 @@ def advance(seconds: float, st: Any, w: int, mj_step: int, table: Any, adr: Any,
         _due(0.0, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
 
 
+@jitable
+def hold(until: float, st: Any, o: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any,
+         worlds: Any, dts: Any, active: Any) -> None:
+    """The env's wait for its tick at clock time ``until`` (``RigEnv._wait_until``: ``remaining`` left, if > 0
+    the rig's sleep of it - ``Rig.sleep`` with no keep-alive due, ``end - now`` from ``end = now + remaining`` -
+    as ``World.hold`` books it: an earlier held sleep's substeps first, as ``World.sync`` runs them)."""
+    now = st[CLOCK]
+    remaining = until - now
+    o[REMAINING] = remaining
+    if remaining > 0:
+        end = now + remaining
+        if end > now:
+            if st[BOOKED] == HELD:
+                st[BOOKED] = 0.0
+                _due(0.0, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+            st[TARGET] += end - now
+            st[BOOKED] = HELD
+            st[CLOCK] = st[TARGET]
+    o[CLOCK_AFTER] = st[CLOCK]
+
+
 def exchanges(tx: Any, out: Any, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any,
               worlds: Any, dts: Any, active: Any) -> None:
     """The transactions ``tx`` (rows of :data:`TX_WIDTH`) in world ``w``, one after the other, as
     ``TimedSerialLine._transact_idle`` carries each: ``st`` (the state vector) in and out, each transaction's
-    frame instants (and what its family's act puts there) into ``out``."""
+    frame instants (and what its family's act puts there) into ``out``; a :data:`HOLD` row is the host's sleep
+    to a tick between them (:func:`hold`)."""
     for k in range(tx.shape[0]):
         t = tx[k]
         o = out[k]
+        if t[KIND] == HOLD:
+            hold(t[UNTIL], st, o, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+            continue
         if k:  # TimedSerialLine._sync: the clock moved without the line (a booked reply)
             c = st[CLOCK]
             if c > st[SEEN]:
