@@ -91,6 +91,9 @@ def _run(env_id: str, mode: str | None, steps: int, compiled: bool, trace: bool 
         out["taken"] = u.compiled_path.taken if u.compiled_path is not None else None
         out["lane"] = u.compiled_path.lane_taken if u.compiled_path is not None else None
         out["fused"] = u.compiled_path.fused if u.compiled_path is not None else None
+        out["steps_taken"] = u.compiled_path.steps_taken if u.compiled_path is not None else None
+        out["calls"] = _calls(u) if u.compiled_path is not None and hasattr(u.compiled_path._steppers[0], "exchange") \
+            else None
         return out
     finally:
         env.close()
@@ -465,3 +468,111 @@ def test_the_status_reads_shape_is_kept_for_that_request_only() -> None:
         assert s.lane.exchange(s.exchange.run, (other,), idempotent=True) is None
         assert s.link.transactions == transactions
         assert s.lane.exchange(s.exchange.run, (status,), idempotent=True) is not None
+
+
+def _split(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Env steps as three calls again: the command, the wait for the tick, the read (no CompiledPath.step)."""
+    monkeypatch.setattr(joints.CompiledPath, "step", lambda self, *args, **kwargs: None)
+
+
+def _calls(env: Any) -> int:
+    """The one-call exchanges' calls so far (each counts the calls it ran)."""
+    return sum(s.exchange.taken for s in env.compiled_path._steppers)
+
+
+@pytest.mark.parametrize(("env_id", "mode"), [(e, m) for e in EROB for m in MODES])
+def test_an_env_step_in_one_call_gives_the_three_calls_bits(env_id: str, mode: str,
+                                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    """The command, the wait for the tick and the read in one compiled call (CompiledPath.step) give what the
+    three give one after the other: every observation, reward, info, state, frame, count, image and the clock;
+    each env step the one call took is one call fewer."""
+    steps = SUPPORTED[env_id]
+    runs = []
+    for split in (False, True):
+        if split:
+            _split(monkeypatch)
+        runs.append(_run(env_id, mode, steps, compiled=True))
+    one, three = runs
+    for key in ("reset", "steps", "transactions", "frames", "images", "time", "taken", "lane", "fused"):
+        assert one[key] == three[key], key
+    if kernel.default_mode():
+        assert one["steps_taken"] >= steps - 2 and three["steps_taken"] == 0
+        assert three["calls"] - one["calls"] == one["steps_taken"]  # each such step: one call, not two
+    else:  # no compiled exchange: every step goes the usual way
+        assert one["steps_taken"] == 0
+
+
+@pytest.mark.parametrize("env_id", EROB)
+def test_the_steps_hold_is_the_envs_wait_to_its_tick(env_id: str) -> None:
+    """CompiledPath.step against its three parts called by hand, for ticks far ahead, just ahead, at and behind
+    the clock: the same states and ``remaining`` (<= 0: late, no sleep), frames, counts, image and clock."""
+    offsets = (0.05, 0.0004, 0.0, -0.003, 0.0011, 0.02)  # s from the clock before the command to the tick
+    runs = []
+    for fused in (True, False):
+        env = gym.make(env_id, action_mode="position")
+        u: Any = env.unwrapped
+        path, rig = u.compiled_path, u.rig
+        out: list[Any] = []
+        try:
+            env.reset(seed=5)
+            rng = np.random.default_rng(2)
+            for k in range(3 * len(offsets)):
+                cmd = [float(x) for x in u.command_of(rng.uniform(-1.0, 1.0, env.action_space.shape))]
+                tick = rig.time + offsets[k % len(offsets)]
+                if fused:
+                    got = path.step("position", cmd, None, tick, rig)
+                    assert got is not None or not kernel.default_mode()
+                if not fused or got is None:
+                    path.command("position", cmd)
+                    remaining = tick - rig.time
+                    if remaining > 0:
+                        rig.sleep(remaining)
+                    got = (path.states(), remaining)
+                states, remaining = got
+                out.append(([repr(s) for s in states], remaining, rig.time))
+            link = _links(u)[0]
+            out.append((link.transactions, _frames(link), _images(u), rig.time, rig.sim.steps))
+            if fused and kernel.default_mode():
+                assert path.steps_taken == 3 * len(offsets)
+        finally:
+            env.close()
+        runs.append(out)
+    assert runs[0] == runs[1]
+    assert any(r[1] <= 0 for r in runs[0][:-1]) and any(r[1] > 0 for r in runs[0][:-1])  # late ticks and waits
+
+
+@pytest.mark.parametrize("case", ["keep-alive due", "raise on overrun"])
+def test_a_step_whose_wait_is_not_the_worlds_hold_alone_goes_in_three(case: str) -> None:
+    """A keep-alive read due before the tick (a joint's watchdog of 100 ms: the rig's sleep reads it) or an env
+    that raises on overruns: the step's command, wait and read go one after the other, with the driver path's
+    bits; CompiledPath.step took none."""
+    runs = []
+    for compiled in (True, False):
+        env = gym.make("joints/ErobReach-v0", compiled_path=compiled, raise_on_overrun=case == "raise on overrun")
+        u: Any = env.unwrapped
+        out: list[Any] = []
+        try:
+            env.reset(seed=4)
+            if case == "keep-alive due":
+                for j in u.joints:
+                    j.watchdog_ms = 100
+            before = _links(u)[0].transactions
+            rng = np.random.default_rng(8)
+            for _ in range(12):
+                obs, reward, terminated, _truncated, info = env.step(
+                    rng.uniform(-1.0, 1.0, env.action_space.shape).astype(np.float32))
+                out.append((obs.tobytes(), reward, terminated, _info(info)))
+            link = _links(u)[0]
+            out.append((link.transactions - before, _frames(link), _images(u), u.rig.time))
+            if compiled:
+                assert u.compiled_path.steps_taken == 0
+                assert u.compiled_path.taken >= 12
+        finally:
+            env.close()
+        runs.append(out)
+    assert runs[0] == runs[1]
+    # the steps' own 3 transactions each (target, start, status read); with the keep-alive, the sleeps' reads too
+    if case == "keep-alive due":
+        assert runs[0][-1][0] > 3 * 12
+    else:
+        assert runs[0][-1][0] == 3 * 12
