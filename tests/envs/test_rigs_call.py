@@ -188,6 +188,7 @@ def test_only_rigs_of_their_own_worlds_of_erobs_are_carried_together() -> None:
         other.close()
 
 
+@pytest.mark.skipif(not kernel.default_mode(), reason="no compiled call without the compiled kernels")
 @pytest.mark.parametrize(("env_id", "kwargs"), [CASES[0], CASES[3]])
 def test_a_batch_step_in_one_call_gives_the_two_calls_bits(env_id: str, kwargs: dict[str, Any],
                                                           monkeypatch: pytest.MonkeyPatch) -> None:
@@ -217,6 +218,7 @@ def test_a_batch_step_in_one_call_gives_the_two_calls_bits(env_id: str, kwargs: 
     assert two_calls - one_calls == fused  # each such step one call instead of two
 
 
+@pytest.mark.skipif(not kernel.default_mode(), reason="no compiled call without the compiled kernels")
 def test_a_batch_steps_waits_are_each_rigs_own_wait_to_its_tick() -> None:
     """CompiledRigs.step against its parts by hand (the commands in one call, each rig's wait for its tick, the
     reads in one call), with ticks ahead of, at and behind each rig's clock: every rig's states, ``remaining``
