@@ -26,7 +26,11 @@ Where the peer offers a one-call exchange (the sim's eRob twins: :mod:`joints.si
 steady requests - a command's writes, the status read; every eRob's of a rig on one line together - go in ONE
 compiled call (frames, physics and the drive's register ops), by :meth:`~joints.link.lane.LinkLane.exchange`,
 which falls back to the requests one by one before anything is sent where the case is not steady;
-:attr:`CompiledPath.fused` counts the requests it carried.
+:attr:`CompiledPath.fused` counts the requests it carried. An env's whole steady step - the command's writes, the
+env's wait for its tick (what ``RigEnv._wait_until``, ``Rig.sleep`` and ``World.hold`` do: a hold row in the call,
+:func:`joints.sim.line_exchange.hold`) and the status reads - goes in ONE such call by :meth:`CompiledPath.step`
+(:attr:`CompiledPath.steps_taken` counts them); anything that would make the wait more than the world's hold (a
+keep-alive read due, another clock) or the step not steady sends nothing there, and the three go one after the other.
 
 A ZLAC8015D's two wheels are one drive: their reference is the rig's (:meth:`~joints.rig.Rig.set_velocities`,
 :meth:`~joints.rig.Rig.read_states`), so a velocity command of both is the joints' checks, the drive's plan
@@ -682,8 +686,9 @@ def _lane_ready(lane: LinkLane, requests: Sequence[Any]) -> bool:
 
 class CompiledRigs:
     """The compiled paths of several rigs (a batch of single envs in one process) whose every joint is an eRob on
-    its twin's one-call exchange: a step's commands of ALL rigs in one compiled call, and their state reads in
-    another (:meth:`~joints.sim.erob_exchange.ErobExchange.carry_rigs`).
+    its twin's one-call exchange: a step's commands, waits for the tick and state reads of ALL rigs in one compiled
+    call (:meth:`step`), or the commands in one and the reads in another
+    (:meth:`~joints.sim.erob_exchange.ErobExchange.carry_rigs`).
 
     Rule: each rig gets what its own :meth:`CompiledPath.command` / :meth:`CompiledPath.states` gives it - the
     same checks (each joint's :meth:`_ErobModbus.plan`), requests, frames, physics, counts, bookkeeping and

@@ -576,3 +576,27 @@ def test_a_step_whose_wait_is_not_the_worlds_hold_alone_goes_in_three(case: str)
         assert runs[0][-1][0] > 3 * 12
     else:
         assert runs[0][-1][0] == 3 * 12
+
+
+def test_an_env_type_with_its_own_step_parts_is_stepped_by_them() -> None:
+    """A JointsEnv subclass that replaces a part of the step (here its read) gets that part called every step: its
+    steps never go in one call (the compiled path's command and read calls still do)."""
+    from envs.reach import ErobReachEnv
+
+    reads = []
+
+    class Counted(ErobReachEnv):
+        def _read(self) -> list[joints.JointState]:
+            reads.append(1)
+            return super()._read()
+
+    env = Counted()
+    try:
+        env.reset(seed=0)
+        reads.clear()  # (the reset's read)
+        for _ in range(5):
+            env.step(env.action_space.sample())
+        assert len(reads) == 5 and env.compiled_path is not None and env.compiled_path.steps_taken == 0
+        assert env.compiled_path.taken >= 4
+    finally:
+        env.close()
