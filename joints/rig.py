@@ -149,8 +149,10 @@ class Rig:
             self.read_states(names)
 
     def sleeps_quietly(self, end: float) -> bool:
-        """Whether :meth:`sleep` until rig time ``end`` (give or take a microsecond) would ask no joint: no
-        joint's keep-alive falls due before it (the sleep is then the clock's alone)."""
+        """Whether :meth:`sleep` until rig time ``end`` (give or take a microsecond) would be the clock's sleep
+        alone: this class's own :meth:`sleep`, and no joint's keep-alive falls due before ``end``."""
+        if type(self).sleep is not Rig.sleep or "sleep" in vars(self):
+            return False
         if self.keepalive:
             margin = end + 1e-6
             for j in self.joints.values():

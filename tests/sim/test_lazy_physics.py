@@ -57,11 +57,13 @@ def test_every_access_to_the_physics_or_a_twin_runs_the_booked_time_first(what: 
         assert world.steps * world.timestep - world.timestep < rig.time
 
 
-def test_an_env_step_runs_two_compiled_calls(monkeypatch: pytest.MonkeyPatch) -> None:
-    """ErobReach-v0: three transactions (the drive acts on each request) and the period hold in two compiled
-    calls - the command's target write and start in one (the one-call exchange, joints.sim.erob_exchange), the
-    hold (``World.hold``: booked, its substeps run on their own at the start of the next call) with the status
-    read in the other - where every frame instant once stepped the physics in a call of its own (seven)."""
+@pytest.mark.parametrize("one_call", [True, False])
+def test_an_env_step_runs_one_compiled_call(monkeypatch: pytest.MonkeyPatch, one_call: bool) -> None:
+    """ErobReach-v0: three transactions (the drive acts on each request) and the period hold in ONE compiled call
+    (``CompiledPath.step``: the target write and start, the hold, the status read), where every frame instant once
+    stepped the physics in a call of its own (seven). Without the one-call step, two: the command's writes in one
+    (the one-call exchange, joints.sim.erob_exchange), the hold (``World.hold``: booked, its substeps run on their
+    own at the start of the next call) with the status read in the other."""
     import gymnasium as gym
     import numpy as np
 
@@ -85,6 +87,8 @@ def test_an_env_step_runs_two_compiled_calls(monkeypatch: pytest.MonkeyPatch) ->
 
     monkeypatch.setattr(stepping.Group, "run", counted)
     monkeypatch.setattr(erob_exchange, "_compiled", lambda: exchange)
+    if not one_call:
+        monkeypatch.setattr(joints.CompiledPath, "step", lambda self, *args, **kwargs: None)
     env = gym.make("joints/ErobReach-v0")
     try:
         env.reset(seed=1)
@@ -94,6 +98,6 @@ def test_an_env_step_runs_two_compiled_calls(monkeypatch: pytest.MonkeyPatch) ->
         for _ in range(20):
             env.step(rng.uniform(space.low, space.high).astype(space.dtype))
         assert calls[0] == 0  # the hold runs in the read's call
-        assert exchanges[0] == 2 * 20  # the command, the read
+        assert exchanges[0] == (1 if one_call else 2) * 20  # the step; or the command, the read
     finally:
         env.close()
