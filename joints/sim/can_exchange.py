@@ -545,6 +545,7 @@ class ErobCanExchange:
         self.taken = 0  #: calls that ran
         self._last: Any = np.zeros((0, OUT_WIDTH))  #: the output rows of the last :meth:`run` (its first ``_done``)
         self._done = 0
+        self._hold = -1  #: the hold row of the last call's rows (:meth:`step`), or -1
         self._st = np.zeros(STATE_WIDTH)
         self._out: dict[int, Any] = {}  #: output rows per count
         self._plans: dict[int, _Plan] = {}  #: id of a tuple of reads -> its plan
@@ -836,7 +837,7 @@ class ErobCanExchange:
         if got is None:
             return None
         out, done = got
-        self._last, self._done = out, done
+        self._last, self._done, self._hold = out, done, -1
         return plan, out, done
 
     def _carry(self, fn: Any, tx: Any, plan: _Plan, span: float, longest: float, timeout: float, hold: bool,
@@ -942,14 +943,13 @@ class ErobCanExchange:
             refusal = self._written(cmd, commands, out, ran, None)
             after = float(out[ran - 1, CLOCK_AFTER])
             if not reached:
-                self._last, self._done = out, ran
+                self._last, self._done, self._hold = out, ran, -1
                 return Stepped(ran, refusal, after, None)
+            self._last, self._done, self._hold = out, done + 1, a
             remaining, t0 = float(o[REMAINING]), float(o[CLOCK_AFTER])
             if t0 != after:
                 self.sleeps += 1
-            reading = out[a + 1:]
-            values = self._read_values(rd, reading, done - a)
-            self._last, self._done = reading, done - a
+            values = self._read_values(rd, out[a + 1:], done - a)
             self.steps += 1
             return Stepped(ran, refusal, after, (remaining, t0, values))
 
@@ -1062,9 +1062,12 @@ class ErobCanExchange:
 
     @property
     def instants(self) -> list[tuple[float, ...]]:
-        """Per transaction of the last :meth:`run`: (request start, end, reply start, end, the host has it, the
-        world's substeps when the drive acted)."""
-        return [(o[E0], o[E1], o[R0], o[R1], o[HOST], o[ACTED]) for o in self._last[:self._done].tolist()]
+        """Per transaction of the last call (:meth:`run`, :meth:`values`, :meth:`acks`, :meth:`step`): (request
+        start, end, reply start, end, the host has it, the world's substeps when the drive acted)."""
+        rows = self._last[:self._done].tolist()
+        if self._hold >= 0:
+            del rows[self._hold]
+        return [(o[E0], o[E1], o[R0], o[R1], o[HOST], o[ACTED]) for o in rows]
 
     def _read_values(self, plan: _Plan, out: Any, done: int) -> list[int]:
         """The values a reads plan's fronts answer (each counts its request), from ``out``'s first ``done`` rows."""
