@@ -113,18 +113,30 @@ def _same(mode: str, monkeypatch: pytest.MonkeyPatch, plant: Any = None) -> dict
     return on
 
 
-def _late(k: int, u: Any) -> None:
+#: s a steady command takes on the wire in each mode (a target and "start"; a set-point), for :func:`_late`
+COMMAND = {"position": 0.00232, "velocity": 0.00118, "torque": 0.00118}
+
+
+def _late(mode: str) -> Any:
     """Before step 40 the host is 25 ms late (a tick missed: an overrun, no wait); before step 70, 5 ms (a
-    short wait)."""
-    if k == 40:
-        u.rig.sleep(0.025)
-    elif k == 70:
-        u.rig.sleep(0.005)
+    shorter wait); before steps 80-89, late so much that the wait is 0.1, 0.2, ... 0.9 substeps (a wait that
+    may end before the physics' next substep: nothing due when the read's call runs it)."""
+
+    def plant(k: int, u: Any) -> None:
+        if k == 40:
+            u.rig.sleep(0.025)
+        elif k == 70:
+            u.rig.sleep(0.005)
+        elif 80 <= k < 90:
+            wait = (k - 79) * 0.1 * u.rig.sim.timestep
+            u.rig.sleep(u.tick_time(1) - u.rig.time - COMMAND[mode] - wait)
+
+    return plant
 
 
 @pytest.mark.parametrize("mode", ["position", "velocity", "torque"])
 def test_the_one_call_step_gives_the_bits_of_the_three_calls(mode: str, monkeypatch: pytest.MonkeyPatch) -> None:
-    on = _same(mode, monkeypatch, _late)
+    on = _same(mode, monkeypatch, _late(mode))
     assert on["taken"] == STEPS  # every step in one call (the temperature reads, the late ticks among them)
     assert on["rec"][-1][1] == 1  # the one overrun
     assert on["apart"] == 0
