@@ -13,7 +13,9 @@ between them and the drive's ops in one call of the twin's one-call exchange (th
 :mod:`joints.sim.can_exchange`, reached through the in-process medium's peer: nothing of the sim is imported
 here). Where the link, the driver or the twin is not in the steady case (a trace, a node to fence, a setting to
 write, anything the exchange refuses before sending) the joint's own method runs instead, so the result is
-the driver path's in every case. Used by :mod:`joints.compiled_path`.
+the driver path's in every case. An env's whole steady step - the command, the env's wait for its tick (the world
+holding the rig's sleep) and the state read - goes in one call (:meth:`ErobCanStep.step`); where it cannot, nothing
+is sent and the env does the three. Used by :mod:`joints.compiled_path`.
 """
 
 from __future__ import annotations

@@ -28,7 +28,9 @@ its last tick, which the call sets to the same final value.
 A sleep the world held (``World.hold`` where the bus lets it: :func:`holds`, nothing in flight) runs first in the
 next call, as ``World.sync`` would run it at the medium's first ``_sync``: its substeps, the bus's tick at the
 last one's end (the medium's time moves there), the clock at the sleep's end. ``acks`` gives a command's outcome
-without its ``Ack`` objects (the host proves once that its rule takes them).
+without its ``Ack`` objects (the host proves once that its rule takes them). ``step`` carries an env's whole step:
+the command's requests, the env's wait for its tick as the world holds it (a :data:`HOLD` row: :func:`hold`) and
+the state reads - the held sleep then runs before the first read, inside the same call.
 
 It runs only in the steady case, checked before anything is sent (:meth:`ErobCanExchange.run` returns None
 otherwise): the world runs fused with this bus's tick its only tick, the medium times frames (not ideal,
