@@ -205,3 +205,28 @@ def test_a_refusal_from_another_node_raises_unexpected_reply() -> None:
             env.step(np.zeros(env.action_space.shape, dtype=np.float32))
     finally:
         env.close()
+
+
+def test_a_replaced_world_hold_leaves_the_steps_to_the_env(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The one call mirrors the clock's sleep as the stock world holds it: a replaced ``World.hold`` (or a world
+    that does not hold sleeps) sends nothing by it - the env's own three calls go through the replacement."""
+    from joints.sim.world import World
+
+    held: list[float] = []
+    hold = World.hold
+
+    def counted(self: World, seconds: float) -> None:
+        held.append(seconds)
+        hold(self, seconds)
+
+    monkeypatch.setattr(World, "hold", counted)
+    env = gym.make("joints/ErobReach-v0", config=_config(), control_period=PERIOD)
+    u: Any = env.unwrapped
+    try:
+        env.reset(seed=3)
+        for _ in range(5):
+            env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+        (stepper,) = u.compiled_path._steppers
+        assert u.compiled_path.steps_taken == 0 and stepper.exchange.steps == 0 and len(held) >= 5
+    finally:
+        env.close()
