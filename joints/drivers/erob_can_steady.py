@@ -13,7 +13,9 @@ between them and the drive's ops in one call of the twin's one-call exchange (th
 :mod:`joints.sim.can_exchange`, reached through the in-process medium's peer: nothing of the sim is imported
 here). Where the link, the driver or the twin is not in the steady case (a trace, a node to fence, a setting to
 write, anything the exchange refuses before sending) the joint's own method runs instead, so the result is
-the driver path's in every case. Used by :mod:`joints.compiled_path`.
+the driver path's in every case. An env's whole steady step - the command, the env's wait for its tick (the world
+holding the rig's sleep) and the state read - goes in one call (:meth:`ErobCanStep.step`); where it cannot, nothing
+is sent and the env does the three. Used by :mod:`joints.compiled_path`.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 from joints.codecs import erob_can as ec
 from joints.devices.erob.can import CanMap
 from joints.devices.params import ParamMap
+from joints.drivers import erob_can as erob_can_driver
 from joints.drivers.erob import CMD_START
 from joints.drivers.erob_can import ErobCanAccess, ErobCanDriver
 from joints.errors import UnexpectedReply
@@ -45,6 +48,8 @@ _STOCK = tuple((cls, name, getattr(cls, name)) for cls, names in (
 #: what a read's value goes through on the host (``CanMap.from_wire`` and the map's lookups it calls), as defined
 _DECODE = ((CanMap, "from_wire", CanMap.from_wire), (CanMap, "param", ParamMap.param), (CanMap, "key", ParamMap.key))
 _I32 = (-0x80000000, 0x7FFFFFFF)
+#: the driver's state rule as defined (a replaced one: no one-call step, see :meth:`ErobCanStep.step`)
+_STATE_NAMES, _STATE_READ = ErobCanDriver.state_names, ErobCanDriver.state_read
 
 
 def _stock(methods: tuple[tuple[Any, str, Any], ...] = _STOCK) -> bool:
@@ -221,11 +226,7 @@ class ErobCanStep:
                 self._check(request, steady)  # raises EncodeError before anything is sent
                 got = self._send_acks((request, self.start), steady)
                 if got is not None:  # (the target write is acknowledged: the call carries only writes it takes)
-                    driver.note_written("target_absolute_position", target)
-                    if got[1] is not None:
-                        self._take((request, self.start)[got[0] - 1], got[1])  # refused: raises DeviceRejected
-                    self.taken += 1
-                    joint.note_contact()
+                    self._moved(target, got, (request, self.start), None)
                     return
             driver.move_to(target, speed=speed, acceleration=acc, deceleration=dec)
             joint.note_contact()
@@ -246,6 +247,15 @@ class ErobCanStep:
             driver.set_current(current)
             joint.note_contact()
 
+    def _moved(self, target: int, got: tuple[int, Any], requests: tuple[Any, ...], at: float | None) -> None:
+        """A steady move's bookkeeping after the exchange carried it (``got``: :meth:`_send_acks`'s; ``at``: the
+        clock after it, None: now): the target noted, a refused start raised, the contact."""
+        self.driver.note_written("target_absolute_position", target)
+        if got[1] is not None:
+            self._take(requests[got[0] - 1], got[1])  # refused: raises DeviceRejected
+        self.taken += 1
+        self.joint.note_contact(at)
+
     def _setpoint(self, value: int) -> bool:
         """The steady set-point (``ErobCanDriver._analog`` with its settings held and the settle wait over: one
         write of the analog value 0x01FE) by one call of the twin's exchange; False: not sent (the driver's own
@@ -256,11 +266,15 @@ class ErobCanStep:
         got = self._send_acks((request,), steady)
         if got is None:
             return False
+        self._set(value, got, request)
+        return True
+
+    def _set(self, value: int, got: tuple[int, Any], request: Any) -> None:
+        """A steady set-point's bookkeeping after the exchange carried it (``got``: :meth:`_send_acks`'s)."""
         if got[1] is not None:
             self._take(request, got[1])  # (never: a set-point is not refused; as the link takes a refusal)
         self.driver.note_written("analog_quantity_value", value)
         self.taken += 1
-        return True
 
     def state(self) -> JointState:
         clock, driver = self.clock, self.driver
@@ -269,12 +283,132 @@ class ErobCanStep:
         values = self._send_values(self._reads_of(names))
         if values is None:
             return self.joint.state()
+        return self._state_of(names, values, t0, clock.now())
+
+    def _state_of(self, names: tuple[str, ...], values: list[int], t0: float, t1: float) -> JointState:
+        """The joint's state from the values of ``names`` read between the clock instants ``t0`` and ``t1``."""
         if self._plain(names):
             v = dict(zip(names, values))
         else:
             from_wire = self.access.map.from_wire
             v = {name: from_wire(name, value) for name, value in zip(names, values)}
-        return self.joint.to_si(driver.state_read(v, t0, clock.now()))
+        return self.joint.to_si(self.driver.state_read(v, t0, t1))
+
+    # -- an env step in one call ----------------------------------------------------------------
+    def step(self, mode: str, values: Sequence[float], tick: float) -> tuple[list[JointState], float] | None:
+        """:meth:`CompiledPath.step <joints.compiled_path.CompiledPath.step>` of this joint: :meth:`command`'s
+        steady command, the env's wait for its tick at clock time ``tick`` (``RigEnv._wait_until``: the world
+        holds the rig's sleep) and :meth:`state`'s read in one call of the twin's exchange
+        (:meth:`~joints.sim.can_exchange.ErobCanExchange.step`): (the state, what was left to the tick - the tick
+        less the clock after the command). The read's names are ``driver.state_names`` at the clock after the
+        wait: the temperature read, where it may fall due, is the call's last and made by the call's own test of
+        that clock. None (nothing sent) where any part is not the steady case or the command's checks refuse
+        (the command's own way raises it again)."""
+        driver = self.driver
+        if self.exchange.world.clock is not self.clock or type(driver).state_names is not _STATE_NAMES or \
+                type(driver).state_read is not _STATE_READ or not self._steady():
+            return None
+        try:
+            planned = self._plan(mode, values[0])
+        except Exception:  # noqa: BLE001 - a refusal: the command's own way raises it again
+            return None
+        if planned is None:
+            return None
+        requests, value = planned
+        link = self.link
+        if not self._proven(requests):
+            return None
+        cached = driver._temperature
+        full = (*erob_can_driver.CAN_STATUS_NAMES, erob_can_driver.TEMPERATURE)
+        reads = self._reads_of(full)
+        if id(reads) not in self._answered:
+            if not all(link.rule.is_reply(r, ec.ValueReply(r.node, 0)) for r in reads):
+                return None
+            self._answered.add(id(reads))
+        with link._lock:
+            got = self.exchange.step(requests, tick, reads, link.policy.timeout,
+                                     None if cached is None else cached[0], erob_can_driver.TEMPERATURE_PERIOD)
+            if got is None:
+                return None
+            read = got.read
+            link.transactions += got.done + (0 if read is None else len(read[2]))
+        self._carried(mode, value, requests, got)
+        if read is None:  # a set-point was held: the bus ticks, the world does not hold the sleep - as the env does
+            return self._wait_and_read(tick)
+        remaining, t0, vals = read
+        n = len(vals)
+        self.lane.fused += n
+        self.lane.taken += n
+        self.values_taken += 1
+        names = full if n == len(full) else full[:n]
+        if driver.state_names(t0) != names:
+            raise RuntimeError(f"{link.name}: the one-call step read {names} but the driver reads "
+                               f"{driver.state_names(t0)} at {t0!r}; this is a bug")
+        return [self._state_of(names, vals, t0, self.clock.now())], remaining
+
+    def _plan(self, mode: str, value: float) -> tuple[tuple[Any, ...], int] | None:
+        """:meth:`command`'s steady requests for ``value`` in ``mode`` (its checks made; they raise) and the
+        value they carry, or None where the command is not the steady one (the link is steady: asked before)."""
+        joint, driver = self.joint, self.driver
+        if mode == "position":
+            target, speed, acc, dec = joint.position_command(value)
+            if not driver.steady_move(speed, acc, dec):
+                return None
+            driver.validate(target_absolute_position=target)
+            request = self.access.message("target_absolute_position", target)
+            self._check(request, True)
+            return (request, self.start), target
+        if mode == "velocity":
+            v, ramp = joint.velocity_command(value)
+            if not driver.steady_velocity(ramp, ramp):
+                return None
+            driver.validate(analog_quantity_value=v, target_speed=v)
+        else:
+            v = joint.torque_command(value)
+            if not driver.steady_current():
+                return None
+            driver.validate(analog_quantity_value=v, target_current=v)
+        request = self.access.message("analog_quantity_value", v)
+        self._check(request, True)
+        return (request,), v
+
+    def _proven(self, requests: tuple[Any, ...]) -> bool:
+        """:meth:`_send_acks`'s proof for ``requests``: the stock rule takes each one's ``Ack`` (once per (request
+        type, node))."""
+        link, acked = self.link, self._acked
+        for r in requests:
+            if (type(r), r.node) not in acked:
+                if not link.rule.is_reply(r, ec.Ack(r.node)):
+                    return False
+                acked.add((type(r), r.node))
+        return True
+
+    def _carried(self, mode: str, value: int, requests: tuple[Any, ...], got: Any) -> None:
+        """:meth:`command`'s bookkeeping after a step's call carried its requests (``got``: the exchange's
+        ``Stepped``): counted as :meth:`_send_acks` counts them, then the move's or the set-point's."""
+        done = got.done
+        self.lane.fused += done
+        self.lane.taken += done
+        self.acks_taken += 1
+        ack = (done, got.refusal)
+        if mode == "position":
+            self._moved(value, ack, requests, got.after)
+            return
+        self._set(value, ack, requests[0])
+        if mode == "torque":
+            self.joint.note_contact(got.after)
+
+    def _wait_and_read(self, tick: float) -> tuple[list[JointState], float]:
+        """The env's wait for ``tick`` (``RigEnv._wait_until`` -> ``Rig.sleep`` with no keep-alive due: the clock's
+        sleep) and :meth:`state`, one after the other: (the state, what was left to the tick)."""
+        clock = self.clock
+        remaining = tick - clock.now()
+        if remaining > 0:
+            end = clock.now() + remaining
+            now = clock.now()
+            if end > now:
+                clock.sleep(end - now)
+        return [self.state()], remaining
 
     def _plain(self, names: tuple[str, ...]) -> bool:
         """Whether ``map.from_wire(name, raw)`` is ``raw`` for each of ``names`` (checked once per names and map):

@@ -28,7 +28,9 @@ its last tick, which the call sets to the same final value.
 A sleep the world held (``World.hold`` where the bus lets it: :func:`holds`, nothing in flight) runs first in the
 next call, as ``World.sync`` would run it at the medium's first ``_sync``: its substeps, the bus's tick at the
 last one's end (the medium's time moves there), the clock at the sleep's end. ``acks`` gives a command's outcome
-without its ``Ack`` objects (the host proves once that its rule takes them).
+without its ``Ack`` objects (the host proves once that its rule takes them). ``step`` carries an env's whole step:
+the command's requests, the env's wait for its tick as the world holds it (a :data:`HOLD` row: :func:`hold`) and
+the state reads - the held sleep then runs before the first read, inside the same call.
 
 It runs only in the steady case, checked before anything is sent (:meth:`ErobCanExchange.run` returns None
 otherwise): the world runs fused with this bus's tick its only tick, the medium times frames (not ideal,
@@ -51,6 +53,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from joints.clock import ManualClock
 from joints.codecs import erob_can as ec
 from joints.devices.erob.can import EROB_CAN, Reach
 from joints.devices.erob.registers import MotionMode, OperationMode
@@ -65,10 +68,11 @@ from joints.sim.erob_kernel import fmax
 from joints.sim.kernel import jitable
 from joints.sim.sensors import Sensor
 from joints.sim.stepping import STEPS
+from joints.sim.world import World
 from joints.transports import can as can_transport
 from joints.transports.can_sim import CanMedium, LockstepCanBus
 
-__all__ = ["ErobCanExchange", "act", "exchanges", "holds"]
+__all__ = ["ErobCanExchange", "Stepped", "act", "exchanges", "hold", "holds"]
 
 _SPEED, _TORQUE = int(OperationMode.SPEED), int(OperationMode.TORQUE)
 
@@ -88,6 +92,10 @@ TX_WIDTH = 15
 #: ``status_of_achieving_position`` (the row itself: its settle timer runs), the target write, "start", the
 #: analog set-point 0x01FE (``analog_quantity_value``)
 READ, READ_ACHIEVE, TARGET_POSITION, START, SETPOINT = range(5)
+#: the op of a row that is no transaction but the host's wait for the env's tick (:func:`hold`): the tick in
+#: :data:`UNTIL`; whether the last row (a read) is optional, and its rule's last read and period (:func:`hold`)
+HOLD = 5
+UNTIL, SINCE, PERIOD, OPTIONAL = VALUE, MOTION, RELATIVE, REPETITIVE
 #: what a set-point write does (its MOTION column; :meth:`ErobCanFront._setpoint`): only stored (an external
 #: analog source, or neither speed nor torque mode), the target speed, the target current
 STORE, TO_SPEED, TO_CURRENT = 0.0, 1.0, 2.0
@@ -103,6 +111,9 @@ SENSED_AT = STATUS_AT + len(K.STATUS_NAMES)
 _SENSED = SENSED_AT - STATUS_AT  #: where the sensed columns start, counted from the status values
 _TIME, _POS, _VEL, _I_OUT = SENSED  #: (in this order)
 OUT_WIDTH = SENSED_AT + len(SENSED)
+#: a :data:`HOLD` row's output: what was left to the tick (<= 0: late), the clock after (:data:`CLOCK_AFTER`),
+#: whether the call got there, whether the optional last read is made
+REMAINING, REACHED, MADE = E0, HOST, R0
 #: a read's sensor report (its SENSE column; :func:`report`): none, the firmware's ``_sensed_counts``,
 #: ``_sensed_speed``, ``_sensed_current`` (each into its status value), ``_sensed_at`` (the status read's: its
 #: three values unused, its draws made; a value that is not finite goes into the read's own status value)
@@ -226,6 +237,59 @@ def _steps(n: int, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: A
 
 
 @jitable
+def run_held(st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any, worlds: Any, dts: Any,
+             active: Any) -> None:
+    """A sleep the world held (``World.hold``), run as ``World.sync`` runs it at the medium's first ``_sync``: its
+    substeps, the bus's tick at the last one's end (the medium's, with no wait of its own: its time moves there),
+    the clock at the sleep's end."""
+    st[BOOKED] = 0.0
+    n = _due(0.0, st, w, worlds)
+    _steps(n, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+    t = st[TICKED]
+    if n > 0 and t > st[NOW]:  # CanMedium.tick
+        st[NOW] = t
+        st[SEEN] = fmax(st[SEEN], t)
+    st[CLOCK] = st[TARGET]
+
+
+@jitable
+def hold(t: Any, st: Any, o: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any, worlds: Any,
+         dts: Any, active: Any) -> bool:
+    """A :data:`HOLD` row ``t``: the env's wait for its tick at clock time ``t[UNTIL]`` (``RigEnv._wait_until``:
+    ``remaining`` left, if > 0 the rig's sleep of it - ``Rig.sleep`` with no keep-alive due, ``end - now`` from
+    ``end = now + remaining`` - as ``World.hold`` books it where the bus holds it: an earlier held sleep run first,
+    as ``World._defer`` syncs it). Into ``o``: what was left, the clock after, reached. Returns whether the
+    optional last read is made (``t[OPTIONAL]``: ``ErobCanDriver.state_names`` at the clock after: its last read
+    ``t[SINCE]`` ago by at least ``t[PERIOD]``, or after now)."""
+    now = st[CLOCK]
+    remaining = t[UNTIL] - now
+    o[REMAINING] = remaining
+    if remaining > 0:
+        end = now + remaining
+        if end > now:
+            if st[BOOKED] == L.HELD:
+                run_held(st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+            st[TARGET] += end - now
+            st[BOOKED] = L.HELD
+            st[CLOCK] = st[TARGET]
+    t0 = st[CLOCK]
+    o[CLOCK_AFTER] = t0
+    o[REACHED] = 1.0
+    made = t[OPTIONAL] == 0.0 or t0 - t[SINCE] >= t[PERIOD] or t0 < t[SINCE]
+    o[MADE] = 1.0 if made else 0.0
+    return made  # type: ignore[no-any-return]
+
+
+@jitable
+def held_setpoint(out: Any, k: int) -> bool:
+    """Whether a set-point of the rows before ``k`` was held by the front (``out``'s HELD)."""
+    for i in range(k):
+        if out[i, HELD] != 0.0:
+            return True
+    return False
+
+
+@jitable
 def _wait(until: float, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any, worlds: Any,
           dts: Any, active: Any) -> None:
     """``ClockDriven._wait_until(until)`` with nothing due on the medium: the clock sleeps (``World.advance``)."""
@@ -245,19 +309,23 @@ def exchanges(tx: Any, out: Any, scratch: Any, sensor: Any, m: Any, st: Any, w: 
     where ``st[REPORTS]``: :func:`report` with the sensor's rows ``sensor`` and ``m``) into ``out``. Stops after a
     refused request; ``st[ODD]`` set: a branch of the medium the call does not model was met (the caller's
     checks keep it from happening). A sleep the world held (``st[BOOKED]`` is ``L.HELD``: ``World.hold``) runs
-    first, as ``World.sync`` runs it at the medium's first ``_sync``: its substeps, the bus's tick at the last
-    one's end (the medium's, with no wait of its own: its time moves there), the clock at the sleep's end."""
-    if st[BOOKED] == L.HELD:
-        st[BOOKED] = 0.0
-        _steps(_due(0.0, st, w, worlds), st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
-        t = st[TICKED]
-        if st[TICKS] > 0.0 and t > st[NOW]:  # CanMedium.tick
-            st[NOW] = t
-            st[SEEN] = fmax(st[SEEN], t)
-        st[CLOCK] = st[TARGET]
-    for k in range(tx.shape[0]):
+    first, as ``World.sync`` runs it at the medium's first ``_sync`` (:func:`run_held`). A :data:`HOLD` row is the
+    host's wait for the env's tick between two requests (:func:`hold`; the call stops there where a set-point
+    before it was held: the world then does not hold the sleep)."""
+    count = tx.shape[0]
+    k = -1
+    while k + 1 < count:
+        k += 1
         t = tx[k]
         o = out[k]
+        if t[OP] == HOLD:
+            if held_setpoint(out, k):  # the world cannot hold the sleep (the bus ticks): Python goes on from here
+                return
+            if not hold(t, st, o, w, mj_step, table, adr, ratio, order, worlds, dts, active):
+                count -= 1  # the optional last read is not made
+            continue
+        if st[BOOKED] == L.HELD:
+            run_held(st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
         # Link._drain: receive(host, 0.0): the medium's _sync, then the poll (a wait until the medium's time
         # where the clock is behind it)
         c = st[CLOCK]
@@ -386,6 +454,18 @@ _HOLD_STOCK = tuple((cls, name, getattr(cls, name)) for cls, names in (
 ) for name in names)
 
 
+#: what the env's wait goes through to the world's hold (:func:`hold` mirrors it; a replaced one: no one-call step)
+_SLEEP_STOCK = ((ManualClock, "sleep", ManualClock.sleep), *((World, name, getattr(World, name)) for name in (
+    "_sleep", "hold", "_defer", "_ticks_hold")))
+
+
+def sleeps_held(world: Any) -> bool:
+    """Whether the clock's sleep is ``world``'s hold as :func:`hold` does it: the world holds sleeps
+    (``hold_sleeps``), its clock's sleep goes to it, and the methods on the way are stock."""
+    clock = world.clock
+    return bool(world.hold_sleeps) and getattr(clock, "_on_sleep", None) == world._sleep and L.stock(_SLEEP_STOCK)
+
+
 def holds(bus: ErobCanBus) -> bool:
     """Whether the world may hold a sleep with ``bus`` ticking (``World.hold``): its substeps and the bus's tick
     run later - at the medium's next ``_sync`` (a frame sent or received, its time or load asked), at the next
@@ -423,6 +503,18 @@ def _direct(plan: Any) -> tuple[int, int, int] | None:
     if at < 0 or at in (erob._SENSED_COUNTS, erob._SENSED_SPEED, erob._SENSED_CURRENT):
         return None
     return at, lo, hi
+
+
+@dataclass(frozen=True, slots=True)
+class Stepped:
+    """What :meth:`ErobCanExchange.step` did: the commands done, the refused start's error reply (the last done) or
+    None, the clock after the commands; then (what was left to the tick, the clock after the wait, the reads'
+    values - one fewer where the optional last read was not made), or None where the call stopped before."""
+
+    done: int
+    refusal: Any
+    after: float
+    read: tuple[float, float, list[int]] | None
 
 
 @dataclass(frozen=True, slots=True)
@@ -469,6 +561,7 @@ class ErobCanExchange:
         self.taken = 0  #: calls that ran
         self._last: Any = np.zeros((0, OUT_WIDTH))  #: the output rows of the last :meth:`run` (its first ``_done``)
         self._done = 0
+        self._hold = -1  #: the hold row of the last call's rows (:meth:`step`), or -1
         self._st = np.zeros(STATE_WIDTH)
         self._out: dict[int, Any] = {}  #: output rows per count
         self._plans: dict[int, _Plan] = {}  #: id of a tuple of reads -> its plan
@@ -486,6 +579,9 @@ class ErobCanExchange:
         self._reported = False  #: the last call made its reads' sensor reports (:meth:`_reporting`)
         self.reported = 0  #: calls that made their reads' sensor reports
         self._none = np.zeros(1)  #: the sensor rows given to a call that makes no reports
+        #: the rows of a step and its output rows (:meth:`_joined`) per sizes
+        self._steps_tx: dict[tuple[int, int], tuple[Any, Any]] = {}
+        self.steps = 0  #: env steps carried whole (:meth:`step`: the command, the wait and the read)
 
     # -- the steady case ------------------------------------------------------------------------
     def _steady(self, front: ErobCanFront) -> bool:
@@ -753,24 +849,38 @@ class ErobCanExchange:
         plan = self._plan(requests)
         if plan is None or (reads and not plan.reads):
             return None
+        got = self._carry(fn, plan.tx, plan, plan.span, plan.longest, timeout, False)
+        if got is None:
+            return None
+        out, done = got
+        self._last, self._done, self._hold = out, done, -1
+        return plan, out, done
+
+    def _carry(self, fn: Any, tx: Any, plan: _Plan, span: float, longest: float, timeout: float, hold: bool,
+               out: Any = None) -> tuple[Any, int] | None:
+        """The compiled call of the rows ``tx`` (the world's lock held; ``plan``: whose fronts they are for and
+        whose reads' sensor reports the call makes; ``span``, ``longest``: the rows' time at most, together and
+        one; ``hold``: a :data:`HOLD` row among them; ``out``: the output rows, else a buffer per size) and the
+        medium brought back: the output rows and how many transactions were done; None (nothing sent) where this
+        is not the steady case."""
         for front in plan.unique:
             if not self._steady(front):
                 return None
         world, medium, bus = self.world, self.medium, self.bus
         clock = world.clock.now()
         held = world._booked  # (a held sleep: _steady) its substeps run first, the medium's time up to a step past
-        ahead = max(medium.now - clock, 0.0) + (world.timestep if held else 0.0)
+        ahead = max(medium.now - clock, 0.0) + (world.timestep if held or hold else 0.0)
         # the branches of the medium the call does not model (a frame within twice the clock's time of 0, a reply
         # near the link's timeout) cannot be met: the whole call is well inside both
-        if not clock > 2.0 * (plan.span + ahead) or not plan.longest < 0.5 * timeout:
+        if not clock > 2.0 * (span + ahead) or not longest < 0.5 * timeout:
             return None
-        tx = plan.tx
         n = len(tx)
-        out = self._out.get(n)
         if out is None:
-            import numpy as np
+            out = self._out.get(n)
+            if out is None:
+                import numpy as np
 
-            out = self._out[n] = np.zeros((n, OUT_WIDTH))
+                out = self._out[n] = np.zeros((n, OUT_WIDTH))
         sensor = self._reporting(plan)
         self._reported = sensor is not None
         self.reported += self._reported
@@ -801,11 +911,78 @@ class ErobCanExchange:
         if state[ODD] or done == 0:
             raise RuntimeError(f"{bus.medium.channel}: the one-call exchange met a branch it does not model "
                                f"after {done} of {n} requests; this is a bug (the steady checks let it through)")
-        self._last, self._done = out, done
         self.taken += 1
         if held:
             self.sleeps += 1
-        return plan, out, done
+        return out, done
+
+    def step(self, commands: Sequence[Any], until: float, reads: tuple[Any, ...], timeout: float,
+             since: float | None, period: float) -> Stepped | None:
+        """An env step's requests in one call: ``commands`` (writes and commands, as :meth:`acks` sends them), the
+        host's wait for the env's tick at clock time ``until`` (:func:`hold`: ``RigEnv._wait_until`` with the rig's
+        sleep the world's hold - the bus holds it: :func:`holds`), then ``reads`` (a tuple of reads, as
+        :meth:`values` sends them; ``since`` not None: the last is made only where the clock after the wait is at
+        least ``period`` past ``since``, or before it - ``ErobCanDriver.state_names``). None (nothing sent) where
+        this is not the steady case. The call stops after a refused start, or before the wait where a set-point
+        was held (the bus ticks then: the world does not hold the sleep; the caller waits and reads)."""
+        for r in commands:
+            if type(r) is ec.Read:
+                return None
+        fn = _compiled()
+        if fn is None or not commands or not reads:
+            return None
+        with self.world.lock:
+            if not sleeps_held(self.world) or not holds(self.bus):
+                return None
+            cmd = self._plan(commands)
+            if cmd is None or cmd.reads:
+                return None
+            rd = self._plan(reads)
+            if rd is None or not rd.reads or rd.unique != cmd.unique:
+                return None
+            a = len(cmd.tx)
+            tx, out = self._joined(cmd.tx, rd.tx)
+            out[a, REACHED] = 0.0
+            h = tx[a]
+            h[UNTIL] = until
+            h[OPTIONAL] = 0.0 if since is None else 1.0
+            h[SINCE] = 0.0 if since is None else since
+            h[PERIOD] = period
+            got = self._carry(fn, tx, rd, cmd.span + rd.span + self.world.timestep, max(cmd.longest, rd.longest),
+                              timeout, True, out)
+            if got is None:
+                return None
+            done = got[1]
+            o = out[a]
+            reached = o[REACHED] != 0.0
+            ran = min(done, a)
+            refusal = self._written(cmd, commands, out, ran, None)
+            after = float(out[ran - 1, CLOCK_AFTER])
+            if not reached:
+                self._last, self._done, self._hold = out, ran, -1
+                return Stepped(ran, refusal, after, None)
+            self._last, self._done, self._hold = out, done + 1, a
+            remaining, t0 = float(o[REMAINING]), float(o[CLOCK_AFTER])
+            if t0 != after:
+                self.sleeps += 1
+            values = self._read_values(rd, out[a + 1:], done - a)
+            self.steps += 1
+            return Stepped(ran, refusal, after, (remaining, t0, values))
+
+    def _joined(self, commands: Any, reads: Any) -> tuple[Any, Any]:
+        """The rows of a step (:meth:`step`): ``commands``'s, a :data:`HOLD` row, ``reads``'s; and its output rows
+        (buffers per sizes, the hold row's other columns 0)."""
+        a, r = len(commands), len(reads)
+        got = self._steps_tx.get((a, r))
+        if got is None:
+            import numpy as np
+
+            got = self._steps_tx[(a, r)] = (np.zeros((a + 1 + r, TX_WIDTH)), np.zeros((a + 1 + r, OUT_WIDTH)))
+            got[0][a, OP] = HOLD
+        tx = got[0]
+        tx[:a] = commands
+        tx[a + 1:] = reads
+        return got
 
     @staticmethod
     def _reporting(plan: _Plan) -> Sensor | None:
@@ -901,9 +1078,12 @@ class ErobCanExchange:
 
     @property
     def instants(self) -> list[tuple[float, ...]]:
-        """Per transaction of the last :meth:`run`: (request start, end, reply start, end, the host has it, the
-        world's substeps when the drive acted)."""
-        return [(o[E0], o[E1], o[R0], o[R1], o[HOST], o[ACTED]) for o in self._last[:self._done].tolist()]
+        """Per transaction of the last call (:meth:`run`, :meth:`values`, :meth:`acks`, :meth:`step`): (request
+        start, end, reply start, end, the host has it, the world's substeps when the drive acted)."""
+        rows = self._last[:self._done].tolist()
+        if self._hold >= 0:
+            del rows[self._hold]
+        return [(o[E0], o[E1], o[R0], o[R1], o[HOST], o[ACTED]) for o in rows]
 
     def _read_values(self, plan: _Plan, out: Any, done: int) -> list[int]:
         """The values a reads plan's fronts answer (each counts its request), from ``out``'s first ``done`` rows."""

@@ -8,7 +8,8 @@ loads OTHER's ``joints/sim/can_exchange.py`` and ``joints/drivers/erob_can_stead
 ``exchanges`` compiled from its own file). Block by block the env's compiled path steps its joint with this
 checkout's :class:`~joints.drivers.erob_can_steady.ErobCanStep` (and exchange) or OTHER's, each block ``STEPS``
 steps of the same seeded uniform actions from the same reset, timed by ``time.thread_time`` (the world holding its
-sleeps for a step that offers ``carried()``, as ``joints.compiled_path`` sets it); the blocks alternate
+sleeps for a step that offers ``carried()``, as ``joints.compiled_path`` sets it; the env step in one call where
+the stepper has a ``step``: ``CompiledPath.step``; ``ONE_CALL=0``: this checkout's without it); the blocks alternate
 (``ROUNDS`` of each) and every block's observations, rewards and ends must be bit-identical to the first block's.
 Prints the best and median CPU time per env step of each. Pin it to one core (``taskset -c 1``).
 """
@@ -52,6 +53,7 @@ def _block(env: Any, step: Any, actions: list[Any]) -> tuple[float, list[Any]]:
     obs, _ = env.reset(seed=7)
     cp._units = [((0,), step)]
     cp._steppers = [step]
+    cp._step = getattr(step, "step", None)  # the env step in one call (``CompiledPath.step``), where it has one
     return timed_steps(env, obs, actions)
 
 
@@ -63,6 +65,8 @@ def main(other: str, mode: str) -> None:
     env.reset(seed=7)
     (this,) = u.compiled_path._steppers
     assert isinstance(this, S.ErobCanStep)
+    if os.environ.get("ONE_CALL", "1") == "0":  # this checkout's stepper without its one-call env step
+        this.step = lambda mode, values, tick: None
     ex = this.exchange
     that = o_s.ErobCanStep(this.joint, this.driver, o_ce.ErobCanExchange(ex.world, ex.bus, ex.host, ex.transport))
     rng = np.random.default_rng(11)

@@ -99,6 +99,28 @@ class _Recorder:
                     return out
 
                 setattr(s.exchange, method, carried)
+            self._step(world, s)
+
+    def _step(self, world: Any, s: ErobCanStep) -> None:
+        """The exchange's one-call env step recorded as its calls are (the commands, then the reads made)."""
+        call = s.exchange.step
+
+        def stepped(commands: Any, until: float, reads: Any, *args: Any) -> Any:
+            got = call(commands, until, reads, *args)
+            if got is not None:
+                self.replies += ["Ack"] * (got.done - (got.refusal is not None))
+                self.replies += [] if got.refusal is None else [type(got.refusal).__name__]
+                made = [] if got.read is None else list(reads[:len(got.read[2])])
+                self.replies += ["value"] * len(made)
+                for r, (_e0, e1, _r0, r1, seen, acted) in zip([*commands[:got.done], *made], s.exchange.instants,
+                                                              strict=True):
+                    self.frames += [(e1, 0x640 + r.node), (r1, 0x5C0 + r.node)]
+                    self.host.append(seen)
+                    self.acted.append(int(acted))
+                assert self.host[-1] == world.clock.now()
+            return got
+
+        s.exchange.step = stepped
 
 
 def _state(u: Any) -> dict[str, Any]:
@@ -124,13 +146,18 @@ def _state(u: Any) -> dict[str, Any]:
     return out
 
 
-def _run(compiled: bool, mode: str, steps: int, *, plant: Any = None, undo: Any = None) -> dict[str, Any]:
+def _run(compiled: bool, mode: str, steps: int, *, plant: Any = None, undo: Any = None,
+         one_call: bool = True) -> dict[str, Any]:
+    """``one_call`` False: the env's steps not in one call each (the command, the sleep and the read one after the
+    other: a plant on the rig's sleep or on the exchange's ``acks`` acts there)."""
     env = gym.make("joints/ErobReach-v0", config=_config(), control_period=PERIOD, action_mode=mode,
                    compiled_path=compiled)
     u: Any = env.unwrapped
     try:
         out: dict[str, Any] = {"steps": []}
         obs, info = env.reset(seed=3)
+        if not one_call and u.compiled_path is not None:
+            u.compiled_path._step = None
         out["reset"] = (obs.tobytes(), _info(info))
         rec = _Recorder(u)
         rng = np.random.default_rng(5)
@@ -211,11 +238,14 @@ def test_the_compiled_can_step_gives_the_frame_by_frame_bits(mode: str) -> None:
 def test_the_world_holds_the_period_sleep_never_a_wait_of_the_medium_s_own(monkeypatch: pytest.MonkeyPatch) -> None:
     """On the compiled path the world holds the env's period sleep (``World.hold``: the read's call runs it) and,
     under a trace (every request frame by frame: the medium's ``_sync`` settles the world first), still the period
-    sleep - never a wait the medium makes itself (its ``_cap`` set: a held one would tick it without its cap)."""
+    sleep - never a wait the medium makes itself (its ``_cap`` set: a held one would tick it without its cap).
+    (The env's steps one call each off: the command, the sleep and the read one after the other, as in
+    tests/sim/test_can_step.py's reference.)"""
     env = gym.make("joints/ErobReach-v0", config=_config(), control_period=PERIOD, compiled_path=True)
     u: Any = env.unwrapped
     try:
         env.reset(seed=3)
+        u.compiled_path._step = None
         world = u.rig.sim
         medium = next(iter(world.buses.values())).medium
         (step,) = [s for s in u.compiled_path._steppers if isinstance(s, ErobCanStep)]
@@ -324,7 +354,7 @@ def test_a_start_the_drive_refuses_mid_step_is_refused_the_same_way() -> None:
     assert driver["steps"][-1][0] == "refused" and driver["steps"][-1][2] == 0x0027
     _same(driver, compiled)
     if kernel.default_mode():  # the call carried the steps, and the refused start (its last reply)
-        assert compiled["taken"][2] >= 2 * 12
+        assert compiled["taken"][2] >= 12  # (one call a step: the command, the hold and the read)
         assert compiled["replies"][-2:] == ["Ack", "ErrorReply"]
 
 
@@ -375,7 +405,7 @@ def test_a_drive_at_another_node_id_is_not_reached_by_a_kept_plan() -> None:
         front(u)._node = None
 
     driver = _run(False, "position", 20, plant=plant, undo=undo)
-    compiled = _run(True, "position", 20, plant=plant, undo=undo)
+    compiled = _run(True, "position", 20, plant=plant, undo=undo, one_call=False)  # (the plant is on rig.sleep)
     assert driver["steps"][-1][0] == "timeout"
     _same(driver, compiled)
 
@@ -426,6 +456,7 @@ def test_a_reply_of_the_call_that_does_not_answer_its_request_raises_unexpected_
     u: Any = env.unwrapped
     try:
         env.reset(seed=3)
+        u.compiled_path._step = None  # (the env's steps one call each: the command by acks, planted here)
         (step,) = [s for s in u.compiled_path._steppers if isinstance(s, ErobCanStep)]
         acks = step.exchange.acks
 
