@@ -53,7 +53,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from joints.clock import ManualClock
 from joints.codecs import erob_can as ec
 from joints.devices.erob.can import EROB_CAN, Reach
 from joints.devices.erob.registers import MotionMode, OperationMode
@@ -68,7 +67,6 @@ from joints.sim.erob_kernel import fmax
 from joints.sim.kernel import jitable
 from joints.sim.sensors import Sensor
 from joints.sim.stepping import STEPS
-from joints.sim.world import World
 from joints.transports import can as can_transport
 from joints.transports.can_sim import CanMedium, LockstepCanBus
 
@@ -452,18 +450,6 @@ _HOLD_STOCK = tuple((cls, name, getattr(cls, name)) for cls, names in (
     (LockstepCanBus, ("send", "recv")),
     (ErobCanBus, ("tick", "next_event", "holds")),
 ) for name in names)
-
-
-#: what the env's wait goes through to the world's hold (:func:`hold` mirrors it; a replaced one: no one-call step)
-_SLEEP_STOCK = ((ManualClock, "sleep", ManualClock.sleep), *((World, name, getattr(World, name)) for name in (
-    "_sleep", "hold", "_defer", "_ticks_hold")))
-
-
-def sleeps_held(world: Any) -> bool:
-    """Whether the clock's sleep is ``world``'s hold as :func:`hold` does it: the world holds sleeps
-    (``hold_sleeps``), its clock's sleep goes to it, and the methods on the way are stock."""
-    clock = world.clock
-    return bool(world.hold_sleeps) and getattr(clock, "_on_sleep", None) == world._sleep and L.stock(_SLEEP_STOCK)
 
 
 def holds(bus: ErobCanBus) -> bool:
@@ -932,7 +918,7 @@ class ErobCanExchange:
         if fn is None or not commands or not reads:
             return None
         with self.world.lock:
-            if not sleeps_held(self.world) or not holds(self.bus):
+            if not L.sleeps_held(self.world) or not holds(self.bus):
                 return None
             cmd = self._plan(commands)
             if cmd is None or cmd.reads:

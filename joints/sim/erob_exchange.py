@@ -372,6 +372,8 @@ class ErobExchange(L.Carrier):
             for ex in {id(ex): ex for ex in exchanges}.values():
                 if ex.line is not line or ex.world is not world or not ex._drive_steady():
                     return None
+        if hold is not None and not L.sleeps_held(world):
+            return None
         got = self._rows(requests, exchanges, size, check, world.group)
         if got is None:
             return None

@@ -23,9 +23,10 @@ from joints.sim import kernel, stepping
 from joints.sim.erob_kernel import fmax  # ``max`` as Python's builtin, in compiled code too
 from joints.sim.kernel import jitable
 from joints.sim.stepping import EROB, STEPS, ZLAC
+from joints.sim.world import SLEEP_STOCK
 
 __all__ = ["HOLD", "Carrier", "advance", "arena_check", "book", "clear", "compiled", "exchanges", "fill", "fused",
-           "hold", "line_back", "stock", "world_back", "world_fused"]
+           "hold", "line_back", "sleeps_held", "stock", "world_back", "world_fused"]
 
 #: columns of the state vector: the clock's time, the world's target time, whether time is booked (1, or
 #: :data:`HELD`), the line's time, the time the line last saw on the clock, when the host's / device's UART is
@@ -170,6 +171,12 @@ def stock(methods: Sequence[tuple[Any, str, Any]]) -> bool:
         if getattr(cls, name) is not fn:
             return False
     return True
+
+
+def sleeps_held(world: Any) -> bool:
+    """Whether the clock's sleep is ``world``'s hold as :func:`hold` does it: the world holds sleeps
+    (``hold_sleeps``), its clock's sleep goes to it, and the methods on the way are stock."""
+    return bool(world.hold_sleeps) and getattr(world.clock, "_on_sleep", None) == world._sleep and stock(SLEEP_STOCK)
 
 
 def world_fused(world: Any) -> bool:

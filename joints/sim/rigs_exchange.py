@@ -119,7 +119,7 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
     for r, (reqs, exs, size, check) in enumerate(zip(requests, exchanges, sizes, checks)):
         first = exs[0]
         line, world = first.line, first.world
-        if world.group is not group or not _line_ok(first):
+        if world.group is not group or not _line_ok(first) or (holds is not None and not L.sleeps_held(world)):
             return None
         for ex in exs if len(exs) == 1 else {id(ex): ex for ex in exs}.values():
             if ex.line is not line or ex.world is not world or not ex._drive_steady():

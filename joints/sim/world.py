@@ -949,6 +949,12 @@ class World:
         """Nothing to release for an in-process world (kept for symmetry with served worlds)."""
 
 
+#: what a clock's sleep goes through to the world's hold, as defined (captured with the class: a replaced one means a
+#: one-call exchange does not stand in for it, :func:`joints.sim.line_exchange.sleeps_held`)
+SLEEP_STOCK = ((ManualClock, "sleep", ManualClock.__dict__["sleep"]),
+               *((World, name, World.__dict__[name]) for name in ("_sleep", "hold", "_defer", "_ticks_hold")))
+
+
 def join(worlds: Sequence[World]) -> stepping.Group:
     """One stepping group holding ``worlds`` (their drives' rows in one table), made once and kept:
     a group that already holds them all (and maybe more: the other rigs of a batch) steps any of them."""

@@ -600,3 +600,25 @@ def test_an_env_type_with_its_own_step_parts_is_stepped_by_them() -> None:
         assert env.compiled_path.taken >= 4
     finally:
         env.close()
+
+
+@pytest.mark.parametrize("replaced", ["World.hold", "Rig.sleep"])
+def test_a_replaced_wait_is_called_and_the_step_goes_in_three(replaced: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A replaced method on the env's way to the world's hold (a wrapper that counts): the one-call step never
+    stands in for it - every step waits through it, one after the other, with the driver path's bits."""
+    from joints.sim.world import World
+
+    owner, name = (World, "hold") if replaced == "World.hold" else (joints.Rig, "sleep")
+    original = getattr(owner, name)
+    calls = [0]
+
+    def counted(self: Any, seconds: float) -> None:
+        calls[0] += 1
+        original(self, seconds)
+
+    monkeypatch.setattr(owner, name, counted)
+    runs = [_run("joints/ErobReach-v0", "position", 12, compiled=c) for c in (True, False)]
+    for key in ("reset", "steps", "transactions", "frames", "images", "time"):
+        assert runs[0][key] == runs[1][key], key
+    assert runs[0]["steps_taken"] == 0 and runs[0]["taken"] >= 12
+    assert calls[0] >= 2 * 12  # each step's wait, on both runs
