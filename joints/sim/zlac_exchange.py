@@ -42,10 +42,6 @@ RAMPS, TARGETS, READ = 0, 1, 2
 #: the family's columns of a transaction row (after :mod:`joints.sim.line_exchange`'s): op, four values (ramps:
 #: acceleration L/R, deceleration L/R [s]; targets: left, right [r/min]; a read: whether it settles, then 0)
 OP, V0, V1, V2, V3 = range(L.ARGS, L.ARGS + 5)
-#: the columns of a one-call step's output rows: the line's, then (the status read's) the drive's three rows as
-#: they stood when it acted on the frame
-SNAP = L.OUTS
-STEP_OUTS = SNAP + 3 * Z.WIDTH
 
 
 @jitable
@@ -92,19 +88,17 @@ def status_read(behind: float, seen: float, settle: bool, first: int, snap: Any,
 jitable(L.exchanges)
 
 
-def step_call(tx: Any, out: Any, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any,
-              worlds: Any, dts: Any, active: Any) -> None:
+def step_call(tx: Any, out: Any, snap: Any, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any,
+              order: Any, worlds: Any, dts: Any, active: Any) -> None:
     """A one-call step (:meth:`ZlacExchange.step`): the transactions ``tx`` (the FC16s, the host's hold to the
     env's tick, the status read last: :func:`joints.sim.line_exchange.exchanges`), then the drive's three rows as
-    the read found them into the read's output row (no substep ran since: the reply's travel is booked) and, if
-    the read settles, its physics (``World.sync``, as :func:`status_read`'s)."""
+    the read found them into ``snap`` (no substep ran since: the reply's travel is booked) and, if the read
+    settles, its physics (``World.sync``, as :func:`status_read`'s)."""
     L.exchanges(tx, out, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
-    last = tx.shape[0] - 1
-    t = tx[last]
+    t = tx[tx.shape[0] - 1]
     first = int(t[L.ROW])
-    o = out[last]
     for k in range(3):
-        o[SNAP + k * Z.WIDTH:SNAP + (k + 1) * Z.WIDTH] = table[first + k]
+        snap[k, :] = table[first + k]
     if t[V0] != 0.0:
         L.advance(0.0, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
 
@@ -178,8 +172,6 @@ class ZlacExchange(L.Carrier):
         self._blank: tuple[Any, int] | None = None
         self._world: Any = None
         self._bus: Any = None
-        #: the buffers of a one-call step (:meth:`step`: its status read's output row has the drive's rows too)
-        self._steps = L.Carrier(STEP_OUTS)
 
     def carried(self) -> tuple[Any, list[Any]] | None:
         """(the world, [the twin]) where every frame to the twin goes over a timed line on the world's clock (which
@@ -371,8 +363,8 @@ class ZlacExchange(L.Carrier):
             self._send_writes(world, fw, rows)
             n = len(rows)
             row[L.ROW] = rows[0][L.ROW]
-            outs = self._steps.carry(fn, world, line, now, [*rows, [L.HOLD, 0.0, 0.0, 0.0, 0.0, until, 0.0, 0.0, 0.0,
-                                                                    0.0], row])
+            outs, (d, left, right) = self._carry_step(fn, world, line, now, [
+                *rows, [L.HOLD, 0.0, 0.0, 0.0, 0.0, until, 0.0, 0.0, 0.0, 0.0], row])
             self._written(fw, line, rows, outs[:n], made)
             h, o = outs[n], outs[n + 1]
             remaining, held = h[L.REMAINING], h[L.CLOCK_AFTER]
@@ -382,14 +374,33 @@ class ZlacExchange(L.Carrier):
             framing.exchanges += 1
             if held > outs[n - 1][L.CLOCK_AFTER]:  # the world held the sleep when the read began
                 self.held += 1
-            w = Z.WIDTH
             raw = mb.ReadRegistersReply(status.slave, status.function,
-                                        ModbusFront.pack(plan, reader(o[SNAP:SNAP + w], o[SNAP + w:SNAP + 2 * w],
-                                                                      o[SNAP + 2 * w:SNAP + 3 * w]), status.count))
+                                        ModbusFront.pack(plan, reader(d, left, right), status.count))
             L.book(line, (row,), (o,), (raw,))
             self.acts += 1
             self.reads += 1
             return self.lane._finish(status, raw, deadline, True), remaining, held
+
+    def _carry_step(self, fn: Any, world: Any, line: TimedSerialLine, now: float, rows: list[list[float]]
+                    ) -> tuple[list[list[float]], list[list[float]]]:
+        """:meth:`~joints.sim.line_exchange.Carrier.carry` of a one-call step's ``rows`` by ``fn`` (:func:`step_call`):
+        each row's output and the drive's three rows as its status read found them."""
+        n = len(rows)
+        buffers = self._buffers.get(n)  # (the rows' and outputs' buffers of :meth:`carry`, by count)
+        snap = self._snap
+        if buffers is None or snap is None:
+            import numpy as np
+
+            if buffers is None:
+                buffers = self._buffers[n] = (np.zeros((n, L.TX_WIDTH)), np.zeros((n, L.OUTS)))
+            if snap is None:
+                snap = self._snap = np.zeros((3, Z.WIDTH))
+        tx, out = buffers
+        tx[:] = rows
+        st = self._st
+        L.fill(st, world, line, now)
+        L.line_back(line, L.fused(fn, world, st, tx, out, snap))
+        return out.tolist(), snap.tolist()
 
     def _read_row(self, request: mb.ReadHoldingRegisters, line: TimedSerialLine, settle: bool) -> list[float]:
         """The transaction row of the status read ``request`` in a one-call step (its reply's size that of a
