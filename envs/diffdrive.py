@@ -472,7 +472,30 @@ class DiffDriveGoalEnv(RigEnv):
 
     batchable = True
 
-    def begin_step(self, action: np.ndarray) -> tuple[tuple[float, float], bool]:
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """:meth:`RigEnv.step`; on the compiled path, where it can, both wheels' command, the wait for the tick and
+        the read in one call (:meth:`~joints.compiled_path.CompiledPath.step`: the same frames, substeps and
+        bits)."""
+        compiled = self.compiled_path
+        if compiled is None or not compiled.steps or self.raise_on_overrun:
+            return super().step(action)
+        token = self._token(action)
+        cmd = self._wheel_command(self._queued(token[0]))
+        got = None if cmd is None else compiled.step("velocity", cmd, None, self.tick_time(1), self.rig)
+        if got is None:  # not the steady case (nothing sent): the command, the wait and the read one by one
+            if cmd is not None:
+                compiled.command("velocity", cmd)
+            self._tick += 1
+            self._wait_until(self.tick_time())
+            return self.finish_step(token)
+        self._tick += 1
+        (sl, sr), remaining = got
+        self.note_overrun(-remaining)
+        return self._finish(token, self._took(sl, sr))
+
+    def _token(self, action: np.ndarray) -> tuple[tuple[float, float], bool]:
+        """``action`` checked (shape, finite) and clipped to [-1, 1] as plain floats, and whether the drive's
+        watchdog tripped (hardware): what :meth:`finish_step` needs."""
         self._check_open()
         a = action if type(action) is np.ndarray and action.dtype.kind == "f" else np.asarray(action, dtype=np.float64)
         if a.shape != self.action_space.shape:
@@ -481,19 +504,30 @@ class DiffDriveGoalEnv(RigEnv):
         if not (math.isfinite(left) and math.isfinite(right)):
             raise ValueError(f"action must be finite, got {[left, right]}")
         clipped = (clip(left, -1.0, 1.0), clip(right, -1.0, 1.0))
-        watchdog = not self.sim and self._watchdog_tripped()
-        if self._queue:  # bus latency (domain randomisation): the action waits its turn
+        return clipped, not self.sim and self._watchdog_tripped()
+
+    def _queued(self, clipped: tuple[float, float]) -> tuple[float, float]:
+        """The action sent this step: ``clipped``, or with a bus latency (domain randomisation) the one whose turn
+        it is (``clipped`` waits its turn)."""
+        if self._queue:
             self._queue.append(clipped)
-            self._command(self._queue.popleft())
-        else:
-            self._command(clipped)
+            return self._queue.popleft()
+        return clipped
+
+    def begin_step(self, action: np.ndarray) -> tuple[tuple[float, float], bool]:
+        token = self._token(action)
+        self._command(self._queued(token[0]))
         self._tick += 1
-        return clipped, watchdog
+        return token
 
     def finish_step(self, token: tuple[tuple[float, float], bool]) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Read both wheels (one FC03), integrate the odometry, observe, reward - on plain floats."""
+        return self._finish(token, self._read())
+
+    def _finish(self, token: tuple[tuple[float, float], bool], states: dict[str, joints.JointState]
+                ) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """:meth:`finish_step` once both wheels' ``states`` are read (:meth:`_took`)."""
         (a_left, a_right), watchdog = token
-        states = self._read()
         pose = self.odometry.update(*self._angles)
         x, y, _ = pose
         d, e = self._goal_terms(pose)
@@ -617,14 +651,21 @@ class DiffDriveGoalEnv(RigEnv):
     # -- bus --------------------------------------------------------------------------------
     def _read(self) -> dict[str, joints.JointState]:
         compiled = self.compiled_path
-        left, right = self.wheel_names
         if compiled is not None:  # the same FC03, read as rig.read_states reads it
-            # (the sim: the caller reads the physics next - the true pose - so the reply's travel may run in the read's call)
+            # (the sim: the caller reads the physics next - the true pose - so the reply's travel may run in the read's
+            # call; the compiled path's one-call step reads so too)
             sl, sr = compiled.states(settle=True)
-            self._states = {left: sl, right: sr}
-        else:
-            self._states = self.rig.read_states()  # one FC03 per drive
-            sl, sr = self._states[left], self._states[right]
+            return self._took(sl, sr)
+        states = self.rig.read_states()  # one FC03 per drive
+        left, right = self.wheel_names
+        return self._took(states[left], states[right], states)
+
+    def _took(self, sl: joints.JointState, sr: joints.JointState,
+              states: dict[str, joints.JointState] | None = None) -> dict[str, joints.JointState]:
+        """Both wheels' states just read (``states``: as the rig gave them, else made of the two): kept, the time of
+        the last talk to the drive, the wheel angles the odometry takes (with the sensor noise, sim)."""
+        left, right = self.wheel_names
+        self._states = {left: sl, right: sr} if states is None else states
         self._last_io = self.rig.time
         ql, qr = sl.position, sr.position
         if self._noise_rng is not None and self._noise > 0:
@@ -633,13 +674,21 @@ class DiffDriveGoalEnv(RigEnv):
         self._angles = (ql, qr)
         return self._states
 
-    def _command(self, action: tuple[float, float]) -> None:
-        """Both wheel speeds for ``action`` (clipped to [-1, 1]: :meth:`command_of` on plain floats)."""
+    def _wheel_command(self, action: tuple[float, float]) -> list[float] | None:
+        """Both wheel speeds [rad/s] for ``action`` (clipped to [-1, 1]: :meth:`command_of` on plain floats); None
+        where a wheel is not enabled (a faulted/disabled drive: the episode has ended, nothing is sent)."""
         for j in self.wheels:
-            if not j.enabled:  # faulted/disabled drive: the episode has ended
-                return
+            if not j.enabled:
+                return None
         vl, vr = self._vlim
-        cmd = [action[0] * vl, action[1] * vr]
+        return [action[0] * vl, action[1] * vr]
+
+    def _command(self, action: tuple[float, float]) -> None:
+        """Both wheel speeds for ``action`` (:meth:`_wheel_command`), sent in one FC16 (none where a wheel is not
+        enabled)."""
+        cmd = self._wheel_command(action)
+        if cmd is None:
+            return
         compiled = self.compiled_path
         if compiled is not None:  # the same FC16(s), sent as rig.set_velocities sends them
             compiled.command("velocity", cmd)

@@ -46,6 +46,7 @@ from collections.abc import Sequence
 from typing import Any, TypeGuard
 
 from joints.codecs import modbus as mb
+from joints.devices.zlac.registers import ControlMode
 from joints.drivers import zlac_modbus as zm
 from joints.drivers.access import ModbusAccess
 from joints.drivers.base import sampled_at
@@ -276,6 +277,9 @@ class _ZlacModbus:
     ramps when they change), one FC03 of both states (the rig's :meth:`~joints.rig.Rig.set_velocities`
     and :meth:`~joints.rig.Rig.read_states`)."""
 
+    #: the drive's control mode (0x200D) in velocity mode (:meth:`ZlacDrive.velocity_words`' steady case)
+    VELOCITY = int(ControlMode.VELOCITY)
+
     def __init__(self, joints: Sequence[Joint], drive: ZlacDrive) -> None:
         self.joints = tuple(joints)
         self.drivers = [j.driver for j in joints if isinstance(j.driver, ZlacChannelDriver)]
@@ -295,6 +299,8 @@ class _ZlacModbus:
         #: the steady FC16s in one compiled call (frames, physics, the twin's ops) where the twin offers it
         self.exchange = _velocity_exchange(self.lane, access.slave)
         self.taken = 0
+        #: the caller's last :meth:`states` ``settle`` (its reads' next access to the world): :meth:`step`'s read
+        self._settle = False
 
     def carried(self) -> tuple[Any, list[Any]] | None:
         """(the compiled world, [the twin]) whose every frame the one-call exchange carries over a timed line;
@@ -345,18 +351,53 @@ class _ZlacModbus:
 
     def states(self, settle: bool = False) -> list[JointState]:
         """Both wheels' states (one FC03); ``settle``: the caller's next access to the world runs its booked time
-        (:meth:`CompiledPath.states`)."""
-        clock = self.clock
-        t0 = clock.now()
+        (:meth:`CompiledPath.states`; kept for :meth:`step`'s read, the caller's next read)."""
+        self._settle = settle
+        t0 = self.clock.now()
         self.drive.identify()  # once per drive: a no-op after the first
         exchange = self.exchange
         done, reply = exchange.read(self.status, settle=settle) if exchange is not None else (False, None)
         if not done:
             reply = self.lane.request(self.status, idempotent=True)
+        return self._states_of(reply, t0)
+
+    def _states_of(self, reply: Any, t0: float) -> list[JointState]:
+        """Both wheels' states from the status read's ``reply``, sent at clock instant ``t0`` (answered now)."""
         assert isinstance(reply, mb.ReadRegistersReply)
         block = self.decode(STATUS_START, reply.values)
-        t = sampled_at(t0, clock.now())
+        t = sampled_at(t0, self.clock.now())
         return [j.to_si(d.state_from(block, t)) for j, d in self._pairs]
+
+    def step(self, mode: str, values: Sequence[float], tick: float) -> tuple[list[JointState], float] | None:
+        """:meth:`CompiledPath.step` of both wheels: the steady velocity command (:meth:`command_all`'s: the ramp
+        FC16 where the ramps change, the target FC16), the hold to ``tick`` and the status read (:meth:`states`'s,
+        with the caller's last ``settle``) in one call of the twin's exchange
+        (:meth:`~joints.sim.zlac_exchange.ZlacExchange.step`); None (nothing sent) where that is not the steady
+        case: another mode, the drive not yet identified or not in velocity mode, a refusal of the checks."""
+        exchange = self.exchange
+        drive = self.drive
+        if exchange is None or mode != "velocity" or drive.lines is None or drive.state.mode != self.VELOCITY:
+            return None
+        steady = exchange.steady(self.status)
+        if steady is None:  # (asked before the plan: the command's own way plans it once)
+            return None
+        try:
+            checked = [j.velocity_command(v) for j, v in zip(self.joints, values)]
+            left, right = self._sides
+            ramps, targets = drive.velocity_words(checked[left], checked[right])
+            target = self.targets.request(targets)
+            writes = (target,) if ramps is None else (self.ramps.request(ramps), target)
+        except Exception:  # noqa: BLE001 - a refusal: the command's own way raises it again
+            return None
+        got = exchange.step(steady, writes, self.status, tick, settle=self._settle)
+        if got is None:
+            return None
+        reply, remaining, held = got
+        if ramps is not None:
+            drive.note_words(self.ramps.names, ramps)
+        drive.note_words(self.targets.names, targets)
+        self.taken += len(self.joints)
+        return self._states_of(reply, held), remaining
 
 
 def _velocity_exchange(lane: LinkLane, slave: int) -> Any:

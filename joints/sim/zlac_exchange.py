@@ -37,10 +37,10 @@ from joints.transports.serial_sim import TimedSerialLine
 
 __all__ = ["ZlacExchange", "act", "status_read"]
 
-#: ops (column OP of a transaction row)
-RAMPS, TARGETS = 0, 1
+#: ops (column OP of a transaction row); READ: the status read of a one-call step (:meth:`ZlacExchange.step`)
+RAMPS, TARGETS, READ = 0, 1, 2
 #: the family's columns of a transaction row (after :mod:`joints.sim.line_exchange`'s): op, four values (ramps:
-#: acceleration L/R, deceleration L/R [s]; targets: left, right [r/min])
+#: acceleration L/R, deceleration L/R [s]; targets: left, right [r/min]; a read: whether it settles, then 0)
 OP, V0, V1, V2, V3 = range(L.ARGS, L.ARGS + 5)
 
 
@@ -57,7 +57,7 @@ def act(table: Any, first: int, t: Any) -> None:
         left[Z.DEC_TIME] = t[V2]
         right[Z.ACC_TIME] = t[V1]
         right[Z.DEC_TIME] = t[V3]
-    elif d[Z.D_STATE] == Z.ENABLED and d[Z.D_MODE] == Z.VELOCITY:  # enabled, velocity mode
+    elif t[OP] == TARGETS and d[Z.D_STATE] == Z.ENABLED and d[Z.D_MODE] == Z.VELOCITY:  # enabled, velocity mode
         Z.set_velocity_target(d, left, t[V0])
         Z.set_velocity_target(d, right, t[V1])
 
@@ -84,7 +84,34 @@ def status_read(behind: float, seen: float, settle: bool, first: int, snap: Any,
         L.advance(0.0, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
 
 
+# (compiled into step_call: the transactions' own arithmetic, as the one-call exchange runs it)
+jitable(L.exchanges)
+
+
+def step_call(tx: Any, out: Any, snap: Any, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any,
+              order: Any, worlds: Any, dts: Any, active: Any) -> None:
+    """A one-call step (:meth:`ZlacExchange.step`): the transactions ``tx`` (the FC16s, the host's hold to the
+    env's tick, the status read last: :func:`joints.sim.line_exchange.exchanges`), then the drive's three rows as
+    the read found them into ``snap`` (no substep ran since: the reply's travel is booked) and, if the read
+    settles, its physics (``World.sync``, as :func:`status_read`'s)."""
+    L.exchanges(tx, out, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+    t = tx[tx.shape[0] - 1]
+    first = int(t[L.ROW])
+    for k in range(3):
+        snap[k, :] = table[first + k]
+    if t[V0] != 0.0:
+        L.advance(0.0, st, w, mj_step, table, adr, ratio, order, worlds, dts, active)
+
+
 _STATUS_READ: list[Any] = []
+_STEP_CALL: list[Any] = []
+
+
+def _step_call() -> Any:
+    """:func:`step_call` compiled (numba), or None without it."""
+    if not _STEP_CALL:
+        _STEP_CALL.append(kernel.compiled(step_call) if L.compiled()[0] is not None else None)
+    return _STEP_CALL[0]
 
 
 def _status_read() -> Any:
@@ -196,17 +223,39 @@ class ZlacExchange(L.Carrier):
         fn = L.compiled()[0]
         if fn is None:
             return False
-        lane = self.lane
-        if not lane._idle():  # LinkLane._open of each request: the lane's state once, then each request
+        parts = self._ready()
+        if parts is None:
             return False
+        world, _, fw, line = parts
+        got = self._writes(requests, parts)
+        if got is None:
+            return False
+        rows, made = got
+        with self.lane.link._lock, world.lock:
+            now = L.clear(line)
+            if now is None:
+                return False
+            self._send_writes(world, fw, rows)
+            outs = self.carry(fn, world, line, now, rows)
+            self._written(fw, line, rows, outs, made)
+        return True
+
+    def _ready(self) -> tuple[Any, ModbusFront, ZlacFirmware, TimedSerialLine] | None:
+        """:meth:`_parts` where the lane is idle too (``LinkLane._open`` of each request: the lane's state once)."""
+        return self._parts() if self.lane._idle() else None
+
+    def _writes(self, requests: Sequence[mb.WriteMultipleRegisters],
+                parts: tuple[Any, ModbusFront, ZlacFirmware, TimedSerialLine]
+                ) -> tuple[list[list[float]], list[tuple[Any, Any]]] | None:
+        """(the transaction rows of ``requests``, each one's reply and the parameters it stores) where each is plain
+        and every value one the twin (``parts``: :meth:`_ready`'s) takes in its light write, else None (nothing
+        sent; the rule's check raises before anything is sent, as the lane's)."""
+        lane = self.lane
         plain = lane._plain
         for r in requests:
             if not plain(r):
-                return False
-        parts = self._parts()
-        if parts is None:
-            return False
-        world, front, fw, line = parts
+                return None
+        _, front, fw, line = parts
         link = lane.link
         framing = lane.framing
         assert framing is not None
@@ -222,7 +271,7 @@ class ZlacExchange(L.Carrier):
             words = r.values
             plan = _plan(table, r.address, len(words))
             if plan is None:
-                return False
+                return None
             op, names, signed = plan
             items: list[tuple[str, int]] = []
             for word, name, sign in zip(words, names, signed):  # as ModbusFront.write makes them
@@ -231,7 +280,7 @@ class ZlacExchange(L.Carrier):
                     value -= 0x10000
                 writable, lo, hi = limits[name]
                 if not (writable and lo <= value <= hi):
-                    return False  # refused: the front answers it its way
+                    return None  # refused: the front answers it its way
                 items.append((name, value))
             if op == RAMPS:
                 values = [_ramp_seconds(v) for _, v in items]
@@ -239,30 +288,133 @@ class ZlacExchange(L.Carrier):
                 values = [float(items[0][1]), float(items[1][1]), 0.0, 0.0]
             reply = mb.WriteMultipleRegistersReply(r.slave, r.address, len(words))
             if as_received(r, reply) is not reply or not is_reply(r, reply):
-                return False
+                return None
             turn = turnaround(r)
             rows.append([ZLAC, 0.0, float(size(r)), line.turnaround if turn is None else turn, float(size(reply)),
                          float(op), *values])
             made.append((reply, items))
+        return rows, made
+
+    def _send_writes(self, world: Any, fw: ZlacFirmware, rows: list[list[float]]) -> None:
+        """The counts of the FC16 ``rows`` about to go (the line clear), their drive's row set (under the locks)."""
+        first = float(self._first_row(world.group, fw))
+        for row in rows:
+            row[L.ROW] = first
+        n = len(rows)
+        if world._held:
+            self.held += 1
+        lane = self.lane
+        lane.link.transactions += n
+        assert lane.framing is not None
+        lane.framing.exchanges += n
+
+    def _written(self, fw: ZlacFirmware, line: TimedSerialLine, rows: Sequence[Sequence[float]],
+                 outs: Sequence[Sequence[float]], made: list[tuple[Any, Any]]) -> None:
+        """What the FC16 ``rows`` leave once carried (``outs``): the parameter store, the frames, the counts."""
+        for _, items in made:
+            fw._keep(items)  # the parameter store's part of the light write (its row effects ran)
+        L.book(line, rows, outs, [reply for reply, _ in made])
+        self.lane.taken += len(rows)
+        self.taken += 1
+
+    def steady(self, status: mb.ReadHoldingRegisters) -> Any:
+        """Whether a one-call :meth:`step` with the status read ``status`` may run now, asked before its FC16s are
+        planned (the lane, line, world and twin as the call assumes, the read's act the twin's stock status block:
+        :meth:`_status_act`): what :meth:`step` takes, or None."""
+        fn = _step_call()
+        if fn is None or not self.lane._open(status):
+            return None
+        parts = self._ready()
+        if parts is None:
+            return None
+        world, _, fw, _ = parts
+        link = self.lane.link
+        framing = self.lane.framing
+        act = None if framing is None else self._status_act(status, framing.peer)
+        if act is None or act[2] is not fw or link.clock is not world.clock:
+            return None
+        return fn, parts, act
+
+    def step(self, steady: Any, writes: Sequence[mb.WriteMultipleRegisters], status: mb.ReadHoldingRegisters,
+             until: float, *, settle: bool = False) -> tuple[Any, float, float] | None:
+        """:meth:`write` of ``writes``, the host's wait for the env's tick at clock time ``until`` (``RigEnv.
+        _wait_until`` with the world holding the rig's sleep: :func:`joints.sim.line_exchange.hold`) and
+        :meth:`read` of ``status`` (``settle`` as there) in ONE compiled call (:func:`step_call`; ``steady``:
+        :meth:`steady`'s answer, asked just before): (the reply, what was left to the tick - <= 0: late -, the
+        clock after the hold); None (nothing sent) where it is not the steady case."""
+        fn, parts, (plan, reader, _) = steady
+        world, _, fw, line = parts
+        link = self.lane.link
+        try:  # the rule's checks raise before anything is sent: the three one by one raise it at its turn
+            got = self._writes(writes, parts)
+            if got is None:
+                return None
+            link.rule.check(status)
+        except Exception:  # noqa: BLE001 - nothing sent: the caller's own way raises it again
+            return None
+        rows, made = got
+        framing = self.lane.framing
+        assert framing is not None
+        row = self._read_row(status, line, settle)
         with link._lock, world.lock:
             now = L.clear(line)
             if now is None:
-                return False
-            first = float(self._first_row(world.group, fw))
-            for row in rows:
-                row[L.ROW] = first
+                return None
+            self._send_writes(world, fw, rows)
             n = len(rows)
-            if world._held:
+            row[L.ROW] = rows[0][L.ROW]
+            outs, (d, left, right) = self._carry_step(fn, world, line, now, [
+                *rows, [L.HOLD, 0.0, 0.0, 0.0, 0.0, until, 0.0, 0.0, 0.0, 0.0], row])
+            self._written(fw, line, rows, outs[:n], made)
+            h, o = outs[n], outs[n + 1]
+            remaining, held = h[L.REMAINING], h[L.CLOCK_AFTER]
+            # the status read (read's own way, from the tick on): its counts, its deadline, the reply of the rows
+            link.transactions += 1
+            deadline = held + link.policy.timeout  # from the request's start (the clock after the hold), as the link's
+            framing.exchanges += 1
+            if held > outs[n - 1][L.CLOCK_AFTER]:  # the world held the sleep when the read began
                 self.held += 1
-            link.transactions += n
-            framing.exchanges += n
-            outs = self.carry(fn, world, line, now, rows)
-            for _, items in made:
-                fw._keep(items)  # the parameter store's part of the light write (its row effects ran)
-            L.book(line, rows, outs, [reply for reply, _ in made])
-            lane.taken += n
-        self.taken += 1
-        return True
+            raw = mb.ReadRegistersReply(status.slave, status.function,
+                                        ModbusFront.pack(plan, reader(d, left, right), status.count))
+            L.book(line, (row,), (o,), (raw,))
+            self.acts += 1
+            self.reads += 1
+            return self.lane._finish(status, raw, deadline, True), remaining, held
+
+    def _carry_step(self, fn: Any, world: Any, line: TimedSerialLine, now: float, rows: list[list[float]]
+                    ) -> tuple[list[list[float]], list[list[float]]]:
+        """:meth:`~joints.sim.line_exchange.Carrier.carry` of a one-call step's ``rows`` by ``fn`` (:func:`step_call`):
+        each row's output and the drive's three rows as its status read found them."""
+        n = len(rows)
+        buffers = self._buffers.get(n)  # (the rows' and outputs' buffers of :meth:`carry`, by count)
+        snap = self._snap
+        if buffers is None or snap is None:
+            import numpy as np
+
+            if buffers is None:
+                buffers = self._buffers[n] = (np.zeros((n, L.TX_WIDTH)), np.zeros((n, L.OUTS)))
+            if snap is None:
+                snap = self._snap = np.zeros((3, Z.WIDTH))
+        tx, out = buffers
+        tx[:] = rows
+        st = self._st
+        L.fill(st, world, line, now)
+        L.line_back(line, L.fused(fn, world, st, tx, out, snap))
+        return out.tolist(), snap.tolist()
+
+    def _read_row(self, request: mb.ReadHoldingRegisters, line: TimedSerialLine, settle: bool) -> list[float]:
+        """The transaction row of the status read ``request`` in a one-call step (its reply's size that of a
+        reply of its words, kept by the request's identity, as :meth:`read`'s)."""
+        framing = self.lane.framing
+        assert framing is not None
+        size = framing.size
+        blank = self._blank
+        if blank is None or blank[0] is not request:
+            blank = self._blank = (request, size(mb.ReadRegistersReply(request.slave, request.function,
+                                                                       (0,) * request.count)))
+        turn = framing._turnaround(request)
+        return [ZLAC, 0.0, float(size(request)), line.turnaround if turn is None else turn, float(blank[1]),
+                float(READ), 1.0 if settle else 0.0, 0.0, 0.0, 0.0]
 
     def _status_act(self, request: Any, bus: Any) -> tuple[Any, Any, Any] | None:
         """(the front's read plan, the rows' reader, the firmware) where the bus's act on the status read

@@ -26,11 +26,13 @@ ENV = "joints/DiffDriveGoal-v0"
 
 def _calls_per_step(monkeypatch: pytest.MonkeyPatch, hold: bool | None, steps: int = 30) -> dict[str, float]:
     """Compiled calls per env step: the world's own (``Group.run``), the one-call exchanges (the FC16s), the
-    read's advance; and the reads that ran a held sleep first."""
-    calls = {"run": 0, "exchanges": 0, "advance": 0, "status": 0}
+    read's advance, the status read's, the one-call step's (``ZlacExchange.step``); and the reads that ran a held
+    sleep first."""
+    calls = {"run": 0, "exchanges": 0, "advance": 0, "status": 0, "step": 0}
     run = stepping.Group.run
     exchanges, advance = L.compiled()
     status = zlac_exchange._status_read()
+    step = zlac_exchange._step_call()
 
     def counted_run(self: Any, *a: Any, **k: Any) -> Any:
         calls["run"] += 1
@@ -48,8 +50,13 @@ def _calls_per_step(monkeypatch: pytest.MonkeyPatch, hold: bool | None, steps: i
         calls["status"] += 1
         status(*a)
 
+    def counted_step(*a: Any) -> None:
+        calls["step"] += 1
+        step(*a)
+
     monkeypatch.setattr(stepping.Group, "run", counted_run)
     monkeypatch.setattr(zlac_exchange, "_status_read", lambda: counted_status)
+    monkeypatch.setattr(zlac_exchange, "_step_call", lambda: counted_step)
     monkeypatch.setattr(L, "compiled", lambda: (counted_exchanges, counted_advance))
     env = gym.make(ENV)
     u: Any = env.unwrapped
@@ -74,16 +81,19 @@ def _calls_per_step(monkeypatch: pytest.MonkeyPatch, hold: bool | None, steps: i
         env.close()
 
 
-def test_a_diffdrive_step_runs_two_compiled_calls(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The command's FC16s (one call); the period hold, the status read's advance, the drive's receipt of the
-    frame and the reply's travel (which the info's true pose would run) in the other - three with the hold
-    stepped at once (four before this branch: the hold and the reply's travel each a call of their own)."""
+def test_a_diffdrive_step_runs_one_compiled_call(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The command's FC16s, the period hold, the status read's advance, the drive's receipt of the frame and the
+    reply's travel (which the info's true pose would run) in one call (the one-call step,
+    tests/envs/test_diffdrive_step.py) - three with the hold stepped at once (the FC16s, the world's own run of the
+    sleep, the status read; two before the one-call step, four before the held sleeps)."""
     if not kernel.default_mode():
         pytest.skip("the compiled stepping is off (JOINTS_COMPILED=0 or no numba)")
     held = _calls_per_step(monkeypatch, None)
-    assert held == {"run": 0.0, "exchanges": 1.0, "advance": 0.0, "status": 1.0, "held": 1.0, "acts": 1.0}
+    assert held == {"run": 0.0, "exchanges": 0.0, "advance": 0.0, "status": 0.0, "step": 1.0, "held": 1.0,
+                    "acts": 1.0}
     eager = _calls_per_step(monkeypatch, False)
-    assert eager == {"run": 1.0, "exchanges": 1.0, "advance": 0.0, "status": 1.0, "held": 0.0, "acts": 1.0}
+    assert eager == {"run": 1.0, "exchanges": 1.0, "advance": 0.0, "status": 1.0, "step": 0.0, "held": 0.0,
+                     "acts": 1.0}
 
 
 def _ideal() -> dict[str, Any]:
