@@ -331,7 +331,7 @@ class ZlacExchange(L.Carrier):
         link = self.lane.link
         framing = self.lane.framing
         act = None if framing is None else self._status_act(status, framing.peer)
-        if act is None or act[2] is not fw or link.clock is not world.clock:
+        if act is None or act[2] is not fw or link.clock is not world.clock or not L.sleeps_held(world):
             return None
         return fn, parts, act
 

@@ -617,8 +617,10 @@ def test_a_replaced_wait_is_called_and_the_step_goes_in_three(replaced: str, mon
         original(self, seconds)
 
     monkeypatch.setattr(owner, name, counted)
-    runs = [_run("joints/ErobReach-v0", "position", 12, compiled=c) for c in (True, False)]
-    for key in ("reset", "steps", "transactions", "frames", "images", "time"):
-        assert runs[0][key] == runs[1][key], key
-    assert runs[0]["steps_taken"] == 0 and runs[0]["taken"] >= 12
-    assert calls[0] >= 2 * 12  # each step's wait, on both runs
+    for env_id, mode in (("joints/ErobReach-v0", "position"), ("joints/DiffDriveGoal-v0", None)):
+        calls[0] = 0
+        runs = [_run(env_id, mode, 12, compiled=c) for c in (True, False)]
+        for key in ("reset", "steps", "transactions", "frames", "images", "time"):
+            assert runs[0][key] == runs[1][key], key
+        assert runs[0]["steps_taken"] == 0 and runs[0]["taken"] >= 12
+        assert calls[0] >= 2 * 12  # each step's wait, on both runs
