@@ -70,8 +70,7 @@ class Batch:
         self.paths = [e.compiled_path for e in self.envs]
         self.rigs = joints.CompiledRigs.build(self.paths)
         #: the step under way: (actions, commands, actions as lists, the rigs' one call or None), begin to finish
-        self._pending: tuple[np.ndarray, np.ndarray, list[list[float]], joints.CompiledRigs | None,
-                             list[list[joints.JointState]] | None] | None = None
+        self._pending: tuple[np.ndarray, np.ndarray, list[list[float]], joints.CompiledRigs | None] | None = None
 
     @classmethod
     def of(cls, envs: Sequence[Any]) -> Batch | None:
@@ -131,14 +130,6 @@ class Batch:
             rows = c.tolist()
         skips = [[not j.enabled for j in e.joints] for e in envs]
         rigs = self._rigs()
-        got = self._step(rigs, mode, rows, skips)
-        if got is not None:  # every rig's command, wait and read in one call
-            for i, (e, (_states, remaining)) in enumerate(zip(envs, got)):
-                e._sent = c[i]
-                e._tick += 1
-                e.note_overrun(-remaining)
-            self._pending = (a, c, a.tolist(), rigs, [states for states, _ in got])
-            return True
         if rigs is not None and rigs.command(mode, rows, skips):  # every rig's in one call
             for i, e in enumerate(envs):
                 e._sent = c[i]
@@ -148,26 +139,8 @@ class Batch:
                 e._sent = c[i]
                 e.compiled_path.command(mode, rows[i], skips[i])  # type: ignore[union-attr]
                 e._tick += 1
-        # (no rig's path can change before finish: the vector step's own)
-        self._pending = (a, c, a.tolist(), rigs, None)
+        self._pending = (a, c, a.tolist(), rigs)  # (no rig's path can change before finish: the vector step's own)
         return True
-
-    def _step(self, rigs: joints.CompiledRigs | None, mode: str, rows: list[list[float]], skips: list[list[bool]]
-              ) -> list[tuple[list[joints.JointState], float]] | None:
-        """Every rig's command, its wait for its tick and its read in one call (:meth:`joints.CompiledRigs.step`),
-        or None (nothing sent): no rig skips a joint or raises on overruns."""
-        if rigs is None or any(any(skip) for skip in skips):
-            return None
-        envs = self.envs
-        for e in envs:
-            if e.raise_on_overrun:
-                return None
-        return rigs.step(mode, rows, [e.tick_time(1) for e in envs], [e.rig for e in envs])
-
-    @property
-    def waited(self) -> bool:
-        """Whether the step under way waited for every rig's tick already (:meth:`_step`'s one call)."""
-        return self._pending is not None and self._pending[4] is not None
 
     def _rigs(self) -> joints.CompiledRigs | None:
         """The rigs' one call (:attr:`rigs`) while every rig keeps the compiled path it was built with."""
@@ -207,13 +180,11 @@ class Batch:
         """Every rig's ``finish_step``: (observations, rewards, the batch's info arrays) where no rig's episode
         ended, else each rig's own outcome (obs, reward, terminated, truncated, info), from its own code."""
         assert self._pending is not None
-        # the one call that sent this step's commands, or None; the states it read with them, or None
-        a, c, values, rigs, read = self._pending
+        a, c, values, rigs = self._pending  # the one call that sent this step's commands, or None
         self._pending = None
         envs = self.envs
         n = self.n
-        if read is None and rigs is not None:
-            read = rigs.states()  # every rig's in one call
+        read = None if rigs is None else rigs.states()  # every rig's in one call
         if read is None:
             states = [e._read() for e in envs]
         else:

@@ -256,8 +256,7 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
 
     def _step_batch(self, batch: Batch) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """:meth:`step` once ``batch`` sent every rig's commands (no rig was due for a reset)."""
-        if not batch.waited:
-            _wait_together(self.envs, batch.joined())
+        _wait_together(self.envs, batch.joined())
         out = batch.finish()
         n = self.num_envs
         if isinstance(out, tuple):  # the batch's arrays: no episode ended

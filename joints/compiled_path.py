@@ -727,9 +727,8 @@ def _lane_ready(lane: LinkLane, requests: Sequence[Any]) -> bool:
 
 class CompiledRigs:
     """The compiled paths of several rigs (a batch of single envs in one process) whose every joint is an eRob on
-    its twin's one-call exchange: a step's commands, waits for the tick and state reads of ALL rigs in one compiled
-    call (:meth:`step`), or the commands in one and the reads in another
-    (:meth:`~joints.sim.erob_exchange.ErobExchange.carry_rigs`).
+    its twin's one-call exchange: a step's commands of ALL rigs in one compiled call, and their state reads in
+    another (:meth:`~joints.sim.erob_exchange.ErobExchange.carry_rigs`).
 
     Rule: each rig gets what its own :meth:`CompiledPath.command` / :meth:`CompiledPath.states` gives it - the
     same checks (each joint's :meth:`_ErobModbus.plan`), requests, frames, physics, counts, bookkeeping and
@@ -746,8 +745,7 @@ class CompiledRigs:
         self._read_exchanges = [[s.exchange for s in u] for u in self._units]
         self._buffers: dict[tuple[int, int], Any] = {}
         self._worlds = [u[0].exchange.world for u in self._units]
-        self.taken = 0  #: compiled calls across the rigs (one per batch command, state read or step)
-        self.steps_taken = 0  #: batch steps whose commands, waits and reads went in one call (:meth:`step`)
+        self.taken = 0  #: compiled calls across the rigs (one per batch command or state read)
 
     def joined(self) -> bool:
         """Whether every rig's world is in one stepping group (so one call carries them all) and books its sleeps
@@ -782,10 +780,9 @@ class CompiledRigs:
         return cls(paths, units)  # type: ignore[arg-type]
 
     def _send(self, requests: list[list[Any]], exchanges: list[list[Any]], lanes: list[LinkLane],
-              lazy: bool, holds: list[tuple[int, float]] | None = None) -> list[list[Any]] | None:
+              lazy: bool) -> list[list[Any]] | None:
         """Each rig's ``requests`` over its lane (``lanes[r]``) in one call, counted as the lane counts them; None
-        (nothing sent) where a rig's lane or exchange is not the steady case. ``holds``: per rig, its wait for its
-        tick (``ErobExchange.run``'s ``hold``)."""
+        (nothing sent) where a rig's lane or exchange is not the steady case."""
         for lane, reqs in zip(lanes, requests):
             if not _lane_ready(lane, reqs):
                 return None
@@ -797,7 +794,7 @@ class CompiledRigs:
                 held += 1
             replies: list[list[Any]] | None = self._carry(
                 requests, exchanges, [lane.framing.size for lane in lanes],  # type: ignore[union-attr]
-                [lane._stock_check for lane in lanes], lazy, self._buffers, holds)
+                [lane._stock_check for lane in lanes], lazy, self._buffers)
             if replies is None:
                 return None
             for lane, reqs in zip(lanes, requests):  # as LinkLane.exchange with its stock check
@@ -854,61 +851,6 @@ class CompiledRigs:
                 s.done(mode, name, value, before, after)
                 before = after
         return True
-
-    def step(self, mode: str, values: Sequence[Sequence[float]], ticks: Sequence[float], rigs: Sequence[Any]
-             ) -> list[tuple[list[JointState], float]] | None:
-        """Rig ``r``'s :meth:`CompiledPath.step` ``(mode, values[r], None, ticks[r], rigs[r])`` for every rig, in
-        one call: per rig (its states, its ``remaining``); None (nothing sent) where a rig's joint is not the steady
-        case or its checks refuse the command, or a rig's sleep is not its world's hold alone (then the batch
-        sends the commands, waits and reads its usual way)."""
-        if mode not in ACTION_MODES or not self.joined():
-            return None
-        plans: list[list[tuple[_ErobModbus, tuple[tuple[Any, ...], str, int]]]] = []
-        requests: list[list[Any]] = []
-        exchanges: list[list[Any]] = []
-        holds: list[tuple[int, float]] = []
-        for units, row, tick, rig, world in zip(self._units, values, ticks, rigs, self._worlds):
-            if rig.clock is not world.clock or not rig.sleeps_quietly(tick):
-                return None
-            planned = []
-            reqs: list[Any] = []
-            exs: list[Any] = []
-            for k, s in enumerate(units):
-                try:
-                    p = s.plan(mode, row[k])
-                except Exception:  # noqa: BLE001 - a refusal: the rig's own command raises it again, in its turn
-                    return None
-                if p is None:
-                    return None
-                planned.append((s, p))
-                reqs.extend(p[0])
-                exs.extend([s.exchange] * len(p[0]))
-            holds.append((len(reqs), tick))
-            plans.append(planned)
-            requests.append(reqs + [s.status for s in units])
-            exchanges.append(exs + [s.exchange for s in units])
-        befores = [p[0][0].clock.now() for p in plans]
-        replies = self._send(requests, exchanges, self._lanes, True, holds)
-        if replies is None:
-            return None
-        self.steps_taken += 1
-        out: list[tuple[list[JointState], float]] = []
-        for planned, units, exs, got, before in zip(plans, self._units, exchanges, replies, befores):
-            first = exs[0]
-            clocks = first.clocks
-            at = 0
-            for s, (sent, name, value) in planned:  # as command's bookkeeping
-                at += len(sent)
-                after = clocks[at - 1]
-                s.done(mode, name, value, before, after)
-                before = after
-            remaining, before = first.held
-            states = []
-            for s, reply, after in zip(units, got[at:], clocks[at:]):  # as states'
-                states.append(s.state_of(reply, before, after))
-                before = after
-            out.append((states, remaining))
-        return out
 
     def states(self) -> list[list[JointState]] | None:
         """Every rig's :meth:`CompiledPath.states` in one call; None (nothing sent) where a rig is not the steady

@@ -100,14 +100,12 @@ class _Buffers:
 
 def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[Any]],
                sizes: Sequence[Callable[[Any], int]], checks: Sequence[Callable[[Any, Any], bool]], lazy: bool,
-               buffers: dict[tuple[int, int], Any], holds: Sequence[tuple[int, float]] | None = None
-               ) -> list[list[Any]] | None:
+               buffers: dict[tuple[int, int], Any]) -> list[list[Any]] | None:
     """Rig ``r``'s ``requests[r]`` (each for the drive whose exchange is ``exchanges[r][k]``, all on one line and
     world, each rig's its own) as ``exchanges[r][0].run(requests[r], sizes[r], checks[r], exchanges[r], lazy=lazy)``
     sends them (a reply check is required: every reply is checked before anything is sent), every rig in one
     compiled call: each rig's replies; None (nothing sent) where any rig is not the steady case. ``buffers``: the
-    caller's, kept between calls; ``holds``: per rig, its ``run``'s ``hold`` (index, tick; each rig's exchange's
-    :attr:`~joints.sim.erob_exchange.ErobExchange.held` then)."""
+    caller's, kept between calls."""
     fn = compiled()
     if fn is None or not L.stock(E._STOCK):
         return None
@@ -116,10 +114,10 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
     made: list[tuple[Any, Any, Any]] = []
     worlds: list[Any] = []
     reads = False
-    for r, (reqs, exs, size, check) in enumerate(zip(requests, exchanges, sizes, checks)):
+    for reqs, exs, size, check in zip(requests, exchanges, sizes, checks):
         first = exs[0]
         line, world = first.line, first.world
-        if world.group is not group or not _line_ok(first) or (holds is not None and not L.sleeps_held(world)):
+        if world.group is not group or not _line_ok(first):
             return None
         for ex in exs if len(exs) == 1 else {id(ex): ex for ex in exs}.values():
             if ex.line is not line or ex.world is not world or not ex._drive_steady():
@@ -127,10 +125,6 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
         got = first._rows(reqs, exs, size, check, group)
         if got is None:
             return None
-        if holds is not None:
-            at, tick = holds[r]
-            got[0].insert(at, [L.HOLD, 0.0, 0.0, 0.0, 0.0, tick, 0.0, 0.0, 0.0, 0.0])
-            got[1].insert(at, None)
         rows.extend(got[0])
         made.extend(got[1])
         worlds.append(world)
@@ -141,7 +135,7 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
         for lock in locks:
             lock.acquire()
             held += 1
-        return _carry_locked(fn, group, requests, exchanges, rows, made, reads, lazy, buffers, holds)
+        return _carry_locked(fn, group, requests, exchanges, rows, made, reads, lazy, buffers)
     finally:
         for lock in reversed(locks[:held]):
             lock.release()
@@ -149,10 +143,9 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
 
 def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
                   exchanges: Sequence[Sequence[Any]], rows: list[list[float]], made: list[tuple[Any, Any, Any]],
-                  reads: bool, lazy: bool, buffers: dict[tuple[int, int], Any],
-                  holds: Sequence[tuple[int, float]] | None) -> list[list[Any]] | None:
+                  reads: bool, lazy: bool, buffers: dict[tuple[int, int], Any]) -> list[list[Any]] | None:
     """:func:`carry_rigs` with every rig's link and world locked, its rows built (``reads``: a status read among
-    them; ``holds``: each rig's hold row among them)."""
+    them)."""
     import numpy as np
 
     plans = []
@@ -173,7 +166,7 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
         L.fill(vector, world, line, now)  # (its slice assignment fills a list as it fills a row)
         filled.append(vector)
         ws.append(world.group_index)
-        at += len(reqs) if holds is None else len(reqs) + 1
+        at += len(reqs)
         starts.append(at)
         steps.append(world.steps)
         plans.append(plan(world._me)[0])
@@ -220,12 +213,7 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
         replies: list[Any] = []
         first.clocks = clocks = []
         frames: list[tuple[Any, ...]] = []
-        hold_at = -1 if holds is None else holds[r][0]
-        for i, req in enumerate(reqs):  # as ErobExchange.run
-            if i == hold_at:
-                o = outs[k]
-                first.held = (o[L.REMAINING], o[CLOCK_AFTER])
-                k += 1
+        for req in reqs:  # as ErobExchange.run
             t, o, (ex, a, b) = tx[k], outs[k], made[k]
             k += 1
             if t[E.OP] == E.READ:
