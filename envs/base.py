@@ -170,6 +170,11 @@ def fault_info(name: str, state: joints.JointState) -> dict[str, Any]:
     return {"joint": name, "name": f.name, "code": f.code, "text": f.text, "clears": f.clears}
 
 
+#: the parts of an env's step that its one-call step (:meth:`~joints.compiled_path.CompiledPath.step`) does in one
+STEP_PARTS = ("begin_step", "finish_step", "_command", "_read", "_wait_until", "_finish", "tick_time", "note_overrun")
+_OWN_STEP: dict[type, bool] = {}  #: per env type: whether it keeps its one-call step's parts (RigEnv._keeps_step_parts)
+
+
 class RigEnv(gym.Env[np.ndarray, np.ndarray]):
     """What every ``joints/`` env shares: a rig, a fixed control schedule, rendering and closing.
 
@@ -273,6 +278,16 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
     #: planner's, for the env's action mode; 0 on ideal buses). Safety shields extend their horizon by it.
     bus_lag = 0.0
 
+    def _keeps_step_parts(self, base: type) -> bool:
+        """Whether this env's type keeps ``base``'s parts of the step (:data:`STEP_PARTS`), which ``base``'s one-call
+        step (:meth:`~joints.compiled_path.CompiledPath.step`) does in one; a type that replaces one of them is stepped
+        by its parts (asked once per type)."""
+        kind = type(self)
+        own = _OWN_STEP.get(kind)
+        if own is None:
+            own = _OWN_STEP[kind] = all(getattr(kind, n) is getattr(base, n) for n in STEP_PARTS)
+        return own
+
     def _check_rate(self, mode: str = "position") -> None:
         """Refuse a control period one cycle of this env's bus traffic does not fit (:func:`joints.check_rate`),
         and note the cycle as :attr:`bus_lag`."""
@@ -305,12 +320,6 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def _markers(self) -> list[tuple[np.ndarray, tuple[float, float, float, float]]]:
         return []
-
-
-#: the parts of :meth:`JointsEnv.step` that its one-call step (:meth:`~joints.compiled_path.CompiledPath.step`) does
-#: in one: a type that replaces one of them is stepped by its parts (per type: whether it keeps them all)
-STEP_PARTS = ("begin_step", "finish_step", "_command", "_read", "_wait_until", "_finish", "tick_time", "note_overrun")
-_OWN_STEP: dict[type, bool] = {}
 
 
 class JointsEnv(RigEnv):
@@ -718,10 +727,7 @@ class JointsEnv(RigEnv):
         state read in one call (:meth:`~joints.compiled_path.CompiledPath.step`: the same frames, substeps and
         bits)."""
         compiled = self.compiled_path
-        own = _OWN_STEP.get(type(self))
-        if own is None:  # a subclass's own parts of the step run as it wrote them: never in one call
-            own = _OWN_STEP[type(self)] = all(getattr(type(self), n) is getattr(JointsEnv, n) for n in STEP_PARTS)
-        if compiled is None or not compiled.steps or self.raise_on_overrun or not own:
+        if compiled is None or not compiled.steps or self.raise_on_overrun or not self._keeps_step_parts(JointsEnv):
             return super().step(action)
         values = self._action_values(action)
         cmd = self._safe_command(self._queued(values))

@@ -477,7 +477,8 @@ class DiffDriveGoalEnv(RigEnv):
         the read in one call (:meth:`~joints.compiled_path.CompiledPath.step`: the same frames, substeps and
         bits)."""
         compiled = self.compiled_path
-        if compiled is None or not compiled.steps or self.raise_on_overrun:
+        if compiled is None or not compiled.steps or self.raise_on_overrun \
+                or not self._keeps_step_parts(DiffDriveGoalEnv):
             return super().step(action)
         token = self._token(action)
         cmd = self._wheel_command(self._queued(token[0]))

@@ -578,15 +578,18 @@ def test_a_step_whose_wait_is_not_the_worlds_hold_alone_goes_in_three(case: str)
         assert runs[0][-1][0] == 3 * 12
 
 
-def test_an_env_type_with_its_own_step_parts_is_stepped_by_them() -> None:
-    """A JointsEnv subclass that replaces a part of the step (here its read) gets that part called every step: its
+@pytest.mark.parametrize("base", ["ErobReachEnv", "DiffDriveGoalEnv"])
+def test_an_env_type_with_its_own_step_parts_is_stepped_by_them(base: str) -> None:
+    """An env subclass that replaces a part of the step (here its read) gets that part called every step: its
     steps never go in one call (the compiled path's command and read calls still do)."""
+    from envs.diffdrive import DiffDriveGoalEnv
     from envs.reach import ErobReachEnv
 
     reads = []
+    kind: Any = ErobReachEnv if base == "ErobReachEnv" else DiffDriveGoalEnv
 
-    class Counted(ErobReachEnv):
-        def _read(self) -> list[joints.JointState]:
+    class Counted(kind):  # type: ignore[misc, valid-type]
+        def _read(self) -> Any:
             reads.append(1)
             return super()._read()
 
