@@ -732,9 +732,10 @@ class JointsEnv(RigEnv):
         values = self._action_values(action)
         cmd = self._safe_command(self._queued(values))
         mode = self.action_mode
-        got = compiled.step(mode, cmd, [not j.enabled for j in self.joints], self.tick_time(1), self.rig)
+        skip = [not j.enabled for j in self.joints]  # faulted/disabled drives: never commanded (see _command)
+        got = compiled.step(mode, cmd, skip, self.tick_time(1), self.rig)
         if got is None:  # not the steady case (nothing sent): the command, the wait and the read one by one
-            compiled.command(mode, cmd, [not j.enabled for j in self.joints])
+            compiled.command(mode, cmd, skip)
             self._tick += 1
             self._wait_until(self.tick_time())
             return self._finish(self._token(values), self._read())

@@ -379,7 +379,7 @@ class ErobExchange(L.Carrier):
             return None
         rows, made = got
         if hold is not None:
-            rows.insert(hold[0], [L.HOLD, 0.0, 0.0, 0.0, 0.0, hold[1], 0.0, 0.0, 0.0, 0.0])
+            rows.insert(hold[0], L.hold_row(hold[1]))
         with world.lock:
             now = L.clear(line)
             if now is None:

@@ -26,7 +26,7 @@ from joints.sim.stepping import EROB, STEPS, ZLAC
 from joints.sim.world import SLEEP_STOCK
 
 __all__ = ["HOLD", "Carrier", "advance", "arena_check", "book", "clear", "compiled", "exchanges", "fill", "fused",
-           "hold", "line_back", "sleeps_held", "stock", "world_back", "world_fused"]
+           "hold", "hold_row", "line_back", "sleeps_held", "stock", "world_back", "world_fused"]
 
 #: columns of the state vector: the clock's time, the world's target time, whether time is booked (1, or
 #: :data:`HELD`), the line's time, the time the line last saw on the clock, when the host's / device's UART is
@@ -102,6 +102,14 @@ def hold(until: float, st: Any, o: Any, w: int, mj_step: int, table: Any, adr: A
             st[BOOKED] = HELD
             st[CLOCK] = st[TARGET]
     o[CLOCK_AFTER] = st[CLOCK]
+
+
+def hold_row(until: float) -> list[float]:
+    """A :data:`HOLD` row: the host's wait for the env's tick at clock time ``until`` (:func:`hold`)."""
+    row = [0.0] * TX_WIDTH
+    row[KIND] = HOLD
+    row[UNTIL] = until
+    return row
 
 
 def exchanges(tx: Any, out: Any, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any,

@@ -364,7 +364,7 @@ class ZlacExchange(L.Carrier):
             n = len(rows)
             row[L.ROW] = rows[0][L.ROW]
             outs, (d, left, right) = self._carry_step(fn, world, line, now, [
-                *rows, [L.HOLD, 0.0, 0.0, 0.0, 0.0, until, 0.0, 0.0, 0.0, 0.0], row])
+                *rows, L.hold_row(until), row])
             self._written(fw, line, rows, outs[:n], made)
             h, o = outs[n], outs[n + 1]
             remaining, held = h[L.REMAINING], h[L.CLOCK_AFTER]
