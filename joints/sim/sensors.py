@@ -50,7 +50,7 @@ FIELDS = ("velocity_window", "velocity_noise", "position_noise", "current_noise"
           "sample_jitter")
 
 __all__ = ["FIELDS", "Draws", "Sensor", "SensorModel", "current", "ideal", "model_of", "numbers", "position",
-           "scale", "seed", "sense", "sensors_of", "velocity"]
+           "scale", "seed", "sense", "sensors_of", "velocity", "warm"]
 
 
 @dataclass(frozen=True)
@@ -322,6 +322,19 @@ class Sensor:
         """``(position(t, q, v), velocity(q, v), current(i))`` in one call: a status read of a joint at ``q``
         moving at ``v`` with ``i`` flowing, the same draws in the same order (the same bits)."""
         return self._reads.sense(self.state, self._m, t, q, v, i)  # type: ignore[no-any-return]
+
+
+def warm() -> None:
+    """Compile (or load from the disk cache) the reads now, as a twin calls them from Python (see
+    :func:`joints.sim.erob_kernel.warm`): otherwise a served twin's first read of each kind waits for the compiler
+    in the real-time loop (seconds on a cold cache: far past a host's reply timeout)."""
+    sensor = Sensor(SensorModel(), "warm", 1.0)
+    if sensor._reads is PY_OPS:
+        return
+    sensor.position(0.0, 0.0, 0.0)
+    sensor.velocity(0.0, 0.0)
+    sensor.current(0.0)
+    sensor.sense(0.0, 0.0, 0.0, 0.0)
 
 
 def sensors_of(world: Any) -> list[Sensor]:

@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from joints.sim import erob_kernel, kernel, zlac_kernel
+from joints.sim import erob_kernel, kernel, sensors, zlac_kernel
 from joints.sim.kernel import jitable
 
 __all__ = ["CHUNK", "KINDS", "Group", "has_kernel", "step_row", "substep"]
@@ -110,6 +110,7 @@ def _warm() -> None:
     if not _WARM:
         erob_kernel.warm()
         zlac_kernel.warm()
+        sensors.warm()  # the twins' reads from Python
         _WARM.append(True)
 
 

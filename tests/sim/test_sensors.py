@@ -5,9 +5,12 @@ from __future__ import annotations
 
 import math
 import random
+from types import SimpleNamespace
+from typing import Any
 
 import pytest
 
+from joints.sim import kernel, sensors, stepping
 from joints.sim.sensors import IDEAL, Sensor, SensorModel
 from simkit import sensor_reads
 
@@ -60,3 +63,46 @@ def test_a_generator_set_later_is_the_one_reads_draw_from() -> None:
     again = Sensor(model, "mks:1", 1000.0)
     again.reseed(9)
     assert s.position(0.0, 0.5, 0.0) == again.position(0.0, 0.5, 0.0)
+
+
+def test_a_compiled_world_compiles_the_reads_its_twins_make_from_python_before_it_runs(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A Python twin (MKS) makes its reads from Python; making a compiled world compiles them (``stepping._warm``)
+    with the types the twin passes, so a served twin's first read never waits for the compiler in the real-time
+    loop (seconds on a cold cache: the MKS pty test's retries, docs/speed-log.md). Calls are recorded, not timed."""
+    pytest.importorskip("mujoco")
+    if not kernel.default_mode():
+        pytest.skip("the reads run in Python (no numba, or JOINTS_COMPILED=0)")
+    import numba
+    from mkskit import axis_config
+
+    import joints
+
+    phase = ["made"]
+    calls: dict[str, set[tuple[str, tuple[Any, ...]]]] = {"warm": set(), "made": set()}
+
+    def recorded(name: str, fn: Any) -> Any:
+        def call(*args: Any) -> Any:
+            calls[phase[-1]].add((name, tuple(numba.typeof(a) for a in args)))
+            return fn(*args)
+        return call
+
+    warm = stepping._warm
+
+    def warming() -> None:
+        phase.append("warm")
+        warm()
+        phase.pop()
+
+    compiled = sensors.compiled_ops()
+    monkeypatch.setitem(kernel._OPS, id(sensors.PY_OPS),
+                        SimpleNamespace(**{k: recorded(k, f) for k, f in vars(compiled).items()}))
+    monkeypatch.setattr(stepping, "_WARM", [])  # this process's warm done again, recorded
+    monkeypatch.setattr(stepping, "_warm", warming)
+    with joints.open(axis_config(backend="sim")) as rig:
+        joint = rig.joints["carriage"]
+        joint.enable()
+        joint.driver.read("encoder_addition")
+        joint.driver.read("real_time_speed")
+    assert {name for name, _ in calls["made"]} >= {"position", "velocity"}  # the MKS twin's reads, from Python
+    assert calls["made"] <= calls["warm"]
