@@ -1,8 +1,11 @@
 """``joints bench``: every speed ratio of issue 23, each against a reference measured in the same run.
 
 Rule: ratios, never absolute times (machines and their load vary from run to run); every
-reference is timed interleaved with what it is compared to, best of ``repeats``, the process
-pinned to one core. The method of the env rows (the issue's): ``gym.make(id)`` with its defaults
+reference is timed interleaved with what it is compared to, the process pinned to one core. An env
+row's figures are the median over ``repeats`` pairs, each an env block and its reference timed one right
+after the other, so that a machine whose speed changes from second to second slows both sides of a
+pair alike (the best env block beside the best reference block could pair a fast moment with a slow
+one); the world and codec rows take the best of ``repeats``. The method of the env rows (the issue's): ``gym.make(id)`` with its defaults
 (wrappers included), uniform random actions over the whole action space from a fixed seed,
 resets not timed; the reference is ``raw_steps`` raw ``mujoco.mj_step`` calls on the same model
 and a fresh ``MjData``. Real-time factors (simulated seconds per wall second) are printed beside
@@ -20,7 +23,7 @@ import platform
 import sys
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -90,6 +93,12 @@ def best_of(fns: Sequence[Callable[[], float]], repeats: int) -> list[float]:
     return best
 
 
+def paired(fns: Sequence[Callable[[], float]], repeats: int) -> list[list[float]]:
+    """``repeats`` timings of each ``fn`` (which returns the seconds it measured), interleaved: per repeat, one
+    of each, one right after the other (``[repeat][fn]``)."""
+    return [[fn() for fn in fns] for _ in range(repeats)]
+
+
 def _raw(model: Any, steps: int, nstep: int = 1) -> Callable[[], float]:
     """``steps`` raw mj_step substeps on ``model`` with a fresh MjData: the seconds they took. ``nstep``
     1: one Python call per substep (the reference of the ratios); more: ``mj_step(model, data, nstep)``
@@ -155,18 +164,18 @@ def _substep_counter(env: Any) -> Callable[[], int]:
 
 @dataclass
 class EnvTiming:
-    """What one block of env steps took: its wall time, the substeps they really ran, and the wall time
-    with the block's resets included (and the reset substeps left out of ``substeps``)."""
+    """What each timed block of env steps took, in order: its wall time, the substeps they really ran, and the
+    wall time with the block's resets included (and the reset substeps left out of ``substeps``)."""
 
     steps: int
-    seconds: float = math.inf
-    substeps: int = 0
-    with_resets: float = math.inf
+    seconds: list[float] = field(default_factory=list)
+    substeps: list[int] = field(default_factory=list)
+    with_resets: list[float] = field(default_factory=list)
 
 
 def _env_block(env: Any, steps: int, seed: int, out: EnvTiming | None = None) -> Callable[[], float]:
     """``steps`` env.step calls with uniform random actions from ``seed`` (resets untimed): seconds.
-    ``out`` (kept from the best repeat): the substeps the steps ran and the seconds with resets timed."""
+    ``out``: each block's seconds, the substeps the steps ran and the seconds with resets timed."""
     import numpy as np
 
     space = env.action_space
@@ -191,8 +200,10 @@ def _env_block(env: Any, steps: int, seed: int, out: EnvTiming | None = None) ->
                 t = clock()
                 env.reset()
                 resets += clock() - t
-        if out is not None and total < out.seconds:
-            out.seconds, out.substeps, out.with_resets = total, substeps, total + resets
+        if out is not None:
+            out.seconds.append(total)
+            out.substeps.append(substeps)
+            out.with_resets.append(total + resets)
         return total
 
     return timed
@@ -201,29 +212,37 @@ def _env_block(env: Any, steps: int, seed: int, out: EnvTiming | None = None) ->
 def _env_rows(name: str, env: Any, model: Any, nominal: int, steps: int, raw_steps: int, repeats: int, seed: int,
               goal: float | None, overhead_goal: float | None, sim_dt: float, rigs: int = 1) -> Iterator[Row]:
     """The rows of one env: substeps/s over raw mj_step/s (per Python call, and per ``nstep`` call), the same
-    with resets timed, and the Python overhead per env step."""
+    with resets timed, and the Python overhead per env step: each the median of its pairs' (:func:`paired`)."""
     timing = EnvTiming(steps)
     models = list(model) if isinstance(model, (list, tuple)) else [model]
     fns = [_env_block(env, steps, seed, timing),
            _raw(models[0], raw_steps) if len(models) == 1 else _raw_many(models, raw_steps),
            _raw(models[0], raw_steps, nominal)]
-    t_env, t_raw, t_nstep = best_of(fns, repeats)
-    raw = t_raw / raw_steps  # s per substep, one Python call each
-    nstep = t_nstep / raw_steps  # s per substep in mj_step(model, data, nstep)
-    sub = timing.substeps
-    ratio = raw * sub / t_env
+    pairs = paired(fns, repeats)
+    # per pair: s per substep with one Python call each (the reference), and in mj_step(model, data, nstep)
+    raws = [p[1] / raw_steps for p in pairs]
+    nsteps = [p[2] / raw_steps for p in pairs]
+    subs, envs, resets = timing.substeps, timing.seconds, timing.with_resets
+    ratio = _median([r * n / e for r, n, e in zip(raws, subs, envs)])
+    to_nstep = _median([ns * n / e for ns, n, e in zip(nsteps, subs, envs)])
+    overhead = _median([(e - n * r) / steps for r, n, e in zip(raws, subs, envs)])  # per env step (batch of rigs)
+    with_resets = _median([r * n / w for r, n, w in zip(raws, subs, resets)])
+    # the median pair's figures for the detail (a pair, not a mix of pairs)
+    k = sorted(range(len(pairs)), key=lambda i: raws[i] * subs[i] / envs[i])[len(pairs) // 2]
+    t_env, raw, nstep, sub = envs[k], raws[k], nsteps[k], subs[k]
     extra = sub / (steps * rigs) - nominal
-    overhead = (t_env - sub * raw) / steps  # per env step (per batch of ``rigs``)
     yield Row(f"{name}: env substeps/s ÷ raw `mj_step`/s", ratio, goal,
-              f"{sub / t_env:,.0f} substeps/s vs raw {1 / raw:,.0f}/s ({ratio * nstep / raw:.2f} of "
+              f"{sub / t_env:,.0f} substeps/s vs raw {1 / raw:,.0f}/s ({to_nstep:.2f} of "
               f"`mj_step(m, d, nstep={nominal})`, {1 / nstep:,.0f}/s); {sub / (steps * rigs):.3f} substeps per "
               f"step ({nominal} nominal{f', {extra:+.3f} beyond it' if abs(extra) > 1e-9 else ''}); "
               f"{steps / t_env:,.0f} env steps/s, real-time factor {steps * rigs * sim_dt / t_env:,.0f}x")
-    yield Row(f"{name}: the same with resets timed", raw * sub / timing.with_resets, None,
-              f"{timing.with_resets - t_env:.3f} s of resets beside {t_env:.3f} s of steps (reset substeps not counted)")
+    yield Row(f"{name}: the same with resets timed", with_resets, None,
+              f"{resets[k] - t_env:.3f} s of resets beside {t_env:.3f} s of steps (reset substeps not counted)")
     yield Row(f"{name}: overhead per env step (wall time - substeps x raw `mj_step`)", overhead * 1e6,
               None if overhead_goal is None else overhead_goal * 1e6,
-              f"{t_env / steps * 1e6:.1f} us per step - {sub / steps:.2f} x {raw * 1e6:.2f} us", at_most=True)
+              f"{t_env / steps * 1e6:.1f} us per step - {sub / steps:.2f} x {raw * 1e6:.2f} us (the median pair; "
+              f"pairs {', '.join(f'{(e - n * r) / steps * 1e6:.0f}' for r, n, e in zip(raws, subs, envs))} us)",
+              at_most=True)
 
 
 def _baseline_config(env_id: str) -> tuple[Any, str] | None:
@@ -741,7 +760,8 @@ def run(*, quick: bool = False, config: str | None = None, rate: float | None = 
 def _run(quick: bool, config: str | None, rate: float | None, out: Callable[[str], None],
          core: int | None) -> list[Row]:
     steps, raw_steps, repeats, min_time = (20, 500, 1, 0.01) if quick else (500, 20000, 5, 0.2)
-    out(f"Python {platform.python_version()} on {platform.machine()}; pinned to core {core}; best of {repeats}; "
+    out(f"Python {platform.python_version()} on {platform.machine()}; pinned to core {core}; env rows the median of {repeats} "
+        f"pairs (env block, reference), world and codec rows the best of {repeats}; "
         f"raw reference {raw_steps} mj_step on a fresh MjData")
     rows = list(env_rows(steps=steps, raw_steps=raw_steps, repeats=repeats))
     rows.append(world_row(raw_steps=raw_steps, repeats=repeats))

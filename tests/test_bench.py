@@ -90,6 +90,30 @@ def test_bench_command_prints_every_row_of_the_table(capsys: pytest.CaptureFixtu
     assert "Bus planner" in out and "bus rs485 (modbus-rtu" in out
 
 
+def test_an_env_row_is_the_median_of_its_pairs_not_the_best_env_beside_the_best_reference(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each env block is set against the reference timed right after it: an env block that hit a fast moment
+    (0.5 s) beside references that all ran slow (1.0 s) is one pair of three, not the row's figure (the best
+    of each side would say 2.0)."""
+    env_s, raw_s, nstep_s = iter([0.5, 1.0, 1.0]), iter([1.0, 1.0, 1.0]), iter([0.5, 0.5, 0.5])
+
+    def block(env: object, steps: int, seed: int, out: bench.EnvTiming) -> object:
+        def timed() -> float:
+            t = next(env_s)
+            out.seconds.append(t)
+            out.substeps.append(1000)  # the raw reference's count: raw_steps substeps in raw_s
+            out.with_resets.append(2 * t)
+            return t
+        return timed
+
+    monkeypatch.setattr(bench, "_env_block", block)
+    monkeypatch.setattr(bench, "_raw", lambda model, steps, nstep=1: (lambda: next(raw_s if nstep == 1 else nstep_s)))
+    ratio, resets, overhead = bench._env_rows("fake", None, object(), 10, 100, 1000, 3, 0, 0.6, None, 0.01)
+    assert ratio.ratio == 1.0 and resets.ratio == 0.5
+    assert overhead.ratio == 0.0  # the median pair: 1.0 s of steps, 1000 substeps x 1 ms
+    assert "0.50 of `mj_step(m, d, nstep=10)`" in ratio.detail  # the median of 1.0, 0.5, 0.5
+
+
 @pytest.mark.parametrize("direct", [True, False])
 def test_erob_position_step_is_three_transactions(direct: bool) -> None:
     """Target (0x0043), start (0x00F1), status read (one FC03 of the adjacent block): 3, both paths."""
