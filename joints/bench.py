@@ -123,11 +123,14 @@ def _raw(model: Any, steps: int, nstep: int = 1) -> Callable[[], float]:
     return timed
 
 
-def _raw_many(models: Sequence[Any], steps: int) -> Callable[[], float]:
-    """``steps`` raw mj_step calls spread evenly over ``models`` (fresh MjData each): seconds."""
+def _raw_many(models: Sequence[Any], steps: int, run: int = 1) -> Callable[[], float]:
+    """About ``steps`` raw mj_step calls spread evenly over ``models`` (fresh MjData each), ``run`` substeps of
+    one model in a row before the next (a batch's pattern: each rig's world runs its period's substeps in one go,
+    rig after rig; one substep per model in turn would make the reference pay the caches' misses the batch does
+    not): seconds for ``steps``."""
     import mujoco
 
-    rounds = max(1, steps // len(models))
+    rounds = max(1, steps // (len(models) * run))
 
     def timed() -> float:
         pairs = [(m, mujoco.MjData(m)) for m in models]
@@ -135,8 +138,9 @@ def _raw_many(models: Sequence[Any], steps: int) -> Callable[[], float]:
         t = time.perf_counter()
         for _ in range(rounds):
             for m, d in pairs:
-                step(m, d)
-        return (time.perf_counter() - t) * steps / (rounds * len(models))
+                for _ in range(run):
+                    step(m, d)
+        return (time.perf_counter() - t) * steps / (rounds * len(models) * run)
 
     return timed
 
@@ -216,7 +220,7 @@ def _env_rows(name: str, env: Any, model: Any, nominal: int, steps: int, raw_ste
     timing = EnvTiming(steps)
     models = list(model) if isinstance(model, (list, tuple)) else [model]
     fns = [_env_block(env, steps, seed, timing),
-           _raw(models[0], raw_steps) if len(models) == 1 else _raw_many(models, raw_steps),
+           _raw(models[0], raw_steps) if len(models) == 1 else _raw_many(models, raw_steps, nominal),
            _raw(models[0], raw_steps, nominal)]
     pairs = paired(fns, repeats)
     # per pair: s per substep with one Python call each (the reference), and in mj_step(model, data, nstep)
