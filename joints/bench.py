@@ -2,11 +2,11 @@
 
 Rule: ratios, never absolute times (machines and their load vary from run to run); every
 reference is timed interleaved with what it is compared to, the process pinned to one core. An env
-row's figures are the median over ``repeats`` pairs, each an env block and its reference timed one right
-after the other, so that a machine whose speed changes from second to second slows both sides of a
-pair alike (the best env block beside the best reference block could pair a fast moment with a slow
-one); the world and codec rows take the best of ``repeats``. The method of the env rows (the issue's): ``gym.make(id)`` with its defaults
-(wrappers included), uniform random actions over the whole action space from a fixed seed,
+row's figures are the median over ``repeats`` pairs, each an env block and its references timed right
+after it, so that a machine whose speed changes within a run slows both sides of a pair alike (the
+best env block beside the best reference could pair a fast moment with a slow one); the world and
+codec rows take the best of ``repeats``. The method of the env rows (the issue's): ``gym.make(id)``
+with its defaults (wrappers included), uniform random actions over the whole action space from a fixed seed,
 resets not timed; the reference is ``raw_steps`` raw ``mujoco.mj_step`` calls on the same model
 and a fresh ``MjData``. Real-time factors (simulated seconds per wall second) are printed beside
 the ratios, for users, not as goals.
