@@ -227,12 +227,13 @@ def _env_rows(name: str, env: Any, model: Any, nominal: int, steps: int, raw_ste
     raws = [p[1] / raw_steps for p in pairs]
     nsteps = [p[2] / raw_steps for p in pairs]
     subs, envs, resets = timing.substeps, timing.seconds, timing.with_resets
-    ratio = _median([r * n / e for r, n, e in zip(raws, subs, envs)])
+    ratios = [r * n / e for r, n, e in zip(raws, subs, envs)]
+    overheads = [(e - n * r) / steps for r, n, e in zip(raws, subs, envs)]  # per env step (per batch of rigs)
+    ratio, overhead = _median(ratios), _median(overheads)
     to_nstep = _median([ns * n / e for ns, n, e in zip(nsteps, subs, envs)])
-    overhead = _median([(e - n * r) / steps for r, n, e in zip(raws, subs, envs)])  # per env step (batch of rigs)
     with_resets = _median([r * n / w for r, n, w in zip(raws, subs, resets)])
     # the median pair's figures for the detail (a pair, not a mix of pairs)
-    k = sorted(range(len(pairs)), key=lambda i: raws[i] * subs[i] / envs[i])[len(pairs) // 2]
+    k = sorted(range(len(pairs)), key=ratios.__getitem__)[len(pairs) // 2]
     t_env, raw, nstep, sub = envs[k], raws[k], nsteps[k], subs[k]
     extra = sub / (steps * rigs) - nominal
     yield Row(f"{name}: env substeps/s ÷ raw `mj_step`/s", ratio, goal,
@@ -245,7 +246,7 @@ def _env_rows(name: str, env: Any, model: Any, nominal: int, steps: int, raw_ste
     yield Row(f"{name}: overhead per env step (wall time - substeps x raw `mj_step`)", overhead * 1e6,
               None if overhead_goal is None else overhead_goal * 1e6,
               f"{t_env / steps * 1e6:.1f} us per step - {sub / steps:.2f} x {raw * 1e6:.2f} us (the median pair; "
-              f"pairs {', '.join(f'{(e - n * r) / steps * 1e6:.0f}' for r, n, e in zip(raws, subs, envs))} us)",
+              f"pairs {', '.join(f'{o * 1e6:.0f}' for o in overheads)} us)",
               at_most=True)
 
 
