@@ -82,23 +82,21 @@ def _run(n: int, physics: int, mj_step: int, table: Any, adr: Any, ratio: Any, o
          dts: Any, active: Any) -> None:
     """``n`` substeps of the ``active`` worlds: the loops of the rows in ``order`` (theirs), then
     (``physics``) each active world's ``mj_step`` (compiled only: the worlds' arrays are reached by address)."""
-    doubles, call = kernel.doubles, kernel.call
+    at, call = kernel.f64_at, kernel.call  # cells by pointer and 2-D indexing: no array view made per substep
     for k in range(n):
         for j in range(len(order)):
             i = order[j]
-            a = adr[i]
-            w = a[WORLD]
-            row = worlds[w]
+            w = adr[i, WORLD]
             dt = dts[w]
-            t = (row[STEPS] + k + 1) * dt
+            t = (worlds[w, STEPS] + k + 1) * dt
             r = ratio[i]
-            q = doubles(row[QPOS_AT], row[NQ])[a[QPOS]] * r
-            qd = doubles(row[QVEL_AT], row[NV])[a[DOF]] * r
-            doubles(row[CTRL_AT], row[NU])[a[ACT]] = step_row(table, adr, i, t, dt, q, qd)
+            q = at(worlds[w, QPOS_AT])[adr[i, QPOS]] * r
+            qd = at(worlds[w, QVEL_AT])[adr[i, DOF]] * r
+            at(worlds[w, CTRL_AT])[adr[i, ACT]] = step_row(table, adr, i, t, dt, q, qd)
         if physics:
             for j in range(len(active)):
-                row = worlds[active[j]]
-                call(mj_step, row[MODEL], row[DATA])
+                w = active[j]
+                call(mj_step, worlds[w, MODEL], worlds[w, DATA])
 
 
 _run_compiled = kernel.compiled(_run) if kernel.AVAILABLE else None
