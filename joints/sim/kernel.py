@@ -25,7 +25,7 @@ from typing import Any, TypeVar
 
 from joints.devices import motion
 
-__all__ = ["AVAILABLE", "arrays", "call", "compiled", "compiled_ops", "default_mode", "doubles", "jitable", "mj_step_address", "rows",
+__all__ = ["AVAILABLE", "arrays", "call", "compiled", "compiled_ops", "default_mode", "f64_at", "jitable", "mj_step_address", "rows",
            "table"]
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -185,11 +185,6 @@ def _call_pp(typingctx: Any, function: Any, a: Any, b: Any) -> Any:
     return sig, codegen
 
 
-def _doubles(address: int, n: int) -> Any:
-    """The ``n`` doubles at ``address`` as an array (compiled code only)."""
-    return numba.carray(f64_at(address), (n,))
-
-
 def _call(function: int, a: int, b: int) -> None:
     """Call the C function ``void f(void*, void*)`` at address ``function`` (compiled code only)."""
     call_pp(function, a, b)
@@ -197,12 +192,10 @@ def _call(function: int, a: int, b: int) -> None:
 
 f64_at: Any = None
 call_pp: Any = None
-doubles: Any = None
 call: Any = None
 if numba is not None:
     f64_at = _extending.intrinsic(_f64_at)
     call_pp = _extending.intrinsic(_call_pp)
-    doubles = compiled(_doubles)
     call = compiled(_call)
 
 
