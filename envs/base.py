@@ -12,7 +12,7 @@ Rules:
   clock, absorbing the bus time), then reads every joint's state. The drive holds the command
   between ticks (zero-order hold).
 * Deterministic in sim: no wall clock, no global RNG; every random draw comes from
-  ``self.np_random`` (seeded by ``reset(seed=...)``).
+  ``self.np_random`` (seeded by ``reset(seed=...)``), the twins' sensor noise included.
 
 Actions are normalised to ``[-1, 1]`` per joint (see :meth:`JointsEnv.command_of`):
 
@@ -226,6 +226,12 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
     def _check_open(self) -> None:
         if self._closed:
             raise RuntimeError("the env is closed")
+
+    def _reset_rig(self) -> None:
+        """Sim: physics and every twin to power-on (``rig.reset``), the twins' sensor noise seeded from
+        ``self.np_random``: ``reset(seed=s)`` replays an episode's noise, every other episode and every
+        rig of a batch (seeded ``s + i``) draws its own."""
+        self.rig.reset(seed=int(self.np_random.integers(2**32)))
 
     #: step is begin_step (check the action, send its commands), a wait for the next tick,
     #: finish_step (read, observe, reward): a batched env (envs.vector) waits for all its rigs at once
@@ -949,7 +955,7 @@ class JointsEnv(RigEnv):
 
     def _reset_sim(self, start: np.ndarray) -> None:
         rig = self.rig
-        rig.reset()  # physics + drives to power-on; drivers forget, joints count as disabled
+        self._reset_rig()  # physics + drives to power-on; drivers forget, joints count as disabled
         self._randomize()
         rig.sim.set_joint_positions({nm: self._to_model(i, float(q))
                                      for i, (nm, q) in enumerate(zip(self.joint_names, start))})

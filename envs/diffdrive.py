@@ -731,7 +731,7 @@ class DiffDriveGoalEnv(RigEnv):
 
     # -- resets -----------------------------------------------------------------------------
     def _reset_sim(self) -> None:
-        self.rig.reset()  # physics + drive to power-on; drivers forget, wheels count as disabled
+        self._reset_rig()  # physics + drive to power-on; drivers forget, wheels count as disabled
         self._randomize()  # (enabling arms the configured watchdog again)
         self._enable_velocity_mode()
         self.rig.sleep(SIM_SETTLE)

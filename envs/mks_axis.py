@@ -254,7 +254,7 @@ class MksAxisPositionEnv(RigEnv):
         self.goal = self._draw_goal(start, options)
         if self.sim:
             rig = self.rig
-            rig.reset()  # physics and the twin to power-on; the driver forgets what it wrote
+            self._reset_rig()  # physics and the twin to power-on; the driver forgets what it wrote
             rig.sim.set_joint_positions({self.joint_name: (start - self.joint.offset) * self.joint.direction})
             self.joint.enable()
         else:

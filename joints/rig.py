@@ -353,15 +353,16 @@ class Rig:
         groups = {id(j.driver.group): j.driver.group for j in self.joints.values() if isinstance(j.driver, CyclicJoint)}
         return sum(g.late for g in groups.values())
 
-    def reset(self) -> None:
+    def reset(self, seed: int | None = None) -> None:
         """Sim: physics to the model's initial state and every emulated drive to power-on.
 
-        Drivers forget what they wrote (the drives lost it) and joints count as disabled.
+        Drivers forget what they wrote (the drives lost it) and joints count as disabled. ``seed``: the
+        twins' sensor noise restarts from it (each twin its own stream); None: from the last seed given.
         On hardware this raises: a real robot cannot be reset by software.
         """
         if self.world is None or self.backend != "sim":
             raise JointsError("reset() is only available with backend = \"sim\" (a mixed rig has real joints)")
-        self.world.reset()
+        self.world.reset(seed)
         for j in self.joints.values():
             j.driver_reset()
 

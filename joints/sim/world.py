@@ -37,7 +37,7 @@ from typing import Any, Protocol, runtime_checkable
 
 from joints.clock import ManualClock
 from joints.errors import ConfigError, MissingDependencyError
-from joints.sim import firmware, kernel, stepping
+from joints.sim import firmware, kernel, sensors, stepping
 
 #: s a measured joint's last measurement is extrapolated at its velocity (then it is held)
 KINEMATIC_HORIZON = 0.05
@@ -797,8 +797,11 @@ class World:
             seen.setdefault(id(b.emulator), b.emulator)
         return list(seen.values())
 
-    def reset(self) -> None:
-        """Physics to the model's initial state, every drive to its power-on state (saved settings kept)."""
+    def reset(self, seed: int | None = None) -> None:
+        """Physics to the model's initial state, every drive to its power-on state (saved settings kept).
+
+        ``seed``: every twin's sensor noise restarts from it, each twin its own stream
+        (:func:`joints.sim.sensors.seed`); None: each from its last seed (0 until one is given)."""
         self._booked = self._held = False  # booked time of the old episode never runs
         mj = self.mujoco
         mj.mj_resetData(self.model, self.data)
@@ -806,6 +809,8 @@ class World:
         self.steps = 0
         self._target = 0.0
         self.clock.restart(0.0)  # a new epoch: the media drop what was in flight
+        if seed is not None:
+            sensors.seed(self, seed)  # before the power cycles, which restart each stream from its seed
         for emu in self._emulators():
             emu.power_cycle()
             emu.time = 0.0

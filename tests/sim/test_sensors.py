@@ -106,3 +106,24 @@ def test_a_compiled_world_compiles_the_reads_its_twins_make_from_python_before_i
         joint.driver.read("real_time_speed")
     assert {name for name, _ in calls["made"]} >= {"position", "velocity"}  # the MKS twin's reads, from Python
     assert calls["made"] <= calls["warm"]
+
+
+def test_a_world_reset_with_a_seed_reseeds_every_twin_and_one_without_keeps_it() -> None:
+    from joints.devices.erob.profiles import profile
+    from simkit import erob_world
+
+    world = erob_world("erob_arm3.xml", ["joint1", "joint2"], profile("eRob80H100"))
+    try:
+        twins = sensors.sensors_of(world)
+        assert len(twins) == 2
+        world.reset(seed=21)
+        first = [s.rng.getstate() for s in twins]
+        assert first[0] != first[1]  # each twin its own stream
+        assert [s.world_seed for s in twins] == [21, 21]
+        twins[0].current(1.0)  # a draw, then a reset without a seed: back to the same streams
+        world.reset()
+        assert [s.rng.getstate() for s in twins] == first
+        world.reset(seed=22)
+        assert [s.rng.getstate() for s in twins] != first
+    finally:
+        world.close()
