@@ -12,7 +12,7 @@ Rules:
   clock, absorbing the bus time), then reads every joint's state. The drive holds the command
   between ticks (zero-order hold).
 * Deterministic in sim: no wall clock, no global RNG; every random draw comes from
-  ``self.np_random`` (seeded by ``reset(seed=...)``), the twins' sensor noise included.
+  ``self.np_random`` (seeded by ``reset(seed=...)``); the twins' sensor noise from the same seed.
 
 Actions are normalised to ``[-1, 1]`` per joint (see :meth:`JointsEnv.command_of`):
 
@@ -227,11 +227,23 @@ class RigEnv(gym.Env[np.ndarray, np.ndarray]):
         if self._closed:
             raise RuntimeError("the env is closed")
 
+    _noise_seeded: np.random.Generator | None = None  #: the generator the sensors' episodes are counted from
+    _episode = 0  #: sim resets since :attr:`_noise_seeded` was made (the sensors' seed counts them)
+
     def _reset_rig(self) -> None:
-        """Sim: physics and every twin to power-on (``rig.reset``), the twins' sensor noise seeded from
-        ``self.np_random``: ``reset(seed=s)`` replays an episode's noise, every other episode and every
-        rig of a batch (seeded ``s + i``) draws its own."""
-        self.rig.reset(seed=int(self.np_random.integers(2**32)))
+        """Sim: physics and every twin to power-on (``rig.reset``), the twins' sensor noise seeded from the env's
+        seed (``np_random_seed``) and the episode's number since it was seeded, leaving ``np_random``'s own draws
+        as they were: ``reset(seed=s)`` replays an episode's noise, every other episode and every rig of a batch
+        (seeded ``s + i``) draws its own."""
+        rng = self.np_random
+        if self._noise_seeded is rng:
+            self._episode += 1
+        else:  # a new generator: the first reset, or one with a seed
+            self._noise_seeded, self._episode = rng, 0
+        seed = self.np_random_seed  # -1: np_random was set directly, its seed unknown (then a draw from it)
+        world_seed = np.random.SeedSequence([seed, self._episode]).generate_state(1)[0] if seed >= 0 \
+            else rng.integers(2**32)
+        self.rig.reset(seed=int(world_seed))
 
     #: step is begin_step (check the action, send its commands), a wait for the next tick,
     #: finish_step (read, observe, reward): a batched env (envs.vector) waits for all its rigs at once

@@ -1,4 +1,4 @@
-"""The twins' sensor noise follows the env's seed (gymnasium's rule: every draw from ``np_random``).
+"""The twins' sensor noise follows the env's seed (gymnasium's rule: ``reset(seed=...)`` fixes every draw).
 
 The eRob profile's current measurement has 20 mA of noise while current flows, and the observation carries the
 torque made from it. With the start pose and the target fixed by ``options`` and the same actions, the seed is
