@@ -99,6 +99,12 @@ def paired(fns: Sequence[Callable[[], float]], repeats: int) -> list[list[float]
     return [[fn() for fn in fns] for _ in range(repeats)]
 
 
+def median_pair(count: int, ratio: Callable[[int], float]) -> int:
+    """The index of the median of ``count`` pairs ordered by ``ratio(i)`` (the upper middle one for an even
+    count): the pair whose figures a row reports, not a mix of pairs."""
+    return sorted(range(count), key=ratio)[count // 2]
+
+
 def _raw(model: Any, steps: int, nstep: int = 1) -> Callable[[], float]:
     """``steps`` raw mj_step substeps on ``model`` with a fresh MjData: the seconds they took. ``nstep``
     1: one Python call per substep (the reference of the ratios); more: ``mj_step(model, data, nstep)``
@@ -233,7 +239,7 @@ def _env_rows(name: str, env: Any, model: Any, nominal: int, steps: int, raw_ste
     to_nstep = _median([ns * n / e for ns, n, e in zip(nsteps, subs, envs)])
     with_resets = _median([r * n / w for r, n, w in zip(raws, subs, resets)])
     # the median pair's figures for the detail (a pair, not a mix of pairs)
-    k = sorted(range(len(pairs)), key=ratios.__getitem__)[len(pairs) // 2]
+    k = median_pair(len(pairs), ratios.__getitem__)
     t_env, raw, nstep, sub = envs[k], raws[k], nsteps[k], subs[k]
     extra = sub / (steps * rigs) - nominal
     yield Row(f"{name}: env substeps/s ÷ raw `mj_step`/s", ratio, goal,

@@ -22,6 +22,19 @@ def load_as(root: str, rel: str, name: str) -> Any:
     return module
 
 
+def raw_step(model: Any, n: int) -> float:
+    """CPU seconds (``time.thread_time``) per raw ``mj_step`` over ``n`` of them on a fresh MjData, one Python call
+    per substep: the bench's reference, timed the probes' way."""
+    import mujoco
+
+    data = mujoco.MjData(model)
+    step = mujoco.mj_step
+    t = time.thread_time()
+    for _ in range(n):
+        step(model, data)
+    return (time.thread_time() - t) / max(n, 1)
+
+
 def timed_steps(env: Any, obs: Any, actions: Any) -> tuple[float, list[Any]]:
     """``env`` stepped through ``actions`` from the observation ``obs`` (reset at each episode's end): the CPU
     seconds per step (``time.thread_time``) and the record the probes compare (observations, rewards, ends)."""

@@ -25,7 +25,7 @@ import mujoco
 import numpy as np
 
 from envs import ErobArmReachEnv, ErobReachEnv
-from joints.bench import paired
+from joints.bench import median_pair, paired
 
 STEPS = 500  #: env steps per timed block (10 s simulated at 20 ms)
 REPEATS = 5
@@ -60,7 +60,7 @@ def bench(name: str, env: Any) -> None:
     # in pairs, the reference right after the env block (a burst of load hits both alike); the median pair's
     # figures (the best of each side on its own can pair a fast env block with slow references)
     pairs = paired([lambda: _env_seconds(env, actions), raw_loop], REPEATS)
-    t_env, t_raw = sorted(pairs, key=lambda p: p[0] / p[1])[len(pairs) // 2]
+    t_env, t_raw = pairs[median_pair(len(pairs), lambda i: pairs[i][0] / pairs[i][1])]
     steps_s = STEPS / t_env
     rtf = steps_s * env.dt
     substeps_s = steps_s * env.substeps
@@ -73,7 +73,7 @@ def bench(name: str, env: Any) -> None:
 
     env.reset(seed=0)
     w_pairs = paired([world_loop, raw_loop], REPEATS)
-    t_world, t_raw_w = sorted(w_pairs, key=lambda p: 4 * p[0] / p[1])[len(w_pairs) // 2]
+    t_world, t_raw_w = w_pairs[median_pair(len(w_pairs), lambda i: w_pairs[i][0] / w_pairs[i][1])]
     world_s, raw_w = (RAW_STEPS // 4) / t_world, RAW_STEPS / t_raw_w
     env.close()
     print(f"{name:<34} {steps_s:>7.0f} steps/s | real-time factor {rtf:>5.1f}x"

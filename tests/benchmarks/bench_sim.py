@@ -15,7 +15,7 @@ from pathlib import Path
 
 import mujoco
 
-from joints.bench import paired
+from joints.bench import median_pair, paired
 from joints.devices.erob.profiles import profile
 from joints.drivers.erob_modbus import ErobModbusDriver
 from joints.link.modbus import ModbusLink
@@ -56,7 +56,7 @@ def bench(model: str, names: list[str]) -> None:
 
     # in pairs, the reference right after ours (load hits both alike); the median pair's figures
     pairs = paired([ours, raw], REPEATS)
-    t_ours, t_raw = sorted(pairs, key=lambda p: p[0] / p[1])[len(pairs) // 2]
+    t_ours, t_raw = pairs[median_pair(len(pairs), lambda i: pairs[i][0] / pairs[i][1])]
     ours, ref = STEPS / t_ours, STEPS / t_raw
     print(f"{model:<16} {len(names)} joint(s): World.step {ours:>9.0f} steps/s | raw mj_step {ref:>9.0f} steps/s "
           f"| ratio {ours / ref:.2f} (goal >= 0.5) | real-time factor {ours * w.timestep:.0f}x")

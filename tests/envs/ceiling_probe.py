@@ -29,12 +29,14 @@ import time
 from typing import Any
 
 import gymnasium as gym
-import mujoco
 import numpy as np
 
 import envs  # noqa: F401 - registers the joints envs
 from joints.sim import line_exchange
 from joints.sim.stepping import STEPS
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from probekit import raw_step
 
 BLOCKS = 7
 PER_BLOCK = 300
@@ -83,16 +85,6 @@ class _Calls:
         self.lane_seconds = 0.0
 
 
-def _raw(model: Any, n: int) -> float:
-    """CPU seconds per raw ``mj_step`` over ``n`` of them (one Python call per substep) on a fresh MjData."""
-    data = mujoco.MjData(model)
-    step = mujoco.mj_step
-    t = time.thread_time()
-    for _ in range(n):
-        step(model, data)
-    return (time.thread_time() - t) / n
-
-
 def _blocks(env: Any, model: Any, calls: _Calls | None) -> list[tuple[float, float, float, float, float]]:
     """Per block: (step, compiled calls, substeps, raw ``mj_step``, lanes' exchanges) per env step, the raw
     reference timed right after the block's steps (as many substeps), so that both see the same load; the same
@@ -114,7 +106,7 @@ def _blocks(env: Any, model: Any, calls: _Calls | None) -> list[tuple[float, flo
             sub, spent, lanes = float(env.unwrapped.frame_skip), 0.0, 0.0
         else:
             sub, spent, lanes = calls.substeps / PER_BLOCK, calls.seconds / PER_BLOCK, calls.lane_seconds / PER_BLOCK
-        got.append((step, spent, sub, _raw(model, int(sub * PER_BLOCK)), lanes))
+        got.append((step, spent, sub, raw_step(model, int(sub * PER_BLOCK)), lanes))
     return got
 
 

@@ -24,12 +24,14 @@ from collections import Counter
 from typing import Any
 
 import gymnasium as gym
-import mujoco
 import numpy as np
 
 import envs  # noqa: F401 - registers the joints envs
 from joints.bench import BASELINE_PERIOD, _baseline_config
 from joints.sim import can_exchange, line_exchange
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from probekit import raw_step
 
 BLOCKS = int(os.environ.get("BLOCKS", "7"))
 STEPS = int(os.environ.get("STEPS", "300"))
@@ -67,15 +69,6 @@ def _wrap() -> list[_Timed]:
     return [line, can]
 
 
-def _raw(model: Any, n: int) -> float:
-    data = mujoco.MjData(model)
-    step = mujoco.mj_step
-    t = time.thread_time()
-    for _ in range(n):
-        step(model, data)
-    return (time.thread_time() - t) / max(n, 1)
-
-
 def _block(env: Any, actions: Any, timers: list[_Timed]) -> tuple[float, float, float, float, float]:
     """(step, compiled calls, substeps, raw mj_step, calls) per env step of one block."""
     u = env.unwrapped
@@ -101,7 +94,7 @@ def _block(env: Any, actions: Any, timers: list[_Timed]) -> tuple[float, float, 
     sub = substeps / len(actions)
     spent = sum(t.seconds for t in timers) / len(actions)
     calls = sum(t.calls for t in timers) / len(actions)
-    return step, spent, sub, _raw(u.rig.world.model, int(sub * len(actions))), calls
+    return step, spent, sub, raw_step(u.rig.world.model, int(sub * len(actions))), calls
 
 
 def _profile(env: Any, actions: Any) -> tuple[float, float, Counter[str]]:

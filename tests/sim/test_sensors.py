@@ -10,9 +10,10 @@ from typing import Any
 
 import pytest
 
+from joints.devices.erob.profiles import profile
 from joints.sim import kernel, sensors, stepping
 from joints.sim.sensors import IDEAL, Sensor, SensorModel
-from simkit import sensor_reads
+from simkit import erob_world, sensor_reads
 
 MODELS = [
     SensorModel(),
@@ -109,9 +110,6 @@ def test_a_compiled_world_compiles_the_reads_its_twins_make_from_python_before_i
 
 
 def test_a_world_reset_with_a_seed_reseeds_every_twin_and_one_without_keeps_it() -> None:
-    from joints.devices.erob.profiles import profile
-    from simkit import erob_world
-
     world = erob_world("erob_arm3.xml", ["joint1", "joint2"], profile("eRob80H100"))
     try:
         twins = sensors.sensors_of(world)
