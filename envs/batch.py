@@ -70,7 +70,9 @@ class Batch:
         self.paths = [e.compiled_path for e in self.envs]
         self.rigs = joints.CompiledRigs.build(self.paths)
         #: the step under way: (actions, commands, actions as lists, the rigs' one call or None), begin to finish
-        self._pending: tuple[np.ndarray, np.ndarray, list[list[float]], joints.CompiledRigs | None] | None = None
+        #: and every rig's states where the one call was the whole step (:meth:`waited`)
+        self._pending: tuple[np.ndarray, np.ndarray, list[list[float]], joints.CompiledRigs | None,
+                             list[list[joints.JointState]] | None] | None = None
 
     @classmethod
     def of(cls, envs: Sequence[Any]) -> Batch | None:
@@ -130,17 +132,45 @@ class Batch:
             rows = c.tolist()
         skips = [[not j.enabled for j in e.joints] for e in envs]
         rigs = self._rigs()
-        if rigs is not None and rigs.command(mode, rows, skips):  # every rig's in one call
+        read: list[list[joints.JointState]] | None = None
+        if rigs is not None and self._whole(skips):  # every rig's whole step in one call (as JointsEnv.step's)
+            got = rigs.step(mode, rows, [e.tick_time(1) for e in envs], [e.rig for e in envs])
+            if got is not None:
+                read = []
+                for i, e in enumerate(envs):
+                    e._sent = c[i]
+                    e._tick += 1
+                    states, remaining = got[i]
+                    e.note_overrun(-remaining)
+                    e._states = states
+                    read.append(states)
+        if read is None and rigs is not None and rigs.command(mode, rows, skips):  # every rig's commands in one call
             for i, e in enumerate(envs):
                 e._sent = c[i]
                 e._tick += 1
-        else:
+        elif read is None:
             for i, e in enumerate(envs):
                 e._sent = c[i]
                 e.compiled_path.command(mode, rows[i], skips[i])  # type: ignore[union-attr]
                 e._tick += 1
-        self._pending = (a, c, a.tolist(), rigs)  # (no rig's path can change before finish: the vector step's own)
+        # (no rig's path can change before finish: the vector step's own)
+        self._pending = (a, c, a.tolist(), rigs, read)
         return True
+
+    def _whole(self, skips: list[list[bool]]) -> bool:
+        """Whether every rig's step may go whole (commands, the wait for the tick, the reads) in one call, as
+        ``JointsEnv.step`` takes its own one-call step: every joint commanded, no overrun raised, the path able."""
+        for e, skip in zip(self.envs, skips):
+            path = e.compiled_path
+            if path is None or not path.steps or e.raise_on_overrun or True in skip \
+                    or not e._keeps_step_parts(JointsEnv):
+                return False
+        return True
+
+    @property
+    def waited(self) -> bool:
+        """Whether the step under way (begin to finish) already waited for every rig's tick (its one call)."""
+        return self._pending is not None and self._pending[4] is not None
 
     def _rigs(self) -> joints.CompiledRigs | None:
         """The rigs' one call (:attr:`rigs`) while every rig keeps the compiled path it was built with."""
@@ -180,17 +210,16 @@ class Batch:
         """Every rig's ``finish_step``: (observations, rewards, the batch's info arrays) where no rig's episode
         ended, else each rig's own outcome (obs, reward, terminated, truncated, info), from its own code."""
         assert self._pending is not None
-        a, c, values, rigs = self._pending  # the one call that sent this step's commands, or None
+        a, c, values, rigs, read = self._pending  # the one call that sent this step's commands, or None
         self._pending = None
         envs = self.envs
         n = self.n
-        read = None if rigs is None else rigs.states()  # every rig's in one call
-        if read is None:
-            states = [e._read() for e in envs]
-        else:
-            states = read
-            for e, st in zip(envs, read):
-                e._states = st
+        if read is None and rigs is not None:  # every rig's in one call (unless the step's one call read them)
+            read = rigs.states()
+            if read is not None:
+                for e, st in zip(envs, read):
+                    e._states = st
+        states = [e._read() for e in envs] if read is None else read
         flat = [s for st in states for s in st]
         p = np.array([s.position for s in flat]).reshape(len(envs), n)
         if any(s.fault is not None for s in flat) \

@@ -33,7 +33,8 @@ from envs.batch import Batch
 __all__ = ["JointsVectorEnv", "make_vector_env", "vector_entry_point"]
 
 
-#: rigs from which a batch takes the batched path by default (:attr:`JointsVectorEnv.batched`)
+#: rigs from which a batch takes the batched path by default (:attr:`JointsVectorEnv.batched`) where no compiled call
+#: carries its rigs' steps (with one, from one rig on)
 BATCH_MIN = 4
 
 
@@ -117,8 +118,10 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
         #: the rigs' per-step Python across the batch (:mod:`envs.batch`), where their type allows it
         self._batch = Batch.of(self.envs)
         #: take the batched path where it can be taken (False: every step rig by rig, the reference); by
-        #: default from BATCH_MIN rigs on (below, its fixed cost of array calls exceeds what it saves)
-        self.batched = num_envs >= BATCH_MIN
+        #: default where one compiled call carries the rigs' steps (:class:`joints.CompiledRigs`: each step whole in
+        #: one call, fewer calls than each rig's own from one rig on), else from BATCH_MIN rigs on (below, the
+        #: batch's fixed cost of array calls exceeds what it saves)
+        self.batched = num_envs >= BATCH_MIN or (self._batch is not None and self._batch.rigs is not None)
 
     # -- what a batch shares -------------------------------------------------------------------
     @property
@@ -256,7 +259,8 @@ class JointsVectorEnv(VectorEnv[Any, Any, Any]):
 
     def _step_batch(self, batch: Batch) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """:meth:`step` once ``batch`` sent every rig's commands (no rig was due for a reset)."""
-        _wait_together(self.envs, batch.joined())
+        if not batch.waited:  # (the step's one call waited for every rig's tick)
+            _wait_together(self.envs, batch.joined())
         out = batch.finish()
         n = self.num_envs
         if isinstance(out, tuple):  # the batch's arrays: no episode ended

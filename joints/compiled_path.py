@@ -484,6 +484,55 @@ def _erob_batch(steppers: Sequence[_Stepper]) -> list[_ErobModbus] | None:
     return units if same and getattr(first.exchange.world, "compiled", False) else None  # (it needs the compiled world)
 
 
+_Planned = list[tuple[_ErobModbus, tuple[tuple[Any, ...], str, int]]]
+
+
+def _plan_all(units: Sequence[_ErobModbus], mode: str, values: Sequence[float], skip: Sequence[bool] | None = None
+              ) -> tuple[_Planned, list[Any], list[Any]] | None:
+    """Every joint's steady command but the skipped ones (:meth:`_ErobModbus.plan`: its checks and requests), all
+    its requests and, per request, the exchange of its drive; None (nothing sent) where one joint is not the
+    steady case or its checks refuse (its own command raises that again, in its turn)."""
+    planned: _Planned = []
+    requests: list[Any] = []
+    exchanges: list[Any] = []
+    for k, s in enumerate(units):
+        if skip is not None and skip[k]:
+            continue
+        try:
+            p = s.plan(mode, values[k])
+        except Exception:  # noqa: BLE001 - a refusal: raised again by the joint's own command
+            return None
+        if p is None:
+            return None
+        planned.append((s, p))
+        requests.extend(p[0])
+        exchanges.extend([s.exchange] * len(p[0]))
+    return planned, requests, exchanges
+
+
+def _note_done(mode: str, planned: _Planned, clocks: Sequence[float], before: float) -> None:
+    """Each planned command's bookkeeping (:meth:`_ErobModbus.done`), sent from ``before`` (the clock before the
+    call, then after the command before it) to the clock after its last request (``clocks``: after each request
+    of the call, the commands' first)."""
+    at = 0
+    for s, (reqs, name, value) in planned:
+        at += len(reqs)
+        after = clocks[at - 1]
+        s.done(mode, name, value, before, after)
+        before = after
+
+
+def _states_read(units: Sequence[_ErobModbus], replies: Sequence[Any], clocks: Sequence[float], before: float
+                 ) -> list[JointState]:
+    """Each joint's state from its status read's reply (``replies``, ``clocks``: each read's, in joint order),
+    stamped from ``before`` (the clock before the reads) or the read before it, to the clock after its own."""
+    out: list[JointState] = []
+    for s, reply, after in zip(units, replies, clocks):
+        out.append(s.state_of(reply, before, after))
+        before = after
+    return out
+
+
 def _command_batch(units: list[_ErobModbus], mode: str, values: Sequence[float], skip: Sequence[bool] | None) -> None:
     """:meth:`CompiledPath.command` of one eRob per joint: the steady commands of the joints up to the first that
     is not the steady case (or whose checks refuse it) go in one call, after each joint's checks; from that
@@ -513,13 +562,7 @@ def _command_batch(units: list[_ErobModbus], mode: str, values: Sequence[float],
             for s, _ in planned:
                 s.command(mode, values[units.index(s)])
         else:
-            clocks = first.exchange.clocks
-            before, at = t0, 0
-            for s, (reqs, name, value) in planned:
-                at += len(reqs)
-                after = clocks[at - 1]
-                s.done(mode, name, value, before, after)
-                before = after
+            _note_done(mode, planned, first.exchange.clocks, t0)
     for k in range(rest, len(units)):  # from the first joint that is not the steady case (or refuses): its own way
         if skip is None or not skip[k]:
             units[k].command(mode, values[k])
@@ -534,13 +577,7 @@ def _states_batch(units: list[_ErobModbus]) -> list[JointState] | None:
     replies = first.lane.exchange(run, [s.status for s in units], idempotent=True)
     if replies is None:
         return None
-    clocks = first.exchange.clocks
-    out: list[JointState] = []
-    before = t0
-    for s, reply, after in zip(units, replies, clocks):
-        out.append(s.state_of(reply, before, after))
-        before = after
-    return out
+    return _states_read(units, replies, first.exchange.clocks, t0)
 
 
 def _step_batch(units: list[_ErobModbus], mode: str, values: Sequence[float], tick: float
@@ -548,18 +585,11 @@ def _step_batch(units: list[_ErobModbus], mode: str, values: Sequence[float], ti
     """:meth:`CompiledPath.step` of one eRob per joint on one line (:func:`_erob_batch`): every joint's steady
     command (:func:`_command_batch`'s), the hold to ``tick`` and every status read (:func:`_states_batch`'s) in
     one call; None (nothing sent) where one joint is not the steady case or its checks refuse."""
-    planned: list[tuple[_ErobModbus, tuple[tuple[Any, ...], str, int]]] = []
-    for s, v in zip(units, values):
-        try:
-            p = s.plan(mode, v)
-        except Exception:  # noqa: BLE001 - a refusal: the command's own way raises it again
-            return None
-        if p is None:
-            return None
-        planned.append((s, p))
+    got = _plan_all(units, mode, values)
+    if got is None:
+        return None
+    planned, requests, exchanges = got
     first = units[0]
-    requests = [r for _, p in planned for r in p[0]]
-    exchanges = [s.exchange for s, p in planned for _ in p[0]]
     n = len(requests)
     requests += [s.status for s in units]
     exchanges += [s.exchange for s in units]
@@ -569,18 +599,9 @@ def _step_batch(units: list[_ErobModbus], mode: str, values: Sequence[float], ti
     if replies is None:
         return None
     clocks = first.exchange.clocks
-    before, at = t0, 0
-    for s, (reqs, name, value) in planned:  # as _command_batch's bookkeeping
-        at += len(reqs)
-        after = clocks[at - 1]
-        s.done(mode, name, value, before, after)
-        before = after
-    remaining, before = first.exchange.held
-    states: list[JointState] = []
-    for s, reply, after in zip(units, replies[n:], clocks[n:]):  # as _states_batch's
-        states.append(s.state_of(reply, before, after))
-        before = after
-    return states, remaining
+    _note_done(mode, planned, clocks, t0)
+    remaining, held = first.exchange.held
+    return _states_read(units, replies[n:], clocks[n:], held), remaining
 
 
 def _hold_sleeps(steppers: Sequence[_Stepper]) -> Any:
@@ -745,7 +766,8 @@ class CompiledRigs:
         self._read_exchanges = [[s.exchange for s in u] for u in self._units]
         self._buffers: dict[tuple[int, int], Any] = {}
         self._worlds = [u[0].exchange.world for u in self._units]
-        self.taken = 0  #: compiled calls across the rigs (one per batch command or state read)
+        self.taken = 0  #: compiled calls across the rigs (one per batch command, state read or whole step)
+        self.steps_taken = 0  #: of them, whole env steps (:meth:`step`)
 
     def joined(self) -> bool:
         """Whether every rig's world is in one stepping group (so one call carries them all) and books its sleeps
@@ -761,7 +783,7 @@ class CompiledRigs:
     @classmethod
     def build(cls, paths: Sequence[CompiledPath | None]) -> CompiledRigs | None:
         """The rigs of ``paths`` in one call, or None where one is not a rig of eRobs on one-call exchanges of one
-        kind."""
+        kind in a compiled world."""
         units: list[list[_ErobModbus]] = []
         kind: Any = None
         for p in paths:
@@ -772,17 +794,20 @@ class CompiledRigs:
                 if not callable(getattr(s.exchange, "carry_rigs", None)) or (kind is not None
                                                                             and type(s.exchange) is not kind):
                     return None
+                if not getattr(s.exchange.world, "compiled", False):  # (the call runs compiled worlds only)
+                    return None
                 kind = type(s.exchange)
             units.append(u)
-        if len(units) < 2 or len({id(u[0].exchange.world) for u in units}) != len(units) \
+        if not units or len({id(u[0].exchange.world) for u in units}) != len(units) \
                 or len({id(u[0].exchange.line) for u in units}) != len(units):  # each rig its own world and line
             return None
         return cls(paths, units)  # type: ignore[arg-type]
 
     def _send(self, requests: list[list[Any]], exchanges: list[list[Any]], lanes: list[LinkLane],
-              lazy: bool) -> list[list[Any]] | None:
-        """Each rig's ``requests`` over its lane (``lanes[r]``) in one call, counted as the lane counts them; None
-        (nothing sent) where a rig's lane or exchange is not the steady case."""
+              lazy: bool, holds: list[tuple[int, float]] | None = None) -> list[list[Any]] | None:
+        """Each rig's ``requests`` over its lane (``lanes[r]``) in one call (``holds``: each rig's wait for its
+        tick among them), counted as the lane counts them; None (nothing sent) where a rig's lane or exchange is
+        not the steady case."""
         for lane, reqs in zip(lanes, requests):
             if not _lane_ready(lane, reqs):
                 return None
@@ -794,7 +819,7 @@ class CompiledRigs:
                 held += 1
             replies: list[list[Any]] | None = self._carry(
                 requests, exchanges, [lane.framing.size for lane in lanes],  # type: ignore[union-attr]
-                [lane._stock_check for lane in lanes], lazy, self._buffers)
+                [lane._stock_check for lane in lanes], lazy, self._buffers, holds)
             if replies is None:
                 return None
             for lane, reqs in zip(lanes, requests):  # as LinkLane.exchange with its stock check
@@ -811,26 +836,15 @@ class CompiledRigs:
         each rig's own command sends it, or raises, in its turn)."""
         if mode not in ACTION_MODES:
             return False
-        plans: list[list[tuple[_ErobModbus, tuple[tuple[Any, ...], str, int]]]] = []
+        plans: list[_Planned] = []
         requests: list[list[Any]] = []
         exchanges: list[list[Any]] = []
         lanes: list[LinkLane] = []
         for units, row, skip in zip(self._units, values, skips):
-            planned = []
-            reqs: list[Any] = []
-            exs: list[Any] = []
-            for k, s in enumerate(units):
-                if skip[k]:
-                    continue
-                try:
-                    p = s.plan(mode, row[k])
-                except Exception:  # noqa: BLE001 - a refusal: the rig's own command raises it again, in its turn
-                    return False
-                if p is None:
-                    return False
-                planned.append((s, p))
-                reqs.extend(p[0])
-                exs.extend([s.exchange] * len(p[0]))
+            got = _plan_all(units, mode, row, skip)
+            if got is None:
+                return False
+            planned, reqs, exs = got
             if planned:
                 plans.append(planned)
                 requests.append(reqs)
@@ -843,14 +857,50 @@ class CompiledRigs:
         if replies is None:
             return False
         for planned, exs, before in zip(plans, exchanges, befores):  # as _command_batch's bookkeeping
-            clocks = exs[0].clocks
-            at = 0
-            for s, (sent, name, value) in planned:
-                at += len(sent)
-                after = clocks[at - 1]
-                s.done(mode, name, value, before, after)
-                before = after
+            _note_done(mode, planned, exs[0].clocks, before)
         return True
+
+    def step(self, mode: str, values: Sequence[Sequence[float]], ticks: Sequence[float], rigs: Sequence[Any]
+             ) -> list[tuple[list[JointState], float]] | None:
+        """Rig ``r``'s :meth:`CompiledPath.step` ``(mode, values[r], None, ticks[r], rigs[r])`` for every rig, in
+        ONE call: each rig's commands, its wait for its tick and its state reads, as its own one-call step does
+        them (the same frames, substeps and bits); None (nothing sent) where a rig is not that step's steady case
+        (a joint not steady or refusing, a sleep that is not its world's hold alone) - then :meth:`command`, the
+        waits and :meth:`states`, one after the other."""
+        if mode not in ACTION_MODES:
+            return None
+        plans: list[_Planned] = []
+        requests: list[list[Any]] = []
+        exchanges: list[list[Any]] = []
+        holds: list[tuple[int, float]] = []
+        for units, row, tick, rig, reads, readers in zip(self._units, values, ticks, rigs, self._reads,
+                                                         self._read_exchanges):
+            world = units[0].exchange.world  # (as CompiledPath.step: the rig's sleep is its world's hold alone)
+            if rig.clock is not world.clock or not world.hold_sleeps or not rig.sleeps_quietly(tick):
+                return None
+            got = _plan_all(units, mode, row)
+            if got is None:
+                return None
+            planned, reqs, exs = got
+            holds.append((len(reqs), tick))
+            plans.append(planned)
+            requests.append(reqs + reads)
+            exchanges.append(exs + readers)
+        befores = [u[0].clock.now() for u in self._units]
+        replies = self._send(requests, exchanges, self._lanes, True, holds)
+        if replies is None:
+            return None
+        out: list[tuple[list[JointState], float]] = []
+        for units, planned, rig_replies, before, (n, _) in zip(self._units, plans, replies, befores, holds):
+            exchange = units[0].exchange  # as _step_batch's bookkeeping
+            clocks = exchange.clocks
+            _note_done(mode, planned, clocks, before)
+            remaining, held = exchange.held
+            out.append((_states_read(units, rig_replies[n:], clocks[n:], held), remaining))
+        for path in self.paths:
+            path.steps_taken += 1
+        self.steps_taken += 1
+        return out
 
     def states(self) -> list[list[JointState]] | None:
         """Every rig's :meth:`CompiledPath.states` in one call; None (nothing sent) where a rig is not the steady
@@ -866,10 +916,5 @@ class CompiledRigs:
                 s = units[0]
                 out.append([s.state_of(got[0], before, s.clock.now())])
                 continue
-            clocks = units[0].exchange.clocks  # as _states_batch
-            states = []
-            for s, reply, after in zip(units, got, clocks):
-                states.append(s.state_of(reply, before, after))
-                before = after
-            out.append(states)
+            out.append(_states_read(units, got, units[0].exchange.clocks, before))  # as _states_batch
         return out

@@ -100,12 +100,14 @@ class _Buffers:
 
 def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[Any]],
                sizes: Sequence[Callable[[Any], int]], checks: Sequence[Callable[[Any, Any], bool]], lazy: bool,
-               buffers: dict[tuple[int, int], Any]) -> list[list[Any]] | None:
+               buffers: dict[tuple[int, int], Any], holds: Sequence[tuple[int, float]] | None = None
+               ) -> list[list[Any]] | None:
     """Rig ``r``'s ``requests[r]`` (each for the drive whose exchange is ``exchanges[r][k]``, all on one line and
-    world, each rig's its own) as ``exchanges[r][0].run(requests[r], sizes[r], checks[r], exchanges[r], lazy=lazy)``
-    sends them (a reply check is required: every reply is checked before anything is sent), every rig in one
-    compiled call: each rig's replies; None (nothing sent) where any rig is not the steady case. ``buffers``: the
-    caller's, kept between calls."""
+    world, each rig's its own) as ``exchanges[r][0].run(requests[r], sizes[r], checks[r], exchanges[r], lazy=lazy,
+    hold=holds[r])`` sends them (a reply check is required: every reply is checked before anything is sent), every
+    rig in one compiled call: each rig's replies (and, with ``holds``, its hold's outcome in its first exchange's
+    ``held``); None (nothing sent) where any rig is not the steady case. ``buffers``: the caller's, kept between
+    calls."""
     fn = compiled()
     if fn is None or not L.stock(E._STOCK):
         return None
@@ -114,7 +116,7 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
     made: list[tuple[Any, Any, Any]] = []
     worlds: list[Any] = []
     reads = False
-    for reqs, exs, size, check in zip(requests, exchanges, sizes, checks):
+    for r, (reqs, exs, size, check) in enumerate(zip(requests, exchanges, sizes, checks)):
         first = exs[0]
         line, world = first.line, first.world
         if world.group is not group or not _line_ok(first):
@@ -122,20 +124,24 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
         for ex in exs if len(exs) == 1 else {id(ex): ex for ex in exs}.values():
             if ex.line is not line or ex.world is not world or not ex._drive_steady():
                 return None
+        if holds is not None and not L.sleeps_held(world):
+            return None
         got = first._rows(reqs, exs, size, check, group)
         if got is None:
             return None
+        if holds is not None:  # the host's wait for the rig's tick among its rows, as in its own run
+            got[0].insert(holds[r][0], L.hold_row(holds[r][1]))
         rows.extend(got[0])
         made.extend(got[1])
         worlds.append(world)
-        reads = reads or any(type(r) is mb.ReadHoldingRegisters for r in reqs)
+        reads = reads or any(type(q) is mb.ReadHoldingRegisters for q in reqs)
     locks = sorted({id(w): w.lock for w in worlds}.values(), key=id)
     held = 0
     try:
         for lock in locks:
             lock.acquire()
             held += 1
-        return _carry_locked(fn, group, requests, exchanges, rows, made, reads, lazy, buffers)
+        return _carry_locked(fn, group, requests, exchanges, rows, made, reads, lazy, buffers, holds)
     finally:
         for lock in reversed(locks[:held]):
             lock.release()
@@ -143,9 +149,10 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
 
 def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
                   exchanges: Sequence[Sequence[Any]], rows: list[list[float]], made: list[tuple[Any, Any, Any]],
-                  reads: bool, lazy: bool, buffers: dict[tuple[int, int], Any]) -> list[list[Any]] | None:
+                  reads: bool, lazy: bool, buffers: dict[tuple[int, int], Any],
+                  holds: Sequence[tuple[int, float]] | None) -> list[list[Any]] | None:
     """:func:`carry_rigs` with every rig's link and world locked, its rows built (``reads``: a status read among
-    them)."""
+    them; ``holds``: a hold row among each rig's, at its index)."""
     import numpy as np
 
     plans = []
@@ -166,7 +173,7 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
         L.fill(vector, world, line, now)  # (its slice assignment fills a list as it fills a row)
         filled.append(vector)
         ws.append(world.group_index)
-        at += len(reqs)
+        at += len(reqs) if holds is None else len(reqs) + 1
         starts.append(at)
         steps.append(world.steps)
         plans.append(plan(world._me)[0])
@@ -204,7 +211,8 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
     tx = rows
     makers = buf.makers
     replies_of: list[list[Any]] = []
-    k = 0
+    k = 0  # the row
+    m = 0  # the request
     for r, (reqs, exs) in enumerate(zip(requests, exchanges)):
         first = exs[0]
         L.arena_check(first.world)  # as line_exchange.fused (every world brought back first, as each rig's own)
@@ -213,9 +221,15 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
         replies: list[Any] = []
         first.clocks = clocks = []
         frames: list[tuple[Any, ...]] = []
+        held = -1 if holds is None else k + holds[r][0]
         for req in reqs:  # as ErobExchange.run
-            t, o, (ex, a, b) = tx[k], outs[k], made[k]
+            if k == held:  # the hold's row: what was left to the tick, the clock after it
+                h = outs[k]
+                first.held = (h[L.REMAINING], h[CLOCK_AFTER])
+                k += 1
+            t, o, (ex, a, b) = tx[k], outs[k], made[m]
             k += 1
+            m += 1
             if t[E.OP] == E.READ:
                 reply = first._status_reply(req, o, a, b, lazy)
             else:
@@ -232,6 +246,10 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
                                reply.values))
             else:
                 frames.append((o[L.D_START], o[L.D_END], o[L.D_SEEN], int(t[L.REPLY]), "device", reply))
+        if k == held:  # a hold after the rig's last request
+            h = outs[k]
+            first.held = (h[L.REMAINING], h[CLOCK_AFTER])
+            k += 1
         line.book_frames(frames)
         first.taken += 1
         replies_of.append(replies)

@@ -108,8 +108,9 @@ def test_batched_path_off_is_the_rig_by_rig_reference() -> None:
 def test_one_rig_forced_onto_the_batched_path() -> None:
     vec, ref = _pair("joints/ErobReach-v0", {"max_episode_steps": 8}, AutoresetMode.NEXT_STEP, n=1)
     try:
-        assert not vec.unwrapped.batched  # below BATCH_MIN: rig by rig by default
-        vec.unwrapped.batched = True
+        u = vec.unwrapped  # below BATCH_MIN: batched by default only where the one compiled call carries the rig
+        assert u.batched == (u._batch.rigs is not None) == kernel.default_mode()
+        u.batched = True
         _run(vec, ref, np.random.default_rng(2).uniform(-1, 1, (12, 1, 1)).astype(np.float32), AutoresetMode.NEXT_STEP)
         assert vec.unwrapped.batched_steps >= 10
     finally:

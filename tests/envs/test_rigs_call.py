@@ -1,5 +1,7 @@
 """The batch's rigs in ONE compiled call (:class:`joints.CompiledRigs`, :mod:`joints.sim.rigs_exchange`): every rig's
-commands in one call and every rig's state read in another give each rig the bits of its own single env - the
+whole step in one call (its commands, its wait for its tick, its state reads) - or, where the step may not go whole,
+every rig's commands in one call and every rig's state read in another - gives each rig the bits of its own single
+env - the
 step's outcomes, and after the run every twin's register image and parameter store, the links' transaction and
 frame counts, each line's frame log, the compiled path's counts, the rig's clock and the world's substeps - with the
 call asserted taken (its counter), and declined (nothing sent, every rig its own way) where one rig is not the
@@ -86,7 +88,7 @@ def test_rigs_in_one_call_give_each_rig_its_single_env_bits(env_id: str, kwargs:
     vec, ref = _pair(env_id, dict(kwargs, max_episode_steps=15), AutoresetMode.NEXT_STEP, n=N)
     try:
         u = vec.unwrapped
-        assert u._batch is not None and (u._batch.rigs is not None or kernels == "python")
+        assert u._batch is not None and (u._batch.rigs is not None) == (kernels == "compiled")
         steps = 30  # a truncation: the reset after it goes rig by rig; the last step is a batched one
         rng = np.random.default_rng(9)
         _run(vec, ref, rng.uniform(-1.2, 1.2, (steps, *vec.action_space.shape)).astype(np.float32),
@@ -99,11 +101,37 @@ def test_rigs_in_one_call_give_each_rig_its_single_env_bits(env_id: str, kwargs:
                 assert sum(x[5] is False for x in booked) >= len(rig.rig.joints) * (u.batched_steps - 5)
                 assert not any(gc.is_tracked(x) for x in booked)
         _each_rig_same(vec, ref)  # (reads every log: its frames and replies are the single envs')
-        if kernels == "compiled":  # each batched step: its commands in one call, its reads (and sleeps) in another
+        if kernels == "compiled":  # each batched step whole in one call: commands, waits, reads
             assert u._batch.joined()
-            assert _calls(vec) >= 2 * (u.batched_steps - 3), (_calls(vec), u.batched_steps)
+            whole = u._batch.rigs.steps_taken
+            # (the few steps that are not whole - a settle wait not over - a call for commands and one for reads)
+            assert whole >= u.batched_steps - 3 and whole <= _calls(vec) <= whole + 6, \
+                (_calls(vec), whole, u.batched_steps)
             assert u.batched_steps >= steps // 2
+            assert all(e.compiled_path.steps_taken >= whole for e in u.envs)
         else:  # no compiled world: never taken, every rig its own way
+            assert _calls(vec) == 0
+    finally:
+        vec.close()
+        ref.close()
+
+
+def test_without_the_whole_step_commands_and_reads_go_in_a_call_each(kernels: str) -> None:
+    """Rigs whose step may not go whole (an overrun raised, so the wait is each rig's own, as a single env's
+    ``step`` takes its parts then): their commands in one call and their reads (and booked sleeps) in another,
+    with each rig's single env bits."""
+    vec, ref = _pair("joints/ErobReach-v0", {"max_episode_steps": 15}, AutoresetMode.NEXT_STEP, n=N)
+    try:
+        for env in [*vec.unwrapped.envs, *(e.unwrapped for e in ref.envs)]:
+            env.raise_on_overrun = True
+        rng = np.random.default_rng(4)
+        _run(vec, ref, rng.uniform(-1, 1, (12, N, 1)).astype(np.float32), AutoresetMode.NEXT_STEP)
+        _each_rig_same(vec, ref)
+        u = vec.unwrapped
+        if kernels == "compiled":
+            assert u._batch.rigs.steps_taken == 0
+            assert _calls(vec) >= 2 * (u.batched_steps - 1) and u.batched_steps >= 10
+        else:
             assert _calls(vec) == 0
     finally:
         vec.close()
@@ -169,7 +197,7 @@ def test_a_refused_command_is_raised_by_the_rigs_own_way(kernels: str) -> None:
 
 def test_only_rigs_of_their_own_worlds_of_erobs_are_carried_together() -> None:
     """The call carries each rig on its own state vector: two rigs of one world (one path twice) are not carried
-    together; a rig of another kind (the ZLAC8015D's diff drive) is not carried at all."""
+    together; a rig of another kind (the ZLAC8015D's diff drive) is not carried at all; one rig is."""
     import joints
 
     vec = gym.make_vec("joints/ErobReach-v0", num_envs=2, vectorization_mode="vector_entry_point")
@@ -178,7 +206,7 @@ def test_only_rigs_of_their_own_worlds_of_erobs_are_carried_together() -> None:
         paths = [e.compiled_path for e in vec.unwrapped.envs]
         assert joints.CompiledRigs.build(paths) is not None
         assert joints.CompiledRigs.build([paths[0], paths[0]]) is None
-        assert joints.CompiledRigs.build(paths[:1]) is None
+        assert joints.CompiledRigs.build(paths[:1]) is not None  # one rig too: its whole step in the one call
         assert joints.CompiledRigs.build([e.compiled_path for e in other.unwrapped.envs]) is None
     finally:
         vec.close()
