@@ -69,6 +69,9 @@ class Batch:
         #: rig of eRobs on one-call exchanges (:class:`joints.compiled_path.CompiledRigs`; None: rig by rig)
         self.paths = [e.compiled_path for e in self.envs]
         self.rigs = joints.CompiledRigs.build(self.paths)
+        #: whether these rigs' paths can take an env's whole step in one call and the type keeps the step's parts
+        #: (as ``JointsEnv.step`` asks: fixed for the paths the batch was built with, :meth:`_rigs`)
+        self._stepping = all(p is not None and p.steps for p in self.paths) and first._keeps_step_parts(JointsEnv)
         #: the step under way: (actions, commands, actions as lists, the rigs' one call or None), begin to finish
         #: and every rig's states where the one call was the whole step (:meth:`waited`)
         self._pending: tuple[np.ndarray, np.ndarray, list[list[float]], joints.CompiledRigs | None,
@@ -159,11 +162,12 @@ class Batch:
 
     def _whole(self, skips: list[list[bool]]) -> bool:
         """Whether every rig's step may go whole (commands, the wait for the tick, the reads) in one call, as
-        ``JointsEnv.step`` takes its own one-call step: every joint commanded, no overrun raised, the path able."""
+        ``JointsEnv.step`` takes its own one-call step: the paths able (:attr:`_stepping`), every joint commanded,
+        no overrun raised."""
+        if not self._stepping:
+            return False
         for e, skip in zip(self.envs, skips):
-            path = e.compiled_path
-            if path is None or not path.steps or e.raise_on_overrun or True in skip \
-                    or not e._keeps_step_parts(JointsEnv):
+            if e.raise_on_overrun or True in skip:
                 return False
         return True
 
