@@ -11,7 +11,9 @@ the group's table, so one rig's physics never sees another's: the order of the r
 It runs only in the steady case of EVERY rig, checked before anything is sent (each world fused and in the one
 group, each line idle, each drive steady, each request a steady one; the caller, :class:`joints.CompiledRigs`,
 checks each rig's link lane); otherwise :func:`carry_rigs` returns None and every rig sends its requests its own
-way. A world's booked sleep (``World.hold``) runs at the start of its rig's transactions, as in its own call.
+way. A world's booked sleep (``World.hold``) runs at the start of its rig's transactions, as in its own call; with
+``holds``, each rig's wait for its env's tick is a hold row among its transactions (its own ``run(hold=...)``'s), so
+that a whole env step of every rig - commands, wait, reads - is one call (:meth:`joints.CompiledRigs.step`).
 """
 
 from __future__ import annotations
