@@ -748,14 +748,16 @@ def _lane_ready(lane: LinkLane, requests: Sequence[Any]) -> bool:
 
 class CompiledRigs:
     """The compiled paths of several rigs (a batch of single envs in one process) whose every joint is an eRob on
-    its twin's one-call exchange: a step's commands of ALL rigs in one compiled call, and their state reads in
-    another (:meth:`~joints.sim.erob_exchange.ErobExchange.carry_rigs`).
+    its twin's one-call exchange, in compiled worlds: a whole env step of ALL rigs in one compiled call
+    (:meth:`step`: commands, waits, reads), or a step's commands of all rigs in one call and their state reads in
+    another (:meth:`command`, :meth:`states`; :meth:`~joints.sim.erob_exchange.ErobExchange.carry_rigs`).
 
-    Rule: each rig gets what its own :meth:`CompiledPath.command` / :meth:`CompiledPath.states` gives it - the
-    same checks (each joint's :meth:`_ErobModbus.plan`), requests, frames, physics, counts, bookkeeping and
-    states. It is taken only where EVERY rig's every joint is the steady case (checked before anything is sent);
-    otherwise :meth:`command` / :meth:`states` return False / None, nothing sent, and each rig goes its own way
-    (its errors raised in its order). :attr:`taken` counts the calls it made."""
+    Rule: each rig gets what its own :meth:`CompiledPath.step` / :meth:`CompiledPath.command` /
+    :meth:`CompiledPath.states` gives it - the same checks (each joint's :meth:`_ErobModbus.plan`), requests,
+    frames, physics, counts, bookkeeping and states. It is taken only where EVERY rig's every joint is the steady
+    case (checked before anything is sent); otherwise :meth:`step` / :meth:`command` / :meth:`states` return None /
+    False / None, nothing sent, and each rig goes its own way (its errors raised in its order). :attr:`taken`
+    counts the calls it made, :attr:`steps_taken` those that were whole steps."""
 
     def __init__(self, paths: Sequence[CompiledPath], units: Sequence[list[_ErobModbus]]) -> None:
         self.paths = list(paths)
