@@ -147,14 +147,12 @@ class Batch:
                     e.note_overrun(-remaining)
                     e._states = states
                     read.append(states)
-        if read is None and rigs is not None and rigs.command(mode, rows, skips):  # every rig's commands in one call
+        if read is None:  # every rig's commands in one call, else each rig's own
+            carried = rigs is not None and rigs.command(mode, rows, skips)
             for i, e in enumerate(envs):
                 e._sent = c[i]
-                e._tick += 1
-        elif read is None:
-            for i, e in enumerate(envs):
-                e._sent = c[i]
-                e.compiled_path.command(mode, rows[i], skips[i])  # type: ignore[union-attr]
+                if not carried:
+                    e.compiled_path.command(mode, rows[i], skips[i])  # type: ignore[union-attr]
                 e._tick += 1
         # (no rig's path can change before finish: the vector step's own)
         self._pending = (a, c, a.tolist(), rigs, read)

@@ -387,8 +387,7 @@ class ErobExchange(L.Carrier):
             outs = self.carry(fn, world, line, now, rows)
             if hold is not None:
                 del rows[hold[0]]
-                h = outs.pop(hold[0])
-                self.held = (h[L.REMAINING], h[CLOCK_AFTER])
+                self.held = L.held_of(outs.pop(hold[0]))
             replies: list[Any] = []
             self.clocks = clocks = []
             frames: list[tuple[float, float, float, int, str, Any]] = []

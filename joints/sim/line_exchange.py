@@ -26,7 +26,7 @@ from joints.sim.stepping import EROB, STEPS, ZLAC
 from joints.sim.world import SLEEP_STOCK
 
 __all__ = ["HOLD", "Carrier", "advance", "arena_check", "book", "clear", "compiled", "exchanges", "fill", "fused",
-           "hold", "hold_row", "line_back", "sleeps_held", "stock", "world_back", "world_fused"]
+           "held_of", "hold", "hold_row", "line_back", "sleeps_held", "stock", "world_back", "world_fused"]
 
 #: columns of the state vector: the clock's time, the world's target time, whether time is booked (1, or
 #: :data:`HELD`), the line's time, the time the line last saw on the clock, when the host's / device's UART is
@@ -110,6 +110,11 @@ def hold_row(until: float) -> list[float]:
     row[KIND] = HOLD
     row[UNTIL] = until
     return row
+
+
+def held_of(o: Sequence[float]) -> tuple[float, float]:
+    """What a :data:`HOLD` row's output row ``o`` says: (what was left to the tick, <= 0: late; the clock after)."""
+    return o[REMAINING], o[CLOCK_AFTER]
 
 
 def exchanges(tx: Any, out: Any, st: Any, w: int, mj_step: int, table: Any, adr: Any, ratio: Any, order: Any,

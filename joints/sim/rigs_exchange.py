@@ -106,10 +106,10 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
                ) -> list[list[Any]] | None:
     """Rig ``r``'s ``requests[r]`` (each for the drive whose exchange is ``exchanges[r][k]``, all on one line and
     world, each rig's its own) as ``exchanges[r][0].run(requests[r], sizes[r], checks[r], exchanges[r], lazy=lazy,
-    hold=holds[r])`` sends them (a reply check is required: every reply is checked before anything is sent), every
-    rig in one compiled call: each rig's replies (and, with ``holds``, its hold's outcome in its first exchange's
-    ``held``); None (nothing sent) where any rig is not the steady case. ``buffers``: the caller's, kept between
-    calls."""
+    hold=holds[r])`` sends them (a reply check is required: every reply is checked before anything is sent; a hold
+    comes before one of the rig's requests), every rig in one compiled call: each rig's replies (and, with
+    ``holds``, its hold's outcome in its first exchange's ``held``); None (nothing sent) where any rig is not the
+    steady case. ``buffers``: the caller's, kept between calls."""
     fn = compiled()
     if fn is None or not L.stock(E._STOCK):
         return None
@@ -131,7 +131,8 @@ def carry_rigs(requests: Sequence[Sequence[Any]], exchanges: Sequence[Sequence[A
         got = first._rows(reqs, exs, size, check, group)
         if got is None:
             return None
-        if holds is not None:  # the host's wait for the rig's tick among its rows, as in its own run
+        if holds is not None:  # the host's wait for the rig's tick before one of its requests, as in its own run
+            assert holds[r][0] < len(reqs), "a rig's hold comes before one of its requests"
             got[0].insert(holds[r][0], L.hold_row(holds[r][1]))
         rows.extend(got[0])
         made.extend(got[1])
@@ -226,8 +227,7 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
         held = -1 if holds is None else k + holds[r][0]
         for req in reqs:  # as ErobExchange.run
             if k == held:  # the hold's row: what was left to the tick, the clock after it
-                h = outs[k]
-                first.held = (h[L.REMAINING], h[CLOCK_AFTER])
+                first.held = L.held_of(outs[k])
                 k += 1
             t, o, (ex, a, b) = tx[k], outs[k], made[m]
             k += 1
@@ -248,10 +248,6 @@ def _carry_locked(fn: Any, group: Any, requests: Sequence[Sequence[Any]],
                                reply.values))
             else:
                 frames.append((o[L.D_START], o[L.D_END], o[L.D_SEEN], int(t[L.REPLY]), "device", reply))
-        if k == held:  # a hold after the rig's last request
-            h = outs[k]
-            first.held = (h[L.REMAINING], h[CLOCK_AFTER])
-            k += 1
         line.book_frames(frames)
         first.taken += 1
         replies_of.append(replies)

@@ -14,6 +14,7 @@ of each) and every block's observations and rewards must be bit-identical to the
 median CPU time per rig step of each, the one call's gain over "two calls" and over "rig by rig", and the calls the
 one-call setting made. Pin it to one core (``taskset -c 1``).
 """
+
 from __future__ import annotations
 
 import os
@@ -59,7 +60,8 @@ def main() -> None:
             for setting in order:
                 if batch is not None:
                     batch.rigs = None if setting == "rig by rig" else rigs
-                    batch.joined = (lambda: False) if setting.endswith("together") else joined  # type: ignore[method-assign]
+                    together = setting.endswith("together")
+                    batch.joined = (lambda: False) if together else joined  # type: ignore[method-assign]
                     batch._stepping = stepping if setting == "one call" else False
                 vec.reset(seed=0)
                 before = 0 if rigs is None else rigs.taken

@@ -1,11 +1,10 @@
 """The batch's rigs in ONE compiled call (:class:`joints.CompiledRigs`, :mod:`joints.sim.rigs_exchange`): every rig's
 whole step in one call (its commands, its wait for its tick, its state reads) - or, where the step may not go whole,
 every rig's commands in one call and every rig's state read in another - gives each rig the bits of its own single
-env - the
-step's outcomes, and after the run every twin's register image and parameter store, the links' transaction and
-frame counts, each line's frame log, the compiled path's counts, the rig's clock and the world's substeps - with the
-call asserted taken (its counter), and declined (nothing sent, every rig its own way) where one rig is not the
-steady case. Compiled and with ``JOINTS_COMPILED=0`` (then the call is never taken and every rig goes its own
+env - the step's outcomes, and after the run every twin's register image and parameter store, the links'
+transaction and frame counts, each line's frame log, the compiled path's counts, the rig's clock and the world's
+substeps - with the call asserted taken (its counter), and declined (nothing sent, every rig its own way) where one
+rig is not the steady case. Compiled and with ``JOINTS_COMPILED=0`` (then the call is never taken and every rig goes its own
 way)."""
 
 from __future__ import annotations
