@@ -1,25 +1,12 @@
-"""What the A/B probes (``tests/*/*_ab_probe.py``, measuring tools, not tests) share: loading another
-checkout's module under another name, so both versions run in one process."""
+"""What the probes (``tests/*/*_probe.py``, measuring tools, not tests) share: the bench's reference timed the probes'
+way, timed blocks of steps and the records their blocks compare."""
 
 from __future__ import annotations
 
-import importlib.util
-import os
-import sys
 import time
 from typing import Any
 
 import numpy as np
-
-
-def load_as(root: str, rel: str, name: str) -> Any:
-    """The module at ``root``/``rel`` (another checkout's file), imported as ``name``."""
-    spec = importlib.util.spec_from_file_location(name, os.path.join(root, rel))
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
 
 
 def raw_step(model: Any, n: int) -> float:
@@ -65,28 +52,3 @@ def same_as_first(first: list[Any] | None, got: list[Any]) -> list[Any]:
         return got
     assert all(np.array_equal(x[0], y[0]) and np.array_equal(x[1], y[1]) for x, y in zip(got, first))
     return first
-
-
-def other_rigs(root: str) -> tuple[Any, Any]:
-    """(``root``'s ``joints.sim.rigs_exchange``, its ``joints.compiled_path``) loaded beside this checkout's, the
-    rigs' compiled kernel this checkout's (compiled here first: the other module would compile its own, minutes,
-    and cache it under its probe name)."""
-    from joints.sim import rigs_exchange
-
-    other = load_as(root, "joints/sim/rigs_exchange.py", "other_rigs_exchange")
-    rigs_exchange.compiled()
-    other._COMPILED = rigs_exchange._COMPILED
-    return other, load_as(root, "joints/compiled_path.py", "other_compiled_path")
-
-
-def rigs_vec(n: int, steps: int) -> tuple[Any, Any, Any]:
-    """(``n`` batched ``joints/ErobReach-v0`` rigs, their ``CompiledRigs``, ``steps`` x ``n`` seeded uniform actions),
-    the episodes unlimited."""
-    import gymnasium as gym
-
-    vec = gym.make_vec("joints/ErobReach-v0", num_envs=n, vectorization_mode="vector_entry_point")
-    u: Any = vec.unwrapped
-    rigs = u._batch.rigs
-    assert rigs is not None
-    u.max_episode_steps = None
-    return vec, rigs, np.random.default_rng(0).uniform(-1, 1, (steps, n, 1)).astype(np.float32)
