@@ -15,6 +15,15 @@ reference) and prints per env step:
 * the ratio with no Python at all (the substeps' raw ``mj_step`` over the compiled calls): the ceiling;
 * the Python a step may keep for a ratio goal (``GOAL``): the substeps' raw ``mj_step`` / goal less the calls.
 
+Then, for an env whose steady step is one eRob's call (``joints/ErobReach-v0``: its target, start, hold and status
+read rows), the skeleton: a bound, not the library's semantics. A second env of the id is stepped into its steady
+state, one steady compiled call is captured, and a bare ``gym.Env`` under gymnasium's wrappers (as ``gym.make`` puts
+them) replays it step after step in its own world: the action checked and clipped, its target set into the captured
+rows, the hold moved to the next tick, the one call, the state read from its output row, an observation array, a
+reward and an info dict. It keeps no check, counts, frame log, firmware store or joint state: its Python is what a
+step whose every check and piece of bookkeeping lived in compiled code would still spend, so its ratio is what such
+a design could reach on this machine.
+
 Each block's raw reference is timed right after its steps; the best block (the highest ratio, the least
 disturbed by load) and the median one. Gymnasium's ``Reacher-v5`` (no drive emulation) is timed
 the same way for scale: its whole overhead is Python. Pin it to one core (``taskset -c 1``).
@@ -118,15 +127,92 @@ def _report(name: str, blocks: list[tuple[float, float, float, float, float]], c
         line = f"{name} [{label}]: step {step * 1e6:.0f} us, {sub:.2f} substeps x raw {raw * 1e6:.2f} us = " \
                f"{physics * 1e6:.0f} us, ratio {physics / step:.2f}"
         if compiled:
-            line += f"; compiled calls {calls * 1e6:.0f} us, the rest (Python) {(step - calls) * 1e6:.0f} us " \
-                    f"(the exchanges' own {(lanes - calls) * 1e6:.0f} us, everything else " \
-                    f"{(step - lanes) * 1e6:.0f} us); ratio with no Python {physics / calls:.2f}; Python left " \
-                    f"for {GOAL}: {(physics / GOAL - calls) * 1e6:.0f} us"
+            split = f" (the exchanges' own {(lanes - calls) * 1e6:.0f} us, everything else " \
+                    f"{(step - lanes) * 1e6:.0f} us)" if lanes else ""  # (the skeleton has no lanes)
+            line += f"; compiled calls {calls * 1e6:.0f} us, the rest (Python) {(step - calls) * 1e6:.0f} us" \
+                    f"{split}; ratio with no Python {physics / calls:.2f}; Python left for {GOAL}: " \
+                    f"{(physics / GOAL - calls) * 1e6:.0f} us"
         else:
             line += f"; overhead (all Python) {(step - physics) * 1e6:.0f} us"
         print(line)
     spread = statistics.pstdev([b[0] for b in blocks]) / statistics.mean([b[0] for b in blocks])
     print(f"  ({BLOCKS} blocks of {PER_BLOCK} steps, step time spread {spread:.0%})")
+
+
+def _skeleton(env_id: str, calls: _Calls) -> Any:
+    """The skeleton of ``env_id`` (see the module docstring) under gymnasium's wrappers, or None where its steady
+    step is not one eRob's call of four rows (target, start, hold, read)."""
+    from gymnasium.wrappers import OrderEnforcing, PassiveEnvChecker, TimeLimit
+
+    from joints.sim import erob_exchange
+
+    captured: list[tuple[Any, ...]] = []
+    fn = calls.fn
+
+    def capture(*args: Any) -> None:
+        captured.append(args)
+        fn(*args)
+
+    line_exchange._COMPILED[0] = (capture, calls.advance)
+    source = gym.make(env_id)
+    try:
+        source.reset(seed=0)
+        source.action_space.seed(0)
+        for _ in range(30):
+            source.step(source.action_space.sample())
+    finally:
+        line_exchange._COMPILED[0] = (calls, calls.advance)
+    if not captured:
+        return None
+    tx, out, st = (a.copy() for a in captured[-1][:3])
+    w, rest = captured[-1][3], captured[-1][4:]
+    kinds = tx[:, line_exchange.KIND].tolist()
+    ops = tx[:, erob_exchange.OP].tolist()
+    if len(kinds) != 4 or kinds[2] != line_exchange.HOLD or ops[0] != erob_exchange.TARGET_POSITION or \
+            ops[3] != erob_exchange.READ:
+        return None
+    u: Any = source.unwrapped
+    period, scale, at = u.control_period, 1.0 / u.joints[0].units.position, erob_exchange.STATUS_AT
+    low, high = u.observation_space.low, u.observation_space.high
+
+    class Skeleton(gym.Env):
+        observation_space = u.observation_space
+        action_space = u.action_space
+
+        def __init__(self) -> None:
+            self.tick = u.tick_time(0)
+            self.prev = 0.0
+            self.model = u.rig.world.model  # (the reference's)
+            self.source = source  # its world: the source env is not stepped again
+
+        def reset(self, *, seed: int | None = None, options: Any = None) -> tuple[Any, dict[str, Any]]:
+            super().reset(seed=seed)
+            return np.zeros(self.observation_space.shape, dtype=self.observation_space.dtype), {}
+
+        def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+            v = float(action[0])
+            if v - v != 0.0:
+                raise ValueError("action must be finite")
+            v = v if -1.0 <= v <= 1.0 else (-1.0 if v < -1.0 else 1.0)
+            target = float(round(v * scale))
+            self.tick += period
+            tx[0, erob_exchange.VALUE] = tx[1, erob_exchange.VALUE] = target
+            tx[2, line_exchange.UNTIL] = self.tick
+            calls(tx, out, st, w, *rest)
+            o = out[3].tolist()
+            pos, vel, cur = o[at] / scale, o[at + 1] / scale, o[at + 2] * 1e-3
+            row = [pos, vel, cur] + [0.0] * (len(low) - 3)
+            obs = np.array([lo if x < lo else hi if x > hi else x  # noqa: FURB136 - as the env clamps
+                            for x, lo, hi in zip(row, low, high)])
+            d = v - self.prev
+            self.prev = v
+            reward = -abs(pos) - 0.01 * d * d
+            info = {"time": st[line_exchange.CLOCK], "overrun": 0.0, "faults": {"joint": None},
+                    "limit_violation": False}
+            return obs, reward, False, False, info
+
+    assert source.spec is not None and source.spec.max_episode_steps is not None
+    return PassiveEnvChecker(OrderEnforcing(TimeLimit(Skeleton(), source.spec.max_episode_steps)))
 
 
 def main(ids: list[str]) -> None:
@@ -138,6 +224,11 @@ def main(ids: list[str]) -> None:
         u: Any = env.unwrapped
         _report(env_id, _blocks(env, u.rig.world.model, calls), compiled=True)
         env.close()
+        skeleton = _skeleton(env_id, calls)
+        if skeleton is None:
+            print(f"{env_id}: no skeleton (its steady step is not one eRob's four rows)")
+            continue
+        _report(f"{env_id} skeleton", _blocks(skeleton, skeleton.unwrapped.model, calls), compiled=True)
     ref = gym.make("Reacher-v5")
     reacher: Any = ref.unwrapped
     _report("Reacher-v5", _blocks(ref, reacher.model, None), compiled=False)
