@@ -24,6 +24,12 @@ reward and an info dict. It keeps no check, counts, frame log, firmware store or
 step whose every check and piece of bookkeeping lived in compiled code would still spend, so its ratio is what such
 a design could reach on this machine.
 
+``rigs:N`` as an ID: the bench's batched row of N rigs (``gym.make_vec("joints/ErobReach-v0", num_envs=N,
+vectorization_mode="vector_entry_point")``, episodes unlimited) per rig step, its compiled call the batch's one
+(:func:`joints.sim.rigs_exchange.rigs_exchanges`); then its skeleton: one steady call of the batch captured and
+replayed, every rig's target, hold and state by array operations across the rigs, observations and rewards as
+arrays.
+
 Each block's raw reference is timed right after its steps; the best block (the highest ratio, the least
 disturbed by load) and the median one. Gymnasium's ``Reacher-v5`` (no drive emulation) is timed
 the same way for scale: its whole overhead is Python. Pin it to one core (``taskset -c 1``).
@@ -35,6 +41,7 @@ import os
 import statistics
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
@@ -136,7 +143,7 @@ def _report(name: str, blocks: list[tuple[float, float, float, float, float]], c
             line += f"; overhead (all Python) {(step - physics) * 1e6:.0f} us"
         print(line)
     spread = statistics.pstdev([b[0] for b in blocks]) / statistics.mean([b[0] for b in blocks])
-    print(f"  ({BLOCKS} blocks of {PER_BLOCK} steps, step time spread {spread:.0%})")
+    print(f"  ({BLOCKS} blocks, step time spread {spread:.0%})")
 
 
 def _skeleton(env_id: str, calls: _Calls) -> Any:
@@ -215,9 +222,111 @@ def _skeleton(env_id: str, calls: _Calls) -> Any:
     return PassiveEnvChecker(OrderEnforcing(TimeLimit(Skeleton(), source.spec.max_episode_steps)))
 
 
+class _RigsCalls:
+    """The batch's one compiled call (:func:`joints.sim.rigs_exchange.rigs_exchanges`), timed: CPU seconds and
+    substeps (all rigs') of the calls since :meth:`clear`; :attr:`captured` the last call's arguments."""
+
+    def __init__(self) -> None:
+        from joints.sim import rigs_exchange
+
+        self.fn = rigs_exchange.compiled()
+        assert self.fn is not None, "the batch's call is not compiled (numba missing or JOINTS_COMPILED=0)"
+        rigs_exchange._COMPILED[0] = self
+        self.seconds = 0.0
+        self.substeps = 0
+        self.captured: tuple[Any, ...] = ()
+
+    def __call__(self, *args: Any) -> None:
+        ws, worlds = args[3], args[11]
+        before = int(worlds[ws, STEPS].sum())
+        self.captured = args
+        t = time.thread_time()
+        self.fn(*args)
+        self.seconds += time.thread_time() - t
+        self.substeps += int(worlds[ws, STEPS].sum()) - before
+
+    def clear(self) -> None:
+        self.seconds = 0.0
+        self.substeps = 0
+
+
+def _rigs_blocks(vec: Any, n: int, model: Any, calls: _RigsCalls, step: Callable[[Any], Any] | None = None
+                 ) -> list[tuple[float, float, float, float, float]]:
+    """:func:`_blocks` of a batch of ``n`` rigs, per rig step (``step``: instead of ``vec.step``), about 1,200 rig
+    steps a block; the episodes unlimited (no resets)."""
+    got = []
+    rng = np.random.default_rng(0)
+    steps = max(10, 4 * PER_BLOCK // n)  # (about 1,200 rig steps a block)
+    for _ in range(BLOCKS):
+        actions = rng.uniform(-1.0, 1.0, (steps, n, 1)).astype(np.float32)
+        calls.clear()
+        go = step or vec.step
+        t = time.thread_time()
+        for a in actions:
+            go(a)
+        rig_step = (time.thread_time() - t) / (steps * n)
+        sub = calls.substeps / (steps * n)
+        got.append((rig_step, calls.seconds / (steps * n), sub, raw_step(model, int(sub * PER_BLOCK)), 0.0))
+    return got
+
+
+def _rigs(n: int) -> None:
+    """The batch of ``n`` rigs of ``joints/ErobReach-v0`` (the bench's batched rows) per rig step, then its skeleton:
+    one steady call of the batch captured and replayed, every rig's target set, hold moved and state read by
+    array operations across the rigs, under no wrapper (as the vector env is made), observations and rewards as
+    arrays - what a batch step whose per-rig work lived in compiled code or in array operations could reach."""
+    from joints.sim import erob_exchange as E
+
+    calls = _RigsCalls()
+    vec: Any = gym.make_vec("joints/ErobReach-v0", num_envs=n, vectorization_mode="vector_entry_point")
+    vec.unwrapped.max_episode_steps = None
+    vec.reset(seed=0)
+    u: Any = vec.unwrapped
+    one: Any = u.envs[0]
+    model = one.rig.world.model
+    _report(f"{n} rigs, per rig step", _rigs_blocks(vec, n, model, calls), compiled=True)
+    tx, out, st = (a.copy() for a in calls.captured[:3])
+    rest = calls.captured[3:]
+    starts = rest[1][:n + 1].copy()
+    first = starts[:-1]
+    if not (np.diff(starts) == 4).all() or not (tx[first + 2, line_exchange.KIND] == line_exchange.HOLD).all() or \
+            not (tx[first, E.OP] == E.TARGET_POSITION).all() or not (tx[first + 3, E.OP] == E.READ).all():
+        print(f"{n} rigs: no skeleton (a rig's steady step is not one eRob's four rows)")
+        return
+    period, scale, at = one.control_period, 1.0 / one.joints[0].units.position, E.STATUS_AT
+    low, high = u.single_observation_space.low, u.single_observation_space.high
+    width = len(low)
+
+    def step(actions: Any) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
+        a = np.asarray(actions, dtype=np.float64)[:, 0]
+        if not np.isfinite(a).all():
+            raise ValueError("actions must be finite")
+        a = np.clip(a, -1.0, 1.0)
+        targets = np.round(a * scale)
+        tx[first, E.VALUE] = targets
+        tx[first + 1, E.VALUE] = targets
+        tx[first + 2, line_exchange.UNTIL] += period
+        calls(tx, out, st, *rest)
+        o = out[first + 3]
+        obs = np.zeros((n, width))
+        obs[:, 0] = o[:, at] / scale
+        obs[:, 1] = o[:, at + 1] / scale
+        obs[:, 2] = o[:, at + 2] * 1e-3
+        np.clip(obs, low, high, out=obs)
+        reward = -np.abs(obs[:, 0]) - 0.01 * a * a
+        done = np.zeros(n, dtype=bool)
+        return obs, reward, done, done, {}
+
+    _report(f"{n} rigs skeleton, per rig step", _rigs_blocks(vec, n, model, calls, step), compiled=True)
+    vec.close()
+
+
 def main(ids: list[str]) -> None:
     calls = _Calls()
     for env_id in ids:
+        if env_id.startswith("rigs:"):
+            _rigs(int(env_id[5:]))
+            continue
         env = gym.make(env_id)
         env.reset(seed=0)
         calls.lanes(env)
