@@ -16,8 +16,8 @@ reference) and prints per env step:
 * the ratio with no Python at all (the substeps' raw ``mj_step`` over the compiled calls): the ceiling;
 * the Python a step may keep for a ratio goal (``GOAL``): the substeps' raw ``mj_step`` / goal less the calls.
 
-Then, for an env whose steady step is one eRob's call (``joints/ErobReach-v0``: its target, start, hold and status
-read rows), the skeleton: a bound, not the library's semantics. A second env of the id is stepped into its steady
+Then, for an env whose steady step is one call of its eRobs' rows (``joints/ErobReach-v0``, ``ErobArmReach-v0``:
+each joint's target and start, the hold, each joint's status read), the skeleton: a bound, not the library's semantics. A second env of the id is stepped into its steady
 state, one steady compiled call is captured, and a bare ``gym.Env`` under gymnasium's wrappers (as ``gym.make`` puts
 them) replays it step after step in its own world: the action checked and clipped, its target set into the captured
 rows, the hold moved to the next tick, the one call, the state read from its output row, an observation array, a
@@ -155,7 +155,7 @@ def _report(name: str, blocks: list[tuple[float, float, float, float, float]], c
 
 def _skeleton(env_id: str, calls: _Calls) -> Any:
     """The skeleton of ``env_id`` (see the module docstring) under gymnasium's wrappers, or None where its steady
-    step is not one eRob's call of four rows (target, start, hold, read)."""
+    step is not one call of its eRobs' rows (each joint's target and start, the hold, each joint's read)."""
     from gymnasium.wrappers import OrderEnforcing, PassiveEnvChecker, TimeLimit
 
     from joints.sim import erob_exchange
@@ -182,12 +182,16 @@ def _skeleton(env_id: str, calls: _Calls) -> Any:
     w, rest = captured[-1][3], captured[-1][4:]
     kinds = tx[:, line_exchange.KIND].tolist()
     ops = tx[:, erob_exchange.OP].tolist()
-    if len(kinds) != 4 or kinds[2] != line_exchange.HOLD or ops[0] != erob_exchange.TARGET_POSITION or \
-            ops[3] != erob_exchange.READ:
+    k = (len(kinds) - 1) // 3  # joints: k x (target, start), the hold, k x read
+    if len(kinds) != 3 * k + 1 or kinds[2 * k] != line_exchange.HOLD or \
+            ops[:2 * k] != [erob_exchange.TARGET_POSITION, erob_exchange.START] * k or \
+            ops[2 * k + 1:] != [erob_exchange.READ] * k:
         return None
     u: Any = source.unwrapped
-    period, scale, at = u.control_period, 1.0 / u.joints[0].units.position, erob_exchange.STATUS_AT
-    low, high = u.observation_space.low, u.observation_space.high
+    period, at = u.control_period, erob_exchange.STATUS_AT
+    scales = [1.0 / j.units.position for j in u.joints]
+    low, high = u.observation_space.low.tolist(), u.observation_space.high.tolist()
+    rest_of_row = [0.0] * (len(low) - 3 * k)
 
     class Skeleton(gym.Env):
         observation_space = u.observation_space
@@ -195,7 +199,7 @@ def _skeleton(env_id: str, calls: _Calls) -> Any:
 
         def __init__(self) -> None:
             self.tick = u.tick_time(0)
-            self.prev = 0.0
+            self.prev = [0.0] * k
             self.model = u.rig.world.model  # (the reference's)
             self.source = source  # its world: the source env is not stepped again
 
@@ -204,24 +208,25 @@ def _skeleton(env_id: str, calls: _Calls) -> Any:
             return np.zeros(self.observation_space.shape, dtype=self.observation_space.dtype), {}
 
         def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
-            v = float(action[0])
-            if v - v != 0.0:
-                raise ValueError("action must be finite")
-            v = v if -1.0 <= v <= 1.0 else (-1.0 if v < -1.0 else 1.0)
-            target = float(round(v * scale))
+            values = []
+            for i, v in enumerate(action.tolist()):
+                if v - v != 0.0:
+                    raise ValueError("action must be finite")
+                v = v if -1.0 <= v <= 1.0 else (-1.0 if v < -1.0 else 1.0)
+                values.append(v)
+                tx[2 * i, erob_exchange.VALUE] = tx[2 * i + 1, erob_exchange.VALUE] = float(round(v * scales[i]))
             self.tick += period
-            tx[0, erob_exchange.VALUE] = tx[1, erob_exchange.VALUE] = target
-            tx[2, line_exchange.UNTIL] = self.tick
+            tx[2 * k, line_exchange.UNTIL] = self.tick
             calls(tx, out, st, w, *rest)
-            o = out[3].tolist()
-            pos, vel, cur = o[at] / scale, o[at + 1] / scale, o[at + 2] * 1e-3
-            row = [pos, vel, cur] + [0.0] * (len(low) - 3)
+            o = out[2 * k + 1:].tolist()
+            positions = [r[at] / c for r, c in zip(o, scales)]
+            row = positions + [r[at + 1] / c for r, c in zip(o, scales)] + [r[at + 2] * 1e-3 for r in o] + rest_of_row
             obs = np.array([lo if x < lo else hi if x > hi else x  # noqa: FURB136 - as the env clamps
                             for x, lo, hi in zip(row, low, high)])
-            d = v - self.prev
-            self.prev = v
-            reward = -abs(pos) - 0.01 * d * d
-            info = {"time": st[line_exchange.CLOCK], "overrun": 0.0, "faults": {"joint": None},
+            change = sum((v - p) * (v - p) for v, p in zip(values, self.prev))
+            self.prev = values
+            reward = -sum(abs(x) for x in positions) - 0.01 * change
+            info = {"time": st[line_exchange.CLOCK], "overrun": 0.0, "faults": dict.fromkeys(u.joint_names),
                     "limit_violation": False}
             return obs, reward, False, False, info
 
@@ -342,7 +347,7 @@ def main(ids: list[str]) -> None:
         env.close()
         skeleton = _skeleton(env_id, calls)
         if skeleton is None:
-            print(f"{env_id}: no skeleton (its steady step is not one eRob's four rows)")
+            print(f"{env_id}: no skeleton (its steady step is not one call of its eRobs' target, start, hold, read rows)")
             continue
         _report(f"{env_id} skeleton", _blocks(skeleton, skeleton.unwrapped.model, calls), compiled=True)
     ref = gym.make("Reacher-v5")
