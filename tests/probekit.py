@@ -3,7 +3,9 @@ way, timed blocks of steps and the records their blocks compare."""
 
 from __future__ import annotations
 
+import sys
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -22,28 +24,41 @@ def raw_step(model: Any, n: int) -> float:
     return (time.thread_time() - t) / max(n, 1)
 
 
-def timed_steps(env: Any, obs: Any, actions: Any) -> tuple[float, list[Any]]:
-    """``env`` stepped through ``actions`` from the observation ``obs`` (reset at each episode's end): the CPU
-    seconds per step (``time.thread_time``) and the record the probes compare (observations, rewards, ends)."""
+def timed_steps(env: Any, obs: Any, actions: Any, profile: Callable[..., Any] | None = None
+                ) -> tuple[float, list[Any]]:
+    """``env`` stepped through ``actions`` from the observation ``obs`` (reset at each episode's end, neither timed
+    nor profiled: the bench's way): the CPU seconds per step (``time.thread_time``) and the record the probes
+    compare (observations, rewards, ends); ``profile``: set by ``sys.setprofile`` over the steps."""
     record: list[Any] = [obs.tobytes()]
+    spent = 0.0
+    sys.setprofile(profile)
     t0 = time.thread_time()
     for a in actions:
         obs, reward, terminated, truncated, _ = env.step(a)
         record.append((obs.tobytes(), reward, terminated, truncated))
         if terminated or truncated:
+            spent += time.thread_time() - t0
+            sys.setprofile(None)
             obs, _ = env.reset()
-    return (time.thread_time() - t0) / len(actions), record
+            sys.setprofile(profile)
+            t0 = time.thread_time()
+    spent += time.thread_time() - t0
+    sys.setprofile(None)
+    return spent / len(actions), record
 
 
-def timed_vec_steps(vec: Any, actions: Any) -> tuple[float, list[Any]]:
+def timed_vec_steps(vec: Any, actions: Any, profile: Callable[..., Any] | None = None) -> tuple[float, list[Any]]:
     """A batched env (reset by the caller) stepped through ``actions``: the CPU seconds per rig step
-    (``time.thread_time``) and each step's (observations, rewards)."""
+    (``time.thread_time``) and each step's (observations, rewards); ``profile``: as :func:`timed_steps`'."""
     got: list[Any] = []
+    sys.setprofile(profile)
     t0 = time.thread_time()
     for a in actions:
         obs, reward, *_ = vec.step(a)
         got.append((obs, reward))
-    return (time.thread_time() - t0) / (len(actions) * vec.num_envs), got
+    spent = time.thread_time() - t0
+    sys.setprofile(None)
+    return spent / (len(actions) * vec.num_envs), got
 
 
 def same_as_first(first: list[Any] | None, got: list[Any]) -> list[Any]:

@@ -30,13 +30,15 @@ import logging
 import os
 import statistics
 import sys
-import time
 from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.envs.registration import registry
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # tests/, for probekit
+from probekit import timed_steps, timed_vec_steps
 
 STEPS = int(os.environ.get("STEPS", "300"))
 ROUNDS = int(os.environ.get("ROUNDS", "10"))
@@ -118,29 +120,13 @@ def _actions(env: Any, rigs: int) -> list[Any]:
 def _block(env: Any, modules: dict[str, Any], actions: list[Any], rigs: int,
            profile: Callable[..., Any] | None = None) -> tuple[float, list[Any]]:
     """CPU seconds per rig step over ``actions`` from a seeded reset, and the record compared (observations,
-    rewards, ends); ``profile``: set by ``sys.setprofile`` over the steps. The resets at episode ends (of an env;
-    a batch resets its rigs within its step) are neither timed nor profiled."""
+    rewards, an env's ends: :func:`probekit.timed_steps`, :func:`probekit.timed_vec_steps`)."""
     _use(modules)
-    vector = hasattr(env, "num_envs")
     obs, _ = env.reset(seed=7)
-    record: list[Any] = [np.asarray(obs).tobytes()]
-    step = env.step
-    t = 0.0
-    sys.setprofile(profile)
-    t0 = time.thread_time()
-    for a in actions:
-        obs, reward, terminated, truncated, _ = step(a)
-        record.append((np.asarray(obs).tobytes(), np.asarray(reward).tobytes(), np.asarray(terminated).tobytes(),
-                       np.asarray(truncated).tobytes()))
-        if not vector and (terminated or truncated):  # a reset is neither timed nor counted (the bench's way)
-            t += time.thread_time() - t0
-            sys.setprofile(None)
-            obs, _ = env.reset()
-            sys.setprofile(profile)
-            t0 = time.thread_time()
-    t += time.thread_time() - t0
-    sys.setprofile(None)
-    return t / (len(actions) * rigs), record
+    if hasattr(env, "num_envs"):
+        t, got = timed_vec_steps(env, actions, profile)
+        return t, [(o.tobytes(), r.tobytes()) for o, r in got]  # (compared by ==, as an env's)
+    return timed_steps(env, obs, actions, profile)
 
 
 def _calls(env: Any, modules: dict[str, Any], actions: list[Any], rigs: int) -> float:

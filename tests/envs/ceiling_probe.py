@@ -17,13 +17,13 @@ reference) and prints per env step:
 * the Python a step may keep for a ratio goal (``GOAL``): the substeps' raw ``mj_step`` / goal less the calls.
 
 Then, for an env whose steady step is one call of its eRobs' rows (``joints/ErobReach-v0``, ``ErobArmReach-v0``:
-each joint's target and start, the hold, each joint's status read), the skeleton: a bound, not the library's semantics. A second env of the id is stepped into its steady
-state, one steady compiled call is captured, and a bare ``gym.Env`` under gymnasium's wrappers (as ``gym.make`` puts
-them) replays it step after step in its own world: the action checked and clipped, its target set into the captured
-rows, the hold moved to the next tick, the one call, the state read from its output row, an observation array, a
-reward and an info dict. It keeps no check, counts, frame log, firmware store or joint state: its Python is what a
-step whose every check and piece of bookkeeping lived in compiled code would still spend, so its ratio is what such
-a design could reach on this machine.
+each joint's target and start, the hold, each joint's status read), the skeleton: a bound, not the library's
+semantics. A second env of the id is stepped into its steady state, one steady compiled call is captured, and a bare
+``gym.Env`` under gymnasium's wrappers (as ``gym.make`` puts them) replays it step after step in its own world: the
+action checked and clipped, its targets set into the captured rows, the hold moved to the next tick, the one call,
+the state read from its output rows, an observation array, a reward and an info dict. It keeps no check, counts,
+frame log, firmware store or joint state: its Python is what a step whose every check and piece of bookkeeping lived
+in compiled code would still spend, so its ratio is what such a design could reach on this machine.
 
 ``rigs:N`` as an ID: the bench's batched row of N rigs (``gym.make_vec("joints/ErobReach-v0", num_envs=N,
 vectorization_mode="vector_entry_point")``, episodes unlimited) per rig step, its compiled call the batch's one
@@ -113,18 +113,20 @@ def _blocks(env: Any, model: Any, calls: _Calls | None) -> list[tuple[float, flo
         actions = [env.action_space.sample() for _ in range(PER_BLOCK)]
         if calls is not None:
             calls.clear()
-        spent = 0.0
+        stepping = 0.0
         t = time.thread_time()
         for a in actions:
             _, _, terminated, truncated, _ = env.step(a)
             if terminated or truncated:  # a reset is not timed (the bench's method), its compiled calls not counted
-                spent += time.thread_time() - t
-                kept = (calls.seconds, calls.substeps, calls.lane_seconds) if calls is not None else None
-                env.reset()
-                if calls is not None and kept is not None:
+                stepping += time.thread_time() - t
+                if calls is None:
+                    env.reset()
+                else:
+                    kept = calls.seconds, calls.substeps, calls.lane_seconds
+                    env.reset()
                     calls.seconds, calls.substeps, calls.lane_seconds = kept
                 t = time.thread_time()
-        step = (spent + time.thread_time() - t) / PER_BLOCK
+        step = (stepping + time.thread_time() - t) / PER_BLOCK
         if calls is None:
             sub, spent, lanes = float(env.unwrapped.frame_skip), 0.0, 0.0
         else:
@@ -264,11 +266,11 @@ class _RigsCalls:
 
 def _rigs_blocks(vec: Any, n: int, model: Any, calls: _RigsCalls, step: Callable[[Any], Any] | None = None
                  ) -> list[tuple[float, float, float, float, float]]:
-    """:func:`_blocks` of a batch of ``n`` rigs, per rig step (``step``: instead of ``vec.step``), about 1,200 rig
-    steps a block; the episodes unlimited (no resets)."""
+    """:func:`_blocks` of a batch of ``n`` rigs, per rig step (``step``: instead of ``vec.step``), at least 1,200
+    rig steps a block; the episodes unlimited (no resets)."""
     got = []
     rng = np.random.default_rng(0)
-    steps = max(10, 4 * PER_BLOCK // n)  # (about 1,200 rig steps a block)
+    steps = max(10, 4 * PER_BLOCK // n)
     for _ in range(BLOCKS):
         actions = rng.uniform(-1.0, 1.0, (steps, n, 1)).astype(np.float32)
         calls.clear()
@@ -347,7 +349,8 @@ def main(ids: list[str]) -> None:
         env.close()
         skeleton = _skeleton(env_id, calls)
         if skeleton is None:
-            print(f"{env_id}: no skeleton (its steady step is not one call of its eRobs' target, start, hold, read rows)")
+            print(f"{env_id}: no skeleton (its steady step is not one call of its eRobs' target, start, hold and "
+                  "read rows)")
             continue
         _report(f"{env_id} skeleton", _blocks(skeleton, skeleton.unwrapped.model, calls), compiled=True)
     ref = gym.make("Reacher-v5")

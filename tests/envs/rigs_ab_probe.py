@@ -43,7 +43,7 @@ def main() -> None:
     for n in sizes:
         vec = gym.make_vec("joints/ErobReach-v0", num_envs=n, vectorization_mode="vector_entry_point",
                            action_mode=ACTION_MODE)
-        u = vec.unwrapped
+        u: Any = vec.unwrapped
         batch = u._batch
         rigs = None if batch is None else batch.rigs
         joined = None if batch is None else batch.joined
@@ -61,7 +61,7 @@ def main() -> None:
                 if batch is not None:
                     batch.rigs = None if setting == "rig by rig" else rigs
                     together = setting.endswith("together")
-                    batch.joined = (lambda: False) if together else joined  # type: ignore[method-assign]
+                    batch.joined = (lambda: False) if together else joined
                     batch._stepping = stepping if setting == "one call" else False
                 vec.reset(seed=0)
                 before = 0 if rigs is None else rigs.taken

@@ -55,7 +55,8 @@ def run(env_id: str, mode: str) -> None:
         if split:
             u.compiled_path.step = lambda *args, **kwargs: None
         made.append(env)
-    actions = np.random.default_rng(0).uniform(-1.0, 1.0, (STEPS, *made[0].action_space.shape)).astype(np.float32)
+    actions = np.random.default_rng(0).uniform(-1.0, 1.0, (STEPS, *np.shape(made[0].action_space.sample()))).astype(
+        np.float32)
     times: list[list[float]] = [[], []]
     raws: list[float] = []
     first = None
@@ -68,7 +69,7 @@ def run(env_id: str, mode: str) -> None:
                 r[1:] if isinstance(r, tuple) else [])) for r in record])
             times[k].append(dt)
             raws.append(_raw_step(u.model))
-    taken = made[0].unwrapped.compiled_path.steps_taken
+    taken = made[0].unwrapped.compiled_path.steps_taken  # type: ignore[attr-defined]
     raw = min(raws)
     u = made[0].unwrapped
     n = u.control_period / u.model.opt.timestep  # substeps per step (the overrun-free step's)

@@ -4,8 +4,8 @@ every rig's commands in one call and every rig's state read in another - gives e
 env - the step's outcomes, and after the run every twin's register image and parameter store, the links'
 transaction and frame counts, each line's frame log, the compiled path's counts, the rig's clock and the world's
 substeps - with the call asserted taken (its counter), and declined (nothing sent, every rig its own way) where one
-rig is not the steady case. Compiled and with ``JOINTS_COMPILED=0`` (then the call is never taken and every rig goes its own
-way)."""
+rig is not the steady case. Compiled and with ``JOINTS_COMPILED=0`` (then the call is never taken and every rig
+goes its own way)."""
 
 from __future__ import annotations
 
