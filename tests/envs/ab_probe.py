@@ -117,8 +117,8 @@ def _actions(env: Any, rigs: int) -> list[Any]:
     return [rng.uniform(space.low, space.high, shape).astype(space.dtype) for _ in range(STEPS)]
 
 
-def _block(env: Any, modules: dict[str, Any], actions: list[Any], rigs: int,
-           profile: Callable[..., Any] | None = None) -> tuple[float, list[Any]]:
+def _block(env: Any, modules: dict[str, Any], actions: list[Any], profile: Callable[..., Any] | None = None
+           ) -> tuple[float, list[Any]]:
     """CPU seconds per rig step over ``actions`` from a seeded reset, and the record compared (observations,
     rewards, an env's ends: :func:`probekit.timed_steps`, :func:`probekit.timed_vec_steps`)."""
     _use(modules)
@@ -137,7 +137,7 @@ def _calls(env: Any, modules: dict[str, Any], actions: list[Any], rigs: int) -> 
         if event == "call":
             count[0] += 1
 
-    _block(env, modules, actions, rigs, profile)
+    _block(env, modules, actions, profile)
     return count[0] / (len(actions) * rigs)
 
 
@@ -148,10 +148,10 @@ def run(case: str, trees: dict[str, dict[str, Any]]) -> None:
     times: dict[str, list[float]] = {name: [] for name in trees}
     first: dict[str, list[Any]] = {}
     for name, (env, _) in made.items():  # a first block of each, untimed: first bring-ups differ
-        _block(env, trees[name], actions, rigs)
+        _block(env, trees[name], actions)
     for _ in range(ROUNDS):
         for name, (env, _) in made.items():
-            t, record = _block(env, trees[name], actions, rigs)
+            t, record = _block(env, trees[name], actions)
             ref = first.setdefault("this" if SAME_BITS else name, record)
             assert record == ref, f"{case}, {name}: the bits differ from the first block's"
             times[name].append(t)
